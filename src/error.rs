@@ -1,0 +1,72 @@
+//! The one error type of the library. Every message names the file (or "built-in scene"),
+//! the field or place at fault, and what is allowed, so a user can fix the input.
+
+use std::path::PathBuf;
+
+/// Result alias used throughout the crate.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Everything that can go wrong, with enough context to act on.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A value in the scene (or on the command line) is out of range or inconsistent.
+    #[error("{file}: field `{field}`: {message}")]
+    Invalid {
+        /// The scene file, or `built-in scene` / `command line`.
+        file: String,
+        /// Dotted path of the offending key, e.g. `medium.sigma_t`.
+        field: String,
+        /// What is wrong and what is allowed.
+        message: String,
+    },
+    /// The scene file is not valid TOML or has an unknown key.
+    #[error("{file}: {message}")]
+    Parse {
+        /// The scene file.
+        file: String,
+        /// The parser's message, which names the key and line.
+        message: String,
+    },
+    /// A data file (grid, image) is malformed: truncated, corrupt or unsupported.
+    #[error("{file}: {message}")]
+    Format {
+        /// The offending file.
+        file: String,
+        /// What is wrong with it and, where possible, how to fix it.
+        message: String,
+    },
+    /// An operating-system I/O error on a named path.
+    #[error("{path}: {source}")]
+    Io {
+        /// The path being read or written.
+        path: PathBuf,
+        /// The underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A numerical stage failed to do its job (e.g. the solver did not converge).
+    #[error("{stage}: {message}")]
+    Numerical {
+        /// The stage, e.g. `diffusion solver`.
+        stage: String,
+        /// What happened and what to try.
+        message: String,
+    },
+}
+
+impl Error {
+    /// Shorthand for [`Error::Invalid`].
+    pub fn invalid(file: impl Into<String>, field: impl Into<String>, message: impl Into<String>) -> Self {
+        Error::Invalid { file: file.into(), field: field.into(), message: message.into() }
+    }
+
+    /// Shorthand for [`Error::Format`].
+    pub fn format(file: impl Into<String>, message: impl Into<String>) -> Self {
+        Error::Format { file: file.into(), message: message.into() }
+    }
+
+    /// Shorthand for [`Error::Io`].
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io { path: path.into(), source }
+    }
+}

@@ -1,0 +1,154 @@
+//! Dense 3-D scalar grid: the storage every density source is converted to.
+
+use crate::error::{Error, Result};
+
+/// A dense grid of `f32` values, index (i, j, k) = (x, y, z), x fastest in memory.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Grid3 {
+    dims: [usize; 3],
+    data: Vec<f32>,
+}
+
+impl Grid3 {
+    /// A grid of `dims` filled with `value`.
+    pub fn filled(dims: [usize; 3], value: f32) -> Self {
+        Grid3 { dims, data: vec![value; dims[0] * dims[1] * dims[2]] }
+    }
+
+    /// Wrap existing data (x fastest). `what` names the source for the error message.
+    pub fn from_vec(dims: [usize; 3], data: Vec<f32>, what: &str) -> Result<Self> {
+        let n = dims[0].checked_mul(dims[1]).and_then(|v| v.checked_mul(dims[2]));
+        match n {
+            Some(n) if n == data.len() && n > 0 => Ok(Grid3 { dims, data }),
+            Some(0) => Err(Error::format(what, format!("grid has zero size {dims:?}: every dimension must be at least 1"))),
+            _ => Err(Error::format(
+                what,
+                format!("grid resolution {dims:?} needs {} values but {} were given", n.map_or("too many".to_string(), |n| n.to_string()), data.len()),
+            )),
+        }
+    }
+
+    /// Resolution (nx, ny, nz).
+    #[inline]
+    pub fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+
+    /// Number of voxels.
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.data.len()
+    }
+
+    /// True when the grid holds no voxel (never, for a validated grid).
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
+    }
+
+    /// Linear index of (i, j, k).
+    #[inline]
+    pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
+        i + self.dims[0] * (j + self.dims[1] * k)
+    }
+
+    /// Value at (i, j, k); the caller guarantees the index is inside.
+    #[inline]
+    pub fn get(&self, i: usize, j: usize, k: usize) -> f32 {
+        self.data[self.index(i, j, k)]
+    }
+
+    /// Value at signed (i, j, k), zero outside the grid.
+    #[inline]
+    pub fn get_or_zero(&self, i: isize, j: isize, k: isize) -> f32 {
+        if i < 0 || j < 0 || k < 0 || i as usize >= self.dims[0] || j as usize >= self.dims[1] || k as usize >= self.dims[2] {
+            0.0
+        } else {
+            self.get(i as usize, j as usize, k as usize)
+        }
+    }
+
+    /// Set the value at (i, j, k).
+    #[inline]
+    pub fn set(&mut self, i: usize, j: usize, k: usize, v: f32) {
+        let idx = self.index(i, j, k);
+        self.data[idx] = v;
+    }
+
+    /// The raw values, x fastest.
+    #[inline]
+    pub fn data(&self) -> &[f32] {
+        &self.data
+    }
+
+    /// Mutable raw values, x fastest.
+    #[inline]
+    pub fn data_mut(&mut self) -> &mut [f32] {
+        &mut self.data
+    }
+
+    /// Trilinear interpolation at continuous voxel coordinates `p`, where voxel (i, j, k) has its
+    /// centre at (i + 0.5, j + 0.5, k + 0.5). Indices are clamped to the grid (clamp-to-edge), so
+    /// the field is defined on the whole box [0, n]³; the caller decides what lies outside it.
+    #[inline]
+    pub fn trilinear(&self, p: [f32; 3]) -> f32 {
+        let mut i0 = [0usize; 3];
+        let mut i1 = [0usize; 3];
+        let mut f = [0f32; 3];
+        for a in 0..3 {
+            let n = self.dims[a];
+            let x = p[a] - 0.5;
+            let fl = x.floor();
+            let fi = fl as isize;
+            f[a] = x - fl;
+            let lo = fi.clamp(0, n as isize - 1) as usize;
+            let hi = (fi + 1).clamp(0, n as isize - 1) as usize;
+            i0[a] = lo;
+            i1[a] = hi;
+        }
+        let nx = self.dims[0];
+        let nxy = nx * self.dims[1];
+        let d = &self.data;
+        let at = |i: usize, j: usize, k: usize| d[i + nx * j + nxy * k];
+        let c00 = at(i0[0], i0[1], i0[2]) * (1.0 - f[0]) + at(i1[0], i0[1], i0[2]) * f[0];
+        let c10 = at(i0[0], i1[1], i0[2]) * (1.0 - f[0]) + at(i1[0], i1[1], i0[2]) * f[0];
+        let c01 = at(i0[0], i0[1], i1[2]) * (1.0 - f[0]) + at(i1[0], i0[1], i1[2]) * f[0];
+        let c11 = at(i0[0], i1[1], i1[2]) * (1.0 - f[0]) + at(i1[0], i1[1], i1[2]) * f[0];
+        let c0 = c00 * (1.0 - f[1]) + c10 * f[1];
+        let c1 = c01 * (1.0 - f[1]) + c11 * f[1];
+        c0 * (1.0 - f[2]) + c1 * f[2]
+    }
+
+    /// Largest value (0 for an all-zero grid).
+    pub fn max_value(&self) -> f32 {
+        self.data.iter().copied().fold(0.0, f32::max)
+    }
+
+    /// Average `n`×`n`×`n` blocks into one voxel (the paper averaged 200×160×120 down to
+    /// 100×80×60). Partial blocks at the far edges average the voxels they hold.
+    pub fn downsample(&self, n: usize) -> Grid3 {
+        if n <= 1 {
+            return self.clone();
+        }
+        let nd = [self.dims[0].div_ceil(n), self.dims[1].div_ceil(n), self.dims[2].div_ceil(n)];
+        let mut out = Grid3::filled(nd, 0.0);
+        for k in 0..nd[2] {
+            for j in 0..nd[1] {
+                for i in 0..nd[0] {
+                    let mut sum = 0.0f64;
+                    let mut cnt = 0usize;
+                    for kk in k * n..((k + 1) * n).min(self.dims[2]) {
+                        for jj in j * n..((j + 1) * n).min(self.dims[1]) {
+                            for ii in i * n..((i + 1) * n).min(self.dims[0]) {
+                                sum += self.get(ii, jj, kk) as f64;
+                                cnt += 1;
+                            }
+                        }
+                    }
+                    out.set(i, j, k, (sum / cnt as f64) as f32);
+                }
+            }
+        }
+        out
+    }
+}
