@@ -57,12 +57,19 @@ pub enum Error {
 impl Error {
     /// Shorthand for [`Error::Invalid`].
     pub fn invalid(file: impl Into<String>, field: impl Into<String>, message: impl Into<String>) -> Self {
-        Error::Invalid { file: file.into(), field: field.into(), message: message.into() }
+        Error::Invalid {
+            file: file.into(),
+            field: field.into(),
+            message: message.into(),
+        }
     }
 
     /// Shorthand for [`Error::Format`].
     pub fn format(file: impl Into<String>, message: impl Into<String>) -> Self {
-        Error::Format { file: file.into(), message: message.into() }
+        Error::Format {
+            file: file.into(),
+            message: message.into(),
+        }
     }
 
     /// Shorthand for [`Error::Io`].

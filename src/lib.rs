@@ -1,7 +1,22 @@
 //! cloudgi: physically based cloud rendering after Max et al., "Diffusion and Multiple
 //! Anisotropic Scattering for Global Illumination in Clouds" (WSCG 2004).
+//!
+//! Pipeline: [`scene::Scene`] → [`medium::Medium`] and [`lighting`] → a method in [`render`] →
+//! [`image::Image`] (linear HDR) → EXR + tone-mapped PNG.
 
+pub mod camera;
 pub mod error;
+pub mod image;
+pub mod io;
+pub mod lighting;
+pub mod math;
 pub mod medium;
+pub mod phase;
+pub mod render;
+pub mod scene;
+pub mod sunlight;
 
 pub use error::{Error, Result};
+pub use image::Image;
+pub use render::{render, NoProgress, Progress, RenderOutput};
+pub use scene::{Method, Scene, SceneDesc};

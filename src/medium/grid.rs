@@ -12,7 +12,10 @@ pub struct Grid3 {
 impl Grid3 {
     /// A grid of `dims` filled with `value`.
     pub fn filled(dims: [usize; 3], value: f32) -> Self {
-        Grid3 { dims, data: vec![value; dims[0] * dims[1] * dims[2]] }
+        Grid3 {
+            dims,
+            data: vec![value; dims[0] * dims[1] * dims[2]],
+        }
     }
 
     /// Wrap existing data (x fastest). `what` names the source for the error message.
@@ -20,10 +23,17 @@ impl Grid3 {
         let n = dims[0].checked_mul(dims[1]).and_then(|v| v.checked_mul(dims[2]));
         match n {
             Some(n) if n == data.len() && n > 0 => Ok(Grid3 { dims, data }),
-            Some(0) => Err(Error::format(what, format!("grid has zero size {dims:?}: every dimension must be at least 1"))),
+            Some(0) => Err(Error::format(
+                what,
+                format!("grid has zero size {dims:?}: every dimension must be at least 1"),
+            )),
             _ => Err(Error::format(
                 what,
-                format!("grid resolution {dims:?} needs {} values but {} were given", n.map_or("too many".to_string(), |n| n.to_string()), data.len()),
+                format!(
+                    "grid resolution {dims:?} needs {} values but {} were given",
+                    n.map_or("too many".to_string(), |n| n.to_string()),
+                    data.len()
+                ),
             )),
         }
     }

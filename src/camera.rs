@@ -1,0 +1,111 @@
+//! Pinhole camera. The image's right is normalize(cross(forward, up)); pixel rows run top to bottom.
+
+use crate::error::Result;
+use crate::math::{Ray, Vec3};
+use crate::scene::{check, finite3, CameraDesc};
+
+/// A validated pinhole camera.
+#[derive(Clone, Debug)]
+pub struct Camera {
+    /// Eye position (m).
+    pub position: Vec3,
+    /// Unit view direction.
+    pub forward: Vec3,
+    /// Unit image-right direction.
+    pub right: Vec3,
+    /// Unit image-up direction.
+    pub up: Vec3,
+    /// tan(fov_y / 2) (unitless).
+    pub tan_half_fov: f32,
+    /// Image width (pixels).
+    pub width: u32,
+    /// Image height (pixels).
+    pub height: u32,
+}
+
+impl Camera {
+    /// Validate `[camera]`.
+    pub fn from_desc(d: &CameraDesc, file: &str) -> Result<Camera> {
+        check(
+            file,
+            "camera.position",
+            finite3(d.position),
+            d.position,
+            "must be three finite numbers (m)",
+        )?;
+        check(
+            file,
+            "camera.look_at",
+            finite3(d.look_at),
+            d.look_at,
+            "must be three finite numbers (m)",
+        )?;
+        let pos = Vec3::from(d.position);
+        let to = Vec3::from(d.look_at) - pos;
+        check(
+            file,
+            "camera.look_at",
+            to.length() > 1e-6,
+            d.look_at,
+            "must differ from camera.position",
+        )?;
+        let forward = to.normalize();
+        let up_hint = Vec3::from(d.up);
+        check(
+            file,
+            "camera.up",
+            finite3(d.up) && up_hint.length() > 1e-12,
+            d.up,
+            "must be a non-zero vector",
+        )?;
+        let cross = forward.cross(up_hint.normalize());
+        check(
+            file,
+            "camera.up",
+            cross.length() > 1e-4,
+            d.up,
+            "is parallel to the view direction (look_at - position); choose an up vector that is not",
+        )?;
+        check(
+            file,
+            "camera.fov_deg",
+            d.fov_deg.is_finite() && d.fov_deg > 0.0 && d.fov_deg < 179.0,
+            d.fov_deg,
+            "the vertical field of view must be in (0, 179) degrees",
+        )?;
+        check(
+            file,
+            "camera.width",
+            d.width > 0 && d.width <= 32768,
+            d.width,
+            "the image width must be 1 to 32768 pixels",
+        )?;
+        check(
+            file,
+            "camera.height",
+            d.height > 0 && d.height <= 32768,
+            d.height,
+            "the image height must be 1 to 32768 pixels",
+        )?;
+        let right = cross.normalize();
+        let up = right.cross(forward).normalize();
+        Ok(Camera {
+            position: pos,
+            forward,
+            right,
+            up,
+            tan_half_fov: (d.fov_deg.to_radians() * 0.5).tan(),
+            width: d.width,
+            height: d.height,
+        })
+    }
+
+    /// The ray through image position (px, py) in pixels, (0, 0) the top-left corner.
+    #[inline]
+    pub fn ray(&self, px: f32, py: f32) -> Ray {
+        let aspect = self.width as f32 / self.height as f32;
+        let sx = (2.0 * px / self.width as f32 - 1.0) * self.tan_half_fov * aspect;
+        let sy = (1.0 - 2.0 * py / self.height as f32) * self.tan_half_fov;
+        Ray::new(self.position, self.forward + self.right * sx + self.up * sy)
+    }
+}

@@ -1,0 +1,182 @@
+//! Small math helpers shared by every stage: colour type, rays, orthonormal frames, and a
+//! counter-based random stream that makes renders independent of the thread count.
+
+pub use glam::Vec3;
+
+/// Linear RGB triple (radiance in W·m⁻²·sr⁻¹ per band, irradiance in W·m⁻², or a unitless factor).
+pub type Rgb = Vec3;
+
+/// A ray `origin + t·dir`, `dir` unit length, `t` in metres.
+#[derive(Clone, Copy, Debug)]
+pub struct Ray {
+    /// Start point (m).
+    pub origin: Vec3,
+    /// Unit direction.
+    pub dir: Vec3,
+}
+
+impl Ray {
+    /// A ray from `origin` along `dir` (normalised here).
+    #[inline]
+    pub fn new(origin: Vec3, dir: Vec3) -> Self {
+        Ray {
+            origin,
+            dir: dir.normalize(),
+        }
+    }
+
+    /// The point at distance `t` (m).
+    #[inline]
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.origin + self.dir * t
+    }
+}
+
+/// An orthonormal frame (t, b, n) with `n` given; used to turn local directions into world ones.
+#[derive(Clone, Copy, Debug)]
+pub struct Frame {
+    /// First tangent.
+    pub t: Vec3,
+    /// Second tangent.
+    pub b: Vec3,
+    /// The given axis.
+    pub n: Vec3,
+}
+
+impl Frame {
+    /// Frame around unit `n` (Duff et al. 2017, branchless and continuous).
+    #[inline]
+    pub fn from_normal(n: Vec3) -> Self {
+        let sign = 1.0f32.copysign(n.z);
+        let a = -1.0 / (sign + n.z);
+        let b = n.x * n.y * a;
+        let t = Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+        let bb = Vec3::new(b, sign + n.y * n.y * a, -n.y);
+        Frame { t, b: bb, n }
+    }
+
+    /// Local (x, y, z) → world, z along `n`.
+    #[inline]
+    pub fn to_world(&self, v: Vec3) -> Vec3 {
+        self.t * v.x + self.b * v.y + self.n * v.z
+    }
+}
+
+/// Luminance of linear Rec.709 RGB.
+#[inline]
+pub fn luminance(c: Rgb) -> f32 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}
+
+/// SplitMix64 finaliser: a strong 64-bit mixer used to derive independent stream seeds.
+#[inline]
+pub fn mix64(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// PCG32 random stream. Seed it from (scene seed, pixel, sample) with [`Rng::for_pixel`] so each
+/// pixel sample draws the same numbers whichever thread runs it.
+#[derive(Clone, Debug)]
+pub struct Rng {
+    state: u64,
+    inc: u64,
+}
+
+impl Rng {
+    /// A stream from a seed and a stream id.
+    pub fn new(seed: u64, stream: u64) -> Self {
+        let mut r = Rng {
+            state: 0,
+            inc: (mix64(stream) << 1) | 1,
+        };
+        r.next_u32();
+        r.state = r.state.wrapping_add(mix64(seed));
+        r.next_u32();
+        r
+    }
+
+    /// The stream for one sample of one pixel of one render.
+    pub fn for_pixel(seed: u64, x: u32, y: u32, sample: u32) -> Self {
+        let key = ((y as u64) << 32) | x as u64;
+        Rng::new(mix64(seed ^ mix64(key)), sample as u64)
+    }
+
+    /// Next 32 random bits.
+    #[inline]
+    pub fn next_u32(&mut self) -> u32 {
+        let old = self.state;
+        self.state = old.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(self.inc);
+        let xorshifted = (((old >> 18) ^ old) >> 27) as u32;
+        let rot = (old >> 59) as u32;
+        xorshifted.rotate_right(rot)
+    }
+
+    /// Uniform in [0, 1).
+    #[inline]
+    pub fn uniform(&mut self) -> f32 {
+        (self.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
+    }
+
+    /// Uniform in [0, 1) with 53 bits.
+    #[inline]
+    pub fn uniform_f64(&mut self) -> f64 {
+        let hi = (self.next_u32() as u64) << 21;
+        let lo = (self.next_u32() >> 11) as u64;
+        (hi | lo) as f64 * (1.0 / 9_007_199_254_740_992.0)
+    }
+}
+
+/// Uniformly distributed direction on the unit sphere from two uniforms.
+#[inline]
+pub fn uniform_sphere(u1: f32, u2: f32) -> Vec3 {
+    let z = 1.0 - 2.0 * u1;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = 2.0 * std::f32::consts::PI * u2;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Cosine-weighted direction on the hemisphere around +z.
+#[inline]
+pub fn cosine_hemisphere(u1: f32, u2: f32) -> Vec3 {
+    let r = u1.sqrt();
+    let phi = 2.0 * std::f32::consts::PI * u2;
+    Vec3::new(r * phi.cos(), r * phi.sin(), (1.0 - u1).max(0.0).sqrt())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_is_orthonormal() {
+        for n in [Vec3::X, Vec3::Y, Vec3::Z, -Vec3::Z, Vec3::new(0.3, -0.8, 0.5).normalize()] {
+            let f = Frame::from_normal(n);
+            assert!(f.t.dot(f.b).abs() < 1e-6 && f.t.dot(n).abs() < 1e-6 && f.b.dot(n).abs() < 1e-6);
+            assert!((f.t.length() - 1.0).abs() < 1e-6 && (f.b.length() - 1.0).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn rng_streams_differ_and_repeat() {
+        let a: Vec<u32> = (0..4)
+            .map(|_| 0)
+            .scan(Rng::for_pixel(1, 2, 3, 0), |r, _| Some(r.next_u32()))
+            .collect();
+        let b: Vec<u32> = (0..4)
+            .map(|_| 0)
+            .scan(Rng::for_pixel(1, 2, 3, 0), |r, _| Some(r.next_u32()))
+            .collect();
+        let c: Vec<u32> = (0..4)
+            .map(|_| 0)
+            .scan(Rng::for_pixel(1, 2, 3, 1), |r, _| Some(r.next_u32()))
+            .collect();
+        assert_eq!(a, b);
+        assert_ne!(a, c);
+        let mut r = Rng::new(7, 7);
+        let mean: f64 = (0..100_000).map(|_| r.uniform() as f64).sum::<f64>() / 100_000.0;
+        assert!((mean - 0.5).abs() < 0.01);
+    }
+}

@@ -1,0 +1,403 @@
+//! The scene file (TOML): its keys, their defaults (the built-in default scene), validation with
+//! messages that name the file and field, and the runtime [`Scene`] built from it.
+//!
+//! Every table and key is optional; a missing one takes the default scene's value. Unknown keys
+//! are an error that names the key.
+
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::lighting::{Ground, Sky, Sun};
+use crate::math::{Rgb, Vec3};
+use crate::medium::Medium;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// `[medium]`: the cloud's density grid and its optical properties.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct MediumDesc {
+    /// `"procedural"` or a path relative to the scene file: `.vol`, `.npy`, `.raw` (+ `.json`), `.vdb`.
+    pub grid: String,
+    /// Seed of the procedural cumulus.
+    pub seed: u64,
+    /// Procedural resolution (nx, ny, nz).
+    pub resolution: [usize; 3],
+    /// Voxel edge length (m), for `.npy`, `.raw` and procedural grids.
+    pub voxel_size: f32,
+    /// Minimum corner of the grid (m), for `.npy`, `.raw` and procedural grids.
+    pub origin: [f32; 3],
+    /// Extinction coefficient at density 1 (m⁻¹).
+    pub sigma_t: f32,
+    /// Single-scattering albedo per RGB band (unitless, in [0, 1]).
+    pub albedo: [f32; 3],
+    /// Henyey–Greenstein mean cosine (unitless, |g| < 1).
+    pub g: f32,
+    /// Grid to read from a `.vdb` file.
+    pub grid_name: String,
+    /// Extra factor on a `.vdb` file's index-to-world transform (unitless).
+    pub scale: f32,
+    /// Largest dense grid accepted, in voxels (memory guard; 4 bytes each plus solver storage).
+    pub max_voxels: u64,
+    /// Average N×N×N blocks after loading (1 = off).
+    pub downsample: usize,
+}
+
+impl Default for MediumDesc {
+    fn default() -> Self {
+        MediumDesc {
+            grid: "procedural".into(),
+            seed: 1,
+            resolution: [100, 80, 60],
+            voxel_size: 10.0,
+            origin: [-500.0, 0.0, -300.0],
+            sigma_t: 0.05,
+            albedo: [0.999, 0.999, 0.999],
+            g: 0.9,
+            grid_name: "density".into(),
+            scale: 1.0,
+            max_voxels: 200_000_000,
+            downsample: 1,
+        }
+    }
+}
+
+/// `[sun]`: a directional light.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct SunDesc {
+    /// Direction towards the sun (normalised by the program). Exclusive with elevation/azimuth.
+    pub direction: Option<[f32; 3]>,
+    /// Elevation above the horizon (degrees); direction = (cos el cos az, sin el, cos el sin az).
+    pub elevation_deg: Option<f32>,
+    /// Azimuth (degrees), measured from +x towards +z.
+    pub azimuth_deg: Option<f32>,
+    /// Irradiance on a plane perpendicular to the rays (W/m² per band).
+    pub irradiance: [f32; 3],
+}
+
+impl Default for SunDesc {
+    fn default() -> Self {
+        SunDesc {
+            direction: Some([0.3, 0.8, 0.5]),
+            elevation_deg: None,
+            azimuth_deg: None,
+            irradiance: [3.0, 3.0, 3.0],
+        }
+    }
+}
+
+/// Which sky model lights the scene.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum SkyModel {
+    /// The same radiance from every direction.
+    Constant,
+}
+
+/// `[sky]`.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct SkyDesc {
+    /// The model.
+    pub model: SkyModel,
+    /// Radiance of the constant sky (W·m⁻²·sr⁻¹ per band).
+    pub radiance: [f32; 3],
+}
+
+impl Default for SkyDesc {
+    fn default() -> Self {
+        SkyDesc {
+            model: SkyModel::Constant,
+            radiance: [0.3, 0.45, 0.8],
+        }
+    }
+}
+
+/// `[ground]`: an infinite Lambertian plane y = height.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct GroundDesc {
+    /// Height of the plane (m).
+    pub height: f32,
+    /// Lambertian albedo per band (unitless, in [0, 1]).
+    pub albedo: [f32; 3],
+}
+
+impl Default for GroundDesc {
+    fn default() -> Self {
+        GroundDesc {
+            height: 0.0,
+            albedo: [0.3, 0.3, 0.3],
+        }
+    }
+}
+
+/// `[camera]`: a pinhole camera.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct CameraDesc {
+    /// Eye position (m).
+    pub position: [f32; 3],
+    /// Point looked at (m).
+    pub look_at: [f32; 3],
+    /// Up hint; must not be parallel to the view direction.
+    pub up: [f32; 3],
+    /// Vertical field of view (degrees).
+    pub fov_deg: f32,
+    /// Image width (pixels).
+    pub width: u32,
+    /// Image height (pixels).
+    pub height: u32,
+}
+
+impl Default for CameraDesc {
+    fn default() -> Self {
+        CameraDesc {
+            position: [0.0, 350.0, 1500.0],
+            look_at: [0.0, 330.0, 0.0],
+            up: [0.0, 1.0, 0.0],
+            fov_deg: 40.0,
+            width: 480,
+            height: 360,
+        }
+    }
+}
+
+/// Rendering method.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Exact single scattering of the sun plus the attenuated background (paper Fig. 4).
+    Single,
+}
+
+impl Method {
+    /// The name used in scene files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Single => "single",
+        }
+    }
+}
+
+/// `[render]`.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct RenderDesc {
+    /// The method.
+    pub method: Method,
+    /// Seed of every random stream.
+    pub seed: u64,
+    /// Samples per pixel.
+    pub spp: u32,
+    /// Exposure of the PNG preview, in stops (the EXR is never scaled).
+    pub exposure: f32,
+    /// Ray-march step of the gather, as a fraction of the smallest voxel edge (unitless).
+    pub step: f32,
+}
+
+impl Default for RenderDesc {
+    fn default() -> Self {
+        RenderDesc {
+            method: Method::Single,
+            seed: 0,
+            spp: 1,
+            exposure: 0.0,
+            step: 0.5,
+        }
+    }
+}
+
+/// The whole scene file, as written.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct SceneDesc {
+    /// `[medium]`.
+    pub medium: MediumDesc,
+    /// `[sun]`.
+    pub sun: SunDesc,
+    /// `[sky]`.
+    pub sky: SkyDesc,
+    /// `[ground]`, absent for no ground.
+    pub ground: Option<GroundDesc>,
+    /// `[camera]`.
+    pub camera: CameraDesc,
+    /// `[render]`.
+    pub render: RenderDesc,
+}
+
+impl Default for SceneDesc {
+    /// The built-in default scene: the procedural cumulus over a grey ground, sun high behind the camera's right.
+    fn default() -> Self {
+        SceneDesc {
+            medium: MediumDesc::default(),
+            sun: SunDesc::default(),
+            sky: SkyDesc::default(),
+            ground: Some(GroundDesc::default()),
+            camera: CameraDesc::default(),
+            render: RenderDesc::default(),
+        }
+    }
+}
+
+/// Name used in messages for the scene without a file.
+pub const BUILTIN: &str = "built-in scene";
+
+impl SceneDesc {
+    /// Parse TOML text; `file` names the source in error messages.
+    pub fn from_toml(text: &str, file: &str) -> Result<Self> {
+        toml::from_str(text).map_err(|e| Error::Parse {
+            file: file.to_string(),
+            message: e.to_string().trim_end().to_string(),
+        })
+    }
+
+    /// Read and parse a scene file.
+    pub fn from_file(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        Self::from_toml(&text, &path.display().to_string())
+    }
+
+    /// Serialise back to TOML (used by `export` and the tests).
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).unwrap_or_default()
+    }
+}
+
+/// Settings of the render itself (from `[render]` after validation).
+#[derive(Clone, Debug)]
+pub struct RenderSettings {
+    /// The method.
+    pub method: Method,
+    /// Seed of every random stream.
+    pub seed: u64,
+    /// Samples per pixel (≥ 1).
+    pub spp: u32,
+    /// PNG exposure (stops).
+    pub exposure: f32,
+    /// March step as a fraction of the smallest voxel edge.
+    pub step: f32,
+}
+
+/// A validated scene, ready to render.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// Where it came from (file path or [`BUILTIN`]), for messages.
+    pub source: String,
+    /// The description it was built from.
+    pub desc: SceneDesc,
+    /// The medium, loaded.
+    pub medium: Medium,
+    /// The sun.
+    pub sun: Sun,
+    /// The sky.
+    pub sky: Sky,
+    /// The ground, if any.
+    pub ground: Option<Ground>,
+    /// The camera.
+    pub camera: Camera,
+    /// Render settings.
+    pub render: RenderSettings,
+}
+
+/// Check a finite number; `what` describes the allowed range for the message.
+pub(crate) fn check(file: &str, field: &str, ok: bool, value: impl std::fmt::Debug, what: &str) -> Result<()> {
+    if ok {
+        Ok(())
+    } else {
+        Err(Error::invalid(file, field, format!("{value:?} is not allowed: {what}")))
+    }
+}
+
+pub(crate) fn finite3(v: [f32; 3]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+pub(crate) fn rgb_in_unit(v: [f32; 3]) -> bool {
+    v.iter().all(|x| (0.0..=1.0).contains(x))
+}
+
+pub(crate) fn rgb_nonneg(v: [f32; 3]) -> bool {
+    v.iter().all(|x| x.is_finite() && *x >= 0.0)
+}
+
+impl Scene {
+    /// Validate a description and load what it refers to. `source` names it in messages;
+    /// relative grid paths resolve against `base_dir`.
+    pub fn build(desc: SceneDesc, source: &str, base_dir: &Path) -> Result<Scene> {
+        let f = source;
+        let r = &desc.render;
+        check(f, "render.spp", r.spp >= 1, r.spp, "samples per pixel must be at least 1")?;
+        check(
+            f,
+            "render.exposure",
+            r.exposure.is_finite(),
+            r.exposure,
+            "exposure must be a finite number of stops",
+        )?;
+        check(
+            f,
+            "render.step",
+            r.step.is_finite() && r.step > 0.0 && r.step <= 4.0,
+            r.step,
+            "the march step is a fraction of a voxel in (0, 4]",
+        )?;
+        let camera = Camera::from_desc(&desc.camera, f)?;
+        let sun = Sun::from_desc(&desc.sun, f)?;
+        let sky = Sky::from_desc(&desc.sky, f, base_dir)?;
+        let ground = match &desc.ground {
+            Some(g) => Some(Ground::from_desc(g, f)?),
+            None => None,
+        };
+        let medium = Medium::from_desc(&desc.medium, f, base_dir)?;
+        let render = RenderSettings {
+            method: r.method,
+            seed: r.seed,
+            spp: r.spp,
+            exposure: r.exposure,
+            step: r.step,
+        };
+        Ok(Scene {
+            source: source.to_string(),
+            desc,
+            medium,
+            sun,
+            sky,
+            ground,
+            camera,
+            render,
+        })
+    }
+
+    /// The built-in default scene.
+    pub fn default_scene() -> Result<Scene> {
+        Scene::build(SceneDesc::default(), BUILTIN, Path::new("."))
+    }
+
+    /// Load a scene file (None: the built-in default scene), applying `edit` to the description first.
+    pub fn load(path: Option<&Path>, edit: impl FnOnce(&mut SceneDesc)) -> Result<Scene> {
+        let (mut desc, source, base) = match path {
+            Some(p) => (
+                SceneDesc::from_file(p)?,
+                p.display().to_string(),
+                p.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from(".")),
+            ),
+            None => (SceneDesc::default(), BUILTIN.to_string(), PathBuf::from(".")),
+        };
+        edit(&mut desc);
+        Scene::build(desc, &source, &base)
+    }
+
+    /// Radiance arriving along a ray that leaves the medium's box without further scattering:
+    /// the ground (lit by sun and sky, sun shadowed by the cloud) or the sky. The sun's disc is
+    /// not included (a point sun is never seen directly).
+    pub fn background(&self, origin: Vec3, dir: Vec3, sun_visibility: impl Fn(Vec3) -> f32) -> Rgb {
+        if let Some(g) = &self.ground {
+            if let Some(t) = g.intersect(origin, dir) {
+                let p = origin + dir * t;
+                return g.radiance(p, &self.sun, &self.sky, sun_visibility(p));
+            }
+        }
+        self.sky.radiance(dir)
+    }
+}
