@@ -70,7 +70,7 @@ fn missing_grid_file() {
 fn write_vol(dir: &Path, dims: [i32; 3], values: &[f32], truncate: usize) {
     let mut b = b"VOL\x03".to_vec();
     for v in [1, dims[0], dims[1], dims[2], 1] {
-        b.extend_from_slice(&(v as i32).to_le_bytes());
+        b.extend_from_slice(&v.to_le_bytes());
     }
     for v in [0.0f32, 0.0, 0.0, 1.0, 1.0, 1.0] {
         b.extend_from_slice(&v.to_le_bytes());
