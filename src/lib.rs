@@ -11,6 +11,7 @@ pub mod io;
 pub mod lighting;
 pub mod math;
 pub mod medium;
+pub mod orders;
 pub mod phase;
 pub mod render;
 pub mod scene;

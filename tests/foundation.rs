@@ -11,7 +11,10 @@ use std::path::Path;
 
 /// A scene around a homogeneous 10 m cube of density 1 at the origin, no ground.
 fn box_scene(sigma_t: f32, albedo: f32, g: f32, sun_dir: Vec3) -> Scene {
-    let mut desc = SceneDesc { ground: None, ..Default::default() };
+    let mut desc = SceneDesc {
+        ground: None,
+        ..Default::default()
+    };
     desc.sky.radiance = [0.2, 0.3, 0.5];
     desc.medium.sigma_t = sigma_t;
     desc.medium.albedo = [albedo; 3];
