@@ -5,6 +5,7 @@
 //! [`image::Image`] (linear HDR) → EXR + tone-mapped PNG.
 
 pub mod camera;
+pub mod cube;
 pub mod error;
 pub mod image;
 pub mod io;
