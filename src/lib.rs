@@ -5,6 +5,7 @@
 //! [`image::Image`] (linear HDR) → EXR + tone-mapped PNG.
 
 pub mod camera;
+pub mod compare;
 pub mod error;
 pub mod image;
 pub mod io;
@@ -13,6 +14,7 @@ pub mod math;
 pub mod medium;
 pub mod orders;
 pub mod phase;
+pub mod reference;
 pub mod render;
 pub mod scene;
 pub mod sunlight;
