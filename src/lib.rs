@@ -6,6 +6,7 @@
 
 pub mod camera;
 pub mod cube;
+pub mod compare;
 pub mod error;
 pub mod image;
 pub mod io;
@@ -14,6 +15,7 @@ pub mod math;
 pub mod medium;
 pub mod orders;
 pub mod phase;
+pub mod reference;
 pub mod render;
 pub mod scene;
 pub mod sunlight;

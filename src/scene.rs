@@ -169,6 +169,8 @@ impl Default for CameraDesc {
 pub enum Method {
     /// Exact single scattering of the sun plus the attenuated background (paper Fig. 4).
     Single,
+    /// Unbiased volumetric path tracing (delta/ratio tracking, NEE + MIS): the ground truth.
+    Reference,
 }
 
 impl Method {
@@ -176,6 +178,7 @@ impl Method {
     pub fn name(self) -> &'static str {
         match self {
             Method::Single => "single",
+            Method::Reference => "reference",
         }
     }
 }
@@ -194,6 +197,12 @@ pub struct RenderDesc {
     pub exposure: f32,
     /// Ray-march step of the gather, as a fraction of the smallest voxel edge (unitless).
     pub step: f32,
+    /// `reference`: most scattering events (medium or ground) per path; absent = no cap.
+    pub max_depth: Option<u32>,
+    /// `reference`: stop after the pass in progress once this many seconds have passed.
+    pub time_limit: Option<f64>,
+    /// `reference`: add the per-pixel standard error of the mean as EXR layer `stderr`.
+    pub stderr: bool,
 }
 
 impl Default for RenderDesc {
@@ -204,6 +213,9 @@ impl Default for RenderDesc {
             spp: 1,
             exposure: 0.0,
             step: 0.5,
+            max_depth: None,
+            time_limit: None,
+            stderr: false,
         }
     }
 }
@@ -277,6 +289,12 @@ pub struct RenderSettings {
     pub exposure: f32,
     /// March step as a fraction of the smallest voxel edge.
     pub step: f32,
+    /// `reference`: most scattering events per path (None = unlimited).
+    pub max_depth: Option<u32>,
+    /// `reference`: wall-clock budget in seconds (None = render all spp).
+    pub time_limit: Option<f64>,
+    /// `reference`: write the standard-error layer.
+    pub stderr: bool,
 }
 
 /// A validated scene, ready to render.
@@ -342,6 +360,15 @@ impl Scene {
             r.step,
             "the march step is a fraction of a voxel in (0, 4]",
         )?;
+        if let Some(t) = r.time_limit {
+            check(
+                f,
+                "render.time_limit",
+                t.is_finite() && t > 0.0,
+                t,
+                "the time limit is a positive number of seconds",
+            )?;
+        }
         let camera = Camera::from_desc(&desc.camera, f)?;
         let sun = Sun::from_desc(&desc.sun, f)?;
         let sky = Sky::from_desc(&desc.sky, f, base_dir)?;
@@ -356,6 +383,9 @@ impl Scene {
             spp: r.spp,
             exposure: r.exposure,
             step: r.step,
+            max_depth: r.max_depth,
+            time_limit: r.time_limit,
+            stderr: r.stderr,
         };
         Ok(Scene {
             source: source.to_string(),

@@ -1,6 +1,8 @@
 //! Subcommands of the `cloudgi` binary.
 
+mod compare;
 mod progress;
+mod slab;
 
 use clap::{Args, Parser, Subcommand};
 use cloudgi::error::{Error, Result};
@@ -25,6 +27,10 @@ pub struct Cli {
 enum Command {
     /// Render a scene (default: the built-in cloud) to OUT.exr plus a tone-mapped OUT.png.
     Render(RenderArgs),
+    /// Reflectance and transmittance of a plane-parallel slab (reference transport), one JSON line.
+    Slab(slab::SlabArgs),
+    /// Compare TEST.exr against REF.exr over the cloud pixels: one JSON line, optional difference PNG.
+    Compare(compare::CompareArgs),
 }
 
 #[derive(Args, Debug)]
@@ -49,6 +55,15 @@ struct RenderArgs {
     /// Override render.seed.
     #[arg(long)]
     seed: Option<u64>,
+    /// Override render.max_depth (reference: most scattering events per path).
+    #[arg(long)]
+    max_depth: Option<u32>,
+    /// Override render.time_limit (reference: seconds; stops after the pass in progress).
+    #[arg(long)]
+    time_limit: Option<f64>,
+    /// Set render.stderr (reference: write the per-pixel standard error as EXR layer `stderr`).
+    #[arg(long)]
+    stderr: bool,
 }
 
 /// Run the parsed command.
@@ -64,6 +79,8 @@ pub fn run(cli: Cli) -> Result<()> {
     }
     match cli.command {
         Command::Render(a) => render(a, cli.quiet),
+        Command::Slab(a) => slab::run(a),
+        Command::Compare(a) => compare::run(a),
     }
 }
 
@@ -100,6 +117,15 @@ fn render(a: RenderArgs, quiet: bool) -> Result<()> {
         }
         if let Some(s) = a.seed {
             d.render.seed = s;
+        }
+        if let Some(m) = a.max_depth {
+            d.render.max_depth = Some(m);
+        }
+        if let Some(t) = a.time_limit {
+            d.render.time_limit = Some(t);
+        }
+        if a.stderr {
+            d.render.stderr = true;
         }
     })?;
     let progress = progress::Bars::new(quiet);

@@ -72,6 +72,7 @@ pub fn render(scene: &Scene, progress: &dyn Progress) -> Result<RenderOutput> {
     let mut timings = Timings::default();
     let image = match scene.render.method {
         Method::Single => single::render(scene, progress, &mut timings)?,
+        Method::Reference => crate::reference::render(scene, progress, &mut timings)?,
     };
     Ok(RenderOutput { image, timings })
 }

@@ -1,0 +1,68 @@
+//! `cloudgi compare TEST.exr REF.exr`: error metrics over the cloud pixels as one JSON line, and
+//! an optional false-colour difference PNG (see `cloudgi::compare` for the mask and metrics).
+
+use clap::Args;
+use cloudgi::compare::{choose_mask, compare, write_diff_png};
+use cloudgi::error::{Error, Result};
+use cloudgi::Image;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct CompareArgs {
+    /// The image to judge (EXR).
+    test: PathBuf,
+    /// The reference image (EXR), e.g. from `render --method reference`.
+    reference: PathBuf,
+    /// Write a false-colour relative luminance difference here (PNG): red brighter, blue darker, ±25 % saturates.
+    #[arg(long)]
+    diff: Option<PathBuf>,
+    /// Take the cloud mask (transmittance < 0.99) from this EXR's `transmittance` layer instead of REF's.
+    #[arg(long)]
+    mask: Option<PathBuf>,
+}
+
+pub fn run(a: CompareArgs) -> Result<()> {
+    if let Some(d) = &a.diff {
+        if !d
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+        {
+            return Err(Error::invalid(
+                "command line",
+                "--diff",
+                format!("`{}` must end in .png", d.display()),
+            ));
+        }
+    }
+    let test = Image::read_exr(&a.test)?;
+    let reference = Image::read_exr(&a.reference)?;
+    let mask_img = match &a.mask {
+        Some(p) => Some(Image::read_exr(p)?),
+        None => None,
+    };
+    if let Some(m) = &mask_img {
+        if (m.width, m.height) != (reference.width, reference.height) {
+            return Err(Error::invalid(
+                "command line",
+                "--mask",
+                format!(
+                    "{} is {}×{} but the images are {}×{}",
+                    a.mask.as_ref().map(|p| p.display().to_string()).unwrap_or_default(),
+                    m.width,
+                    m.height,
+                    reference.width,
+                    reference.height
+                ),
+            ));
+        }
+    }
+    let mask = choose_mask(&reference, mask_img.as_ref());
+    let metrics = compare(&test, &reference, mask.as_deref())?;
+    if let Some(d) = &a.diff {
+        write_diff_png(d, &test, &reference, mask.as_deref())?;
+    }
+    let line = serde_json::to_string(&metrics).map_err(|e| Error::format("<json>", e.to_string()))?;
+    println!("{line}");
+    Ok(())
+}

@@ -1,0 +1,159 @@
+//! The path-tracing estimator of the radiance arriving along one ray.
+//!
+//! Vertices are real collisions in the medium (delta tracking) and hits on the Lambertian ground.
+//! At each vertex: next-event estimation of the sun (a directional light, shadowed by ratio
+//! tracking) and of the sky (sampled by [`SkySampler`], shadowed by ratio tracking, weighted by the
+//! power heuristic against the phase function or the ground's cosine lobe); then the path continues
+//! in a direction sampled from the phase function or the cosine lobe. A continuation that escapes
+//! to the sky picks up the sky's radiance with the complementary MIS weight. The throughput is
+//! multiplied by the albedo at each vertex and Russian roulette with survival probability
+//! min(1, max band of the throughput) ends paths without bias; there is no depth cap unless
+//! `max_depth` is set.
+
+use super::sky::SkySampler;
+use super::tracking::{ratio_transmittance, sample_collision};
+use crate::math::{cosine_hemisphere, Frame, Rgb, Rng, Vec3};
+use crate::phase::{hg, sample_hg};
+use crate::scene::Scene;
+use std::f32::consts::FRAC_1_PI;
+
+/// Offset (m) that lifts a ground hit above the plane before tracing on.
+const GROUND_EPS: f32 = 1e-3;
+
+/// Options of the estimator.
+#[derive(Clone, Copy, Debug)]
+pub struct PathOptions {
+    /// Most scattering events (medium or ground) per path; `u32::MAX` for no cap.
+    pub max_depth: u32,
+}
+
+impl Default for PathOptions {
+    fn default() -> Self {
+        PathOptions { max_depth: u32::MAX }
+    }
+}
+
+/// Power heuristic weight of a strategy with density `a` against one with density `b`.
+#[inline]
+fn power(a: f32, b: f32) -> f32 {
+    let (a2, b2) = (a * a, b * b);
+    if a2 + b2 > 0.0 {
+        a2 / (a2 + b2)
+    } else {
+        0.0
+    }
+}
+
+/// Radiance (W·m⁻²·sr⁻¹) arriving at `o` from direction `d` (the ray `o + t·d`), one sample.
+pub fn radiance(scene: &Scene, o: Vec3, d: Vec3, opts: &PathOptions, rng: &mut Rng) -> Rgb {
+    let m = &scene.medium;
+    let sun = &scene.sun;
+    let ground = scene.ground.as_ref();
+    // The one line to change when `Sky::sample`/`Sky::pdf` land: `let sky = &scene.sky;`.
+    let sky = SkySampler::new(&scene.sky);
+    let sun_on = sun.irradiance.max_element() > 0.0;
+    let ground_t = |p: Vec3, dir: Vec3| ground.and_then(|g| g.intersect(p, dir));
+    // Transmittance towards the sky or sun: zero if the ground is in the way.
+    let shadow = |p: Vec3, dir: Vec3, rng: &mut Rng| -> f32 {
+        if ground_t(p, dir).is_some() {
+            0.0
+        } else {
+            ratio_transmittance(m, p, dir, f32::INFINITY, rng)
+        }
+    };
+
+    let (mut o, mut d) = (o, d);
+    let mut l = Rgb::ZERO;
+    let mut beta = Rgb::ONE;
+    // Density of the direction sampled at the previous vertex (None: camera ray, no MIS).
+    let mut prev_pdf: Option<f32> = None;
+    let mut depth = 0u32;
+    loop {
+        let tg = ground_t(o, d);
+        let t_max = tg.unwrap_or(f32::INFINITY);
+        if let Some(t) = sample_collision(m, o, d, t_max, rng) {
+            // Real collision in the medium.
+            depth += 1;
+            if depth > opts.max_depth {
+                break;
+            }
+            let p = o + d * t;
+            beta *= m.albedo;
+            if sun_on {
+                let tr = shadow(p, sun.dir, rng);
+                if tr > 0.0 {
+                    l += beta * sun.irradiance * (hg(d.dot(sun.dir), m.g) * tr);
+                }
+            }
+            let (wi, ls, pl) = sky.sample([rng.uniform(), rng.uniform()]);
+            if pl > 0.0 && ls.max_element() > 0.0 {
+                let f = hg(d.dot(wi), m.g);
+                let tr = shadow(p, wi, rng);
+                if tr > 0.0 {
+                    l += beta * ls * (f * tr * power(pl, f) / pl);
+                }
+            }
+            if !roulette(&mut beta, rng) {
+                break;
+            }
+            let nd = sample_hg(d, m.g, rng.uniform(), rng.uniform());
+            prev_pdf = Some(hg(d.dot(nd), m.g));
+            o = p;
+            d = nd;
+        } else if let (Some(t), Some(g)) = (tg, ground) {
+            // Lambertian ground.
+            depth += 1;
+            if depth > opts.max_depth {
+                break;
+            }
+            let p = o + d * t;
+            let p = Vec3::new(p.x, g.height + GROUND_EPS, p.z);
+            beta *= g.albedo;
+            if sun_on && sun.dir.y > 0.0 {
+                let tr = shadow(p, sun.dir, rng);
+                if tr > 0.0 {
+                    l += beta * sun.irradiance * (sun.dir.y * FRAC_1_PI * tr);
+                }
+            }
+            let (wi, ls, pl) = sky.sample([rng.uniform(), rng.uniform()]);
+            if pl > 0.0 && wi.y > 0.0 && ls.max_element() > 0.0 {
+                let f = wi.y * FRAC_1_PI;
+                let tr = shadow(p, wi, rng);
+                if tr > 0.0 {
+                    l += beta * ls * (f * tr * power(pl, f) / pl);
+                }
+            }
+            if !roulette(&mut beta, rng) {
+                break;
+            }
+            let local = cosine_hemisphere(rng.uniform(), rng.uniform());
+            let nd = Frame::from_normal(Vec3::Y).to_world(local).normalize();
+            prev_pdf = Some(nd.y.max(0.0) * FRAC_1_PI);
+            o = p;
+            d = nd;
+        } else {
+            // Escaped to the sky.
+            let w = match prev_pdf {
+                None => 1.0,
+                Some(pp) => power(pp, sky.pdf(d)),
+            };
+            l += beta * scene.sky.radiance(d) * w;
+            break;
+        }
+    }
+    l
+}
+
+/// Russian roulette with survival probability min(1, max band of `beta`); re-weights survivors.
+#[inline]
+fn roulette(beta: &mut Rgb, rng: &mut Rng) -> bool {
+    let q = beta.max_element().min(1.0);
+    if q >= 1.0 {
+        return true;
+    }
+    if q <= 0.0 || rng.uniform() >= q {
+        return false;
+    }
+    *beta /= q;
+    true
+}

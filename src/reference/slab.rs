@@ -1,0 +1,163 @@
+//! The plane-parallel slab validator: the reference transport in a homogeneous slab of optical
+//! thickness τ, infinite sideways, with no refraction at its faces, lit from above by a collimated
+//! beam at normal incidence or by uniform diffuse light. Estimates the total reflected (R) and
+//! transmitted (T, including the unscattered beam) fractions of the incident flux, to be checked
+//! against adding-doubling (`tests/data/slab_adding_doubling.csv`).
+//!
+//! The transport is the tracer's: exponential free paths (delta tracking in a homogeneous medium
+//! with a tight majorant is exactly this), Henyey–Greenstein directions from [`sample_hg_cos`], and
+//! the throughput multiplied by the albedo at each collision followed by Russian roulette with
+//! survival probability min(1, throughput) — which for a single band is the same as absorbing the
+//! photon with probability 1 − albedo, so every photon scores 0 or 1.
+//!
+//! Photon i draws from its own stream `Rng::new(seed, i)`, so the result is identical at any thread count.
+
+use crate::error::{Error, Result};
+use crate::math::Rng;
+use crate::phase::sample_hg_cos;
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// How the slab is lit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Incidence {
+    /// A beam at normal incidence.
+    Collimated,
+    /// Uniform radiance from the whole upper hemisphere (cosine-weighted incident directions).
+    Diffuse,
+}
+
+/// A slab case.
+#[derive(Clone, Copy, Debug)]
+pub struct SlabParams {
+    /// Optical thickness τ (unitless, ≥ 0).
+    pub thickness: f64,
+    /// Single-scattering albedo in [0, 1].
+    pub albedo: f64,
+    /// HG mean cosine, |g| < 1.
+    pub g: f64,
+    /// Illumination.
+    pub incidence: Incidence,
+}
+
+/// Reflected and transmitted fractions with their standard errors.
+#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
+pub struct SlabResult {
+    /// Total reflectance (fraction of the incident flux leaving through the top).
+    #[serde(rename = "R")]
+    pub r: f64,
+    /// Total transmittance (fraction leaving through the bottom, unscattered beam included).
+    #[serde(rename = "T")]
+    pub t: f64,
+    /// Standard error of R.
+    #[serde(rename = "R_stderr")]
+    pub r_stderr: f64,
+    /// Standard error of T.
+    #[serde(rename = "T_stderr")]
+    pub t_stderr: f64,
+}
+
+/// Where a photon ends.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Fate {
+    Reflected,
+    Transmitted,
+    Absorbed,
+}
+
+/// Photons per parallel work item.
+const CHUNK: u64 = 2048;
+
+impl SlabParams {
+    /// Check the parameters; `file` names the source for messages (e.g. "command line").
+    pub fn validate(&self, file: &str) -> Result<()> {
+        if !(self.thickness.is_finite() && self.thickness >= 0.0) {
+            return Err(Error::invalid(
+                file,
+                "--thickness",
+                format!("{} is not allowed: the optical thickness must be finite and ≥ 0", self.thickness),
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.albedo) {
+            return Err(Error::invalid(
+                file,
+                "--albedo",
+                format!("{} is not allowed: the albedo must be in [0, 1]", self.albedo),
+            ));
+        }
+        if !(self.g.is_finite() && self.g.abs() < 1.0) {
+            return Err(Error::invalid(
+                file,
+                "--g",
+                format!("{} is not allowed: the Henyey-Greenstein g must satisfy |g| < 1", self.g),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Trace one photon.
+fn photon(p: &SlabParams, rng: &mut Rng) -> Fate {
+    // μ: cosine between the direction and the downward normal; z: optical depth below the top.
+    let mut mu = match p.incidence {
+        Incidence::Collimated => 1.0f64,
+        Incidence::Diffuse => rng.uniform_f64().sqrt().max(1e-12),
+    };
+    let mut z = 0.0f64;
+    let g = p.g as f32;
+    loop {
+        z += -(1.0 - rng.uniform_f64()).ln() * mu;
+        if z <= 0.0 {
+            return Fate::Reflected;
+        }
+        if z >= p.thickness {
+            return Fate::Transmitted;
+        }
+        // Throughput × albedo, then roulette with q = throughput: survive with probability albedo.
+        if rng.uniform_f64() >= p.albedo {
+            return Fate::Absorbed;
+        }
+        let c = sample_hg_cos(g, rng.uniform()) as f64;
+        let s = ((1.0 - c * c) * (1.0 - mu * mu)).max(0.0).sqrt();
+        let phi = 2.0 * std::f64::consts::PI * rng.uniform_f64();
+        mu = (mu * c + s * phi.cos()).clamp(-1.0, 1.0);
+    }
+}
+
+/// Estimate R and T with `samples` photons (≥ 2).
+pub fn slab(p: &SlabParams, samples: u64, seed: u64) -> Result<SlabResult> {
+    p.validate("slab")?;
+    if samples < 2 {
+        return Err(Error::invalid(
+            "slab",
+            "--samples",
+            format!("{samples} is not allowed: at least 2 photons are needed for a standard error"),
+        ));
+    }
+    let chunks = samples.div_ceil(CHUNK);
+    let counts: Vec<(u64, u64)> = (0..chunks)
+        .into_par_iter()
+        .map(|c| {
+            let (mut r, mut t) = (0u64, 0u64);
+            for i in c * CHUNK..((c + 1) * CHUNK).min(samples) {
+                let mut rng = Rng::new(seed, i);
+                match photon(p, &mut rng) {
+                    Fate::Reflected => r += 1,
+                    Fate::Transmitted => t += 1,
+                    Fate::Absorbed => {}
+                }
+            }
+            (r, t)
+        })
+        .collect();
+    let (r, t) = counts.iter().fold((0u64, 0u64), |a, b| (a.0 + b.0, a.1 + b.1));
+    let n = samples as f64;
+    // Each photon scores 0 or 1: the sample variance of a Bernoulli mean is p(1 − p)/(n − 1).
+    let est = |k: u64| {
+        let m = k as f64 / n;
+        (m, (m * (1.0 - m) / (n - 1.0)).sqrt())
+    };
+    let ((r, r_stderr), (t, t_stderr)) = (est(r), est(t));
+    Ok(SlabResult { r, t, r_stderr, t_stderr })
+}

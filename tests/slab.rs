@@ -1,0 +1,143 @@
+//! The slab validator against adding-doubling: every one of the 105 rows of
+//! `tests/data/slab_adding_doubling.csv` (copied from the project's shared reference data), for
+//! both collimated and diffuse incidence, must agree within 3 standard errors + 0.002.
+//!
+//! Photons per case: `PHOTONS` gives a standard error of at most 0.5/√N ≈ 0.0022 for a fraction
+//! near 0.5, so the tolerance (≤ 0.009) is tight enough to catch a wrong phase function sampler
+//! (g = 0.9 treated as isotropic moves R by 0.1 or more at τ = 1), a missing unscattered beam or a
+//! wrong diffuse-incidence distribution, while the whole table runs in a few seconds.
+
+use cloudgi::reference::slab::{slab, Incidence, SlabParams};
+use rayon::prelude::*;
+
+const PHOTONS: u64 = 50_000;
+
+struct Row {
+    tau: f64,
+    albedo: f64,
+    g: f64,
+    ur1: f64,
+    ut1: f64,
+    uru: f64,
+    utu: f64,
+}
+
+fn rows() -> Vec<Row> {
+    let text = include_str!("data/slab_adding_doubling.csv");
+    let mut lines = text.lines();
+    assert_eq!(lines.next().unwrap().trim(), "optical_thickness,albedo,g,UR1,UT1,URU,UTU");
+    lines
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|x| x.trim().parse().unwrap()).collect();
+            Row {
+                tau: v[0],
+                albedo: v[1],
+                g: v[2],
+                ur1: v[3],
+                ut1: v[4],
+                uru: v[5],
+                utu: v[6],
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn every_adding_doubling_row_within_three_standard_errors() {
+    let rows = rows();
+    assert_eq!(rows.len(), 105);
+    let failures: Vec<String> = rows
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(i, r)| {
+            [(Incidence::Collimated, r.ur1, r.ut1), (Incidence::Diffuse, r.uru, r.utu)]
+                .into_iter()
+                .filter_map(move |(inc, er, et)| {
+                    let p = SlabParams {
+                        thickness: r.tau,
+                        albedo: r.albedo,
+                        g: r.g,
+                        incidence: inc,
+                    };
+                    let s = slab(&p, PHOTONS, 1000 + i as u64).unwrap();
+                    let ok_r = (s.r - er).abs() <= 3.0 * s.r_stderr + 0.002;
+                    let ok_t = (s.t - et).abs() <= 3.0 * s.t_stderr + 0.002;
+                    (!(ok_r && ok_t)).then(|| {
+                        format!(
+                            "τ={} a={} g={} {:?}: R {:.5}±{:.5} (exact {er}), T {:.5}±{:.5} (exact {et})",
+                            r.tau, r.albedo, r.g, inc, s.r, s.r_stderr, s.t, s.t_stderr
+                        )
+                    })
+                })
+        })
+        .collect();
+    assert!(
+        failures.is_empty(),
+        "{} of 210 cases fail:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
+}
+
+#[test]
+fn slab_is_deterministic_and_rejects_bad_input() {
+    let p = SlabParams {
+        thickness: 2.0,
+        albedo: 0.9,
+        g: 0.5,
+        incidence: Incidence::Diffuse,
+    };
+    let a = slab(&p, 5000, 3).unwrap();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    let b = pool.install(|| slab(&p, 5000, 3).unwrap());
+    assert_eq!(a, b);
+    // Conservative slab: nothing is absorbed.
+    let c = slab(&SlabParams { albedo: 1.0, ..p }, 5000, 3).unwrap();
+    assert!((c.r + c.t - 1.0).abs() < 1e-12);
+    for bad in [
+        SlabParams { thickness: -1.0, ..p },
+        SlabParams { albedo: 1.5, ..p },
+        SlabParams { g: 1.0, ..p },
+        SlabParams { thickness: f64::NAN, ..p },
+    ] {
+        assert!(slab(&bad, 100, 0).is_err());
+    }
+    assert!(slab(&p, 1, 0).is_err());
+}
+
+#[test]
+fn cli_prints_one_json_line() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_cloudgi"))
+        .args([
+            "slab",
+            "--thickness",
+            "1",
+            "--albedo",
+            "0.8",
+            "--g",
+            "0",
+            "--incidence",
+            "collimated",
+        ])
+        .args(["--samples", "20000", "--seed", "5"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert_eq!(text.lines().count(), 1);
+    let v: serde_json::Value = serde_json::from_str(text.trim()).unwrap();
+    for k in ["R", "T", "R_stderr", "T_stderr"] {
+        assert!(v[k].is_f64(), "{k} missing in {text}");
+    }
+    // Row τ=1, a=0.8, g=0: UR1 = 0.210847, UT1 = 0.541400.
+    assert!((v["R"].as_f64().unwrap() - 0.210847).abs() < 3.0 * v["R_stderr"].as_f64().unwrap() + 0.002);
+    assert!((v["T"].as_f64().unwrap() - 0.541400).abs() < 3.0 * v["T_stderr"].as_f64().unwrap() + 0.002);
+    let bad = std::process::Command::new(env!("CARGO_BIN_EXE_cloudgi"))
+        .args(["slab", "--thickness", "1", "--albedo", "2", "--g", "0", "--incidence", "diffuse"])
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    let msg = String::from_utf8_lossy(&bad.stderr);
+    assert!(msg.contains("--albedo") && msg.contains("[0, 1]"), "{msg}");
+}
