@@ -1,5 +1,6 @@
 //! Subcommands of the `cloudgi` binary.
 
+mod info;
 mod progress;
 
 use clap::{Args, Parser, Subcommand};
@@ -25,6 +26,8 @@ pub struct Cli {
 enum Command {
     /// Render a scene (default: the built-in cloud) to OUT.exr plus a tone-mapped OUT.png.
     Render(RenderArgs),
+    /// Describe the grids of an OpenVDB file: types, active voxels, bounding boxes, transforms, dense memory.
+    Info(info::InfoArgs),
 }
 
 #[derive(Args, Debug)]
@@ -64,6 +67,7 @@ pub fn run(cli: Cli) -> Result<()> {
     }
     match cli.command {
         Command::Render(a) => render(a, cli.quiet),
+        Command::Info(a) => info::run(a),
     }
 }
 
