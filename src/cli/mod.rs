@@ -1,6 +1,7 @@
 //! Subcommands of the `cloudgi` binary.
 
 mod compare;
+mod info;
 mod progress;
 mod slab;
 
@@ -31,6 +32,8 @@ enum Command {
     Slab(slab::SlabArgs),
     /// Compare TEST.exr against REF.exr over the cloud pixels: one JSON line, optional difference PNG.
     Compare(compare::CompareArgs),
+    /// Describe the grids of an OpenVDB file: types, active voxels, bounding boxes, transforms, dense memory.
+    Info(info::InfoArgs),
 }
 
 #[derive(Args, Debug)]
@@ -81,6 +84,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Render(a) => render(a, cli.quiet),
         Command::Slab(a) => slab::run(a),
         Command::Compare(a) => compare::run(a),
+        Command::Info(a) => info::run(a),
     }
 }
 

@@ -1,5 +1,5 @@
-//! Grid sources: the procedural cumulus and files — Mitsuba `.vol`, NumPy `.npy`, and `.raw`
-//! with a `.json` sidecar — plus writers for each (used by `export` and round-trip tests).
+//! Grid sources: the procedural cumulus and files — Mitsuba `.vol`, NumPy `.npy`, `.raw`
+//! with a `.json` sidecar, and OpenVDB `.vdb` (read by [`super::vdb`]) — plus writers for each (used by `export` and round-trip tests).
 //!
 //! Readers never trust a header: every size is checked against the bytes really present before
 //! anything is allocated, so a hostile file cannot cause an unbounded allocation or a panic.
@@ -102,6 +102,7 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
             })
         }
         "npy" => placed(parse_npy(&read(&path)?, &name)?),
+        "vdb" => load_vdb(d, file, &read(&path)?, name),
         "raw" => {
             let sidecar = path.with_extension("json");
             let text = std::fs::read_to_string(&sidecar).map_err(|e| Error::io(&sidecar, e))?;
@@ -117,11 +118,32 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
             file,
             "medium.grid",
             format!(
-                "`{}`: unsupported grid file type; use \"procedural\" or a .vol, .npy or .raw (+ .json) file",
+                "`{}`: unsupported grid file type; use \"procedural\" or a .vol, .npy, .raw (+ .json) or .vdb file",
                 d.grid
             ),
         )),
     }
+}
+
+/// A `.vdb` grid: placed by the file's own transform (times `medium.scale`), densified over its
+/// active bounding box with `medium.downsample` applied while reading, behind `medium.max_voxels`.
+fn load_vdb(d: &MediumDesc, file: &str, bytes: &[u8], name: String) -> Result<Loaded> {
+    check(
+        file,
+        "medium.scale",
+        d.scale.is_finite() && d.scale > 0.0,
+        d.scale,
+        "the factor on the .vdb transform must be positive and finite",
+    )?;
+    let v = super::vdb::read_vdb_dense_bytes(bytes, &name, Some(&d.grid_name), d.max_voxels, d.downsample)?;
+    let s = d.scale as f64;
+    Ok(Loaded {
+        grid: v.grid,
+        origin: Vec3::from(v.origin.map(|x| (x * s) as f32)),
+        voxel_size: Vec3::from(v.voxel_size.map(|x| (x * s) as f32)),
+        name,
+        downsampled: true,
+    })
 }
 
 fn read(path: &Path) -> Result<Vec<u8>> {

@@ -14,6 +14,7 @@ pub mod grid;
 pub mod loaders;
 pub mod majorant;
 pub mod procedural;
+pub mod vdb;
 
 use crate::error::{Error, Result};
 use crate::math::{Rgb, Vec3};
