@@ -194,6 +194,10 @@ pub struct RenderDesc {
     pub exposure: f32,
     /// Ray-march step of the gather, as a fraction of the smallest voxel edge (unitless).
     pub step: f32,
+    /// Pixels per face edge of the viewing cubes (a multiple of 4; docs/cubes.md).
+    pub cube_resolution: usize,
+    /// Ground irradiance samples per edge (N×N hemicubes; docs/cubes.md).
+    pub ground_samples: usize,
 }
 
 impl Default for RenderDesc {
@@ -204,6 +208,8 @@ impl Default for RenderDesc {
             spp: 1,
             exposure: 0.0,
             step: 0.5,
+            cube_resolution: crate::cube::render::DEFAULT_CUBE_RESOLUTION,
+            ground_samples: crate::cube::render::DEFAULT_GROUND_SAMPLES,
         }
     }
 }
@@ -277,6 +283,8 @@ pub struct RenderSettings {
     pub exposure: f32,
     /// March step as a fraction of the smallest voxel edge.
     pub step: f32,
+    /// Viewing-cube and hemicube settings (`render.cube_resolution`, `render.ground_samples`).
+    pub cubes: crate::cube::CubeOptions,
 }
 
 /// A validated scene, ready to render.
@@ -342,6 +350,12 @@ impl Scene {
             r.step,
             "the march step is a fraction of a voxel in (0, 4]",
         )?;
+        let cubes = crate::cube::CubeOptions {
+            res: r.cube_resolution,
+            ground_samples: r.ground_samples,
+            ..Default::default()
+        };
+        cubes.validate(f)?;
         let camera = Camera::from_desc(&desc.camera, f)?;
         let sun = Sun::from_desc(&desc.sun, f)?;
         let sky = Sky::from_desc(&desc.sky, f, base_dir)?;
@@ -356,6 +370,7 @@ impl Scene {
             spp: r.spp,
             exposure: r.exposure,
             step: r.step,
+            cubes,
         };
         Ok(Scene {
             source: source.to_string(),
