@@ -203,6 +203,10 @@ pub struct RenderDesc {
     pub time_limit: Option<f64>,
     /// `reference`: add the per-pixel standard error of the mean as EXR layer `stderr`.
     pub stderr: bool,
+    /// Pixels per face edge of the viewing cubes (a multiple of 4; docs/cubes.md).
+    pub cube_resolution: usize,
+    /// Ground irradiance samples per edge (N×N hemicubes; docs/cubes.md).
+    pub ground_samples: usize,
 }
 
 impl Default for RenderDesc {
@@ -216,6 +220,8 @@ impl Default for RenderDesc {
             max_depth: None,
             time_limit: None,
             stderr: false,
+            cube_resolution: crate::cube::render::DEFAULT_CUBE_RESOLUTION,
+            ground_samples: crate::cube::render::DEFAULT_GROUND_SAMPLES,
         }
     }
 }
@@ -295,6 +301,8 @@ pub struct RenderSettings {
     pub time_limit: Option<f64>,
     /// `reference`: write the standard-error layer.
     pub stderr: bool,
+    /// Viewing-cube and hemicube settings (`render.cube_resolution`, `render.ground_samples`).
+    pub cubes: crate::cube::CubeOptions,
 }
 
 /// A validated scene, ready to render.
@@ -369,6 +377,12 @@ impl Scene {
                 "the time limit is a positive number of seconds",
             )?;
         }
+        let cubes = crate::cube::CubeOptions {
+            res: r.cube_resolution,
+            ground_samples: r.ground_samples,
+            ..Default::default()
+        };
+        cubes.validate(f)?;
         let camera = Camera::from_desc(&desc.camera, f)?;
         let sun = Sun::from_desc(&desc.sun, f)?;
         let sky = Sky::from_desc(&desc.sky, f, base_dir)?;
@@ -386,6 +400,7 @@ impl Scene {
             max_depth: r.max_depth,
             time_limit: r.time_limit,
             stderr: r.stderr,
+            cubes,
         };
         Ok(Scene {
             source: source.to_string(),

@@ -154,6 +154,18 @@ impl CubeImage {
     }
 }
 
+impl CubeImage {
+    /// [`Self::bin_averages`] for the bins in `needed` only (None elsewhere): the averages of a
+    /// partially rendered cube.
+    pub fn bin_averages_masked(&self, needed: super::render::BinMask) -> Vec<Option<Rgb>> {
+        self.bin_averages()
+            .into_iter()
+            .enumerate()
+            .map(|(b, l)| needed.contains(b).then_some(l))
+            .collect()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

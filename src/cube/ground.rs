@@ -1,0 +1,258 @@
+//! The lit ground (paper section 3, last paragraph): upward hemicubes on a ground sample grid
+//! over the area the cloud can shadow give the irradiance
+//!
+//!   E(x) = ∫_{ω·y>0} L(x, ω) (ω·y) dω + E_sun · max(ω_sun·y, 0) · T_sun(x),
+//!
+//! where L is the cloud-lit scene (cloud with colour I0 and the sun's single scattering, sky
+//! behind) rendered on the hemicube and T_sun the exact transmittance of the cloud towards the
+//! sun. Each hemicube pixel is weighted by its exact cosine-weighted solid angle. The ground is
+//! Lambertian: radiance = albedo·E/π. Outside the grid the unoccluded irradiance is used.
+//!
+//! **Area.** The rectangle (in x, z) covering the cloud's occupied voxels projected straight down,
+//! widened on every side by the cloud top's height above the ground (beyond that the cloud is below
+//! 45° elevation and blocks little sky), united with the occupied box projected along the sun
+//! onto the ground (its shadow; for suns lower than ω_sun·y = 0.1 the shadow is projected as if
+//! the sun were at that height, so a grazing sun cannot stretch the grid without bound).
+
+use super::lit::LitVolume;
+use super::render::{BinMask, CubeOptions, CubeRenderer};
+use crate::lighting::{Ground, Sky, Sun};
+use crate::math::{Rgb, Vec3};
+use crate::render::Progress;
+use rayon::prelude::*;
+use std::f32::consts::PI;
+
+/// Irradiance samples on a regular grid over a ground rectangle.
+#[derive(Clone, Debug)]
+pub struct GroundGrid {
+    /// Minimum (x, z) corner of the rectangle (m).
+    pub min: [f32; 2],
+    /// Maximum (x, z) corner (m).
+    pub max: [f32; 2],
+    /// Samples per edge; sample (a, b) sits at the centre of cell (a, b) of an n×n split.
+    pub n: usize,
+    /// Irradiance (W/m² per band) per sample, index a + n·b (a along x, b along z).
+    pub irradiance: Vec<Rgb>,
+}
+
+impl GroundGrid {
+    /// World position (x, z) of sample (a, b).
+    #[inline]
+    pub fn sample_xz(&self, a: usize, b: usize) -> [f32; 2] {
+        [
+            self.min[0] + (a as f32 + 0.5) / self.n as f32 * (self.max[0] - self.min[0]),
+            self.min[1] + (b as f32 + 0.5) / self.n as f32 * (self.max[1] - self.min[1]),
+        ]
+    }
+}
+
+/// The ground with its irradiance.
+#[derive(Clone, Debug)]
+pub struct LitGround {
+    /// The plane and its albedo.
+    pub ground: Ground,
+    /// Irradiance with no cloud: sun (if above the horizon) plus the whole sky (W/m²).
+    pub unoccluded: Rgb,
+    /// Rendered samples, if any.
+    pub grid: Option<GroundGrid>,
+}
+
+impl LitGround {
+    /// A ground lit by the unoccluded sun and sky everywhere (no cloud shadow).
+    pub fn unoccluded(ground: Ground, sun: &Sun, sky: &Sky) -> LitGround {
+        let unoccluded = ground.irradiance(sun, sky, 1.0);
+        LitGround {
+            ground,
+            unoccluded,
+            grid: None,
+        }
+    }
+
+    /// Irradiance (W/m²) at ground point `p` (its y is ignored): bilinear between the samples
+    /// inside the grid's rectangle (clamped to the outermost samples), unoccluded outside.
+    pub fn irradiance(&self, p: Vec3) -> Rgb {
+        let Some(g) = &self.grid else {
+            return self.unoccluded;
+        };
+        if p.x < g.min[0] || p.x > g.max[0] || p.z < g.min[1] || p.z > g.max[1] {
+            return self.unoccluded;
+        }
+        let n = g.n;
+        let fx = ((p.x - g.min[0]) / (g.max[0] - g.min[0]) * n as f32 - 0.5).clamp(0.0, (n - 1) as f32);
+        let fz = ((p.z - g.min[1]) / (g.max[1] - g.min[1]) * n as f32 - 0.5).clamp(0.0, (n - 1) as f32);
+        let (a0, b0) = (fx.floor() as usize, fz.floor() as usize);
+        let (a1, b1) = ((a0 + 1).min(n - 1), (b0 + 1).min(n - 1));
+        let (u, v) = (fx - a0 as f32, fz - b0 as f32);
+        let e = |a: usize, b: usize| g.irradiance[a + n * b];
+        (e(a0, b0) * (1.0 - u) + e(a1, b0) * u) * (1.0 - v) + (e(a0, b1) * (1.0 - u) + e(a1, b1) * u) * v
+    }
+
+    /// Outgoing radiance (W·m⁻²·sr⁻¹) of the Lambertian ground at `p`: albedo·E/π.
+    #[inline]
+    pub fn radiance(&self, p: Vec3) -> Rgb {
+        self.ground.albedo * self.irradiance(p) / PI
+    }
+}
+
+/// The (x, z) rectangle the ground grid covers for this cloud and sun (see the module docs);
+/// None for an empty cloud.
+pub fn ground_area(lit: &LitVolume, ground: &Ground) -> Option<([f32; 2], [f32; 2])> {
+    let m = &lit.medium;
+    let d = m.dims();
+    let (mut lo, mut hi) = ([usize::MAX; 3], [0usize; 3]);
+    let mut any = false;
+    for k in 0..d[2] {
+        for j in 0..d[1] {
+            for i in 0..d[0] {
+                if m.density.get(i, j, k) > 0.0 {
+                    any = true;
+                    for (a, x) in [i, j, k].into_iter().enumerate() {
+                        lo[a] = lo[a].min(x);
+                        hi[a] = hi[a].max(x);
+                    }
+                }
+            }
+        }
+    }
+    if !any {
+        return None;
+    }
+    // One voxel of apron: the trilinear field reaches half a voxel beyond the centres.
+    let bmin = m.origin + m.voxel_size * Vec3::new(lo[0] as f32, lo[1] as f32, lo[2] as f32) - m.voxel_size;
+    let bmax = m.origin + m.voxel_size * Vec3::new(hi[0] as f32 + 2.0, hi[1] as f32 + 2.0, hi[2] as f32 + 2.0);
+    let height = (bmax.y - ground.height).max(0.0);
+    let mut rmin = [bmin.x - height, bmin.z - height];
+    let mut rmax = [bmax.x + height, bmax.z + height];
+    let s = lit.sun.dir;
+    if s.y > 0.0 {
+        let sy = s.y.max(0.1);
+        for c in 0..8 {
+            let p = Vec3::new(
+                if c & 1 == 0 { bmin.x } else { bmax.x },
+                if c & 2 == 0 { bmin.y } else { bmax.y },
+                if c & 4 == 0 { bmin.z } else { bmax.z },
+            );
+            let up = (p.y - ground.height).max(0.0);
+            let q = [p.x - s.x / sy * up, p.z - s.z / sy * up];
+            rmin = [rmin[0].min(q[0]), rmin[1].min(q[1])];
+            rmax = [rmax[0].max(q[0]), rmax[1].max(q[1])];
+        }
+    }
+    Some((rmin, rmax))
+}
+
+/// Exact cosine-weighted solid angle ∫ max(ω·y, 0) dω of every cube pixel at `res` (index as
+/// [`super::CubeImage::index`]); they sum to π. Gauss–Legendre 8×8 per pixel (smooth integrand).
+pub fn hemicube_weights(res: usize) -> Vec<f64> {
+    const X: [f64; 8] = [
+        -0.960_289_856_497_536_3,
+        -0.796_666_477_413_626_7,
+        -0.525_532_409_916_329,
+        -0.183_434_642_495_649_8,
+        0.183_434_642_495_649_8,
+        0.525_532_409_916_329,
+        0.796_666_477_413_626_7,
+        0.960_289_856_497_536_3,
+    ];
+    const W: [f64; 8] = [
+        0.101_228_536_290_376_3,
+        0.222_381_034_453_374_5,
+        0.313_706_645_877_887_3,
+        0.362_683_783_378_362,
+        0.362_683_783_378_362,
+        0.313_706_645_877_887_3,
+        0.222_381_034_453_374_5,
+        0.101_228_536_290_376_3,
+    ];
+    let mut out = vec![0.0; 6 * res * res];
+    for (face, f) in crate::lighting::CUBE_FACES.iter().enumerate() {
+        for j in 0..res {
+            for i in 0..res {
+                let (u0, u1) = super::CubeImage::pixel_range(res, i);
+                let (v0, v1) = super::CubeImage::pixel_range(res, j);
+                let mut s = 0.0;
+                for (xi, wi) in X.iter().zip(W) {
+                    let u = 0.5 * (u0 + u1) + 0.5 * (u1 - u0) * xi;
+                    for (xj, wj) in X.iter().zip(W) {
+                        let v = 0.5 * (v0 + v1) + 0.5 * (v1 - v0) * xj;
+                        let r2 = 1.0 + u * u + v * v;
+                        // ω = (n + u tu + v tv)/r, dω = du dv / r³, so (ω·y) dω = (n + u tu + v tv)·y du dv / r⁴.
+                        let y = f.n.y as f64 + u * f.tu.y as f64 + v * f.tv.y as f64;
+                        s += wi * wj * y.max(0.0) / (r2 * r2);
+                    }
+                }
+                out[(face * res + j) * res + i] = s * 0.25 * (u1 - u0) * (v1 - v0);
+            }
+        }
+    }
+    out
+}
+
+/// Irradiance (W/m²) on an upward-facing ground point `p` from the hemicube plus the sun.
+pub fn hemicube_irradiance(renderer: &CubeRenderer<'_>, weights: &[f64], p: Vec3) -> Rgb {
+    let lit = renderer.lit;
+    let res = renderer.opts.res;
+    let mut acc = [0f64; 3];
+    for b in BinMask::upper_hemisphere().iter() {
+        for (face, i, j) in renderer.pixels.bin_pixels(b) {
+            let k = (face * res + j) * res + i;
+            let w = weights[k];
+            if w <= 0.0 {
+                continue;
+            }
+            let l = renderer.trace(p, renderer.pixels.dirs[k], renderer.pixels.cone[j * res + i]);
+            acc[0] += l.x as f64 * w;
+            acc[1] += l.y as f64 * w;
+            acc[2] += l.z as f64 * w;
+        }
+    }
+    let sun = &lit.sun;
+    let sun_e = if sun.dir.y > 0.0 {
+        sun.irradiance * (sun.dir.y * lit.medium.transmittance(p, sun.dir, 0.0, f32::INFINITY))
+    } else {
+        Rgb::ZERO
+    };
+    Rgb::new(acc[0] as f32, acc[1] as f32, acc[2] as f32) + sun_e
+}
+
+/// Render `opts.ground_samples`² hemicubes over [`ground_area`] and return the lit ground.
+pub fn render_ground(lit: &LitVolume, ground: &Ground, opts: &CubeOptions, progress: &dyn Progress) -> LitGround {
+    render_ground_with(&CubeRenderer::new(lit, opts), ground, progress)
+}
+
+/// [`render_ground`] with a renderer already built.
+pub fn render_ground_with(renderer: &CubeRenderer<'_>, ground: &Ground, progress: &dyn Progress) -> LitGround {
+    let lit = renderer.lit;
+    let mut out = LitGround::unoccluded(ground.clone(), &lit.sun, &lit.sky);
+    let Some((min, max)) = ground_area(lit, ground) else {
+        return out;
+    };
+    let n = renderer.opts.ground_samples;
+    let weights = hemicube_weights(renderer.opts.res);
+    let mut grid = GroundGrid {
+        min,
+        max,
+        n,
+        irradiance: vec![Rgb::ZERO; n * n],
+    };
+    // Just above the plane, so upward rays start on the visible side.
+    let y = ground.height + 1e-3 * lit.medium.min_voxel();
+    progress.begin("ground hemicubes", n as u64);
+    let rows: Vec<Vec<Rgb>> = (0..n)
+        .into_par_iter()
+        .map(|b| {
+            let row = (0..n)
+                .map(|a| {
+                    let [x, z] = grid.sample_xz(a, b);
+                    hemicube_irradiance(renderer, &weights, Vec3::new(x, y, z))
+                })
+                .collect();
+            progress.advance(1);
+            row
+        })
+        .collect();
+    progress.end();
+    grid.irradiance = rows.into_iter().flatten().collect();
+    out.grid = Some(grid);
+    out
+}

@@ -1,0 +1,192 @@
+//! The lit volume: everything a viewing cube needs to render the cloud as a self-luminous,
+//! absorbing medium (paper section 3): the medium (ρ, σt, albedo, g), the diffusion solution I0
+//! per voxel, the reduced sun transmittance per voxel, the sun, the sky and the (lit) ground.
+//!
+//! **Source term.** Along a ray, radiance is ∫ T(s) κ(s) J(s) ds + T·background with κ = ρσt and
+//! J the in-scattered radiance per unit extinction, J(X, ω) = a ∫ p(ω, ω′) I(X, ω′) dω′. With the
+//! paper's split I = I_ri,sun + I0 + I1·ω (eq. 3), the sun's reduced radiance is a delta of
+//! irradiance E_sun·T_sun(X) in the direction −ω_sun, and the HG phase integrates the isotropic
+//! I0 to I0 (∫p = 1), so
+//!
+//!   J(X, ω) = a · ( I0(X) + p_HG(cosθ) · E_sun · T_sun(X) ),  cosθ = (−ω_sun)·ω,
+//!
+//! where ω is the direction the scattered light travels (towards the eye) and −ω_sun the
+//! direction the sunlight travels. The g·I1·ω term and the first scattering of the reduced sky
+//! are dropped, as the paper renders its cubes with colour I0 and opacity ρσt.
+
+use super::ground::LitGround;
+use crate::lighting::{Sky, Sun};
+use crate::math::{Rgb, Vec3};
+use crate::medium::{Grid3, Medium};
+use crate::phase::hg;
+use crate::sunlight::SunTransmittance;
+use std::sync::Arc;
+
+/// The lit scene a viewing cube renders.
+#[derive(Clone, Debug)]
+pub struct LitVolume {
+    /// The medium (cheap to clone: the grids are shared).
+    pub medium: Medium,
+    /// Diffuse radiance I0 (W·m⁻²·sr⁻¹ per band) at each voxel centre, index i + nx(j + ny k).
+    pub i0: Arc<Vec<Rgb>>,
+    /// Transmittance towards the sun (unitless) at each voxel centre, same dims as the density.
+    pub sun_t: Arc<Grid3>,
+    /// The sun (its light enters only through `sun_t` and the phase function, never as a disc).
+    pub sun: Sun,
+    /// The sky behind everything.
+    pub sky: Sky,
+    /// The ground with its irradiance, if the scene has a ground.
+    pub ground: Option<LitGround>,
+}
+
+impl LitVolume {
+    /// Assemble a lit volume. `i0` and `sun_t` must have the density grid's dimensions (an
+    /// internal invariant: the caller builds them from the same medium).
+    pub fn new(medium: Medium, i0: Vec<Rgb>, sun_t: Grid3, sun: Sun, sky: Sky, ground: Option<LitGround>) -> LitVolume {
+        let n = medium.density.len();
+        assert_eq!(i0.len(), n, "I0 must have one value per voxel");
+        assert_eq!(sun_t.dims(), medium.dims(), "sun transmittance must have the density grid's dims");
+        LitVolume {
+            medium,
+            i0: Arc::new(i0),
+            sun_t: Arc::new(sun_t),
+            sun,
+            sky,
+            ground,
+        }
+    }
+
+    /// A lit volume from a scene: I0 given, the sun transmittance computed exactly at voxel
+    /// centres near the cloud ([`SunTransmittance`]), the ground unshadowed until
+    /// [`super::ground::render_ground`] replaces it.
+    pub fn from_scene(scene: &crate::scene::Scene, i0: Vec<Rgb>) -> LitVolume {
+        let sun_t = SunTransmittance::compute(&scene.medium, scene.sun.dir).grid;
+        let ground = scene
+            .ground
+            .as_ref()
+            .map(|g| LitGround::unoccluded(g.clone(), &scene.sun, &scene.sky));
+        LitVolume::new(scene.medium.clone(), i0, sun_t, scene.sun.clone(), scene.sky.clone(), ground)
+    }
+
+    /// The same scene with another ground (e.g. the one [`super::ground::render_ground`] made).
+    pub fn with_ground(mut self, ground: Option<LitGround>) -> LitVolume {
+        self.ground = ground;
+        self
+    }
+
+    /// Grid resolution.
+    #[inline]
+    pub fn dims(&self) -> [usize; 3] {
+        self.medium.dims()
+    }
+
+    /// I0 interpolated trilinearly (clamp to edge) at continuous voxel coordinates `v`.
+    #[inline]
+    pub fn i0_at_voxel(&self, v: Vec3) -> Rgb {
+        let (idx, w) = trilinear_taps(self.dims(), v);
+        let mut s = Rgb::ZERO;
+        for k in 0..8 {
+            s += self.i0[idx[k]] * w[k];
+        }
+        s
+    }
+
+    /// In-scattered radiance per unit extinction J (W·m⁻²·sr⁻¹) at continuous voxel coordinates
+    /// `v`, for light leaving towards the eye along `dir_to_eye` (unit). See the module docs.
+    #[inline]
+    pub fn source_at_voxel(&self, v: Vec3, dir_to_eye: Vec3) -> Rgb {
+        let phase = hg((-self.sun.dir).dot(dir_to_eye), self.medium.g);
+        let t = self.sun_t.trilinear(v.to_array());
+        self.medium.albedo * (self.i0_at_voxel(v) + self.sun.irradiance * (phase * t))
+    }
+
+    /// In-scattered radiance per unit extinction at world point `p` (m): emitted radiance per
+    /// unit optical depth, a·(I0 + p_HG·E_sun·T_sun). Outside the box the clamped edge values.
+    #[inline]
+    pub fn source(&self, p: Vec3, dir_to_eye: Vec3) -> Rgb {
+        self.source_at_voxel(self.medium.to_voxel(p), dir_to_eye)
+    }
+
+    /// Radiance arriving at `o` from direction `d` beyond the medium: the lit ground where the
+    /// ray meets it, else the sky. `t_ground` is the ground hit distance from [`Self::ground_hit`].
+    #[inline]
+    pub fn background(&self, o: Vec3, d: Vec3, t_ground: Option<f32>) -> Rgb {
+        match (t_ground, &self.ground) {
+            (Some(t), Some(g)) => g.radiance(o + d * t),
+            _ => self.sky.radiance(d),
+        }
+    }
+
+    /// Distance (m) along `o + t·d` to the ground, if the scene has one and the ray meets it.
+    #[inline]
+    pub fn ground_hit(&self, o: Vec3, d: Vec3) -> Option<f32> {
+        self.ground.as_ref().and_then(|g| g.ground.intersect(o, d))
+    }
+}
+
+/// Indices and weights of the 8 trilinear taps at continuous voxel coordinates `v` (voxel
+/// centres at half-integers), clamped to the grid like [`Grid3::trilinear`].
+#[inline]
+pub(crate) fn trilinear_taps(dims: [usize; 3], v: Vec3) -> ([usize; 8], [f32; 8]) {
+    let mut lo = [0usize; 3];
+    let mut hi = [0usize; 3];
+    let mut f = [0f32; 3];
+    let p = v.to_array();
+    for a in 0..3 {
+        let n = dims[a] as isize;
+        let x = p[a] - 0.5;
+        let fl = x.floor();
+        let fi = fl as isize;
+        f[a] = x - fl;
+        lo[a] = fi.clamp(0, n - 1) as usize;
+        hi[a] = (fi + 1).clamp(0, n - 1) as usize;
+    }
+    let nx = dims[0];
+    let nxy = nx * dims[1];
+    let ix = |i: usize, j: usize, k: usize| i + nx * j + nxy * k;
+    let (fx, fy, fz) = (f[0], f[1], f[2]);
+    let (gx, gy, gz) = (1.0 - fx, 1.0 - fy, 1.0 - fz);
+    (
+        [
+            ix(lo[0], lo[1], lo[2]),
+            ix(hi[0], lo[1], lo[2]),
+            ix(lo[0], hi[1], lo[2]),
+            ix(hi[0], hi[1], lo[2]),
+            ix(lo[0], lo[1], hi[2]),
+            ix(hi[0], lo[1], hi[2]),
+            ix(lo[0], hi[1], hi[2]),
+            ix(hi[0], hi[1], hi[2]),
+        ],
+        [
+            gx * gy * gz,
+            fx * gy * gz,
+            gx * fy * gz,
+            fx * fy * gz,
+            gx * gy * fz,
+            fx * gy * fz,
+            gx * fy * fz,
+            fx * fy * fz,
+        ],
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn taps_match_grid_trilinear() {
+        let dims = [5, 4, 3];
+        let mut g = Grid3::filled(dims, 0.0);
+        for (n, x) in g.data_mut().iter_mut().enumerate() {
+            *x = ((n * 37) % 11) as f32;
+        }
+        let mut rng = crate::math::Rng::new(1, 2);
+        for _ in 0..200 {
+            let v = Vec3::new(rng.uniform() * 6.0 - 0.5, rng.uniform() * 5.0 - 0.5, rng.uniform() * 4.0 - 0.5);
+            let (idx, w) = trilinear_taps(dims, v);
+            let s: f32 = (0..8).map(|k| g.data()[idx[k]] * w[k]).sum();
+            assert!((s - g.trilinear(v.to_array())).abs() < 1e-4);
+        }
+    }
+}

@@ -1,0 +1,166 @@
+//! Mip pyramid of the lit volume for cone-matched volume rendering (the modern stand-in for the
+//! paper's octree of least-squares approximations, Schussman and Max 2001).
+//!
+//! Level 0 holds, per voxel, the pre-multiplied quantities (ρ, ρ·I0 (RGB), ρ·T_sun); level l+1
+//! averages 2×2×2 blocks of level l, counting cells beyond the grid as empty, so every level keeps
+//! the cloud's total mass and the mass-weighted mean colour. A sample at level l interpolates
+//! trilinearly and divides by ρ to recover the colour, so empty space never darkens the colour.
+//! Each level has a block occupancy grid for empty-space skipping.
+
+use super::lit::{trilinear_taps, LitVolume};
+use crate::math::Vec3;
+use crate::medium::{Grid3, MajorantGrid};
+
+/// Block edge (in the level's voxels) of each level's occupancy grid.
+pub const BLOCK: usize = 4;
+
+/// Values stored per voxel: ρ, ρ·I0.r, ρ·I0.g, ρ·I0.b, ρ·T_sun.
+pub type Cell = [f32; 5];
+
+/// One level of the pyramid.
+#[derive(Clone, Debug)]
+pub struct Level {
+    /// Cells per axis.
+    pub dims: [usize; 3],
+    /// Voxel edge lengths at this level (m).
+    pub voxel_size: Vec3,
+    /// Pre-multiplied cells, x fastest.
+    pub cells: Vec<Cell>,
+    /// Upper bounds of ρ per block of [`BLOCK`]³ cells (with a one-cell apron).
+    pub occupancy: MajorantGrid,
+}
+
+impl Level {
+    /// Trilinear sample at continuous level-voxel coordinates `v` (inside the level's box).
+    #[inline]
+    pub fn sample(&self, v: Vec3) -> Cell {
+        let (idx, w) = trilinear_taps(self.dims, v);
+        let mut s = [0f32; 5];
+        for k in 0..8 {
+            let c = &self.cells[idx[k]];
+            let wk = w[k];
+            for a in 0..5 {
+                s[a] += c[a] * wk;
+            }
+        }
+        s
+    }
+}
+
+/// The pyramid, finest level first.
+#[derive(Clone, Debug)]
+pub struct LitPyramid {
+    /// Levels 0 (the voxel grid) to the coarsest.
+    pub levels: Vec<Level>,
+    /// Minimum corner shared by every level (m).
+    pub origin: Vec3,
+}
+
+impl LitPyramid {
+    /// Build from a lit volume, down to a level whose largest axis has at most [`BLOCK`] cells or
+    /// `max_levels` levels in all (at least 1).
+    pub fn build(lit: &LitVolume, max_levels: usize) -> LitPyramid {
+        let m = &lit.medium;
+        let dims = m.dims();
+        let rho = m.density.data();
+        let t = lit.sun_t.data();
+        let cells: Vec<Cell> = (0..rho.len())
+            .map(|n| {
+                let r = rho[n];
+                let c = lit.i0[n] * r;
+                [r, c.x, c.y, c.z, r * t[n]]
+            })
+            .collect();
+        let mut levels = vec![make_level(dims, m.voxel_size, cells)];
+        while levels.len() < max_levels.max(1) {
+            let last = levels.last().expect("at least one level");
+            if last.dims.iter().all(|&d| d <= BLOCK) {
+                break;
+            }
+            let next = downsample(last);
+            levels.push(next);
+        }
+        LitPyramid { levels, origin: m.origin }
+    }
+}
+
+fn make_level(dims: [usize; 3], voxel_size: Vec3, cells: Vec<Cell>) -> Level {
+    let rho = Grid3::from_vec(dims, cells.iter().map(|c| c[0]).collect(), "pyramid level").expect("level dims are positive");
+    let occupancy = MajorantGrid::build(&rho, BLOCK);
+    Level {
+        dims,
+        voxel_size,
+        cells,
+        occupancy,
+    }
+}
+
+/// Average 2×2×2 blocks; cells beyond the grid count as empty (mass-preserving).
+fn downsample(l: &Level) -> Level {
+    let d = l.dims;
+    let nd = [d[0].div_ceil(2), d[1].div_ceil(2), d[2].div_ceil(2)];
+    let mut cells = vec![[0f32; 5]; nd[0] * nd[1] * nd[2]];
+    for k in 0..nd[2] {
+        for j in 0..nd[1] {
+            for i in 0..nd[0] {
+                let mut s = [0f32; 5];
+                for kk in 2 * k..(2 * k + 2).min(d[2]) {
+                    for jj in 2 * j..(2 * j + 2).min(d[1]) {
+                        for ii in 2 * i..(2 * i + 2).min(d[0]) {
+                            let c = &l.cells[ii + d[0] * (jj + d[1] * kk)];
+                            for a in 0..5 {
+                                s[a] += c[a];
+                            }
+                        }
+                    }
+                }
+                cells[i + nd[0] * (j + nd[1] * k)] = s.map(|x| x * 0.125);
+            }
+        }
+    }
+    make_level(nd, l.voxel_size * 2.0, cells)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lighting::{Sky, Sun};
+    use crate::math::Rgb;
+    use crate::medium::Medium;
+
+    #[test]
+    fn every_level_keeps_mass_and_mean_colour() {
+        let dims = [7, 5, 6];
+        let mut g = Grid3::filled(dims, 0.0);
+        let mut i0 = vec![Rgb::ZERO; 7 * 5 * 6];
+        for (n, x) in g.data_mut().iter_mut().enumerate() {
+            *x = ((n * 13) % 5) as f32 * 0.5;
+            i0[n] = Rgb::new(n as f32 % 3.0, 1.0, 2.0);
+        }
+        let m = Medium::new(g, Vec3::ZERO, Vec3::ONE, 1.0, Rgb::ONE, 0.5);
+        let sun = Sun {
+            dir: Vec3::Y,
+            irradiance: Rgb::ONE,
+        };
+        let lit = LitVolume::new(m, i0, Grid3::filled(dims, 0.5), sun, Sky::constant(Rgb::ONE), None);
+        let p = LitPyramid::build(&lit, 10);
+        assert!(p.levels.len() >= 2);
+        let total = |l: &Level| {
+            let vol = l.voxel_size.x * l.voxel_size.y * l.voxel_size.z;
+            let mut s = [0f64; 5];
+            for c in &l.cells {
+                for a in 0..5 {
+                    s[a] += (c[a] * vol) as f64;
+                }
+            }
+            s
+        };
+        let t0 = total(&p.levels[0]);
+        for l in &p.levels[1..] {
+            let t = total(l);
+            for a in 0..5 {
+                assert!((t[a] - t0[a]).abs() < 1e-4 * t0[a].max(1.0), "level {:?}: {t:?} vs {t0:?}", l.dims);
+            }
+        }
+    }
+}

@@ -1,0 +1,388 @@
+//! Rendering the lit scene onto viewing cubes.
+//!
+//! Each cube pixel is a cone of angular width α = √(pixel solid angle). Its ray is marched front
+//! to back through the [`LitPyramid`], at distance t on the level whose voxel edge is about the
+//! cone's footprint α·t (level l from t = 2^l·h/α on, h the finest voxel edge), with steps of a
+//! fixed fraction of that level's voxel, skipping empty blocks of the level's occupancy grid and
+//! stopping once the transmittance drops below a cut-off. Each step of length Δ and density ρ adds
+//! T·(1 − e^{−σt ρ Δ})·J (J from [`LitVolume::source`]) and multiplies T by e^{−σt ρ Δ}; what
+//! is left is T × (lit ground or sky).
+//!
+//! Only the bins in a [`BinMask`] are rendered (the paper's half- and partial cubes); the other
+//! pixels stay black and their bins are reported as absent.
+
+use super::image::CubeImage;
+use super::lit::LitVolume;
+use super::pyramid::{LitPyramid, BLOCK};
+use crate::error::{Error, Result};
+use crate::lighting::bins::{DirectionBins, BINS_PER_EDGE, NUM_BINS};
+use crate::math::{Rgb, Vec3};
+use crate::medium::{ray_box, Dda};
+use crate::phase::hg;
+use std::sync::OnceLock;
+
+/// Settings of the cube renderer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CubeOptions {
+    /// Pixels per face edge (a multiple of 4, so pixels nest in the 4×4 bins of a face).
+    pub res: usize,
+    /// March step as a fraction of the current pyramid level's smallest voxel edge.
+    pub step: f32,
+    /// A ray stops when its transmittance falls below this (the dropped rest is at most this
+    /// fraction of the brightest radiance behind).
+    pub t_cutoff: f32,
+    /// Level-of-detail bias in octaves: the footprint is taken as α·t·2^bias (0 = matched,
+    /// negative = sharper and slower).
+    pub lod_bias: f32,
+    /// Pyramid levels used (1 = always the finest grid, no level of detail).
+    pub max_levels: usize,
+    /// Ground sample grid edge (N×N hemicubes).
+    pub ground_samples: usize,
+}
+
+/// Default pixels per face edge (see docs/cubes.md for the measurement behind it).
+pub const DEFAULT_CUBE_RESOLUTION: usize = 16;
+/// Default ground sample grid edge.
+pub const DEFAULT_GROUND_SAMPLES: usize = 32;
+
+impl Default for CubeOptions {
+    fn default() -> Self {
+        CubeOptions {
+            res: DEFAULT_CUBE_RESOLUTION,
+            step: 0.5,
+            t_cutoff: 1e-3,
+            lod_bias: 0.0,
+            max_levels: 8,
+            ground_samples: DEFAULT_GROUND_SAMPLES,
+        }
+    }
+}
+
+impl CubeOptions {
+    /// Check the options; `file` names the scene file for messages.
+    pub fn validate(&self, file: &str) -> Result<()> {
+        if self.res < 4 || self.res > 256 || self.res % BINS_PER_EDGE != 0 {
+            return Err(Error::invalid(
+                file,
+                "render.cube_resolution",
+                format!("{} is not allowed: use a multiple of 4 from 4 to 256 (default 16)", self.res),
+            ));
+        }
+        if self.ground_samples < 2 || self.ground_samples > 1024 {
+            return Err(Error::invalid(
+                file,
+                "render.ground_samples",
+                format!(
+                    "{} is not allowed: use 2 to 1024 samples per edge (default 32)",
+                    self.ground_samples
+                ),
+            ));
+        }
+        if !(self.step.is_finite() && self.step > 0.0 && self.step <= 4.0) {
+            return Err(Error::invalid(file, "cube step", format!("{} is not in (0, 4]", self.step)));
+        }
+        if !(self.t_cutoff.is_finite() && (0.0..1.0).contains(&self.t_cutoff)) {
+            return Err(Error::invalid(file, "cube cut-off", format!("{} is not in [0, 1)", self.t_cutoff)));
+        }
+        if !self.lod_bias.is_finite() || self.max_levels == 0 {
+            return Err(Error::invalid(file, "cube level of detail", "bias must be finite and levels ≥ 1"));
+        }
+        Ok(())
+    }
+}
+
+/// A set of the 96 direction bins (bit b = bin b).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Hash)]
+pub struct BinMask(pub u128);
+
+fn bins() -> &'static DirectionBins {
+    static B: OnceLock<DirectionBins> = OnceLock::new();
+    B.get_or_init(DirectionBins::new)
+}
+
+/// The bin holding the directions opposite to bin `b`'s (the bin layout is point-symmetric, so
+/// this is exact for every direction in the bin).
+pub fn opposite_bin(b: usize) -> usize {
+    static T: OnceLock<[usize; NUM_BINS]> = OnceLock::new();
+    T.get_or_init(|| {
+        let d = bins();
+        let mut t = [0; NUM_BINS];
+        for (i, bin) in d.bins.iter().enumerate() {
+            t[i] = d.bin_of(-bin.center);
+        }
+        t
+    })[b]
+}
+
+impl BinMask {
+    /// Every bin.
+    pub const ALL: BinMask = BinMask((1u128 << NUM_BINS) - 1);
+    /// No bin.
+    pub const NONE: BinMask = BinMask(0);
+
+    /// Is bin `b` in the set?
+    #[inline]
+    pub fn contains(self, b: usize) -> bool {
+        (self.0 >> b) & 1 == 1
+    }
+
+    /// Add bin `b`.
+    #[inline]
+    pub fn insert(&mut self, b: usize) {
+        self.0 |= 1u128 << b;
+    }
+
+    /// Number of bins in the set.
+    #[inline]
+    pub fn count(self) -> u32 {
+        self.0.count_ones()
+    }
+
+    /// Union.
+    #[inline]
+    pub fn union(self, o: BinMask) -> BinMask {
+        BinMask(self.0 | o.0)
+    }
+
+    /// The bins in increasing order.
+    pub fn iter(self) -> impl Iterator<Item = usize> {
+        (0..NUM_BINS).filter(move |&b| self.contains(b))
+    }
+
+    /// Bins whose directions satisfy `pred` at their centre.
+    pub fn from_centres(pred: impl Fn(Vec3) -> bool) -> BinMask {
+        let mut m = BinMask::NONE;
+        for (b, bin) in bins().bins.iter().enumerate() {
+            if pred(bin.center) {
+                m.insert(b);
+            }
+        }
+        m
+    }
+
+    /// Bins looking away from the neighbour across face `face` (an index into
+    /// [`crate::lighting::CUBE_FACES`]: +x, −x, +y, −y, +z, −z): directions ω with ω·n < 0. Bin
+    /// edges lie on the planes ω·n = 0, so a bin is wholly on one side.
+    pub fn looking_away_from(face: usize) -> BinMask {
+        let n = crate::lighting::CUBE_FACES[face].n;
+        BinMask::from_centres(|c| c.dot(n) < 0.0)
+    }
+
+    /// Union of [`Self::looking_away_from`] over the faces set in `faces` (bit f = face f).
+    pub fn for_faces(faces: u8) -> BinMask {
+        (0..6)
+            .filter(|f| faces >> f & 1 == 1)
+            .fold(BinMask::NONE, |m, f| m.union(BinMask::looking_away_from(f)))
+    }
+
+    /// Bins of the upper hemisphere (ω·y > 0): a ground point's hemicube.
+    pub fn upper_hemisphere() -> BinMask {
+        BinMask::from_centres(|c| c.y > 0.0)
+    }
+}
+
+/// Per-resolution pixel tables: directions, solid angles, cone widths.
+#[derive(Clone, Debug)]
+pub struct PixelTable {
+    /// Pixels per face edge.
+    pub res: usize,
+    /// Unit direction per pixel, index as [`CubeImage::index`].
+    pub dirs: Vec<Vec3>,
+    /// Exact solid angle per face pixel, index j·res + i (sr).
+    pub solid_angle: Vec<f64>,
+    /// Cone width √(solid angle) per face pixel (rad).
+    pub cone: Vec<f32>,
+}
+
+impl PixelTable {
+    /// Tables for `res`.
+    pub fn new(res: usize) -> PixelTable {
+        let mut dirs = Vec::with_capacity(6 * res * res);
+        for face in 0..6 {
+            for j in 0..res {
+                for i in 0..res {
+                    dirs.push(CubeImage::local_direction(res, face, i, j));
+                }
+            }
+        }
+        let solid_angle = CubeImage::face_solid_angles(res);
+        let cone = solid_angle.iter().map(|s| s.sqrt() as f32).collect();
+        PixelTable {
+            res,
+            dirs,
+            solid_angle,
+            cone,
+        }
+    }
+
+    /// Face pixels (i, j) of bin `b`.
+    pub fn bin_pixels(&self, b: usize) -> impl Iterator<Item = (usize, usize, usize)> {
+        let per = self.res / BINS_PER_EDGE;
+        let face = b / (BINS_PER_EDGE * BINS_PER_EDGE);
+        let bv = (b / BINS_PER_EDGE) % BINS_PER_EDGE;
+        let bu = b % BINS_PER_EDGE;
+        (bv * per..(bv + 1) * per).flat_map(move |j| (bu * per..(bu + 1) * per).map(move |i| (face, i, j)))
+    }
+}
+
+/// Renders cubes of one lit volume; build once, use from many threads.
+#[derive(Clone, Debug)]
+pub struct CubeRenderer<'a> {
+    /// The scene.
+    pub lit: &'a LitVolume,
+    /// Its mip pyramid.
+    pub pyramid: LitPyramid,
+    /// The options.
+    pub opts: CubeOptions,
+    /// Pixel tables at `opts.res`.
+    pub pixels: PixelTable,
+    h_min: f32,
+}
+
+impl<'a> CubeRenderer<'a> {
+    /// Build the pyramid and tables.
+    pub fn new(lit: &'a LitVolume, opts: &CubeOptions) -> CubeRenderer<'a> {
+        CubeRenderer {
+            lit,
+            pyramid: LitPyramid::build(lit, opts.max_levels),
+            opts: opts.clone(),
+            pixels: PixelTable::new(opts.res),
+            h_min: lit.medium.min_voxel(),
+        }
+    }
+
+    /// Radiance (W·m⁻²·sr⁻¹) arriving at `o` from direction `d` (unit), for a cone of angular
+    /// width `cone` (rad).
+    pub fn trace(&self, o: Vec3, d: Vec3, cone: f32) -> Rgb {
+        let lit = self.lit;
+        let m = &lit.medium;
+        let t_ground = lit.ground_hit(o, d);
+        let t_end = t_ground.unwrap_or(f32::INFINITY);
+        // Sunlight travels along −sun.dir; the scattered light travels towards the eye, −d.
+        let sun_e = lit.sun.irradiance * hg((-lit.sun.dir).dot(-d), m.g);
+        let albedo = m.albedo;
+        let sigma_t = m.sigma_t;
+        let cut = self.opts.t_cutoff;
+        let inv_cone = 1.0 / (cone.max(1e-6) * self.opts.lod_bias.exp2());
+        let nlev = self.pyramid.levels.len();
+        let origin = self.pyramid.origin;
+        let (od, dd) = (o.as_dvec3(), d.as_dvec3());
+        let mut tr = 1.0f32;
+        let mut l = Rgb::ZERO;
+        'levels: for (li, lev) in self.pyramid.levels.iter().enumerate() {
+            let ts = if li == 0 {
+                0.0
+            } else {
+                self.h_min * (1u32 << li) as f32 * inv_cone
+            };
+            let te = if li + 1 == nlev {
+                f32::INFINITY
+            } else {
+                self.h_min * (1u32 << (li + 1)) as f32 * inv_cone
+            };
+            let te = te.min(t_end);
+            if ts >= te {
+                continue;
+            }
+            let dims_f = Vec3::new(lev.dims[0] as f32, lev.dims[1] as f32, lev.dims[2] as f32);
+            let hi = origin + lev.voxel_size * dims_f;
+            let Some((ta, tb)) = ray_box(origin.as_dvec3(), hi.as_dvec3(), od, dd, ts as f64, te as f64) else {
+                continue;
+            };
+            let step = self.opts.step * lev.voxel_size.min_element();
+            let inv_vs = Vec3::ONE / lev.voxel_size;
+            let cell = (lev.voxel_size * BLOCK as f32).as_dvec3();
+            for s in Dda::new(origin.as_dvec3(), cell, lev.occupancy.dims, od, dd, ta, tb) {
+                if lev.occupancy.get(s.cell) <= 0.0 {
+                    continue;
+                }
+                let (s0, s1) = (s.t0 as f32, s.t1 as f32);
+                let n = ((s1 - s0) / step).ceil().max(1.0);
+                let len = (s1 - s0) / n;
+                for k in 0..n as u32 {
+                    let t = s0 + (k as f32 + 0.5) * len;
+                    let v = ((o + d * t) - origin) * inv_vs;
+                    if v.min_element() < 0.0 || v.cmpgt(dims_f).any() {
+                        continue;
+                    }
+                    let c = lev.sample(v);
+                    let rho = c[0];
+                    if rho <= 1e-12 {
+                        continue;
+                    }
+                    let e = (-sigma_t * rho * len).exp();
+                    // T(1 − e)·J with J = a(ρI0 + p E_sun ρT_sun)/ρ from the pre-multiplied cell.
+                    let w = tr * (1.0 - e) / rho;
+                    l += albedo * (Rgb::new(c[1], c[2], c[3]) + sun_e * c[4]) * w;
+                    tr *= e;
+                    if tr < cut {
+                        tr = 0.0;
+                        break 'levels;
+                    }
+                }
+            }
+        }
+        if tr > 0.0 {
+            l += lit.background(o, d, t_ground) * tr;
+        }
+        l
+    }
+
+    /// Render the bins in `needed` of a world-aligned cube at `p` (m); other pixels stay black.
+    pub fn render_cube(&self, p: Vec3, needed: BinMask) -> CubeImage {
+        let res = self.opts.res;
+        let mut cube = CubeImage::new(res);
+        for b in needed.iter() {
+            for (face, i, j) in self.pixels.bin_pixels(b) {
+                let k = cube.index(face, i, j);
+                cube.pixels[k] = self.trace(p, self.pixels.dirs[k], self.pixels.cone[j * res + i]);
+            }
+        }
+        cube
+    }
+
+    /// Mean radiance (solid-angle weighted, W·m⁻²·sr⁻¹) of each bin in `needed` seen from `p`;
+    /// bins not in `needed` are zero. Same numbers as `render_cube(p, needed).bin_averages()`
+    /// without storing the image.
+    pub fn bin_radiance(&self, p: Vec3, needed: BinMask) -> [Rgb; NUM_BINS] {
+        let res = self.opts.res;
+        let mut out = [Rgb::ZERO; NUM_BINS];
+        for b in needed.iter() {
+            let mut acc = [0f64; 3];
+            let mut area = 0f64;
+            for (face, i, j) in self.pixels.bin_pixels(b) {
+                let k = (face * res + j) * res + i;
+                let sa = self.pixels.solid_angle[j * res + i];
+                let l = self.trace(p, self.pixels.dirs[k], self.pixels.cone[j * res + i]);
+                acc[0] += l.x as f64 * sa;
+                acc[1] += l.y as f64 * sa;
+                acc[2] += l.z as f64 * sa;
+                area += sa;
+            }
+            out[b] = Rgb::new((acc[0] / area) as f32, (acc[1] / area) as f32, (acc[2] / area) as f32);
+        }
+        out
+    }
+}
+
+/// Brute-force reference: each pixel centre's ray marched on the exact trilinear fields (density
+/// of the medium, I0 and T_sun interpolated separately, no pyramid) with steps of `step` voxels,
+/// cut off only at transmittance 1e-6. Bins outside `needed` stay black.
+pub fn render_cube_brute(lit: &LitVolume, p: Vec3, res: usize, needed: BinMask, step: f32) -> CubeImage {
+    let table = PixelTable::new(res);
+    let mut cube = CubeImage::new(res);
+    let m = &lit.medium;
+    let step = step * m.min_voxel();
+    for b in needed.iter() {
+        for (face, i, j) in table.bin_pixels(b) {
+            let k = cube.index(face, i, j);
+            let d = table.dirs[k];
+            let tg = lit.ground_hit(p, d);
+            let r = crate::render::march::march(m, p, d, 0.0, tg.unwrap_or(f32::INFINITY), step, 0.5, |v, _| {
+                lit.source_at_voxel(v, -d)
+            });
+            cube.pixels[k] = r.radiance + lit.background(p, d, tg) * r.transmittance;
+        }
+    }
+    cube
+}
