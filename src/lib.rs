@@ -6,6 +6,7 @@
 
 pub mod camera;
 pub mod cube;
+pub mod edges;
 pub mod error;
 pub mod image;
 pub mod io;

@@ -194,6 +194,8 @@ pub struct RenderDesc {
     pub exposure: f32,
     /// Ray-march step of the gather, as a fraction of the smallest voxel edge (unitless).
     pub step: f32,
+    /// Density T below which the final gather uses the edge treatment (paper section 4); 0 turns it off.
+    pub low_density_threshold: f32,
 }
 
 impl Default for RenderDesc {
@@ -204,6 +206,7 @@ impl Default for RenderDesc {
             spp: 1,
             exposure: 0.0,
             step: 0.5,
+            low_density_threshold: crate::edges::gather::DEFAULT_THRESHOLD,
         }
     }
 }
@@ -277,6 +280,8 @@ pub struct RenderSettings {
     pub exposure: f32,
     /// March step as a fraction of the smallest voxel edge.
     pub step: f32,
+    /// Density below which the edge treatment applies (0: off).
+    pub low_density_threshold: f32,
 }
 
 /// A validated scene, ready to render.
@@ -342,6 +347,13 @@ impl Scene {
             r.step,
             "the march step is a fraction of a voxel in (0, 4]",
         )?;
+        check(
+            f,
+            "render.low_density_threshold",
+            r.low_density_threshold.is_finite() && r.low_density_threshold >= 0.0,
+            r.low_density_threshold,
+            "the edge threshold is a density ≥ 0 (0 turns the edge treatment off)",
+        )?;
         let camera = Camera::from_desc(&desc.camera, f)?;
         let sun = Sun::from_desc(&desc.sun, f)?;
         let sky = Sky::from_desc(&desc.sky, f, base_dir)?;
@@ -356,6 +368,7 @@ impl Scene {
             spp: r.spp,
             exposure: r.exposure,
             step: r.step,
+            low_density_threshold: r.low_density_threshold,
         };
         Ok(Scene {
             source: source.to_string(),
