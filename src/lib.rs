@@ -7,6 +7,7 @@
 pub mod camera;
 pub mod cube;
 pub mod compare;
+pub mod edges;
 pub mod error;
 pub mod image;
 pub mod io;

@@ -207,6 +207,8 @@ pub struct RenderDesc {
     pub cube_resolution: usize,
     /// Ground irradiance samples per edge (N×N hemicubes; docs/cubes.md).
     pub ground_samples: usize,
+    /// Density T below which the final gather uses the edge treatment (paper section 4); 0 turns it off.
+    pub low_density_threshold: f32,
 }
 
 impl Default for RenderDesc {
@@ -222,6 +224,7 @@ impl Default for RenderDesc {
             stderr: false,
             cube_resolution: crate::cube::render::DEFAULT_CUBE_RESOLUTION,
             ground_samples: crate::cube::render::DEFAULT_GROUND_SAMPLES,
+            low_density_threshold: crate::edges::gather::DEFAULT_THRESHOLD,
         }
     }
 }
@@ -303,6 +306,8 @@ pub struct RenderSettings {
     pub stderr: bool,
     /// Viewing-cube and hemicube settings (`render.cube_resolution`, `render.ground_samples`).
     pub cubes: crate::cube::CubeOptions,
+    /// Density below which the edge treatment applies (0: off).
+    pub low_density_threshold: f32,
 }
 
 /// A validated scene, ready to render.
@@ -383,6 +388,13 @@ impl Scene {
             ..Default::default()
         };
         cubes.validate(f)?;
+        check(
+            f,
+            "render.low_density_threshold",
+            r.low_density_threshold.is_finite() && r.low_density_threshold >= 0.0,
+            r.low_density_threshold,
+            "the edge threshold is a density ≥ 0 (0 turns the edge treatment off)",
+        )?;
         let camera = Camera::from_desc(&desc.camera, f)?;
         let sun = Sun::from_desc(&desc.sun, f)?;
         let sky = Sky::from_desc(&desc.sky, f, base_dir)?;
@@ -401,6 +413,7 @@ impl Scene {
             time_limit: r.time_limit,
             stderr: r.stderr,
             cubes,
+            low_density_threshold: r.low_density_threshold,
         };
         Ok(Scene {
             source: source.to_string(),

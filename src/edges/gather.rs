@@ -1,0 +1,385 @@
+//! The final gather with the edge treatment: one pixel ray, composited front to back.
+//!
+//! Along the ray the density profile is cut at the blend band [T_lo, T] (T_lo = (1 − band)·T):
+//! * every piece emits the **exact sun single scattering**, a·E_sun(p)·HG(g, ω_sun·d) per unit
+//!   optical depth (E_sun(p) is the attenuated sun irradiance the caller supplies);
+//! * the caller's **dense source** (the diffusion solution, radiance per unit optical depth) is
+//!   weighted by w(ρ) = smoothstep(T_lo, T, ρ): 0 below T_lo, 1 from T up;
+//! * each **low-density segment** S_j (0 < ρ < T, the paper's definition) gets
+//!   E_j = Σ_{i≥1} q_i a^i K_ij from a view-aligned cube at c_j (eq. 9, [`super::orders_kernel`]),
+//!   spread uniformly in optical depth over the segment (source E_j/(1 − e^{−D_j}), so an
+//!   unblended segment adds exactly E_j times the transmittance in front of it), weighted 1 − w(ρ);
+//! * what lies behind is attenuated by the exact transmittance, the background last.
+//!
+//! **No double counting of the sun.** The cube must not contain the direct sun (a point light is
+//! never in a cube image). Its multiple scattering inside the segment is added analytically as a
+//! delta in the sun's direction for orders i ≥ 2: a^i q_i E_sun(c_j) HG(g^i, ω_sun·d). Order 1 of the
+//! sun is left out because the exact single scattering above already covers it (exactly, rather than
+//! with the Poisson estimate q_1 = D e^{−D}).
+//!
+//! **Section 6 fixes.** (1) The cube request carries the segment so the cube renderer leaves out the
+//! cells the segment crosses (scattering along S_j is what the orders already count). (2) Where two
+//! segments are joined by a *bridge* — an interior stretch with ρ in the blend band that does not
+//! reach T — the segment's edge source is (1 − w_b)·(merged) + w_b·(split at the bridge's density
+//! maximum), w_b = w(max ρ on the bridge). At max ρ → T this tends to the two separate segments the
+//! paper would use just above T, and at max ρ → T_lo to the merged one: no seam where segments join.
+
+use super::orders_kernel::{edge_radiance, segment_orders, OrderKernel, DEFAULT_TAIL};
+use super::segments::{LowSegment, RayProfile};
+use crate::cube::CubeImage;
+use crate::math::{Rgb, Vec3};
+use crate::medium::Medium;
+use crate::phase::{hg, hg_f64};
+
+/// Bridges are resolved recursively at most this deep (2^depth sub-segments at worst).
+pub const MAX_BRIDGE_DEPTH: usize = 3;
+
+/// What a cube renderer is asked for.
+#[derive(Clone, Copy, Debug)]
+pub struct CubeRequest {
+    /// Cube centre c_j (m).
+    pub center: Vec3,
+    /// Unit local +x axis: the viewing ray's direction (from the eye into the scene).
+    pub x_axis: Vec3,
+    /// Pixels per face edge.
+    pub res: usize,
+    /// The segment S_j (entry and exit points, m): cells it crosses must be left out of the cube
+    /// (paper section 6) so its own scattering is not counted twice.
+    pub exclude: (Vec3, Vec3),
+}
+
+/// Renders the radiance arriving at a point from every direction (the lit volume, sky, ground,
+/// but **not** the direct sun) into a cube made with [`CubeImage::along`]`(res, x_axis)`.
+pub trait CubeSource: Sync {
+    /// Render one cube.
+    fn render_cube(&self, req: &CubeRequest) -> CubeImage;
+}
+
+/// The attenuated sun, for exact single scattering and the sun's higher orders in segments.
+#[derive(Clone, Copy)]
+pub struct SunInput<'a> {
+    /// Unit direction towards the sun.
+    pub dir: Vec3,
+    /// Sun irradiance reaching a point (W m⁻² per band), i.e. E_sun·exp(−τ_sun(p)).
+    pub irradiance_at: &'a (dyn Fn(Vec3) -> Rgb + Sync),
+}
+
+/// Settings of the edge treatment.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EdgeSettings {
+    /// T: densities below it use the edge treatment (`render.low_density_threshold`); 0 disables it.
+    pub threshold: f32,
+    /// Relative width of the blend band below T: T_lo = (1 − band)·T, in [0, 1].
+    pub band: f32,
+    /// Cube pixels per face edge.
+    pub cube_res: usize,
+    /// Bound on the omitted Poisson tail (eq. 8).
+    pub tail: f64,
+    /// Longest compositing step (m); pieces are cut to at most this length.
+    pub step: f32,
+    /// Resolve bridges between segments smoothly (section 6 fix); false: the paper's hard switch.
+    pub merge_transition: bool,
+}
+
+impl Default for EdgeSettings {
+    fn default() -> Self {
+        EdgeSettings {
+            threshold: DEFAULT_THRESHOLD,
+            band: 0.5,
+            cube_res: 16,
+            tail: DEFAULT_TAIL,
+            step: 5.0,
+            merge_transition: true,
+        }
+    }
+}
+
+/// Default T for `render.low_density_threshold` (density units); see docs/edges.md.
+pub const DEFAULT_THRESHOLD: f32 = 0.3;
+
+/// One pixel's radiance split into its parts (W m⁻² sr⁻¹ per band); they add up to the pixel.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EdgeAov {
+    /// Dense-region (diffusion) emission, attenuated to the eye.
+    pub diffusion: Rgb,
+    /// Low-density multiple scattering E_j (orders ≥ 1 of the cube, ≥ 2 of the sun), attenuated.
+    pub edge: Rgb,
+    /// Exact single scattering of the sun, attenuated.
+    pub sun_single: Rgb,
+    /// Background (sky or ground) times the transmittance of the whole ray.
+    pub background: Rgb,
+    /// Transmittance of the whole ray.
+    pub transmittance: f32,
+    /// Number of cubes rendered for this pixel.
+    pub cubes: u32,
+}
+
+impl EdgeAov {
+    /// The pixel value.
+    pub fn total(&self) -> Rgb {
+        self.diffusion + self.edge + self.sun_single + self.background
+    }
+}
+
+/// The final gather with the edge treatment over one medium.
+pub struct EdgeGather<'a> {
+    medium: &'a Medium,
+    settings: EdgeSettings,
+    kernel: OrderKernel,
+    cubes: &'a dyn CubeSource,
+    sun: SunInput<'a>,
+    dense: &'a (dyn Fn(Vec3, Vec3) -> Rgb + Sync),
+}
+
+/// Largest segment optical depth whose orders are tabulated separately (deeper ones reuse the last).
+const MAX_TABULATED_DEPTH: f64 = 40.0;
+
+impl<'a> EdgeGather<'a> {
+    /// Prepare the gather: tabulates the order weights for `settings.cube_res` and the medium's g.
+    /// `dense(p, dir_to_eye)` is the dense-region source: radiance emitted per unit optical depth
+    /// at p (already including the albedo), e.g. a·I0(p) from the diffusion solution.
+    pub fn new(
+        medium: &'a Medium,
+        settings: EdgeSettings,
+        cubes: &'a dyn CubeSource,
+        sun: SunInput<'a>,
+        dense: &'a (dyn Fn(Vec3, Vec3) -> Rgb + Sync),
+    ) -> Self {
+        let orders = OrderKernel::orders_to_tabulate(medium.g, MAX_TABULATED_DEPTH, settings.tail);
+        let kernel = OrderKernel::new(settings.cube_res.max(1), medium.g, orders);
+        EdgeGather {
+            medium,
+            settings,
+            kernel,
+            cubes,
+            sun,
+            dense,
+        }
+    }
+
+    /// The tabulated kernel.
+    pub fn kernel(&self) -> &OrderKernel {
+        &self.kernel
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &EdgeSettings {
+        &self.settings
+    }
+
+    /// Lower end of the blend band.
+    fn t_lo(&self) -> f32 {
+        self.settings.threshold * (1.0 - self.settings.band.clamp(0.0, 1.0))
+    }
+
+    /// Dense weight w(ρ).
+    fn dense_weight(&self, rho: f32) -> f32 {
+        let t = self.settings.threshold;
+        if t <= 0.0 || rho >= t {
+            return 1.0;
+        }
+        let lo = self.t_lo();
+        if rho <= lo {
+            return 0.0;
+        }
+        let x = (rho - lo) / (t - lo);
+        x * x * (3.0 - 2.0 * x)
+    }
+
+    /// E_j for a segment (eq. 9 with albedo and the sun's orders ≥ 2), and the cube count (1).
+    pub fn segment_radiance(&self, o: Vec3, d: Vec3, seg: &LowSegment) -> Rgb {
+        let m = self.medium;
+        let center = seg.center(o, d);
+        let req = CubeRequest {
+            center,
+            x_axis: d,
+            res: self.settings.cube_res,
+            exclude: (
+                (o.as_dvec3() + d.as_dvec3() * seg.t0).as_vec3(),
+                (o.as_dvec3() + d.as_dvec3() * seg.t1).as_vec3(),
+            ),
+        };
+        let cube = self.cubes.render_cube(&req);
+        let q = segment_orders(seg.depth, self.settings.tail);
+        let k = self.kernel.convolve(&cube, q.len());
+        let mut e = edge_radiance(&q, &k, m.albedo, 1);
+        // The sun as a delta for orders ≥ 2 (order 1 is the exact single scattering).
+        let es = (self.sun.irradiance_at)(center);
+        if es.max_element() > 0.0 && q.len() >= 2 {
+            let c = self.sun.dir.dot(d) as f64;
+            let ks: Vec<Rgb> = (1..=q.len()).map(|i| es * hg_f64(c, (m.g as f64).powi(i as i32)) as f32).collect();
+            e += edge_radiance(&q, &ks, m.albedo, 2);
+        }
+        e
+    }
+
+    /// Add the edge source (per unit optical depth) of pieces `first..end` into `out`, with
+    /// weight `weight`, resolving bridges recursively. Returns the number of cubes rendered.
+    fn fill_edge(&self, prof: &RayProfile, o: Vec3, d: Vec3, first: usize, end: usize, weight: f32, depth: usize, out: &mut [Rgb]) -> u32 {
+        let seg = prof.segment(self.medium, first, end);
+        if seg.depth <= 1e-12 {
+            return 0;
+        }
+        let e = self.segment_radiance(o, d, &seg);
+        let s = e / (-(-seg.depth).exp_m1()) as f32;
+        let mut cubes = 1;
+        let bridge = if self.settings.merge_transition && depth < MAX_BRIDGE_DEPTH {
+            self.strongest_bridge(prof, first, end)
+        } else {
+            None
+        };
+        let wb = bridge.map_or(0.0, |b| b.1);
+        for o in &mut out[first..end] {
+            *o += s * (weight * (1.0 - wb));
+        }
+        if let Some((split, wb)) = bridge {
+            cubes += self.fill_edge(prof, o, d, first, split, weight * wb, depth + 1, out);
+            cubes += self.fill_edge(prof, o, d, split, end, weight * wb, depth + 1, out);
+        }
+        cubes
+    }
+
+    /// The interior band run of pieces `first..end` with the largest dense weight: returns the
+    /// piece index to split before (the boundary nearest the run's density maximum) and w_b.
+    fn strongest_bridge(&self, prof: &RayProfile, first: usize, end: usize) -> Option<(usize, f32)> {
+        let lo = self.t_lo();
+        let ps = &prof.pieces;
+        let mut best: Option<(usize, f32)> = None;
+        let mut k = first;
+        while k < end {
+            if ps[k].rho[1] < lo {
+                k += 1;
+                continue;
+            }
+            let run0 = k;
+            while k < end && ps[k].rho[1] >= lo {
+                k += 1;
+            }
+            // Interior only: low pieces on both sides within the segment.
+            if run0 == first || k == end {
+                continue;
+            }
+            // Boundary with the highest density inside the run.
+            let (mut arg, mut rmax) = (run0 + 1, f32::MIN);
+            for (b, p) in ps.iter().enumerate().take(k).skip(run0 + 1) {
+                if p.rho[0] > rmax {
+                    rmax = p.rho[0];
+                    arg = b;
+                }
+            }
+            if k - run0 == 1 {
+                // A one-piece run: split at its end nearer the maximum (midpoint counted).
+                rmax = ps[run0].rho.iter().copied().fold(f32::MIN, f32::max);
+                arg = if ps[run0].rho[2] >= ps[run0].rho[0] { run0 + 1 } else { run0 };
+            }
+            let w = self.dense_weight(rmax);
+            if w > 0.0 && !matches!(best, Some(b) if b.1 >= w) {
+                best = Some((arg, w));
+            }
+        }
+        best.filter(|b| b.0 > first && b.0 < end)
+    }
+
+    /// Radiance along `o + t·d` (`d` unit) for t ∈ [0, t_max], with `background` the radiance
+    /// arriving from beyond t_max (sky or ground), split into its parts.
+    pub fn radiance(&self, o: Vec3, d: Vec3, t_max: f32, background: Rgb) -> EdgeAov {
+        let m = self.medium;
+        let t = self.settings.threshold;
+        let levels: Vec<f32> = if t > 0.0 { vec![self.t_lo(), t] } else { Vec::new() };
+        let mut prof = RayProfile::trace(m, o, d, 0.0, t_max, &levels);
+        if self.settings.merge_transition && t > 0.0 {
+            refine_maxima(&mut prof, m, self.t_lo(), t);
+        }
+        let mut aov = EdgeAov::default();
+        let mut edge_src = vec![Rgb::ZERO; prof.pieces.len()];
+        if t > 0.0 {
+            for seg in prof.segments(m, t) {
+                aov.cubes += self.fill_edge(&prof, o, d, seg.first, seg.end, 1.0, 0, &mut edge_src);
+            }
+        }
+        let phase_sun = hg(self.sun.dir.dot(d), m.g);
+        let to_eye = -d;
+        let mut tr = 1.0f64;
+        let (od, dd) = (o.as_dvec3(), d.as_dvec3());
+        'pieces: for (k, p) in prof.pieces.iter().enumerate() {
+            let n = ((p.t1 - p.t0) / self.settings.step.max(1e-6) as f64).ceil().max(1.0) as usize;
+            for s in 0..n {
+                let ta = p.t0 + (p.t1 - p.t0) * s as f64 / n as f64;
+                let tb = p.t0 + (p.t1 - p.t0) * (s + 1) as f64 / n as f64;
+                let delta = if n == 1 { p.tau } else { prof.depth_within(m, k, ta, tb) };
+                if delta <= 0.0 {
+                    continue;
+                }
+                let tm = 0.5 * (ta + tb);
+                let pos = (od + dd * tm).as_vec3();
+                let rho = prof.rho(m, tm);
+                let w = self.dense_weight(rho);
+                let f = (tr * -(-delta).exp_m1()) as f32;
+                if w > 0.0 {
+                    aov.diffusion += f * w * (self.dense)(pos, to_eye);
+                }
+                if w < 1.0 {
+                    aov.edge += f * (1.0 - w) * edge_src[k];
+                }
+                aov.sun_single += f * m.albedo * (self.sun.irradiance_at)(pos) * phase_sun;
+                tr *= (-delta).exp();
+                if tr < crate::render::march::T_CUTOFF as f64 {
+                    tr = 0.0;
+                    break 'pieces;
+                }
+            }
+        }
+        aov.transmittance = tr as f32;
+        aov.background = background * tr as f32;
+        aov
+    }
+}
+
+/// Cut each band run's highest-density piece at its density maximum (golden-section search on
+/// the cubic), so bridges split exactly where the two segments would separate.
+fn refine_maxima(prof: &mut RayProfile, m: &Medium, lo: f32, hi: f32) {
+    let mut k = 0;
+    while k < prof.pieces.len() {
+        let p = prof.pieces[k];
+        if !(p.rho[1] >= lo && p.rho[1] < hi && p.rho[1] > p.rho[0] && p.rho[1] > p.rho[2]) {
+            k += 1;
+            continue;
+        }
+        // Interior maximum inside this piece.
+        let (mut a, mut b) = (p.t0, p.t1);
+        let gr = 0.5 * (5f64.sqrt() - 1.0);
+        for _ in 0..40 {
+            let c = b - gr * (b - a);
+            let e = a + gr * (b - a);
+            if prof.rho(m, c) > prof.rho(m, e) {
+                b = e;
+            } else {
+                a = c;
+            }
+        }
+        let tc = 0.5 * (a + b);
+        if tc > p.t0 && tc < p.t1 {
+            let left_tau = prof.depth_within(m, k, p.t0, tc);
+            let right_tau = prof.depth_within(m, k, tc, p.t1);
+            let rc = prof.rho(m, tc);
+            let mid = |x: f64, y: f64| prof.rho(m, 0.5 * (x + y));
+            let left = super::segments::Piece {
+                t0: p.t0,
+                t1: tc,
+                tau: left_tau,
+                rho: [p.rho[0], mid(p.t0, tc), rc],
+            };
+            let right = super::segments::Piece {
+                t0: tc,
+                t1: p.t1,
+                tau: right_tau,
+                rho: [rc, mid(tc, p.t1), p.rho[2]],
+            };
+            prof.pieces[k] = left;
+            prof.pieces.insert(k + 1, right);
+            k += 2;
+        } else {
+            k += 1;
+        }
+    }
+}

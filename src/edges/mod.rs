@@ -1,0 +1,12 @@
+//! Multiple anisotropic scattering at the cloud's edges (paper section 4, with the fixes its
+//! section 6 asks for): low-density segments along each viewing ray, Poisson-weighted orders of
+//! Henyey–Greenstein scattering over a view-aligned cube, and a front-to-back gather that blends
+//! them with the dense (diffusion) solution. See `docs/edges.md`.
+
+pub mod gather;
+pub mod orders_kernel;
+pub mod segments;
+
+pub use gather::{CubeRequest, CubeSource, EdgeAov, EdgeGather, EdgeSettings, SunInput};
+pub use orders_kernel::{edge_radiance, segment_orders, OrderKernel};
+pub use segments::{low_density_segments, LowSegment, RayProfile};

@@ -1,0 +1,327 @@
+//! Exact density profile along a ray, cut into pieces at chosen density levels, and the paper's
+//! low-density segments S_j (0 < ρ < T) with their optical depth D_j and centre c_j.
+//!
+//! Inside one *dual* cell (between adjacent voxel centres) the trilinear density is a cubic in the
+//! ray distance, so Simpson's rule gives its integral exactly over any sub-interval (as in
+//! [`Medium::density_integral`]). The profile walks the dual lattice (skipping empty majorant
+//! blocks), drops cells where ρ ≡ 0 (a cubic that vanishes at five points vanishes everywhere),
+//! and splits the others where ρ crosses a level. Crossings are located by bisection between five
+//! samples per cell; a level crossed twice between two samples (a dip shorter than a quarter
+//! cell) is missed, which only moves a piece boundary, never the optical depth.
+
+use crate::math::Vec3;
+use crate::medium::{Dda, Medium};
+use glam::DVec3;
+
+/// Samples per dual cell used to detect level crossings (cell quarters).
+const CELL_SAMPLES: usize = 4;
+
+/// A stretch of ray inside one dual cell with ρ on one side of every level.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Piece {
+    /// Start (m along the ray).
+    pub t0: f64,
+    /// End (m).
+    pub t1: f64,
+    /// Optical depth σt∫ρ ds over the piece (exact).
+    pub tau: f64,
+    /// ρ at start, middle, end.
+    pub rho: [f32; 3],
+}
+
+/// The non-empty pieces of a ray through the medium, front to back.
+#[derive(Clone, Debug)]
+pub struct RayProfile {
+    /// Pieces in order of t; consecutive pieces touch unless empty space lies between them.
+    pub pieces: Vec<Piece>,
+    o: DVec3,
+    d: DVec3,
+}
+
+/// A maximal run of contiguous pieces whose mid-density is below a level (paper's S_j).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LowSegment {
+    /// Entry (m along the ray).
+    pub t0: f64,
+    /// Exit (m).
+    pub t1: f64,
+    /// Optical depth D_j (unitless).
+    pub depth: f64,
+    /// Distance (m) where the optical depth from t0 reaches D_j/2: the cube centre c_j.
+    pub t_center: f64,
+    /// Pieces `first..end` of the profile.
+    pub first: usize,
+    /// One past the last piece.
+    pub end: usize,
+}
+
+impl LowSegment {
+    /// c_j in world space.
+    pub fn center(&self, o: Vec3, d: Vec3) -> Vec3 {
+        (o.as_dvec3() + d.as_dvec3() * self.t_center).as_vec3()
+    }
+}
+
+/// ρ at distance t along the ray (inside the box).
+#[inline]
+fn rho_at(m: &Medium, o: DVec3, d: DVec3, t: f64) -> f32 {
+    let v = ((o + d * t) - m.origin.as_dvec3()) / m.voxel_size.as_dvec3();
+    m.density.trilinear([v.x as f32, v.y as f32, v.z as f32])
+}
+
+impl RayProfile {
+    /// Profile `o + t·d` (`d` unit), t ∈ [t_min, t_max], split wherever ρ crosses one of `levels`
+    /// (density units; non-positive levels are ignored).
+    pub fn trace(m: &Medium, o: Vec3, d: Vec3, t_min: f32, t_max: f32, levels: &[f32]) -> RayProfile {
+        let (od, dd) = (o.as_dvec3(), d.as_dvec3());
+        let mut prof = RayProfile {
+            pieces: Vec::new(),
+            o: od,
+            d: dd,
+        };
+        let Some((t0, t1)) = m.intersect(o, d, t_min, t_max) else {
+            return prof;
+        };
+        let levels: Vec<f32> = levels.iter().copied().filter(|l| *l > 0.0).collect();
+        let sigma_t = m.sigma_t as f64;
+        let h = m.voxel_size.as_dvec3();
+        let dual_origin = m.origin.as_dvec3() - 0.5 * h;
+        let dims = m.dims();
+        let dual_dims = [dims[0] + 1, dims[1] + 1, dims[2] + 1];
+        let rho = |t: f64| rho_at(m, od, dd, t);
+        let simpson = |a: f64, b: f64| -> (f64, [f32; 3]) {
+            let r = [rho(a), rho(0.5 * (a + b)), rho(b)];
+            (sigma_t * (b - a) / 6.0 * (r[0] as f64 + 4.0 * r[1] as f64 + r[2] as f64), r)
+        };
+        let mut cuts: Vec<f64> = Vec::with_capacity(8);
+        m.majorant.for_each_block(m, o, d, t0, t1, |ta, tb, maj| {
+            if maj <= 0.0 {
+                return true;
+            }
+            for s in Dda::new(dual_origin, h, dual_dims, od, dd, ta as f64, tb as f64) {
+                let mut samples = [(0f64, 0f32); CELL_SAMPLES + 1];
+                for (k, sm) in samples.iter_mut().enumerate() {
+                    let t = s.t0 + (s.t1 - s.t0) * k as f64 / CELL_SAMPLES as f64;
+                    *sm = (t, rho(t));
+                }
+                if samples.iter().all(|x| x.1 <= 0.0) {
+                    continue;
+                }
+                cuts.clear();
+                cuts.push(s.t0);
+                for w in samples.windows(2) {
+                    let (ta, ra) = w[0];
+                    let (tb, rb) = w[1];
+                    for &l in &levels {
+                        if (ra < l) != (rb < l) {
+                            // Bisection on the cubic: keep the invariant ρ(lo) on ra's side.
+                            let (mut lo, mut hi) = (ta, tb);
+                            for _ in 0..40 {
+                                let mid = 0.5 * (lo + hi);
+                                if (rho(mid) < l) == (ra < l) {
+                                    lo = mid;
+                                } else {
+                                    hi = mid;
+                                }
+                            }
+                            cuts.push(0.5 * (lo + hi));
+                        }
+                    }
+                }
+                cuts.push(s.t1);
+                cuts.sort_by(f64::total_cmp);
+                for w in cuts.windows(2) {
+                    if w[1] > w[0] {
+                        let (tau, r) = simpson(w[0], w[1]);
+                        prof.pieces.push(Piece {
+                            t0: w[0],
+                            t1: w[1],
+                            tau,
+                            rho: r,
+                        });
+                    }
+                }
+            }
+            true
+        });
+        prof
+    }
+
+    /// Ray origin and direction the profile was traced along.
+    pub fn ray(&self) -> (DVec3, DVec3) {
+        (self.o, self.d)
+    }
+
+    /// Total optical depth.
+    pub fn depth(&self) -> f64 {
+        self.pieces.iter().map(|p| p.tau).sum()
+    }
+
+    /// Maximal runs of contiguous pieces with mid-density below `level` (the paper's segments
+    /// for level = T), with D_j and c_j.
+    pub fn segments(&self, m: &Medium, level: f32) -> Vec<LowSegment> {
+        let mut out = Vec::new();
+        let mut k = 0;
+        let n = self.pieces.len();
+        while k < n {
+            if self.pieces[k].rho[1] >= level {
+                k += 1;
+                continue;
+            }
+            let first = k;
+            k += 1;
+            while k < n && self.pieces[k].rho[1] < level && self.pieces[k].t0 == self.pieces[k - 1].t1 {
+                k += 1;
+            }
+            out.push(self.segment(m, first, k));
+        }
+        out
+    }
+
+    /// The segment made of pieces `first..end` (contiguous), with its depth and centre.
+    pub fn segment(&self, m: &Medium, first: usize, end: usize) -> LowSegment {
+        let ps = &self.pieces[first..end];
+        let depth: f64 = ps.iter().map(|p| p.tau).sum();
+        LowSegment {
+            t0: ps[0].t0,
+            t1: ps[ps.len() - 1].t1,
+            depth,
+            t_center: self.t_at_depth(m, first, end, 0.5 * depth),
+            first,
+            end,
+        }
+    }
+
+    /// The distance where the optical depth accumulated from the start of piece `first` reaches
+    /// `target` (clamped to pieces `first..end`); exact up to bisection tolerance.
+    pub fn t_at_depth(&self, m: &Medium, first: usize, end: usize, target: f64) -> f64 {
+        let mut acc = 0.0;
+        for p in &self.pieces[first..end] {
+            if acc + p.tau >= target && p.tau > 0.0 {
+                let want = target - acc;
+                let sigma_t = m.sigma_t as f64;
+                let r0 = p.rho[0] as f64;
+                let (mut lo, mut hi) = (p.t0, p.t1);
+                for _ in 0..50 {
+                    let mid = 0.5 * (lo + hi);
+                    // Simpson on [t0, mid] is exact: the piece lies in one dual cell.
+                    let rm = rho_at(m, self.o, self.d, 0.5 * (p.t0 + mid)) as f64;
+                    let r1 = rho_at(m, self.o, self.d, mid) as f64;
+                    let tau = sigma_t * (mid - p.t0) / 6.0 * (r0 + 4.0 * rm + r1);
+                    if tau < want {
+                        lo = mid;
+                    } else {
+                        hi = mid;
+                    }
+                }
+                return 0.5 * (lo + hi);
+            }
+            acc += p.tau;
+        }
+        self.pieces[end - 1].t1
+    }
+
+    /// Optical depth between `t_a` and `t_b` (both inside piece `k`), exact.
+    pub fn depth_within(&self, m: &Medium, k: usize, t_a: f64, t_b: f64) -> f64 {
+        let _ = k;
+        let r = |t| rho_at(m, self.o, self.d, t) as f64;
+        m.sigma_t as f64 * (t_b - t_a) / 6.0 * (r(t_a) + 4.0 * r(0.5 * (t_a + t_b)) + r(t_b))
+    }
+
+    /// ρ at distance t.
+    pub fn rho(&self, m: &Medium, t: f64) -> f32 {
+        rho_at(m, self.o, self.d, t)
+    }
+}
+
+/// The paper's low-density segments along `o + t·d` (`d` unit), t ∈ [t_min, t_max]: maximal
+/// stretches with 0 < ρ < `threshold`, with optical depth D_j and centre c_j.
+pub fn low_density_segments(m: &Medium, o: Vec3, d: Vec3, t_min: f32, t_max: f32, threshold: f32) -> Vec<LowSegment> {
+    RayProfile::trace(m, o, d, t_min, t_max, &[threshold]).segments(m, threshold)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::Rgb;
+    use crate::medium::Grid3;
+
+    /// A medium whose density varies along x only: ρ(x) given at voxel centres.
+    fn ramp_medium(values: &[f32], sigma_t: f32) -> Medium {
+        let n = values.len();
+        let mut g = Grid3::filled([n, 3, 3], 0.0);
+        for k in 0..3 {
+            for j in 0..3 {
+                for (i, v) in values.iter().enumerate() {
+                    g.set(i, j, k, *v);
+                }
+            }
+        }
+        Medium::new(g, Vec3::ZERO, Vec3::ONE, sigma_t, Rgb::ONE, 0.0)
+    }
+
+    #[test]
+    fn linear_ramp_segment_depth_and_centre_are_exact() {
+        // ρ at centres x = i + 0.5: 0, 0.1, 0.2, …, 0.9 → ρ(x) = 0.1(x − 0.5) on [0.5, 9.5].
+        let vals: Vec<f32> = (0..10).map(|i| 0.1 * i as f32).collect();
+        let m = ramp_medium(&vals, 2.0);
+        let o = Vec3::new(-1.0, 1.5, 1.5);
+        let segs = low_density_segments(&m, o, Vec3::X, 0.0, 100.0, 0.45);
+        assert_eq!(segs.len(), 1, "{segs:?}");
+        let s = segs[0];
+        // Starts where ρ leaves 0 (x = 0.5, t = 1.5), ends where ρ = 0.45 (x = 5, t = 6).
+        assert!((s.t0 - 1.5).abs() < 1e-6 && (s.t1 - 6.0).abs() < 1e-5, "{s:?}");
+        // D = σt ∫_{0.5}^{5} 0.1(x − 0.5) dx = 2 · 0.05 · 4.5² = 2.025.
+        assert!((s.depth - 2.025).abs() < 1e-5, "{}", s.depth);
+        // Half depth at 0.1 (x − 0.5)² = D/2 / 2 ⇒ x − 0.5 = 4.5/√2.
+        let xc = 0.5 + 4.5 / 2f64.sqrt();
+        assert!((s.t_center - (xc + 1.0)).abs() < 1e-5, "{} vs {}", s.t_center, xc + 1.0);
+    }
+
+    #[test]
+    fn dense_core_splits_two_segments_and_gaps_split_too() {
+        // 0 … low … dense … low … 0 … low … 0
+        let vals = [0.0, 0.2, 0.2, 1.0, 1.0, 0.2, 0.2, 0.0, 0.0, 0.0, 0.3, 0.0];
+        let m = ramp_medium(&vals, 1.0);
+        let o = Vec3::new(-1.0, 1.5, 1.5);
+        let segs = low_density_segments(&m, o, Vec3::X, 0.0, 100.0, 0.5);
+        assert_eq!(segs.len(), 3, "{segs:?}");
+        // Total depth of the pieces equals the exact integral.
+        let prof = RayProfile::trace(&m, o, Vec3::X, 0.0, 100.0, &[0.5]);
+        let exact = m.optical_depth(o, Vec3::X, 0.0, 100.0) as f64;
+        assert!((prof.depth() - exact).abs() < 1e-5 * exact);
+        // The third segment is a tent 0 → 0.3 → 0 over x ∈ [9.5, 11.5]: D = 0.3, centred at x = 10.5.
+        let s = segs[2];
+        assert!((s.depth - 0.3).abs() < 1e-6 && (s.t_center - 11.5).abs() < 1e-5, "{s:?}");
+        // Threshold 0 gives no segments.
+        assert!(low_density_segments(&m, o, Vec3::X, 0.0, 100.0, 0.0).is_empty());
+    }
+
+    #[test]
+    fn oblique_rays_segment_depths_sum_to_low_part_of_the_integral() {
+        let m = Medium::new(
+            crate::medium::procedural::cumulus([24, 20, 16], 3),
+            Vec3::ZERO,
+            Vec3::ONE,
+            1.0,
+            Rgb::ONE,
+            0.8,
+        );
+        let mut rng = crate::math::Rng::new(9, 1);
+        for _ in 0..50 {
+            let o = Vec3::new(-5.0, rng.uniform() * 20.0, rng.uniform() * 16.0);
+            let d = Vec3::new(1.0, rng.uniform() - 0.5, rng.uniform() - 0.5).normalize();
+            let prof = RayProfile::trace(&m, o, d, 0.0, 100.0, &[0.3]);
+            let exact = m.optical_depth(o, d, 0.0, 100.0) as f64;
+            assert!((prof.depth() - exact).abs() < 1e-4 * exact.max(1.0), "{} vs {exact}", prof.depth());
+            for s in prof.segments(&m, 0.3) {
+                for p in &prof.pieces[s.first..s.end] {
+                    assert!(p.rho[1] < 0.3 && p.rho[0] <= 0.3 + 1e-4 && p.rho[2] <= 0.3 + 1e-4);
+                }
+                assert!(s.t_center > s.t0 && s.t_center < s.t1);
+                let half = m.optical_depth(o, d, s.t0 as f32, s.t_center as f32) as f64;
+                assert!((half - 0.5 * s.depth).abs() < 1e-4, "{half} vs {}", 0.5 * s.depth);
+            }
+        }
+    }
+}

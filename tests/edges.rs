@@ -1,0 +1,344 @@
+//! Edge treatment (paper section 4 + section 6 fixes): furnace, thin slab against Monte Carlo,
+//! threshold 0 against the pure dense gather, smooth merging of segments, determinism.
+
+use cloudgi::cube::CubeImage;
+use cloudgi::edges::{CubeRequest, CubeSource, EdgeGather, EdgeSettings, SunInput};
+use cloudgi::math::{Rgb, Rng, Vec3};
+use cloudgi::medium::{procedural, Grid3, Medium};
+use cloudgi::phase::{hg, sample_hg};
+use rayon::prelude::*;
+
+/// A cube filled with one radiance.
+struct Uniform(Rgb);
+
+impl CubeSource for Uniform {
+    fn render_cube(&self, req: &CubeRequest) -> CubeImage {
+        let mut c = CubeImage::along(req.res, req.x_axis);
+        c.pixels.iter_mut().for_each(|p| *p = self.0);
+        c
+    }
+}
+
+/// A cube whose radiance depends on the world direction: `f(dir)`.
+struct Directional<F: Fn(Vec3) -> Rgb + Sync>(F);
+
+impl<F: Fn(Vec3) -> Rgb + Sync> CubeSource for Directional<F> {
+    fn render_cube(&self, req: &CubeRequest) -> CubeImage {
+        let mut c = CubeImage::along(req.res, req.x_axis);
+        for face in 0..6 {
+            for j in 0..req.res {
+                for i in 0..req.res {
+                    let k = c.index(face, i, j);
+                    c.pixels[k] = (self.0)(c.direction(face, i, j));
+                }
+            }
+        }
+        c
+    }
+}
+
+/// Fails the test if a cube is asked for.
+struct NoCubes;
+
+impl CubeSource for NoCubes {
+    fn render_cube(&self, _: &CubeRequest) -> CubeImage {
+        panic!("no cube may be rendered with threshold 0");
+    }
+}
+
+fn no_sun(_: Vec3) -> Rgb {
+    Rgb::ZERO
+}
+
+fn cumulus_medium(albedo: f32, g: f32) -> Medium {
+    Medium::new(
+        procedural::cumulus([40, 32, 24], 7),
+        Vec3::ZERO,
+        Vec3::splat(10.0),
+        0.05,
+        Rgb::splat(albedo),
+        g,
+    )
+}
+
+/// Rays from outside the cumulus box towards random points of it.
+fn rays(n: usize, seed: u64) -> Vec<(Vec3, Vec3)> {
+    let mut rng = Rng::new(seed, 3);
+    (0..n)
+        .map(|_| {
+            let target = Vec3::new(rng.uniform() * 400.0, 40.0 + rng.uniform() * 200.0, rng.uniform() * 240.0);
+            let o = Vec3::new(200.0, 120.0, -600.0) + Vec3::new(rng.uniform() - 0.5, rng.uniform() - 0.5, 0.0) * 300.0;
+            (o, (target - o).normalize())
+        })
+        .collect()
+}
+
+#[test]
+fn furnace_every_pixel_reads_l() {
+    // Albedo 1, radiance L arriving from everywhere (cube and background), dense source a·I0 = L:
+    // every pixel reads L, at any density and with the blend band and bridges active.
+    let m = cumulus_medium(1.0, 0.9);
+    let l = Rgb::new(0.7, 1.0, 1.3);
+    let dense = move |_: Vec3, _: Vec3| l;
+    let cubes = Uniform(l);
+    for threshold in [0.0, 0.3, 1.0, 10.0] {
+        let settings = EdgeSettings {
+            threshold,
+            cube_res: 4,
+            ..Default::default()
+        };
+        let gather = EdgeGather::new(
+            &m,
+            settings,
+            &cubes,
+            SunInput {
+                dir: Vec3::Y,
+                irradiance_at: &no_sun,
+            },
+            &dense,
+        );
+        let mut edge_seen = false;
+        for (o, d) in rays(150, 1) {
+            let a = gather.radiance(o, d, f32::INFINITY, l);
+            edge_seen |= a.edge.max_element() > 0.01;
+            // f32 compositing over a few hundred steps: 1e-5 relative.
+            assert!(
+                (a.total() - l).abs().max_element() < 2e-5 * 1.3,
+                "T={threshold}: {} vs {l}",
+                a.total()
+            );
+        }
+        assert_eq!(edge_seen, threshold > 0.0, "T={threshold}");
+    }
+}
+
+#[test]
+fn threshold_zero_is_the_pure_dense_gather() {
+    // With T = 0 no cube is rendered and the gather is ∫ T(t) σt ρ (S_dense + S_sun) dt +
+    // T_total·background, checked against a fine midpoint rule on the exact field.
+    let m = cumulus_medium(0.8, 0.85);
+    let dense = |p: Vec3, _: Vec3| Rgb::new(1.0 + p.x / 400.0, 0.5 + p.y / 320.0, 0.3);
+    let sun_dir = Vec3::new(0.3, 0.8, -0.5).normalize();
+    let sun = |p: Vec3| Rgb::splat(2.0) * (-(p.y / 300.0)).exp();
+    let settings = EdgeSettings {
+        threshold: 0.0,
+        step: 2.0,
+        ..Default::default()
+    };
+    let gather = EdgeGather::new(
+        &m,
+        settings,
+        &NoCubes,
+        SunInput {
+            dir: sun_dir,
+            irradiance_at: &sun,
+        },
+        &dense,
+    );
+    let bg = Rgb::new(0.2, 0.3, 0.6);
+    for (o, d) in rays(25, 2) {
+        let a = gather.radiance(o, d, f32::INFINITY, bg);
+        assert_eq!(a.edge, Rgb::ZERO);
+        assert_eq!(a.cubes, 0);
+        let Some((t0, t1)) = m.intersect(o, d, 0.0, f32::INFINITY) else {
+            continue;
+        };
+        let n = 20_000;
+        let dt = (t1 - t0) as f64 / n as f64;
+        let (mut tr, mut sum) = (1.0f64, Rgb::ZERO);
+        let ph = hg(sun_dir.dot(d), m.g);
+        for k in 0..n {
+            let t = t0 as f64 + (k as f64 + 0.5) * dt;
+            let p = o + d * t as f32;
+            let delta = m.sigma_t as f64 * m.density_at(p) as f64 * dt;
+            let s = dense(p, -d) + m.albedo * sun(p) * ph;
+            sum += s * (tr * -(-delta).exp_m1()) as f32;
+            tr *= (-delta).exp();
+        }
+        sum += bg * tr as f32;
+        // The gather samples the source at 2 m spacing (midpoints), the reference at < 0.05 m: the
+        // sources vary by < 1 % over 2 m, so 0.5 % agreement is expected.
+        assert!(
+            (a.total() - sum).abs().max_element() < 5e-3 * sum.max_element(),
+            "{} vs {sum}",
+            a.total()
+        );
+        assert!((a.transmittance as f64 - tr).abs() < 1e-4);
+    }
+}
+
+#[test]
+fn deterministic_at_any_thread_count() {
+    let m = cumulus_medium(0.9, 0.9);
+    let cubes = Directional(|d: Vec3| Rgb::new(1.0 + d.y, 1.0 - 0.5 * d.x, 0.5 + d.z * d.z));
+    let dense = |p: Vec3, _: Vec3| Rgb::splat(0.5 + p.y / 400.0);
+    let sun = |_: Vec3| Rgb::splat(3.0);
+    let settings = EdgeSettings {
+        cube_res: 4,
+        ..Default::default()
+    };
+    let gather = EdgeGather::new(
+        &m,
+        settings,
+        &cubes,
+        SunInput {
+            dir: Vec3::Y,
+            irradiance_at: &sun,
+        },
+        &dense,
+    );
+    let rs = rays(60, 4);
+    let seq: Vec<_> = rs.iter().map(|(o, d)| gather.radiance(*o, *d, f32::INFINITY, Rgb::ONE)).collect();
+    let par: Vec<_> = rs
+        .par_iter()
+        .map(|(o, d)| gather.radiance(*o, *d, f32::INFINITY, Rgb::ONE))
+        .collect();
+    assert_eq!(seq, par);
+    assert!(seq.iter().any(|a| a.cubes > 0));
+}
+
+/// Optical depth τ0 = σt·H of a slab y ∈ [0, H] of density 1, wide in x and z.
+fn slab(sigma_t: f32, h: f32, albedo: f32, g: f32) -> Medium {
+    Medium::new(
+        Grid3::filled([8, 2, 8], 1.0),
+        Vec3::new(-400.0, 0.0, -400.0),
+        Vec3::new(100.0, h / 2.0, 100.0),
+        sigma_t,
+        Rgb::splat(albedo),
+        g,
+    )
+}
+
+/// Radiance seen looking along `u` (u.y > 0) from below a slab of optical depth `tau0` lit by a
+/// uniform sky of radiance 1 over the upper hemisphere (black below), scattered orders 1..=4,
+/// by backward Monte Carlo (phase sampling; free flights in optical units).
+fn slab_monte_carlo(tau0: f64, albedo: f64, g: f32, u: Vec3, paths: usize) -> f64 {
+    let chunks = 16;
+    let per = paths / chunks;
+    let sum: f64 = (0..chunks)
+        .into_par_iter()
+        .map(|c| {
+            let mut rng = Rng::new(77, c as u64);
+            let mut acc = 0.0;
+            for _ in 0..per {
+                let (mut y, mut dir, mut w) = (0.0f64, u, 1.0f64); // y: optical depth above the bottom
+                for _order in 1..=4 {
+                    let s = -(1.0 - rng.uniform_f64()).ln();
+                    let ny = y + s * dir.y as f64;
+                    if ny <= 0.0 || ny >= tau0 {
+                        break; // leaves the slab unscattered: not counted (order 0 of this vertex)
+                    }
+                    y = ny;
+                    w *= albedo;
+                    dir = sample_hg(dir, g, rng.uniform(), rng.uniform());
+                    if dir.y > 0.0 {
+                        acc += w * (-(tau0 - y) / dir.y as f64).exp();
+                    }
+                }
+            }
+            acc
+        })
+        .sum();
+    sum / (per * chunks) as f64
+}
+
+#[test]
+fn thin_slab_under_sky_matches_monte_carlo() {
+    // Slab of optical depth 0.1 (σt = 0.01 m⁻¹, 10 m), g = 0.9, viewed from below at 30° from the
+    // zenith (segment depth D = 0.115). The cube at c_j sees the sky through the slab (uncollided:
+    // the cells along the segment, here the whole slab, are left out of its scattering).
+    let (h, sigma_t, g) = (10.0f32, 0.01f32, 0.9f32);
+    let u = Vec3::new(0.5, 3f32.sqrt() / 2.0, 0.0);
+    let o = Vec3::new(0.0, -1.0, 0.0);
+    let tau0 = (sigma_t * h) as f64;
+    for albedo in [1.0f32, 0.8] {
+        let m = slab(sigma_t, h, albedo, g);
+        let cubes = Directional(move |w: Vec3| {
+            if w.y <= 0.0 {
+                return Rgb::ZERO;
+            }
+            // From the cube centre (height h/2) up through the rest of the slab.
+            Rgb::splat((-(sigma_t * h / 2.0) / w.y).exp())
+        });
+        let dense = |_: Vec3, _: Vec3| Rgb::ZERO;
+        let settings = EdgeSettings {
+            threshold: 2.0,
+            cube_res: 32,
+            ..Default::default()
+        };
+        let gather = EdgeGather::new(
+            &m,
+            settings,
+            &cubes,
+            SunInput {
+                dir: Vec3::Y,
+                irradiance_at: &no_sun,
+            },
+            &dense,
+        );
+        let a = gather.radiance(o, u, f32::INFINITY, Rgb::ONE);
+        assert_eq!(a.cubes, 1);
+        let d = tau0 / (u.y as f64);
+        assert!((a.transmittance as f64 - (-d).exp()).abs() < 1e-6);
+        let mc = slab_monte_carlo(tau0, albedo as f64, g, u, 400_000);
+        let edge = a.edge.x as f64;
+        // The Poisson model attenuates light entering from the side by e^{−D} at the cube and then
+        // again through the slab to the cube: for D = 0.115 that undercounts by up to about D/2
+        // (6 %) plus the forward approximation of the second order. Tolerance 10 %; Monte Carlo
+        // standard error with 4·10⁵ paths is below 1 %.
+        let rel = (edge - mc).abs() / mc;
+        eprintln!("slab albedo {albedo}: edge {edge:.5}, Monte Carlo {mc:.5}, relative difference {rel:.4}");
+        assert!(rel < 0.10, "edge {edge} vs MC {mc}");
+    }
+}
+
+#[test]
+fn merging_segments_is_continuous_with_the_fix_and_jumps_without() {
+    // A ray along x through ρ = 0.1 | bump of peak b | 0.1. As b rises through T = 0.3 the two
+    // segments join into one. The edge part must change continuously with the fix.
+    let profile = |b: f32| {
+        let vals = [0.0, 0.1, 0.1, 0.1, 0.1, b, 0.1, 0.1, 0.1, 0.1, 0.0];
+        let mut grid = Grid3::filled([vals.len(), 3, 3], 0.0);
+        for k in 0..3 {
+            for j in 0..3 {
+                for (i, v) in vals.iter().enumerate() {
+                    grid.set(i, j, k, *v);
+                }
+            }
+        }
+        Medium::new(grid, Vec3::ZERO, Vec3::splat(10.0), 0.5, Rgb::ONE, 0.9)
+    };
+    // Light from the side and front: higher orders (more scattering) see more of the side.
+    let cubes = Directional(|w: Vec3| Rgb::splat(if w.x > 0.9 { 4.0 } else { 0.5 + w.y.max(0.0) }));
+    let dense = |_: Vec3, _: Vec3| Rgb::splat(0.8);
+    let edge_at = |b: f32, fix: bool| {
+        let m = profile(b);
+        let settings = EdgeSettings {
+            threshold: 0.3,
+            band: 0.5,
+            cube_res: 8,
+            merge_transition: fix,
+            ..Default::default()
+        };
+        let g = EdgeGather::new(
+            &m,
+            settings,
+            &cubes,
+            SunInput {
+                dir: Vec3::Y,
+                irradiance_at: &no_sun,
+            },
+            &dense,
+        );
+        g.radiance(Vec3::new(-5.0, 15.0, 15.0), Vec3::X, f32::INFINITY, Rgb::ZERO).total().x
+    };
+    let eps = 1e-4;
+    let jump = |fix: bool| (edge_at(0.3 + eps, fix) - edge_at(0.3 - eps, fix)).abs();
+    let (with_fix, without) = (jump(true), jump(false));
+    eprintln!("jump at T: with fix {with_fix:.2e}, without {without:.2e}");
+    assert!(without > 1e-2, "the paper's hard switch should show a seam: {without}");
+    assert!(with_fix < 2e-3, "seam with the fix: {with_fix}");
+    // And at the bottom of the band (bridge fades in) too.
+    let lo = 0.15;
+    assert!((edge_at(lo + eps, true) - edge_at(lo - eps, true)).abs() < 2e-3);
+}
