@@ -170,7 +170,8 @@ fn single_scattering_matches_brute_force() {
             ((model - reference) / reference).abs().max_element()
         })
         .reduce(|| 0.0, f64::max);
-    // 48 quadratic march segments, a 256×64 transmittance LUT: measured worst 0.4 % (2-core box).
+    eprintln!("single scattering: worst relative error {worst:.5}");
+    // 48 quadratic march segments, a 256×64 transmittance LUT: measured worst 0.35 %.
     assert!(worst < 0.01, "worst relative error {worst}");
 }
 
