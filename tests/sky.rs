@@ -619,3 +619,35 @@ fn bad_sky_input_gives_clear_errors() {
     assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("--width"));
     assert!(!d.join("x.exr").exists());
 }
+
+#[test]
+fn example_scenes_build_and_the_sunset_sun_is_red() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples");
+    let load = |name: &str| {
+        let p = dir.join(name);
+        let d = SceneDesc::from_file(&p).unwrap();
+        sun_and_sky(&d.sun, &d.sky, name, &dir).unwrap()
+    };
+    let (noon_sun, noon_sky) = load("noon.toml");
+    let (sunset_sun, sunset_sky) = load("sunset.toml");
+    assert!((sunset_sun.dir.y - 4f32.to_radians().sin()).abs() < 1e-6);
+    let rb = |c: Rgb| c.x / c.z;
+    assert!(rb(noon_sun.irradiance) < 1.1 && rb(sunset_sun.irradiance) > 5.0);
+    assert!(noon_sky.irradiance_up.z > noon_sky.irradiance_up.x * 3.0, "noon sky light is blue");
+    assert!(sunset_sky.irradiance_up.max_element() < noon_sky.irradiance_up.max_element());
+    // `from_atmosphere` with a constant sky uses the Earth atmosphere at `sky.altitude_m`.
+    let (sun, _) = sun_and_sky(
+        &SunDesc {
+            from_atmosphere: true,
+            direction: Some([0.0, 1.0, 0.0]),
+            ..Default::default()
+        },
+        &SkyDesc::default(),
+        "t",
+        Path::new("."),
+    )
+    .unwrap();
+    let p = AtmosphereParams::default();
+    let expect = p.solar_irradiance * p.transmittance_to_top(p.bottom_radius, 1.0);
+    assert!(((sun.irradiance.as_dvec3() - expect) / expect).abs().max_element() < 1e-6);
+}
