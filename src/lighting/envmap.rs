@@ -198,7 +198,8 @@ impl EnvMap {
     }
 
     /// Draw a direction with density ∝ (luminance + ε)·sin θ per pixel, from two uniforms in
-    /// [0, 1): (direction, its radiance, its solid-angle density in sr⁻¹).
+    /// [0, 1): (direction, its radiance, its solid-angle density in sr⁻¹). The density is 0 only
+    /// exactly at a pole (probability zero); callers should skip such a sample.
     pub fn sample(&self, u: Vec2) -> (Vec3, Rgb, f32) {
         let total = self.total();
         // Row from the marginal, then column from the row's conditional; reuse the remainder.
