@@ -66,13 +66,21 @@ impl Default for MediumDesc {
 #[serde(deny_unknown_fields, default)]
 pub struct SunDesc {
     /// Direction towards the sun (normalised by the program). Exclusive with elevation/azimuth.
+    /// Absent from a `[sun]` table (and no elevation given): the default scene's direction.
+    #[serde(default)]
     pub direction: Option<[f32; 3]>,
     /// Elevation above the horizon (degrees); direction = (cos el cos az, sin el, cos el sin az).
     pub elevation_deg: Option<f32>,
     /// Azimuth (degrees), measured from +x towards +z.
     pub azimuth_deg: Option<f32>,
-    /// Irradiance on a plane perpendicular to the rays (W/m² per band).
+    /// Irradiance on a plane perpendicular to the rays (W/m² per band). Ignored when
+    /// `from_atmosphere` is true.
     pub irradiance: [f32; 3],
+    /// Derive the irradiance from the atmosphere: extraterrestrial solar irradiance × the
+    /// transmittance along the sun's path from the observer (`sky.altitude_m`).
+    pub from_atmosphere: bool,
+    /// Angular diameter of the sun's disc (degrees; 0 = a point, the real sun is 0.53).
+    pub angular_diameter_deg: f32,
 }
 
 impl Default for SunDesc {
@@ -82,6 +90,8 @@ impl Default for SunDesc {
             elevation_deg: None,
             azimuth_deg: None,
             irradiance: [3.0, 3.0, 3.0],
+            from_atmosphere: false,
+            angular_diameter_deg: 0.0,
         }
     }
 }
@@ -92,6 +102,10 @@ impl Default for SunDesc {
 pub enum SkyModel {
     /// The same radiance from every direction.
     Constant,
+    /// A physically based atmosphere (Rayleigh, Mie, ozone; single + multiple scattering).
+    Atmosphere,
+    /// An equirectangular HDR environment map (`sky.path`).
+    Envmap,
 }
 
 /// `[sky]`.
@@ -102,6 +116,16 @@ pub struct SkyDesc {
     pub model: SkyModel,
     /// Radiance of the constant sky (W·m⁻²·sr⁻¹ per band).
     pub radiance: [f32; 3],
+    /// Atmosphere: the observer's altitude above the planet's ground (m).
+    pub altitude_m: f32,
+    /// Atmosphere: width of the precomputed equirectangular sky map (pixels, height = width/2).
+    pub map_width: u32,
+    /// Atmosphere: albedo of the planet's ground (unitless per band, in [0, 1]).
+    pub planet_albedo: [f32; 3],
+    /// Envmap: equirectangular OpenEXR file, relative to the scene file.
+    pub path: Option<String>,
+    /// Envmap: factor on the file's radiance (unitless).
+    pub scale: f32,
 }
 
 impl Default for SkyDesc {
@@ -109,6 +133,11 @@ impl Default for SkyDesc {
         SkyDesc {
             model: SkyModel::Constant,
             radiance: [0.3, 0.45, 0.8],
+            altitude_m: 0.0,
+            map_width: crate::lighting::DEFAULT_MAP_WIDTH,
+            planet_albedo: [0.3, 0.3, 0.3],
+            path: None,
+            scale: 1.0,
         }
     }
 }
@@ -396,8 +425,7 @@ impl Scene {
             "the edge threshold is a density ≥ 0 (0 turns the edge treatment off)",
         )?;
         let camera = Camera::from_desc(&desc.camera, f)?;
-        let sun = Sun::from_desc(&desc.sun, f)?;
-        let sky = Sky::from_desc(&desc.sky, f, base_dir)?;
+        let (sun, sky) = crate::lighting::sun_and_sky(&desc.sun, &desc.sky, f, base_dir)?;
         let ground = match &desc.ground {
             Some(g) => Some(Ground::from_desc(g, f)?),
             None => None,

@@ -4,6 +4,7 @@ mod compare;
 mod info;
 mod progress;
 mod slab;
+mod sky;
 
 use clap::{Args, Parser, Subcommand};
 use cloudgi::error::{Error, Result};
@@ -34,6 +35,8 @@ enum Command {
     Compare(compare::CompareArgs),
     /// Describe the grids of an OpenVDB file: types, active voxels, bounding boxes, transforms, dense memory.
     Info(info::InfoArgs),
+    /// Export the scene's sky as an equirectangular EXR (row 0 = +y) plus a PNG preview.
+    Sky(sky::SkyArgs),
 }
 
 #[derive(Args, Debug)]
@@ -85,6 +88,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Slab(a) => slab::run(a),
         Command::Compare(a) => compare::run(a),
         Command::Info(a) => info::run(a),
+        Command::Sky(a) => sky::run(a, cli.quiet),
     }
 }
 

@@ -1,14 +1,21 @@
 //! Light sources: the sun (a directional light, never binned), the sky, and the Lambertian ground.
 
+pub mod atmosphere;
 pub mod bins;
+pub mod envmap;
 
 use crate::error::Result;
+use crate::image::Image;
 use crate::math::{Rgb, Vec3};
 use crate::scene::{check, finite3, rgb_in_unit, rgb_nonneg, GroundDesc, SkyDesc, SkyModel, SunDesc};
+use glam::Vec2;
 use std::f32::consts::PI;
 use std::path::Path;
+use std::sync::Arc;
 
+pub use atmosphere::{Atmosphere, AtmosphereParams};
 pub use bins::{DirectionBins, CUBE_FACES};
+pub use envmap::EnvMap;
 
 /// The sun: a directional light.
 #[derive(Clone, Debug)]
@@ -59,13 +66,8 @@ impl Sun {
                     "given without sun.elevation_deg: give both, or sun.direction",
                 ));
             }
-            (None, None, None) => {
-                return Err(crate::Error::invalid(
-                    file,
-                    "sun.direction",
-                    "missing: give sun.direction or sun.elevation_deg (+ azimuth_deg)",
-                ));
-            }
+            // A `[sun]` table without a direction: the default scene's sun.
+            (None, None, None) => Vec3::from(SunDesc::default().direction.unwrap_or([0.3, 0.8, 0.5])).normalize(),
             (Some(_), _, _) => {
                 return Err(crate::Error::invalid(
                     file,
@@ -74,6 +76,13 @@ impl Sun {
                 ));
             }
         };
+        check(
+            file,
+            "sun.angular_diameter_deg",
+            d.angular_diameter_deg.is_finite() && (0.0..=20.0).contains(&d.angular_diameter_deg),
+            d.angular_diameter_deg,
+            "the sun's angular diameter must be in [0, 20] degrees (0 = a point; the real sun is 0.53)",
+        )?;
         check(
             file,
             "sun.irradiance",
@@ -93,6 +102,22 @@ impl Sun {
 pub enum SkyKind {
     /// The same radiance (W·m⁻²·sr⁻¹ per band) from every direction.
     Constant(Rgb),
+    /// The physically based atmosphere ([`atmosphere`]), precomputed into an equirectangular map.
+    Atmosphere {
+        /// The atmosphere and its LUTs.
+        atmosphere: Arc<Atmosphere>,
+        /// Observer altitude above the planet's ground (m).
+        altitude_m: f32,
+        /// Unit direction towards the sun the map was computed for.
+        sun_dir: Vec3,
+        /// The sky as an equirectangular map (W·m⁻²·sr⁻¹ per band).
+        map: Arc<EnvMap>,
+    },
+    /// An equirectangular HDR environment map read from a file (already scaled).
+    EnvMap {
+        /// The map (W·m⁻²·sr⁻¹ per band).
+        map: Arc<EnvMap>,
+    },
 }
 
 /// The sky: radiance arriving from each direction, plus cached integrals.
@@ -105,9 +130,66 @@ pub struct Sky {
     pub irradiance_up: Rgb,
 }
 
+/// Default width of the atmosphere's equirectangular map (pixels; height = width / 2).
+pub const DEFAULT_MAP_WIDTH: u32 = 512;
+
+/// Validate `[sun]` and `[sky]` together (the atmosphere needs the sun's direction, and
+/// `sun.from_atmosphere` needs the atmosphere). Relative `sky.path` resolves against `base_dir`.
+pub fn sun_and_sky(sun: &SunDesc, sky: &SkyDesc, file: &str, base_dir: &Path) -> Result<(Sun, Sky)> {
+    let mut s = Sun::from_desc(sun, file)?;
+    let k = Sky::from_desc_with_sun(sky, s.dir, file, base_dir)?;
+    if sun.from_atmosphere {
+        let atm = match &k.kind {
+            SkyKind::Atmosphere { atmosphere, .. } => atmosphere.clone(),
+            _ => Arc::new(Atmosphere::new(atmosphere_params(sky, file)?)),
+        };
+        check_altitude(sky, file)?;
+        s.irradiance = atm.sun_irradiance(sky.altitude_m as f64, s.dir.as_dvec3()).as_vec3();
+    }
+    Ok((s, k))
+}
+
+fn check_altitude(d: &SkyDesc, file: &str) -> Result<()> {
+    check(
+        file,
+        "sky.altitude_m",
+        d.altitude_m.is_finite() && (0.0..90_000.0).contains(&d.altitude_m),
+        d.altitude_m,
+        "the observer's altitude must be in [0, 90000) m (the atmosphere's top is at 100 km)",
+    )
+}
+
+/// Earth atmosphere parameters with the scene's `sky.planet_albedo`.
+fn atmosphere_params(d: &SkyDesc, file: &str) -> Result<AtmosphereParams> {
+    check(
+        file,
+        "sky.planet_albedo",
+        rgb_in_unit(d.planet_albedo),
+        d.planet_albedo,
+        "each band must be in [0, 1]",
+    )?;
+    Ok(AtmosphereParams {
+        ground_albedo: Vec3::from(d.planet_albedo).as_dvec3(),
+        ..Default::default()
+    })
+}
+
 impl Sky {
-    /// Validate `[sky]`.
-    pub fn from_desc(d: &SkyDesc, file: &str, _base_dir: &Path) -> Result<Sky> {
+    /// Validate `[sky]` for models that do not depend on the sun (`constant`, `envmap`); the
+    /// atmosphere needs the sun: use [`Sky::from_desc_with_sun`] or [`sun_and_sky`].
+    pub fn from_desc(d: &SkyDesc, file: &str, base_dir: &Path) -> Result<Sky> {
+        if d.model == SkyModel::Atmosphere {
+            return Err(crate::Error::invalid(
+                file,
+                "sky.model",
+                "\"atmosphere\" depends on the sun: build it with lighting::sun_and_sky (Scene::build does)",
+            ));
+        }
+        Sky::from_desc_with_sun(d, Vec3::Y, file, base_dir)
+    }
+
+    /// Validate `[sky]` for a sun in unit direction `sun_dir` and precompute what it needs.
+    pub fn from_desc_with_sun(d: &SkyDesc, sun_dir: Vec3, file: &str, base_dir: &Path) -> Result<Sky> {
         match d.model {
             SkyModel::Constant => {
                 check(
@@ -118,6 +200,43 @@ impl Sky {
                     "radiance must be finite and non-negative (W/(m² sr))",
                 )?;
                 Ok(Sky::constant(Rgb::from(d.radiance)))
+            }
+            SkyModel::Atmosphere => {
+                check_altitude(d, file)?;
+                check(
+                    file,
+                    "sky.map_width",
+                    (16..=8192).contains(&d.map_width) && d.map_width % 2 == 0,
+                    d.map_width,
+                    "the map width must be even and in [16, 8192] pixels (height = width / 2)",
+                )?;
+                let atm = Arc::new(Atmosphere::new(atmosphere_params(d, file)?));
+                Ok(Sky::atmosphere(atm, d.altitude_m, sun_dir, d.map_width as usize))
+            }
+            SkyModel::Envmap => {
+                let rel = d.path.as_deref().filter(|p| !p.is_empty()).ok_or_else(|| {
+                    crate::Error::invalid(
+                        file,
+                        "sky.path",
+                        "missing: sky.model = \"envmap\" needs sky.path, an equirectangular .exr relative to the scene file",
+                    )
+                })?;
+                check(
+                    file,
+                    "sky.scale",
+                    d.scale.is_finite() && d.scale >= 0.0,
+                    d.scale,
+                    "the radiance scale must be finite and non-negative",
+                )?;
+                let path = base_dir.join(rel);
+                if !path.is_file() {
+                    return Err(crate::Error::invalid(
+                        file,
+                        "sky.path",
+                        format!("`{}` is not a file (paths are relative to the scene file)", path.display()),
+                    ));
+                }
+                Ok(Sky::from_envmap(EnvMap::load(&path, d.scale)?))
             }
         }
     }
@@ -130,6 +249,42 @@ impl Sky {
         }
     }
 
+    /// A sky from an environment map.
+    pub fn from_envmap(map: EnvMap) -> Sky {
+        let irradiance_up = map.irradiance_up();
+        Sky {
+            kind: SkyKind::EnvMap { map: Arc::new(map) },
+            irradiance_up,
+        }
+    }
+
+    /// The atmosphere seen from `altitude_m` with the sun towards `sun_dir`, precomputed into a
+    /// `width` × `width/2` map.
+    pub fn atmosphere(atmosphere: Arc<Atmosphere>, altitude_m: f32, sun_dir: Vec3, width: usize) -> Sky {
+        let sun_dir = sun_dir.normalize();
+        let h = (width / 2).max(1);
+        let px = atmosphere.render_map(altitude_m as f64, sun_dir, width, h);
+        let map = EnvMap::new(width, h, px);
+        let irradiance_up = map.irradiance_up();
+        Sky {
+            kind: SkyKind::Atmosphere {
+                atmosphere,
+                altitude_m,
+                sun_dir,
+                map: Arc::new(map),
+            },
+            irradiance_up,
+        }
+    }
+
+    /// The equirectangular map behind this sky, if it has one.
+    pub fn map(&self) -> Option<&EnvMap> {
+        match &self.kind {
+            SkyKind::Constant(_) => None,
+            SkyKind::Atmosphere { map, .. } | SkyKind::EnvMap { map } => Some(map),
+        }
+    }
+
     /// Radiance arriving from direction `dir` (unit, pointing away from the observer towards the sky).
     #[inline]
     pub fn radiance(&self, dir: Vec3) -> Rgb {
@@ -138,6 +293,67 @@ impl Sky {
                 let _ = dir;
                 *l
             }
+            SkyKind::Atmosphere { map, .. } | SkyKind::EnvMap { map } => map.radiance(dir),
+        }
+    }
+
+    /// Draw a direction from two uniforms in [0, 1): (unit direction, its radiance, its
+    /// solid-angle density in sr⁻¹). Constant sky: uniform on the sphere; map skies: density
+    /// ∝ (luminance + ε)·sin θ per pixel (see [`envmap`]). The sun is never sampled here.
+    pub fn sample(&self, u: Vec2) -> (Vec3, Rgb, f32) {
+        match &self.kind {
+            SkyKind::Constant(l) => (crate::math::uniform_sphere(u.x, u.y), *l, 1.0 / (4.0 * PI)),
+            SkyKind::Atmosphere { map, .. } | SkyKind::EnvMap { map } => map.sample(u),
+        }
+    }
+
+    /// Solid-angle density (sr⁻¹) with which [`Sky::sample`] draws unit direction `dir`.
+    pub fn pdf(&self, dir: Vec3) -> f32 {
+        match &self.kind {
+            SkyKind::Constant(_) => 1.0 / (4.0 * PI),
+            SkyKind::Atmosphere { map, .. } | SkyKind::EnvMap { map } => map.pdf(dir),
+        }
+    }
+
+    /// Power ∫_bin L dω (W/m² per band) of the sky in each of the 96 direction bins, integrated
+    /// over the bin (constant: exactly L·Δω; maps: 16 × 16 sub-rectangles per bin, each weighted
+    /// by its exact solid angle). The sun is never binned.
+    pub fn bin_powers(&self, bins: &DirectionBins) -> Vec<Rgb> {
+        match &self.kind {
+            SkyKind::Constant(l) => bins.bins.iter().map(|b| *l * b.solid_angle as f32).collect(),
+            _ => bins.integrate(16, |d| self.radiance(d)),
+        }
+    }
+
+    /// The sky as an equirectangular image (convention of [`envmap`]), `width` × `width/2`
+    /// pixels; `None` keeps a map sky's own resolution (constant: 512 × 256). The atmosphere is
+    /// recomputed at a new width, an envmap resampled.
+    pub fn to_image(&self, width: Option<usize>) -> Image {
+        match &self.kind {
+            SkyKind::Constant(l) => {
+                let w = width.unwrap_or(DEFAULT_MAP_WIDTH as usize);
+                let mut img = Image::new(w as u32, (w / 2).max(1) as u32);
+                img.pixels.iter_mut().for_each(|p| *p = *l);
+                img
+            }
+            SkyKind::Atmosphere {
+                atmosphere,
+                altitude_m,
+                sun_dir,
+                map,
+            } => match width {
+                Some(w) if w != map.width => {
+                    let h = (w / 2).max(1);
+                    let mut img = Image::new(w as u32, h as u32);
+                    img.pixels = atmosphere.render_map(*altitude_m as f64, *sun_dir, w, h);
+                    img
+                }
+                _ => map.to_image(),
+            },
+            SkyKind::EnvMap { map } => match width {
+                Some(w) if w != map.width => map.resample(w, (w / 2).max(1)).to_image(),
+                _ => map.to_image(),
+            },
         }
     }
 
@@ -206,5 +422,57 @@ impl Ground {
     #[inline]
     pub fn radiance(&self, _p: Vec3, sun: &Sun, sky: &Sky, sun_visibility: f32) -> Rgb {
         self.albedo * self.irradiance(sun, sky, sun_visibility) / PI
+    }
+}
+
+/// The sun's disc, for an optional angular size (`sun.angular_diameter_deg`; 0 = a point).
+/// [`Sun`] stays a point-light record; renderers that want soft shadows or a visible disc build
+/// this from it.
+#[derive(Clone, Copy, Debug)]
+pub struct SunDisc {
+    /// Unit direction to the disc's centre.
+    pub dir: Vec3,
+    /// Cosine of the angular radius (1 for a point).
+    pub cos_radius: f32,
+}
+
+impl SunDisc {
+    /// The disc of `sun` with angular diameter `angular_diameter_deg` (degrees).
+    pub fn new(sun: &Sun, angular_diameter_deg: f32) -> SunDisc {
+        SunDisc {
+            dir: sun.dir,
+            cos_radius: (0.5 * angular_diameter_deg.to_radians()).cos(),
+        }
+    }
+
+    /// Solid angle (sr): 2π(1 − cos radius); 0 for a point.
+    pub fn solid_angle(&self) -> f32 {
+        2.0 * PI * (1.0 - self.cos_radius)
+    }
+
+    /// Whether unit direction `dir` lies in the disc (never, for a point).
+    pub fn contains(&self, dir: Vec3) -> bool {
+        self.cos_radius < 1.0 && dir.dot(self.dir) >= self.cos_radius
+    }
+
+    /// Uniform radiance of the disc (W·m⁻²·sr⁻¹): irradiance / solid angle (zero for a point,
+    /// whose radiance is a delta).
+    pub fn radiance(&self, sun: &Sun) -> Rgb {
+        let sa = self.solid_angle();
+        if sa > 0.0 {
+            sun.irradiance / sa
+        } else {
+            Rgb::ZERO
+        }
+    }
+
+    /// A direction uniformly distributed over the disc's solid angle (the centre for a point).
+    pub fn sample(&self, u: Vec2) -> Vec3 {
+        let cos_t = 1.0 - u.x * (1.0 - self.cos_radius);
+        let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+        let phi = 2.0 * PI * u.y;
+        crate::math::Frame::from_normal(self.dir)
+            .to_world(Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t))
+            .normalize()
     }
 }

@@ -1,0 +1,68 @@
+//! `cloudgi sky [SCENE] -o sky.exr [--width W]`: export the scene's sky as an equirectangular
+//! EXR (row 0 = +y, u = atan2(z, x)/2π; see docs/sky.md) plus a tone-mapped PNG beside it. The
+//! sun is not in the map (it is carried separately); its direction and irradiance are printed.
+
+use clap::Args;
+use cloudgi::error::{Error, Result};
+use cloudgi::lighting::sun_and_sky;
+use cloudgi::scene::{SceneDesc, BUILTIN};
+use std::path::{Path, PathBuf};
+
+/// Arguments of `cloudgi sky`.
+#[derive(Args, Debug)]
+pub struct SkyArgs {
+    /// Scene file (TOML). Without it, the built-in default scene.
+    scene: Option<PathBuf>,
+    /// Output EXR; the PNG preview is written beside it.
+    #[arg(short, long, default_value = "sky.exr")]
+    output: PathBuf,
+    /// Width of the map in pixels (height = width / 2). Default: the sky's own map width
+    /// (`sky.map_width` for the atmosphere, the file's for an envmap, 512 for a constant sky).
+    #[arg(long)]
+    width: Option<u32>,
+}
+
+/// Run `cloudgi sky`.
+pub fn run(a: SkyArgs, quiet: bool) -> Result<()> {
+    super::check_exr_path(&a.output, "--output")?;
+    if let Some(w) = a.width {
+        if !(2..=16384).contains(&w) {
+            return Err(Error::invalid(
+                "command line",
+                "--width",
+                format!("{w} is not allowed: use 2 to 16384 pixels"),
+            ));
+        }
+    }
+    let (desc, source, base) = match &a.scene {
+        Some(p) => (
+            SceneDesc::from_file(p)?,
+            p.display().to_string(),
+            p.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from(".")),
+        ),
+        None => (SceneDesc::default(), BUILTIN.to_string(), PathBuf::from(".")),
+    };
+    let t = std::time::Instant::now();
+    let (sun, sky) = sun_and_sky(&desc.sun, &desc.sky, &source, &base)?;
+    let img = sky.to_image(a.width.map(|w| w as usize));
+    img.write_exr(&a.output)?;
+    let png = super::png_beside(&a.output);
+    img.write_png(&png, desc.render.exposure)?;
+    if !quiet {
+        eprintln!(
+            "sky {}×{} → {} + {} ({:.3} s)",
+            img.width,
+            img.height,
+            a.output.display(),
+            png.display(),
+            t.elapsed().as_secs_f64()
+        );
+        eprintln!(
+            "sun (not in the map): direction {:?}, irradiance {:?} W/m²; sky irradiance on the ground {:?} W/m²",
+            sun.dir.to_array(),
+            sun.irradiance.to_array(),
+            sky.irradiance_up.to_array()
+        );
+    }
+    Ok(())
+}

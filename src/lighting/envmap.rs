@@ -1,0 +1,291 @@
+//! Equirectangular environment maps: storage, lookup, file input/output and importance sampling.
+//!
+//! Convention (the same for `sky.model = "envmap"` input and `cloudgi sky` output), with +y up:
+//!
+//! - pixel (column i, row j) of a W × H map covers u ∈ [i/W, (i+1)/W], v ∈ [j/H, (j+1)/H];
+//! - polar angle θ = π·v from +y: **row 0 is the top (+y, zenith)**, the last row is −y;
+//! - azimuth φ = 2π·u measured from +x towards +z: direction = (sin θ cos φ, cos θ, sin θ sin φ).
+//!   So the left edge (u = 0) looks along +x, u = 1/4 along +z, u = 1/2 along −x, u = 3/4 along −z;
+//!   φ is the scene file's `sun.azimuth_deg`, and u = atan2(z, x)/2π (wrapped to [0, 1)).
+//!
+//! Radiance between pixel centres is bilinear (wrapping in u, clamped in v). Sampling draws
+//! directions from a piecewise-constant density proportional to (luminance + ε)·sin θ per pixel
+//! (ε = 10⁻³ × the mean luminance keeps the density positive wherever radiance can be).
+
+use crate::error::{Error, Result};
+use crate::image::Image;
+use crate::math::{luminance, Rgb, Vec3};
+use glam::Vec2;
+use std::f32::consts::PI;
+use std::path::Path;
+
+/// An equirectangular radiance map with its sampling distribution.
+#[derive(Clone)]
+pub struct EnvMap {
+    /// Width (pixels).
+    pub width: usize,
+    /// Height (pixels).
+    pub height: usize,
+    /// Radiance (W·m⁻²·sr⁻¹ per band), row-major, row 0 = +y.
+    pub pixels: Vec<Rgb>,
+    /// Sampling weight f_ij = (luminance + ε)·sin θ_j per pixel.
+    weight: Vec<f64>,
+    /// Per row: cumulative weights over columns (length W + 1), unnormalised.
+    row_cdf: Vec<f64>,
+    /// Cumulative row sums (length H + 1), unnormalised.
+    marginal_cdf: Vec<f64>,
+}
+
+impl std::fmt::Debug for EnvMap {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "EnvMap({}×{})", self.width, self.height)
+    }
+}
+
+/// Direction of map coordinates (u, v) ∈ [0, 1]².
+#[inline]
+pub fn direction(u: f32, v: f32) -> Vec3 {
+    let (st, ct) = (PI * v).sin_cos();
+    let (sp, cp) = (2.0 * PI * u).sin_cos();
+    Vec3::new(st * cp, ct, st * sp)
+}
+
+/// Map coordinates (u, v) ∈ [0, 1)×[0, 1] of a unit direction.
+#[inline]
+pub fn uv(dir: Vec3) -> (f32, f32) {
+    let mut u = dir.z.atan2(dir.x) / (2.0 * PI);
+    if u < 0.0 {
+        u += 1.0;
+    }
+    if u >= 1.0 {
+        u = 0.0;
+    }
+    (u, dir.y.clamp(-1.0, 1.0).acos() / PI)
+}
+
+impl EnvMap {
+    /// A map from `width` × `height` radiance pixels (row 0 = +y). `pixels.len()` must be
+    /// width·height and every value finite and non-negative (checked by the loaders).
+    pub fn new(width: usize, height: usize, pixels: Vec<Rgb>) -> EnvMap {
+        assert!(width >= 1 && height >= 1 && pixels.len() == width * height, "EnvMap::new: bad size");
+        let mean = pixels.iter().map(|p| luminance(*p).max(0.0) as f64).sum::<f64>() / pixels.len() as f64;
+        let eps = if mean > 0.0 { 1e-3 * mean } else { 1.0 };
+        let mut weight = Vec::with_capacity(width * height);
+        let mut row_cdf = Vec::with_capacity((width + 1) * height);
+        let mut marginal_cdf = Vec::with_capacity(height + 1);
+        marginal_cdf.push(0.0);
+        for j in 0..height {
+            let sin_t = (std::f64::consts::PI * (j as f64 + 0.5) / height as f64).sin();
+            let mut acc = 0.0;
+            row_cdf.push(0.0);
+            for i in 0..width {
+                let f = (luminance(pixels[j * width + i]).max(0.0) as f64 + eps) * sin_t;
+                weight.push(f);
+                acc += f;
+                row_cdf.push(acc);
+            }
+            let last = *marginal_cdf.last().unwrap_or(&0.0);
+            marginal_cdf.push(last + acc);
+        }
+        EnvMap {
+            width,
+            height,
+            pixels,
+            weight,
+            row_cdf,
+            marginal_cdf,
+        }
+    }
+
+    /// A map from an image, radiance multiplied by `scale`; `file` names it in errors.
+    pub fn from_image(img: &Image, scale: f32, file: &str) -> Result<EnvMap> {
+        if img.width < 2 || img.height < 1 {
+            return Err(Error::format(
+                file,
+                format!(
+                    "an environment map needs at least 2×1 pixels, this one is {}×{}",
+                    img.width, img.height
+                ),
+            ));
+        }
+        if let Some(k) = img.pixels.iter().position(|p| !p.is_finite() || p.min_element() < 0.0) {
+            let (x, y) = (k as u32 % img.width, k as u32 / img.width);
+            return Err(Error::format(
+                file,
+                format!(
+                    "pixel ({x}, {y}) is {:?}: an environment map must hold finite, non-negative radiance",
+                    img.pixels[k]
+                ),
+            ));
+        }
+        Ok(EnvMap::new(
+            img.width as usize,
+            img.height as usize,
+            img.pixels.iter().map(|p| *p * scale).collect(),
+        ))
+    }
+
+    /// Load an equirectangular OpenEXR file, radiance multiplied by `scale`.
+    pub fn load(path: &Path, scale: f32) -> Result<EnvMap> {
+        let img = Image::read_exr(path)?;
+        EnvMap::from_image(&img, scale, &path.display().to_string())
+    }
+
+    /// The map as an image (same pixels, same convention).
+    pub fn to_image(&self) -> Image {
+        let mut img = Image::new(self.width as u32, self.height as u32);
+        img.pixels.clone_from(&self.pixels);
+        img
+    }
+
+    /// Resample to `width` × `height`: each new pixel is the mean of 4 × 4 bilinear lookups.
+    pub fn resample(&self, width: usize, height: usize) -> EnvMap {
+        let mut px = vec![Rgb::ZERO; width * height];
+        for (k, p) in px.iter_mut().enumerate() {
+            let (i, j) = (k % width, k / width);
+            let mut acc = Rgb::ZERO;
+            for a in 0..4 {
+                for b in 0..4 {
+                    let u = (i as f32 + (a as f32 + 0.5) / 4.0) / width as f32;
+                    let v = (j as f32 + (b as f32 + 0.5) / 4.0) / height as f32;
+                    acc += self.lookup(u, v);
+                }
+            }
+            *p = acc / 16.0;
+        }
+        EnvMap::new(width, height, px)
+    }
+
+    /// Bilinear radiance at map coordinates (u, v).
+    #[inline]
+    pub fn lookup(&self, u: f32, v: f32) -> Rgb {
+        let (w, h) = (self.width as f32, self.height as f32);
+        let x = u * w - 0.5;
+        let y = (v * h - 0.5).clamp(0.0, h - 1.0);
+        let x0f = x.floor();
+        let fx = x - x0f;
+        let x0 = (x0f as i64).rem_euclid(self.width as i64) as usize;
+        let x1 = (x0 + 1) % self.width;
+        let y0 = y.floor() as usize;
+        let y1 = (y0 + 1).min(self.height - 1);
+        let fy = y - y0 as f32;
+        let at = |i: usize, j: usize| self.pixels[j * self.width + i];
+        (at(x0, y0) * (1.0 - fx) + at(x1, y0) * fx) * (1.0 - fy) + (at(x0, y1) * (1.0 - fx) + at(x1, y1) * fx) * fy
+    }
+
+    /// Radiance arriving from unit direction `dir`.
+    #[inline]
+    pub fn radiance(&self, dir: Vec3) -> Rgb {
+        let (u, v) = uv(dir);
+        self.lookup(u, v)
+    }
+
+    /// Total sampling weight Σ f_ij.
+    #[inline]
+    fn total(&self) -> f64 {
+        self.marginal_cdf[self.height]
+    }
+
+    /// Solid-angle density (sr⁻¹) of [`EnvMap::sample`] at pixel (i, j) and polar sine `sin_t`.
+    #[inline]
+    fn pdf_pixel(&self, i: usize, j: usize, sin_t: f32) -> f32 {
+        if sin_t <= 0.0 {
+            return 0.0;
+        }
+        // Density in (u, v) is f_ij / mean f; dω = 2π² sin θ du dv.
+        let pdf_uv = self.weight[j * self.width + i] * (self.width * self.height) as f64 / self.total();
+        (pdf_uv / (2.0 * std::f64::consts::PI * std::f64::consts::PI * sin_t as f64)) as f32
+    }
+
+    /// Draw a direction with density ∝ (luminance + ε)·sin θ per pixel, from two uniforms in
+    /// [0, 1): (direction, its radiance, its solid-angle density in sr⁻¹). The density is 0 only
+    /// exactly at a pole (probability zero); callers should skip such a sample.
+    pub fn sample(&self, u: Vec2) -> (Vec3, Rgb, f32) {
+        let total = self.total();
+        // Row from the marginal, then column from the row's conditional; reuse the remainder.
+        let target = u.y as f64 * total;
+        let j = search(&self.marginal_cdf, target).min(self.height - 1);
+        let row_sum = self.marginal_cdf[j + 1] - self.marginal_cdf[j];
+        let fv = ((target - self.marginal_cdf[j]) / row_sum).clamp(0.0, 1.0);
+        let row = &self.row_cdf[j * (self.width + 1)..(j + 1) * (self.width + 1)];
+        let target_u = u.x as f64 * row[self.width];
+        let i = search(row, target_u).min(self.width - 1);
+        let fu = ((target_u - row[i]) / (row[i + 1] - row[i])).clamp(0.0, 1.0);
+        let uu = ((i as f64 + fu) / self.width as f64) as f32;
+        let vv = ((j as f64 + fv) / self.height as f64) as f32;
+        let dir = direction(uu.min(1.0 - f32::EPSILON), vv);
+        let pdf = self.pdf_pixel(i, j, dir.x.hypot(dir.z));
+        (dir, self.radiance(dir), pdf)
+    }
+
+    /// Solid-angle density (sr⁻¹) with which [`EnvMap::sample`] draws unit direction `dir`.
+    pub fn pdf(&self, dir: Vec3) -> f32 {
+        let (u, v) = uv(dir);
+        let i = ((u * self.width as f32) as usize).min(self.width - 1);
+        let j = ((v * self.height as f32) as usize).min(self.height - 1);
+        // sin θ from x and z: accurate near the poles, and the same formula as `sample`.
+        self.pdf_pixel(i, j, dir.x.hypot(dir.z))
+    }
+
+    /// Irradiance (W/m² per band) on an upward-facing plane from the upper hemisphere of the map:
+    /// midpoint rule in (cos θ, φ) on a 128 × 512 grid of bilinear lookups.
+    pub fn irradiance_up(&self) -> Rgb {
+        let (nt, np) = (128usize, 512usize);
+        let mut e = [0f64; 3];
+        for a in 0..nt {
+            let mu = (a as f32 + 0.5) / nt as f32;
+            let v = mu.acos() / PI;
+            for b in 0..np {
+                let l = self.lookup((b as f32 + 0.5) / np as f32, v);
+                for c in 0..3 {
+                    e[c] += (l[c] * mu) as f64;
+                }
+            }
+        }
+        let k = 2.0 * std::f64::consts::PI / (nt * np) as f64;
+        Rgb::new((e[0] * k) as f32, (e[1] * k) as f32, (e[2] * k) as f32)
+    }
+}
+
+/// Largest index k with cdf[k] <= target (cdf ascending, cdf[0] = 0), skipping empty cells.
+#[inline]
+fn search(cdf: &[f64], target: f64) -> usize {
+    let n = cdf.len() - 1;
+    // partition_point: first k with cdf[k] > target.
+    let k = cdf.partition_point(|&c| c <= target);
+    let mut i = k.saturating_sub(1).min(n - 1);
+    // Never land on a zero-width cell (cannot happen with ε > 0, but stay safe).
+    while i + 1 < n && cdf[i + 1] <= cdf[i] {
+        i += 1;
+    }
+    i
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn uv_direction_round_trip_and_axes() {
+        for (u, v) in [(0.1, 0.2), (0.6, 0.7), (0.9, 0.5), (0.25, 0.5)] {
+            let d = direction(u, v);
+            let (a, b) = uv(d);
+            assert!((a - u).abs() < 1e-5 && (b - v).abs() < 1e-5, "{u} {v} -> {a} {b}");
+        }
+        assert!((direction(0.0, 0.5) - Vec3::X).length() < 1e-6);
+        assert!((direction(0.25, 0.5) - Vec3::Z).length() < 1e-6);
+        assert!((direction(0.5, 0.0) - Vec3::Y).length() < 1e-6);
+    }
+
+    #[test]
+    fn sample_pdf_agree() {
+        let px: Vec<Rgb> = (0..32 * 16).map(|k| Rgb::splat(((k * 7919) % 13) as f32)).collect();
+        let m = EnvMap::new(32, 16, px);
+        let mut rng = crate::math::Rng::new(3, 4);
+        for _ in 0..2000 {
+            let (d, _, pdf) = m.sample(Vec2::new(rng.uniform(), rng.uniform()));
+            let q = m.pdf(d);
+            assert!((pdf - q).abs() <= 1e-3 * pdf.max(q), "{pdf} vs {q}");
+        }
+    }
+}
