@@ -334,11 +334,10 @@ impl<'a> CubeRenderer<'a> {
                             if v.min_element() < 0.0 || v.cmpgt(dims).any() {
                                 continue;
                             }
-                            let c = lev.sample(v);
-                            let rho = c[0];
-                            if rho <= 1e-12 {
+                            let Some(c) = lev.sample(v) else {
                                 continue;
-                            }
+                            };
+                            let rho = c[0];
                             let e = (-sigma_t * rho * len).exp();
                             // T(1 − e)·J with J = a(ρI0 + p E_sun ρT_sun)/ρ from the pre-multiplied cell.
                             let w = tr * (1.0 - e) / rho;
