@@ -377,6 +377,38 @@ fn hemicube_irradiance_without_cloud_is_sky_plus_sun() {
 }
 
 #[test]
+fn hemicube_under_a_furnace_cloud_reads_pi_l() {
+    // A cloud of albedo 1 with I0 = L under a sky of L and no sun: every upward direction reads L,
+    // so E = πL wherever the ground point is, under the cloud or beside it (cut-off 1e-3 only).
+    let l = Rgb::new(0.4, 0.5, 0.9);
+    let v = lit(
+        blob([16, 8, 16], 4.0),
+        Vec3::new(-8.0, 4.0, -8.0),
+        1.0,
+        1.0,
+        0.85,
+        l,
+        1.0,
+        sun(Vec3::Y, 0.0),
+        l,
+        None,
+    );
+    let opts = CubeOptions::default();
+    let r = CubeRenderer::new(
+        &v,
+        &CubeOptions {
+            res: opts.ground_res,
+            ..opts.clone()
+        },
+    );
+    let w = hemicube_weights(opts.ground_res);
+    for p in [Vec3::new(0.0, 0.0, 0.0), Vec3::new(3.0, 0.0, -2.0), Vec3::new(30.0, 0.0, 0.0)] {
+        let e = hemicube_irradiance(&r, &w, p);
+        assert!(rel(e, l * std::f32::consts::PI) < 2e-3, "{p}: {e}");
+    }
+}
+
+#[test]
 fn ground_under_an_opaque_slab_is_shadowed() {
     // A black opaque slab 10×2×10 m whose bottom face is 5 m above the ground: from the point
     // below its centre it fills exactly the +y face of the hemicube, whose cosine-weighted solid
