@@ -493,3 +493,31 @@ fn bad_cube_keys_are_rejected_with_the_field_named() {
     let d = cloudgi::SceneDesc::from_toml("[render]\ncube_resolution = 32\nground_samples = 16\n", "t.toml").unwrap();
     assert_eq!((d.render.cube_resolution, d.render.ground_samples), (32, 16));
 }
+
+#[test]
+fn clear_air_on_a_small_scene_lights_the_ground_and_fills_every_needed_bin() {
+    let mut desc = cloudgi::SceneDesc::default();
+    desc.medium.resolution = [25, 20, 15];
+    desc.medium.voxel_size = 40.0;
+    desc.render.ground_samples = 8;
+    let scene = cloudgi::Scene::build(desc, "small", std::path::Path::new(".")).unwrap();
+    let sun_t = cloudgi::sunlight::SunTransmittance::compute(&scene.medium, scene.sun.dir).grid;
+    let n = scene.medium.density.len();
+    let l = scene.sky.radiance(Vec3::Y);
+    let out = cloudgi::cube::clear_air(&scene, vec![l; n], sun_t, &NoProgress);
+    assert!(!out.cubes.is_empty());
+    let g = out.lit.ground.as_ref().unwrap();
+    let grid = g.grid.as_ref().expect("the cloud's ground is rendered");
+    // Somewhere in its shadow the ground gets clearly less than the unoccluded irradiance.
+    assert!(grid.irradiance.iter().any(|e| e.x < 0.9 * g.unoccluded.x));
+    for (q, m) in out.cubes.needed.iter().enumerate() {
+        for b in 0..96 {
+            let x = out.cubes.bins(q)[b];
+            assert_eq!(m.contains(b), out.cubes.lookup(out.cubes.voxels[q], b).is_some());
+            assert!(x.is_finite() && x.min_element() >= 0.0);
+            if m.contains(b) {
+                assert!(x.max_element() > 0.0, "needed bin {b} of cube {q} is black");
+            }
+        }
+    }
+}
