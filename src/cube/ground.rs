@@ -189,9 +189,11 @@ pub fn hemicube_weights(res: usize) -> Vec<f64> {
 }
 
 /// Irradiance (W/m²) on an upward-facing ground point `p` from the hemicube plus the sun.
+/// `weights` are [`hemicube_weights`] at the renderer's `opts.res`.
 pub fn hemicube_irradiance(renderer: &CubeRenderer<'_>, weights: &[f64], p: Vec3) -> Rgb {
     let lit = renderer.lit;
     let res = renderer.opts.res;
+    assert_eq!(weights.len(), 6 * res * res, "hemicube weights are for another resolution");
     let mut acc = [0f64; 3];
     for b in BinMask::upper_hemisphere().iter() {
         for (face, i, j) in renderer.pixels.bin_pixels(b) {
@@ -215,12 +217,17 @@ pub fn hemicube_irradiance(renderer: &CubeRenderer<'_>, weights: &[f64], p: Vec3
     Rgb::new(acc[0] as f32, acc[1] as f32, acc[2] as f32) + sun_e
 }
 
-/// Render `opts.ground_samples`² hemicubes over [`ground_area`] and return the lit ground.
+/// Render `opts.ground_samples`² hemicubes of `opts.ground_res` pixels per face edge over
+/// [`ground_area`] and return the lit ground.
 pub fn render_ground(lit: &LitVolume, ground: &Ground, opts: &CubeOptions, progress: &dyn Progress) -> LitGround {
-    render_ground_with(&CubeRenderer::new(lit, opts), ground, progress)
+    let opts = CubeOptions {
+        res: opts.ground_res,
+        ..opts.clone()
+    };
+    render_ground_with(&CubeRenderer::new(lit, &opts), ground, progress)
 }
 
-/// [`render_ground`] with a renderer already built.
+/// [`render_ground`] with a renderer already built (its `opts.res` is the hemicube resolution).
 pub fn render_ground_with(renderer: &CubeRenderer<'_>, ground: &Ground, progress: &dyn Progress) -> LitGround {
     let lit = renderer.lit;
     let mut out = LitGround::unoccluded(ground.clone(), &lit.sun, &lit.sky);

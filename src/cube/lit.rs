@@ -135,7 +135,7 @@ pub(crate) fn trilinear_taps(dims: [usize; 3], v: Vec3) -> ([usize; 8], [f32; 8]
     for a in 0..3 {
         let n = dims[a] as isize;
         let x = p[a] - 0.5;
-        let fl = x.floor();
+        let fl = super::render::fast_floor(x);
         let fi = fl as isize;
         f[a] = x - fl;
         lo[a] = fi.clamp(0, n - 1) as usize;

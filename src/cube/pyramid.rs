@@ -31,19 +31,36 @@ pub struct Level {
 }
 
 impl Level {
-    /// Trilinear sample at continuous level-voxel coordinates `v` (inside the level's box).
+    /// Trilinear sample at continuous level-voxel coordinates `v` (inside the level's box);
+    /// None where the interpolated density is zero (the colour channels are then not gathered).
     #[inline]
-    pub fn sample(&self, v: Vec3) -> Cell {
+    pub fn sample(&self, v: Vec3) -> Option<Cell> {
         let (idx, w) = trilinear_taps(self.dims, v);
-        let mut s = [0f32; 5];
+        let cells = [
+            &self.cells[idx[0]],
+            &self.cells[idx[1]],
+            &self.cells[idx[2]],
+            &self.cells[idx[3]],
+            &self.cells[idx[4]],
+            &self.cells[idx[5]],
+            &self.cells[idx[6]],
+            &self.cells[idx[7]],
+        ];
+        let mut rho = 0.0;
         for k in 0..8 {
-            let c = &self.cells[idx[k]];
+            rho += cells[k][0] * w[k];
+        }
+        if rho <= 1e-12 {
+            return None;
+        }
+        let mut s = [rho, 0.0, 0.0, 0.0, 0.0];
+        for k in 0..8 {
             let wk = w[k];
-            for a in 0..5 {
-                s[a] += c[a] * wk;
+            for a in 1..5 {
+                s[a] += cells[k][a] * wk;
             }
         }
-        s
+        Some(s)
     }
 }
 

@@ -17,7 +17,6 @@ use super::pyramid::{LitPyramid, BLOCK};
 use crate::error::{Error, Result};
 use crate::lighting::bins::{DirectionBins, BINS_PER_EDGE, NUM_BINS};
 use crate::math::{Rgb, Vec3};
-use crate::medium::{ray_box, Dda};
 use crate::phase::hg;
 use std::sync::OnceLock;
 
@@ -38,10 +37,13 @@ pub struct CubeOptions {
     pub max_levels: usize,
     /// Ground sample grid edge (N×N hemicubes).
     pub ground_samples: usize,
+    /// Pixels per face edge of the ground's hemicubes (a multiple of 4). Finer than the border
+    /// cubes by default: the ground's shadow edges are sharp and there are few hemicubes.
+    pub ground_res: usize,
 }
 
 /// Default pixels per face edge (see docs/cubes.md for the measurement behind it).
-pub const DEFAULT_CUBE_RESOLUTION: usize = 16;
+pub const DEFAULT_CUBE_RESOLUTION: usize = 8;
 /// Default ground sample grid edge.
 pub const DEFAULT_GROUND_SAMPLES: usize = 32;
 
@@ -49,11 +51,12 @@ impl Default for CubeOptions {
     fn default() -> Self {
         CubeOptions {
             res: DEFAULT_CUBE_RESOLUTION,
-            step: 0.5,
+            step: 1.0,
             t_cutoff: 1e-3,
             lod_bias: 0.0,
             max_levels: 8,
             ground_samples: DEFAULT_GROUND_SAMPLES,
+            ground_res: 16,
         }
     }
 }
@@ -65,7 +68,14 @@ impl CubeOptions {
             return Err(Error::invalid(
                 file,
                 "render.cube_resolution",
-                format!("{} is not allowed: use a multiple of 4 from 4 to 256 (default 16)", self.res),
+                format!("{} is not allowed: use a multiple of 4 from 4 to 256 (default 8)", self.res),
+            ));
+        }
+        if self.ground_res < 4 || self.ground_res > 256 || self.ground_res % BINS_PER_EDGE != 0 {
+            return Err(Error::invalid(
+                file,
+                "ground hemicube resolution",
+                format!("{} is not allowed: use a multiple of 4 from 4 to 256", self.ground_res),
             ));
         }
         if self.ground_samples < 2 || self.ground_samples > 1024 {
@@ -266,59 +276,80 @@ impl<'a> CubeRenderer<'a> {
         let inv_cone = 1.0 / (cone.max(1e-6) * self.opts.lod_bias.exp2());
         let nlev = self.pyramid.levels.len();
         let origin = self.pyramid.origin;
-        let (od, dd) = (o.as_dvec3(), d.as_dvec3());
+        // Components of d below 1e-20 are nudged so the slab and block arithmetic stay finite.
+        let dn = Vec3::select(d.abs().cmplt(Vec3::splat(1e-20)), Vec3::splat(1e-20), d);
+        let inv_d = Vec3::ONE / dn;
+        let positive = d.cmpgt(Vec3::ZERO);
+        // The coarsest level's box contains every level's box.
+        let (t_box0, t_box1) = {
+            let top = self.pyramid.levels.last().expect("pyramid has a level");
+            let hi = origin + top.voxel_size * dims_f(top.dims);
+            let (ta, tb) = ((origin - o) * inv_d, (hi - o) * inv_d);
+            (ta.min(tb).max_element().max(0.0), ta.max(tb).min_element().min(t_end))
+        };
         let mut tr = 1.0f32;
         let mut l = Rgb::ZERO;
-        'levels: for (li, lev) in self.pyramid.levels.iter().enumerate() {
-            let ts = if li == 0 {
-                0.0
-            } else {
-                self.h_min * (1u32 << li) as f32 * inv_cone
-            };
-            let te = if li + 1 == nlev {
-                f32::INFINITY
-            } else {
-                self.h_min * (1u32 << (li + 1)) as f32 * inv_cone
-            };
-            let te = te.min(t_end);
-            if ts >= te {
-                continue;
-            }
-            let dims_f = Vec3::new(lev.dims[0] as f32, lev.dims[1] as f32, lev.dims[2] as f32);
-            let hi = origin + lev.voxel_size * dims_f;
-            let Some((ta, tb)) = ray_box(origin.as_dvec3(), hi.as_dvec3(), od, dd, ts as f64, te as f64) else {
-                continue;
-            };
-            let step = self.opts.step * lev.voxel_size.min_element();
-            let inv_vs = Vec3::ONE / lev.voxel_size;
-            let cell = (lev.voxel_size * BLOCK as f32).as_dvec3();
-            for s in Dda::new(origin.as_dvec3(), cell, lev.occupancy.dims, od, dd, ta, tb) {
-                if lev.occupancy.get(s.cell) <= 0.0 {
+        if t_box0 < t_box1 {
+            'levels: for (li, lev) in self.pyramid.levels.iter().enumerate() {
+                let ts = if li == 0 {
+                    0.0
+                } else {
+                    self.h_min * (1u32 << li) as f32 * inv_cone
+                };
+                let te = if li + 1 == nlev {
+                    f32::INFINITY
+                } else {
+                    self.h_min * (1u32 << (li + 1)) as f32 * inv_cone
+                };
+                let (ta, tb) = (ts.max(t_box0), te.min(t_box1));
+                if ta >= tb {
                     continue;
                 }
-                let (s0, s1) = (s.t0 as f32, s.t1 as f32);
-                let n = ((s1 - s0) / step).ceil().max(1.0);
-                let len = (s1 - s0) / n;
-                for k in 0..n as u32 {
-                    let t = s0 + (k as f32 + 0.5) * len;
-                    let v = ((o + d * t) - origin) * inv_vs;
-                    if v.min_element() < 0.0 || v.cmpgt(dims_f).any() {
-                        continue;
+                let dims = dims_f(lev.dims);
+                let step = self.opts.step * lev.voxel_size.min_element();
+                let inv_vs = Vec3::ONE / lev.voxel_size;
+                let cell = lev.voxel_size * BLOCK as f32;
+                let inv_cell = Vec3::ONE / cell;
+                let nudge = 1e-3 * cell.min_element();
+                let bd = lev.occupancy.dims;
+                // Walk the occupancy blocks (f32 Amanatides–Woo, each block located afresh).
+                let mut t = ta;
+                while t < tb {
+                    let f = ((o + d * (t + nudge)) - origin) * inv_cell;
+                    let bi = Vec3::new(fast_floor(f.x), fast_floor(f.y), fast_floor(f.z));
+                    let next = origin + (bi + Vec3::select(positive, Vec3::ONE, Vec3::ZERO)) * cell;
+                    let t_exit = ((next - o) * inv_d).min_element().min(tb).max(t + nudge);
+                    let inside = bi.x >= 0.0
+                        && bi.y >= 0.0
+                        && bi.z >= 0.0
+                        && (bi.x as usize) < bd[0]
+                        && (bi.y as usize) < bd[1]
+                        && (bi.z as usize) < bd[2];
+                    if inside && lev.occupancy.get([bi.x as usize, bi.y as usize, bi.z as usize]) > 0.0 {
+                        let n = ((t_exit - t) / step).ceil().max(1.0);
+                        let len = (t_exit - t) / n;
+                        for k in 0..n as u32 {
+                            let ts = t + (k as f32 + 0.5) * len;
+                            let v = ((o + d * ts) - origin) * inv_vs;
+                            if v.min_element() < 0.0 || v.cmpgt(dims).any() {
+                                continue;
+                            }
+                            let Some(c) = lev.sample(v) else {
+                                continue;
+                            };
+                            let rho = c[0];
+                            let e = (-sigma_t * rho * len).exp();
+                            // T(1 − e)·J with J = a(ρI0 + p E_sun ρT_sun)/ρ from the pre-multiplied cell.
+                            let w = tr * (1.0 - e) / rho;
+                            l += albedo * (Rgb::new(c[1], c[2], c[3]) + sun_e * c[4]) * w;
+                            tr *= e;
+                            if tr < cut {
+                                tr = 0.0;
+                                break 'levels;
+                            }
+                        }
                     }
-                    let c = lev.sample(v);
-                    let rho = c[0];
-                    if rho <= 1e-12 {
-                        continue;
-                    }
-                    let e = (-sigma_t * rho * len).exp();
-                    // T(1 − e)·J with J = a(ρI0 + p E_sun ρT_sun)/ρ from the pre-multiplied cell.
-                    let w = tr * (1.0 - e) / rho;
-                    l += albedo * (Rgb::new(c[1], c[2], c[3]) + sun_e * c[4]) * w;
-                    tr *= e;
-                    if tr < cut {
-                        tr = 0.0;
-                        break 'levels;
-                    }
+                    t = t_exit;
                 }
             }
         }
@@ -363,6 +394,22 @@ impl<'a> CubeRenderer<'a> {
         }
         out
     }
+}
+
+/// floor for |x| < 2³¹ without a libm call (the default x86-64 target has no SSE4.1 round).
+#[inline]
+pub(crate) fn fast_floor(x: f32) -> f32 {
+    let t = x as i32 as f32;
+    if t > x {
+        t - 1.0
+    } else {
+        t
+    }
+}
+
+#[inline]
+fn dims_f(d: [usize; 3]) -> Vec3 {
+    Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32)
 }
 
 /// Brute-force reference: each pixel centre's ray marched on the exact trilinear fields (density
