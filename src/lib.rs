@@ -5,10 +5,13 @@
 //! [`image::Image`] (linear HDR) → EXR + tone-mapped PNG.
 
 pub mod camera;
+pub mod diffusion;
 pub mod error;
 pub mod image;
+pub mod incident;
 pub mod io;
 pub mod lighting;
+pub mod lit;
 pub mod math;
 pub mod medium;
 pub mod orders;

@@ -169,6 +169,8 @@ impl Default for CameraDesc {
 pub enum Method {
     /// Exact single scattering of the sun plus the attenuated background (paper Fig. 4).
     Single,
+    /// Diffusion (stage 1 + eq. 4 solved by multigrid) composited with exact sun single scattering (paper Fig. 5).
+    Diffusion,
 }
 
 impl Method {
@@ -176,6 +178,7 @@ impl Method {
     pub fn name(self) -> &'static str {
         match self {
             Method::Single => "single",
+            Method::Diffusion => "diffusion",
         }
     }
 }
@@ -194,6 +197,10 @@ pub struct RenderDesc {
     pub exposure: f32,
     /// Ray-march step of the gather, as a fraction of the smallest voxel edge (unitless).
     pub step: f32,
+    /// Relative residual the diffusion solver must reach (unitless).
+    pub solver_tolerance: f64,
+    /// Most conjugate-gradient iterations of the diffusion solver per band.
+    pub solver_max_iterations: usize,
 }
 
 impl Default for RenderDesc {
@@ -204,6 +211,8 @@ impl Default for RenderDesc {
             spp: 1,
             exposure: 0.0,
             step: 0.5,
+            solver_tolerance: 1e-6,
+            solver_max_iterations: 200,
         }
     }
 }
@@ -277,6 +286,10 @@ pub struct RenderSettings {
     pub exposure: f32,
     /// March step as a fraction of the smallest voxel edge.
     pub step: f32,
+    /// Diffusion solver: relative residual to reach.
+    pub solver_tolerance: f64,
+    /// Diffusion solver: most iterations per band.
+    pub solver_max_iterations: usize,
 }
 
 /// A validated scene, ready to render.
@@ -342,6 +355,20 @@ impl Scene {
             r.step,
             "the march step is a fraction of a voxel in (0, 4]",
         )?;
+        check(
+            f,
+            "render.solver_tolerance",
+            r.solver_tolerance.is_finite() && r.solver_tolerance > 0.0 && r.solver_tolerance < 1.0,
+            r.solver_tolerance,
+            "the solver's relative residual must be in (0, 1), e.g. 1e-6",
+        )?;
+        check(
+            f,
+            "render.solver_max_iterations",
+            r.solver_max_iterations >= 1,
+            r.solver_max_iterations,
+            "the solver needs at least 1 iteration (default 200)",
+        )?;
         let camera = Camera::from_desc(&desc.camera, f)?;
         let sun = Sun::from_desc(&desc.sun, f)?;
         let sky = Sky::from_desc(&desc.sky, f, base_dir)?;
@@ -356,6 +383,8 @@ impl Scene {
             spp: r.spp,
             exposure: r.exposure,
             step: r.step,
+            solver_tolerance: r.solver_tolerance,
+            solver_max_iterations: r.solver_max_iterations,
         };
         Ok(Scene {
             source: source.to_string(),

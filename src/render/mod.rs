@@ -1,5 +1,6 @@
 //! Rendering: method dispatch, progress reporting and stage timings.
 
+pub mod diffusion;
 pub mod march;
 pub mod single;
 
@@ -72,6 +73,7 @@ pub fn render(scene: &Scene, progress: &dyn Progress) -> Result<RenderOutput> {
     let mut timings = Timings::default();
     let image = match scene.render.method {
         Method::Single => single::render(scene, progress, &mut timings)?,
+        Method::Diffusion => diffusion::render(scene, progress, &mut timings)?,
     };
     Ok(RenderOutput { image, timings })
 }
