@@ -7,12 +7,15 @@
 //! directions point below the horizon see the Lambertian ground instead (the ground "as an
 //! upward sky"), lit by the unshadowed sun and the sky's hemisphere irradiance.
 //!
-//! **Rays.** For bin b light flows along ω = −(direction towards the bin). Rays start on the
-//! entrant faces of the box that encloses every non-empty voxel plus one voxel of margin (clipped to
-//! the grid): `rays_per_face_edge`² rays per voxel face, stratified and jittered in position on the
-//! face and in direction within the bin's (u, v) square (direction strata decorrelated from position).
-//! A ray whose cross-section perpendicular to its direction is w = A·|ω·n| walks the voxels with an
-//! exact DDA. In a voxel of density ρ (piecewise constant, the voxel value, as the diffusion
+//! **Rays.** For bin b light flows along ω = −(direction towards the bin). The box enclosing every
+//! non-empty voxel plus one voxel of margin (clipped to the grid) is crossed by families of parallel
+//! rays: one family along the bin's centre direction (`rays_per_face_edge` = 1, the paper), or n²
+//! families along jittered directions, one per stratum of the bin's (u, v) square, weighted by the
+//! stratum's exact solid angle. A family starts on the plane perpendicular to the dominant axis of
+//! its direction, one ray per voxel face (a lattice shifted by one random offset), covering the
+//! box's shadow, so in every plane across the box each voxel face is crossed by exactly one ray:
+//! every voxel is reached. A ray whose cross-section perpendicular to its direction is
+//! w = A·|ω·n| walks the voxels with an exact DDA. In a voxel of density ρ (piecewise constant, the voxel value, as the diffusion
 //! stage uses) and extinction κ = ρσt it adds w·∫I ds = w·I_in·(1 − e^{−κl})/κ to the voxel's
 //! radiance sum and w·l to its weight sum, then attenuates I by e^{−κl}. The voxel's mean radiance
 //! from the bin is Ī_b = Σ w∫I ds / Σ w l: the paper's segment-length weighting, normalised by
@@ -56,7 +59,9 @@ pub type EntryRadiance = dyn Fn([usize; 3], usize) -> Option<Rgb> + Sync;
 /// Stage-1 sampling settings.
 #[derive(Clone, Debug)]
 pub struct IncidentSettings {
-    /// Rays per voxel face edge: `n`² rays start on every voxel face of the entrant faces (≥ 1).
+    /// Direction strata per bin edge: 1 traces each bin along its centre direction (the paper);
+    /// n > 1 traces n² parallel families per bin, one per jittered sub-square of the bin, each
+    /// weighted by its exact solid angle.
     pub rays_per_face_edge: usize,
     /// Sub-rectangles per bin edge when integrating the sky's radiance over a bin.
     pub sky_subdivisions: usize,
@@ -120,8 +125,10 @@ pub struct IncidentLight {
     pub sun_irradiance: Rgb,
     /// The mean radiance per bin that was propagated (W·m⁻²·sr⁻¹).
     pub bin_radiance: Vec<Rgb>,
-    /// Rays traced (all bins and the sun).
+    /// Rays that crossed the medium's active box (all bins and the sun).
     pub rays: u64,
+    /// Extra rays traced through the centre of a full voxel that no ray had crossed.
+    pub fallback_rays: u64,
 }
 
 impl IncidentLight {
@@ -288,8 +295,59 @@ impl Ctx<'_> {
         });
     }
 
+    /// One family of parallel rays along `d` (world, unit): launched from the plane perpendicular
+    /// to the dominant axis of `d`, one ray per voxel face of that plane (a lattice with one random offset), covering the
+    /// box's shadow along `d`, so in every plane x_a = const the rays form a lattice of one per
+    /// voxel face and every voxel is crossed. Cross-section weight area·|d_a|·`share`.
+    fn trace_family(&self, src: &Source, d: Vec3, share: f32, rng: &mut Rng, sums: &mut Sums) -> u64 {
+        let h = self.m.voxel_size;
+        let a = if d.x.abs() >= d.y.abs() && d.x.abs() >= d.z.abs() {
+            0
+        } else if d.y.abs() >= d.z.abs() {
+            1
+        } else {
+            2
+        };
+        let (u, v) = ((a + 1) % 3, (a + 2) % 3);
+        let plane = if d[a] > 0.0 { 0.0 } else { self.bd[a] as f64 };
+        let fv = d.as_dvec3() / h.as_dvec3();
+        let reach = |x: usize| -> (i64, i64) {
+            // A ray launched at coordinate o moves by `shift` (voxels) along axis x while crossing
+            // the box; it can touch [0, bd_x] when o ∈ [−max(shift, 0), bd_x + max(−shift, 0)].
+            let shift = fv[x] / fv[a].abs() * self.bd[a] as f64;
+            (-(shift.max(0.0).ceil() as i64) - 1, self.bd[x] as i64 + (-shift).max(0.0).ceil() as i64 + 1)
+        };
+        let (u0, u1) = reach(u);
+        let (v0, v1) = reach(v);
+        let w = h[u] * h[v] * d[a].abs() * share;
+        let mut rays = 0u64;
+        // One random offset for the whole family: a rigid lattice keeps exactly one ray per voxel
+        // face in every plane (independent per-ray jitter would leave gaps downstream).
+        let (ou, ov) = (rng.uniform_f64(), rng.uniform_f64());
+        for jv in v0..v1 {
+            for ju in u0..u1 {
+                let mut o = DVec3::ZERO;
+                o[a] = plane;
+                o[u] = ju as f64 + ou;
+                o[v] = jv as f64 + ov;
+                let mut hit = false;
+                self.trace(src, o, d, src.radiance, |idx, li, len| {
+                    hit = true;
+                    let s = &mut sums[idx];
+                    s[0] += w * li.x;
+                    s[1] += w * li.y;
+                    s[2] += w * li.z;
+                    s[3] += w * len;
+                });
+                rays += hit as u64;
+            }
+        }
+        rays
+    }
+
     /// All rays of one direction into per-voxel sums over the active box.
-    fn trace_source(&self, src: &Source, src_id: u64) -> (Sums, u64) {
+    fn trace_source(&self, src: &Source, src_id: u64) -> (Sums, u64, u64) {
+        let mut fallback = 0u64;
         let n = self.bd[0] * self.bd[1] * self.bd[2];
         let mut sums: Sums = vec![[0.0; 4]; n];
         let h = self.m.voxel_size;
@@ -299,48 +357,23 @@ impl Ctx<'_> {
         };
         let ss = self.ss;
         let mut rays = 0u64;
-        for a in 0..3 {
-            if flow0[a] == 0.0 {
-                continue;
-            }
-            let (u, v) = ((a + 1) % 3, (a + 2) % 3);
-            let plane = if flow0[a] > 0.0 { 0.0 } else { self.bd[a] as f64 };
-            let area = (h[u] * h[v]) as f64 / (ss * ss) as f64;
-            for jv in 0..self.bd[v] {
-                for ju in 0..self.bd[u] {
-                    for s in 0..ss * ss {
-                        let ray_id = (((a * self.bd[v] + jv) * self.bd[u] + ju) * ss * ss + s) as u64;
-                        let mut rng = Rng::new(mix64(self.seed ^ mix64(src_id)), ray_id);
-                        let (su, sv) = (s % ss, s / ss);
-                        let mut o = DVec3::ZERO;
-                        o[a] = plane;
-                        o[u] = ju as f64 + (su as f64 + rng.uniform_f64()) / ss as f64;
-                        o[v] = jv as f64 + (sv as f64 + rng.uniform_f64()) / ss as f64;
-                        let d = match src.bin {
-                            Some((_, b)) => {
-                                // 4×4 direction strata, decorrelated from the position.
-                                let stratum = (mix64(ray_id ^ 0x5eed) % 16) as usize;
-                                let (du, dvv) = (stratum % 4, stratum / 4);
-                                -b.direction_at((du as f32 + rng.uniform()) / 4.0, (dvv as f32 + rng.uniform()) / 4.0)
-                            }
-                            None => src.flow,
-                        };
-                        // Only rays entering through this face.
-                        if d[a] == 0.0 || (d[a] > 0.0) != (flow0[a] > 0.0) {
-                            continue;
-                        }
-                        let w = area as f32 * d[a].abs();
-                        rays += 1;
-                        self.trace(src, o, d, src.radiance, |idx, li, len| {
-                            let s = &mut sums[idx];
-                            s[0] += w * li.x;
-                            s[1] += w * li.y;
-                            s[2] += w * li.z;
-                            s[3] += w * len;
-                        });
-                    }
+        for stratum in 0..ss * ss {
+            let mut rng = Rng::new(mix64(self.seed ^ mix64(src_id)), stratum as u64);
+            // The family's direction and its share of the bin's solid angle.
+            let (d, share) = match src.bin {
+                Some((_, b)) if ss > 1 => {
+                    let (su, sv) = (stratum % ss, stratum / ss);
+                    let (fu, fv) = ((su as f32 + rng.uniform()) / ss as f32, (sv as f32 + rng.uniform()) / ss as f32);
+                    let du = (b.u[1] - b.u[0]) / ss as f64;
+                    let dv = (b.v[1] - b.v[0]) / ss as f64;
+                    let (ua, va) = (b.u[0] + su as f64 * du, b.v[0] + sv as f64 * dv);
+                    let sa = crate::lighting::bins::rect_solid_angle(ua, ua + du, va, va + dv);
+                    (-b.direction_at(fu, fv), (sa / b.solid_angle) as f32)
                 }
-            }
+                Some((_, b)) => (-b.center, 1.0),
+                None => (src.flow, 1.0),
+            };
+            rays += self.trace_family(src, d, share, &mut rng, &mut sums);
         }
         // A full voxel no ray crossed: one ray through its centre, from where it enters the box.
         for k in 0..self.bd[2] {
@@ -351,7 +384,7 @@ impl Ctx<'_> {
                         let c = DVec3::new(i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5);
                         let dv = flow0.as_dvec3() / h.as_dvec3();
                         let back = c - dv * 1e9;
-                        rays += 1;
+                        fallback += 1;
                         let mut acc = [0.0f32; 4];
                         self.trace(src, back, flow0, src.radiance, |id2, li, len| {
                             if id2 == idx {
@@ -363,7 +396,7 @@ impl Ctx<'_> {
                 }
             }
         }
-        (sums, rays)
+        (sums, rays, fallback)
     }
 }
 
@@ -382,6 +415,7 @@ pub fn compute(m: &Medium, bins: &DirectionBins, sources: &IncidentSources, sett
         sun_irradiance: sun_e,
         bin_radiance: sources.bin_radiance.clone(),
         rays: 0,
+        fallback_rays: 0,
     };
     let Some((lo, hi)) = active_box(m, 1) else {
         return out;
@@ -441,8 +475,9 @@ pub fn compute(m: &Medium, bins: &DirectionBins, sources: &IncidentSources, sett
     let mut sun_t = vec![1f32; nb];
     let chunk = rayon::current_num_threads().max(1) * 2;
     let mut rays = 0u64;
+    let mut fallback = 0u64;
     for (ci, group) in list.chunks(chunk).enumerate() {
-        let results: Vec<(Sums, u64)> = group
+        let results: Vec<(Sums, u64, u64)> = group
             .par_iter()
             .enumerate()
             .map(|(gi, (src, _, _))| {
@@ -452,6 +487,7 @@ pub fn compute(m: &Medium, bins: &DirectionBins, sources: &IncidentSources, sett
             })
             .collect();
         rays += results.iter().map(|r| r.1).sum::<u64>();
+        fallback += results.iter().map(|r| r.2).sum::<u64>();
         let base = ci * chunk;
         s0.par_chunks_mut(4096)
             .zip(s1.par_chunks_mut(4096))
@@ -460,7 +496,7 @@ pub fn compute(m: &Medium, bins: &DirectionBins, sources: &IncidentSources, sett
             .for_each(|(bi, ((a0, a1), st))| {
                 for (o, ((v0, v1), t)) in a0.iter_mut().zip(a1.iter_mut()).zip(st.iter_mut()).enumerate() {
                     let idx = bi * 4096 + o;
-                    for (gi, (res, _)) in results.iter().enumerate() {
+                    for (gi, (res, _, _)) in results.iter().enumerate() {
                         let s = res[idx];
                         if s[3] <= 0.0 {
                             continue;
@@ -483,6 +519,7 @@ pub fn compute(m: &Medium, bins: &DirectionBins, sources: &IncidentSources, sett
             });
     }
     out.rays = rays;
+    out.fallback_rays = fallback;
     // Scatter into the full grid with ρσs/(4π) and ρσs·g/(4π).
     let sigma_s = m.albedo * m.sigma_t;
     let g = m.g as f64;
@@ -514,3 +551,4 @@ pub fn compute(m: &Medium, bins: &DirectionBins, sources: &IncidentSources, sett
     }
     out
 }
+
