@@ -200,6 +200,8 @@ pub enum Method {
     Single,
     /// Unbiased volumetric path tracing (delta/ratio tracking, NEE + MIS): the ground truth.
     Reference,
+    /// Diffusion (stage 1 + eq. 4 solved by multigrid) composited with exact sun single scattering (paper Fig. 5).
+    Diffusion,
 }
 
 impl Method {
@@ -208,6 +210,7 @@ impl Method {
         match self {
             Method::Single => "single",
             Method::Reference => "reference",
+            Method::Diffusion => "diffusion",
         }
     }
 }
@@ -238,6 +241,10 @@ pub struct RenderDesc {
     pub ground_samples: usize,
     /// Density T below which the final gather uses the edge treatment (paper section 4); 0 turns it off.
     pub low_density_threshold: f32,
+    /// Relative residual the diffusion solver must reach (unitless).
+    pub solver_tolerance: f64,
+    /// Most conjugate-gradient iterations of the diffusion solver per band.
+    pub solver_max_iterations: usize,
 }
 
 impl Default for RenderDesc {
@@ -254,6 +261,8 @@ impl Default for RenderDesc {
             cube_resolution: crate::cube::render::DEFAULT_CUBE_RESOLUTION,
             ground_samples: crate::cube::render::DEFAULT_GROUND_SAMPLES,
             low_density_threshold: crate::edges::gather::DEFAULT_THRESHOLD,
+            solver_tolerance: 1e-6,
+            solver_max_iterations: 200,
         }
     }
 }
@@ -337,6 +346,10 @@ pub struct RenderSettings {
     pub cubes: crate::cube::CubeOptions,
     /// Density below which the edge treatment applies (0: off).
     pub low_density_threshold: f32,
+    /// Diffusion solver: relative residual to reach.
+    pub solver_tolerance: f64,
+    /// Diffusion solver: most iterations per band.
+    pub solver_max_iterations: usize,
 }
 
 /// A validated scene, ready to render.
@@ -424,6 +437,20 @@ impl Scene {
             r.low_density_threshold,
             "the edge threshold is a density ≥ 0 (0 turns the edge treatment off)",
         )?;
+        check(
+            f,
+            "render.solver_tolerance",
+            r.solver_tolerance.is_finite() && r.solver_tolerance > 0.0 && r.solver_tolerance < 1.0,
+            r.solver_tolerance,
+            "the solver's relative residual must be in (0, 1), e.g. 1e-6",
+        )?;
+        check(
+            f,
+            "render.solver_max_iterations",
+            r.solver_max_iterations >= 1,
+            r.solver_max_iterations,
+            "the solver needs at least 1 iteration (default 200)",
+        )?;
         let camera = Camera::from_desc(&desc.camera, f)?;
         let (sun, sky) = crate::lighting::sun_and_sky(&desc.sun, &desc.sky, f, base_dir)?;
         let ground = match &desc.ground {
@@ -442,6 +469,8 @@ impl Scene {
             stderr: r.stderr,
             cubes,
             low_density_threshold: r.low_density_threshold,
+            solver_tolerance: r.solver_tolerance,
+            solver_max_iterations: r.solver_max_iterations,
         };
         Ok(Scene {
             source: source.to_string(),

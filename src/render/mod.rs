@@ -1,5 +1,6 @@
 //! Rendering: method dispatch, progress reporting and stage timings.
 
+pub mod diffusion;
 pub mod march;
 pub mod single;
 
@@ -73,6 +74,7 @@ pub fn render(scene: &Scene, progress: &dyn Progress) -> Result<RenderOutput> {
     let image = match scene.render.method {
         Method::Single => single::render(scene, progress, &mut timings)?,
         Method::Reference => crate::reference::render(scene, progress, &mut timings)?,
+        Method::Diffusion => diffusion::render(scene, progress, &mut timings)?,
     };
     Ok(RenderOutput { image, timings })
 }

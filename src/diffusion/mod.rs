@@ -1,0 +1,424 @@
+//! Stage 2: the diffusion equation (eq. 4) with the boundary condition (eq. 7), discretised as the
+//! paper's "Finite Difference Solution" says, and solved per RGB band by multigrid-preconditioned
+//! conjugate gradients ([`multigrid`]).
+//!
+//! # The continuous equations, and one corrected factor
+//!
+//! With I = I_ri + I0 + I1·ω (eq. 3), integrating eq. 1 over the sphere, and over the sphere
+//! times ω, gives (∫ωω dω = 4π/3 𝟙, ∫p(ω,ω′)ω dω = g ω′):
+//!
+//! ```text
+//!   ∇·I1 = −3ρσa I0 + 3 Q0                                   (scalar)
+//!   I1   = (−∇I0 + 3 Q1) / (ρσtr),   σtr = σt(1 − a g)        (vector)
+//! ```
+//!
+//! with Q0 and Q1 exactly as eqs. 5 and 6 define them (each with its 1/4π). Eliminating I1:
+//!
+//! ```text
+//!   ∇·(∇I0 / (3ρσtr)) − ρσa I0 = −Q0 + ∇·(Q1 / (ρσtr))       (eq. 4, corrected)
+//! ```
+//!
+//! The paper's eq. 4 has ∇·(Q1/(4πρσtr)): that is right only for the *unnormalised* moment
+//! ∫Q ω dω, which is what its stage-1 paragraph accumulates (a segment adds ρσs I Δω l p1 ω,
+//! without 1/4π), but not for eq. 6 as printed. Likewise eq. 7's 1/(2πρσtr) n·Q1 equals
+//! 2 n·Q1/(ρσtr) with eq. 6's Q1. We store Q0, Q1 as eqs. 5, 6 define them and use the factors
+//! 1 and 2. (Check: the no-inward-flux condition ∫_{ω·n>0} I_d (ω·n) dω = π I0 + (2π/3) I1·n = 0
+//! with n inward gives I0 + (2/3) n·I1 = 0, i.e. I0 − 2/(3ρσtr) n·∇I0 + 2/(ρσtr) n·Q1 = 0.)
+//!
+//! # The discrete equations
+//!
+//! Unknowns: I0 at the centre of every voxel with ρ > 0 ("full"); empty voxels carry no unknown.
+//! Write the equation as −∇·(D∇I0 − F) + ρσa I0 = Q0 with D = 1/(3ρσtr), F = Q1/(ρσtr); note
+//! D∇I0 − F = −I1/3. Integrating over a voxel of volume V and dividing by V (finite volumes,
+//! face area A = V/h_a on axis a), each of the six faces of a full voxel P contributes
+//! (1/h_a)·φ_f, with φ_f the outward flux I1·n/3 through the face:
+//!
+//! * **Interior face** (neighbour N full): gradient at the face centre (I_N − I_P)/h_a, face
+//!   density ρ_f = (ρ_P + ρ_N)/2, D_f = 1/(3ρ_f σtr), and F_f = (F_P + F_N)/2 (so that
+//!   Σ_f F_f·n/h_a is the central difference (F_{P+1} − F_{P−1})/(2h_a) of eq. 4's last term):
+//!   `φ_f = −D_f (I_N − I_P)/h_a + F_f·n`.
+//! * **Boundary face** (neighbour empty, or outside the grid): a ghost value I_g in the empty
+//!   cell satisfies eq. 7 at the face, with face value (I_P + I_g)/2, inward normal derivative
+//!   (I_P − I_g)/h_a, and the non-zero cell's ρ_P and Q1_P. With β = 2/(3ρ_P σtr h_a) and
+//!   f = F_P·n (n outward):
+//!   `(I_P + I_g)/2 + β (I_g − I_P) − 2f = 0` ⇒ `I_g = ((1 − 2β) ... )` eliminated:
+//!   `φ_f = −D_P (I_g − I_P)/h_a + f = (β I_P + f)/(1 + 2β)`,
+//!   which is exactly half the ghost face value, φ = I0_face/2: the Marshak flux. The ghost never
+//!   becomes an unknown, and a different ghost may serve each full neighbour of an empty cell.
+//!
+//! Row P therefore reads
+//!
+//! ```text
+//!   [ρ_P σa + Σ_int D_f/h_a² + Σ_bnd β/(h_a(1+2β))] I_P − Σ_int (D_f/h_a²) I_N
+//!       = Q0_P − Σ_int F_f·n/h_a − Σ_bnd f/(h_a(1+2β))
+//! ```
+//!
+//! a symmetric 7-point stencil (the coupling of a face is the same from both sides), strictly
+//! diagonally dominant on rows that touch a boundary or absorb, weakly elsewhere, and irreducible
+//! within each connected piece of cloud, each of which touches a boundary: symmetric positive
+//! definite, also for albedo 1. The solver works on the diagonally scaled system
+//! D^{-1/2} A D^{-1/2} y = D^{-1/2} b (x = D^{-1/2} y), whose relative residual is the one reported
+//! and tested against the tolerance: thin voxels (large D/h²) then do not drown out thick ones.
+//!
+//! The outgoing diffuse flux through a boundary face (W/m² per band) is 4π φ_f = 2π I0_face: the
+//! energy-balance test sums it.
+
+pub mod multigrid;
+pub mod slab;
+
+use crate::error::{Error, Result};
+use crate::incident::IncidentLight;
+use crate::math::Rgb;
+use crate::medium::Medium;
+use multigrid::{Hierarchy, Stencil};
+use rayon::prelude::*;
+
+/// Solver settings.
+#[derive(Clone, Debug)]
+pub struct DiffusionSettings {
+    /// Relative residual (scaled system) to reach (`render.solver_tolerance`, default 1e-6).
+    pub tolerance: f64,
+    /// Most PCG iterations per band (`render.solver_max_iterations`, default 200).
+    pub max_iterations: usize,
+    /// Floor τ_min on a voxel's transport optical depth ρσtr·h in the diffusion coefficient and the
+    /// boundary's β (a flux limiter for optically thin voxels, where diffusion overestimates the
+    /// flux without bound); 0 gives the paper's scheme exactly. See the module docs.
+    pub min_optical_depth: f64,
+}
+
+impl Default for DiffusionSettings {
+    fn default() -> Self {
+        DiffusionSettings {
+            tolerance: 1e-6,
+            max_iterations: 200,
+            min_optical_depth: DEFAULT_MIN_OPTICAL_DEPTH,
+        }
+    }
+}
+
+/// Default [`DiffusionSettings::min_optical_depth`].
+pub const DEFAULT_MIN_OPTICAL_DEPTH: f64 = 0.01;
+
+/// Convergence of one band's solve.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SolveStats {
+    /// PCG iterations taken.
+    pub iterations: usize,
+    /// Final relative residual ‖b − Ax‖/‖b‖ of the scaled system.
+    pub relative_residual: f64,
+    /// Relative residual after each iteration (entry 0: the initial guess).
+    pub history: Vec<f64>,
+    /// Unknowns (full voxels).
+    pub unknowns: usize,
+    /// Multigrid levels.
+    pub levels: usize,
+}
+
+impl SolveStats {
+    /// Mean residual reduction per iteration, (r_n / r_0)^{1/n}.
+    pub fn convergence_factor(&self) -> f64 {
+        if self.iterations == 0 || self.history[0] <= 0.0 {
+            return 0.0;
+        }
+        (self.relative_residual / self.history[0]).powf(1.0 / self.iterations as f64)
+    }
+}
+
+/// The diffusion solution: I0 per voxel per band, plus solver statistics.
+#[derive(Clone, Debug)]
+pub struct DiffusionSolution {
+    /// Grid resolution.
+    pub dims: [usize; 3],
+    /// I0 per band, per voxel (W·m⁻²·sr⁻¹); zero where ρ = 0.
+    pub i0: [Vec<f32>; 3],
+    /// Per band.
+    pub stats: [SolveStats; 3],
+}
+
+impl DiffusionSolution {
+    /// I0 of voxel (i, j, k) as RGB.
+    #[inline]
+    pub fn at(&self, i: usize, j: usize, k: usize) -> Rgb {
+        let idx = i + self.dims[0] * (j + self.dims[1] * k);
+        Rgb::new(self.i0[0][idx], self.i0[1][idx], self.i0[2][idx])
+    }
+
+    /// One line per band: iterations and residual.
+    pub fn summary(&self) -> String {
+        let s = &self.stats;
+        format!(
+            "diffusion: {} unknowns, {} levels; iterations R/G/B {}/{}/{}, relative residual {:.1e}/{:.1e}/{:.1e}",
+            s[0].unknowns,
+            s[0].levels,
+            s[0].iterations,
+            s[1].iterations,
+            s[2].iterations,
+            s[0].relative_residual,
+            s[1].relative_residual,
+            s[2].relative_residual
+        )
+    }
+}
+
+/// Face coefficient of an interior face: D_f/h² with ρ_f the mean of the two (both > 0), and the
+/// face's transport optical depth ρ_f σtr h floored at `tau_min`.
+#[inline]
+pub fn interior_coupling(rho_p: f64, rho_n: f64, sigma_tr: f64, h: f64, tau_min: f64) -> f64 {
+    let rho_f = 0.5 * (rho_p + rho_n);
+    1.0 / (3.0 * (rho_f * sigma_tr * h).max(tau_min) * h)
+}
+
+/// Boundary face: (diagonal term, factor multiplying f = F_P·n_out in the flux) per unit volume:
+/// φ/h = (β I_P + f)/(h(1 + 2β)), β = 2/(3ρσtr h) with ρσtr h floored at `tau_min`.
+#[inline]
+pub fn boundary_terms(rho_p: f64, sigma_tr: f64, h: f64, tau_min: f64) -> (f64, f64) {
+    let beta = 2.0 / (3.0 * (rho_p * sigma_tr * h).max(tau_min));
+    let den = h * (1.0 + 2.0 * beta);
+    (beta / den, 1.0 / den)
+}
+
+/// The box of voxels the solver works on: every full voxel, `lo` its minimum corner in the grid.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Domain {
+    /// Minimum corner (voxel index).
+    pub lo: [usize; 3],
+    /// Cells per axis.
+    pub dims: [usize; 3],
+}
+
+impl Domain {
+    /// The tight box of the medium's full voxels (None for an empty medium).
+    pub fn of(m: &Medium) -> Option<Domain> {
+        crate::incident::active_box(m, 0).map(|(lo, hi)| Domain {
+            lo,
+            dims: [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]],
+        })
+    }
+
+    /// Grid index of domain cell (i, j, k).
+    #[inline]
+    pub fn global(&self, gd: [usize; 3], i: usize, j: usize, k: usize) -> usize {
+        (i + self.lo[0]) + gd[0] * ((j + self.lo[1]) + gd[1] * (k + self.lo[2]))
+    }
+}
+
+/// Assemble band `c`'s operator and right-hand side on `dom` (see the module docs).
+pub fn assemble(m: &Medium, inc: &IncidentLight, c: usize, tau_min: f64, dom: &Domain) -> (Stencil, Vec<f64>) {
+    let gd = m.dims();
+    let d = dom.dims;
+    let n = d[0] * d[1] * d[2];
+    let rho = m.density.data();
+    let a = m.albedo[c] as f64;
+    let st = m.sigma_t as f64;
+    let sigma_a = st * (1.0 - a);
+    let sigma_tr = st * (1.0 - a * m.g as f64);
+    let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
+    let gstride = [1, gd[0], gd[0] * gd[1]];
+    let mut st_out = Stencil::zeros(d);
+    let mut b = vec![0f64; n];
+    // F = Q1/(ρσtr) per axis at voxel centres.
+    let f_at = |idx: usize, ax: usize| -> f64 { inc.q1[ax][idx][c] as f64 / (rho[idx] as f64 * sigma_tr) };
+    let plane = d[0] * d[1];
+    let [o0v, o1v, o2v] = &mut st_out.off;
+    st_out
+        .diag
+        .par_chunks_mut(plane)
+        .zip(o0v.par_chunks_mut(plane))
+        .zip(o1v.par_chunks_mut(plane))
+        .zip(o2v.par_chunks_mut(plane))
+        .zip(b.par_chunks_mut(plane))
+        .enumerate()
+        .for_each(|(k, ((((dg, o0), o1), o2), bb))| {
+            let offs: [&mut [f64]; 3] = [o0, o1, o2];
+            for j in 0..d[1] {
+                for i in 0..d[0] {
+                    let l = i + d[0] * j;
+                    let idx = dom.global(gd, i, j, k);
+                    let rp = rho[idx] as f64;
+                    if rp <= 0.0 {
+                        continue;
+                    }
+                    let mut diag = rp * sigma_a;
+                    let mut rhs = inc.q0[idx][c] as f64;
+                    let cell = [i + dom.lo[0], j + dom.lo[1], k + dom.lo[2]];
+                    for ax in 0..3 {
+                        let fp = f_at(idx, ax);
+                        for side in [-1i64, 1] {
+                            let nc = cell[ax] as i64 + side;
+                            let nidx = (nc >= 0 && nc < gd[ax] as i64).then(|| (idx as i64 + side * gstride[ax] as i64) as usize);
+                            let rn = nidx.map_or(0.0, |q| rho[q] as f64);
+                            if rn > 0.0 {
+                                let q = nidx.unwrap_or(0);
+                                let cf = interior_coupling(rp, rn, sigma_tr, h[ax], tau_min);
+                                diag += cf;
+                                if side > 0 {
+                                    offs[ax][l] = -cf;
+                                }
+                                let ff = 0.5 * (fp + f_at(q, ax));
+                                rhs -= ff * side as f64 / h[ax];
+                            } else {
+                                let (dterm, fterm) = boundary_terms(rp, sigma_tr, h[ax], tau_min);
+                                diag += dterm;
+                                rhs -= fterm * fp * side as f64;
+                            }
+                        }
+                    }
+                    dg[l] = diag;
+                    bb[l] = rhs;
+                }
+            }
+        });
+    (st_out, b)
+}
+
+/// Outgoing diffuse power (W per band) through every boundary face of the cloud: Σ A·2π I0_face.
+pub fn boundary_outflow(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, tau_min: f64) -> Rgb {
+    let d = m.dims();
+    let rho = m.density.data();
+    let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
+    let vol = h[0] * h[1] * h[2];
+    let stride = [1, d[0], d[0] * d[1]];
+    let mut out = [0f64; 3];
+    for (c, o) in out.iter_mut().enumerate() {
+        let a = m.albedo[c] as f64;
+        let sigma_tr = m.sigma_t as f64 * (1.0 - a * m.g as f64);
+        for k in 0..d[2] {
+            for j in 0..d[1] {
+                for i in 0..d[0] {
+                    let idx = i + d[0] * (j + d[1] * k);
+                    let rp = rho[idx] as f64;
+                    if rp <= 0.0 {
+                        continue;
+                    }
+                    let cell = [i, j, k];
+                    for ax in 0..3 {
+                        for side in [-1i64, 1] {
+                            let nc = cell[ax] as i64 + side;
+                            let full = nc >= 0 && nc < d[ax] as i64 && rho[(idx as i64 + side * stride[ax] as i64) as usize] > 0.0;
+                            if !full {
+                                let (dt, ft) = boundary_terms(rp, sigma_tr, h[ax], tau_min);
+                                let f = inc.q1[ax][idx][c] as f64 / (rp * sigma_tr) * side as f64;
+                                let phi_over_h = dt * sol.i0[c][idx] as f64 + ft * f;
+                                *o += 4.0 * std::f64::consts::PI * phi_over_h * vol;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    Rgb::new(out[0] as f32, out[1] as f32, out[2] as f32)
+}
+
+/// Solve eq. 4 with eq. 7 for all three bands. `previous` warm-starts each band. Fails with
+/// [`Error::Numerical`] when a band does not reach `settings.tolerance` within `max_iterations`.
+pub fn solve_diffusion(
+    medium: &Medium,
+    incident: &IncidentLight,
+    previous: Option<&DiffusionSolution>,
+    settings: &DiffusionSettings,
+) -> Result<DiffusionSolution> {
+    let dims = medium.dims();
+    if incident.dims != dims {
+        return Err(Error::Numerical {
+            stage: "diffusion solver".into(),
+            message: format!("incident light is for a {:?} grid but the medium is {:?}", incident.dims, dims),
+        });
+    }
+    if let Some(p) = previous {
+        if p.dims != dims {
+            return Err(Error::Numerical {
+                stage: "diffusion solver".into(),
+                message: format!("warm start is for a {:?} grid but the medium is {:?}", p.dims, dims),
+            });
+        }
+    }
+    let n = dims[0] * dims[1] * dims[2];
+    let Some(dom) = Domain::of(medium) else {
+        return Ok(DiffusionSolution {
+            dims,
+            i0: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+            stats: Default::default(),
+        });
+    };
+    let dd = dom.dims;
+    let to_global = |x: &[f64]| -> Vec<f32> {
+        let mut out = vec![0f32; n];
+        for k in 0..dd[2] {
+            for j in 0..dd[1] {
+                for i in 0..dd[0] {
+                    out[dom.global(dims, i, j, k)] = x[i + dd[0] * (j + dd[1] * k)] as f32;
+                }
+            }
+        }
+        out
+    };
+    let to_local = |x: &[f32]| -> Vec<f64> {
+        let mut out = vec![0f64; dd[0] * dd[1] * dd[2]];
+        for k in 0..dd[2] {
+            for j in 0..dd[1] {
+                for i in 0..dd[0] {
+                    out[i + dd[0] * (j + dd[1] * k)] = x[dom.global(dims, i, j, k)] as f64;
+                }
+            }
+        }
+        out
+    };
+    // Bands with identical coefficients share one hierarchy; the bands are solved in parallel.
+    let systems: Vec<(Stencil, Vec<f64>)> = (0..3)
+        .into_par_iter()
+        .map(|c| assemble(medium, incident, c, settings.min_optical_depth, &dom))
+        .collect();
+    let mut hier: Vec<(f32, Hierarchy)> = Vec::new();
+    let mut which = [0usize; 3];
+    for (c, (a, _)) in systems.iter().enumerate() {
+        let alb = medium.albedo[c];
+        which[c] = match hier.iter().position(|(x, _)| *x == alb) {
+            Some(p) => p,
+            None => {
+                hier.push((alb, Hierarchy::build(a.clone())));
+                hier.len() - 1
+            }
+        };
+    }
+    let results: Vec<(Vec<f64>, SolveStats)> = (0..3)
+        .into_par_iter()
+        .map(|c| {
+            let x0 = previous.map(|p| to_local(&p.i0[c]));
+            hier[which[c]].1.solve(&systems[c].1, x0.as_deref(), settings.tolerance, settings.max_iterations)
+        })
+        .collect();
+    for (c, (_, stats)) in results.iter().enumerate() {
+        if !(stats.relative_residual <= settings.tolerance) {
+            return Err(Error::Numerical {
+                stage: "diffusion solver".into(),
+                message: format!(
+                    "band {c} reached relative residual {:.3e} after {} iterations, above the tolerance {:.1e}; \
+                     raise render.solver_max_iterations or render.solver_tolerance",
+                    stats.relative_residual, stats.iterations, settings.tolerance
+                ),
+            });
+        }
+    }
+    let mut it = results.into_iter().map(|(x, s)| (to_global(&x), s));
+    let (x0, s0) = it.next().unwrap_or_default();
+    let (x1, s1) = it.next().unwrap_or_default();
+    let (x2, s2) = it.next().unwrap_or_default();
+    Ok(DiffusionSolution {
+        dims,
+        i0: [x0, x1, x2],
+        stats: [s0, s1, s2],
+    })
+}
+
+impl Default for SolveStats {
+    fn default() -> Self {
+        SolveStats {
+            iterations: 0,
+            relative_residual: 0.0,
+            history: vec![0.0],
+            unknowns: 0,
+            levels: 0,
+        }
+    }
+}

@@ -1,0 +1,141 @@
+//! The diffusion method on a plane-parallel slab: the same stage-1 definitions (voxel-mean reduced
+//! radiance, Q0 and Q1 as eqs. 5 and 6) and the same finite-difference rows (interior faces and
+//! the ghost-eliminated Robin boundary of [`super`]) on a column of cells across the slab's
+//! thickness. Sideways the slab is infinite (periodic lateral faces carry no net flux), so the 3-D
+//! stencil reduces exactly to a tridiagonal system, solved directly.
+//!
+//! R and T are hemispherical flux ratios: the diffuse outflow through a boundary face is 4π φ
+//! (= 2π I0 at the face), divided by the incident flux; T adds the unscattered transmission
+//! (e^{−τ} for a normal beam, 2E₃(τ) for diffuse light), as the adding-doubling table does.
+
+use super::{boundary_terms, interior_coupling};
+
+/// How the slab is lit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Incidence {
+    /// A collimated beam at normal incidence (the table's UR1/UT1).
+    Normal,
+    /// Uniform diffuse radiance over the incoming hemisphere (URU/UTU).
+    Diffuse,
+}
+
+/// Reflectance and transmittance of a slab.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SlabResult {
+    /// Total reflectance (diffuse).
+    pub r: f64,
+    /// Total transmittance (diffuse + unscattered).
+    pub t: f64,
+}
+
+/// Exponential integral E_n(x) = ∫₀¹ μ^{n−2} e^{−x/μ} dμ (n ≥ 2, x ≥ 0), composite Gauss–Legendre.
+pub fn expint(n: i32, x: f64) -> f64 {
+    const X: [f64; 4] = [-0.861_136_311_594_052_6, -0.339_981_043_584_856_3, 0.339_981_043_584_856_3, 0.861_136_311_594_052_6];
+    const W: [f64; 4] = [0.347_854_845_137_453_9, 0.652_145_154_862_546_1, 0.652_145_154_862_546_1, 0.347_854_845_137_453_9];
+    let m = 256;
+    let mut s = 0.0;
+    for k in 0..m {
+        let (a, b) = (k as f64 / m as f64, (k + 1) as f64 / m as f64);
+        for (xi, wi) in X.iter().zip(W) {
+            let mu = 0.5 * (a + b) + 0.5 * (b - a) * xi;
+            s += wi * 0.5 * (b - a) * mu.powi(n - 2) * (-x / mu).exp();
+        }
+    }
+    s
+}
+
+/// R and T of a slab of optical thickness `tau`, albedo `a`, HG `g`, discretised with `cells` cells.
+pub fn solve_slab(tau: f64, a: f64, g: f64, incidence: Incidence, cells: usize) -> SlabResult {
+    let n = cells.max(1);
+    let h = 1.0;
+    let sigma_t = tau / n as f64; // ρ = 1, h = 1 m
+    let sigma_s = a * sigma_t;
+    let sigma_a = sigma_t - sigma_s;
+    let sigma_tr = sigma_t * (1.0 - a * g);
+    let dtau = sigma_t * h;
+    let four_pi = 4.0 * std::f64::consts::PI;
+    // Voxel-mean Q0 and Q1 (z component, z = depth, light flows +z); incident flux E_in.
+    let mut q0 = vec![0.0; n];
+    let mut q1 = vec![0.0; n];
+    let e_in = match incidence {
+        Incidence::Normal => {
+            for k in 0..n {
+                let t0 = k as f64 * dtau;
+                let mean = (-t0).exp() * (-(-dtau).exp_m1()) / dtau;
+                q0[k] = sigma_s / four_pi * mean;
+                q1[k] = sigma_s * g / four_pi * mean;
+            }
+            1.0
+        }
+        Incidence::Diffuse => {
+            // ∫_hemisphere e^{−t/μ} dω = 2π E2(t), ∫ μ e^{−t/μ} dω = 2π E3(t); cell means from E3, E4.
+            let e3: Vec<f64> = (0..=n).map(|k| expint(3, k as f64 * dtau)).collect();
+            let e4: Vec<f64> = (0..=n).map(|k| expint(4, k as f64 * dtau)).collect();
+            for k in 0..n {
+                let m2 = (e3[k] - e3[k + 1]) / dtau;
+                let m3 = (e4[k] - e4[k + 1]) / dtau;
+                let two_pi = 2.0 * std::f64::consts::PI;
+                q0[k] = sigma_s / four_pi * two_pi * m2;
+                q1[k] = sigma_s * g / four_pi * two_pi * m3;
+            }
+            std::f64::consts::PI
+        }
+    };
+    // Tridiagonal system: lower l, diagonal d, upper u, rhs b.
+    let f: Vec<f64> = q1.iter().map(|q| q / sigma_tr).collect(); // ρ = 1
+    let mut d = vec![sigma_a; n];
+    let mut l = vec![0.0; n];
+    let mut u = vec![0.0; n];
+    let mut b = q0.clone();
+    let (bd, bf) = boundary_terms(1.0, sigma_tr, h, 0.0);
+    for k in 0..n {
+        // Top face (outward normal −z).
+        if k == 0 {
+            d[k] += bd;
+            b[k] -= bf * (-f[k]);
+        } else {
+            let c = interior_coupling(1.0, 1.0, sigma_tr, h, 0.0);
+            d[k] += c;
+            l[k] = -c;
+            b[k] -= 0.5 * (f[k] + f[k - 1]) * -1.0 / h;
+        }
+        // Bottom face (outward +z).
+        if k + 1 == n {
+            d[k] += bd;
+            b[k] -= bf * f[k];
+        } else {
+            let c = interior_coupling(1.0, 1.0, sigma_tr, h, 0.0);
+            d[k] += c;
+            u[k] = -c;
+            b[k] -= 0.5 * (f[k] + f[k + 1]) / h;
+        }
+    }
+    // Thomas algorithm.
+    let mut cp = vec![0.0; n];
+    let mut dp = vec![0.0; n];
+    for k in 0..n {
+        let den = d[k] - if k > 0 { l[k] * cp[k - 1] } else { 0.0 };
+        cp[k] = u[k] / den;
+        dp[k] = (b[k] - if k > 0 { l[k] * dp[k - 1] } else { 0.0 }) / den;
+    }
+    let mut x = vec![0.0; n];
+    for k in (0..n).rev() {
+        x[k] = dp[k] - if k + 1 < n { cp[k] * x[k + 1] } else { 0.0 };
+    }
+    // Outgoing fluxes 4π φ / h·h (per unit area: φ/h·h).
+    let phi_top = (bd * x[0] + bf * (-f[0])) * h;
+    let phi_bot = (bd * x[n - 1] + bf * f[n - 1]) * h;
+    let unscattered = match incidence {
+        Incidence::Normal => (-tau).exp(),
+        Incidence::Diffuse => 2.0 * expint(3, tau),
+    };
+    SlabResult {
+        r: four_pi * phi_top / e_in,
+        t: four_pi * phi_bot / e_in + unscattered,
+    }
+}
+
+/// Cells used for a slab of optical thickness `tau`: at most 0.05 optical depth per cell, at least 40.
+pub fn default_cells(tau: f64) -> usize {
+    ((tau / 0.05).ceil() as usize).clamp(40, 4000)
+}

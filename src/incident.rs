@@ -1,0 +1,554 @@
+//! Stage 1: the reduced incident radiance I_ri (eq. 2) and its first scattering, Q0 (eq. 5) and
+//! the vector Q1 (eq. 6), per voxel and RGB band.
+//!
+//! **Sky and ground.** Each of the 96 direction bins carries the bin's mean radiance
+//! P_b / Δω_b, where the power P_b = ∫_bin L(ω) dω comes from
+//! [`DirectionBins::integrate`] over the sky's radiance, so any sky model works. Bins whose
+//! directions point below the horizon see the Lambertian ground instead (the ground "as an
+//! upward sky"), lit by the unshadowed sun and the sky's hemisphere irradiance.
+//!
+//! **Rays.** For bin b light flows along ω = −(direction towards the bin). The box enclosing every
+//! non-empty voxel plus one voxel of margin (clipped to the grid) is crossed by families of parallel
+//! rays: one family along the bin's centre direction (`rays_per_face_edge` = 1, the paper), or n²
+//! families along jittered directions, one per stratum of the bin's (u, v) square, weighted by the
+//! stratum's exact solid angle. A family starts on the plane perpendicular to the dominant axis of
+//! its direction, one ray per voxel face (a lattice shifted by one random offset), covering the
+//! box's shadow, so in every plane across the box each voxel face is crossed by exactly one ray:
+//! every voxel is reached. A ray whose cross-section perpendicular to its direction is
+//! w = A·|ω·n| walks the voxels with an exact DDA. In a voxel of density ρ (piecewise constant, the voxel value, as the diffusion
+//! stage uses) and extinction κ = ρσt it adds w·∫I ds = w·I_in·(1 − e^{−κl})/κ to the voxel's
+//! radiance sum and w·l to its weight sum, then attenuates I by e^{−κl}. The voxel's mean radiance
+//! from the bin is Ī_b = Σ w∫I ds / Σ w l: the paper's segment-length weighting, normalised by
+//! the (cross-section weighted) sum of segment lengths. A full voxel that no ray happens to cross
+//! (possible with direction jitter) is given one ray through its centre.
+//!
+//! **Q0 and Q1** (eqs. 5, 6, with the 1/4π of their definitions):
+//! Q0 = ρσs/(4π) · Σ_b Δω_b Ī_b, Q1 = ρσs·g/(4π) · Σ_b Δω_b Ī_b (−m_b), where m_b is the bin's
+//! exact mean direction ∫ω dω/Δω (towards the sky, length < 1). This uses ∫p(ω, ω′)ω dω = g ω′
+//! for the HG phase function. σs = a·σt per band.
+//!
+//! **Sun.** The sun is traced apart, as one more parallel-ray direction without jitter, carrying
+//! its irradiance; it adds ρσs/(4π)·E·T̄ to Q0 and ρσs g/(4π)·E·T̄·(−sun dir) to Q1, with T̄ the
+//! voxel-mean transmittance. The reduced sun radiance for the gather's exact single scattering is
+//! kept at voxel centres (exact optical depth of the trilinear field, [`SunTransmittance`]).
+//!
+//! **Clear-air hook** ([`EntryRadiance`]). When a sky-bin ray steps from an empty voxel X_e into a
+//! face-adjacent full voxel, [`compute`] asks `entry(X_e, b)`. `Some(L)` means: the radiance
+//! arriving at X_e from the directions of bin b (flowing along −dir_b) is L (W·m⁻²·sr⁻¹ per band),
+//! and the ray carries L from there on instead of its attenuated sky value (the paper's section 3:
+//! the viewing cube's bin replaces the propagating radiance). `None` keeps the attenuated value.
+//! The hook is never asked for the sun, nor where a full voxel lies on the grid's own boundary
+//! (no empty voxel precedes it).
+//!
+//! **Determinism.** Each ray's jitter comes from a counter-based stream keyed by (seed, bin, ray);
+//! bins are traced in parallel into their own buffers and reduced into Q0/Q1 per voxel in bin
+//! order, so the result is bit-identical at any thread count.
+
+use crate::lighting::bins::{Bin, DirectionBins, NUM_BINS};
+use crate::math::{mix64, Rgb, Rng, Vec3};
+use crate::medium::Medium;
+use crate::scene::Scene;
+use crate::sunlight::SunTransmittance;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+
+/// The clear-air hook: `(empty voxel, bin) → Some(radiance arriving from that bin)`; see the module docs.
+pub type EntryRadiance = dyn Fn([usize; 3], usize) -> Option<Rgb> + Sync;
+
+/// Stage-1 sampling settings.
+#[derive(Clone, Debug)]
+pub struct IncidentSettings {
+    /// Direction strata per bin edge: 1 traces each bin along its centre direction (the paper);
+    /// n > 1 traces n² parallel families per bin, one per jittered sub-square of the bin, each
+    /// weighted by its exact solid angle.
+    pub rays_per_face_edge: usize,
+    /// Sub-rectangles per bin edge when integrating the sky's radiance over a bin.
+    pub sky_subdivisions: usize,
+    /// Seed of the ray jitter.
+    pub seed: u64,
+}
+
+impl Default for IncidentSettings {
+    fn default() -> Self {
+        IncidentSettings {
+            rays_per_face_edge: 1,
+            sky_subdivisions: 8,
+            seed: 0,
+        }
+    }
+}
+
+/// What lights the medium from outside.
+#[derive(Clone, Debug)]
+pub struct IncidentSources {
+    /// Mean radiance arriving from each of the 96 bins (W·m⁻²·sr⁻¹ per band), in [`DirectionBins`] order.
+    pub bin_radiance: Vec<Rgb>,
+    /// Unit direction towards the sun and its irradiance (W/m² per band), if any.
+    pub sun: Option<(Vec3, Rgb)>,
+}
+
+impl IncidentSources {
+    /// The scene's sky (any model, through [`DirectionBins::integrate`]), the ground below the
+    /// horizon (unshadowed), and the sun.
+    pub fn from_scene(scene: &Scene, bins: &DirectionBins, sky_subdivisions: usize) -> IncidentSources {
+        let power = bins.integrate(sky_subdivisions.max(1), |d| {
+            if d.y < 0.0 {
+                if let Some(g) = &scene.ground {
+                    return g.radiance(d, &scene.sun, &scene.sky, 1.0);
+                }
+            }
+            scene.sky.radiance(d)
+        });
+        let bin_radiance = power.iter().zip(&bins.bins).map(|(p, b)| *p / b.solid_angle as f32).collect();
+        IncidentSources {
+            bin_radiance,
+            sun: Some((scene.sun.dir, scene.sun.irradiance)),
+        }
+    }
+}
+
+/// Stage-1 output: first-scattered light per voxel, and the sun for the gather.
+#[derive(Clone, Debug)]
+pub struct IncidentLight {
+    /// Grid resolution (same as the medium's).
+    pub dims: [usize; 3],
+    /// Q0 per voxel (eq. 5, W·m⁻³·sr⁻¹ per band); zero where ρ = 0.
+    pub q0: Vec<Rgb>,
+    /// Q1 per voxel (eq. 6), `q1[axis][voxel]` is the axis component per band (W·m⁻³·sr⁻¹).
+    pub q1: [Vec<Rgb>; 3],
+    /// Voxel-mean transmittance of the direct sun (piecewise-constant ρ), used for Q0/Q1.
+    pub sun_mean_transmittance: Vec<f32>,
+    /// Sun transmittance at voxel centres (exact), for the gather's single scattering.
+    pub sun_transmittance: SunTransmittance,
+    /// Sun irradiance (W/m² per band); zero without a sun.
+    pub sun_irradiance: Rgb,
+    /// The mean radiance per bin that was propagated (W·m⁻²·sr⁻¹).
+    pub bin_radiance: Vec<Rgb>,
+    /// Rays that crossed the medium's active box (all bins and the sun).
+    pub rays: u64,
+    /// Extra rays traced through the centre of a full voxel that no ray had crossed.
+    pub fallback_rays: u64,
+}
+
+impl IncidentLight {
+    /// Reduced sun radiance (irradiance, W/m²) I_risun at a point in continuous voxel coordinates.
+    #[inline]
+    pub fn sun_at_voxel(&self, v: Vec3) -> Rgb {
+        self.sun_irradiance * self.sun_transmittance.at_voxel(v)
+    }
+}
+
+/// Stage 1 for a scene with default sampling (seed from `render.seed`).
+pub fn compute_incident(scene: &Scene, entry: Option<&EntryRadiance>) -> IncidentLight {
+    let settings = IncidentSettings {
+        seed: scene.render.seed,
+        ..IncidentSettings::default()
+    };
+    let bins = DirectionBins::new();
+    let sources = IncidentSources::from_scene(scene, &bins, settings.sky_subdivisions);
+    compute(&scene.medium, &bins, &sources, &settings, entry)
+}
+
+/// Index box [lo, hi) of every non-empty voxel grown by `margin` voxels, clipped to the grid.
+pub fn active_box(m: &Medium, margin: usize) -> Option<([usize; 3], [usize; 3])> {
+    let d = m.dims();
+    let mut lo = d;
+    let mut hi = [0usize; 3];
+    let data = m.density.data();
+    for k in 0..d[2] {
+        for j in 0..d[1] {
+            for i in 0..d[0] {
+                if data[i + d[0] * (j + d[1] * k)] > 0.0 {
+                    let c = [i, j, k];
+                    for a in 0..3 {
+                        lo[a] = lo[a].min(c[a]);
+                        hi[a] = hi[a].max(c[a] + 1);
+                    }
+                }
+            }
+        }
+    }
+    if hi[0] == 0 {
+        return None;
+    }
+    for a in 0..3 {
+        lo[a] = lo[a].saturating_sub(margin);
+        hi[a] = (hi[a] + margin).min(d[a]);
+    }
+    Some((lo, hi))
+}
+
+/// Walk the voxels of `dims` crossed by `o + t·dv` (voxel coordinates, t in metres since `dv` is
+/// the world direction divided by the voxel size) for t ∈ [t0, t1], calling
+/// `f(cell, length_m)`. Incremental Amanatides–Woo in f64.
+#[inline]
+fn walk(dims: [usize; 3], o: DVec3, dv: DVec3, t0: f64, t1: f64, mut f: impl FnMut([usize; 3], f64)) {
+    let p = o + dv * t0;
+    let mut cell = [0i64; 3];
+    let mut step = [0i64; 3];
+    let mut t_max = [f64::INFINITY; 3];
+    let mut t_delta = [f64::INFINITY; 3];
+    for a in 0..3 {
+        let n = dims[a] as i64;
+        let mut c = (p[a].floor() as i64).clamp(0, n - 1);
+        if dv[a] < 0.0 && c > 0 && (p[a] - c as f64).abs() < 1e-9 {
+            c -= 1;
+        }
+        cell[a] = c;
+        if dv[a] > 0.0 {
+            step[a] = 1;
+            t_delta[a] = 1.0 / dv[a];
+            t_max[a] = ((c + 1) as f64 - o[a]) / dv[a];
+        } else if dv[a] < 0.0 {
+            step[a] = -1;
+            t_delta[a] = -1.0 / dv[a];
+            t_max[a] = (c as f64 - o[a]) / dv[a];
+        }
+    }
+    let mut t = t0;
+    loop {
+        let a = if t_max[0] <= t_max[1] && t_max[0] <= t_max[2] {
+            0
+        } else if t_max[1] <= t_max[2] {
+            1
+        } else {
+            2
+        };
+        let tn = t_max[a].min(t1);
+        if tn > t {
+            f([cell[0] as usize, cell[1] as usize, cell[2] as usize], tn - t);
+            t = tn;
+        }
+        if t >= t1 {
+            return;
+        }
+        cell[a] += step[a];
+        if cell[a] < 0 || cell[a] >= dims[a] as i64 {
+            return;
+        }
+        t_max[a] += t_delta[a];
+    }
+}
+
+/// One propagated direction: a sky bin (jittered within it) or the sun (exact).
+struct Source<'a> {
+    bin: Option<(usize, &'a Bin)>,
+    /// Flow direction when there is no bin (the sun).
+    flow: Vec3,
+    radiance: Rgb,
+}
+
+/// Per-voxel sums of one direction over the active box: (w∫I ds per band, w·l).
+type Sums = Vec<[f32; 4]>;
+
+struct Ctx<'a> {
+    m: &'a Medium,
+    lo: [usize; 3],
+    bd: [usize; 3],
+    rho: Vec<f32>,
+    entry: Option<&'a EntryRadiance>,
+    seed: u64,
+    ss: usize,
+}
+
+impl Ctx<'_> {
+    #[inline]
+    fn lin(&self, c: [usize; 3]) -> usize {
+        c[0] + self.bd[0] * (c[1] + self.bd[1] * c[2])
+    }
+
+    /// Trace one ray (origin `o` in active-box voxel coordinates, world unit direction `d`)
+    /// carrying `l0`, calling `sink(cell, w∫I ds, l)` for every full voxel.
+    fn trace(&self, src: &Source, o: DVec3, d: Vec3, l0: Rgb, mut sink: impl FnMut(usize, Rgb, f32)) {
+        let h = self.m.voxel_size.as_dvec3();
+        let dv = d.as_dvec3() / h;
+        let hi = DVec3::new(self.bd[0] as f64, self.bd[1] as f64, self.bd[2] as f64);
+        let Some((t0, t1)) = crate::medium::ray_box(DVec3::ZERO, hi, o, dv, f64::NEG_INFINITY, f64::INFINITY) else {
+            return;
+        };
+        let sigma_t = self.m.sigma_t as f64;
+        let mut l = l0;
+        let mut prev: Option<([usize; 3], bool)> = None;
+        walk(self.bd, o, dv, t0, t1, |c, len| {
+            let idx = self.lin(c);
+            let rho = self.rho[idx];
+            let full = rho > 0.0;
+            if full {
+                if let (Some(hook), Some((pc, false)), Some((b, _))) = (self.entry, prev, src.bin) {
+                    let g = [pc[0] + self.lo[0], pc[1] + self.lo[1], pc[2] + self.lo[2]];
+                    if let Some(lh) = hook(g, b) {
+                        l = lh;
+                    }
+                }
+                let tau = sigma_t * rho as f64 * len;
+                let (e, integral) = if tau < 1e-6 {
+                    (1.0 - tau, len * (1.0 - 0.5 * tau))
+                } else {
+                    let e = (-tau).exp();
+                    (e, (1.0 - e) * len / tau)
+                };
+                sink(idx, l * integral as f32, len as f32);
+                l *= e as f32;
+            }
+            prev = Some((c, full));
+        });
+    }
+
+    /// One family of parallel rays along `d` (world, unit): launched from the plane perpendicular
+    /// to the dominant axis of `d`, one ray per voxel face of that plane (a lattice with one random offset), covering the
+    /// box's shadow along `d`, so in every plane x_a = const the rays form a lattice of one per
+    /// voxel face and every voxel is crossed. Cross-section weight area·|d_a|·`share`.
+    fn trace_family(&self, src: &Source, d: Vec3, share: f32, rng: &mut Rng, sums: &mut Sums) -> u64 {
+        let h = self.m.voxel_size;
+        let a = if d.x.abs() >= d.y.abs() && d.x.abs() >= d.z.abs() {
+            0
+        } else if d.y.abs() >= d.z.abs() {
+            1
+        } else {
+            2
+        };
+        let (u, v) = ((a + 1) % 3, (a + 2) % 3);
+        let plane = if d[a] > 0.0 { 0.0 } else { self.bd[a] as f64 };
+        let fv = d.as_dvec3() / h.as_dvec3();
+        let reach = |x: usize| -> (i64, i64) {
+            // A ray launched at coordinate o moves by `shift` (voxels) along axis x while crossing
+            // the box; it can touch [0, bd_x] when o ∈ [−max(shift, 0), bd_x + max(−shift, 0)].
+            let shift = fv[x] / fv[a].abs() * self.bd[a] as f64;
+            (-(shift.max(0.0).ceil() as i64) - 1, self.bd[x] as i64 + (-shift).max(0.0).ceil() as i64 + 1)
+        };
+        let (u0, u1) = reach(u);
+        let (v0, v1) = reach(v);
+        let w = h[u] * h[v] * d[a].abs() * share;
+        let mut rays = 0u64;
+        // One random offset for the whole family: a rigid lattice keeps exactly one ray per voxel
+        // face in every plane (independent per-ray jitter would leave gaps downstream).
+        let (ou, ov) = (rng.uniform_f64(), rng.uniform_f64());
+        for jv in v0..v1 {
+            for ju in u0..u1 {
+                let mut o = DVec3::ZERO;
+                o[a] = plane;
+                o[u] = ju as f64 + ou;
+                o[v] = jv as f64 + ov;
+                let mut hit = false;
+                self.trace(src, o, d, src.radiance, |idx, li, len| {
+                    hit = true;
+                    let s = &mut sums[idx];
+                    s[0] += w * li.x;
+                    s[1] += w * li.y;
+                    s[2] += w * li.z;
+                    s[3] += w * len;
+                });
+                rays += hit as u64;
+            }
+        }
+        rays
+    }
+
+    /// All rays of one direction into per-voxel sums over the active box.
+    fn trace_source(&self, src: &Source, src_id: u64) -> (Sums, u64, u64) {
+        let mut fallback = 0u64;
+        let n = self.bd[0] * self.bd[1] * self.bd[2];
+        let mut sums: Sums = vec![[0.0; 4]; n];
+        let h = self.m.voxel_size;
+        let flow0 = match src.bin {
+            Some((_, b)) => -b.center,
+            None => src.flow,
+        };
+        let ss = self.ss;
+        let mut rays = 0u64;
+        for stratum in 0..ss * ss {
+            let mut rng = Rng::new(mix64(self.seed ^ mix64(src_id)), stratum as u64);
+            // The family's direction and its share of the bin's solid angle.
+            let (d, share) = match src.bin {
+                Some((_, b)) if ss > 1 => {
+                    let (su, sv) = (stratum % ss, stratum / ss);
+                    let (fu, fv) = ((su as f32 + rng.uniform()) / ss as f32, (sv as f32 + rng.uniform()) / ss as f32);
+                    let du = (b.u[1] - b.u[0]) / ss as f64;
+                    let dv = (b.v[1] - b.v[0]) / ss as f64;
+                    let (ua, va) = (b.u[0] + su as f64 * du, b.v[0] + sv as f64 * dv);
+                    let sa = crate::lighting::bins::rect_solid_angle(ua, ua + du, va, va + dv);
+                    (-b.direction_at(fu, fv), (sa / b.solid_angle) as f32)
+                }
+                Some((_, b)) => (-b.center, 1.0),
+                None => (src.flow, 1.0),
+            };
+            rays += self.trace_family(src, d, share, &mut rng, &mut sums);
+        }
+        // A full voxel no ray crossed: one ray through its centre, from where it enters the box.
+        for k in 0..self.bd[2] {
+            for j in 0..self.bd[1] {
+                for i in 0..self.bd[0] {
+                    let idx = self.lin([i, j, k]);
+                    if self.rho[idx] > 0.0 && sums[idx][3] == 0.0 {
+                        let c = DVec3::new(i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5);
+                        let dv = flow0.as_dvec3() / h.as_dvec3();
+                        let back = c - dv * 1e9;
+                        fallback += 1;
+                        let mut acc = [0.0f32; 4];
+                        self.trace(src, back, flow0, src.radiance, |id2, li, len| {
+                            if id2 == idx {
+                                acc = [li.x, li.y, li.z, len];
+                            }
+                        });
+                        sums[idx] = acc;
+                    }
+                }
+            }
+        }
+        (sums, rays, fallback)
+    }
+}
+
+/// Stage 1: propagate every bin and the sun through `m`; see the module docs.
+pub fn compute(m: &Medium, bins: &DirectionBins, sources: &IncidentSources, settings: &IncidentSettings, entry: Option<&EntryRadiance>) -> IncidentLight {
+    let dims = m.dims();
+    let n = dims[0] * dims[1] * dims[2];
+    let (sun_dir, sun_e) = sources.sun.unwrap_or((Vec3::Y, Rgb::ZERO));
+    let sun_transmittance = SunTransmittance::compute(m, sun_dir);
+    let mut out = IncidentLight {
+        dims,
+        q0: vec![Rgb::ZERO; n],
+        q1: [vec![Rgb::ZERO; n], vec![Rgb::ZERO; n], vec![Rgb::ZERO; n]],
+        sun_mean_transmittance: vec![1.0; n],
+        sun_transmittance,
+        sun_irradiance: sun_e,
+        bin_radiance: sources.bin_radiance.clone(),
+        rays: 0,
+        fallback_rays: 0,
+    };
+    let Some((lo, hi)) = active_box(m, 1) else {
+        return out;
+    };
+    let bd = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
+    let nb = bd[0] * bd[1] * bd[2];
+    let mut rho = vec![0f32; nb];
+    for k in 0..bd[2] {
+        for j in 0..bd[1] {
+            for i in 0..bd[0] {
+                rho[i + bd[0] * (j + bd[1] * k)] = m.density.get(i + lo[0], j + lo[1], k + lo[2]);
+            }
+        }
+    }
+    let ctx = Ctx {
+        m,
+        lo,
+        bd,
+        rho,
+        entry,
+        seed: settings.seed,
+        ss: settings.rays_per_face_edge.max(1),
+    };
+    // Sources: the 96 bins, then the sun. Each contributes Δω·Ī to Σ0 and Δω·Ī·flow to Σ1.
+    let mut list: Vec<(Source, Rgb, Vec3)> = bins
+        .bins
+        .iter()
+        .enumerate()
+        .filter(|(b, _)| sources.bin_radiance[*b].max_element() > 0.0 || entry.is_some())
+        .map(|(b, bin)| {
+            (
+                Source {
+                    bin: Some((b, bin)),
+                    flow: -bin.center,
+                    radiance: sources.bin_radiance[b],
+                },
+                Rgb::splat(bin.solid_angle as f32),
+                -bin.mean_dir,
+            )
+        })
+        .collect();
+    let sun_index = list.len();
+    if sun_e.max_element() > 0.0 {
+        list.push((
+            Source {
+                bin: None,
+                flow: -sun_dir,
+                radiance: Rgb::ONE,
+            },
+            sun_e,
+            -sun_dir,
+        ));
+    }
+    // Accumulators over the active box: Σ0 (3) and Σ1 (3 axes × 3 bands), f64, in source order.
+    let mut s0 = vec![[0f64; 3]; nb];
+    let mut s1 = vec![[0f64; 9]; nb];
+    let mut sun_t = vec![1f32; nb];
+    let chunk = rayon::current_num_threads().max(1) * 2;
+    let mut rays = 0u64;
+    let mut fallback = 0u64;
+    for (ci, group) in list.chunks(chunk).enumerate() {
+        let results: Vec<(Sums, u64, u64)> = group
+            .par_iter()
+            .enumerate()
+            .map(|(gi, (src, _, _))| {
+                let id = (ci * chunk + gi) as u64;
+                let id = src.bin.map_or(NUM_BINS as u64 + 1, |(b, _)| b as u64) ^ (id << 32);
+                ctx.trace_source(src, id)
+            })
+            .collect();
+        rays += results.iter().map(|r| r.1).sum::<u64>();
+        fallback += results.iter().map(|r| r.2).sum::<u64>();
+        let base = ci * chunk;
+        s0.par_chunks_mut(4096)
+            .zip(s1.par_chunks_mut(4096))
+            .zip(sun_t.par_chunks_mut(4096))
+            .enumerate()
+            .for_each(|(bi, ((a0, a1), st))| {
+                for (o, ((v0, v1), t)) in a0.iter_mut().zip(a1.iter_mut()).zip(st.iter_mut()).enumerate() {
+                    let idx = bi * 4096 + o;
+                    for (gi, (res, _, _)) in results.iter().enumerate() {
+                        let s = res[idx];
+                        if s[3] <= 0.0 {
+                            continue;
+                        }
+                        let (_, dw, flow) = &group[gi];
+                        let inv = 1.0 / s[3] as f64;
+                        let mean = [s[0] as f64 * inv, s[1] as f64 * inv, s[2] as f64 * inv];
+                        if base + gi == sun_index {
+                            *t = mean[0] as f32;
+                        }
+                        for c in 0..3 {
+                            let p = mean[c] * dw[c] as f64;
+                            v0[c] += p;
+                            for ax in 0..3 {
+                                v1[3 * ax + c] += p * flow[ax] as f64;
+                            }
+                        }
+                    }
+                }
+            });
+    }
+    out.rays = rays;
+    out.fallback_rays = fallback;
+    // Scatter into the full grid with ρσs/(4π) and ρσs·g/(4π).
+    let sigma_s = m.albedo * m.sigma_t;
+    let g = m.g as f64;
+    for k in 0..bd[2] {
+        for j in 0..bd[1] {
+            for i in 0..bd[0] {
+                let bi = i + bd[0] * (j + bd[1] * k);
+                let rho = ctx.rho[bi] as f64;
+                if rho <= 0.0 {
+                    continue;
+                }
+                let gi = (i + lo[0]) + dims[0] * ((j + lo[1]) + dims[1] * (k + lo[2]));
+                let f = [
+                    rho * sigma_s.x as f64 / (4.0 * PI),
+                    rho * sigma_s.y as f64 / (4.0 * PI),
+                    rho * sigma_s.z as f64 / (4.0 * PI),
+                ];
+                out.q0[gi] = Rgb::new((f[0] * s0[bi][0]) as f32, (f[1] * s0[bi][1]) as f32, (f[2] * s0[bi][2]) as f32);
+                for ax in 0..3 {
+                    out.q1[ax][gi] = Rgb::new(
+                        (f[0] * g * s1[bi][3 * ax]) as f32,
+                        (f[1] * g * s1[bi][3 * ax + 1]) as f32,
+                        (f[2] * g * s1[bi][3 * ax + 2]) as f32,
+                    );
+                }
+                out.sun_mean_transmittance[gi] = sun_t[bi];
+            }
+        }
+    }
+    out
+}
+
