@@ -1,6 +1,7 @@
 //! Subcommands of the `cloudgi` binary.
 
 mod compare;
+mod export;
 mod progress;
 mod slab;
 
@@ -31,6 +32,8 @@ enum Command {
     Slab(slab::SlabArgs),
     /// Compare TEST.exr against REF.exr over the cloud pixels: one JSON line, optional difference PNG.
     Compare(compare::CompareArgs),
+    /// Export the scene for another renderer (Mitsuba 3) to cross-check the reference.
+    Export(export::ExportArgs),
 }
 
 #[derive(Args, Debug)]
@@ -81,6 +84,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Render(a) => render(a, cli.quiet),
         Command::Slab(a) => slab::run(a),
         Command::Compare(a) => compare::run(a),
+        Command::Export(a) => export::run(a, cli.quiet),
     }
 }
 

@@ -7,6 +7,7 @@
 //! * [`integrator`]: the path estimator (NEE of sun and sky with MIS, Lambertian ground,
 //!   Russian roulette, no depth cap by default).
 //! * [`slab`]: the same transport in a plane-parallel slab, checked against adding-doubling.
+//! * [`mitsuba`]: export of the scene to Mitsuba 3 for an independent cross-check.
 //!
 //! Rendering is progressive: pass after pass of one sample per pixel, each pixel sample drawing
 //! from its own stream [`Rng::for_pixel`]`(seed, x, y, sample)`, summed per pixel in sample order,
@@ -18,6 +19,7 @@
 //! `render.stderr`, `stderr` (the standard error of each pixel's mean, per band).
 
 pub mod integrator;
+pub mod mitsuba;
 pub mod sky;
 pub mod slab;
 pub mod tracking;
