@@ -9,8 +9,10 @@
 //!   minus ours) with the same irradiance;
 //! * constant sky → `constant` emitter with the same radiance;
 //! * ground → a `rectangle` of half-size [`GROUND_HALF_SIZE`] facing up with a `diffuse` BSDF. When
-//!   the ground coincides with the grid's floor it is lowered by [`GROUND_OFFSET`] so the two
-//!   surfaces do not fight over the same intersection;
+//!   the ground lies within [`ground_offset`] of the grid's floor it is lowered to that distance
+//!   below it: Mitsuba pushes new rays off a surface by about 5e-6 × the coordinates' magnitude
+//!   (2.7 mm at 500 m), and a shadow ray leaving a ground that touches the box would start inside
+//!   the box, which Mitsuba then treats as blocked (the box's footprint came out black);
 //! * camera → `perspective` sensor, vertical field of view (`fov_axis = "y"`), `hdrfilm` of the
 //!   same size, `box` filter, `independent` sampler with `render.spp` samples;
 //! * integrator → `volpath` with no depth cap (`max_depth = -1`), as our reference.
@@ -27,8 +29,11 @@ use std::path::{Path, PathBuf};
 
 /// Half-size (m) of the ground rectangle.
 pub const GROUND_HALF_SIZE: f32 = 1.0e6;
-/// How far (m) the ground is lowered when it lies on the grid's floor.
-pub const GROUND_OFFSET: f32 = 1.0e-3;
+/// How far (m) the ground must stay below the grid's floor in the export: 1e-4 × the largest
+/// coordinate of the grid's box (+1 m), about 20 times Mitsuba's ray offset there.
+pub fn ground_offset(lo: Vec3, hi: Vec3) -> f32 {
+    1.0e-4 * (lo.abs().max(hi.abs()).max_element() + 1.0)
+}
 
 fn v3(v: Vec3) -> String {
     format!("{}, {}, {}", v.x, v.y, v.z)
@@ -120,11 +125,8 @@ pub fn scene_xml(scene: &Scene, vol_name: &str) -> Result<String> {
     let _ = writeln!(w, "        </medium>");
     let _ = writeln!(w, "    </shape>");
     if let Some(g) = &scene.ground {
-        let h = if (g.height - lo.y).abs() < GROUND_OFFSET {
-            lo.y.min(g.height) - GROUND_OFFSET
-        } else {
-            g.height
-        };
+        let off = ground_offset(lo, hi);
+        let h = if (g.height - lo.y).abs() < off { lo.y - off } else { g.height };
         // Mitsuba's rectangle spans [−1, 1]² in the xy plane facing +z; rotate it to face +y.
         let _ = writeln!(w, "    <shape type=\"rectangle\">");
         let _ = writeln!(w, "        <transform name=\"to_world\">");
@@ -191,8 +193,10 @@ mod tests {
         // Mitsuba's direction is where the light goes: minus ours.
         let s = -scene.sun.dir;
         assert!(xml.contains(&format!("value=\"{}, {}, {}\"", s.x, s.y, s.z)));
-        // The ground sits on the grid's floor in the default scene: lowered by 1 mm.
-        assert!(xml.contains("<translate value=\"0, -0.001, 0\"/>"), "{xml}");
+        // The ground sits on the grid's floor in the default scene: lowered by 1e-4 × 500 m (+1).
+        let (lo, hi) = scene.medium.bbox();
+        assert!((ground_offset(lo, hi) - 0.0501).abs() < 1e-6);
+        assert!(xml.contains("<translate value=\"0, -0.0501, 0\"/>"), "{xml}");
         let bytes = std::fs::read(&files[1]).unwrap();
         let (g, lo, hi) = parse_vol(&bytes, "density.vol").unwrap();
         assert_eq!(g.data(), scene.medium.density.data());
