@@ -124,6 +124,16 @@ pub fn render_with_stats(scene: &Scene, progress: &dyn Progress, timings: &mut T
     (img, stats)
 }
 
+/// Convenience for tests and other methods' comparisons: the reference image of `scene` at `spp`
+/// samples per pixel (no time limit, no progress), with the `transmittance` layer and, if
+/// `scene.render.stderr`, the `stderr` layer. All other settings come from `scene.render`.
+pub fn render_image(scene: &Scene, spp: u32) -> Image {
+    let mut s = scene.clone();
+    s.render.spp = spp.max(1);
+    s.render.time_limit = None;
+    render_with_stats(&s, &crate::render::NoProgress, &mut Timings::default()).0
+}
+
 /// One sample of pixel (x, y): a jittered camera ray through the pixel, traced with stream
 /// `Rng::for_pixel(seed, x, y, s)`.
 #[inline]
