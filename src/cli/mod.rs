@@ -2,6 +2,7 @@
 
 mod compare;
 mod info;
+mod export;
 mod progress;
 mod slab;
 mod sky;
@@ -37,6 +38,8 @@ enum Command {
     Info(info::InfoArgs),
     /// Export the scene's sky as an equirectangular EXR (row 0 = +y) plus a PNG preview.
     Sky(sky::SkyArgs),
+    /// Export the scene for another renderer (Mitsuba 3) to cross-check the reference.
+    Export(export::ExportArgs),
 }
 
 #[derive(Args, Debug)]
@@ -89,6 +92,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Compare(a) => compare::run(a),
         Command::Info(a) => info::run(a),
         Command::Sky(a) => sky::run(a, cli.quiet),
+        Command::Export(a) => export::run(a, cli.quiet),
     }
 }
 

@@ -49,7 +49,7 @@ pub fn radiance(scene: &Scene, o: Vec3, d: Vec3, opts: &PathOptions, rng: &mut R
     let m = &scene.medium;
     let sun = &scene.sun;
     let ground = scene.ground.as_ref();
-    // The one line to change when `Sky::sample`/`Sky::pdf` land: `let sky = &scene.sky;`.
+    // Sky NEE through `Sky::sample`/`Sky::pdf` (uniform sphere for the constant sky, map importance sampling otherwise).
     let sky = SkySampler::new(&scene.sky);
     let sun_on = sun.irradiance.max_element() > 0.0;
     let ground_t = |p: Vec3, dir: Vec3| ground.and_then(|g| g.intersect(p, dir));

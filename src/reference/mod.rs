@@ -7,6 +7,7 @@
 //! * [`integrator`]: the path estimator (NEE of sun and sky with MIS, Lambertian ground,
 //!   Russian roulette, no depth cap by default).
 //! * [`slab`]: the same transport in a plane-parallel slab, checked against adding-doubling.
+//! * [`mitsuba`]: export of the scene to Mitsuba 3 for an independent cross-check.
 //!
 //! Rendering is progressive: pass after pass of one sample per pixel, each pixel sample drawing
 //! from its own stream [`Rng::for_pixel`]`(seed, x, y, sample)`, summed per pixel in sample order,
@@ -18,6 +19,7 @@
 //! `render.stderr`, `stderr` (the standard error of each pixel's mean, per band).
 
 pub mod integrator;
+pub mod mitsuba;
 pub mod sky;
 pub mod slab;
 pub mod tracking;
@@ -120,6 +122,16 @@ pub fn render_with_stats(scene: &Scene, progress: &dyn Progress, timings: &mut T
         seconds: start.elapsed().as_secs_f64(),
     };
     (img, stats)
+}
+
+/// Convenience for tests and other methods' comparisons: the reference image of `scene` at `spp`
+/// samples per pixel (no time limit, no progress), with the `transmittance` layer and, if
+/// `scene.render.stderr`, the `stderr` layer. All other settings come from `scene.render`.
+pub fn render_image(scene: &Scene, spp: u32) -> Image {
+    let mut s = scene.clone();
+    s.render.spp = spp.max(1);
+    s.render.time_limit = None;
+    render_with_stats(&s, &crate::render::NoProgress, &mut Timings::default()).0
 }
 
 /// One sample of pixel (x, y): a jittered camera ray through the pixel, traced with stream

@@ -1,0 +1,42 @@
+//! `cloudgi export mitsuba [SCENE] -o DIR`: write the scene for an independent renderer.
+
+use clap::{Args, Subcommand};
+use cloudgi::error::Result;
+use cloudgi::scene::Scene;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct ExportArgs {
+    #[command(subcommand)]
+    target: Target,
+}
+
+#[derive(Subcommand, Debug)]
+enum Target {
+    /// Mitsuba 3: DIR/scene.xml (volpath, heterogeneous medium, sun, sky, ground, camera) + DIR/density.vol.
+    Mitsuba(MitsubaArgs),
+}
+
+#[derive(Args, Debug)]
+struct MitsubaArgs {
+    /// Scene file (TOML). Without it, the built-in default scene.
+    scene: Option<PathBuf>,
+    /// Output folder (created if missing).
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+pub fn run(a: ExportArgs, quiet: bool) -> Result<()> {
+    match a.target {
+        Target::Mitsuba(m) => {
+            let scene = Scene::load(m.scene.as_deref(), |_| {})?;
+            let files = cloudgi::reference::mitsuba::export(&scene, &m.output)?;
+            if !quiet {
+                for f in files {
+                    eprintln!("wrote {}", f.display());
+                }
+            }
+            Ok(())
+        }
+    }
+}

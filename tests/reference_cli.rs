@@ -1,0 +1,71 @@
+//! The command line of the reference tools: `render --method reference`, `compare`, `export mitsuba`.
+
+use std::path::Path;
+use std::process::Command;
+
+fn cloudgi(args: &[&str], dir: &Path) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_cloudgi"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .unwrap()
+}
+
+const SCENE: &str = r#"
+[medium]
+resolution = [20, 16, 12]
+voxel_size = 40.0
+origin = [-400.0, 0.0, -240.0]
+[camera]
+width = 24
+height = 18
+[render]
+method = "reference"
+spp = 4
+"#;
+
+#[test]
+fn render_compare_and_export() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("s.toml"), SCENE).unwrap();
+    let out = cloudgi(&["render", "s.toml", "-o", "ref.exr", "--stderr", "--max-depth", "50", "-q"], d);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let img = cloudgi::Image::read_exr(&d.join("ref.exr")).unwrap();
+    assert!(img.layer("stderr").is_some() && img.layer("transmittance").is_some());
+    assert!(d.join("ref.png").exists());
+    let out = cloudgi(&["render", "s.toml", "-o", "single.exr", "--method", "single", "-q"], d);
+    assert!(out.status.success());
+
+    // Against itself: zero error. Against `single`: darker (no multiple scattering).
+    let out = cloudgi(&["compare", "ref.exr", "ref.exr"], d);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["rmse"].as_f64(), Some(0.0));
+    assert!(v["psnr"].is_null(), "infinite PSNR is written as null");
+    assert_eq!(v["mask"], "transmittance < 0.99");
+    let out = cloudgi(&["compare", "single.exr", "ref.exr", "--diff", "diff.png", "--mask", "ref.exr"], d);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert_eq!(text.lines().count(), 1);
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    for k in ["rmse", "psnr", "mean_relative_error", "luminance_bias"] {
+        assert!(v[k].is_f64(), "{k} in {text}");
+    }
+    assert!(v["luminance_bias"].as_f64().unwrap() < -0.2, "{text}");
+    assert!(v["pixels"].as_u64().unwrap() > 0);
+    assert!(d.join("diff.png").exists());
+
+    // Bad input: clear messages, no panic.
+    let out = cloudgi(&["compare", "single.exr", "missing.exr"], d);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("missing.exr"));
+    let out = cloudgi(&["compare", "single.exr", "ref.exr", "--diff", "diff.jpg"], d);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--diff"));
+    let out = cloudgi(&["render", "s.toml", "-o", "x.exr", "--time-limit", "0", "-q"], d);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("render.time_limit"));
+
+    let out = cloudgi(&["export", "mitsuba", "s.toml", "-o", "mi", "-q"], d);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(d.join("mi/scene.xml").exists() && d.join("mi/density.vol").exists());
+}
