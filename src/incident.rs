@@ -54,7 +54,7 @@ use rayon::prelude::*;
 use std::f64::consts::PI;
 
 /// The clear-air hook: `(empty voxel, bin) → Some(radiance arriving from that bin)`; see the module docs.
-pub type EntryRadiance = dyn Fn([usize; 3], usize) -> Option<Rgb> + Sync;
+pub type EntryRadiance<'h> = dyn Fn([usize; 3], usize) -> Option<Rgb> + Sync + 'h;
 
 /// Stage-1 sampling settings.
 #[derive(Clone, Debug)]
@@ -140,7 +140,7 @@ impl IncidentLight {
 }
 
 /// Stage 1 for a scene with default sampling (seed from `render.seed`).
-pub fn compute_incident(scene: &Scene, entry: Option<&EntryRadiance>) -> IncidentLight {
+pub fn compute_incident(scene: &Scene, entry: Option<&EntryRadiance<'_>>) -> IncidentLight {
     let settings = IncidentSettings {
         seed: scene.render.seed,
         ..IncidentSettings::default()
@@ -247,7 +247,7 @@ struct Ctx<'a> {
     lo: [usize; 3],
     bd: [usize; 3],
     rho: Vec<f32>,
-    entry: Option<&'a EntryRadiance>,
+    entry: Option<&'a EntryRadiance<'a>>,
     seed: u64,
     ss: usize,
 }
@@ -315,7 +315,10 @@ impl Ctx<'_> {
             // A ray launched at coordinate o moves by `shift` (voxels) along axis x while crossing
             // the box; it can touch [0, bd_x] when o ∈ [−max(shift, 0), bd_x + max(−shift, 0)].
             let shift = fv[x] / fv[a].abs() * self.bd[a] as f64;
-            (-(shift.max(0.0).ceil() as i64) - 1, self.bd[x] as i64 + (-shift).max(0.0).ceil() as i64 + 1)
+            (
+                -(shift.max(0.0).ceil() as i64) - 1,
+                self.bd[x] as i64 + (-shift).max(0.0).ceil() as i64 + 1,
+            )
         };
         let (u0, u1) = reach(u);
         let (v0, v1) = reach(v);
@@ -401,7 +404,13 @@ impl Ctx<'_> {
 }
 
 /// Stage 1: propagate every bin and the sun through `m`; see the module docs.
-pub fn compute(m: &Medium, bins: &DirectionBins, sources: &IncidentSources, settings: &IncidentSettings, entry: Option<&EntryRadiance>) -> IncidentLight {
+pub fn compute(
+    m: &Medium,
+    bins: &DirectionBins,
+    sources: &IncidentSources,
+    settings: &IncidentSettings,
+    entry: Option<&EntryRadiance<'_>>,
+) -> IncidentLight {
     let dims = m.dims();
     let n = dims[0] * dims[1] * dims[2];
     let (sun_dir, sun_e) = sources.sun.unwrap_or((Vec3::Y, Rgb::ZERO));
@@ -551,4 +560,3 @@ pub fn compute(m: &Medium, bins: &DirectionBins, sources: &IncidentSources, sett
     }
     out
 }
-

@@ -5,10 +5,10 @@
 //! [`image::Image`] (linear HDR) → EXR + tone-mapped PNG.
 
 pub mod camera;
-pub mod cube;
 pub mod compare;
-pub mod edges;
+pub mod cube;
 pub mod diffusion;
+pub mod edges;
 pub mod error;
 pub mod image;
 pub mod incident;

@@ -42,7 +42,11 @@ impl LitVolume {
         let d = medium.dims();
         let rho = medium.density.data();
         let mk = |c: usize, weighted: bool| {
-            let data: Vec<f32> = solution.i0[c].iter().zip(rho).map(|(v, r)| if weighted { v * r } else { *v }).collect();
+            let data: Vec<f32> = solution.i0[c]
+                .iter()
+                .zip(rho)
+                .map(|(v, r)| if weighted { v * r } else { *v })
+                .collect();
             Grid3::from_vec(d, data, "diffusion solution").unwrap_or_else(|_| Grid3::filled(d, 0.0))
         };
         LitVolume {
@@ -61,7 +65,11 @@ impl LitVolume {
             return Rgb::ZERO;
         }
         let a = v.to_array();
-        Rgb::new(self.rho_i0[0].trilinear(a), self.rho_i0[1].trilinear(a), self.rho_i0[2].trilinear(a)) / rho
+        Rgb::new(
+            self.rho_i0[0].trilinear(a),
+            self.rho_i0[1].trilinear(a),
+            self.rho_i0[2].trilinear(a),
+        ) / rho
     }
 
     /// Source per unit extinction S (W·m⁻²·sr⁻¹) at voxel coordinates `v` with trilinear density

@@ -202,6 +202,9 @@ pub enum Method {
     Reference,
     /// Diffusion (stage 1 + eq. 4 solved by multigrid) composited with exact sun single scattering (paper Fig. 5).
     Diffusion,
+    /// Diffusion, clear-air propagation with viewing cubes and ground hemicubes, and the
+    /// low-density edge treatment in the final gather (paper Fig. 7).
+    Full,
 }
 
 impl Method {
@@ -211,6 +214,7 @@ impl Method {
             Method::Single => "single",
             Method::Reference => "reference",
             Method::Diffusion => "diffusion",
+            Method::Full => "full",
         }
     }
 }
@@ -245,6 +249,12 @@ pub struct RenderDesc {
     pub solver_tolerance: f64,
     /// Most conjugate-gradient iterations of the diffusion solver per band.
     pub solver_max_iterations: usize,
+    /// `full`: most clear-air propagation iterations (0: diffusion plus edges only, paper Fig. 6).
+    pub iterations: usize,
+    /// `full`: stop iterating once I0 changes by less than this fraction (unitless).
+    pub propagation_tolerance: f64,
+    /// `full`: write the components (diffusion, low_density, sun_single, background) as EXR layers.
+    pub aov: bool,
 }
 
 impl Default for RenderDesc {
@@ -261,6 +271,9 @@ impl Default for RenderDesc {
             cube_resolution: crate::cube::render::DEFAULT_CUBE_RESOLUTION,
             ground_samples: crate::cube::render::DEFAULT_GROUND_SAMPLES,
             low_density_threshold: crate::edges::gather::DEFAULT_THRESHOLD,
+            iterations: crate::render::full::DEFAULT_ITERATIONS,
+            propagation_tolerance: crate::render::full::DEFAULT_PROPAGATION_TOLERANCE,
+            aov: false,
             solver_tolerance: 1e-6,
             solver_max_iterations: 200,
         }
@@ -350,6 +363,12 @@ pub struct RenderSettings {
     pub solver_tolerance: f64,
     /// Diffusion solver: most iterations per band.
     pub solver_max_iterations: usize,
+    /// `full`: most clear-air propagation iterations (0: diffusion plus edges only, paper Fig. 6).
+    pub iterations: usize,
+    /// `full`: stop iterating once I0 changes by less than this fraction (unitless).
+    pub propagation_tolerance: f64,
+    /// `full`: write the components (diffusion, low_density, sun_single, background) as EXR layers.
+    pub aov: bool,
 }
 
 /// A validated scene, ready to render.
@@ -439,6 +458,20 @@ impl Scene {
         )?;
         check(
             f,
+            "render.iterations",
+            r.iterations <= 20,
+            r.iterations,
+            "the clear-air iterations are a count from 0 to 20 (the paper found 1 enough)",
+        )?;
+        check(
+            f,
+            "render.propagation_tolerance",
+            r.propagation_tolerance.is_finite() && r.propagation_tolerance >= 0.0,
+            r.propagation_tolerance,
+            "the propagation tolerance is a relative change ≥ 0, e.g. 0.01",
+        )?;
+        check(
+            f,
             "render.solver_tolerance",
             r.solver_tolerance.is_finite() && r.solver_tolerance > 0.0 && r.solver_tolerance < 1.0,
             r.solver_tolerance,
@@ -469,6 +502,9 @@ impl Scene {
             stderr: r.stderr,
             cubes,
             low_density_threshold: r.low_density_threshold,
+            iterations: r.iterations,
+            propagation_tolerance: r.propagation_tolerance,
+            aov: r.aov,
             solver_tolerance: r.solver_tolerance,
             solver_max_iterations: r.solver_max_iterations,
         };

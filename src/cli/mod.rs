@@ -1,11 +1,11 @@
 //! Subcommands of the `cloudgi` binary.
 
 mod compare;
-mod info;
 mod export;
+mod info;
 mod progress;
-mod slab;
 mod sky;
+mod slab;
 
 use clap::{Args, Parser, Subcommand};
 use cloudgi::error::{Error, Result};
@@ -73,6 +73,12 @@ struct RenderArgs {
     /// Set render.stderr (reference: write the per-pixel standard error as EXR layer `stderr`).
     #[arg(long)]
     stderr: bool,
+    /// Override render.iterations (full: clear-air propagation iterations, 0 = paper Fig. 6).
+    #[arg(long)]
+    iterations: Option<usize>,
+    /// Set render.aov (full: write diffusion, low_density, sun_single, background as EXR layers).
+    #[arg(long)]
+    aov: bool,
 }
 
 /// Run the parsed command.
@@ -138,6 +144,12 @@ fn render(a: RenderArgs, quiet: bool) -> Result<()> {
         }
         if a.stderr {
             d.render.stderr = true;
+        }
+        if let Some(n) = a.iterations {
+            d.render.iterations = n;
+        }
+        if a.aov {
+            d.render.aov = true;
         }
     })?;
     let progress = progress::Bars::new(quiet);

@@ -385,7 +385,9 @@ pub fn solve_diffusion(
         .into_par_iter()
         .map(|c| {
             let x0 = previous.map(|p| to_local(&p.i0[c]));
-            hier[which[c]].1.solve(&systems[c].1, x0.as_deref(), settings.tolerance, settings.max_iterations)
+            hier[which[c]]
+                .1
+                .solve(&systems[c].1, x0.as_deref(), settings.tolerance, settings.max_iterations)
         })
         .collect();
     for (c, (_, stats)) in results.iter().enumerate() {

@@ -1,6 +1,7 @@
 //! Rendering: method dispatch, progress reporting and stage timings.
 
 pub mod diffusion;
+pub mod full;
 pub mod march;
 pub mod single;
 
@@ -38,11 +39,16 @@ pub struct Timings {
 }
 
 impl Timings {
-    /// Run `f` as stage `name`, recording its time.
+    /// Run `f` as stage `name`, recording its time (added to the stage's earlier runs, so an
+    /// iterated stage shows its total).
     pub fn time<T>(&mut self, name: &str, f: impl FnOnce() -> T) -> T {
         let t = Instant::now();
         let r = f();
-        self.stages.push((name.to_string(), t.elapsed().as_secs_f64()));
+        let dt = t.elapsed().as_secs_f64();
+        match self.stages.iter_mut().find(|s| s.0 == name) {
+            Some(s) => s.1 += dt,
+            None => self.stages.push((name.to_string(), dt)),
+        }
         r
     }
 
@@ -75,21 +81,22 @@ pub fn render(scene: &Scene, progress: &dyn Progress) -> Result<RenderOutput> {
         Method::Single => single::render(scene, progress, &mut timings)?,
         Method::Reference => crate::reference::render(scene, progress, &mut timings)?,
         Method::Diffusion => diffusion::render(scene, progress, &mut timings)?,
+        Method::Full => full::render(scene, progress, &mut timings)?,
     };
     Ok(RenderOutput { image, timings })
 }
 
 /// Render rows in parallel: `shade(x, y)` gives a pixel; progress advances per row.
-pub fn render_rows(
+pub fn render_rows<T: Clone + Default + Send>(
     width: u32,
     height: u32,
     progress: &dyn Progress,
     stage: &str,
-    shade: impl Fn(u32, u32) -> crate::math::Rgb + Sync,
-) -> Vec<crate::math::Rgb> {
+    shade: impl Fn(u32, u32) -> T + Sync,
+) -> Vec<T> {
     use rayon::prelude::*;
     progress.begin(stage, height as u64);
-    let mut px = vec![crate::math::Rgb::ZERO; width as usize * height as usize];
+    let mut px = vec![T::default(); width as usize * height as usize];
     px.par_chunks_mut(width as usize).enumerate().for_each(|(y, row)| {
         for (x, p) in row.iter_mut().enumerate() {
             *p = shade(x as u32, y as u32);

@@ -1,0 +1,238 @@
+//! Method `full` (the paper's Figure 7): stages 1 and 2, the clear-air propagation of section 3,
+//! and the final gather with the low-density edges of section 4.
+//!
+//! 1. Stage 1 (incident light from sky, ground and sun) and stage 2 (diffusion solve).
+//! 2. Clear air, iterated (`render.iterations`, `--iterations`): the ground's hemicubes and a
+//!    viewing cube at every empty border voxel are rendered from the current lit volume; stage 1 is
+//!    re-run with rays entering the cloud from a border voxel carrying that cube's radiance from
+//!    the opposite bin (light reflected by other cloud parts and the lit ground); the diffusion
+//!    equation is re-solved warm-started from the previous I0. The relative change of I0 is logged
+//!    per iteration and the loop stops early below `render.propagation_tolerance`.
+//! 3. Final gather ([`crate::edges::gather::EdgeGather`]): exact sun single scattering everywhere,
+//!    the diffusion radiance in the dense core, and for low-density segments the Poisson-weighted
+//!    HG orders convolved with a view-aligned cube at the segment's optical midpoint, over the lit
+//!    ground (the hemicubes' irradiance: cloud shadow and cloud light) or the sky.
+//!
+//! With `iterations = 0` this is the paper's Figure 6 (diffusion plus the low-density edges, the
+//! ground still lit by its hemicubes).
+
+use super::single::pixel_sample;
+use super::{render_rows, Progress, Timings};
+use crate::cube::{clear_air, CubeImage, CubeRenderer, LitVolume};
+use crate::diffusion::{solve_diffusion, DiffusionSolution};
+use crate::edges::gather::{CubeRequest, CubeSource, EdgeAov, EdgeGather, EdgeSettings, SunInput};
+use crate::error::Result;
+use crate::image::Image;
+use crate::incident::compute_incident;
+use crate::math::{Rgb, Vec3};
+use crate::scene::Scene;
+
+/// Default cap on clear-air iterations (the paper found one enough and two indistinguishable).
+pub const DEFAULT_ITERATIONS: usize = 2;
+/// Default stopping threshold on the relative change of I0 between iterations.
+pub const DEFAULT_PROPAGATION_TOLERANCE: f64 = 0.01;
+
+/// The lit scene after the clear-air iterations.
+pub struct Propagation {
+    /// Lit volume (final I0, sun transmittance, lit ground) for cubes and the gather.
+    pub lit: LitVolume,
+    /// The final diffusion solution.
+    pub solution: DiffusionSolution,
+    /// Relative change ‖I0_new − I0_old‖/‖I0_new‖ of each clear-air iteration.
+    pub changes: Vec<f64>,
+}
+
+/// I0 per voxel as RGB.
+fn i0_rgb(sol: &DiffusionSolution) -> Vec<Rgb> {
+    (0..sol.i0[0].len())
+        .map(|k| Rgb::new(sol.i0[0][k], sol.i0[1][k], sol.i0[2][k]))
+        .collect()
+}
+
+/// ‖a − b‖₂ / ‖b‖₂ over all voxels and bands.
+pub fn relative_change(old: &DiffusionSolution, new: &DiffusionSolution) -> f64 {
+    let (mut num, mut den) = (0f64, 0f64);
+    for c in 0..3 {
+        for (a, b) in old.i0[c].iter().zip(&new.i0[c]) {
+            num += ((b - a) as f64).powi(2);
+            den += (*b as f64).powi(2);
+        }
+    }
+    if den > 0.0 {
+        (num / den).sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// Stages 1–2 and the clear-air iterations.
+pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Propagation> {
+    let settings = super::diffusion::settings(scene);
+    let inc = timings.time("incident light", || compute_incident(scene, None));
+    let mut sol = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &inc, None, &settings))?;
+    progress.log(&sol.summary());
+    let sun_t = inc.sun_transmittance.grid.clone();
+    let mut changes = Vec::new();
+    let mut ca = timings.time("clear-air cubes", || clear_air(scene, i0_rgb(&sol), sun_t.clone(), progress));
+    let iterations = scene.render.iterations;
+    for it in 0..iterations {
+        if it > 0 {
+            ca = timings.time("clear-air cubes", || clear_air(scene, i0_rgb(&sol), sun_t.clone(), progress));
+        }
+        let hook = ca.cubes.hook();
+        let inc = timings.time("incident light", || compute_incident(scene, Some(&hook)));
+        let new = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &inc, Some(&sol), &settings))?;
+        let change = relative_change(&sol, &new);
+        progress.log(&format!(
+            "clear-air iteration {}/{}: {} border cubes, I0 changed by {:.3} % ({} warm-start iterations)",
+            it + 1,
+            iterations,
+            ca.cubes.len(),
+            100.0 * change,
+            new.stats[1].iterations
+        ));
+        sol = new;
+        changes.push(change);
+        if change < scene.render.propagation_tolerance {
+            break;
+        }
+    }
+    let ground = ca.lit.ground.clone();
+    let lit = LitVolume::new(
+        scene.medium.clone(),
+        i0_rgb(&sol),
+        sun_t,
+        scene.sun.clone(),
+        scene.sky.clone(),
+        ground,
+    );
+    Ok(Propagation {
+        lit,
+        solution: sol,
+        changes,
+    })
+}
+
+/// View-aligned cubes for the edge gather, rendered through the clear-air cube renderer.
+pub struct GatherCubes<'a> {
+    renderer: CubeRenderer<'a>,
+    /// Radius (m) of the tube around a segment whose cells are left out of its own cube.
+    exclude_radius: f32,
+}
+
+impl<'a> GatherCubes<'a> {
+    /// Cubes over `lit` with the scene's cube settings.
+    pub fn new(lit: &'a LitVolume, scene: &Scene) -> Self {
+        GatherCubes {
+            renderer: CubeRenderer::new(lit, &scene.render.cubes),
+            exclude_radius: lit.medium.min_voxel(),
+        }
+    }
+
+    /// Distance along `d` from the cube centre at which a ray leaves the segment's cells: the
+    /// tube of radius `exclude_radius` around the segment (paper section 6: the cells S_j crosses
+    /// are excluded, their scattering is what the orders count).
+    fn exclusion_start(&self, req: &CubeRequest, d: Vec3) -> f32 {
+        let (a, b) = req.exclude;
+        let axis = b - a;
+        let len = axis.length();
+        if len <= 0.0 {
+            return 0.0;
+        }
+        let x = axis / len;
+        let s_c = (req.center - a).dot(x).clamp(0.0, len);
+        let along = d.dot(x);
+        let t_axial = if along > 1e-6 {
+            (len - s_c) / along
+        } else if along < -1e-6 {
+            s_c / -along
+        } else {
+            f32::INFINITY
+        };
+        let perp = (d - x * along).length();
+        let t_tube = if perp > 1e-6 { self.exclude_radius / perp } else { f32::INFINITY };
+        let t = t_axial.min(t_tube);
+        if t.is_finite() {
+            t
+        } else {
+            0.0
+        }
+    }
+}
+
+impl CubeSource for GatherCubes<'_> {
+    fn render_cube(&self, req: &CubeRequest) -> CubeImage {
+        let mut cube = CubeImage::along(req.res, req.x_axis);
+        let res = req.res;
+        let cones: Vec<f32> = CubeImage::face_solid_angles(res).iter().map(|w| (*w as f32).sqrt()).collect();
+        for face in 0..6 {
+            for j in 0..res {
+                for i in 0..res {
+                    let d = cube.direction(face, i, j);
+                    let t0 = self.exclusion_start(req, d);
+                    let k = cube.index(face, i, j);
+                    cube.pixels[k] = self.renderer.trace(req.center + d * t0, d, cones[j * res + i]);
+                }
+            }
+        }
+        cube
+    }
+}
+
+/// Edge-gather settings from `[render]`.
+pub fn edge_settings(scene: &Scene) -> EdgeSettings {
+    EdgeSettings {
+        threshold: scene.render.low_density_threshold,
+        step: scene.render.step * scene.medium.min_voxel() * 4.0,
+        ..EdgeSettings::default()
+    }
+}
+
+/// Final gather over a propagated scene: the image, with AOV layers when `render.aov` is set.
+pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image {
+    let cubes = GatherCubes::new(lit, scene);
+    let m = &lit.medium;
+    let sun_e = lit.sun.irradiance;
+    let sun_at = move |p: Vec3| sun_e * lit.sun_t.trilinear(m.to_voxel(p).to_array());
+    let sun = SunInput {
+        dir: lit.sun.dir,
+        irradiance_at: &sun_at,
+    };
+    let albedo = m.albedo;
+    let dense = move |p: Vec3, _to_eye: Vec3| albedo * lit.i0_at_voxel(m.to_voxel(p));
+    let edge = EdgeGather::new(m, edge_settings(scene), &cubes, sun, &dense);
+    let cam = &scene.camera;
+    let spp = scene.render.spp;
+    let aovs = render_rows(cam.width, cam.height, progress, "final gather", |x, y| {
+        let mut sum = EdgeAov::default();
+        for s in 0..spp {
+            let (px, py, _) = pixel_sample(scene, x, y, s, spp);
+            let ray = cam.ray(px, py);
+            let t_ground = lit.ground_hit(ray.origin, ray.dir);
+            let bg = lit.background(ray.origin, ray.dir, t_ground);
+            let a = edge.radiance(ray.origin, ray.dir, t_ground.unwrap_or(f32::INFINITY), bg);
+            sum.diffusion += a.diffusion;
+            sum.edge += a.edge;
+            sum.sun_single += a.sun_single;
+            sum.background += a.background;
+            sum.transmittance += a.transmittance;
+            sum.cubes += a.cubes;
+        }
+        let k = 1.0 / spp as f32;
+        [sum.diffusion * k, sum.edge * k, sum.sun_single * k, sum.background * k]
+    });
+    let mut img = Image::new(cam.width, cam.height);
+    img.pixels = aovs.iter().map(|a| a[0] + a[1] + a[2] + a[3]).collect();
+    if scene.render.aov {
+        for (n, name) in ["diffusion", "low_density", "sun_single", "background"].iter().enumerate() {
+            img.add_layer(name, aovs.iter().map(|a| a[n]).collect());
+        }
+    }
+    img
+}
+
+/// Render the image.
+pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
+    let prop = propagate(scene, progress, timings)?;
+    Ok(timings.time("final gather", || gather(scene, &prop.lit, progress)))
+}
