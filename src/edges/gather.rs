@@ -131,6 +131,31 @@ pub struct EdgeGather<'a> {
     dense: &'a (dyn Fn(Vec3, Vec3) -> Rgb + Sync),
 }
 
+/// One low-density segment (or a bridge's merged/split variant) whose E is needed for a pixel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EdgeJob {
+    /// The segment (pieces of the plan's profile, D_j, c_j).
+    pub seg: LowSegment,
+    /// Weight of its edge source (1 without bridges).
+    pub weight: f32,
+    /// Index j among the ray's top-level segments when this job is one whole, unbridged segment
+    /// (the only kind the sparse gather interpolates).
+    pub top: Option<usize>,
+}
+
+/// A ray's profile and edge jobs, before any cube is rendered.
+#[derive(Clone, Debug)]
+pub struct PixelPlan {
+    /// Ray origin (m).
+    pub o: Vec3,
+    /// Unit ray direction.
+    pub d: Vec3,
+    /// The density profile.
+    pub profile: RayProfile,
+    /// The segments whose E the composite needs.
+    pub jobs: Vec<EdgeJob>,
+}
+
 /// Largest segment optical depth whose orders are tabulated separately (deeper ones reuse the last).
 const MAX_TABULATED_DEPTH: f64 = 40.0;
 
@@ -186,12 +211,10 @@ impl<'a> EdgeGather<'a> {
         x * x * (3.0 - 2.0 * x)
     }
 
-    /// E_j for a segment (eq. 9 with albedo and the sun's orders ≥ 2), and the cube count (1).
-    pub fn segment_radiance(&self, o: Vec3, d: Vec3, seg: &LowSegment) -> Rgb {
-        let m = self.medium;
-        let center = seg.center(o, d);
+    /// Render the cube of a segment and convolve it: K_i for orders 1..=`orders`.
+    pub fn segment_k(&self, o: Vec3, d: Vec3, seg: &LowSegment, orders: usize) -> Vec<Rgb> {
         let req = CubeRequest {
-            center,
+            center: seg.center(o, d),
             x_axis: d,
             res: self.settings.cube_res,
             exclude: (
@@ -200,11 +223,22 @@ impl<'a> EdgeGather<'a> {
             ),
         };
         let cube = self.cubes.render_cube(&req);
+        self.kernel.convolve(&cube, orders)
+    }
+
+    /// Orders eq. 8 needs for a segment.
+    pub fn orders_for(&self, seg: &LowSegment) -> usize {
+        OrderKernel::orders_for_depth(seg.depth, self.settings.tail)
+    }
+
+    /// E_j from the cube's K_i (eq. 9 with albedo) plus the sun's orders ≥ 2 as a delta. If `k`
+    /// holds fewer orders than needed, the last one is reused (high orders are nearly isotropic).
+    pub fn segment_radiance_from_k(&self, o: Vec3, d: Vec3, seg: &LowSegment, k: &[Rgb]) -> Rgb {
+        let m = self.medium;
         let q = segment_orders(seg.depth, self.settings.tail);
-        let k = self.kernel.convolve(&cube, q.len());
-        let mut e = edge_radiance(&q, &k, m.albedo, 1);
-        // The sun as a delta for orders ≥ 2 (order 1 is the exact single scattering).
-        let es = (self.sun.irradiance_at)(center);
+        let kk: Vec<Rgb> = (0..q.len()).map(|i| k[i.min(k.len() - 1)]).collect();
+        let mut e = edge_radiance(&q, &kk, m.albedo, 1);
+        let es = (self.sun.irradiance_at)(seg.center(o, d));
         if es.max_element() > 0.0 && q.len() >= 2 {
             let c = self.sun.dir.dot(d) as f64;
             let ks: Vec<Rgb> = (1..=q.len()).map(|i| es * hg_f64(c, (m.g as f64).powi(i as i32)) as f32).collect();
@@ -213,30 +247,42 @@ impl<'a> EdgeGather<'a> {
         e
     }
 
-    /// Add the edge source (per unit optical depth) of pieces `first..end` into `out`, with
-    /// weight `weight`, resolving bridges recursively. Returns the number of cubes rendered.
-    fn fill_edge(&self, prof: &RayProfile, o: Vec3, d: Vec3, first: usize, end: usize, weight: f32, depth: usize, out: &mut [Rgb]) -> u32 {
+    /// E_j for a segment, rendering its cube.
+    pub fn segment_radiance(&self, o: Vec3, d: Vec3, seg: &LowSegment) -> Rgb {
+        let k = self.segment_k(o, d, seg, self.orders_for(seg));
+        self.segment_radiance_from_k(o, d, seg, &k)
+    }
+
+    /// Edge jobs of pieces `first..end` with weight `weight`, resolving bridges recursively.
+    fn plan_edge(
+        &self,
+        prof: &RayProfile,
+        first: usize,
+        end: usize,
+        weight: f32,
+        depth: usize,
+        top: Option<usize>,
+        jobs: &mut Vec<EdgeJob>,
+    ) {
         let seg = prof.segment(self.medium, first, end);
         if seg.depth <= 1e-12 {
-            return 0;
+            return;
         }
-        let e = self.segment_radiance(o, d, &seg);
-        let s = e / (-(-seg.depth).exp_m1()) as f32;
-        let mut cubes = 1;
         let bridge = if self.settings.merge_transition && depth < MAX_BRIDGE_DEPTH {
             self.strongest_bridge(prof, first, end)
         } else {
             None
         };
         let wb = bridge.map_or(0.0, |b| b.1);
-        for o in &mut out[first..end] {
-            *o += s * (weight * (1.0 - wb));
-        }
+        jobs.push(EdgeJob {
+            seg,
+            weight: weight * (1.0 - wb),
+            top: if bridge.is_none() { top } else { None },
+        });
         if let Some((split, wb)) = bridge {
-            cubes += self.fill_edge(prof, o, d, first, split, weight * wb, depth + 1, out);
-            cubes += self.fill_edge(prof, o, d, split, end, weight * wb, depth + 1, out);
+            self.plan_edge(prof, first, split, weight * wb, depth + 1, None, jobs);
+            self.plan_edge(prof, split, end, weight * wb, depth + 1, None, jobs);
         }
-        cubes
     }
 
     /// The interior band run of pieces `first..end` with the largest dense weight: returns the
@@ -280,21 +326,45 @@ impl<'a> EdgeGather<'a> {
         best.filter(|b| b.0 > first && b.0 < end)
     }
 
-    /// Radiance along `o + t·d` (`d` unit) for t ∈ [0, t_max], with `background` the radiance
-    /// arriving from beyond t_max (sky or ground), split into its parts.
-    pub fn radiance(&self, o: Vec3, d: Vec3, t_max: f32, background: Rgb) -> EdgeAov {
+    /// Trace the ray's profile and list its edge jobs (no cube rendered yet).
+    pub fn plan(&self, o: Vec3, d: Vec3, t_max: f32) -> PixelPlan {
         let m = self.medium;
         let t = self.settings.threshold;
         let levels: Vec<f32> = if t > 0.0 { vec![self.t_lo(), t] } else { Vec::new() };
-        let mut prof = RayProfile::trace(m, o, d, 0.0, t_max, &levels);
+        let mut profile = RayProfile::trace(m, o, d, 0.0, t_max, &levels);
         if self.settings.merge_transition && t > 0.0 {
-            refine_maxima(&mut prof, m, self.t_lo(), t);
+            refine_maxima(&mut profile, m, self.t_lo(), t);
         }
+        let mut jobs = Vec::new();
+        if t > 0.0 {
+            for (j, seg) in profile.segments(m, t).into_iter().enumerate() {
+                self.plan_edge(&profile, seg.first, seg.end, 1.0, 0, Some(j), &mut jobs);
+            }
+        }
+        PixelPlan { o, d, profile, jobs }
+    }
+
+    /// Radiance along `o + t·d` (`d` unit) for t ∈ [0, t_max], with `background` the radiance
+    /// arriving from beyond t_max (sky or ground), split into its parts. Renders one cube per
+    /// edge job.
+    pub fn radiance(&self, o: Vec3, d: Vec3, t_max: f32, background: Rgb) -> EdgeAov {
+        let plan = self.plan(o, d, t_max);
+        let e: Vec<Rgb> = plan.jobs.iter().map(|j| self.segment_radiance(o, d, &j.seg)).collect();
+        let mut aov = self.composite(&plan, &e, background);
+        aov.cubes = plan.jobs.len() as u32;
+        aov
+    }
+
+    /// Composite a planned ray front to back, given E for each of its jobs.
+    pub fn composite(&self, plan: &PixelPlan, e: &[Rgb], background: Rgb) -> EdgeAov {
+        let m = self.medium;
+        let (o, d, prof) = (plan.o, plan.d, &plan.profile);
         let mut aov = EdgeAov::default();
         let mut edge_src = vec![Rgb::ZERO; prof.pieces.len()];
-        if t > 0.0 {
-            for seg in prof.segments(m, t) {
-                aov.cubes += self.fill_edge(&prof, o, d, seg.first, seg.end, 1.0, 0, &mut edge_src);
+        for (job, ej) in plan.jobs.iter().zip(e) {
+            let s = *ej / (-(-job.seg.depth).exp_m1()) as f32 * job.weight;
+            for x in &mut edge_src[job.seg.first..job.seg.end] {
+                *x += s;
             }
         }
         let phase_sun = hg(self.sun.dir.dot(d), m.g);
