@@ -187,6 +187,11 @@ impl<'a> EdgeGather<'a> {
         &self.kernel
     }
 
+    /// The medium.
+    pub fn medium(&self) -> &Medium {
+        self.medium
+    }
+
     /// The settings.
     pub fn settings(&self) -> &EdgeSettings {
         &self.settings
