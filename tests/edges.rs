@@ -344,6 +344,53 @@ fn merging_segments_is_continuous_with_the_fix_and_jumps_without() {
 }
 
 #[test]
+fn wisps_joining_across_clear_air_leave_no_seam() {
+    // ρ = 0.1 | two voxels of b | 0.1 along x: at b = 0 a dual cell is empty and the paper has two
+    // segments; at b > 0 one. With the near-gap weight the edge part is continuous at b = 0.
+    let profile = |b: f32| {
+        let vals = [0.0, 0.1, 0.1, 0.1, 0.1, b, b, 0.1, 0.1, 0.1, 0.1, 0.0];
+        let mut grid = Grid3::filled([vals.len(), 3, 3], 0.0);
+        for k in 0..3 {
+            for j in 0..3 {
+                for (i, v) in vals.iter().enumerate() {
+                    grid.set(i, j, k, *v);
+                }
+            }
+        }
+        Medium::new(grid, Vec3::ZERO, Vec3::splat(10.0), 0.5, Rgb::ONE, 0.9)
+    };
+    let cubes = Directional(|w: Vec3| Rgb::splat(if w.x > 0.9 { 4.0 } else { 0.5 + w.y.max(0.0) }));
+    let dense = |_: Vec3, _: Vec3| Rgb::splat(0.8);
+    let edge_at = |b: f32, fix: bool| {
+        let m = profile(b);
+        let settings = EdgeSettings {
+            threshold: 0.3,
+            cube_res: 8,
+            merge_transition: fix,
+            ..Default::default()
+        };
+        let g = EdgeGather::new(
+            &m,
+            settings,
+            &cubes,
+            SunInput {
+                dir: Vec3::Y,
+                irradiance_at: &no_sun,
+            },
+            &dense,
+        );
+        g.radiance(Vec3::new(-5.0, 15.0, 15.0), Vec3::X, f32::INFINITY, Rgb::ZERO).total().x
+    };
+    let (with_fix, without) = (
+        (edge_at(1e-5, true) - edge_at(0.0, true)).abs(),
+        (edge_at(1e-5, false) - edge_at(0.0, false)).abs(),
+    );
+    eprintln!("jump where the gap closes: with fix {with_fix:.2e}, without {without:.2e}");
+    assert!(without > 1e-2, "the paper's switch should show a seam: {without}");
+    assert!(with_fix < 2e-3, "seam with the fix: {with_fix}");
+}
+
+#[test]
 fn bad_threshold_is_a_clear_error() {
     for bad in ["-0.1", "nan", "inf"] {
         let text = format!("[render]\nlow_density_threshold = {bad}\n");

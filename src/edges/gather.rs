@@ -23,6 +23,9 @@
 //! reach T — the segment's edge source is (1 − w_b)·(merged) + w_b·(split at the bridge's density
 //! maximum), w_b = w(max ρ on the bridge). At max ρ → T this tends to the two separate segments the
 //! paper would use just above T, and at max ρ → T_lo to the merged one: no seam where segments join.
+//! Likewise for a *near-gap* (an interior stretch with ρ below `GAP_FRACTION`·T_lo): the split
+//! weight is 1 − smoothstep(0, gap, min ρ), so two wisps that touch across clear air fade into one
+//! segment instead of switching abruptly when the gap closes.
 
 use super::orders_kernel::{edge_radiance, segment_orders, OrderKernel, DEFAULT_TAIL};
 use super::segments::{LowSegment, RayProfile};
@@ -33,6 +36,10 @@ use crate::phase::{hg, hg_f64};
 
 /// Bridges are resolved recursively at most this deep (2^depth sub-segments at worst).
 pub const MAX_BRIDGE_DEPTH: usize = 3;
+
+/// Near-gap level as a fraction of T_lo: interior stretches of a segment thinner than this fade
+/// towards a split, so two wisps joining across clear air leave no seam.
+pub const GAP_FRACTION: f32 = 0.25;
 
 /// What a cube renderer is asked for.
 #[derive(Clone, Copy, Debug)]
@@ -294,51 +301,74 @@ impl<'a> EdgeGather<'a> {
     /// piece index to split before (the boundary nearest the run's density maximum) and w_b.
     fn strongest_bridge(&self, prof: &RayProfile, first: usize, end: usize) -> Option<(usize, f32)> {
         let lo = self.t_lo();
+        let gap = self.gap_level();
         let ps = &prof.pieces;
         let mut best: Option<(usize, f32)> = None;
-        let mut k = first;
-        while k < end {
-            if ps[k].rho[1] < lo {
-                k += 1;
-                continue;
-            }
-            let run0 = k;
-            while k < end && ps[k].rho[1] >= lo {
-                k += 1;
-            }
-            // Interior only: low pieces on both sides within the segment.
-            if run0 == first || k == end {
-                continue;
-            }
-            // Boundary with the highest density inside the run.
-            let (mut arg, mut rmax) = (run0 + 1, f32::MIN);
-            for (b, p) in ps.iter().enumerate().take(k).skip(run0 + 1) {
-                if p.rho[0] > rmax {
-                    rmax = p.rho[0];
-                    arg = b;
+        // Two kinds of interior runs: dense bridges (ρ ≥ T_lo, strength w(max ρ)) and near-gaps
+        // (ρ < gap level, strength 1 − smoothstep(0, gap, min ρ)).
+        for dense in [true, false] {
+            let inside = |p: &super::segments::Piece| if dense { p.rho[1] >= lo } else { p.rho[1] < gap };
+            let mut k = first;
+            while k < end {
+                if !inside(&ps[k]) {
+                    k += 1;
+                    continue;
+                }
+                let run0 = k;
+                while k < end && inside(&ps[k]) {
+                    k += 1;
+                }
+                // Interior only: other pieces on both sides within the segment.
+                if run0 == first || k == end {
+                    continue;
+                }
+                // The boundary inside the run with the most extreme density; a one-piece run
+                // splits at its end nearer the extreme.
+                let better = |a: f32, b: f32| if dense { a > b } else { a < b };
+                let at = |b: usize| if b < k { ps[b].rho[0] } else { ps[k - 1].rho[2] };
+                let (mut arg, mut ext) = (run0, at(run0));
+                for b in run0 + 1..=k {
+                    if better(at(b), ext) {
+                        ext = at(b);
+                        arg = b;
+                    }
+                }
+                for p in &ps[run0..k] {
+                    if better(p.rho[1], ext) {
+                        ext = p.rho[1];
+                    }
+                }
+                let w = if dense {
+                    self.dense_weight(ext)
+                } else {
+                    let x = (ext / gap).clamp(0.0, 1.0);
+                    1.0 - x * x * (3.0 - 2.0 * x)
+                };
+                if w > 0.0 && arg > first && arg < end && !matches!(best, Some(b) if b.1 >= w) {
+                    best = Some((arg, w));
                 }
             }
-            if k - run0 == 1 {
-                // A one-piece run: split at its end nearer the maximum (midpoint counted).
-                rmax = ps[run0].rho.iter().copied().fold(f32::MIN, f32::max);
-                arg = if ps[run0].rho[2] >= ps[run0].rho[0] { run0 + 1 } else { run0 };
-            }
-            let w = self.dense_weight(rmax);
-            if w > 0.0 && !matches!(best, Some(b) if b.1 >= w) {
-                best = Some((arg, w));
-            }
         }
-        best.filter(|b| b.0 > first && b.0 < end)
+        best
+    }
+
+    /// Density below which an interior stretch of a segment counts as a near-gap.
+    fn gap_level(&self) -> f32 {
+        GAP_FRACTION * self.t_lo()
     }
 
     /// Trace the ray's profile and list its edge jobs (no cube rendered yet).
     pub fn plan(&self, o: Vec3, d: Vec3, t_max: f32) -> PixelPlan {
         let m = self.medium;
         let t = self.settings.threshold;
-        let levels: Vec<f32> = if t > 0.0 { vec![self.t_lo(), t] } else { Vec::new() };
+        let levels: Vec<f32> = if t > 0.0 {
+            vec![self.gap_level(), self.t_lo(), t]
+        } else {
+            Vec::new()
+        };
         let mut profile = RayProfile::trace(m, o, d, 0.0, t_max, &levels);
         if self.settings.merge_transition && t > 0.0 {
-            refine_maxima(&mut profile, m, self.t_lo(), t);
+            refine_extrema(&mut profile, m, self.gap_level(), self.t_lo(), t);
         }
         let mut jobs = Vec::new();
         if t > 0.0 {
@@ -410,23 +440,26 @@ impl<'a> EdgeGather<'a> {
     }
 }
 
-/// Cut each band run's highest-density piece at its density maximum (golden-section search on
-/// the cubic), so bridges split exactly where the two segments would separate.
-fn refine_maxima(prof: &mut RayProfile, m: &Medium, lo: f32, hi: f32) {
+/// Cut pieces at interior density maxima in the blend band and interior minima below the gap
+/// level (golden-section search on the cubic), so bridges split exactly where the two segments
+/// would separate.
+fn refine_extrema(prof: &mut RayProfile, m: &Medium, gap: f32, lo: f32, hi: f32) {
     let mut k = 0;
     while k < prof.pieces.len() {
         let p = prof.pieces[k];
-        if !(p.rho[1] >= lo && p.rho[1] < hi && p.rho[1] > p.rho[0] && p.rho[1] > p.rho[2]) {
+        let max = p.rho[1] >= lo && p.rho[1] < hi && p.rho[1] > p.rho[0] && p.rho[1] > p.rho[2];
+        let min = p.rho[1] < gap && p.rho[1] < p.rho[0] && p.rho[1] < p.rho[2];
+        if !(max || min) {
             k += 1;
             continue;
         }
-        // Interior maximum inside this piece.
+        let sign = if max { 1.0 } else { -1.0 };
         let (mut a, mut b) = (p.t0, p.t1);
         let gr = 0.5 * (5f64.sqrt() - 1.0);
         for _ in 0..40 {
             let c = b - gr * (b - a);
             let e = a + gr * (b - a);
-            if prof.rho(m, c) > prof.rho(m, e) {
+            if sign * prof.rho(m, c) > sign * prof.rho(m, e) {
                 b = e;
             } else {
                 a = c;
