@@ -1,7 +1,10 @@
 //! Measures the sparse (interpolated) edge gather against one cube per segment on the default
 //! scene, and prints the default cloud's density statistics behind `render.low_density_threshold`.
 //!
-//! `cargo run --release --example edges_sparse [WIDTH] [CUBE_RES]`
+//! `cargo run --release --example edges_sparse [WIDTH] [CUBE_RES] [REFERENCE_CUBE_RES]`
+//!
+//! With a reference resolution, errors are measured against one cube per segment at that finer
+//! resolution, and the per-segment gather at CUBE_RES is listed too (time against error).
 //!
 //! The cubes here are rendered by single-scattering ray marching (the `single` method per cube
 //! pixel), a stand-in for the full cube renderer with a realistic cost per cube.
@@ -39,6 +42,7 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let width: u32 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(96);
     let res: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(8);
+    let ref_res: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(res);
     let scene = Scene::load(None, |d| {
         d.camera.height = d.camera.height * width / d.camera.width;
         d.camera.width = width;
@@ -87,6 +91,20 @@ fn main() {
         gather.kernel().max_order,
         t.elapsed().as_secs_f64()
     );
+    let ref_settings = EdgeSettings {
+        cube_res: ref_res,
+        ..settings
+    };
+    let ref_gather = EdgeGather::new(
+        m,
+        ref_settings,
+        &cubes,
+        SunInput {
+            dir: scene.sun.dir,
+            irradiance_at: &sun_irr,
+        },
+        &dense,
+    );
     let cam = &scene.camera;
     let ray = |x: u32, y: u32| {
         let r = cam.ray(x as f32 + 0.5, y as f32 + 0.5);
@@ -104,9 +122,12 @@ fn main() {
     };
     let (w, h) = (cam.width, cam.height);
     let t = Instant::now();
-    let (reference, st) = gather_image(&gather, w, h, &ray, None);
+    let (reference, st) = gather_image(&ref_gather, w, h, &ray, None);
     let t_ref = t.elapsed().as_secs_f64();
-    println!("{w}×{h}, cube res {res}: one cube per segment: {t_ref:.2} s, {} cubes", st.cubes);
+    println!(
+        "{w}×{h}, reference cube res {ref_res}: one cube per segment: {t_ref:.2} s, {} cubes",
+        st.cubes
+    );
     let err = |a: &[EdgeAov]| {
         let (mut se, mut sn, mut te, mut n) = (0.0, 0.0, 0.0, 0usize);
         for (x, r) in a.iter().zip(&reference) {
@@ -120,6 +141,18 @@ fn main() {
         }
         (se / sn.max(1e-12), te / n.max(1) as f64)
     };
+    if ref_res != res {
+        let t = Instant::now();
+        let (img, st) = gather_image(&gather, w, h, &ray, None);
+        let secs = t.elapsed().as_secs_f64();
+        let (e_edge, e_total) = err(&img);
+        println!(
+            "one cube per segment at res {res}: {secs:.2} s, {} cubes; edge-part L1 error {:.2} %, mean relative error of the pixel {:.3} %",
+            st.cubes,
+            100.0 * e_edge,
+            100.0 * e_total
+        );
+    }
     for (block, tol) in [(8, 10.0), (8, 30.0), (4, 10.0), (4, 30.0)] {
         let sp = SparseSettings {
             block,
