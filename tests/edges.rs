@@ -483,3 +483,65 @@ fn sparse_gather_matches_per_pixel_cubes_on_a_smooth_scene() {
         assert!((a.edge - b.edge).abs().max_element() <= 1e-6 * b.edge.max_element().max(1.0));
     }
 }
+
+#[test]
+fn sun_orders_are_not_double_counted_and_cube_request_is_the_segment() {
+    // A homogeneous box of density 0.1 < T_lo = 0.15: one unblended segment. Black cube, constant sun irradiance E:
+    // the sun's single scattering is exact, a·E·HG(g, cos)·(1 − e^{−D}); the edge part holds only
+    // orders ≥ 2, Σ_{i≥2} a^i q_i E HG(g^i, cos) (times the segment's own compositing, which for an
+    // unblended segment adds exactly E_j).
+    use std::sync::Mutex;
+    struct Recording(Mutex<Vec<CubeRequest>>);
+    impl CubeSource for Recording {
+        fn render_cube(&self, req: &CubeRequest) -> CubeImage {
+            self.0.lock().unwrap().push(*req);
+            CubeImage::along(req.res, req.x_axis)
+        }
+    }
+    let (sigma_t, a, g) = (0.5f32, 0.9f32, 0.85f32);
+    let m = Medium::new(Grid3::filled([6, 6, 6], 0.1), Vec3::ZERO, Vec3::ONE, sigma_t, Rgb::splat(a), g);
+    let cubes = Recording(Mutex::new(Vec::new()));
+    let e_sun = Rgb::new(3.0, 2.0, 1.0);
+    let sun = move |_: Vec3| e_sun;
+    let sun_dir = Vec3::new(0.6, 0.0, 0.8);
+    let dense = |_: Vec3, _: Vec3| Rgb::ZERO;
+    let settings = EdgeSettings {
+        cube_res: 4,
+        ..Default::default()
+    };
+    let gather = EdgeGather::new(
+        &m,
+        settings,
+        &cubes,
+        SunInput {
+            dir: sun_dir,
+            irradiance_at: &sun,
+        },
+        &dense,
+    );
+    let (o, d) = (Vec3::new(-1.0, 3.0, 3.0), Vec3::X);
+    let aov = gather.radiance(o, d, f32::INFINITY, Rgb::ZERO);
+    let depth = (sigma_t * 0.1 * 6.0) as f64;
+    let cos = sun_dir.dot(d);
+    let single = e_sun * a * hg(cos, g) * (1.0 - (-depth).exp()) as f32;
+    assert!(
+        (aov.sun_single - single).abs().max_element() < 1e-5,
+        "{} vs {single}",
+        aov.sun_single
+    );
+    let q = cloudgi::edges::segment_orders(depth, 1e-4);
+    let mut multi = 0.0f64;
+    for (idx, qi) in q.iter().enumerate().skip(1) {
+        let i = idx as i32 + 1;
+        multi += qi * (a as f64).powi(i) * cloudgi::phase::hg_f64(cos as f64, (g as f64).powi(i));
+    }
+    let expect = e_sun * multi as f32;
+    assert!((aov.edge - expect).abs().max_element() < 1e-5, "{} vs {expect}", aov.edge);
+    // The cube: centred at half depth (x = 3), along the ray, excluding exactly the segment.
+    let reqs = cubes.0.lock().unwrap();
+    assert_eq!(reqs.len(), 1);
+    let r = reqs[0];
+    assert!((r.center - Vec3::new(3.0, 3.0, 3.0)).length() < 1e-4, "{:?}", r.center);
+    assert_eq!(r.x_axis, d);
+    assert!((r.exclude.0 - Vec3::new(0.0, 3.0, 3.0)).length() < 1e-5 && (r.exclude.1 - Vec3::new(6.0, 3.0, 3.0)).length() < 1e-5);
+}
