@@ -121,6 +121,25 @@ fn main() {
         }
     };
     let (w, h) = (cam.width, cam.height);
+    {
+        use rayon::prelude::*;
+        let t = Instant::now();
+        let (segs, jobs): (usize, usize) = (0..w * h)
+            .into_par_iter()
+            .map(|i| {
+                let r = ray(i % w, i / w);
+                let p = gather.plan(r.o, r.d, r.t_max);
+                (p.jobs.iter().filter(|j| j.top.is_some()).count(), p.jobs.len())
+            })
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        println!(
+            "{w}×{h}: planning every ray (profile, segments, bridges; no cube): {:.2} s; {segs} unbridged segments, {jobs} edge jobs",
+            t.elapsed().as_secs_f64()
+        );
+    }
+    if args.get(4).map(String::as_str) == Some("plan-only") {
+        return;
+    }
     let t = Instant::now();
     let (reference, st) = gather_image(&ref_gather, w, h, &ray, None);
     let t_ref = t.elapsed().as_secs_f64();
