@@ -23,6 +23,9 @@
 //! reach T — the segment's edge source is (1 − w_b)·(merged) + w_b·(split at the bridge's density
 //! maximum), w_b = w(max ρ on the bridge). At max ρ → T this tends to the two separate segments the
 //! paper would use just above T, and at max ρ → T_lo to the merged one: no seam where segments join.
+//! Likewise for a *near-gap* (an interior stretch with ρ below `GAP_FRACTION`·T_lo): the split
+//! weight is 1 − smoothstep(0, gap, min ρ), so two wisps that touch across clear air fade into one
+//! segment instead of switching abruptly when the gap closes.
 
 use super::orders_kernel::{edge_radiance, segment_orders, OrderKernel, DEFAULT_TAIL};
 use super::segments::{LowSegment, RayProfile};
@@ -33,6 +36,10 @@ use crate::phase::{hg, hg_f64};
 
 /// Bridges are resolved recursively at most this deep (2^depth sub-segments at worst).
 pub const MAX_BRIDGE_DEPTH: usize = 3;
+
+/// Near-gap level as a fraction of T_lo: interior stretches of a segment thinner than this fade
+/// towards a split, so two wisps joining across clear air leave no seam.
+pub const GAP_FRACTION: f32 = 0.25;
 
 /// What a cube renderer is asked for.
 #[derive(Clone, Copy, Debug)]
@@ -94,6 +101,18 @@ impl Default for EdgeSettings {
     }
 }
 
+impl EdgeSettings {
+    /// Settings from a scene: T from `render.low_density_threshold`, the step from `render.step`
+    /// (a fraction of the smallest voxel), the rest at their defaults.
+    pub fn from_scene(scene: &crate::scene::Scene) -> Self {
+        EdgeSettings {
+            threshold: scene.render.low_density_threshold,
+            step: scene.render.step * scene.medium.min_voxel(),
+            ..Default::default()
+        }
+    }
+}
+
 /// Default T for `render.low_density_threshold` (density units); see docs/edges.md.
 pub const DEFAULT_THRESHOLD: f32 = 0.3;
 
@@ -131,6 +150,31 @@ pub struct EdgeGather<'a> {
     dense: &'a (dyn Fn(Vec3, Vec3) -> Rgb + Sync),
 }
 
+/// One low-density segment (or a bridge's merged/split variant) whose E is needed for a pixel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EdgeJob {
+    /// The segment (pieces of the plan's profile, D_j, c_j).
+    pub seg: LowSegment,
+    /// Weight of its edge source (1 without bridges).
+    pub weight: f32,
+    /// Index j among the ray's top-level segments when this job is one whole, unbridged segment
+    /// (the only kind the sparse gather interpolates).
+    pub top: Option<usize>,
+}
+
+/// A ray's profile and edge jobs, before any cube is rendered.
+#[derive(Clone, Debug)]
+pub struct PixelPlan {
+    /// Ray origin (m).
+    pub o: Vec3,
+    /// Unit ray direction.
+    pub d: Vec3,
+    /// The density profile.
+    pub profile: RayProfile,
+    /// The segments whose E the composite needs.
+    pub jobs: Vec<EdgeJob>,
+}
+
 /// Largest segment optical depth whose orders are tabulated separately (deeper ones reuse the last).
 const MAX_TABULATED_DEPTH: f64 = 40.0;
 
@@ -162,6 +206,11 @@ impl<'a> EdgeGather<'a> {
         &self.kernel
     }
 
+    /// The medium.
+    pub fn medium(&self) -> &Medium {
+        self.medium
+    }
+
     /// The settings.
     pub fn settings(&self) -> &EdgeSettings {
         &self.settings
@@ -186,12 +235,10 @@ impl<'a> EdgeGather<'a> {
         x * x * (3.0 - 2.0 * x)
     }
 
-    /// E_j for a segment (eq. 9 with albedo and the sun's orders ≥ 2), and the cube count (1).
-    pub fn segment_radiance(&self, o: Vec3, d: Vec3, seg: &LowSegment) -> Rgb {
-        let m = self.medium;
-        let center = seg.center(o, d);
+    /// Render the cube of a segment and convolve it: K_i for orders 1..=`orders`.
+    pub fn segment_k(&self, o: Vec3, d: Vec3, seg: &LowSegment, orders: usize) -> Vec<Rgb> {
         let req = CubeRequest {
-            center,
+            center: seg.center(o, d),
             x_axis: d,
             res: self.settings.cube_res,
             exclude: (
@@ -200,11 +247,22 @@ impl<'a> EdgeGather<'a> {
             ),
         };
         let cube = self.cubes.render_cube(&req);
+        self.kernel.convolve(&cube, orders)
+    }
+
+    /// Orders eq. 8 needs for a segment.
+    pub fn orders_for(&self, seg: &LowSegment) -> usize {
+        OrderKernel::orders_for_depth(seg.depth, self.settings.tail)
+    }
+
+    /// E_j from the cube's K_i (eq. 9 with albedo) plus the sun's orders ≥ 2 as a delta. If `k`
+    /// holds fewer orders than needed, the last one is reused (high orders are nearly isotropic).
+    pub fn segment_radiance_from_k(&self, o: Vec3, d: Vec3, seg: &LowSegment, k: &[Rgb]) -> Rgb {
+        let m = self.medium;
         let q = segment_orders(seg.depth, self.settings.tail);
-        let k = self.kernel.convolve(&cube, q.len());
-        let mut e = edge_radiance(&q, &k, m.albedo, 1);
-        // The sun as a delta for orders ≥ 2 (order 1 is the exact single scattering).
-        let es = (self.sun.irradiance_at)(center);
+        let kk: Vec<Rgb> = (0..q.len()).map(|i| k[i.min(k.len() - 1)]).collect();
+        let mut e = edge_radiance(&q, &kk, m.albedo, 1);
+        let es = (self.sun.irradiance_at)(seg.center(o, d));
         if es.max_element() > 0.0 && q.len() >= 2 {
             let c = self.sun.dir.dot(d) as f64;
             let ks: Vec<Rgb> = (1..=q.len()).map(|i| es * hg_f64(c, (m.g as f64).powi(i as i32)) as f32).collect();
@@ -213,88 +271,147 @@ impl<'a> EdgeGather<'a> {
         e
     }
 
-    /// Add the edge source (per unit optical depth) of pieces `first..end` into `out`, with
-    /// weight `weight`, resolving bridges recursively. Returns the number of cubes rendered.
-    fn fill_edge(&self, prof: &RayProfile, o: Vec3, d: Vec3, first: usize, end: usize, weight: f32, depth: usize, out: &mut [Rgb]) -> u32 {
+    /// E_j for a segment, rendering its cube.
+    pub fn segment_radiance(&self, o: Vec3, d: Vec3, seg: &LowSegment) -> Rgb {
+        let k = self.segment_k(o, d, seg, self.orders_for(seg));
+        self.segment_radiance_from_k(o, d, seg, &k)
+    }
+
+    /// Edge jobs of pieces `first..end` with weight `weight`, resolving bridges recursively.
+    fn plan_edge(
+        &self,
+        prof: &RayProfile,
+        first: usize,
+        end: usize,
+        weight: f32,
+        depth: usize,
+        top: Option<usize>,
+        jobs: &mut Vec<EdgeJob>,
+    ) {
         let seg = prof.segment(self.medium, first, end);
         if seg.depth <= 1e-12 {
-            return 0;
+            return;
         }
-        let e = self.segment_radiance(o, d, &seg);
-        let s = e / (-(-seg.depth).exp_m1()) as f32;
-        let mut cubes = 1;
         let bridge = if self.settings.merge_transition && depth < MAX_BRIDGE_DEPTH {
             self.strongest_bridge(prof, first, end)
         } else {
             None
         };
         let wb = bridge.map_or(0.0, |b| b.1);
-        for o in &mut out[first..end] {
-            *o += s * (weight * (1.0 - wb));
-        }
+        jobs.push(EdgeJob {
+            seg,
+            weight: weight * (1.0 - wb),
+            top: if bridge.is_none() { top } else { None },
+        });
         if let Some((split, wb)) = bridge {
-            cubes += self.fill_edge(prof, o, d, first, split, weight * wb, depth + 1, out);
-            cubes += self.fill_edge(prof, o, d, split, end, weight * wb, depth + 1, out);
+            self.plan_edge(prof, first, split, weight * wb, depth + 1, None, jobs);
+            self.plan_edge(prof, split, end, weight * wb, depth + 1, None, jobs);
         }
-        cubes
     }
 
     /// The interior band run of pieces `first..end` with the largest dense weight: returns the
     /// piece index to split before (the boundary nearest the run's density maximum) and w_b.
     fn strongest_bridge(&self, prof: &RayProfile, first: usize, end: usize) -> Option<(usize, f32)> {
         let lo = self.t_lo();
+        let gap = self.gap_level();
         let ps = &prof.pieces;
         let mut best: Option<(usize, f32)> = None;
-        let mut k = first;
-        while k < end {
-            if ps[k].rho[1] < lo {
-                k += 1;
-                continue;
-            }
-            let run0 = k;
-            while k < end && ps[k].rho[1] >= lo {
-                k += 1;
-            }
-            // Interior only: low pieces on both sides within the segment.
-            if run0 == first || k == end {
-                continue;
-            }
-            // Boundary with the highest density inside the run.
-            let (mut arg, mut rmax) = (run0 + 1, f32::MIN);
-            for (b, p) in ps.iter().enumerate().take(k).skip(run0 + 1) {
-                if p.rho[0] > rmax {
-                    rmax = p.rho[0];
-                    arg = b;
+        // Two kinds of interior runs: dense bridges (ρ ≥ T_lo, strength w(max ρ)) and near-gaps
+        // (ρ < gap level, strength 1 − smoothstep(0, gap, min ρ)).
+        for dense in [true, false] {
+            let inside = |p: &super::segments::Piece| if dense { p.rho[1] >= lo } else { p.rho[1] < gap };
+            let mut k = first;
+            while k < end {
+                if !inside(&ps[k]) {
+                    k += 1;
+                    continue;
+                }
+                let run0 = k;
+                while k < end && inside(&ps[k]) {
+                    k += 1;
+                }
+                // Interior only: other pieces on both sides within the segment.
+                if run0 == first || k == end {
+                    continue;
+                }
+                // The boundary inside the run with the most extreme density; a one-piece run
+                // splits at its end nearer the extreme.
+                let better = |a: f32, b: f32| if dense { a > b } else { a < b };
+                let at = |b: usize| if b < k { ps[b].rho[0] } else { ps[k - 1].rho[2] };
+                let (mut arg, mut ext) = (run0, at(run0));
+                for b in run0 + 1..=k {
+                    if better(at(b), ext) {
+                        ext = at(b);
+                        arg = b;
+                    }
+                }
+                for p in &ps[run0..k] {
+                    if better(p.rho[1], ext) {
+                        ext = p.rho[1];
+                    }
+                }
+                let w = if dense {
+                    self.dense_weight(ext)
+                } else {
+                    let x = (ext / gap).clamp(0.0, 1.0);
+                    1.0 - x * x * (3.0 - 2.0 * x)
+                };
+                if w > 0.0 && arg > first && arg < end && !matches!(best, Some(b) if b.1 >= w) {
+                    best = Some((arg, w));
                 }
             }
-            if k - run0 == 1 {
-                // A one-piece run: split at its end nearer the maximum (midpoint counted).
-                rmax = ps[run0].rho.iter().copied().fold(f32::MIN, f32::max);
-                arg = if ps[run0].rho[2] >= ps[run0].rho[0] { run0 + 1 } else { run0 };
-            }
-            let w = self.dense_weight(rmax);
-            if w > 0.0 && !matches!(best, Some(b) if b.1 >= w) {
-                best = Some((arg, w));
+        }
+        best
+    }
+
+    /// Density below which an interior stretch of a segment counts as a near-gap.
+    fn gap_level(&self) -> f32 {
+        GAP_FRACTION * self.t_lo()
+    }
+
+    /// Trace the ray's profile and list its edge jobs (no cube rendered yet).
+    pub fn plan(&self, o: Vec3, d: Vec3, t_max: f32) -> PixelPlan {
+        let m = self.medium;
+        let t = self.settings.threshold;
+        let levels: Vec<f32> = if t > 0.0 {
+            vec![self.gap_level(), self.t_lo(), t]
+        } else {
+            Vec::new()
+        };
+        let mut profile = RayProfile::trace(m, o, d, 0.0, t_max, &levels);
+        if self.settings.merge_transition && t > 0.0 {
+            refine_extrema(&mut profile, m, self.gap_level(), self.t_lo(), t);
+        }
+        let mut jobs = Vec::new();
+        if t > 0.0 {
+            for (j, seg) in profile.segments(m, t).into_iter().enumerate() {
+                self.plan_edge(&profile, seg.first, seg.end, 1.0, 0, Some(j), &mut jobs);
             }
         }
-        best.filter(|b| b.0 > first && b.0 < end)
+        PixelPlan { o, d, profile, jobs }
     }
 
     /// Radiance along `o + t·d` (`d` unit) for t ∈ [0, t_max], with `background` the radiance
-    /// arriving from beyond t_max (sky or ground), split into its parts.
+    /// arriving from beyond t_max (sky or ground), split into its parts. Renders one cube per
+    /// edge job.
     pub fn radiance(&self, o: Vec3, d: Vec3, t_max: f32, background: Rgb) -> EdgeAov {
+        let plan = self.plan(o, d, t_max);
+        let e: Vec<Rgb> = plan.jobs.iter().map(|j| self.segment_radiance(o, d, &j.seg)).collect();
+        let mut aov = self.composite(&plan, &e, background);
+        aov.cubes = plan.jobs.len() as u32;
+        aov
+    }
+
+    /// Composite a planned ray front to back, given E for each of its jobs.
+    pub fn composite(&self, plan: &PixelPlan, e: &[Rgb], background: Rgb) -> EdgeAov {
         let m = self.medium;
-        let t = self.settings.threshold;
-        let levels: Vec<f32> = if t > 0.0 { vec![self.t_lo(), t] } else { Vec::new() };
-        let mut prof = RayProfile::trace(m, o, d, 0.0, t_max, &levels);
-        if self.settings.merge_transition && t > 0.0 {
-            refine_maxima(&mut prof, m, self.t_lo(), t);
-        }
+        let (o, d, prof) = (plan.o, plan.d, &plan.profile);
         let mut aov = EdgeAov::default();
         let mut edge_src = vec![Rgb::ZERO; prof.pieces.len()];
-        if t > 0.0 {
-            for seg in prof.segments(m, t) {
-                aov.cubes += self.fill_edge(&prof, o, d, seg.first, seg.end, 1.0, 0, &mut edge_src);
+        for (job, ej) in plan.jobs.iter().zip(e) {
+            let s = *ej / (-(-job.seg.depth).exp_m1()) as f32 * job.weight;
+            for x in &mut edge_src[job.seg.first..job.seg.end] {
+                *x += s;
             }
         }
         let phase_sun = hg(self.sun.dir.dot(d), m.g);
@@ -335,23 +452,26 @@ impl<'a> EdgeGather<'a> {
     }
 }
 
-/// Cut each band run's highest-density piece at its density maximum (golden-section search on
-/// the cubic), so bridges split exactly where the two segments would separate.
-fn refine_maxima(prof: &mut RayProfile, m: &Medium, lo: f32, hi: f32) {
+/// Cut pieces at interior density maxima in the blend band and interior minima below the gap
+/// level (golden-section search on the cubic), so bridges split exactly where the two segments
+/// would separate.
+fn refine_extrema(prof: &mut RayProfile, m: &Medium, gap: f32, lo: f32, hi: f32) {
     let mut k = 0;
     while k < prof.pieces.len() {
         let p = prof.pieces[k];
-        if !(p.rho[1] >= lo && p.rho[1] < hi && p.rho[1] > p.rho[0] && p.rho[1] > p.rho[2]) {
+        let max = p.rho[1] >= lo && p.rho[1] < hi && p.rho[1] > p.rho[0] && p.rho[1] > p.rho[2];
+        let min = p.rho[1] < gap && p.rho[1] < p.rho[0] && p.rho[1] < p.rho[2];
+        if !(max || min) {
             k += 1;
             continue;
         }
-        // Interior maximum inside this piece.
+        let sign = if max { 1.0 } else { -1.0 };
         let (mut a, mut b) = (p.t0, p.t1);
         let gr = 0.5 * (5f64.sqrt() - 1.0);
         for _ in 0..40 {
             let c = b - gr * (b - a);
             let e = a + gr * (b - a);
-            if prof.rho(m, c) > prof.rho(m, e) {
+            if sign * prof.rho(m, c) > sign * prof.rho(m, e) {
                 b = e;
             } else {
                 a = c;

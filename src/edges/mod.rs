@@ -6,7 +6,9 @@
 pub mod gather;
 pub mod orders_kernel;
 pub mod segments;
+pub mod sparse;
 
-pub use gather::{CubeRequest, CubeSource, EdgeAov, EdgeGather, EdgeSettings, SunInput};
+pub use gather::{CubeRequest, CubeSource, EdgeAov, EdgeGather, EdgeJob, EdgeSettings, PixelPlan, SunInput};
 pub use orders_kernel::{edge_radiance, segment_orders, OrderKernel};
 pub use segments::{low_density_segments, LowSegment, RayProfile};
+pub use sparse::{gather_image, GatherStats, PixelRay, SparseSettings};

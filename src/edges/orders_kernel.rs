@@ -82,6 +82,9 @@ fn integrate_rect(face: usize, u0: f64, u1: f64, v0: f64, v1: f64, g: f64, level
     quads.iter().map(|q| integrate_rect(face, q.0, q.1, q.2, q.3, g, level + 1)).sum()
 }
 
+/// Largest optical depth the Poisson weights are evaluated at (see [`segment_orders`]).
+pub const MAX_DEPTH: f64 = 500.0;
+
 /// Default bound on the omitted Poisson tail (the 10⁻⁴).
 pub const DEFAULT_TAIL: f64 = 1e-4;
 
@@ -168,9 +171,9 @@ impl OrderKernel {
     /// use the last tabulated one (g^i is then below g^max_order; see [`OrderKernel::orders_for_depth`]).
     pub fn convolve(&self, cube: &CubeImage, orders: usize) -> Vec<Rgb> {
         assert_eq!(cube.res, self.res, "cube resolution differs from the kernel's");
-        (1..=orders)
+        let mut k: Vec<Rgb> = (1..=orders.min(self.max_order))
             .map(|i| {
-                let w = self.weights(i.min(self.max_order));
+                let w = self.weights(i);
                 let mut s = [0f64; 3];
                 for (wk, l) in w.iter().zip(&cube.pixels) {
                     let wk = *wk as f64;
@@ -180,7 +183,11 @@ impl OrderKernel {
                 }
                 Rgb::new(s[0] as f32, s[1] as f32, s[2] as f32)
             })
-            .collect()
+            .collect();
+        if let Some(&last) = k.last() {
+            k.resize(orders, last);
+        }
+        k
     }
 
     /// Σ_i w_i(pixel) summed over the pixels a predicate selects (for tests and diagnostics).
@@ -204,7 +211,7 @@ impl OrderKernel {
 
     /// Number of orders (≥ 1) that eq. 8 needs at optical depth `d` for an omitted tail below `tail`.
     pub fn orders_for_depth(d: f64, tail: f64) -> usize {
-        (poisson_weights(d, tail).len() - 1).max(1)
+        (poisson_weights(d.min(MAX_DEPTH), tail).len() - 1).max(1)
     }
 }
 
@@ -212,7 +219,9 @@ impl OrderKernel {
 /// tail (< `tail`) added to the highest order kept, so Σ_{i≥0} q_i = 1 exactly and the furnace
 /// test holds to rounding. Index 0 of the result is order 1.
 pub fn segment_orders(d: f64, tail: f64) -> Vec<f64> {
-    let mut q = poisson_weights(d, tail);
+    // Beyond D = 500 (never reached by a low-density segment of a sensible scene) e^{−D} would
+    // underflow; there every kept order is far past the tabulated ones, which are all equal.
+    let mut q = poisson_weights(d.min(MAX_DEPTH), tail);
     let omitted = (1.0 - q.iter().sum::<f64>()).max(0.0);
     if q.len() == 1 {
         // D so small that q_0 alone passes the bound: keep order 1 with the whole remainder.
@@ -367,6 +376,9 @@ mod tests {
             assert!(1.0 - raw.iter().sum::<f64>() < DEFAULT_TAIL);
             assert_eq!(q.len(), (raw.len() - 1).max(1));
         }
+        // Huge depths stay finite and normalised.
+        let q = segment_orders(5000.0, DEFAULT_TAIL);
+        assert!(q.iter().all(|x| x.is_finite()) && (q.iter().sum::<f64>() - 1.0).abs() < 1e-9 && q.len() < 700);
     }
 
     #[test]

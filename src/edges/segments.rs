@@ -116,7 +116,7 @@ impl RayProfile {
                         if (ra < l) != (rb < l) {
                             // Bisection on the cubic: keep the invariant ρ(lo) on ra's side.
                             let (mut lo, mut hi) = (ta, tb);
-                            for _ in 0..40 {
+                            for _ in 0..32 {
                                 let mid = 0.5 * (lo + hi);
                                 if (rho(mid) < l) == (ra < l) {
                                     lo = mid;
@@ -127,6 +127,17 @@ impl RayProfile {
                             cuts.push(0.5 * (lo + hi));
                         }
                     }
+                }
+                if cuts.len() == 1 {
+                    // No crossing (the common case): the samples at 0, ½, 1 give Simpson's rule.
+                    let r = [samples[0].1, samples[CELL_SAMPLES / 2].1, samples[CELL_SAMPLES].1];
+                    prof.pieces.push(Piece {
+                        t0: s.t0,
+                        t1: s.t1,
+                        tau: sigma_t * (s.t1 - s.t0) / 6.0 * (r[0] as f64 + 4.0 * r[1] as f64 + r[2] as f64),
+                        rho: r,
+                    });
+                    continue;
                 }
                 cuts.push(s.t1);
                 cuts.sort_by(f64::total_cmp);

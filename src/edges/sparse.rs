@@ -1,0 +1,224 @@
+//! The paper's speed-up for the final gather (section 4): K_ij changes slowly across the image
+//! where the cube centres c_j of neighbouring pixels lie at similar depths, so it is computed on a
+//! sparse lattice and bilinearly interpolated, refining as a quadtree where depths differ.
+//!
+//! Each pixel's top-level segment j is matched, at each corner of its quadtree square, with the
+//! corner pixel's segment whose centre distance is nearest; if all corners that carry weight match
+//! within `depth_tolerance`, K is interpolated from the corners' K (each rendered once, on demand,
+//! and cached per pixel and segment). Otherwise the square is halved, down to the pixel itself.
+//! Squares start at `block` pixels (the paper's 8; its 9×9 vertex blocks). Only whole, unbridged
+//! segments are interpolated; bridge variants (rare) always get their own cube. The q_ij and the
+//! sun's orders are evaluated per pixel, as in the paper.
+//!
+//! The paper's further split of each cube into three parts sampled at 8, 4 and 2 pixels (rear five
+//! faces, front face at doubled resolution, central quarter) is not implemented: it needs partial
+//! cube renders from the cube renderer. See docs/edges.md for measured time and error.
+
+use super::gather::{EdgeAov, EdgeGather};
+use super::segments::LowSegment;
+use crate::math::{Rgb, Vec3};
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::OnceLock;
+
+/// One pixel's camera ray.
+#[derive(Clone, Copy, Debug)]
+pub struct PixelRay {
+    /// Origin (m).
+    pub o: Vec3,
+    /// Unit direction.
+    pub d: Vec3,
+    /// End of the medium part (m): the ground hit or infinity.
+    pub t_max: f32,
+    /// Radiance arriving from beyond (sky or ground).
+    pub background: Rgb,
+}
+
+/// Settings of the sparse gather.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SparseSettings {
+    /// Initial square size in pixels (a power of two; the paper's 8).
+    pub block: u32,
+    /// Largest difference of cube-centre distance (m) between a pixel and a corner for interpolation.
+    pub depth_tolerance: f32,
+}
+
+impl Default for SparseSettings {
+    fn default() -> Self {
+        SparseSettings {
+            block: 8,
+            depth_tolerance: 10.0,
+        }
+    }
+}
+
+/// Counts from one image gather.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GatherStats {
+    /// Cubes rendered.
+    pub cubes: u64,
+    /// Segments whose K was interpolated.
+    pub interpolated: u64,
+    /// Segments whose K came from their own cube.
+    pub direct: u64,
+}
+
+/// Gather a `width`×`height` image. `ray(x, y)` gives each pixel's ray. With `sparse` = None every
+/// segment renders its own cube (the reference); otherwise K is interpolated where allowed.
+/// Pixels in row-major order. Deterministic at any thread count: every cached K is a pure
+/// function of its pixel and segment.
+pub fn gather_image(
+    g: &EdgeGather,
+    width: u32,
+    height: u32,
+    ray: &(dyn Fn(u32, u32) -> PixelRay + Sync),
+    sparse: Option<SparseSettings>,
+) -> (Vec<EdgeAov>, GatherStats) {
+    let (w, h) = (width as usize, height as usize);
+    let cubes = AtomicU64::new(0);
+    let interp = AtomicU64::new(0);
+    let direct = AtomicU64::new(0);
+    let Some(sp) = sparse else {
+        let px: Vec<EdgeAov> = (0..w * h)
+            .into_par_iter()
+            .map(|i| {
+                let r = ray((i % w) as u32, (i / w) as u32);
+                g.radiance(r.o, r.d, r.t_max, r.background)
+            })
+            .collect();
+        let n: u64 = px.iter().map(|a| a.cubes as u64).sum();
+        return (
+            px,
+            GatherStats {
+                cubes: n,
+                interpolated: 0,
+                direct: n,
+            },
+        );
+    };
+    // Top-level segments of every pixel (cheap: no cubes), and a K cache per (pixel, segment).
+    let tops: Vec<Vec<LowSegment>> = (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            let r = ray((i % w) as u32, (i / w) as u32);
+            let t = g.settings().threshold;
+            if t <= 0.0 {
+                return Vec::new();
+            }
+            super::segments::RayProfile::trace(g.medium(), r.o, r.d, 0.0, r.t_max, &[t]).segments(g.medium(), t)
+        })
+        .collect();
+    let cache: Vec<Vec<OnceLock<Vec<Rgb>>>> = tops.iter().map(|t| (0..t.len()).map(|_| OnceLock::new()).collect()).collect();
+    let rays: Vec<PixelRay> = (0..w * h).into_par_iter().map(|i| ray((i % w) as u32, (i / w) as u32)).collect();
+    // K of segment j of pixel i, from its own cube (cached).
+    let own_k = |i: usize, j: usize| -> &Vec<Rgb> {
+        cache[i][j].get_or_init(|| {
+            cubes.fetch_add(1, Ordering::Relaxed);
+            let seg = &tops[i][j];
+            // Enough orders for the deeper segments that may borrow this K.
+            let orders = g.orders_for(seg).max(8) * 2;
+            g.segment_k(rays[i].o, rays[i].d, seg, orders)
+        })
+    };
+    let block = sp.block.max(1).next_power_of_two() as usize;
+    let px: Vec<EdgeAov> = (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            let r = rays[i];
+            let plan = g.plan(r.o, r.d, r.t_max);
+            let mut n_cubes = 0u32;
+            let e: Vec<Rgb> = plan
+                .jobs
+                .iter()
+                .map(|job| {
+                    let Some(_) = job.top else {
+                        n_cubes += 1;
+                        cubes.fetch_add(1, Ordering::Relaxed);
+                        direct.fetch_add(1, Ordering::Relaxed);
+                        return g.segment_radiance(r.o, r.d, &job.seg);
+                    };
+                    // The plan's top segments are the same as `tops[i]` (same threshold) but its
+                    // profile is also cut at T_lo: match by centre distance.
+                    let tc = job.seg.t_center;
+                    let j_own = nearest(&tops[i], tc).map(|(j, _)| j);
+                    let mut s = block;
+                    while s > 1 {
+                        let (x0, y0) = ((x / s) * s, (y / s) * s);
+                        if x0 == x && y0 == y {
+                            break;
+                        }
+                        let (x1, y1) = ((x0 + s).min(w - 1), (y0 + s).min(h - 1));
+                        let fx = if x1 > x0 { (x - x0) as f32 / (x1 - x0) as f32 } else { 0.0 };
+                        let fy = if y1 > y0 { (y - y0) as f32 / (y1 - y0) as f32 } else { 0.0 };
+                        let corners = [
+                            (x0, y0, (1.0 - fx) * (1.0 - fy)),
+                            (x1, y0, fx * (1.0 - fy)),
+                            (x0, y1, (1.0 - fx) * fy),
+                            (x1, y1, fx * fy),
+                        ];
+                        let mut ok = true;
+                        let mut picks = [(0usize, 0usize, 0f32); 4];
+                        for (c, &(cx, cy, wt)) in corners.iter().enumerate() {
+                            if wt <= 0.0 {
+                                continue;
+                            }
+                            let ci = cy * w + cx;
+                            match nearest(&tops[ci], tc) {
+                                Some((j, dist)) if dist <= sp.depth_tolerance as f64 => picks[c] = (ci, j, wt),
+                                _ => {
+                                    ok = false;
+                                    break;
+                                }
+                            }
+                        }
+                        if ok {
+                            let mut k: Vec<Rgb> = Vec::new();
+                            for &(ci, j, wt) in picks.iter().filter(|p| p.2 > 0.0) {
+                                let kc = own_k(ci, j);
+                                if k.len() < kc.len() {
+                                    let last = k.last().copied().unwrap_or(Rgb::ZERO);
+                                    k.resize(kc.len(), last);
+                                }
+                                for (a, b) in k.iter_mut().zip(kc.iter().chain(std::iter::repeat(&kc[kc.len() - 1]))) {
+                                    *a += *b * wt;
+                                }
+                            }
+                            interp.fetch_add(1, Ordering::Relaxed);
+                            return g.segment_radiance_from_k(r.o, r.d, &job.seg, &k);
+                        }
+                        s /= 2;
+                    }
+                    direct.fetch_add(1, Ordering::Relaxed);
+                    match j_own {
+                        Some(j) => g.segment_radiance_from_k(r.o, r.d, &job.seg, own_k(i, j)),
+                        None => {
+                            n_cubes += 1;
+                            cubes.fetch_add(1, Ordering::Relaxed);
+                            g.segment_radiance(r.o, r.d, &job.seg)
+                        }
+                    }
+                })
+                .collect();
+            let mut a = g.composite(&plan, &e, r.background);
+            a.cubes = n_cubes;
+            a
+        })
+        .collect();
+    (
+        px,
+        GatherStats {
+            cubes: cubes.into_inner(),
+            interpolated: interp.into_inner(),
+            direct: direct.into_inner(),
+        },
+    )
+}
+
+/// The segment whose centre distance is nearest `tc`, and that distance.
+fn nearest(segs: &[LowSegment], tc: f64) -> Option<(usize, f64)> {
+    segs.iter()
+        .enumerate()
+        .map(|(j, s)| (j, (s.t_center - tc).abs()))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+}
