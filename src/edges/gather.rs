@@ -423,7 +423,7 @@ impl<'a> EdgeGather<'a> {
             for s in 0..n {
                 let ta = p.t0 + (p.t1 - p.t0) * s as f64 / n as f64;
                 let tb = p.t0 + (p.t1 - p.t0) * (s + 1) as f64 / n as f64;
-                let delta = if n == 1 { p.tau } else { prof.depth_within(m, k, ta, tb) };
+                let delta = if n == 1 { p.tau } else { prof.depth_within(m, ta, tb) };
                 if delta <= 0.0 {
                     continue;
                 }
@@ -479,8 +479,8 @@ fn refine_extrema(prof: &mut RayProfile, m: &Medium, gap: f32, lo: f32, hi: f32)
         }
         let tc = 0.5 * (a + b);
         if tc > p.t0 && tc < p.t1 {
-            let left_tau = prof.depth_within(m, k, p.t0, tc);
-            let right_tau = prof.depth_within(m, k, tc, p.t1);
+            let left_tau = prof.depth_within(m, p.t0, tc);
+            let right_tau = prof.depth_within(m, tc, p.t1);
             let rc = prof.rho(m, tc);
             let mid = |x: f64, y: f64| prof.rho(m, 0.5 * (x + y));
             let left = super::segments::Piece {

@@ -232,9 +232,8 @@ impl RayProfile {
         self.pieces[end - 1].t1
     }
 
-    /// Optical depth between `t_a` and `t_b` (both inside piece `k`), exact.
-    pub fn depth_within(&self, m: &Medium, k: usize, t_a: f64, t_b: f64) -> f64 {
-        let _ = k;
+    /// Optical depth between `t_a` and `t_b` (both inside one piece), exact.
+    pub fn depth_within(&self, m: &Medium, t_a: f64, t_b: f64) -> f64 {
         let r = |t| rho_at(m, self.o, self.d, t) as f64;
         m.sigma_t as f64 * (t_b - t_a) / 6.0 * (r(t_a) + 4.0 * r(0.5 * (t_a + t_b)) + r(t_b))
     }
