@@ -17,10 +17,11 @@
 //! ground still lit by its hemicubes).
 
 use super::single::pixel_sample;
-use super::{render_rows, Progress, Timings};
+use super::{Progress, Timings};
 use crate::cube::{clear_air, CubeImage, CubeRenderer, LitVolume};
 use crate::diffusion::{solve_diffusion, DiffusionSolution};
-use crate::edges::gather::{CubeRequest, CubeSource, EdgeAov, EdgeGather, EdgeSettings, SunInput};
+use crate::edges::gather::{CubeRequest, CubeSource, EdgeGather, EdgeSettings, SunInput};
+use crate::edges::sparse::{gather_image, PixelRay, SparseSettings};
 use crate::error::Result;
 use crate::image::Image;
 use crate::incident::compute_incident;
@@ -179,16 +180,10 @@ impl CubeSource for GatherCubes<'_> {
     }
 }
 
-/// Edge-gather settings from `[render]`.
-pub fn edge_settings(scene: &Scene) -> EdgeSettings {
-    EdgeSettings {
-        threshold: scene.render.low_density_threshold,
-        step: scene.render.step * scene.medium.min_voxel() * 4.0,
-        ..EdgeSettings::default()
-    }
-}
-
 /// Final gather over a propagated scene: the image, with AOV layers when `render.aov` is set.
+/// K is computed sparsely and interpolated across pixels where neighbouring cubes lie at similar
+/// depths ([`crate::edges::sparse`], the paper's speed-up); `render.spp` > 1 averages whole
+/// gathers at jittered pixel positions.
 pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image {
     let cubes = GatherCubes::new(lit, scene);
     let m = &lit.medium;
@@ -200,32 +195,43 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
     };
     let albedo = m.albedo;
     let dense = move |p: Vec3, _to_eye: Vec3| albedo * lit.i0_at_voxel(m.to_voxel(p));
-    let edge = EdgeGather::new(m, edge_settings(scene), &cubes, sun, &dense);
+    let edge = EdgeGather::new(m, EdgeSettings::from_scene(scene), &cubes, sun, &dense);
     let cam = &scene.camera;
     let spp = scene.render.spp;
-    let aovs = render_rows(cam.width, cam.height, progress, "final gather", |x, y| {
-        let mut sum = EdgeAov::default();
-        for s in 0..spp {
+    let n = cam.width as usize * cam.height as usize;
+    let mut sum = vec![[Rgb::ZERO; 4]; n];
+    progress.begin("final gather", spp as u64);
+    for s in 0..spp {
+        let ray = |x: u32, y: u32| {
             let (px, py, _) = pixel_sample(scene, x, y, s, spp);
-            let ray = cam.ray(px, py);
-            let t_ground = lit.ground_hit(ray.origin, ray.dir);
-            let bg = lit.background(ray.origin, ray.dir, t_ground);
-            let a = edge.radiance(ray.origin, ray.dir, t_ground.unwrap_or(f32::INFINITY), bg);
-            sum.diffusion += a.diffusion;
-            sum.edge += a.edge;
-            sum.sun_single += a.sun_single;
-            sum.background += a.background;
-            sum.transmittance += a.transmittance;
-            sum.cubes += a.cubes;
+            let r = cam.ray(px, py);
+            let t_ground = lit.ground_hit(r.origin, r.dir);
+            PixelRay {
+                o: r.origin,
+                d: r.dir,
+                t_max: t_ground.unwrap_or(f32::INFINITY),
+                background: lit.background(r.origin, r.dir, t_ground),
+            }
+        };
+        let (aovs, stats) = gather_image(&edge, cam.width, cam.height, &ray, Some(SparseSettings::default()));
+        progress.log(&format!(
+            "final gather: {} cubes rendered, K interpolated for {} segments, own cube for {}",
+            stats.cubes, stats.interpolated, stats.direct
+        ));
+        for (acc, a) in sum.iter_mut().zip(&aovs) {
+            acc[0] += a.diffusion;
+            acc[1] += a.edge;
+            acc[2] += a.sun_single;
+            acc[3] += a.background;
         }
-        let k = 1.0 / spp as f32;
-        [sum.diffusion * k, sum.edge * k, sum.sun_single * k, sum.background * k]
-    });
+        progress.advance(1);
+    }
+    let k = 1.0 / spp as f32;
     let mut img = Image::new(cam.width, cam.height);
-    img.pixels = aovs.iter().map(|a| a[0] + a[1] + a[2] + a[3]).collect();
+    img.pixels = sum.iter().map(|a| (a[0] + a[1] + a[2] + a[3]) * k).collect();
     if scene.render.aov {
-        for (n, name) in ["diffusion", "low_density", "sun_single", "background"].iter().enumerate() {
-            img.add_layer(name, aovs.iter().map(|a| a[n]).collect());
+        for (c, name) in ["diffusion", "low_density", "sun_single", "background"].iter().enumerate() {
+            img.add_layer(name, sum.iter().map(|a| a[c] * k).collect());
         }
     }
     img
