@@ -315,7 +315,10 @@ impl Ctx<'_> {
             // A ray launched at coordinate o moves by `shift` (voxels) along axis x while crossing
             // the box; it can touch [0, bd_x] when o ∈ [−max(shift, 0), bd_x + max(−shift, 0)].
             let shift = fv[x] / fv[a].abs() * self.bd[a] as f64;
-            (-(shift.max(0.0).ceil() as i64) - 1, self.bd[x] as i64 + (-shift).max(0.0).ceil() as i64 + 1)
+            (
+                -(shift.max(0.0).ceil() as i64) - 1,
+                self.bd[x] as i64 + (-shift).max(0.0).ceil() as i64 + 1,
+            )
         };
         let (u0, u1) = reach(u);
         let (v0, v1) = reach(v);
@@ -401,7 +404,13 @@ impl Ctx<'_> {
 }
 
 /// Stage 1: propagate every bin and the sun through `m`; see the module docs.
-pub fn compute(m: &Medium, bins: &DirectionBins, sources: &IncidentSources, settings: &IncidentSettings, entry: Option<&EntryRadiance>) -> IncidentLight {
+pub fn compute(
+    m: &Medium,
+    bins: &DirectionBins,
+    sources: &IncidentSources,
+    settings: &IncidentSettings,
+    entry: Option<&EntryRadiance>,
+) -> IncidentLight {
     let dims = m.dims();
     let n = dims[0] * dims[1] * dims[2];
     let (sun_dir, sun_e) = sources.sun.unwrap_or((Vec3::Y, Rgb::ZERO));
@@ -551,4 +560,3 @@ pub fn compute(m: &Medium, bins: &DirectionBins, sources: &IncidentSources, sett
     }
     out
 }
-

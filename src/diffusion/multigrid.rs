@@ -105,7 +105,11 @@ impl Stencil {
                 for i in 0..nx {
                     let l = i + nx * j;
                     let c = l + p * k;
-                    rp[l] = if self.diag[c] > 0.0 { b[c] - self.row(x, c, [i, j, k]) } else { 0.0 };
+                    rp[l] = if self.diag[c] > 0.0 {
+                        b[c] - self.row(x, c, [i, j, k])
+                    } else {
+                        0.0
+                    };
                 }
             }
         });
@@ -143,7 +147,7 @@ impl Stencil {
         let cp = cd[0] * cd[1];
         let fp = nx * ny;
         let [o0v, o1v, o2v] = &mut out.off;
-    out.diag
+        out.diag
             .par_chunks_mut(cp)
             .zip(o0v.par_chunks_mut(cp))
             .zip(o1v.par_chunks_mut(cp))
@@ -304,8 +308,13 @@ pub struct Hierarchy {
 }
 
 impl Hierarchy {
-    /// Scale `a` to unit diagonal and build the levels.
-    pub fn build(mut a: Stencil) -> Hierarchy {
+    /// Scale `a` to unit diagonal and build the levels down to [`COARSE_CELLS`] unknowns.
+    pub fn build(a: Stencil) -> Hierarchy {
+        Self::build_with(a, COARSE_CELLS)
+    }
+
+    /// As [`Hierarchy::build`], coarsening until a level has at most `coarse_cells` unknowns.
+    pub fn build_with(mut a: Stencil, coarse_cells: usize) -> Hierarchy {
         let scale: Vec<f64> = a.diag.iter().map(|d| if *d > 0.0 { 1.0 / d.sqrt() } else { 0.0 }).collect();
         let [nx, ny, nz] = a.dims;
         let strides = [1, nx, nx * ny];
@@ -332,7 +341,7 @@ impl Hierarchy {
         let mut levels = vec![a];
         loop {
             let last = levels.last().expect("at least one level");
-            if last.unknowns() <= COARSE_CELLS || last.dims.iter().all(|d| *d <= 1) {
+            if last.unknowns() <= coarse_cells || last.dims.iter().all(|d| *d <= 1) {
                 break;
             }
             let c = last.coarsen();
@@ -372,41 +381,41 @@ impl Hierarchy {
         let coarse_is_direct = l + 2 == self.levels.len();
         let visits = if coarse_is_direct { 1 } else { self.cycle.max(1) };
         for visit in 0..visits {
-        s.residual(x, b, &mut r);
-        let [nx, ny, nz] = s.dims;
-        let cd = c.dims;
-        let cp = cd[0] * cd[1];
-        let fp = nx * ny;
-        let mut bc = vec![0f64; c.diag.len()];
-        bc.par_chunks_mut(cp).enumerate().for_each(|(kc, bp)| {
-            for k in 2 * kc..(2 * kc + 2).min(nz) {
+            s.residual(x, b, &mut r);
+            let [nx, ny, nz] = s.dims;
+            let cd = c.dims;
+            let cp = cd[0] * cd[1];
+            let fp = nx * ny;
+            let mut bc = vec![0f64; c.diag.len()];
+            bc.par_chunks_mut(cp).enumerate().for_each(|(kc, bp)| {
+                for k in 2 * kc..(2 * kc + 2).min(nz) {
+                    for j in 0..ny {
+                        for i in 0..nx {
+                            bp[i / 2 + cd[0] * (j / 2)] += r[i + nx * j + fp * k];
+                        }
+                    }
+                }
+            });
+            let mut xc = vec![0f64; c.diag.len()];
+            self.vcycle(l + 1, &bc, &mut xc);
+            let w = self.over_correction;
+            x.par_chunks_mut(fp).enumerate().for_each(|(k, xp)| {
                 for j in 0..ny {
                     for i in 0..nx {
-                        bp[i / 2 + cd[0] * (j / 2)] += r[i + nx * j + fp * k];
+                        let f = i + nx * j;
+                        if s.diag[f + fp * k] > 0.0 {
+                            xp[f] += w * xc[i / 2 + cd[0] * (j / 2) + cp * (k / 2)];
+                        }
                     }
                 }
+            });
+            if visit + 1 < visits {
+                // Between the two coarse visits of a W-cycle: a symmetric sweep pair.
+                s.gs_color(x, b, 1);
+                s.gs_color(x, b, 0);
+                s.gs_color(x, b, 0);
+                s.gs_color(x, b, 1);
             }
-        });
-        let mut xc = vec![0f64; c.diag.len()];
-        self.vcycle(l + 1, &bc, &mut xc);
-        let w = self.over_correction;
-        x.par_chunks_mut(fp).enumerate().for_each(|(k, xp)| {
-            for j in 0..ny {
-                for i in 0..nx {
-                    let f = i + nx * j;
-                    if s.diag[f + fp * k] > 0.0 {
-                        xp[f] += w * xc[i / 2 + cd[0] * (j / 2) + cp * (k / 2)];
-                    }
-                }
-            }
-        });
-        if visit + 1 < visits {
-            // Between the two coarse visits of a W-cycle: a symmetric sweep pair.
-            s.gs_color(x, b, 1);
-            s.gs_color(x, b, 0);
-            s.gs_color(x, b, 0);
-            s.gs_color(x, b, 1);
-        }
         }
         for _ in 0..self.sweeps {
             s.gs_color(x, b, 1);

@@ -42,7 +42,11 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
             for s in 0..spp {
                 let (px, py, xi) = pixel_sample(scene, x, y, s, spp);
                 let ray = cam.ray(px, py);
-                let t_max = scene.ground.as_ref().and_then(|g| g.intersect(ray.origin, ray.dir)).unwrap_or(f32::INFINITY);
+                let t_max = scene
+                    .ground
+                    .as_ref()
+                    .and_then(|g| g.intersect(ray.origin, ray.dir))
+                    .unwrap_or(f32::INFINITY);
                 let r = lit.march(ray.origin, ray.dir, 0.0, t_max, step, xi);
                 sum += r.radiance;
                 if r.transmittance > 0.0 {
