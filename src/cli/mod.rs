@@ -1,6 +1,7 @@
 //! Subcommands of the `cloudgi` binary.
 
 mod progress;
+mod slab;
 
 use clap::{Args, Parser, Subcommand};
 use cloudgi::error::{Error, Result};
@@ -25,6 +26,8 @@ pub struct Cli {
 enum Command {
     /// Render a scene (default: the built-in cloud) to OUT.exr plus a tone-mapped OUT.png.
     Render(RenderArgs),
+    /// Reflectance and transmittance of a plane-parallel slab (diffusion), optionally against a reference table.
+    Slab(slab::SlabArgs),
 }
 
 #[derive(Args, Debug)]
@@ -64,6 +67,7 @@ pub fn run(cli: Cli) -> Result<()> {
     }
     match cli.command {
         Command::Render(a) => render(a, cli.quiet),
+        Command::Slab(a) => slab::run(a),
     }
 }
 

@@ -402,7 +402,7 @@ pub fn solve_diffusion(
         })
         .collect();
     for (c, (_, stats)) in results.iter().enumerate() {
-        if !(stats.relative_residual <= settings.tolerance) {
+        if stats.relative_residual.is_nan() || stats.relative_residual > settings.tolerance {
             return Err(Error::Numerical {
                 stage: "diffusion solver".into(),
                 message: format!(

@@ -266,6 +266,7 @@ impl Dense {
         Dense { cells, l: a }
     }
 
+    #[allow(clippy::needless_range_loop)]
     fn solve(&self, b: &[f64], x: &mut [f64]) {
         let n = self.cells.len();
         let mut y: Vec<f64> = self.cells.iter().map(|c| b[*c]).collect();
@@ -469,7 +470,7 @@ impl Hierarchy {
             while stats.iterations < max_iter {
                 a.apply(&p, &mut ap);
                 let pap = dot(&p, &ap);
-                if !(pap > 0.0) {
+                if pap.is_nan() || pap <= 0.0 {
                     break;
                 }
                 let alpha = rz / pap;
