@@ -466,3 +466,61 @@ fn diffusion_render_is_brighter_than_single_scattering() {
     let (ld, ls) = (lum(&d.image), lum(&s.image));
     assert!(ld > 1.5 * ls, "diffusion {ld} vs single {ls}");
 }
+
+#[test]
+fn bad_solver_settings_name_the_field() {
+    for (field, edit) in [
+        (
+            "render.solver_tolerance",
+            Box::new(|d: &mut cloudgi::SceneDesc| d.render.solver_tolerance = 0.0) as Box<dyn Fn(&mut cloudgi::SceneDesc)>,
+        ),
+        (
+            "render.solver_tolerance",
+            Box::new(|d: &mut cloudgi::SceneDesc| d.render.solver_tolerance = f64::NAN),
+        ),
+        (
+            "render.solver_max_iterations",
+            Box::new(|d: &mut cloudgi::SceneDesc| d.render.solver_max_iterations = 0),
+        ),
+    ] {
+        let err = Scene::load(None, |d| edit(d)).unwrap_err();
+        match err {
+            Error::Invalid { field: f, .. } => assert_eq!(f, field),
+            e => panic!("{e}"),
+        }
+    }
+}
+
+#[test]
+fn jittered_direction_strata_keep_the_bin_power() {
+    // n² jittered families per bin, weighted by their exact solid angles: in a nearly transparent
+    // box Q0 is still ρσs/(4π)·Δω·L (to 1e-5), and Q1 = g·Q0·(−mean direction) to 2 % (the strata's
+    // jittered directions sample the bin's first moment).
+    let bins = DirectionBins::new();
+    let thin = Medium::new(Grid3::filled([6, 5, 4], 1e-7), Vec3::ZERO, Vec3::ONE, 1.0, Rgb::ONE, 0.5);
+    let settings = IncidentSettings {
+        rays_per_face_edge: 3,
+        ..Default::default()
+    };
+    for b in [5usize, 60] {
+        let mut r = vec![Rgb::ZERO; 96];
+        r[b] = Rgb::ONE;
+        let inc = compute(
+            &thin,
+            &bins,
+            &IncidentSources {
+                bin_radiance: r,
+                sun: None,
+            },
+            &settings,
+            None,
+        );
+        let q0 = 1e-7 / (4.0 * PI) * bins.bins[b].solid_angle;
+        let q1 = -bins.bins[b].mean_dir * (0.5 * q0) as f32;
+        for idx in 0..inc.q0.len() {
+            assert!((inc.q0[idx].x as f64 - q0).abs() < 1e-5 * q0, "{} vs {q0}", inc.q0[idx].x);
+            let got = Vec3::new(inc.q1[0][idx].x, inc.q1[1][idx].x, inc.q1[2][idx].x);
+            assert!((got - q1).length() < 0.02 * q1.length(), "{got} vs {q1}");
+        }
+    }
+}
