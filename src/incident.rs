@@ -95,7 +95,8 @@ impl IncidentSources {
         let power = bins.integrate(sky_subdivisions.max(1), |d| {
             if d.y < 0.0 {
                 if let Some(g) = &scene.ground {
-                    return g.radiance(d, &scene.sun, &scene.sky, 1.0);
+                    // The Lambertian ground is uniform: its radiance does not depend on the point.
+                    return g.radiance(Vec3::ZERO, &scene.sun, &scene.sky, 1.0);
                 }
             }
             scene.sky.radiance(d)

@@ -26,7 +26,7 @@ use crate::sunlight::SunTransmittance;
 pub struct LitVolume {
     /// The medium (density, σt, albedo, g, box).
     pub medium: Medium,
-    /// I0 per band at voxel centres (W·m⁻²·sr⁻¹); zero where ρ = 0.
+    /// I0 per band at voxel centres (W·m⁻²·sr⁻¹), clamped at 0; zero where ρ = 0.
     pub i0: [Grid3; 3],
     /// ρ·I0 per band at voxel centres, for the density-weighted interpolation.
     rho_i0: [Grid3; 3],
@@ -41,11 +41,13 @@ impl LitVolume {
     pub fn new(medium: &Medium, incident: &IncidentLight, solution: &DiffusionSolution) -> LitVolume {
         let d = medium.dims();
         let rho = medium.density.data();
+        // I0 is clamped at 0: the P1 approximation can go negative in thin voxels at a strongly
+        // forward-lit edge (the −∇·(Q1/ρσtr) source is a dipole), and a radiance cannot.
         let mk = |c: usize, weighted: bool| {
             let data: Vec<f32> = solution.i0[c]
                 .iter()
                 .zip(rho)
-                .map(|(v, r)| if weighted { v * r } else { *v })
+                .map(|(v, r)| if weighted { v.max(0.0) * r } else { v.max(0.0) })
                 .collect();
             Grid3::from_vec(d, data, "diffusion solution").unwrap_or_else(|_| Grid3::filled(d, 0.0))
         };

@@ -25,6 +25,17 @@
 //! 1 and 2. (Check: the no-inward-flux condition ∫_{ω·n>0} I_d (ω·n) dω = π I0 + (2π/3) I1·n = 0
 //! with n inward gives I0 + (2/3) n·I1 = 0, i.e. I0 − 2/(3ρσtr) n·∇I0 + 2/(ρσtr) n·Q1 = 0.)
 //!
+//! # A floor on thin voxels
+//!
+//! Where ρσtr·h ≪ 1 the coefficients D/h² grow without bound (the default cloud has voxels down to
+//! ρ = 5·10⁻¹²) and the system becomes arbitrarily stiff, while diffusion there is meaningless
+//! anyway. [`DiffusionSettings::min_optical_depth`] = τ_min floors the face's transport optical
+//! depth ρ_f σtr h in D_f and β (a flux limiter: the flux of a voxel thinner than τ_min is that of
+//! a voxel of depth τ_min). Only the coefficients change; ρσa, Q0 and Q1 keep the true ρ. With
+//! τ_min = 0 the scheme is exactly the paper's. Measured on the default cloud (g = 0.9, so
+//! τ_tr = 0.1·τ): τ_min = 10⁻³ (default) takes ~36 PCG iterations per band, 10⁻² takes 15 but
+//! raises the ρ-weighted mean I0 by 6 %; see docs/diffusion.md.
+//!
 //! # The discrete equations
 //!
 //! Unknowns: I0 at the centre of every voxel with ρ > 0 ("full"); empty voxels carry no unknown.
@@ -41,7 +52,7 @@
 //!   cell satisfies eq. 7 at the face, with face value (I_P + I_g)/2, inward normal derivative
 //!   (I_P − I_g)/h_a, and the non-zero cell's ρ_P and Q1_P. With β = 2/(3ρ_P σtr h_a) and
 //!   f = F_P·n (n outward):
-//!   `(I_P + I_g)/2 + β (I_g − I_P) − 2f = 0` ⇒ `I_g = ((1 − 2β) ... )` eliminated:
+//!   `(I_P + I_g)/2 + β (I_g − I_P) − 2f = 0` ⇒ `I_g = (4f − (1 − 2β) I_P)/(1 + 2β)`, so
 //!   `φ_f = −D_P (I_g − I_P)/h_a + f = (β I_P + f)/(1 + 2β)`,
 //!   which is exactly half the ghost face value, φ = I0_face/2: the Marshak flux. The ghost never
 //!   becomes an unknown, and a different ghost may serve each full neighbour of an empty cell.
@@ -97,7 +108,7 @@ impl Default for DiffusionSettings {
 }
 
 /// Default [`DiffusionSettings::min_optical_depth`].
-pub const DEFAULT_MIN_OPTICAL_DEPTH: f64 = 0.01;
+pub const DEFAULT_MIN_OPTICAL_DEPTH: f64 = 1e-3;
 
 /// Convergence of one band's solve.
 #[derive(Clone, Debug, PartialEq)]
@@ -391,7 +402,7 @@ pub fn solve_diffusion(
         })
         .collect();
     for (c, (_, stats)) in results.iter().enumerate() {
-        if !(stats.relative_residual <= settings.tolerance) {
+        if stats.relative_residual.is_nan() || stats.relative_residual > settings.tolerance {
             return Err(Error::Numerical {
                 stage: "diffusion solver".into(),
                 message: format!(

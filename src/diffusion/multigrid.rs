@@ -266,6 +266,7 @@ impl Dense {
         Dense { cells, l: a }
     }
 
+    #[allow(clippy::needless_range_loop)]
     fn solve(&self, b: &[f64], x: &mut [f64]) {
         let n = self.cells.len();
         let mut y: Vec<f64> = self.cells.iter().map(|c| b[*c]).collect();
@@ -308,8 +309,13 @@ pub struct Hierarchy {
 }
 
 impl Hierarchy {
-    /// Scale `a` to unit diagonal and build the levels.
-    pub fn build(mut a: Stencil) -> Hierarchy {
+    /// Scale `a` to unit diagonal and build the levels down to [`COARSE_CELLS`] unknowns.
+    pub fn build(a: Stencil) -> Hierarchy {
+        Self::build_with(a, COARSE_CELLS)
+    }
+
+    /// As [`Hierarchy::build`], coarsening until a level has at most `coarse_cells` unknowns.
+    pub fn build_with(mut a: Stencil, coarse_cells: usize) -> Hierarchy {
         let scale: Vec<f64> = a.diag.iter().map(|d| if *d > 0.0 { 1.0 / d.sqrt() } else { 0.0 }).collect();
         let [nx, ny, nz] = a.dims;
         let strides = [1, nx, nx * ny];
@@ -336,7 +342,7 @@ impl Hierarchy {
         let mut levels = vec![a];
         loop {
             let last = levels.last().expect("at least one level");
-            if last.unknowns() <= COARSE_CELLS || last.dims.iter().all(|d| *d <= 1) {
+            if last.unknowns() <= coarse_cells || last.dims.iter().all(|d| *d <= 1) {
                 break;
             }
             let c = last.coarsen();
@@ -464,7 +470,7 @@ impl Hierarchy {
             while stats.iterations < max_iter {
                 a.apply(&p, &mut ap);
                 let pap = dot(&p, &ap);
-                if !(pap > 0.0) {
+                if pap.is_nan() || pap <= 0.0 {
                     break;
                 }
                 let alpha = rz / pap;

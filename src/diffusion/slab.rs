@@ -107,7 +107,7 @@ pub fn solve_slab(tau: f64, a: f64, g: f64, incidence: Incidence, cells: usize) 
             let c = interior_coupling(1.0, 1.0, sigma_tr, h, 0.0);
             d[k] += c;
             l[k] = -c;
-            b[k] -= 0.5 * (f[k] + f[k - 1]) * -1.0 / h;
+            b[k] += 0.5 * (f[k] + f[k - 1]) / h;
         }
         // Bottom face (outward +z).
         if k + 1 == n {
