@@ -57,7 +57,9 @@ impl Progress for Bars {
             return;
         }
         match self.bar.lock().ok().and_then(|b| b.clone()) {
-            Some(pb) => pb.println(msg),
+            // A hidden bar (no terminal) drops println: log to stderr instead.
+            Some(pb) if !pb.is_hidden() => pb.println(msg),
+            Some(_) => eprintln!("{msg}"),
             None => eprintln!("{msg}"),
         }
     }

@@ -3,8 +3,8 @@
 //! of eq. 4 with eq. 7 ([`cloudgi::diffusion::slab`], deterministic: standard errors 0).
 
 use clap::{Args, ValueEnum};
-use cloudgi::error::{Error, Result};
 use cloudgi::diffusion::slab::{default_cells, solve_slab, Incidence as DiffusionIncidence};
+use cloudgi::error::{Error, Result};
 use cloudgi::reference::slab::{slab, Incidence, SlabParams, SlabResult};
 
 /// Method for the slab.

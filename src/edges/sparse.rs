@@ -39,7 +39,8 @@ pub struct PixelRay {
 pub struct SparseSettings {
     /// Initial square size in pixels (a power of two; the paper's 8).
     pub block: u32,
-    /// Largest difference of cube-centre distance (m) between a pixel and a corner for interpolation.
+    /// Largest difference of cube-centre distance (m) between a pixel and a corner for interpolation
+    /// (40 m: half the cubes of 10 m on the default scene, images within 2e-4 mean relative difference).
     pub depth_tolerance: f32,
 }
 
@@ -47,7 +48,7 @@ impl Default for SparseSettings {
     fn default() -> Self {
         SparseSettings {
             block: 8,
-            depth_tolerance: 10.0,
+            depth_tolerance: 40.0,
         }
     }
 }
