@@ -67,6 +67,12 @@ pub struct IncidentSettings {
     pub sky_subdivisions: usize,
     /// Seed of the ray jitter.
     pub seed: u64,
+    /// Similarity (δ-) scaling with forward fraction f = g: the forward peak of the HG phase
+    /// function is treated as unscattered, so incident light decays with σt(1 − a·g) and scatters
+    /// isotropically with σs(1 − g) (Q1 = 0). The diffusion operator (σtr, σa) is unchanged by the
+    /// scaling. `false` is the paper's scheme exactly (Q1 from the first moment, decay with σt);
+    /// see docs/diffusion.md for why the default scene uses it (`render.delta_scaling`).
+    pub delta_scaling: bool,
 }
 
 impl Default for IncidentSettings {
@@ -75,6 +81,7 @@ impl Default for IncidentSettings {
             rays_per_face_edge: 1,
             sky_subdivisions: 8,
             seed: 0,
+            delta_scaling: false,
         }
     }
 }
@@ -144,6 +151,7 @@ impl IncidentLight {
 pub fn compute_incident(scene: &Scene, entry: Option<&EntryRadiance<'_>>) -> IncidentLight {
     let settings = IncidentSettings {
         seed: scene.render.seed,
+        delta_scaling: scene.render.delta_scaling,
         ..IncidentSettings::default()
     };
     let bins = DirectionBins::new();
@@ -251,6 +259,8 @@ struct Ctx<'a> {
     entry: Option<&'a EntryRadiance<'a>>,
     seed: u64,
     ss: usize,
+    /// Extinction per unit density the incident light decays with, per band (m⁻¹).
+    atten: [f64; 3],
 }
 
 impl Ctx<'_> {
@@ -268,7 +278,7 @@ impl Ctx<'_> {
         let Some((t0, t1)) = crate::medium::ray_box(DVec3::ZERO, hi, o, dv, f64::NEG_INFINITY, f64::INFINITY) else {
             return;
         };
-        let sigma_t = self.m.sigma_t as f64;
+        let atten = self.atten;
         let mut l = l0;
         let mut prev: Option<([usize; 3], bool)> = None;
         walk(self.bd, o, dv, t0, t1, |c, len| {
@@ -282,15 +292,21 @@ impl Ctx<'_> {
                         l = lh;
                     }
                 }
-                let tau = sigma_t * rho as f64 * len;
-                let (e, integral) = if tau < 1e-6 {
-                    (1.0 - tau, len * (1.0 - 0.5 * tau))
-                } else {
-                    let e = (-tau).exp();
-                    (e, (1.0 - e) * len / tau)
-                };
-                sink(idx, l * integral as f32, len as f32);
-                l *= e as f32;
+                let mut e = [0f32; 3];
+                let mut integral = [0f32; 3];
+                for c in 0..3 {
+                    let tau = atten[c] * rho as f64 * len;
+                    let (ec, ic) = if tau < 1e-6 {
+                        (1.0 - tau, len * (1.0 - 0.5 * tau))
+                    } else {
+                        let ec = (-tau).exp();
+                        (ec, (1.0 - ec) * len / tau)
+                    };
+                    e[c] = ec as f32;
+                    integral[c] = ic as f32;
+                }
+                sink(idx, l * Rgb::from_array(integral), len as f32);
+                l *= Rgb::from_array(e);
             }
             prev = Some((c, full));
         });
@@ -448,6 +464,12 @@ pub fn compute(
         entry,
         seed: settings.seed,
         ss: settings.rays_per_face_edge.max(1),
+        atten: {
+            let f = if settings.delta_scaling { m.g as f64 } else { 0.0 };
+            let a = m.albedo.as_dvec3();
+            let st = m.sigma_t as f64;
+            [st * (1.0 - f * a.x), st * (1.0 - f * a.y), st * (1.0 - f * a.z)]
+        },
     };
     // Sources: the 96 bins, then the sun. Each contributes Δω·Ī to Σ0 and Δω·Ī·flow to Σ1.
     let mut list: Vec<(Source, Rgb, Vec3)> = bins
@@ -531,8 +553,12 @@ pub fn compute(
     out.rays = rays;
     out.fallback_rays = fallback;
     // Scatter into the full grid with ρσs/(4π) and ρσs·g/(4π).
-    let sigma_s = m.albedo * m.sigma_t;
-    let g = m.g as f64;
+    // With δ-scaling (f = g) the scattering that changes direction is σs(1 − g), isotropic (g' = 0).
+    let (sigma_s, g) = if settings.delta_scaling {
+        (m.albedo * m.sigma_t * (1.0 - m.g), 0.0)
+    } else {
+        (m.albedo * m.sigma_t, m.g as f64)
+    };
     for k in 0..bd[2] {
         for j in 0..bd[1] {
             for i in 0..bd[0] {

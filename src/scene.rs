@@ -251,6 +251,11 @@ pub struct RenderDesc {
     pub solver_max_iterations: usize,
     /// `full`: most clear-air propagation iterations (0: diffusion plus edges only, paper Fig. 6).
     pub iterations: usize,
+    /// Stage 1 with similarity (δ-) scaling, forward fraction f = g (docs/diffusion.md): keeps I0
+    /// positive on sunlit faces but, with the paper's gather, darkens the cloud (measured against
+    /// `reference`: luminance bias −62 % vs −21 %), so off by default; false: the paper's
+    /// first-moment Q1 scheme exactly.
+    pub delta_scaling: bool,
     /// `full`: stop iterating once I0 changes by less than this fraction (unitless).
     pub propagation_tolerance: f64,
     /// `full`: write the components (diffusion, low_density, sun_single, background) as EXR layers.
@@ -274,6 +279,7 @@ impl Default for RenderDesc {
             iterations: crate::render::full::DEFAULT_ITERATIONS,
             propagation_tolerance: crate::render::full::DEFAULT_PROPAGATION_TOLERANCE,
             aov: false,
+            delta_scaling: false,
             solver_tolerance: 1e-6,
             solver_max_iterations: 200,
         }
@@ -365,6 +371,9 @@ pub struct RenderSettings {
     pub solver_max_iterations: usize,
     /// `full`: most clear-air propagation iterations (0: diffusion plus edges only, paper Fig. 6).
     pub iterations: usize,
+    /// Stage 1 with similarity (δ-) scaling, forward fraction f = g (docs/diffusion.md); false:
+    /// the paper's first-moment Q1 scheme exactly.
+    pub delta_scaling: bool,
     /// `full`: stop iterating once I0 changes by less than this fraction (unitless).
     pub propagation_tolerance: f64,
     /// `full`: write the components (diffusion, low_density, sun_single, background) as EXR layers.
@@ -505,6 +514,7 @@ impl Scene {
             iterations: r.iterations,
             propagation_tolerance: r.propagation_tolerance,
             aov: r.aov,
+            delta_scaling: r.delta_scaling,
             solver_tolerance: r.solver_tolerance,
             solver_max_iterations: r.solver_max_iterations,
         };

@@ -24,7 +24,7 @@ use crate::edges::gather::{CubeRequest, CubeSource, EdgeGather, EdgeSettings, Su
 use crate::edges::sparse::{gather_image, PixelRay, SparseSettings};
 use crate::error::Result;
 use crate::image::Image;
-use crate::incident::compute_incident;
+use crate::incident::{compute_incident, IncidentLight};
 use crate::math::{Rgb, Vec3};
 use crate::scene::Scene;
 
@@ -39,6 +39,8 @@ pub struct Propagation {
     pub lit: LitVolume,
     /// The final diffusion solution.
     pub solution: DiffusionSolution,
+    /// The stage-1 light the final solution was solved with.
+    pub incident: IncidentLight,
     /// Relative change ‖I0_new − I0_old‖/‖I0_new‖ of each clear-air iteration.
     pub changes: Vec<f64>,
 }
@@ -69,7 +71,7 @@ pub fn relative_change(old: &DiffusionSolution, new: &DiffusionSolution) -> f64 
 /// Stages 1–2 and the clear-air iterations.
 pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Propagation> {
     let settings = super::diffusion::settings(scene);
-    let inc = timings.time("incident light", || compute_incident(scene, None));
+    let mut inc = timings.time("incident light", || compute_incident(scene, None));
     let mut sol = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &inc, None, &settings))?;
     progress.log(&sol.summary());
     let sun_t = inc.sun_transmittance.grid.clone();
@@ -80,9 +82,13 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         if it > 0 {
             ca = timings.time("clear-air cubes", || clear_air(scene, i0_rgb(&sol), sun_t.clone(), progress));
         }
-        let hook = ca.cubes.hook();
-        let inc = timings.time("incident light", || compute_incident(scene, Some(&hook)));
-        let new = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &inc, Some(&sol), &settings))?;
+        // Stage 1 asks for bin b = the direction the light comes from (its rays flow along −ω_b),
+        // which is exactly the cube's bin b ("radiance arriving from ω_b"): no flip here.
+        let cubes = &ca.cubes;
+        let hook = move |v: [usize; 3], b: usize| cubes.lookup(v, b);
+        let new_inc = timings.time("incident light", || compute_incident(scene, Some(&hook)));
+        let new = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &new_inc, Some(&sol), &settings))?;
+        inc = new_inc;
         let change = relative_change(&sol, &new);
         progress.log(&format!(
             "clear-air iteration {}/{}: {} border cubes, I0 changed by {:.3} % ({} warm-start iterations)",
@@ -110,6 +116,7 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
     Ok(Propagation {
         lit,
         solution: sol,
+        incident: inc,
         changes,
     })
 }
