@@ -41,9 +41,8 @@ fn mutate(rng: &mut Rng, b: &mut Vec<u8>) {
             let v = INTERESTING[rng.below(INTERESTING.len())];
             let w = if rng.below(2) == 0 { 4 } else { 8 };
             let bytes = v.to_le_bytes();
-            for k in 0..w.min(b.len() - i) {
-                b[i + k] = bytes[k];
-            }
+            let n = w.min(b.len() - i);
+            b[i..i + n].copy_from_slice(&bytes[..n]);
         }
         3 => b.truncate(i),
         4 => {
