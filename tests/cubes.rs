@@ -313,8 +313,9 @@ fn entry_radiance_is_the_radiance_arriving_from_behind_the_ray() {
         cubes.entry_radiance([9, 4, 4], travel).is_none(),
         "interior empty voxels have no cube"
     );
+    // Stage 1's hook is asked with the source bin, the opposite of the travel bin.
     let hook = cubes.hook();
-    assert_eq!(hook(e, travel), Some(got));
+    assert_eq!(hook(e, cloudgi::cube::opposite_bin(travel)), Some(got));
 }
 
 #[test]

@@ -118,9 +118,11 @@ impl BorderCubes {
         self.lookup(voxel, opposite_bin(travel_bin))
     }
 
-    /// The stage-1 hook `(empty_voxel, travel_bin) → Option<radiance>`.
+    /// The stage-1 hook ([`crate::incident::EntryRadiance`]): stage 1 asks with the *source* bin b
+    /// (the sky direction its rays come from, flowing along −ω_b), which is the cube's own bin b,
+    /// so this is [`Self::lookup`], not [`Self::entry_radiance`] (which takes the travel bin).
     pub fn hook(&self) -> impl Fn([usize; 3], usize) -> Option<Rgb> + Sync + '_ {
-        move |v, b| self.entry_radiance(v, b)
+        move |v, b| self.lookup(v, b)
     }
 
     /// Number of bins rendered over all cubes.

@@ -27,7 +27,7 @@ use crate::scene::Scene;
 pub struct ClearAir {
     /// The lit volume, with the ground from its hemicubes (if the scene has a ground).
     pub lit: LitVolume,
-    /// The border cubes, rendered over that ground; [`BorderCubes::entry_radiance`] is stage 1's hook.
+    /// The border cubes, rendered over that ground; [`BorderCubes::hook`] is stage 1's hook.
     pub cubes: BorderCubes,
 }
 

@@ -82,10 +82,9 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         if it > 0 {
             ca = timings.time("clear-air cubes", || clear_air(scene, i0_rgb(&sol), sun_t.clone(), progress));
         }
-        // Stage 1 asks for bin b = the direction the light comes from (its rays flow along −ω_b),
-        // which is exactly the cube's bin b ("radiance arriving from ω_b"): no flip here.
-        let cubes = &ca.cubes;
-        let hook = move |v: [usize; 3], b: usize| cubes.lookup(v, b);
+        // Stage 1 asks with bin b = the direction the light comes from (its rays flow along −ω_b),
+        // which is the cube's own bin b ("radiance arriving from ω_b").
+        let hook = ca.cubes.hook();
         let new_inc = timings.time("incident light", || compute_incident(scene, Some(&hook)));
         let new = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &new_inc, Some(&sol), &settings))?;
         inc = new_inc;

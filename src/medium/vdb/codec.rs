@@ -334,4 +334,69 @@ mod tests {
         assert!(blosc_decompress(&b, 41).is_err());
         assert!(blosc_decompress(&b[..20], 40).is_err());
     }
+
+    /// Build a blosc chunk the way blosc 1 lays it out: header, block offsets, per block
+    /// `nsplits` streams of (i32 size, LZ4 block), byte-shuffled.
+    fn blosc_chunk(data: &[u8], typesize: usize, blocksize: usize, split: bool) -> Vec<u8> {
+        let n = data.len();
+        let nblocks = n.div_ceil(blocksize);
+        let mut body = Vec::new();
+        let mut starts = Vec::new();
+        for j in 0..nblocks {
+            let block = &data[j * blocksize..((j + 1) * blocksize).min(n)];
+            let leftover = block.len() < blocksize;
+            // Shuffle: stream b holds byte b of every element; the tail bytes stay in place.
+            let ne = block.len() / typesize;
+            let mut sh = block.to_vec();
+            for i in 0..ne {
+                for b in 0..typesize {
+                    sh[b * ne + i] = block[i * typesize + b];
+                }
+            }
+            starts.push(16 + 4 * nblocks + body.len());
+            let nsplits = if split && !leftover && block.len() / typesize >= 128 {
+                typesize
+            } else {
+                1
+            };
+            let ne = block.len() / nsplits;
+            for s in 0..nsplits {
+                let c = lz4_flex::block::compress(&sh[s * ne..(s + 1) * ne]);
+                body.extend_from_slice(&(c.len() as i32).to_le_bytes());
+                body.extend_from_slice(&c);
+            }
+        }
+        let mut out = vec![2, 1, 0x1 | (1 << 5) | if split { 0 } else { 0x10 }, typesize as u8];
+        let total = 16 + 4 * nblocks + body.len();
+        for v in [n, blocksize, total] {
+            out.extend_from_slice(&(v as u32).to_le_bytes());
+        }
+        for st in starts {
+            out.extend_from_slice(&(st as u32).to_le_bytes());
+        }
+        out.extend_from_slice(&body);
+        out
+    }
+
+    #[test]
+    fn blosc_lz4_shuffled_split_unsplit_and_leftover_blocks() {
+        let data: Vec<u8> = (0..2050u32)
+            .flat_map(|i| ((i as f32 * 0.01).sin()).to_le_bytes())
+            .take(8202)
+            .collect();
+        for (blocksize, split) in [(8202, false), (2048, true), (2048, false), (4096, true)] {
+            let c = blosc_chunk(&data, 4, blocksize, split);
+            assert_eq!(
+                blosc_decompress(&c, data.len()).unwrap(),
+                data,
+                "blocksize {blocksize} split {split}"
+            );
+            // Corrupt every byte of the chunk in turn: errors or wrong data, never a panic.
+            for i in (0..c.len()).step_by(7) {
+                let mut bad = c.clone();
+                bad[i] ^= 0x5a;
+                let _ = blosc_decompress(&bad, data.len());
+            }
+        }
+    }
 }

@@ -187,9 +187,9 @@ pub(crate) fn parse_tree_type(t: &str) -> Option<(String, Vec<u32>)> {
 
 /// Read a tree's topology and buffers. `grid` names it in errors.
 pub(crate) fn read_tree(c: &mut Cursor, vt: &ValueType, half: bool, compression: u32, log2: &[u32], grid: &str) -> Result<SparseTree> {
-    if log2.len() < 2 || log2.len() > 4 || log2.iter().any(|&l| !(1..=6).contains(&l)) || log2.iter().sum::<u32>() > 24 {
+    if log2.len() < 2 || log2.len() > 4 || log2.iter().any(|&l| !(2..=6).contains(&l)) || log2.iter().sum::<u32>() > 24 {
         return Err(c.err(format!(
-            "grid `{grid}`: tree configuration {log2:?} is not supported (2 to 4 node levels of 2¹ to 2⁶ per edge, as OpenVDB's 5-4-3)"
+            "grid `{grid}`: tree configuration {log2:?} is not supported (2 to 4 node levels of 2² to 2⁶ per edge, as OpenVDB's 5-4-3)"
         )));
     }
     let buffers = c.i32("tree buffer count")?;
@@ -226,6 +226,11 @@ pub(crate) fn read_tree(c: &mut Cursor, vt: &ValueType, half: bool, compression:
                 value: v,
             });
         }
+    }
+    let mut origins: Vec<[i64; 3]> = r.tiles.iter().map(|t| t.origin).collect();
+    origins.sort_unstable();
+    if origins.windows(2).any(|w| w[0] == w[1]) {
+        return Err(c.err(format!("grid `{grid}`: two root tiles share an origin")));
     }
     // (root child origin, range of its leaves) in file order.
     let mut children: Vec<([i64; 3], std::ops::Range<usize>)> = Vec::new();
