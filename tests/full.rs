@@ -130,7 +130,10 @@ fn light_crosses_clear_air_between_cloud_parts() {
     // The right block's gap face (i = 16) is what lights it; the left face must reach a fair share.
     let src = p1.solution.i0[0][idx(16, 6, 6)];
     assert!(src > 0.0);
-    assert!(a > 0.0 && b > 1.1 * a, "left face I0 {a} → {b} (right gap face {src}): no light crossed the gap");
+    assert!(
+        a > 0.0 && b > 1.1 * a,
+        "left face I0 {a} → {b} (right gap face {src}): no light crossed the gap"
+    );
     assert!(b < src, "the lit face {b} cannot outshine its source {src}");
     assert_eq!(p1.changes.len(), 1);
 }
@@ -156,7 +159,10 @@ fn full_render_is_deterministic_and_aovs_add_up() {
     let names = ["diffusion", "low_density", "sun_single", "background"];
     for (i, p) in a.pixels.iter().enumerate() {
         let sum: Rgb = names.iter().map(|n| a.layer(n).unwrap()[i]).sum();
-        assert!((sum - *p).abs().max_element() <= 1e-5 * p.max_element().max(1e-3), "pixel {i}: {sum} vs {p}");
+        assert!(
+            (sum - *p).abs().max_element() <= 1e-5 * p.max_element().max(1e-3),
+            "pixel {i}: {sum} vs {p}"
+        );
         assert!(p.is_finite() && p.min_element() >= 0.0);
     }
     // The cloud is in view and lit: some pixels carry diffusion light.
@@ -172,4 +178,3 @@ fn bad_propagation_settings_name_the_field() {
         assert!(err.contains(&format!("render.{key}")) && err.contains("bad.toml"), "{err}");
     }
 }
-

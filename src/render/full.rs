@@ -87,7 +87,9 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         // which is the cube's own bin b ("radiance arriving from ω_b").
         let hook = ca.cubes.hook();
         let new_inc = timings.time("incident light", || compute_incident(scene, Some(&hook)));
-        let new = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &new_inc, Some(&sol), &settings))?;
+        let new = timings.time("diffusion solve", || {
+            solve_diffusion(&scene.medium, &new_inc, Some(&sol), &settings)
+        })?;
         inc = new_inc;
         let change = relative_change(&sol, &new);
         progress.log(&format!(
@@ -212,7 +214,12 @@ impl CubeSource for GatherCubes<'_> {
                     let local = CubeImage::local_direction(half, face, bi, bj);
                     let d = (cube.axes * local).normalize();
                     let l = trace(d, 2.0 * cones[(2 * bj) * res + 2 * bi]);
-                    for (i, j) in [(2 * bi, 2 * bj), (2 * bi + 1, 2 * bj), (2 * bi, 2 * bj + 1), (2 * bi + 1, 2 * bj + 1)] {
+                    for (i, j) in [
+                        (2 * bi, 2 * bj),
+                        (2 * bi + 1, 2 * bj),
+                        (2 * bi, 2 * bj + 1),
+                        (2 * bi + 1, 2 * bj + 1),
+                    ] {
                         let k = cube.index(face, i, j);
                         cube.pixels[k] = l;
                     }
