@@ -70,8 +70,17 @@ fn render(s: &Scene) -> (Image, u32) {
 
 /// Furnace: albedo 1, constant sky L, no sun, no ground ⇒ every pixel reads L.
 fn furnace(sigma_t: f32, g: f32, spp: u32) {
+    furnace_with(sigma_t, g, spp, false);
+}
+
+/// `envmap`: the constant sky as an equirectangular map, so next-event estimation samples the
+/// map's sin θ-weighted distribution (not the uniform sphere) and MIS must still add up to L.
+fn furnace_with(sigma_t: f32, g: f32, spp: u32, envmap: bool) {
     let l = Rgb::new(0.5, 1.0, 2.0);
-    let s = scene(ball(sigma_t, 1.0, g), Rgb::ZERO, l, 40.0, 30.0, (8, 6), spp);
+    let mut s = scene(ball(sigma_t, 1.0, g), Rgb::ZERO, l, 40.0, 30.0, (8, 6), spp);
+    if envmap {
+        s.sky = Sky::from_envmap(cloudgi::lighting::envmap::EnvMap::new(32, 16, vec![l; 32 * 16]));
+    }
     let (img, _) = render(&s);
     let se = img.layer(STDERR_LAYER).unwrap();
     let t = img.layer(TRANSMITTANCE_LAYER).unwrap();
@@ -102,6 +111,11 @@ fn furnace(sigma_t: f32, g: f32, spp: u32) {
 fn furnace_thin_cloud() {
     // Optical diameter 0.5: most camera rays pass; the scattered ones must add back exactly.
     furnace(0.5 / 14.0, 0.5, 128);
+}
+
+#[test]
+fn furnace_with_an_importance_sampled_environment_map() {
+    furnace_with(8.0 / 14.0, 0.85, 128, true);
 }
 
 #[test]
