@@ -94,6 +94,11 @@ fn figure_series_writes_everything() {
     }
     for r in json["references"].as_array().unwrap() {
         assert_eq!(r["spp"].as_u64(), Some(4));
+        // 4 spp: the reference's own relative noise is finite and clearly above zero.
+        assert!(
+            num(&r["cloud_noise"]).is_some_and(|x| x > 0.001) && num(&r["edge_noise"]).is_some_and(|x| x > 0.001),
+            "{r}"
+        );
         assert!(r["edge_pixels"].as_u64().unwrap() > 0 && r["cloud_pixels"].as_u64().unwrap() > r["edge_pixels"].as_u64().unwrap());
     }
     // Physics sanity, robust even at 4 spp: single scattering alone misses most of the light of
