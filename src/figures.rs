@@ -60,10 +60,10 @@ pub struct FigureOptions {
 impl Default for FigureOptions {
     fn default() -> Self {
         FigureOptions {
-            width: 160,
-            height: 120,
+            width: 120,
+            height: 90,
             reference_spp: 256,
-            reference_time: Some(20.0),
+            reference_time: Some(15.0),
         }
     }
 }
@@ -343,7 +343,11 @@ pub fn table_markdown(report: &FigureReport) -> String {
     s.push_str("|---|---|---:|---:|---:|---:|---:|---:|---:|\n");
     for f in &report.figures {
         let (me, re, be) = match &f.edge {
-            Some(e) => (pct(e.mean_relative_error), format!("{:.4}", e.rmse), pct(e.luminance_bias)),
+            Some(e) => (
+                pct(e.mean_relative_error),
+                format!("{:.4}", e.rmse),
+                format!("{:+.1} %", 100.0 * e.luminance_bias),
+            ),
             None => ("n/a".into(), "n/a".into(), "n/a".into()),
         };
         let _ = writeln!(
