@@ -2,6 +2,7 @@
 
 mod compare;
 mod export;
+mod figures;
 mod info;
 mod progress;
 mod sky;
@@ -40,6 +41,8 @@ enum Command {
     Sky(sky::SkyArgs),
     /// Export the scene for another renderer (Mitsuba 3) to cross-check the reference.
     Export(export::ExportArgs),
+    /// Render the paper's figure series (Figs. 4–8) and the reference, with errors, into a folder with index.md.
+    Figures(figures::FiguresArgs),
 }
 
 #[derive(Args, Debug)]
@@ -99,6 +102,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Info(a) => info::run(a),
         Command::Sky(a) => sky::run(a, cli.quiet),
         Command::Export(a) => export::run(a, cli.quiet),
+        Command::Figures(a) => figures::run(a, cli.quiet),
     }
 }
 

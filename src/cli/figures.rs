@@ -1,0 +1,51 @@
+//! `cloudgi figures [SCENE] -o DIR`: the paper's figure series (Figs. 4–8) with the reference,
+//! difference images, `index.md` and `results.json` (see `cloudgi::figures`).
+
+use clap::Args;
+use cloudgi::error::Result;
+use cloudgi::figures::{run as run_figures, table_markdown, FigureOptions};
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct FiguresArgs {
+    /// Scene file (TOML). Without it, the built-in default scene.
+    scene: Option<PathBuf>,
+    /// Output folder (created if missing).
+    #[arg(short, long, default_value = "figures")]
+    output: PathBuf,
+    /// Image width (pixels).
+    #[arg(long, default_value_t = FigureOptions::default().width)]
+    width: u32,
+    /// Image height (pixels).
+    #[arg(long, default_value_t = FigureOptions::default().height)]
+    height: u32,
+    /// Samples per pixel of each reference render (scene and sunset).
+    #[arg(long, default_value_t = FigureOptions::default().reference_spp)]
+    reference_spp: u32,
+    /// Time limit of each reference render in seconds (0 = none; stops after the pass in progress).
+    #[arg(long, default_value_t = FigureOptions::default().reference_time.unwrap_or(0.0))]
+    reference_time: f64,
+}
+
+pub fn run(a: FiguresArgs, quiet: bool) -> Result<()> {
+    let opts = FigureOptions {
+        width: a.width,
+        height: a.height,
+        reference_spp: a.reference_spp,
+        reference_time: (a.reference_time > 0.0).then_some(a.reference_time),
+    };
+    if !(a.reference_time.is_finite() && a.reference_time >= 0.0) {
+        return Err(cloudgi::Error::invalid(
+            "command line",
+            "--reference-time",
+            "the time limit is a number of seconds ≥ 0 (0 = none)",
+        ));
+    }
+    let progress = super::progress::Bars::new(quiet);
+    let report = run_figures(a.scene.as_deref(), &a.output, &opts, &progress)?;
+    if !quiet {
+        eprint!("{}", table_markdown(&report));
+        eprintln!("→ {}", a.output.join("index.md").display());
+    }
+    Ok(())
+}
