@@ -7,12 +7,15 @@
 //! diffuse radiance (the paper volume-renders the colour I0 with opacity ρσt; the albedo a makes
 //! that exact for the isotropic part of I_d) plus the exact single scattering of the reduced sun
 //! through the HG phase function. The g·I1·ω part of the diffuse field and the sky's own single
-//! scattering are not included (the paper's approximation).
+//! scattering are not included (the paper's approximation) unless `render.diffuse_anisotropy`
+//! attaches the first moment ([`LitVolume::with_diffuse_anisotropy`], [`crate::diffusion::flux`]):
+//! then the diffuse part is a·max(0, I0 + g·I1·ω), ω the direction to the eye.
 //!
 //! I0 is defined only where ρ > 0. Between voxel centres it is interpolated density-weighted,
 //! I0(p) = trilinear(ρ·I0)/trilinear(ρ), so that empty voxels (I0 = 0) do not darken the cloud's
 //! edge; where the trilinear ρ is zero there is no emission anyway.
 
+use crate::diffusion::flux::{diffuse_flux, FluxField};
 use crate::diffusion::DiffusionSolution;
 use crate::incident::IncidentLight;
 use crate::math::{Rgb, Vec3};
@@ -34,6 +37,8 @@ pub struct LitVolume {
     pub sun_transmittance: SunTransmittance,
     /// Sun irradiance (W/m² per band).
     pub sun_irradiance: Rgb,
+    /// The diffuse field's first moment I1, when `render.diffuse_anisotropy` is on.
+    pub flux: Option<FluxField>,
 }
 
 impl LitVolume {
@@ -57,7 +62,16 @@ impl LitVolume {
             rho_i0: [mk(0, true), mk(1, true), mk(2, true)],
             sun_transmittance: incident.sun_transmittance.clone(),
             sun_irradiance: incident.sun_irradiance,
+            flux: None,
         }
+    }
+
+    /// Add the anisotropic diffuse in-scattering g·I1·ω (I1 from the solver's fluxes with floor
+    /// `tau_min`, see [`crate::diffusion::flux`]).
+    pub fn with_diffuse_anisotropy(mut self, incident: &IncidentLight, solution: &DiffusionSolution, tau_min: f64) -> LitVolume {
+        let i1 = diffuse_flux(&self.medium, incident, solution, tau_min);
+        self.flux = Some(FluxField::new(&self.medium, &i1));
+        self
     }
 
     /// I0 at continuous voxel coordinates `v` (density-weighted trilinear), given the trilinear ρ there.
@@ -82,7 +96,11 @@ impl LitVolume {
         // Sunlight travels along −sun_dir and leaves towards the eye along −view_dir.
         let phase = hg((-self.sun_transmittance.dir).dot(-view_dir), m.g);
         let sun = self.sun_irradiance * (phase * self.sun_transmittance.at_voxel(v));
-        m.albedo * (self.i0_at_voxel(v, rho) + sun)
+        let mut diffuse = self.i0_at_voxel(v, rho);
+        if let Some(f) = &self.flux {
+            diffuse = (diffuse + f.anisotropic_at_voxel(v, rho, -view_dir)).max(Rgb::ZERO);
+        }
+        m.albedo * (diffuse + sun)
     }
 
     /// Extinction ρσt (m⁻¹) at a world point.

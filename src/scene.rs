@@ -260,6 +260,9 @@ pub struct RenderDesc {
     pub propagation_tolerance: f64,
     /// `full`: write the components (diffusion, low_density, sun_single, background) as EXR layers.
     pub aov: bool,
+    /// `diffusion`, `full`: the gather's diffuse source is a·max(0, I0 + g·I1·ω) instead of a·I0
+    /// (src/diffusion/flux.rs, docs/diffusion.md).
+    pub diffuse_anisotropy: bool,
 }
 
 impl Default for RenderDesc {
@@ -282,6 +285,7 @@ impl Default for RenderDesc {
             delta_scaling: false,
             solver_tolerance: 1e-6,
             solver_max_iterations: 200,
+            diffuse_anisotropy: false,
         }
     }
 }
@@ -378,6 +382,9 @@ pub struct RenderSettings {
     pub propagation_tolerance: f64,
     /// `full`: write the components (diffusion, low_density, sun_single, background) as EXR layers.
     pub aov: bool,
+    /// `diffusion`, `full`: the gather's diffuse source is a·max(0, I0 + g·I1·ω) instead of a·I0
+    /// (src/diffusion/flux.rs, docs/diffusion.md).
+    pub diffuse_anisotropy: bool,
 }
 
 /// A validated scene, ready to render.
@@ -517,6 +524,7 @@ impl Scene {
             delta_scaling: r.delta_scaling,
             solver_tolerance: r.solver_tolerance,
             solver_max_iterations: r.solver_max_iterations,
+            diffuse_anisotropy: r.diffuse_anisotropy,
         };
         Ok(Scene {
             source: source.to_string(),

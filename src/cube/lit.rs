@@ -37,6 +37,9 @@ pub struct LitVolume {
     pub sky: Sky,
     /// The ground with its irradiance, if the scene has a ground.
     pub ground: Option<LitGround>,
+    /// The diffuse field's first moment I1 (`render.diffuse_anisotropy`), used by the final
+    /// gather's dense source (not by the viewing cubes).
+    pub flux: Option<Arc<crate::diffusion::flux::FluxField>>,
 }
 
 impl LitVolume {
@@ -53,6 +56,7 @@ impl LitVolume {
             sun,
             sky,
             ground,
+            flux: None,
         }
     }
 

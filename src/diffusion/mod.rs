@@ -74,6 +74,7 @@
 //! The outgoing diffuse flux through a boundary face (W/m² per band) is 4π φ_f = 2π I0_face: the
 //! energy-balance test sums it.
 
+pub mod flux;
 pub mod multigrid;
 pub mod slab;
 

@@ -27,7 +27,11 @@ pub fn lit_volume(scene: &Scene, progress: &dyn Progress, timings: &mut Timings)
     let inc = timings.time("incident light", || compute_incident(scene, None));
     let sol = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &inc, None, &settings(scene)))?;
     progress.log(&sol.summary());
-    Ok(LitVolume::new(&scene.medium, &inc, &sol))
+    let lit = LitVolume::new(&scene.medium, &inc, &sol);
+    if scene.render.diffuse_anisotropy {
+        return Ok(lit.with_diffuse_anisotropy(&inc, &sol, settings(scene).min_optical_depth));
+    }
+    Ok(lit)
 }
 
 /// Render the image.

@@ -107,7 +107,7 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         }
     }
     let ground = ca.lit.ground.clone();
-    let lit = LitVolume::new(
+    let mut lit = LitVolume::new(
         scene.medium.clone(),
         i0_rgb(&sol),
         sun_t,
@@ -115,6 +115,10 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         scene.sky.clone(),
         ground,
     );
+    if scene.render.diffuse_anisotropy {
+        let i1 = crate::diffusion::flux::diffuse_flux(&scene.medium, &inc, &sol, settings.min_optical_depth);
+        lit.flux = Some(std::sync::Arc::new(crate::diffusion::flux::FluxField::new(&scene.medium, &i1)));
+    }
     Ok(Propagation {
         lit,
         solution: sol,
@@ -244,7 +248,16 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
         irradiance_at: &sun_at,
     };
     let albedo = m.albedo;
-    let dense = move |p: Vec3, _to_eye: Vec3| albedo * lit.i0_at_voxel(m.to_voxel(p));
+    let flux = lit.flux.as_deref();
+    let dense = move |p: Vec3, to_eye: Vec3| {
+        let v = m.to_voxel(p);
+        let i0 = lit.i0_at_voxel(v);
+        match flux {
+            // a·max(0, I0 + g·I1·ω): the diffuse field's first moment (crate::diffusion::flux).
+            Some(f) => albedo * (i0 + f.anisotropic_at_voxel(v, m.density_at(p), to_eye)).max(Rgb::ZERO),
+            None => albedo * i0,
+        }
+    };
     let edge = EdgeGather::new(m, EdgeSettings::from_scene(scene), &cubes, sun, &dense);
     let cam = &scene.camera;
     let spp = scene.render.spp;

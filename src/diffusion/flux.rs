@@ -1,0 +1,131 @@
+//! The first moment I1 of the diffuse field (eq. 3: I_d(ω) = I0 + I1·ω, ω the direction the light
+//! travels) and the anisotropic part of the diffuse in-scattering it gives the final gather
+//! (`render.diffuse_anisotropy`).
+//!
+//! **In-scattering.** With the HG phase function normalised to 1 and ∫p(ω′·ω) ω′ dω′ = g ω, the
+//! diffuse radiance scattered towards the eye (ω = direction to the eye) per unit extinction is
+//!
+//! ```text
+//!   J_d(ω) = a ∫ p(ω′·ω) (I0 + I1·ω′) dω′ = a (I0 + g I1·ω)
+//! ```
+//!
+//! clamped at 0 per band (the P1 field can exceed its isotropic part where I0 is small).
+//!
+//! **I1 from the solver's own fluxes.** The scheme of [`super`] computes the outward flux
+//! φ_f = I1·n/3 through every face of a full voxel: −D_f (I_N − I_P)/h + F_f·n on an interior face
+//! (with the τ_min floor in D_f), the Marshak flux (β I_P + f)/(1 + 2β) on a boundary face. The
+//! voxel-centre I1 on axis a is the mean of its two faces: I1_a = 3 (φ_+ − φ_−)/2. Away from
+//! boundaries and the floor this is the central difference of Fick's law,
+//! I1 = (−∇I0 + 3 Q1)/(ρσtr), with ∇I0 ≈ (I_{+1} − I_{−1})/(2h) and Q1 the mean of the
+//! neighbours' F = Q1/(ρσtr); at a boundary face it uses the same ghost value as the solve. I1 is
+//! zero where ρ = 0, and is interpolated density-weighted like I0: trilinear(ρ I1)/trilinear(ρ).
+
+use super::{boundary_terms, interior_coupling, DiffusionSolution};
+use crate::incident::IncidentLight;
+use crate::math::{Rgb, Vec3};
+use crate::medium::Medium;
+use rayon::prelude::*;
+
+/// I1 per voxel per band (`[band]` a vector, W·m⁻²·sr⁻¹); zero where ρ = 0. See the module docs.
+pub fn diffuse_flux(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, tau_min: f64) -> Vec<[Vec3; 3]> {
+    let d = m.dims();
+    let rho = m.density.data();
+    let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
+    let stride = [1usize, d[0], d[0] * d[1]];
+    let n = d[0] * d[1] * d[2];
+    let st = m.sigma_t as f64;
+    let sigma_tr: [f64; 3] = std::array::from_fn(|c| st * (1.0 - m.albedo[c] as f64 * m.g as f64));
+    (0..n)
+        .into_par_iter()
+        .map(|idx| {
+            let rp = rho[idx] as f64;
+            let mut out = [Vec3::ZERO; 3];
+            if rp <= 0.0 {
+                return out;
+            }
+            let cell = [idx % d[0], (idx / d[0]) % d[1], idx / (d[0] * d[1])];
+            for (c, o) in out.iter_mut().enumerate() {
+                let s = sigma_tr[c];
+                let ip = sol.i0[c][idx] as f64;
+                let f_at = |q: usize, ax: usize| inc.q1[ax][q][c] as f64 / (rho[q] as f64 * s);
+                let mut v = [0f64; 3];
+                for ax in 0..3 {
+                    let fp = f_at(idx, ax);
+                    let mut phi = [0f64; 2];
+                    for (t, side) in [-1i64, 1].into_iter().enumerate() {
+                        let nc = cell[ax] as i64 + side;
+                        let nidx = (nc >= 0 && nc < d[ax] as i64).then(|| (idx as i64 + side * stride[ax] as i64) as usize);
+                        let rn = nidx.map_or(0.0, |q| rho[q] as f64);
+                        phi[t] = match nidx {
+                            Some(q) if rn > 0.0 => {
+                                let cf = interior_coupling(rp, rn, s, h[ax], tau_min);
+                                let ff = 0.5 * (fp + f_at(q, ax));
+                                -cf * h[ax] * (sol.i0[c][q] as f64 - ip) + ff * side as f64
+                            }
+                            _ => {
+                                let (dt, ft) = boundary_terms(rp, s, h[ax], tau_min);
+                                h[ax] * (dt * ip + ft * fp * side as f64)
+                            }
+                        };
+                    }
+                    // φ_+ = I1_a/3 through the + face, φ_− = −I1_a/3 through the − face.
+                    v[ax] = 1.5 * (phi[1] - phi[0]);
+                }
+                *o = Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32);
+            }
+            out
+        })
+        .collect()
+}
+
+/// ρ·I1 per voxel, interpolated density-weighted; answers g·I1·ω at any point.
+#[derive(Clone, Debug)]
+pub struct FluxField {
+    dims: [usize; 3],
+    /// ρ·I1 per voxel, `[band]`.
+    rho_i1: Vec<[Vec3; 3]>,
+    /// HG mean cosine of the medium.
+    g: f32,
+}
+
+impl FluxField {
+    /// From I1 per voxel ([`diffuse_flux`]) and the medium it was computed on.
+    pub fn new(m: &Medium, i1: &[[Vec3; 3]]) -> FluxField {
+        let rho_i1 = i1
+            .iter()
+            .zip(m.density.data())
+            .map(|(v, r)| [v[0] * *r, v[1] * *r, v[2] * *r])
+            .collect();
+        FluxField {
+            dims: m.dims(),
+            rho_i1,
+            g: m.g,
+        }
+    }
+
+    /// I1 per band at continuous voxel coordinates `v` where the trilinear density is `rho`.
+    #[inline]
+    pub fn i1_at_voxel(&self, v: Vec3, rho: f32) -> [Vec3; 3] {
+        if rho <= 0.0 {
+            return [Vec3::ZERO; 3];
+        }
+        let (idx, w) = crate::cube::lit::trilinear_taps(self.dims, v);
+        let mut s = [Vec3::ZERO; 3];
+        for k in 0..8 {
+            let t = &self.rho_i1[idx[k]];
+            for c in 0..3 {
+                s[c] += t[c] * w[k];
+            }
+        }
+        [s[0] / rho, s[1] / rho, s[2] / rho]
+    }
+
+    /// The anisotropic in-scattering g·I1·ω (per band, may be negative) at voxel coordinates `v`
+    /// with trilinear density `rho`, towards the eye along `to_eye` (unit, the direction the
+    /// scattered light travels).
+    #[inline]
+    pub fn anisotropic_at_voxel(&self, v: Vec3, rho: f32, to_eye: Vec3) -> Rgb {
+        let i1 = self.i1_at_voxel(v, rho);
+        Rgb::new(i1[0].dot(to_eye), i1[1].dot(to_eye), i1[2].dot(to_eye)) * self.g
+    }
+}
