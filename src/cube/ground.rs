@@ -144,26 +144,7 @@ pub fn ground_area(lit: &LitVolume, ground: &Ground) -> Option<([f32; 2], [f32; 
 /// Exact cosine-weighted solid angle ∫ max(ω·y, 0) dω of every cube pixel at `res` (index as
 /// [`super::CubeImage::index`]); they sum to π. Gauss–Legendre 8×8 per pixel (smooth integrand).
 pub fn hemicube_weights(res: usize) -> Vec<f64> {
-    const X: [f64; 8] = [
-        -0.960_289_856_497_536_3,
-        -0.796_666_477_413_626_7,
-        -0.525_532_409_916_329,
-        -0.183_434_642_495_649_8,
-        0.183_434_642_495_649_8,
-        0.525_532_409_916_329,
-        0.796_666_477_413_626_7,
-        0.960_289_856_497_536_3,
-    ];
-    const W: [f64; 8] = [
-        0.101_228_536_290_376_3,
-        0.222_381_034_453_374_5,
-        0.313_706_645_877_887_3,
-        0.362_683_783_378_362,
-        0.362_683_783_378_362,
-        0.313_706_645_877_887_3,
-        0.222_381_034_453_374_5,
-        0.101_228_536_290_376_3,
-    ];
+    use crate::lighting::bins::{GL8_W, GL8_X};
     let mut out = vec![0.0; 6 * res * res];
     for (face, f) in crate::lighting::CUBE_FACES.iter().enumerate() {
         for j in 0..res {
@@ -171,9 +152,9 @@ pub fn hemicube_weights(res: usize) -> Vec<f64> {
                 let (u0, u1) = super::CubeImage::pixel_range(res, i);
                 let (v0, v1) = super::CubeImage::pixel_range(res, j);
                 let mut s = 0.0;
-                for (xi, wi) in X.iter().zip(W) {
+                for (xi, wi) in GL8_X.iter().zip(GL8_W) {
                     let u = 0.5 * (u0 + u1) + 0.5 * (u1 - u0) * xi;
-                    for (xj, wj) in X.iter().zip(W) {
+                    for (xj, wj) in GL8_X.iter().zip(GL8_W) {
                         let v = 0.5 * (v0 + v1) + 0.5 * (v1 - v0) * xj;
                         let r2 = 1.0 + u * u + v * v;
                         // ω = (n + u tu + v tv)/r, dω = du dv / r³, so (ω·y) dω = (n + u tu + v tv)·y du dv / r⁴.

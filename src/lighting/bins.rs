@@ -88,34 +88,37 @@ pub fn rect_solid_angle(u0: f64, u1: f64, v0: f64, v1: f64) -> f64 {
     f(u1, v1) - f(u0, v1) - f(u1, v0) + f(u0, v0)
 }
 
+/// 8-point Gauss–Legendre nodes and weights on [−1, 1] (exact to ~1e-12 for the smooth
+/// integrands of solid angles and moments over cube-face rectangles).
+pub(crate) const GL8_X: [f64; 8] = [
+    -0.960_289_856_497_536_3,
+    -0.796_666_477_413_626_7,
+    -0.525_532_409_916_329,
+    -0.183_434_642_495_649_8,
+    0.183_434_642_495_649_8,
+    0.525_532_409_916_329,
+    0.796_666_477_413_626_7,
+    0.960_289_856_497_536_3,
+];
+pub(crate) const GL8_W: [f64; 8] = [
+    0.101_228_536_290_376_3,
+    0.222_381_034_453_374_5,
+    0.313_706_645_877_887_3,
+    0.362_683_783_378_362,
+    0.362_683_783_378_362,
+    0.313_706_645_877_887_3,
+    0.222_381_034_453_374_5,
+    0.101_228_536_290_376_3,
+];
+
 /// Exact first moment ∫ω dω (a vector, sr) of the rectangle [u0, u1]×[v0, v1] on a face, in the
 /// face's (u, v, n) frame, by Gauss–Legendre quadrature (the integrand is smooth).
 fn rect_first_moment(u0: f64, u1: f64, v0: f64, v1: f64) -> [f64; 3] {
     // 8-point Gauss–Legendre on each axis is exact to ~1e-12 for these smooth integrands.
-    const X: [f64; 8] = [
-        -0.960_289_856_497_536_3,
-        -0.796_666_477_413_626_7,
-        -0.525_532_409_916_329,
-        -0.183_434_642_495_649_8,
-        0.183_434_642_495_649_8,
-        0.525_532_409_916_329,
-        0.796_666_477_413_626_7,
-        0.960_289_856_497_536_3,
-    ];
-    const W: [f64; 8] = [
-        0.101_228_536_290_376_3,
-        0.222_381_034_453_374_5,
-        0.313_706_645_877_887_3,
-        0.362_683_783_378_362,
-        0.362_683_783_378_362,
-        0.313_706_645_877_887_3,
-        0.222_381_034_453_374_5,
-        0.101_228_536_290_376_3,
-    ];
     let mut m = [0.0; 3];
-    for (xi, wi) in X.iter().zip(W) {
+    for (xi, wi) in GL8_X.iter().zip(GL8_W) {
         let u = 0.5 * (u0 + u1) + 0.5 * (u1 - u0) * xi;
-        for (xj, wj) in X.iter().zip(W) {
+        for (xj, wj) in GL8_X.iter().zip(GL8_W) {
             let v = 0.5 * (v0 + v1) + 0.5 * (v1 - v0) * xj;
             let r2 = 1.0 + u * u + v * v;
             // dω = du dv / r³; ω = (u, v, 1)/r.
