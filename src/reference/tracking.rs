@@ -14,16 +14,19 @@ use crate::medium::Medium;
 /// Transmittance below which ratio tracking plays Russian roulette (unbiased: survivors are re-weighted).
 const RATIO_RR_THRESHOLD: f32 = 0.1;
 
-/// Sample a real collision along `o + t·d` (`d` unit) in [0, t_max] by delta tracking.
-/// Returns the collision distance, or `None` when the ray passes `t_max` (or leaves the medium)
-/// without one; the probability of `None` is exactly the transmittance.
-pub fn sample_collision(m: &Medium, o: Vec3, d: Vec3, t_max: f32, rng: &mut Rng) -> Option<f32> {
-    let (t0, t1) = m.intersect(o, d, 0.0, t_max)?;
+/// Walk the tentative collisions (rate μ = σt·block majorant) along `o + t·d`, t ∈ [t0, t1],
+/// calling `at(t, ρ(t), block majorant, rng)` at each; it returns false to stop the walk.
+/// The exponential draws and the callback's draws share `rng` in a fixed order, so both
+/// estimators below are deterministic per stream.
+fn tentative_collisions(
+    m: &Medium,
+    o: Vec3,
+    d: Vec3,
+    (t0, t1): (f32, f32),
+    rng: &mut Rng,
+    mut at: impl FnMut(f32, f32, f32, &mut Rng) -> bool,
+) {
     let sigma_t = m.sigma_t;
-    if sigma_t <= 0.0 {
-        return None;
-    }
-    let mut hit = None;
     // Remaining optical depth to the next tentative collision (memoryless across blocks).
     let mut tau = -(1.0 - rng.uniform()).ln();
     m.majorant.for_each_block(m, o, d, t0, t1, |ta, tb, maj| {
@@ -40,12 +43,29 @@ pub fn sample_collision(m: &Medium, o: Vec3, d: Vec3, t_max: f32, rng: &mut Rng)
             }
             t += dt;
             let rho = m.density_at(o + d * t);
-            if rng.uniform() * maj < rho {
-                hit = Some(t);
+            if !at(t, rho, maj, rng) {
                 return false;
             }
             tau = -(1.0 - rng.uniform()).ln();
         }
+    });
+}
+
+/// Sample a real collision along `o + t·d` (`d` unit) in [0, t_max] by delta tracking.
+/// Returns the collision distance, or `None` when the ray passes `t_max` (or leaves the medium)
+/// without one; the probability of `None` is exactly the transmittance.
+pub fn sample_collision(m: &Medium, o: Vec3, d: Vec3, t_max: f32, rng: &mut Rng) -> Option<f32> {
+    let span = m.intersect(o, d, 0.0, t_max)?;
+    if m.sigma_t <= 0.0 {
+        return None;
+    }
+    let mut hit = None;
+    tentative_collisions(m, o, d, span, rng, |t, rho, maj, rng| {
+        if rng.uniform() * maj < rho {
+            hit = Some(t);
+            return false;
+        }
+        true
     });
     hit
 }
@@ -53,40 +73,24 @@ pub fn sample_collision(m: &Medium, o: Vec3, d: Vec3, t_max: f32, rng: &mut Rng)
 /// Unbiased estimate of the transmittance exp(−∫σt ρ ds) along `o + t·d` for t ∈ [0, t_max]
 /// by ratio tracking, with Russian roulette once the running product drops below 0.1.
 pub fn ratio_transmittance(m: &Medium, o: Vec3, d: Vec3, t_max: f32, rng: &mut Rng) -> f32 {
-    let Some((t0, t1)) = m.intersect(o, d, 0.0, t_max) else {
+    let Some(span) = m.intersect(o, d, 0.0, t_max) else {
         return 1.0;
     };
-    let sigma_t = m.sigma_t;
-    if sigma_t <= 0.0 {
+    if m.sigma_t <= 0.0 {
         return 1.0;
     }
     let mut tr = 1.0f32;
-    let mut tau = -(1.0 - rng.uniform()).ln();
-    m.majorant.for_each_block(m, o, d, t0, t1, |ta, tb, maj| {
-        let mu = sigma_t * maj;
-        if mu <= 0.0 {
-            return true;
-        }
-        let mut t = ta;
-        loop {
-            let dt = tau / mu;
-            if t + dt >= tb {
-                tau -= (tb - t) * mu;
-                return true;
+    tentative_collisions(m, o, d, span, rng, |_, rho, maj, rng| {
+        tr *= (1.0 - rho / maj).max(0.0);
+        if tr < RATIO_RR_THRESHOLD {
+            // Survive with probability 1/2, doubling the weight: unbiased.
+            if tr <= 0.0 || rng.uniform() < 0.5 {
+                tr = 0.0;
+                return false;
             }
-            t += dt;
-            let rho = m.density_at(o + d * t);
-            tr *= (1.0 - rho / maj).max(0.0);
-            if tr < RATIO_RR_THRESHOLD {
-                // Survive with probability 1/2, doubling the weight: unbiased.
-                if tr <= 0.0 || rng.uniform() < 0.5 {
-                    tr = 0.0;
-                    return false;
-                }
-                tr *= 2.0;
-            }
-            tau = -(1.0 - rng.uniform()).ln();
+            tr *= 2.0;
         }
+        true
     });
     tr
 }
