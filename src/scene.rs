@@ -146,6 +146,8 @@ impl Default for SkyDesc {
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct GroundDesc {
+    /// False: no ground, as if the table were absent.
+    pub enabled: bool,
     /// Height of the plane (m).
     pub height: f32,
     /// Lambertian albedo per band (unitless, in [0, 1]).
@@ -155,6 +157,7 @@ pub struct GroundDesc {
 impl Default for GroundDesc {
     fn default() -> Self {
         GroundDesc {
+            enabled: true,
             height: 0.0,
             albedo: [0.3, 0.3, 0.3],
         }
@@ -227,8 +230,11 @@ pub struct RenderDesc {
     pub method: Method,
     /// Seed of every random stream.
     pub seed: u64,
-    /// Samples per pixel.
+    /// `reference`: samples (paths) per pixel.
     pub spp: u32,
+    /// `single`, `diffusion`, `full`: anti-aliasing samples per pixel (stratified positions, one
+    /// whole gather each); independent of the path tracer's `spp`.
+    pub aa_samples: u32,
     /// Exposure of the PNG preview, in stops (the EXR is never scaled).
     pub exposure: f32,
     /// Ray-march step of the gather, as a fraction of the smallest voxel edge (unitless).
@@ -268,9 +274,10 @@ pub struct RenderDesc {
 impl Default for RenderDesc {
     fn default() -> Self {
         RenderDesc {
-            method: Method::Single,
+            method: Method::Full,
             seed: 0,
             spp: 1,
+            aa_samples: 1,
             exposure: 0.0,
             step: 0.5,
             max_depth: None,
@@ -300,7 +307,9 @@ pub struct SceneDesc {
     pub sun: SunDesc,
     /// `[sky]`.
     pub sky: SkyDesc,
-    /// `[ground]`, absent for no ground.
+    /// `[ground]`, absent for no ground (so a scene file without the table has none, unlike the
+    /// other tables, which take the default scene's values).
+    #[serde(default)]
     pub ground: Option<GroundDesc>,
     /// `[camera]`.
     pub camera: CameraDesc,
@@ -336,7 +345,16 @@ impl SceneDesc {
 
     /// Read and parse a scene file.
     pub fn from_file(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let text = String::from_utf8(bytes).map_err(|e| {
+            Error::format(
+                path.display().to_string(),
+                format!(
+                    "not UTF-8 text (invalid byte at offset {}): a scene file is TOML text, see examples/default.toml",
+                    e.utf8_error().valid_up_to()
+                ),
+            )
+        })?;
         Self::from_toml(&text, &path.display().to_string())
     }
 
@@ -353,8 +371,10 @@ pub struct RenderSettings {
     pub method: Method,
     /// Seed of every random stream.
     pub seed: u64,
-    /// Samples per pixel (≥ 1).
+    /// `reference`: samples per pixel (≥ 1).
     pub spp: u32,
+    /// Deterministic methods: anti-aliasing samples per pixel (≥ 1).
+    pub aa_samples: u32,
     /// PNG exposure (stops).
     pub exposure: f32,
     /// March step as a fraction of the smallest voxel edge.
@@ -438,6 +458,13 @@ impl Scene {
         check(f, "render.spp", r.spp >= 1, r.spp, "samples per pixel must be at least 1")?;
         check(
             f,
+            "render.aa_samples",
+            (1..=1024).contains(&r.aa_samples),
+            r.aa_samples,
+            "anti-aliasing samples per pixel must be 1 to 1024",
+        )?;
+        check(
+            f,
             "render.exposure",
             r.exposure.is_finite(),
             r.exposure,
@@ -503,7 +530,8 @@ impl Scene {
         let camera = Camera::from_desc(&desc.camera, f)?;
         let (sun, sky) = crate::lighting::sun_and_sky(&desc.sun, &desc.sky, f, base_dir)?;
         let ground = match &desc.ground {
-            Some(g) => Some(Ground::from_desc(g, f)?),
+            Some(g) if g.enabled => Some(Ground::from_desc(g, f)?),
+            Some(_) => None,
             None => None,
         };
         let medium = Medium::from_desc(&desc.medium, f, base_dir)?;
@@ -511,6 +539,7 @@ impl Scene {
             method: r.method,
             seed: r.seed,
             spp: r.spp,
+            aa_samples: r.aa_samples,
             exposure: r.exposure,
             step: r.step,
             max_depth: r.max_depth,

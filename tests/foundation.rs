@@ -167,7 +167,8 @@ fn single_render_is_identical_with_any_thread_count() {
     let scene = Scene::load(None, |d| {
         d.camera.width = 64;
         d.camera.height = 48;
-        d.render.spp = 2;
+        d.render.method = cloudgi::Method::Single;
+        d.render.aa_samples = 2;
     })
     .unwrap();
     let run = |n: usize| {

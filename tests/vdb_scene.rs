@@ -102,7 +102,7 @@ pub const VIEW: &str = "sigma_t = 4.0\n\
 #[test]
 fn a_vdb_cloud_renders_end_to_end() {
     let dir = tempfile::tempdir().unwrap();
-    // The default ground (y = 0) lies under the cloud; pixel (0, 0) sees the sky.
+    // No [ground] table, so no ground; pixel (0, 0) sees the sky.
     let s = scene(dir.path(), "sphere64_half_blosc.vdb", VIEW, "").unwrap();
     let out = cloudgi::render(&s, &NoProgress).unwrap();
     let img = out.image;

@@ -29,7 +29,10 @@ struct MitsubaArgs {
 pub fn run(a: ExportArgs, quiet: bool) -> Result<()> {
     match a.target {
         Target::Mitsuba(m) => {
-            let scene = Scene::load(m.scene.as_deref(), |_| {})?;
+            let file = super::SceneFile::read(m.scene.as_deref())?;
+            let ours = |p: &std::path::Path| p.file_name().is_some_and(|n| n == "scene.xml" || n == "density.vol");
+            super::output::check_folder(&m.output, "--output", &file.inputs(&file.desc), ours)?;
+            let scene = Scene::build(file.desc, &file.source, &file.base)?;
             let files = cloudgi::reference::mitsuba::export(&scene, &m.output)?;
             if !quiet {
                 for f in files {

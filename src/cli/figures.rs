@@ -4,6 +4,7 @@
 use clap::Args;
 use cloudgi::error::Result;
 use cloudgi::figures::{run as run_figures, table_markdown, FigureOptions};
+use cloudgi::scene::Method;
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -40,6 +41,19 @@ pub fn run(a: FiguresArgs, quiet: bool) -> Result<()> {
             "--reference-time",
             "the time limit is a number of seconds ≥ 0 (0 = none)",
         ));
+    }
+    let file = super::SceneFile::read(a.scene.as_deref())?;
+    // figures writes .exr, .png, .json and .md files under fixed names into the folder.
+    let ours = |p: &std::path::Path| {
+        p.extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| ["exr", "png", "json", "md"].contains(&e.to_ascii_lowercase().as_str()))
+    };
+    super::output::check_folder(&a.output, "--output", &file.inputs(&file.desc), ours)?;
+    for method in [Method::Reference, Method::Full] {
+        let mut d = file.desc.clone();
+        (d.camera.width, d.camera.height, d.render.method, d.render.stderr) = (a.width, a.height, method, true);
+        super::memory::check_image(&d, "command line")?;
     }
     let progress = super::progress::Bars::new(quiet);
     let report = run_figures(a.scene.as_deref(), &a.output, &opts, &progress)?;

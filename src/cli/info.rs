@@ -9,7 +9,7 @@ use std::path::PathBuf;
 pub struct InfoArgs {
     /// An OpenVDB (.vdb) file.
     file: PathBuf,
-    /// Print one JSON object: {"grids": [{"name", "type", "active_voxels", "sum", "bbox_min",
+    /// Print one JSON object on one line: {"grids": [{"name", "type", "active_voxels", "sum", "bbox_min",
     /// "bbox_max", "voxel_size", "translation", "dense_bytes"}]}.
     #[arg(long)]
     json: bool,
@@ -76,7 +76,7 @@ pub fn run(a: InfoArgs) -> Result<()> {
         struct Out<'a> {
             grids: &'a [VdbGridInfo],
         }
-        println!("{}", serde_json::to_string_pretty(&Out { grids: &grids }).expect("serialisable"));
+        println!("{}", serde_json::to_string(&Out { grids: &grids }).expect("serialisable"));
     } else {
         println!(
             "{}: {} grid{}",

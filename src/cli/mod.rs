@@ -4,13 +4,18 @@ mod compare;
 mod export;
 mod figures;
 mod info;
+mod memory;
+mod output;
 mod progress;
+mod scene_file;
 mod sky;
 mod slab;
+mod warnings;
 
 use clap::{Args, Parser, Subcommand};
 use cloudgi::error::{Error, Result};
 use cloudgi::scene::{Method, Scene};
+use scene_file::SceneFile;
 use std::path::{Path, PathBuf};
 
 /// Physically based cloud renderer (Max et al. 2004: diffusion and multiple anisotropic scattering).
@@ -19,7 +24,7 @@ use std::path::{Path, PathBuf};
 pub struct Cli {
     #[command(subcommand)]
     command: Command,
-    /// Worker threads (default: all cores). The image is identical for any count.
+    /// Worker threads (default: all cores). Every output is identical for any count.
     #[arg(long, global = true)]
     threads: Option<usize>,
     /// No progress bars or summaries.
@@ -52,7 +57,7 @@ struct RenderArgs {
     /// Output EXR; the PNG preview is written beside it.
     #[arg(short, long, default_value = "cloud.exr")]
     output: PathBuf,
-    /// Override render.method.
+    /// Override render.method (default: full).
     #[arg(long, value_enum)]
     method: Option<Method>,
     /// Override camera.width (pixels).
@@ -61,9 +66,12 @@ struct RenderArgs {
     /// Override camera.height (pixels).
     #[arg(long)]
     height: Option<u32>,
-    /// Override render.spp.
+    /// Override render.spp (reference: paths per pixel).
     #[arg(long)]
     spp: Option<u32>,
+    /// Override render.aa_samples (single, diffusion, full: anti-aliasing samples per pixel).
+    #[arg(long)]
+    aa_samples: Option<u32>,
     /// Override render.seed.
     #[arg(long)]
     seed: Option<u64>,
@@ -122,44 +130,74 @@ fn check_exr_path(p: &Path, flag: &str) -> Result<()> {
     }
 }
 
-fn render(a: RenderArgs, quiet: bool) -> Result<()> {
-    check_exr_path(&a.output, "--output")?;
-    let scene = Scene::load(a.scene.as_deref(), |d| {
-        if let Some(m) = a.method {
+impl RenderArgs {
+    /// The scene keys the command line sets, with their flags (for the warnings).
+    fn flags(&self) -> Vec<(&'static str, &'static str)> {
+        let given = [
+            (self.spp.is_some(), "render.spp", "--spp"),
+            (self.aa_samples.is_some(), "render.aa_samples", "--aa-samples"),
+            (self.max_depth.is_some(), "render.max_depth", "--max-depth"),
+            (self.time_limit.is_some(), "render.time_limit", "--time-limit"),
+            (self.stderr, "render.stderr", "--stderr"),
+            (self.iterations.is_some(), "render.iterations", "--iterations"),
+            (self.aov, "render.aov", "--aov"),
+        ];
+        given.into_iter().filter(|g| g.0).map(|(_, k, f)| (k, f)).collect()
+    }
+
+    /// Apply the overrides to a scene description.
+    fn apply(&self, d: &mut cloudgi::SceneDesc) {
+        if let Some(m) = self.method {
             d.render.method = m;
         }
-        if let Some(w) = a.width {
+        if let Some(w) = self.width {
             d.camera.width = w;
         }
-        if let Some(h) = a.height {
+        if let Some(h) = self.height {
             d.camera.height = h;
         }
-        if let Some(s) = a.spp {
+        if let Some(s) = self.spp {
             d.render.spp = s;
         }
-        if let Some(s) = a.seed {
+        if let Some(s) = self.aa_samples {
+            d.render.aa_samples = s;
+        }
+        if let Some(s) = self.seed {
             d.render.seed = s;
         }
-        if let Some(m) = a.max_depth {
+        if let Some(m) = self.max_depth {
             d.render.max_depth = Some(m);
         }
-        if let Some(t) = a.time_limit {
+        if let Some(t) = self.time_limit {
             d.render.time_limit = Some(t);
         }
-        if a.stderr {
+        if self.stderr {
             d.render.stderr = true;
         }
-        if let Some(n) = a.iterations {
+        if let Some(n) = self.iterations {
             d.render.iterations = n;
         }
-        if a.aov {
+        if self.aov {
             d.render.aov = true;
         }
-    })?;
+    }
+}
+
+fn render(a: RenderArgs, quiet: bool) -> Result<()> {
+    check_exr_path(&a.output, "--output")?;
+    let file = SceneFile::read(a.scene.as_deref())?;
+    let mut desc = file.desc.clone();
+    a.apply(&mut desc);
+    let png = png_beside(&a.output);
+    output::check_files(&[&a.output, &png], "--output", &file.inputs(&desc))?;
+    memory::check_image(&desc, &file.source)?;
+    let scene = Scene::build(desc, &file.source, &file.base)?;
+    for w in warnings::warnings(&file, &a.flags(), &scene) {
+        eprintln!("warning: {w}");
+    }
     let progress = progress::Bars::new(quiet);
     let out = cloudgi::render(&scene, &progress)?;
     out.image.write_exr(&a.output)?;
-    let png = png_beside(&a.output);
     out.image.write_png(&png, scene.render.exposure)?;
     if !quiet {
         eprintln!(

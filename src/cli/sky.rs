@@ -5,8 +5,7 @@
 use clap::Args;
 use cloudgi::error::{Error, Result};
 use cloudgi::lighting::sun_and_sky;
-use cloudgi::scene::{SceneDesc, BUILTIN};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Arguments of `cloudgi sky`.
 #[derive(Args, Debug)]
@@ -34,19 +33,14 @@ pub fn run(a: SkyArgs, quiet: bool) -> Result<()> {
             ));
         }
     }
-    let (desc, source, base) = match &a.scene {
-        Some(p) => (
-            SceneDesc::from_file(p)?,
-            p.display().to_string(),
-            p.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from(".")),
-        ),
-        None => (SceneDesc::default(), BUILTIN.to_string(), PathBuf::from(".")),
-    };
+    let file = super::SceneFile::read(a.scene.as_deref())?;
+    let desc = &file.desc;
+    let png = super::png_beside(&a.output);
+    super::output::check_files(&[&a.output, &png], "--output", &file.inputs(desc))?;
     let t = std::time::Instant::now();
-    let (sun, sky) = sun_and_sky(&desc.sun, &desc.sky, &source, &base)?;
+    let (sun, sky) = sun_and_sky(&desc.sun, &desc.sky, &file.source, &file.base)?;
     let img = sky.to_image(a.width.map(|w| w as usize));
     img.write_exr(&a.output)?;
-    let png = super::png_beside(&a.output);
     img.write_png(&png, desc.render.exposure)?;
     if !quiet {
         eprintln!(

@@ -39,11 +39,11 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
         let n = r[0] as u64 * r[1] as u64 * r[2] as u64;
         check(
             file,
-            "medium.max_voxels",
+            "medium.resolution",
             n <= d.max_voxels,
-            n,
+            r,
             &format!(
-                "medium.resolution asks for {n} voxels, more than medium.max_voxels = {}",
+                "asks for {n} voxels, more than medium.max_voxels = {}; lower medium.resolution (or raise medium.max_voxels)",
                 d.max_voxels
             ),
         )?;
@@ -64,6 +64,13 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
     }
     let path: PathBuf = base_dir.join(&d.grid);
     let name = path.display().to_string();
+    if !path.is_file() {
+        return Err(Error::invalid(
+            file,
+            "medium.grid",
+            format!("`{name}` is not a file (paths are relative to the scene file)"),
+        ));
+    }
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     let placed = |grid: Grid3| -> Result<Loaded> {
         check(

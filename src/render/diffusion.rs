@@ -38,7 +38,7 @@ pub fn lit_volume(scene: &Scene, progress: &dyn Progress, timings: &mut Timings)
 pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
     let lit = lit_volume(scene, progress, timings)?;
     let cam = &scene.camera;
-    let spp = scene.render.spp;
+    let spp = scene.render.aa_samples;
     let step = scene.render.step * scene.medium.min_voxel();
     let px = timings.time("gather", || {
         render_rows(cam.width, cam.height, progress, "diffusion gather", |x, y| {

@@ -236,7 +236,7 @@ impl CubeSource for GatherCubes<'_> {
 
 /// Final gather over a propagated scene: the image, with AOV layers when `render.aov` is set.
 /// K is computed sparsely and interpolated across pixels where neighbouring cubes lie at similar
-/// depths ([`crate::edges::sparse`], the paper's speed-up); `render.spp` > 1 averages whole
+/// depths ([`crate::edges::sparse`], the paper's speed-up); `render.aa_samples` > 1 averages whole
 /// gathers at jittered pixel positions.
 pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image {
     let cubes = GatherCubes::new(lit, scene);
@@ -260,7 +260,7 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
     };
     let edge = EdgeGather::new(m, EdgeSettings::from_scene(scene), &cubes, sun, &dense);
     let cam = &scene.camera;
-    let spp = scene.render.spp;
+    let spp = scene.render.aa_samples;
     let n = cam.width as usize * cam.height as usize;
     let mut sum = vec![[Rgb::ZERO; 4]; n];
     progress.begin("final gather", spp as u64);

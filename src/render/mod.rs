@@ -1,6 +1,7 @@
 //! Rendering: method dispatch, progress reporting and stage timings.
 
 pub mod diffusion;
+pub mod empty;
 pub mod full;
 pub mod march;
 pub mod single;
@@ -77,6 +78,10 @@ pub struct RenderOutput {
 /// Render `scene` with its configured method.
 pub fn render(scene: &Scene, progress: &dyn Progress) -> Result<RenderOutput> {
     let mut timings = Timings::default();
+    if matches!(scene.render.method, Method::Diffusion | Method::Full) && empty::is_transparent(&scene.medium) {
+        let image = empty::render(scene, progress, &mut timings)?;
+        return Ok(RenderOutput { image, timings });
+    }
     let image = match scene.render.method {
         Method::Single => single::render(scene, progress, &mut timings)?,
         Method::Reference => crate::reference::render(scene, progress, &mut timings)?,

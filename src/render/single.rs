@@ -54,7 +54,7 @@ pub fn radiance(scene: &Scene, sun_t: &SunTransmittance, o: Vec3, d: Vec3, xi: f
 pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
     let sun_t = timings.time("sun transmittance", || SunTransmittance::compute(&scene.medium, scene.sun.dir));
     let cam = &scene.camera;
-    let spp = scene.render.spp;
+    let spp = scene.render.aa_samples;
     let px = timings.time("gather", || {
         render_rows(cam.width, cam.height, progress, "single scattering", |x, y| {
             let mut sum = Rgb::ZERO;

@@ -1,0 +1,81 @@
+//! Refuse an image too large for this machine's memory before any work, instead of letting the
+//! allocator abort mid-render.
+
+use cloudgi::error::{Error, Result};
+use cloudgi::scene::{Method, SceneDesc};
+
+/// Bytes per pixel a render holds at its peak (rounded up; measured from the buffers each method
+/// allocates): the method's accumulators plus the image, its layers and their EXR/PNG encodings.
+pub fn bytes_per_pixel(method: Method, aov: bool, stderr: bool) -> u64 {
+    // Per RGB layer: f32 pixels (12 B), EXR channel copies (12 B), compressed EXR (≤ 12 B).
+    const LAYER: u64 = 36;
+    // The PNG: 8-bit RGB and its encoding.
+    const PNG: u64 = 6;
+    let (work, layers) = match method {
+        // One Rgb per pixel from the row renderer, moved into the image.
+        Method::Single | Method::Diffusion => (12, 1),
+        // Σx, Σx² in f64 (48 B), camera transmittance (4 B); layers: image, transmittance, stderr.
+        Method::Reference => (52, 2 + u64::from(stderr)),
+        // Four accumulated components (48 B), the gather's per-pixel components (48 B) and
+        // low-density segment lists (≥ 24 B); layers: image and, with AOVs, four more.
+        Method::Full => (120, 1 + 4 * u64::from(aov)),
+    };
+    work + layers * LAYER + PNG
+}
+
+/// Bytes of memory available to new allocations (Linux `MemAvailable`), if known.
+fn available_bytes() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
+/// Bytes as GiB with one decimal.
+pub fn gib(b: u64) -> String {
+    format!("{:.1} GiB", b as f64 / (1u64 << 30) as f64)
+}
+
+/// The image of `desc` (after the command line's overrides) must fit in `available` bytes.
+pub fn check_image_fits(desc: &SceneDesc, source: &str, available: Option<u64>) -> Result<()> {
+    let (w, h) = (desc.camera.width as u64, desc.camera.height as u64);
+    let r = &desc.render;
+    let need = w * h * bytes_per_pixel(r.method, r.aov, r.stderr);
+    match available {
+        Some(avail) if need > avail => Err(Error::invalid(
+            source,
+            "camera.width, camera.height",
+            format!(
+                "a {w}×{h} image with method {} needs about {} of memory but {} is available; \
+                 lower camera.width and camera.height (or --width/--height)",
+                r.method.name(),
+                gib(need),
+                gib(avail)
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// [`check_image_fits`] against this machine's available memory.
+pub fn check_image(desc: &SceneDesc, source: &str) -> Result<()> {
+    check_image_fits(desc, source, available_bytes())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_huge_image_is_refused_with_what_it_needs() {
+        let mut d = SceneDesc::default();
+        d.camera.width = 32768;
+        d.camera.height = 32768;
+        let e = check_image_fits(&d, "s.toml", Some(16 << 30)).unwrap_err().to_string();
+        assert!(e.contains("camera.width") && e.contains("GiB") && e.contains("16.0 GiB"), "{e}");
+        d.camera.width = 480;
+        d.camera.height = 360;
+        assert!(check_image_fits(&d, "s.toml", Some(16 << 30)).is_ok());
+        assert!(check_image_fits(&d, "s.toml", None).is_ok());
+    }
+}

@@ -1,0 +1,79 @@
+//! The scene file as the command line reads it: the description, where it came from, and which
+//! keys the file really sets (for the "does not apply" warnings, which must not fire on defaults).
+
+use cloudgi::error::Result;
+use cloudgi::scene::{SceneDesc, SkyModel, BUILTIN};
+use std::path::{Path, PathBuf};
+
+/// A scene file read but not yet built.
+pub struct SceneFile {
+    /// The description (defaults filled in).
+    pub desc: SceneDesc,
+    /// The file name for messages, or [`BUILTIN`].
+    pub source: String,
+    /// The folder relative paths resolve against.
+    pub base: PathBuf,
+    /// The scene file itself (None: the built-in scene).
+    pub path: Option<PathBuf>,
+    /// `table.key` of every key the file sets.
+    pub keys: Vec<String>,
+}
+
+impl SceneFile {
+    /// Read `path` (None: the built-in default scene).
+    pub fn read(path: Option<&Path>) -> Result<SceneFile> {
+        let Some(p) = path else {
+            return Ok(SceneFile {
+                desc: SceneDesc::default(),
+                source: BUILTIN.to_string(),
+                base: PathBuf::from("."),
+                path: None,
+                keys: Vec::new(),
+            });
+        };
+        let desc = SceneDesc::from_file(p)?;
+        // The file parsed as a scene, so it is readable TOML text.
+        let table: toml::Table = std::fs::read_to_string(p).ok().and_then(|t| t.parse().ok()).unwrap_or_default();
+        let mut keys = Vec::new();
+        for (name, value) in &table {
+            match value.as_table() {
+                Some(t) => keys.extend(t.keys().map(|k| format!("{name}.{k}"))),
+                None => keys.push(name.clone()),
+            }
+        }
+        Ok(SceneFile {
+            desc,
+            source: p.display().to_string(),
+            base: p.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from(".")),
+            path: Some(p.to_path_buf()),
+            keys,
+        })
+    }
+
+    /// Whether the file sets `key` (`table.key`).
+    pub fn sets(&self, key: &str) -> bool {
+        self.keys.iter().any(|k| k == key)
+    }
+
+    /// The files the scene reads, each with the key that names it: the scene file, the grid
+    /// (and a `.raw` grid's `.json` sidecar) and the environment map.
+    pub fn inputs(&self, desc: &SceneDesc) -> Vec<(PathBuf, String)> {
+        let mut v = Vec::new();
+        if let Some(p) = &self.path {
+            v.push((p.clone(), "the scene file".to_string()));
+        }
+        if desc.medium.grid != "procedural" {
+            let g = self.base.join(&desc.medium.grid);
+            if g.extension().is_some_and(|e| e.eq_ignore_ascii_case("raw")) {
+                v.push((g.with_extension("json"), "the .json sidecar of medium.grid".to_string()));
+            }
+            v.push((g, "medium.grid".to_string()));
+        }
+        if desc.sky.model == SkyModel::Envmap {
+            if let Some(p) = &desc.sky.path {
+                v.push((self.base.join(p), "sky.path".to_string()));
+            }
+        }
+        v
+    }
+}

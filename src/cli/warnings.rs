@@ -1,0 +1,206 @@
+//! Warnings for settings that do not apply to this scene or method (they would be silently
+//! ignored) and for a cloud the camera cannot see. Printed on stderr; the render still runs.
+
+use super::scene_file::SceneFile;
+use cloudgi::math::Vec3;
+use cloudgi::scene::{Method, Scene, SkyModel};
+
+/// What kind of grid `medium.grid` names.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum GridKind {
+    Procedural,
+    Vol,
+    Npy,
+    Raw,
+    Vdb,
+}
+
+fn grid_kind(grid: &str) -> GridKind {
+    if grid == "procedural" {
+        return GridKind::Procedural;
+    }
+    let ext = std::path::Path::new(grid)
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    match ext.as_str() {
+        "vol" => GridKind::Vol,
+        "npy" => GridKind::Npy,
+        "raw" => GridKind::Raw,
+        // The loader refuses other extensions before this runs.
+        _ => GridKind::Vdb,
+    }
+}
+
+/// Every warning for `scene`, read from `file`; `flags` are the command-line options given,
+/// as (the key they set, the flag).
+pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<String> {
+    let d = &scene.desc;
+    let mut out = Vec::new();
+    let mut rule = |key: &str, applies: bool, why: &str| {
+        if applies {
+            return;
+        }
+        let given = match flags.iter().find(|(k, _)| *k == key) {
+            Some((_, flag)) => format!("command line: `{flag}`"),
+            None if file.sets(key) => format!("{}: `{key}`", file.source),
+            None => return,
+        };
+        out.push(format!("{given} does not apply {why}; it is ignored"));
+    };
+
+    let kind = grid_kind(&d.medium.grid);
+    let file_grid = format!("to a grid read from a file (`{}` gives it)", d.medium.grid);
+    rule("medium.seed", kind == GridKind::Procedural, &file_grid);
+    rule("medium.resolution", kind == GridKind::Procedural, &file_grid);
+    let placement = match kind {
+        GridKind::Vol => "to a .vol grid (the file carries its own bounding box)",
+        _ => "to a .vdb grid (the file carries its own transform; medium.scale scales it)",
+    };
+    let placed_by_desc = matches!(kind, GridKind::Procedural | GridKind::Npy | GridKind::Raw);
+    rule("medium.voxel_size", placed_by_desc, placement);
+    rule("medium.origin", placed_by_desc, placement);
+    let not_vdb = "unless medium.grid is a .vdb file";
+    rule("medium.grid_name", kind == GridKind::Vdb, not_vdb);
+    rule("medium.scale", kind == GridKind::Vdb, not_vdb);
+
+    rule(
+        "sun.irradiance",
+        !d.sun.from_atmosphere,
+        "with sun.from_atmosphere = true (the atmosphere gives the irradiance)",
+    );
+    let sky = d.sky.model;
+    rule("sky.radiance", sky == SkyModel::Constant, "unless sky.model = \"constant\"");
+    let atmosphere = "unless sky.model = \"atmosphere\"";
+    rule(
+        "sky.altitude_m",
+        sky == SkyModel::Atmosphere || d.sun.from_atmosphere,
+        "unless sky.model = \"atmosphere\" or sun.from_atmosphere = true",
+    );
+    rule("sky.map_width", sky == SkyModel::Atmosphere, atmosphere);
+    rule("sky.planet_albedo", sky == SkyModel::Atmosphere, atmosphere);
+    rule("sky.path", sky == SkyModel::Envmap, "unless sky.model = \"envmap\"");
+    rule("sky.scale", sky == SkyModel::Envmap, "unless sky.model = \"envmap\"");
+    let ground = d.ground.as_ref().is_some_and(|g| g.enabled);
+    rule("ground.height", ground, "with ground.enabled = false");
+    rule("ground.albedo", ground, "with ground.enabled = false");
+
+    let m = scene.render.method;
+    let name = m.name();
+    let reference = m == Method::Reference;
+    rule(
+        "render.spp",
+        reference,
+        &format!(
+            "to method {name} (it is the path tracer's samples per pixel; the deterministic methods' \
+             anti-aliasing is render.aa_samples)"
+        ),
+    );
+    rule(
+        "render.aa_samples",
+        !reference,
+        "to method reference (its samples per pixel are render.spp)",
+    );
+    let only_reference = format!("to method {name} (only reference uses it)");
+    for key in ["render.max_depth", "render.time_limit", "render.stderr"] {
+        rule(key, reference, &only_reference);
+    }
+    rule(
+        "render.step",
+        !reference,
+        "to method reference (it tracks collisions exactly, without a march step)",
+    );
+    let only_full = format!("to method {name} (only full uses it)");
+    for key in [
+        "render.cube_resolution",
+        "render.ground_samples",
+        "render.iterations",
+        "render.propagation_tolerance",
+        "render.aov",
+        "render.low_density_threshold",
+    ] {
+        rule(key, m == Method::Full, &only_full);
+    }
+    let solved = matches!(m, Method::Diffusion | Method::Full);
+    let only_solved = format!("to method {name} (only diffusion and full use it)");
+    for key in [
+        "render.solver_tolerance",
+        "render.solver_max_iterations",
+        "render.delta_scaling",
+        "render.diffuse_anisotropy",
+    ] {
+        rule(key, solved, &only_solved);
+    }
+
+    out.extend(frame_warning(scene));
+    out
+}
+
+/// A warning when the camera cannot see the cloud: its box is outside the view or smaller than a
+/// pixel (e.g. a .vdb in centimetres without `medium.scale`).
+fn frame_warning(scene: &Scene) -> Option<String> {
+    let (lo, hi) = scene.medium.bbox();
+    let cam = &scene.camera;
+    let p = cam.position;
+    if p.cmpge(lo).all() && p.cmple(hi).all() {
+        return None;
+    }
+    let corners: Vec<Vec3> = (0..8)
+        .map(|c| {
+            Vec3::new(
+                if c & 1 == 0 { lo.x } else { hi.x },
+                if c & 2 == 0 { lo.y } else { hi.y },
+                if c & 4 == 0 { lo.z } else { hi.z },
+            )
+        })
+        .collect();
+    let (w, h) = (cam.width as f32, cam.height as f32);
+    let aspect = w / h;
+    // Image-plane position in pixels of a point in front of the camera.
+    let project = |q: Vec3| -> Option<(f32, f32)> {
+        let v = q - p;
+        let z = v.dot(cam.forward);
+        (z > 0.0).then(|| {
+            let sx = v.dot(cam.right) / (z * cam.tan_half_fov * aspect);
+            let sy = v.dot(cam.up) / (z * cam.tan_half_fov);
+            ((sx + 1.0) * 0.5 * w, (1.0 - sy) * 0.5 * h)
+        })
+    };
+    let projected: Vec<Option<(f32, f32)>> = corners.iter().map(|&c| project(c)).collect();
+    let inside = |&(x, y): &(f32, f32)| (0.0..=w).contains(&x) && (0.0..=h).contains(&y);
+    let corner_inside = projected.iter().flatten().any(inside);
+    // Rays through a grid over the image catch a box that spans the frame without a corner in it.
+    let n = 64;
+    let ray_hits = (0..=n).any(|j| {
+        (0..=n).any(|i| {
+            let r = cam.ray(w * i as f32 / n as f32, h * j as f32 / n as f32);
+            scene.medium.intersect(r.origin, r.dir, 0.0, f32::INFINITY).is_some()
+        })
+    });
+    let bbox = format!("{:?} .. {:?} m", lo.to_array(), hi.to_array());
+    let fix = "check camera.position and camera.look_at, or medium.voxel_size / medium.scale \
+               (a .vdb in centimetres needs medium.scale = 0.01)";
+    if !corner_inside && !ray_hits {
+        return Some(format!(
+            "{}: the cloud's bounding box {bbox} is not in the camera's view, the image will show no cloud; {fix}",
+            scene.source
+        ));
+    }
+    if projected.iter().all(Option::is_some) {
+        let xs = projected.iter().flatten().map(|q| q.0);
+        let ys = projected.iter().flatten().map(|q| q.1);
+        let span = |v: &mut dyn Iterator<Item = f32>| {
+            let (a, b) = v.fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+            b - a
+        };
+        let (sx, sy) = (span(&mut xs.into_iter()), span(&mut ys.into_iter()));
+        if sx < 1.0 && sy < 1.0 {
+            return Some(format!(
+                "{}: the cloud's bounding box {bbox} covers less than one pixel of the image; {fix}",
+                scene.source
+            ));
+        }
+    }
+    None
+}
