@@ -34,6 +34,9 @@ pub fn run(a: CompareArgs) -> Result<()> {
                 format!("`{}` must end in .png", d.display()),
             ));
         }
+        let mut inputs = vec![(a.test.clone(), "TEST".to_string()), (a.reference.clone(), "REF".to_string())];
+        inputs.extend(a.mask.iter().map(|m| (m.clone(), "--mask".to_string())));
+        super::output::check_files(&[d], "--diff", &inputs)?;
     }
     let test = Image::read_exr(&a.test)?;
     let reference = Image::read_exr(&a.reference)?;

@@ -4,23 +4,18 @@
 use cloudgi::error::{Error, Result};
 use cloudgi::scene::{Method, SceneDesc};
 
-/// Bytes per pixel a render holds at its peak (rounded up; measured from the buffers each method
-/// allocates): the method's accumulators plus the image, its layers and their EXR/PNG encodings.
+/// Bytes per pixel a render holds at its peak: the method's accumulators, the image, its layers
+/// and their EXR/PNG encodings. Peak resident memory of 1500×1000 renders of an 8³ grid on the
+/// development sandbox (`/usr/bin/time -f %M`), less the grid, was 33 B per pixel for `single`,
+/// 78 B for `reference` and 271 B for `full` (its per-pixel gather components and low-density
+/// segment lists); these are those, rounded up, plus 36 B per extra RGB layer.
 pub fn bytes_per_pixel(method: Method, aov: bool, stderr: bool) -> u64 {
-    // Per RGB layer: f32 pixels (12 B), EXR channel copies (12 B), compressed EXR (≤ 12 B).
     const LAYER: u64 = 36;
-    // The PNG: 8-bit RGB and its encoding.
-    const PNG: u64 = 6;
-    let (work, layers) = match method {
-        // One Rgb per pixel from the row renderer, moved into the image.
-        Method::Single | Method::Diffusion => (12, 1),
-        // Σx, Σx² in f64 (48 B), camera transmittance (4 B); layers: image, transmittance, stderr.
-        Method::Reference => (52, 2 + u64::from(stderr)),
-        // Four accumulated components (48 B), the gather's per-pixel components (48 B) and
-        // low-density segment lists (≥ 24 B); layers: image and, with AOVs, four more.
-        Method::Full => (120, 1 + 4 * u64::from(aov)),
-    };
-    work + layers * LAYER + PNG
+    match method {
+        Method::Single | Method::Diffusion => 48,
+        Method::Reference => 96 + LAYER * u64::from(stderr),
+        Method::Full => 300 + 4 * LAYER * u64::from(aov),
+    }
 }
 
 /// Bytes of memory available to new allocations (Linux `MemAvailable`), if known.

@@ -56,7 +56,7 @@ fn check_not_input(path: &Path, flag: &str, inputs: &[(PathBuf, String)]) -> Res
                 "command line",
                 flag,
                 format!(
-                    "`{}` is {key} of the scene; writing it would overwrite the scene's own input, choose another output name",
+                    "`{}` is {key}, an input of this command; writing it would overwrite it, choose another output name",
                     path.display()
                 ),
             ));
