@@ -156,6 +156,8 @@ fn bad_lights_ground_camera_and_render_keys() {
         ("[sun]\ndirection = [nan, 1.0, 0.0]\n", &["s.toml", "sun.direction"]),
         ("[sun]\ndirection = [0.0, 1.0, 0.0]\nelevation_deg = 30.0\n", &["s.toml", "sun."]),
         ("[sun]\nelevation_deg = 100.0\nazimuth_deg = 0.0\n", &["s.toml", "sun."]),
+        ("[sun]\nazimuth_deg = 30.0\n", &["s.toml", "sun.azimuth_deg", "sun.elevation_deg"]),
+        ("[sun]\nelevation_deg = nan\n", &["s.toml", "sun.elevation_deg"]),
         ("[sun]\nirradiance = [-1.0, 3.0, 3.0]\n", &["s.toml", "sun.irradiance"]),
         ("[sun]\nangular_diameter_deg = -1.0\n", &["s.toml", "sun.angular_diameter_deg"]),
         ("[sun]\nangular_diameter_deg = 50.0\n", &["s.toml", "sun.angular_diameter_deg"]),

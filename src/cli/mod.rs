@@ -114,6 +114,12 @@ pub fn run(cli: Cli) -> Result<()> {
     }
 }
 
+/// Write an image's EXR and PNG preview together: both or neither.
+fn write_exr_and_png(img: &cloudgi::Image, exr: &Path, png: &Path, exposure: f32) -> Result<()> {
+    let (e, p) = (img.to_exr_bytes()?, img.to_png_bytes(exposure)?);
+    cloudgi::io::write_atomic_all(&[(exr, &e), (png, &p)])
+}
+
 /// The PNG written beside an EXR.
 fn png_beside(exr: &Path) -> PathBuf {
     exr.with_extension("png")
@@ -197,8 +203,7 @@ fn render(a: RenderArgs, quiet: bool) -> Result<()> {
     }
     let progress = progress::Bars::new(quiet);
     let out = cloudgi::render(&scene, &progress)?;
-    out.image.write_exr(&a.output)?;
-    out.image.write_png(&png, scene.render.exposure)?;
+    write_exr_and_png(&out.image, &a.output, &png, scene.render.exposure)?;
     if !quiet {
         eprintln!(
             "{} {}×{} → {} + {}",

@@ -40,8 +40,7 @@ pub fn run(a: SkyArgs, quiet: bool) -> Result<()> {
     let t = std::time::Instant::now();
     let (sun, sky) = sun_and_sky(&desc.sun, &desc.sky, &file.source, &file.base)?;
     let img = sky.to_image(a.width.map(|w| w as usize));
-    img.write_exr(&a.output)?;
-    img.write_png(&png, desc.render.exposure)?;
+    super::write_exr_and_png(&img, &a.output, &png, desc.render.exposure)?;
     if !quiet {
         eprintln!(
             "sky {}×{} → {} + {} ({:.3} s)",
