@@ -204,3 +204,50 @@ fn frame_warning(scene: &Scene) -> Option<String> {
     }
     None
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    fn warnings_of(path: &Path) -> Vec<String> {
+        let file = SceneFile::read(Some(path)).unwrap();
+        let scene = Scene::build(file.desc.clone(), &file.source, &file.base).unwrap();
+        warnings(&file, &[], &scene)
+    }
+
+    #[test]
+    fn the_examples_warn_about_nothing() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples");
+        let mut n = 0;
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.extension().is_some_and(|x| x == "toml") {
+                assert_eq!(warnings_of(&p), Vec::<String>::new(), "{}", p.display());
+                n += 1;
+            }
+        }
+        assert!(n >= 5, "{n} example scenes");
+    }
+
+    #[test]
+    fn a_cloud_behind_the_camera_or_beside_the_frame_is_reported() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("s.toml");
+        let grid = "[medium]\nresolution = [4, 4, 4]\nvoxel_size = 100.0\n";
+        for (camera, warned) in [
+            ("", false),
+            ("[camera]\nlook_at = [0.0, 330.0, 3000.0]\n", true),
+            ("[camera]\nlook_at = [3000.0, 330.0, 1500.0]\n", true),
+            // Inside the cloud's box: it surrounds the camera.
+            (
+                "[camera]\nposition = [-300.0, 200.0, -200.0]\nlook_at = [0.0, 200.0, 3000.0]\n",
+                false,
+            ),
+        ] {
+            std::fs::write(&p, format!("{grid}{camera}")).unwrap();
+            let w = warnings_of(&p);
+            assert_eq!(w.iter().any(|m| m.contains("not in the camera's view")), warned, "{camera}: {w:?}");
+        }
+    }
+}
