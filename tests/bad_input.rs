@@ -135,6 +135,10 @@ fn bad_medium_values() {
         ("[medium]\nvoxel_size = 0.0\n", &["s.toml", "medium.voxel_size"]),
         ("[medium]\nvoxel_size = -1.0\n", &["s.toml", "medium.voxel_size"]),
         (
+            "[medium]\nresolution = [4, 4, 4]\nvoxel_size = 1e20\n",
+            &["s.toml", "medium.voxel_size", "1e6 m"],
+        ),
+        (
             "[medium]\nresolution = [8, 8, 8]\norigin = [nan, 0.0, 0.0]\n",
             &["s.toml", "medium.origin"],
         ),

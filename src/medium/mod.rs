@@ -27,6 +27,10 @@ pub use dda::{ray_box, Dda, Segment};
 pub use grid::Grid3;
 pub use majorant::MajorantGrid;
 
+/// Largest voxel edge accepted (m): beyond about 1e15 m the diffusion solve's squared voxel
+/// sizes overflow f32; no cloud has voxels of 1000 km.
+pub const MAX_VOXEL_SIZE: f32 = 1.0e6;
+
 /// A validated medium.
 #[derive(Clone, Debug)]
 pub struct Medium {
@@ -121,9 +125,9 @@ impl Medium {
         check(
             &loaded.name,
             "medium.voxel_size",
-            finite3(voxel.to_array()) && voxel.min_element() > 0.0,
+            finite3(voxel.to_array()) && voxel.min_element() > 0.0 && voxel.max_element() <= MAX_VOXEL_SIZE,
             voxel,
-            "voxel size must be positive and finite (m)",
+            "voxel size must be positive and at most 1e6 m (1000 km); check the grid's units",
         )?;
         check(
             &loaded.name,
