@@ -460,6 +460,11 @@ fn bad_render_arguments_and_outputs() {
     fails(&[s()], &["render", "s.toml", "--width", "abc"], &["abc"]);
     fails(&[s()], &["render", "s.toml", "--width", "0", "-q"], &["camera.width"]);
     fails(&[s()], &["render", "s.toml", "--height", "40000", "-q"], &["camera.height"]);
+    fails(
+        &[s()],
+        &["render", "s.toml", "--width", "4294967295", "--height", "4294967295", "-q"],
+        &["camera.width"],
+    );
     fails(&[s()], &render(&["--time-limit", "0"]), &["render.time_limit"]);
     fails(&[s()], &render(&["--spp", "0"]), &["render.spp"]);
     fails(&[s()], &render(&["--aa-samples", "0"]), &["render.aa_samples"]);
@@ -619,6 +624,11 @@ fn settings_that_do_not_apply_are_named() {
         &["`render.spp`", "method full"],
     );
     warns(&scene(""), &["--method", "single", "--aov", "--stderr"], &["`--aov`", "`--stderr`"]);
+    warns(
+        &scene(""),
+        &["--method", "single", "--spp", "4", "--max-depth", "3"],
+        &["`--spp`", "`--max-depth`"],
+    );
     warns(
         &scene("[render]\nmax_depth = 3\niterations = 2\n"),
         &single,

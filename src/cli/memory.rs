@@ -35,7 +35,8 @@ pub fn gib(b: u64) -> String {
 pub fn check_image_fits(desc: &SceneDesc, source: &str, available: Option<u64>) -> Result<()> {
     let (w, h) = (desc.camera.width as u64, desc.camera.height as u64);
     let r = &desc.render;
-    let need = w * h * bytes_per_pixel(r.method, r.aov, r.stderr);
+    // Saturating: the camera's own limits are checked later, so any u32 size may arrive here.
+    let need = (w * h).saturating_mul(bytes_per_pixel(r.method, r.aov, r.stderr));
     match available {
         Some(avail) if need > avail => Err(Error::invalid(
             source,
