@@ -27,8 +27,11 @@ use std::sync::Arc;
 pub struct LitVolume {
     /// The medium (cheap to clone: the grids are shared).
     pub medium: Medium,
-    /// Diffuse radiance I0 (W·m⁻²·sr⁻¹ per band) at each voxel centre, index i + nx(j + ny k).
+    /// Diffuse radiance I0 (W·m⁻²·sr⁻¹ per band) at each voxel centre, index i + nx(j + ny k),
+    /// clamped at 0 (see [`LitVolume::new`]).
     pub i0: Arc<Vec<Rgb>>,
+    /// ρ·I0 per band at voxel centres, for the density-weighted interpolation.
+    rho_i0: Arc<[Grid3; 3]>,
     /// Transmittance towards the sun (unitless) at each voxel centre, same dims as the density.
     pub sun_t: Arc<Grid3>,
     /// The sun (its light enters only through `sun_t` and the phase function, never as a disc).
@@ -49,9 +52,22 @@ impl LitVolume {
         let n = medium.density.len();
         assert_eq!(i0.len(), n, "I0 must have one value per voxel");
         assert_eq!(sun_t.dims(), medium.dims(), "sun transmittance must have the density grid's dims");
+        // One rule with the `diffusion` gather (crate::lit): I0 is clamped at 0 — the P1 solution
+        // goes negative in thin voxels on sunlit tops (the −∇·(Q1/ρσtr) source is a dipole) and
+        // a radiance cannot — and interpolated density-weighted, so the cubes' pyramid (which
+        // stores ρ·I0) and the gather's dense source see the same field.
+        let i0: Vec<Rgb> = i0.into_iter().map(|v| v.max(Rgb::ZERO)).collect();
+        let d = medium.dims();
+        let rho = medium.density.data();
+        let band = |c: usize| {
+            let data: Vec<f32> = i0.iter().zip(rho).map(|(v, r)| v[c] * r).collect();
+            Grid3::from_vec(d, data, "lit volume").expect("I0 has one value per voxel")
+        };
+        let rho_i0 = Arc::new([band(0), band(1), band(2)]);
         LitVolume {
             medium,
             i0: Arc::new(i0),
+            rho_i0,
             sun_t: Arc::new(sun_t),
             sun,
             sky,
@@ -84,31 +100,29 @@ impl LitVolume {
         self.medium.dims()
     }
 
-    /// I0 interpolated trilinearly (clamp to edge) at continuous voxel coordinates `v`.
+    /// I0 (≥ 0) at continuous voxel coordinates `v`, density-weighted:
+    /// trilinear(ρ·I0)/`rho`, with `rho` the trilinear density there (zero where `rho` ≤ 0).
     #[inline]
-    pub fn i0_at_voxel(&self, v: Vec3) -> Rgb {
-        let (idx, w) = trilinear_taps(self.dims(), v);
-        let mut s = Rgb::ZERO;
-        for k in 0..8 {
-            s += self.i0[idx[k]] * w[k];
+    pub fn i0_at_voxel(&self, v: Vec3, rho: f32) -> Rgb {
+        if rho <= 0.0 {
+            return Rgb::ZERO;
         }
-        s
+        let a = v.to_array();
+        Rgb::new(
+            self.rho_i0[0].trilinear(a),
+            self.rho_i0[1].trilinear(a),
+            self.rho_i0[2].trilinear(a),
+        ) / rho
     }
 
     /// In-scattered radiance per unit extinction J (W·m⁻²·sr⁻¹) at continuous voxel coordinates
-    /// `v`, for light leaving towards the eye along `dir_to_eye` (unit). See the module docs.
+    /// `v` with trilinear density `rho`, for light leaving towards the eye along `dir_to_eye`
+    /// (unit). See the module docs.
     #[inline]
-    pub fn source_at_voxel(&self, v: Vec3, dir_to_eye: Vec3) -> Rgb {
+    pub fn source_at_voxel(&self, v: Vec3, rho: f32, dir_to_eye: Vec3) -> Rgb {
         let phase = hg((-self.sun.dir).dot(dir_to_eye), self.medium.g);
         let t = self.sun_t.trilinear(v.to_array());
-        self.medium.albedo * (self.i0_at_voxel(v) + self.sun.irradiance * (phase * t))
-    }
-
-    /// In-scattered radiance per unit extinction at world point `p` (m): emitted radiance per
-    /// unit optical depth, a·(I0 + p_HG·E_sun·T_sun). Outside the box the clamped edge values.
-    #[inline]
-    pub fn source(&self, p: Vec3, dir_to_eye: Vec3) -> Rgb {
-        self.source_at_voxel(self.medium.to_voxel(p), dir_to_eye)
+        self.medium.albedo * (self.i0_at_voxel(v, rho) + self.sun.irradiance * (phase * t))
     }
 
     /// Radiance arriving at `o` from direction `d` beyond the medium: the lit ground where the

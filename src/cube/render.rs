@@ -425,8 +425,8 @@ pub fn render_cube_brute(lit: &LitVolume, p: Vec3, res: usize, needed: BinMask, 
             let k = cube.index(face, i, j);
             let d = table.dirs[k];
             let tg = lit.ground_hit(p, d);
-            let r = crate::render::march::march(m, p, d, 0.0, tg.unwrap_or(f32::INFINITY), step, 0.5, |v, _| {
-                lit.source_at_voxel(v, -d)
+            let r = crate::render::march::march(m, p, d, 0.0, tg.unwrap_or(f32::INFINITY), step, 0.5, |v, rho| {
+                lit.source_at_voxel(v, rho, -d)
             });
             cube.pixels[k] = r.radiance + lit.background(p, d, tg) * r.transmittance;
         }

@@ -53,13 +53,15 @@ fn i0_rgb(sol: &DiffusionSolution) -> Vec<Rgb> {
         .collect()
 }
 
-/// ‖a − b‖₂ / ‖b‖₂ over all voxels and bands.
+/// ‖a − b‖₂ / ‖b‖₂ over all voxels and bands, of I0 clamped at 0 as the lit volume uses it (the
+/// raw P1 solution's negative dipoles on sunlit faces would count as change the image never sees).
 pub fn relative_change(old: &DiffusionSolution, new: &DiffusionSolution) -> f64 {
     let (mut num, mut den) = (0f64, 0f64);
     for c in 0..3 {
         for (a, b) in old.i0[c].iter().zip(&new.i0[c]) {
+            let (a, b) = (a.max(0.0), b.max(0.0));
             num += ((b - a) as f64).powi(2);
-            den += (*b as f64).powi(2);
+            den += (b as f64).powi(2);
         }
     }
     if den > 0.0 {
@@ -92,8 +94,20 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         })?;
         inc = new_inc;
         let change = relative_change(&sol, &new);
+        // A change near or above 100 % is not noise: on grids whose voxels are optically very
+        // thick (τ ≫ 1 per voxel) stage 1 deposits all light in the first voxel, and the P1 dipole
+        // source −∇·(Q1/ρσtr) is not resolved, so the cubes' anisotropic light moves I0 a lot.
+        let tau_voxel = scene.medium.sigma_t * scene.medium.density.max_value() * scene.medium.min_voxel();
+        let hint = if change > 0.5 && tau_voxel > 10.0 {
+            format!(
+                "; large because voxels reach optical depth {tau_voxel:.0}: stage 1's P1 source is resolved \
+                 only near 1 per voxel (raise medium.resolution or lower medium.sigma_t)"
+            )
+        } else {
+            String::new()
+        };
         progress.log(&format!(
-            "clear-air iteration {}/{}: {} border cubes, I0 changed by {:.3} % ({} warm-start iterations)",
+            "clear-air iteration {}/{}: {} border cubes, I0 changed by {:.3} % ({} warm-start iterations){hint}",
             it + 1,
             iterations,
             ca.cubes.len(),
@@ -251,10 +265,11 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
     let flux = lit.flux.as_deref();
     let dense = move |p: Vec3, to_eye: Vec3| {
         let v = m.to_voxel(p);
-        let i0 = lit.i0_at_voxel(v);
+        let rho = m.density_at(p);
+        let i0 = lit.i0_at_voxel(v, rho);
         match flux {
             // a·max(0, I0 + g·I1·ω): the diffuse field's first moment (crate::diffusion::flux).
-            Some(f) => albedo * (i0 + f.anisotropic_at_voxel(v, m.density_at(p), to_eye)).max(Rgb::ZERO),
+            Some(f) => albedo * (i0 + f.anisotropic_at_voxel(v, rho, to_eye)).max(Rgb::ZERO),
             None => albedo * i0,
         }
     };
