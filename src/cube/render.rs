@@ -16,7 +16,7 @@ use super::lit::LitVolume;
 use super::pyramid::{LitPyramid, BLOCK};
 use crate::error::{Error, Result};
 use crate::lighting::bins::{DirectionBins, BINS_PER_EDGE, NUM_BINS};
-use crate::math::{Rgb, Vec3};
+use crate::math::{fast_floor, Rgb, Vec3};
 use crate::phase::hg;
 use std::sync::OnceLock;
 
@@ -393,17 +393,6 @@ impl<'a> CubeRenderer<'a> {
             out[b] = Rgb::new((acc[0] / area) as f32, (acc[1] / area) as f32, (acc[2] / area) as f32);
         }
         out
-    }
-}
-
-/// floor for |x| < 2³¹ without a libm call (the default x86-64 target has no SSE4.1 round).
-#[inline]
-pub(crate) fn fast_floor(x: f32) -> f32 {
-    let t = x as i32 as f32;
-    if t > x {
-        t - 1.0
-    } else {
-        t
     }
 }
 

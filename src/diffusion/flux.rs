@@ -109,14 +109,8 @@ impl FluxField {
         if rho <= 0.0 {
             return [Vec3::ZERO; 3];
         }
-        let (idx, w) = crate::cube::lit::trilinear_taps(self.dims, v);
-        let mut s = [Vec3::ZERO; 3];
-        for k in 0..8 {
-            let t = &self.rho_i1[idx[k]];
-            for c in 0..3 {
-                s[c] += t[c] * w[k];
-            }
-        }
+        let t = crate::math::Trilinear::new(self.dims, v.to_array());
+        let s: [Vec3; 3] = std::array::from_fn(|c| t.blend(|n| self.rho_i1[n][c]));
         [s[0] / rho, s[1] / rho, s[2] / rho]
     }
 
