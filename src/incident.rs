@@ -456,6 +456,12 @@ pub fn compute(
             }
         }
     }
+    // δ-scaling (f = g) or the paper's scheme (f = 0, the identity): one transform of the optics.
+    let optics = if settings.delta_scaling {
+        m.optics.delta_scaled()
+    } else {
+        m.optics.similarity(0.0)
+    };
     let ctx = Ctx {
         m,
         lo,
@@ -464,12 +470,7 @@ pub fn compute(
         entry,
         seed: settings.seed,
         ss: settings.rays_per_face_edge.max(1),
-        atten: {
-            let f = if settings.delta_scaling { m.g as f64 } else { 0.0 };
-            let a = m.albedo.as_dvec3();
-            let st = m.sigma_t as f64;
-            [st * (1.0 - f * a.x), st * (1.0 - f * a.y), st * (1.0 - f * a.z)]
-        },
+        atten: optics.sigma_t,
     };
     // Sources: the 96 bins, then the sun. Each contributes Δω·Ī to Σ0 and Δω·Ī·flow to Σ1.
     let mut list: Vec<(Source, Rgb, Vec3)> = bins
@@ -554,11 +555,7 @@ pub fn compute(
     out.fallback_rays = fallback;
     // Scatter into the full grid with ρσs/(4π) and ρσs·g/(4π).
     // With δ-scaling (f = g) the scattering that changes direction is σs(1 − g), isotropic (g' = 0).
-    let (sigma_s, g) = if settings.delta_scaling {
-        (m.albedo * m.sigma_t * (1.0 - m.g), 0.0)
-    } else {
-        (m.albedo * m.sigma_t, m.g as f64)
-    };
+    let (sigma_s, g) = (optics.sigma_s, optics.phase.mean_cosine());
     for k in 0..bd[2] {
         for j in 0..bd[1] {
             for i in 0..bd[0] {

@@ -20,7 +20,6 @@ use crate::diffusion::DiffusionSolution;
 use crate::incident::IncidentLight;
 use crate::math::{Rgb, Vec3};
 use crate::medium::{Grid3, Medium};
-use crate::phase::hg;
 use crate::render::march::{march, March};
 use crate::sunlight::SunTransmittance;
 
@@ -94,19 +93,19 @@ impl LitVolume {
     pub fn source_at_voxel(&self, v: Vec3, rho: f32, view_dir: Vec3) -> Rgb {
         let m = &self.medium;
         // Sunlight travels along −sun_dir and leaves towards the eye along −view_dir.
-        let phase = hg((-self.sun_transmittance.dir).dot(-view_dir), m.g);
+        let phase = m.optics.phase.eval(self.sun_transmittance.dir, -view_dir);
         let sun = self.sun_irradiance * (phase * self.sun_transmittance.at_voxel(v));
         let mut diffuse = self.i0_at_voxel(v, rho);
         if let Some(f) = &self.flux {
             diffuse = (diffuse + f.anisotropic_at_voxel(v, rho, -view_dir)).max(Rgb::ZERO);
         }
-        m.albedo * (diffuse + sun)
+        m.optics.albedo * (diffuse + sun)
     }
 
     /// Extinction ρσt (m⁻¹) at a world point.
     #[inline]
     pub fn extinction(&self, p: Vec3) -> f32 {
-        self.medium.density_at(p) * self.medium.sigma_t
+        self.medium.density_at(p) * self.medium.optics.sigma_t
     }
 
     /// Emission ρσt·S (W·m⁻³·sr⁻¹) at a world point towards an eye looking along `view_dir`:
@@ -117,7 +116,7 @@ impl LitVolume {
         if rho <= 0.0 {
             return Rgb::ZERO;
         }
-        self.source_at_voxel(self.medium.to_voxel(p), rho, view_dir) * (rho * self.medium.sigma_t)
+        self.source_at_voxel(self.medium.to_voxel(p), rho, view_dir) * (rho * self.medium.optics.sigma_t)
     }
 
     /// Front-to-back march of `o + t·d`, t ∈ [t_min, t_max], steps of at most `step` m, sample

@@ -109,7 +109,7 @@ fn light_crosses_clear_air_between_cloud_parts() {
             }
         }
     }
-    m = Medium::new(g, m.origin, m.voxel_size, m.sigma_t, m.albedo, m.g);
+    m = Medium::with_optics(g, m.origin, m.voxel_size, m.optics);
     let mut s = scene_with(m, |d| {
         d.ground = None;
         d.render.iterations = 1;

@@ -18,7 +18,6 @@ use super::ground::LitGround;
 use crate::lighting::{Sky, Sun};
 use crate::math::{Rgb, Vec3};
 use crate::medium::{Grid3, Medium};
-use crate::phase::hg;
 use crate::sunlight::SunTransmittance;
 use std::sync::Arc;
 
@@ -120,9 +119,9 @@ impl LitVolume {
     /// (unit). See the module docs.
     #[inline]
     pub fn source_at_voxel(&self, v: Vec3, rho: f32, dir_to_eye: Vec3) -> Rgb {
-        let phase = hg((-self.sun.dir).dot(dir_to_eye), self.medium.g);
+        let phase = self.medium.optics.phase.eval(self.sun.dir, dir_to_eye);
         let t = self.sun_t.trilinear(v.to_array());
-        self.medium.albedo * (self.i0_at_voxel(v, rho) + self.sun.irradiance * (phase * t))
+        self.medium.optics.albedo * (self.i0_at_voxel(v, rho) + self.sun.irradiance * (phase * t))
     }
 
     /// Radiance arriving at `o` from direction `d` beyond the medium: the lit ground where the

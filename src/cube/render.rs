@@ -17,7 +17,6 @@ use super::pyramid::{LitPyramid, BLOCK};
 use crate::error::{Error, Result};
 use crate::lighting::bins::{DirectionBins, BINS_PER_EDGE, NUM_BINS};
 use crate::math::{fast_floor, Rgb, Vec3};
-use crate::phase::hg;
 use std::sync::OnceLock;
 
 /// Settings of the cube renderer.
@@ -269,9 +268,9 @@ impl<'a> CubeRenderer<'a> {
         let t_ground = lit.ground_hit(o, d);
         let t_end = t_ground.unwrap_or(f32::INFINITY);
         // Sunlight travels along −sun.dir; the scattered light travels towards the eye, −d.
-        let sun_e = lit.sun.irradiance * hg((-lit.sun.dir).dot(-d), m.g);
-        let albedo = m.albedo;
-        let sigma_t = m.sigma_t;
+        let sun_e = lit.sun.irradiance * m.optics.phase.eval(lit.sun.dir, -d);
+        let albedo = m.optics.albedo;
+        let sigma_t = m.optics.sigma_t;
         let cut = self.opts.t_cutoff;
         let inv_cone = 1.0 / (cone.max(1e-6) * self.opts.lod_bias.exp2());
         let nlev = self.pyramid.levels.len();

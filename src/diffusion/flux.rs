@@ -33,8 +33,7 @@ pub fn diffuse_flux(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, ta
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
     let stride = [1usize, d[0], d[0] * d[1]];
     let n = d[0] * d[1] * d[2];
-    let st = m.sigma_t as f64;
-    let sigma_tr: [f64; 3] = std::array::from_fn(|c| st * (1.0 - m.albedo[c] as f64 * m.g as f64));
+    let sigma_tr: [f64; 3] = std::array::from_fn(|c| m.optics.sigma_tr(c));
     (0..n)
         .into_par_iter()
         .map(|idx| {
@@ -99,7 +98,7 @@ impl FluxField {
         FluxField {
             dims: m.dims(),
             rho_i1,
-            g: m.g,
+            g: m.optics.phase.mean_cosine() as f32,
         }
     }
 

@@ -220,10 +220,8 @@ pub fn assemble(m: &Medium, inc: &IncidentLight, c: usize, tau_min: f64, dom: &D
     let d = dom.dims;
     let n = d[0] * d[1] * d[2];
     let rho = m.density.data();
-    let a = m.albedo[c] as f64;
-    let st = m.sigma_t as f64;
-    let sigma_a = st * (1.0 - a);
-    let sigma_tr = st * (1.0 - a * m.g as f64);
+    let sigma_a = m.optics.sigma_a(c);
+    let sigma_tr = m.optics.sigma_tr(c);
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
     let gstride = [1, gd[0], gd[0] * gd[1]];
     let mut st_out = Stencil::zeros(d);
@@ -292,8 +290,7 @@ pub fn boundary_outflow(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution
     let stride = [1, d[0], d[0] * d[1]];
     let mut out = [0f64; 3];
     for (c, o) in out.iter_mut().enumerate() {
-        let a = m.albedo[c] as f64;
-        let sigma_tr = m.sigma_t as f64 * (1.0 - a * m.g as f64);
+        let sigma_tr = m.optics.sigma_tr(c);
         for k in 0..d[2] {
             for j in 0..d[1] {
                 for i in 0..d[0] {
@@ -384,7 +381,7 @@ pub fn solve_diffusion(
     let mut hier: Vec<(f32, Hierarchy)> = Vec::new();
     let mut which = [0usize; 3];
     for (c, (a, _)) in systems.iter().enumerate() {
-        let alb = medium.albedo[c];
+        let alb = medium.optics.albedo[c];
         which[c] = match hier.iter().position(|(x, _)| *x == alb) {
             Some(p) => p,
             None => {

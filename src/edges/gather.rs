@@ -32,7 +32,6 @@ use super::segments::{LowSegment, RayProfile};
 use crate::cube::CubeImage;
 use crate::math::{Rgb, Vec3};
 use crate::medium::Medium;
-use crate::phase::{hg, hg_f64};
 
 /// Bridges are resolved recursively at most this deep (2^depth sub-segments at worst).
 pub const MAX_BRIDGE_DEPTH: usize = 3;
@@ -192,8 +191,8 @@ impl<'a> EdgeGather<'a> {
         sun: SunInput<'a>,
         dense: &'a (dyn Fn(Vec3, Vec3) -> Rgb + Sync),
     ) -> Self {
-        let orders = OrderKernel::orders_to_tabulate(medium.g, MAX_TABULATED_DEPTH, settings.tail);
-        let kernel = OrderKernel::new(settings.cube_res.max(1), medium.g, orders);
+        let orders = OrderKernel::orders_to_tabulate(medium.optics.phase, MAX_TABULATED_DEPTH, settings.tail);
+        let kernel = OrderKernel::new(settings.cube_res.max(1), medium.optics.phase, orders);
         EdgeGather {
             medium,
             settings,
@@ -264,12 +263,14 @@ impl<'a> EdgeGather<'a> {
         let m = self.medium;
         let q = segment_orders(seg.depth, self.settings.tail);
         let kk: Vec<Rgb> = (0..q.len()).map(|i| k[i.min(k.len() - 1)]).collect();
-        let mut e = edge_radiance(&q, &kk, m.albedo, 1);
+        let mut e = edge_radiance(&q, &kk, m.optics.albedo, 1);
         let es = (self.sun.irradiance_at)(seg.center(o, d));
         if es.max_element() > 0.0 && q.len() >= 2 {
+            // cos θ = (−ω_sun)·(−d): sunlight leaving towards the eye.
             let c = self.sun.dir.dot(d) as f64;
-            let ks: Vec<Rgb> = (1..=q.len()).map(|i| es * hg_f64(c, (m.g as f64).powi(i as i32)) as f32).collect();
-            e += edge_radiance(&q, &ks, m.albedo, 2);
+            let phase = m.optics.phase;
+            let ks: Vec<Rgb> = (1..=q.len()).map(|i| es * phase.order(i).eval_cos_f64(c) as f32).collect();
+            e += edge_radiance(&q, &ks, m.optics.albedo, 2);
         }
         e
     }
@@ -417,7 +418,7 @@ impl<'a> EdgeGather<'a> {
                 *x += s;
             }
         }
-        let phase_sun = hg(self.sun.dir.dot(d), m.g);
+        let phase_sun = m.optics.phase.eval(self.sun.dir, -d);
         let to_eye = -d;
         let mut tr = 1.0f64;
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
@@ -441,7 +442,7 @@ impl<'a> EdgeGather<'a> {
                 if w < 1.0 {
                     aov.edge += f * (1.0 - w) * edge_src[k];
                 }
-                aov.sun_single += f * m.albedo * (self.sun.irradiance_at)(pos) * phase_sun;
+                aov.sun_single += f * m.optics.albedo * (self.sun.irradiance_at)(pos) * phase_sun;
                 tr *= (-delta).exp();
                 if tr < crate::render::march::T_CUTOFF as f64 {
                     tr = 0.0;

@@ -83,7 +83,7 @@ impl RayProfile {
             return prof;
         };
         let levels: Vec<f32> = levels.iter().copied().filter(|l| *l > 0.0).collect();
-        let sigma_t = m.sigma_t as f64;
+        let sigma_t = m.optics.sigma_t as f64;
         let h = m.voxel_size.as_dvec3();
         let dual_origin = m.origin.as_dvec3() - 0.5 * h;
         let dims = m.dims();
@@ -210,7 +210,7 @@ impl RayProfile {
         for p in &self.pieces[first..end] {
             if acc + p.tau >= target && p.tau > 0.0 {
                 let want = target - acc;
-                let sigma_t = m.sigma_t as f64;
+                let sigma_t = m.optics.sigma_t as f64;
                 let r0 = p.rho[0] as f64;
                 let (mut lo, mut hi) = (p.t0, p.t1);
                 for _ in 0..50 {
@@ -235,7 +235,7 @@ impl RayProfile {
     /// Optical depth between `t_a` and `t_b` (both inside one piece), exact.
     pub fn depth_within(&self, m: &Medium, t_a: f64, t_b: f64) -> f64 {
         let r = |t| rho_at(m, self.o, self.d, t) as f64;
-        m.sigma_t as f64 * (t_b - t_a) / 6.0 * (r(t_a) + 4.0 * r(0.5 * (t_a + t_b)) + r(t_b))
+        m.optics.sigma_t as f64 * (t_b - t_a) / 6.0 * (r(t_a) + 4.0 * r(0.5 * (t_a + t_b)) + r(t_b))
     }
 
     /// ρ at distance t.

@@ -18,6 +18,7 @@ pub mod vdb;
 
 use crate::error::{Error, Result};
 use crate::math::{Rgb, Vec3};
+use crate::optics::Optics;
 use crate::scene::{check, finite3, rgb_in_unit, MediumDesc};
 use glam::DVec3;
 use std::path::Path;
@@ -36,12 +37,8 @@ pub struct Medium {
     pub origin: Vec3,
     /// Voxel edge lengths (m).
     pub voxel_size: Vec3,
-    /// Extinction at density 1 (m⁻¹).
-    pub sigma_t: f32,
-    /// Single-scattering albedo per band.
-    pub albedo: Rgb,
-    /// HG mean cosine.
-    pub g: f32,
+    /// σt, albedo and phase function at density 1 (the only place they are kept).
+    pub optics: Optics,
     /// Per-block bounds of ρ for empty-space skipping and delta tracking.
     pub majorant: Arc<MajorantGrid>,
 }
@@ -49,14 +46,17 @@ pub struct Medium {
 impl Medium {
     /// Wrap a density grid; densities must already be validated (finite, ≥ 0).
     pub fn new(density: Grid3, origin: Vec3, voxel_size: Vec3, sigma_t: f32, albedo: Rgb, g: f32) -> Medium {
+        Medium::with_optics(density, origin, voxel_size, Optics::new(sigma_t, albedo, g))
+    }
+
+    /// [`Medium::new`] from an [`Optics`] (e.g. another medium's).
+    pub fn with_optics(density: Grid3, origin: Vec3, voxel_size: Vec3, optics: Optics) -> Medium {
         let majorant = MajorantGrid::build(&density, 4);
         Medium {
             density: Arc::new(density),
             origin,
             voxel_size,
-            sigma_t,
-            albedo,
-            g,
+            optics,
             majorant: Arc::new(majorant),
         }
     }
@@ -231,7 +231,7 @@ impl Medium {
     /// Optical depth ∫ σt ρ ds (unitless) along a ray segment; exact.
     #[inline]
     pub fn optical_depth(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> f32 {
-        (self.sigma_t as f64 * self.density_integral(o, d, t_min, t_max)) as f32
+        (self.optics.sigma_t as f64 * self.density_integral(o, d, t_min, t_max)) as f32
     }
 
     /// Transmittance exp(−optical depth) along a ray segment; exact.

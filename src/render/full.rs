@@ -97,11 +97,11 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         // A change near or above 100 % is not noise: on grids whose voxels are optically very
         // thick (τ ≫ 1 per voxel) stage 1 deposits all light in the first voxel, and the P1 dipole
         // source −∇·(Q1/ρσtr) is not resolved, so the cubes' anisotropic light moves I0 a lot.
-        let tau_voxel = scene.medium.sigma_t * scene.medium.density.max_value() * scene.medium.min_voxel();
+        let tau_voxel = scene.medium.optics.sigma_t * scene.medium.density.max_value() * scene.medium.min_voxel();
         let hint = if change > 0.5 && tau_voxel > 10.0 {
             format!(
                 "; large because voxels reach optical depth {tau_voxel:.0}: stage 1's P1 source is resolved \
-                 only near 1 per voxel (raise medium.resolution or lower medium.sigma_t)"
+                 only near 1 per voxel (raise medium.resolution or lower medium.optics.sigma_t)"
             )
         } else {
             String::new()
@@ -261,7 +261,7 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
         dir: lit.sun.dir,
         irradiance_at: &sun_at,
     };
-    let albedo = m.albedo;
+    let albedo = m.optics.albedo;
     let flux = lit.flux.as_deref();
     let dense = move |p: Vec3, to_eye: Vec3| {
         let v = m.to_voxel(p);

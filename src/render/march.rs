@@ -33,7 +33,7 @@ pub fn march(m: &Medium, o: Vec3, d: Vec3, t_min: f32, t_max: f32, step: f32, xi
     };
     let dims = m.dims();
     let inv_h = Vec3::ONE / m.voxel_size;
-    let sigma_t = m.sigma_t;
+    let sigma_t = m.optics.sigma_t;
     let mut t_acc = 1.0f32;
     let mut l = Rgb::ZERO;
     m.majorant.for_each_block(m, o, d, t0, t1, |ta, tb, maj| {

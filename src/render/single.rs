@@ -7,7 +7,6 @@ use super::{render_rows, Progress, Timings};
 use crate::error::Result;
 use crate::image::Image;
 use crate::math::{Rgb, Rng, Vec3};
-use crate::phase::hg;
 use crate::scene::Scene;
 use crate::sunlight::SunTransmittance;
 
@@ -41,8 +40,8 @@ pub fn radiance(scene: &Scene, sun_t: &SunTransmittance, o: Vec3, d: Vec3, xi: f
     let t_max = scene.ground.as_ref().and_then(|g| g.intersect(o, d)).unwrap_or(f32::INFINITY);
     let step = scene.render.step * m.min_voxel();
     // Light travels from the sun (direction −sun.dir) towards the eye (direction −d).
-    let phase = hg((-scene.sun.dir).dot(-d), m.g);
-    let sun_term = m.albedo * scene.sun.irradiance * phase;
+    let phase = m.optics.phase.eval(scene.sun.dir, -d);
+    let sun_term = m.optics.albedo * scene.sun.irradiance * phase;
     let r = march(m, o, d, 0.0, t_max, step, xi, |v, _| sun_term * sun_t.at_voxel(v));
     if r.transmittance <= 0.0 {
         return r.radiance;
