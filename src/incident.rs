@@ -45,9 +45,9 @@
 //! order, so the result is bit-identical at any thread count.
 
 use crate::lighting::bins::{Bin, DirectionBins, NUM_BINS};
+use crate::lighting::{Ground, Sky, Sun};
 use crate::math::{mix64, Rgb, Rng, Vec3};
 use crate::medium::Medium;
-use crate::scene::Scene;
 use crate::sunlight::SunTransmittance;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -96,22 +96,22 @@ pub struct IncidentSources {
 }
 
 impl IncidentSources {
-    /// The scene's sky (any model, through [`DirectionBins::integrate`]), the ground below the
+    /// The sky (any model, through [`DirectionBins::integrate`]), the ground below the
     /// horizon (unshadowed), and the sun.
-    pub fn from_scene(scene: &Scene, bins: &DirectionBins, sky_subdivisions: usize) -> IncidentSources {
+    pub fn from_lighting(sun: &Sun, sky: &Sky, ground: Option<&Ground>, bins: &DirectionBins, sky_subdivisions: usize) -> IncidentSources {
         let power = bins.integrate(sky_subdivisions.max(1), |d| {
             if d.y < 0.0 {
-                if let Some(g) = &scene.ground {
+                if let Some(g) = ground {
                     // The Lambertian ground is uniform: its radiance does not depend on the point.
-                    return g.radiance(Vec3::ZERO, &scene.sun, &scene.sky, 1.0);
+                    return g.radiance(Vec3::ZERO, sun, sky, 1.0);
                 }
             }
-            scene.sky.radiance(d)
+            sky.radiance(d)
         });
         let bin_radiance = power.iter().zip(&bins.bins).map(|(p, b)| *p / b.solid_angle as f32).collect();
         IncidentSources {
             bin_radiance,
-            sun: Some((scene.sun.dir, scene.sun.irradiance)),
+            sun: Some((sun.dir, sun.irradiance)),
         }
     }
 }
@@ -145,18 +145,6 @@ impl IncidentLight {
     pub fn sun_at_voxel(&self, v: Vec3) -> Rgb {
         self.sun_irradiance * self.sun_transmittance.at_voxel(v)
     }
-}
-
-/// Stage 1 for a scene with default sampling (seed from `render.seed`).
-pub fn compute_incident(scene: &Scene, entry: Option<&EntryRadiance<'_>>) -> IncidentLight {
-    let settings = IncidentSettings {
-        seed: scene.render.seed,
-        delta_scaling: scene.render.delta_scaling,
-        ..IncidentSettings::default()
-    };
-    let bins = DirectionBins::new();
-    let sources = IncidentSources::from_scene(scene, &bins, settings.sky_subdivisions);
-    compute(&scene.medium, &bins, &sources, &settings, entry)
 }
 
 /// Index box [lo, hi) of every non-empty voxel grown by `margin` voxels, clipped to the grid.
@@ -428,10 +416,24 @@ pub fn compute(
     settings: &IncidentSettings,
     entry: Option<&EntryRadiance<'_>>,
 ) -> IncidentLight {
+    let sun_dir = sources.sun.map_or(Vec3::Y, |s| s.0);
+    compute_with_sun(m, bins, sources, settings, entry, SunTransmittance::compute(m, sun_dir))
+}
+
+/// [`compute`] with the sun transmittance at voxel centres already known (it depends only on
+/// the medium and the sun, so a run computes it once; `sun_transmittance.dir` must be the
+/// sources' sun direction).
+pub fn compute_with_sun(
+    m: &Medium,
+    bins: &DirectionBins,
+    sources: &IncidentSources,
+    settings: &IncidentSettings,
+    entry: Option<&EntryRadiance<'_>>,
+    sun_transmittance: SunTransmittance,
+) -> IncidentLight {
     let dims = m.dims();
     let n = dims[0] * dims[1] * dims[2];
     let (sun_dir, sun_e) = sources.sun.unwrap_or((Vec3::Y, Rgb::ZERO));
-    let sun_transmittance = SunTransmittance::compute(m, sun_dir);
     let mut out = IncidentLight {
         dims,
         q0: vec![Rgb::ZERO; n],

@@ -4,10 +4,11 @@
 use cloudgi::diffusion::multigrid::{Hierarchy, Stencil};
 use cloudgi::diffusion::slab::{default_cells, solve_slab, Incidence};
 use cloudgi::diffusion::{assemble, boundary_outflow, solve_diffusion, DiffusionSettings, Domain};
-use cloudgi::incident::{compute, compute_incident, IncidentSettings, IncidentSources};
+use cloudgi::incident::{compute, IncidentSettings, IncidentSources};
 use cloudgi::lighting::DirectionBins;
 use cloudgi::math::{Rgb, Rng, Vec3};
 use cloudgi::medium::{Grid3, Medium};
+use cloudgi::render::diffusion::compute_incident;
 use cloudgi::{Error, Method, NoProgress, Scene};
 use std::f64::consts::PI;
 

@@ -7,20 +7,16 @@
 pub mod border;
 pub mod ground;
 pub mod image;
-pub mod lit;
-pub mod pyramid;
 pub mod render;
 
 pub use border::{find_border_voxels, render_border_cubes, BorderCubes};
 pub use ground::{render_ground, LitGround};
 pub use image::CubeImage;
-pub use lit::LitVolume;
 pub use render::{opposite_bin, render_cube_brute, BinMask, CubeOptions, CubeRenderer};
 
-use crate::math::Rgb;
-use crate::medium::Grid3;
+use crate::lighting::Ground;
+use crate::lit::LitVolume;
 use crate::render::Progress;
-use crate::scene::Scene;
 
 /// What one propagation iteration gets from the cubes.
 #[derive(Clone, Debug)]
@@ -31,19 +27,13 @@ pub struct ClearAir {
     pub cubes: BorderCubes,
 }
 
-/// One iteration's cubes: the lit volume from `scene` with the current `i0` (W·m⁻²·sr⁻¹ per
-/// voxel) and `sun_t` (transmittance towards the sun at voxel centres, e.g.
-/// [`crate::sunlight::SunTransmittance`]`::compute(..).grid`); the ground's hemicubes first (they
-/// look up only), then every border cube with that lit ground behind it. Settings from
-/// `scene.render.cubes` (`render.cube_resolution`, `render.ground_samples`).
-pub fn clear_air(scene: &Scene, i0: Vec<Rgb>, sun_t: Grid3, progress: &dyn Progress) -> ClearAir {
-    let opts = &scene.render.cubes;
-    let ground = scene
-        .ground
-        .as_ref()
-        .map(|g| LitGround::unoccluded(g.clone(), &scene.sun, &scene.sky));
-    let mut lit = LitVolume::new(scene.medium.clone(), i0, sun_t, scene.sun.clone(), scene.sky.clone(), ground);
-    if let Some(g) = &scene.ground {
+/// One iteration's cubes over `lit` (the current I0, its ground unoccluded): the ground's
+/// hemicubes first (they look up only), then every border cube with that lit ground behind it.
+/// Both render through the lit volume's one pyramid. `opts`: `render.cube_resolution`,
+/// `render.ground_samples`.
+pub fn clear_air(lit: LitVolume, ground: Option<&Ground>, opts: &CubeOptions, progress: &dyn Progress) -> ClearAir {
+    let mut lit = lit;
+    if let Some(g) = ground {
         let lg = render_ground(&lit, g, opts, progress);
         lit = lit.with_ground(Some(lg));
     }

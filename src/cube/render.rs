@@ -12,11 +12,12 @@
 //! pixels stay black and their bins are reported as absent.
 
 use super::image::CubeImage;
-use super::lit::LitVolume;
-use super::pyramid::{LitPyramid, BLOCK};
 use crate::error::{Error, Result};
 use crate::lighting::bins::{DirectionBins, BINS_PER_EDGE, NUM_BINS};
+use crate::lit::pyramid::{LitPyramid, BLOCK};
+use crate::lit::LitVolume;
 use crate::math::{fast_floor, Rgb, Vec3};
+use std::sync::Arc;
 use std::sync::OnceLock;
 
 /// Settings of the cube renderer.
@@ -239,8 +240,10 @@ impl PixelTable {
 pub struct CubeRenderer<'a> {
     /// The scene.
     pub lit: &'a LitVolume,
-    /// Its mip pyramid.
-    pub pyramid: LitPyramid,
+    /// Its mip pyramid (shared with every renderer of the same lit volume).
+    pub pyramid: Arc<LitPyramid>,
+    /// Levels used: the first `opts.max_levels` of the pyramid.
+    levels: usize,
     /// The options.
     pub opts: CubeOptions,
     /// Pixel tables at `opts.res`.
@@ -253,7 +256,8 @@ impl<'a> CubeRenderer<'a> {
     pub fn new(lit: &'a LitVolume, opts: &CubeOptions) -> CubeRenderer<'a> {
         CubeRenderer {
             lit,
-            pyramid: LitPyramid::build(lit, opts.max_levels),
+            pyramid: lit.pyramid(),
+            levels: opts.max_levels.max(1),
             opts: opts.clone(),
             pixels: PixelTable::new(opts.res),
             h_min: lit.medium.min_voxel(),
@@ -273,7 +277,8 @@ impl<'a> CubeRenderer<'a> {
         let sigma_t = m.optics.sigma_t;
         let cut = self.opts.t_cutoff;
         let inv_cone = 1.0 / (cone.max(1e-6) * self.opts.lod_bias.exp2());
-        let nlev = self.pyramid.levels.len();
+        let levels = &self.pyramid.levels[..self.levels.min(self.pyramid.levels.len())];
+        let nlev = levels.len();
         let origin = self.pyramid.origin;
         // Components of d below 1e-20 are nudged so the slab and block arithmetic stay finite.
         let dn = Vec3::select(d.abs().cmplt(Vec3::splat(1e-20)), Vec3::splat(1e-20), d);
@@ -281,7 +286,7 @@ impl<'a> CubeRenderer<'a> {
         let positive = d.cmpgt(Vec3::ZERO);
         // The coarsest level's box contains every level's box.
         let (t_box0, t_box1) = {
-            let top = self.pyramid.levels.last().expect("pyramid has a level");
+            let top = levels.last().expect("pyramid has a level");
             let hi = origin + top.voxel_size * dims_f(top.dims);
             let (ta, tb) = ((origin - o) * inv_d, (hi - o) * inv_d);
             (ta.min(tb).max_element().max(0.0), ta.max(tb).min_element().min(t_end))
@@ -289,7 +294,7 @@ impl<'a> CubeRenderer<'a> {
         let mut tr = 1.0f32;
         let mut l = Rgb::ZERO;
         if t_box0 < t_box1 {
-            'levels: for (li, lev) in self.pyramid.levels.iter().enumerate() {
+            'levels: for (li, lev) in levels.iter().enumerate() {
                 let ts = if li == 0 {
                     0.0
                 } else {
@@ -413,8 +418,8 @@ pub fn render_cube_brute(lit: &LitVolume, p: Vec3, res: usize, needed: BinMask, 
             let k = cube.index(face, i, j);
             let d = table.dirs[k];
             let tg = lit.ground_hit(p, d);
-            let r = crate::render::march::march(m, p, d, 0.0, tg.unwrap_or(f32::INFINITY), step, 0.5, |v, rho| {
-                lit.source_at_voxel(v, rho, -d)
+            let r = crate::medium::march::march(m, p, d, 0.0, tg.unwrap_or(f32::INFINITY), step, 0.5, |v, rho| {
+                lit.source(v, rho, -d)
             });
             cube.pixels[k] = r.radiance + lit.background(p, d, tg) * r.transmittance;
         }

@@ -444,7 +444,7 @@ impl<'a> EdgeGather<'a> {
                 }
                 aov.sun_single += f * m.optics.albedo * (self.sun.irradiance_at)(pos) * phase_sun;
                 tr *= (-delta).exp();
-                if tr < crate::render::march::T_CUTOFF as f64 {
+                if tr < crate::medium::march::T_CUTOFF as f64 {
                     tr = 0.0;
                     break 'pieces;
                 }

@@ -13,6 +13,7 @@ pub mod dda;
 pub mod grid;
 pub mod loaders;
 pub mod majorant;
+pub mod march;
 pub mod procedural;
 pub mod vdb;
 

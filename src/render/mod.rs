@@ -2,7 +2,6 @@
 
 pub mod diffusion;
 pub mod full;
-pub mod march;
 pub mod single;
 
 use crate::error::Result;

@@ -2,11 +2,11 @@
 //! the Henyey–Greenstein phase function, plus the attenuated sky or ground behind the cloud.
 //! No multiple scattering: the cloud is dark, as the paper shows.
 
-use super::march::march;
 use super::{render_rows, Progress, Timings};
 use crate::error::Result;
 use crate::image::Image;
 use crate::math::{Rgb, Rng, Vec3};
+use crate::medium::march::march;
 use crate::scene::Scene;
 use crate::sunlight::SunTransmittance;
 

@@ -7,7 +7,7 @@
 //! trilinearly and divides by ρ to recover the colour, so empty space never darkens the colour.
 //! Each level has a block occupancy grid for empty-space skipping.
 
-use super::lit::LitVolume;
+use super::LitVolume;
 use crate::math::{Trilinear, Vec3};
 use crate::medium::{Grid3, MajorantGrid};
 use glam::Vec4;
@@ -66,11 +66,11 @@ impl LitPyramid {
         let dims = m.dims();
         let rho = m.density.data();
         let t = lit.sun_t.data();
+        let ri0 = [lit.rho_i0(0).data(), lit.rho_i0(1).data(), lit.rho_i0(2).data()];
         let cells: Vec<Cell> = (0..rho.len())
             .map(|n| {
                 let r = rho[n];
-                let c = lit.i0[n] * r;
-                [r, c.x, c.y, c.z, r * t[n]]
+                [r, ri0[0][n], ri0[1][n], ri0[2][n], r * t[n]]
             })
             .collect();
         let mut levels = vec![make_level(dims, m.voxel_size, cells)];
