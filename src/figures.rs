@@ -26,8 +26,8 @@
 use crate::compare::{compare, write_diff_png, Metrics};
 use crate::error::{Error, Result};
 use crate::image::Image;
+use crate::pipeline::{Progress, Timings};
 use crate::reference::TRANSMITTANCE_LAYER;
-use crate::render::{Progress, Timings};
 use crate::scene::{Method, Scene, SceneDesc, SkyModel};
 use serde::Serialize;
 use std::fmt::Write as _;

@@ -5,195 +5,18 @@
 //! are an error that names the key.
 
 use crate::camera::Camera;
-use crate::error::{Error, Result};
+pub use crate::camera::CameraDesc;
+use crate::error::{check, Error, Result};
 use crate::lighting::{Ground, Sky, Sun};
+pub use crate::lighting::{GroundDesc, SkyDesc, SkyModel, SunDesc};
 use crate::math::{Rgb, Vec3};
 use crate::medium::Medium;
+pub use crate::medium::MediumDesc;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-/// `[medium]`: the cloud's density grid and its optical properties.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct MediumDesc {
-    /// `"procedural"` or a path relative to the scene file: `.vol`, `.npy`, `.raw` (+ `.json`), `.vdb`.
-    pub grid: String,
-    /// Seed of the procedural cumulus.
-    pub seed: u64,
-    /// Procedural resolution (nx, ny, nz).
-    pub resolution: [usize; 3],
-    /// Voxel edge length (m), for `.npy`, `.raw` and procedural grids.
-    pub voxel_size: f32,
-    /// Minimum corner of the grid (m), for `.npy`, `.raw` and procedural grids.
-    pub origin: [f32; 3],
-    /// Extinction coefficient at density 1 (m⁻¹).
-    pub sigma_t: f32,
-    /// Single-scattering albedo per RGB band (unitless, in [0, 1]).
-    pub albedo: [f32; 3],
-    /// Henyey–Greenstein mean cosine (unitless, |g| < 1).
-    pub g: f32,
-    /// Grid to read from a `.vdb` file.
-    pub grid_name: String,
-    /// Extra factor on a `.vdb` file's index-to-world transform (unitless).
-    pub scale: f32,
-    /// Largest dense grid accepted, in voxels (memory guard; 4 bytes each plus solver storage).
-    pub max_voxels: u64,
-    /// Average N×N×N blocks after loading (1 = off).
-    pub downsample: usize,
-}
-
-impl Default for MediumDesc {
-    fn default() -> Self {
-        MediumDesc {
-            grid: "procedural".into(),
-            seed: 1,
-            resolution: [100, 80, 60],
-            voxel_size: 10.0,
-            origin: [-500.0, 0.0, -300.0],
-            sigma_t: 0.05,
-            albedo: [0.999, 0.999, 0.999],
-            g: 0.9,
-            grid_name: "density".into(),
-            scale: 1.0,
-            max_voxels: 200_000_000,
-            downsample: 1,
-        }
-    }
-}
-
-/// `[sun]`: a directional light.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct SunDesc {
-    /// Direction towards the sun (normalised by the program). Exclusive with elevation/azimuth.
-    /// Absent from a `[sun]` table (and no elevation given): the default scene's direction.
-    #[serde(default)]
-    pub direction: Option<[f32; 3]>,
-    /// Elevation above the horizon (degrees); direction = (cos el cos az, sin el, cos el sin az).
-    pub elevation_deg: Option<f32>,
-    /// Azimuth (degrees), measured from +x towards +z.
-    pub azimuth_deg: Option<f32>,
-    /// Irradiance on a plane perpendicular to the rays (W/m² per band). Ignored when
-    /// `from_atmosphere` is true.
-    pub irradiance: [f32; 3],
-    /// Derive the irradiance from the atmosphere: extraterrestrial solar irradiance × the
-    /// transmittance along the sun's path from the observer (`sky.altitude_m`).
-    pub from_atmosphere: bool,
-    /// Angular diameter of the sun's disc (degrees; 0 = a point, the real sun is 0.53).
-    pub angular_diameter_deg: f32,
-}
-
-impl Default for SunDesc {
-    fn default() -> Self {
-        SunDesc {
-            direction: Some([0.3, 0.8, 0.5]),
-            elevation_deg: None,
-            azimuth_deg: None,
-            irradiance: [3.0, 3.0, 3.0],
-            from_atmosphere: false,
-            angular_diameter_deg: 0.0,
-        }
-    }
-}
-
-/// Which sky model lights the scene.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
-#[serde(rename_all = "lowercase")]
-pub enum SkyModel {
-    /// The same radiance from every direction.
-    Constant,
-    /// A physically based atmosphere (Rayleigh, Mie, ozone; single + multiple scattering).
-    Atmosphere,
-    /// An equirectangular HDR environment map (`sky.path`).
-    Envmap,
-}
-
-/// `[sky]`.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct SkyDesc {
-    /// The model.
-    pub model: SkyModel,
-    /// Radiance of the constant sky (W·m⁻²·sr⁻¹ per band).
-    pub radiance: [f32; 3],
-    /// Atmosphere: the observer's altitude above the planet's ground (m).
-    pub altitude_m: f32,
-    /// Atmosphere: width of the precomputed equirectangular sky map (pixels, height = width/2).
-    pub map_width: u32,
-    /// Atmosphere: albedo of the planet's ground (unitless per band, in [0, 1]).
-    pub planet_albedo: [f32; 3],
-    /// Envmap: equirectangular OpenEXR file, relative to the scene file.
-    pub path: Option<String>,
-    /// Envmap: factor on the file's radiance (unitless).
-    pub scale: f32,
-}
-
-impl Default for SkyDesc {
-    fn default() -> Self {
-        SkyDesc {
-            model: SkyModel::Constant,
-            radiance: [0.3, 0.45, 0.8],
-            altitude_m: 0.0,
-            map_width: crate::lighting::DEFAULT_MAP_WIDTH,
-            planet_albedo: [0.3, 0.3, 0.3],
-            path: None,
-            scale: 1.0,
-        }
-    }
-}
-
-/// `[ground]`: an infinite Lambertian plane y = height.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct GroundDesc {
-    /// Height of the plane (m).
-    pub height: f32,
-    /// Lambertian albedo per band (unitless, in [0, 1]).
-    pub albedo: [f32; 3],
-}
-
-impl Default for GroundDesc {
-    fn default() -> Self {
-        GroundDesc {
-            height: 0.0,
-            albedo: [0.3, 0.3, 0.3],
-        }
-    }
-}
-
-/// `[camera]`: a pinhole camera.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct CameraDesc {
-    /// Eye position (m).
-    pub position: [f32; 3],
-    /// Point looked at (m).
-    pub look_at: [f32; 3],
-    /// Up hint; must not be parallel to the view direction.
-    pub up: [f32; 3],
-    /// Vertical field of view (degrees).
-    pub fov_deg: f32,
-    /// Image width (pixels).
-    pub width: u32,
-    /// Image height (pixels).
-    pub height: u32,
-}
-
-impl Default for CameraDesc {
-    fn default() -> Self {
-        CameraDesc {
-            position: [0.0, 350.0, 1500.0],
-            look_at: [0.0, 330.0, 0.0],
-            up: [0.0, 1.0, 0.0],
-            fov_deg: 40.0,
-            width: 480,
-            height: 360,
-        }
-    }
-}
-
 /// Rendering method.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum Method {
     /// Exact single scattering of the sun plus the attenuated background (paper Fig. 4).
@@ -279,8 +102,8 @@ impl Default for RenderDesc {
             cube_resolution: crate::cube::render::DEFAULT_CUBE_RESOLUTION,
             ground_samples: crate::cube::render::DEFAULT_GROUND_SAMPLES,
             low_density_threshold: crate::edges::gather::DEFAULT_THRESHOLD,
-            iterations: crate::render::full::DEFAULT_ITERATIONS,
-            propagation_tolerance: crate::render::full::DEFAULT_PROPAGATION_TOLERANCE,
+            iterations: crate::cube::DEFAULT_ITERATIONS,
+            propagation_tolerance: crate::cube::DEFAULT_PROPAGATION_TOLERANCE,
             aov: false,
             delta_scaling: false,
             solver_tolerance: 1e-6,
@@ -406,27 +229,6 @@ pub struct Scene {
     pub camera: Camera,
     /// Render settings.
     pub render: RenderSettings,
-}
-
-/// Check a finite number; `what` describes the allowed range for the message.
-pub(crate) fn check(file: &str, field: &str, ok: bool, value: impl std::fmt::Debug, what: &str) -> Result<()> {
-    if ok {
-        Ok(())
-    } else {
-        Err(Error::invalid(file, field, format!("{value:?} is not allowed: {what}")))
-    }
-}
-
-pub(crate) fn finite3(v: [f32; 3]) -> bool {
-    v.iter().all(|x| x.is_finite())
-}
-
-pub(crate) fn rgb_in_unit(v: [f32; 3]) -> bool {
-    v.iter().all(|x| (0.0..=1.0).contains(x))
-}
-
-pub(crate) fn rgb_nonneg(v: [f32; 3]) -> bool {
-    v.iter().all(|x| x.is_finite() && *x >= 0.0)
 }
 
 impl Scene {

@@ -13,6 +13,31 @@ use cloudgi::error::{Error, Result};
 use cloudgi::scene::{Method, Scene};
 use std::path::{Path, PathBuf};
 
+/// `--method`: clap's view of [`Method`] (clap stays in the CLI).
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum MethodArg {
+    /// Exact single scattering of the sun plus the attenuated background (paper Fig. 4).
+    Single,
+    /// Unbiased volumetric path tracing (delta/ratio tracking, NEE + MIS): the ground truth.
+    Reference,
+    /// Diffusion (stage 1 + eq. 4 solved by multigrid) composited with exact sun single scattering (paper Fig. 5).
+    Diffusion,
+    /// Diffusion, clear-air propagation with viewing cubes and ground hemicubes, and the
+    /// low-density edge treatment in the final gather (paper Fig. 7).
+    Full,
+}
+
+impl From<MethodArg> for Method {
+    fn from(m: MethodArg) -> Method {
+        match m {
+            MethodArg::Single => Method::Single,
+            MethodArg::Reference => Method::Reference,
+            MethodArg::Diffusion => Method::Diffusion,
+            MethodArg::Full => Method::Full,
+        }
+    }
+}
+
 /// Physically based cloud renderer (Max et al. 2004: diffusion and multiple anisotropic scattering).
 #[derive(Parser, Debug)]
 #[command(name = "cloudgi", version, about)]
@@ -54,7 +79,7 @@ struct RenderArgs {
     output: PathBuf,
     /// Override render.method.
     #[arg(long, value_enum)]
-    method: Option<Method>,
+    method: Option<MethodArg>,
     /// Override camera.width (pixels).
     #[arg(long)]
     width: Option<u32>,
@@ -126,7 +151,7 @@ fn render(a: RenderArgs, quiet: bool) -> Result<()> {
     check_exr_path(&a.output, "--output")?;
     let scene = Scene::load(a.scene.as_deref(), |d| {
         if let Some(m) = a.method {
-            d.render.method = m;
+            d.render.method = m.into();
         }
         if let Some(w) = a.width {
             d.camera.width = w;

@@ -20,7 +20,7 @@ use crate::lighting::bins::NUM_BINS;
 use crate::lit::LitVolume;
 use crate::math::Rgb;
 use crate::medium::Grid3;
-use crate::render::Progress;
+use crate::pipeline::Progress;
 use rayon::prelude::*;
 
 /// Face offsets in [`crate::lighting::CUBE_FACES`] order: +x, −x, +y, −y, +z, −z.

@@ -19,7 +19,7 @@ use crate::lighting::Ground;
 pub use crate::lit::ground::{GroundGrid, LitGround};
 use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
-use crate::render::Progress;
+use crate::pipeline::Progress;
 use rayon::prelude::*;
 
 /// The (x, z) rectangle the ground grid covers for this cloud and sun (see the module docs);

@@ -16,7 +16,13 @@ pub use render::{opposite_bin, render_cube_brute, BinMask, CubeOptions, CubeRend
 
 use crate::lighting::Ground;
 use crate::lit::LitVolume;
-use crate::render::Progress;
+use crate::pipeline::Progress;
+
+/// Default cap on clear-air iterations: on the default scene the first changes I0 by 2.5 %, the
+/// second by 0.03 % (images within 4·10⁻⁴ mean relative difference), as the paper found.
+pub const DEFAULT_ITERATIONS: usize = 1;
+/// Default stopping threshold on the relative change of I0 between iterations.
+pub const DEFAULT_PROPAGATION_TOLERANCE: f64 = 0.01;
 
 /// What one propagation iteration gets from the cubes.
 #[derive(Clone, Debug)]

@@ -100,21 +100,6 @@ impl Default for EdgeSettings {
     }
 }
 
-impl EdgeSettings {
-    /// Settings from a scene: T from `render.low_density_threshold`, the step from `render.step`
-    /// (a fraction of the smallest voxel), the cube resolution from `render.cube_resolution`
-    /// (docs/edges.md: res 8 is within 2.4 % of res 16 on the edge term at a quarter of the cost),
-    /// the rest at their defaults.
-    pub fn from_scene(scene: &crate::scene::Scene) -> Self {
-        EdgeSettings {
-            threshold: scene.render.low_density_threshold,
-            step: scene.render.step * scene.medium.min_voxel(),
-            cube_res: scene.render.cubes.res,
-            ..Default::default()
-        }
-    }
-}
-
 /// Default T for `render.low_density_threshold` (density units); see docs/edges.md.
 pub const DEFAULT_THRESHOLD: f32 = 0.3;
 

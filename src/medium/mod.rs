@@ -17,17 +17,67 @@ pub mod march;
 pub mod procedural;
 pub mod vdb;
 
+use crate::error::{check, finite3, rgb_in_unit};
 use crate::error::{Error, Result};
 use crate::math::{Rgb, Vec3};
 use crate::optics::Optics;
-use crate::scene::{check, finite3, rgb_in_unit, MediumDesc};
 use glam::DVec3;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 use std::sync::Arc;
 
 pub use dda::{ray_box, Dda, Segment};
 pub use grid::Grid3;
 pub use majorant::MajorantGrid;
+
+/// `[medium]`: the cloud's density grid and its optical properties.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct MediumDesc {
+    /// `"procedural"` or a path relative to the scene file: `.vol`, `.npy`, `.raw` (+ `.json`), `.vdb`.
+    pub grid: String,
+    /// Seed of the procedural cumulus.
+    pub seed: u64,
+    /// Procedural resolution (nx, ny, nz).
+    pub resolution: [usize; 3],
+    /// Voxel edge length (m), for `.npy`, `.raw` and procedural grids.
+    pub voxel_size: f32,
+    /// Minimum corner of the grid (m), for `.npy`, `.raw` and procedural grids.
+    pub origin: [f32; 3],
+    /// Extinction coefficient at density 1 (m⁻¹).
+    pub sigma_t: f32,
+    /// Single-scattering albedo per RGB band (unitless, in [0, 1]).
+    pub albedo: [f32; 3],
+    /// Henyey–Greenstein mean cosine (unitless, |g| < 1).
+    pub g: f32,
+    /// Grid to read from a `.vdb` file.
+    pub grid_name: String,
+    /// Extra factor on a `.vdb` file's index-to-world transform (unitless).
+    pub scale: f32,
+    /// Largest dense grid accepted, in voxels (memory guard; 4 bytes each plus solver storage).
+    pub max_voxels: u64,
+    /// Average N×N×N blocks after loading (1 = off).
+    pub downsample: usize,
+}
+
+impl Default for MediumDesc {
+    fn default() -> Self {
+        MediumDesc {
+            grid: "procedural".into(),
+            seed: 1,
+            resolution: [100, 80, 60],
+            voxel_size: 10.0,
+            origin: [-500.0, 0.0, -300.0],
+            sigma_t: 0.05,
+            albedo: [0.999, 0.999, 0.999],
+            g: 0.9,
+            grid_name: "density".into(),
+            scale: 1.0,
+            max_voxels: 200_000_000,
+            downsample: 1,
+        }
+    }
+}
 
 /// A validated medium.
 #[derive(Clone, Debug)]

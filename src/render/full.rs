@@ -30,12 +30,6 @@ use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
 use crate::scene::Scene;
 
-/// Default cap on clear-air iterations: on the default scene the first changes I0 by 2.5 %, the
-/// second by 0.03 % (images within 4·10⁻⁴ mean relative difference), as the paper found.
-pub const DEFAULT_ITERATIONS: usize = 1;
-/// Default stopping threshold on the relative change of I0 between iterations.
-pub const DEFAULT_PROPAGATION_TOLERANCE: f64 = 0.01;
-
 /// The lit scene after the clear-air iterations.
 pub struct Propagation {
     /// Lit volume (final I0, sun transmittance, lit ground) for cubes and the gather.
@@ -234,6 +228,19 @@ impl CubeSource for GatherCubes<'_> {
     }
 }
 
+/// The edge treatment's settings from a scene: T from `render.low_density_threshold`, the step
+/// from `render.step` (a fraction of the smallest voxel), the cube resolution from
+/// `render.cube_resolution` (docs/edges.md: res 8 is within 2.4 % of res 16 on the edge term at a
+/// quarter of the cost), the rest at their defaults.
+pub fn edge_settings(scene: &Scene) -> EdgeSettings {
+    EdgeSettings {
+        threshold: scene.render.low_density_threshold,
+        step: scene.render.step * scene.medium.min_voxel(),
+        cube_res: scene.render.cubes.res,
+        ..Default::default()
+    }
+}
+
 /// Final gather over a propagated scene: the image, with AOV layers when `render.aov` is set.
 /// K is computed sparsely and interpolated across pixels where neighbouring cubes lie at similar
 /// depths ([`crate::edges::sparse`], the paper's speed-up); `render.spp` > 1 averages whole
@@ -252,7 +259,7 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
         // a·I0, or a·max(0, I0 + g·I1·ω) with the first moment ([`LitVolume::diffuse`]).
         albedo * lit.diffuse(m.to_voxel(p), m.density_at(p), to_eye)
     };
-    let edge = EdgeGather::new(m, EdgeSettings::from_scene(scene), &cubes, sun, &dense);
+    let edge = EdgeGather::new(m, edge_settings(scene), &cubes, sun, &dense);
     let cam = &scene.camera;
     let spp = scene.render.spp;
     let n = cam.width as usize * cam.height as usize;
