@@ -47,7 +47,7 @@
 use crate::lighting::bins::{Bin, DirectionBins, NUM_BINS};
 use crate::lighting::{Ground, Sky, Sun};
 use crate::math::{mix64, Rgb, Rng, Vec3};
-use crate::medium::Medium;
+use crate::medium::{Dda, Medium};
 use crate::sunlight::SunTransmittance;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -176,58 +176,6 @@ pub fn active_box(m: &Medium, margin: usize) -> Option<([usize; 3], [usize; 3])>
     Some((lo, hi))
 }
 
-/// Walk the voxels of `dims` crossed by `o + t·dv` (voxel coordinates, t in metres since `dv` is
-/// the world direction divided by the voxel size) for t ∈ [t0, t1], calling
-/// `f(cell, length_m)`. Incremental Amanatides–Woo in f64.
-#[inline]
-fn walk(dims: [usize; 3], o: DVec3, dv: DVec3, t0: f64, t1: f64, mut f: impl FnMut([usize; 3], f64)) {
-    let p = o + dv * t0;
-    let mut cell = [0i64; 3];
-    let mut step = [0i64; 3];
-    let mut t_max = [f64::INFINITY; 3];
-    let mut t_delta = [f64::INFINITY; 3];
-    for a in 0..3 {
-        let n = dims[a] as i64;
-        let mut c = (p[a].floor() as i64).clamp(0, n - 1);
-        if dv[a] < 0.0 && c > 0 && (p[a] - c as f64).abs() < 1e-9 {
-            c -= 1;
-        }
-        cell[a] = c;
-        if dv[a] > 0.0 {
-            step[a] = 1;
-            t_delta[a] = 1.0 / dv[a];
-            t_max[a] = ((c + 1) as f64 - o[a]) / dv[a];
-        } else if dv[a] < 0.0 {
-            step[a] = -1;
-            t_delta[a] = -1.0 / dv[a];
-            t_max[a] = (c as f64 - o[a]) / dv[a];
-        }
-    }
-    let mut t = t0;
-    loop {
-        let a = if t_max[0] <= t_max[1] && t_max[0] <= t_max[2] {
-            0
-        } else if t_max[1] <= t_max[2] {
-            1
-        } else {
-            2
-        };
-        let tn = t_max[a].min(t1);
-        if tn > t {
-            f([cell[0] as usize, cell[1] as usize, cell[2] as usize], tn - t);
-            t = tn;
-        }
-        if t >= t1 {
-            return;
-        }
-        cell[a] += step[a];
-        if cell[a] < 0 || cell[a] >= dims[a] as i64 {
-            return;
-        }
-        t_max[a] += t_delta[a];
-    }
-}
-
 /// One propagated direction: a sky bin (jittered within it) or the sun (exact).
 struct Source<'a> {
     bin: Option<(usize, &'a Bin)>,
@@ -269,7 +217,9 @@ impl Ctx<'_> {
         let atten = self.atten;
         let mut l = l0;
         let mut prev: Option<([usize; 3], bool)> = None;
-        walk(self.bd, o, dv, t0, t1, |c, len| {
+        // The active box in voxel coordinates (t in metres, since `dv` is d / h).
+        for seg in Dda::new(DVec3::ZERO, DVec3::ONE, self.bd, o, dv, t0, t1) {
+            let (c, len) = (seg.cell, seg.len());
             let idx = self.lin(c);
             let rho = self.rho[idx];
             let full = rho > 0.0;
@@ -297,7 +247,7 @@ impl Ctx<'_> {
                 l *= Rgb::from_array(e);
             }
             prev = Some((c, full));
-        });
+        }
     }
 
     /// One family of parallel rays along `d` (world, unit): launched from the plane perpendicular

@@ -253,9 +253,6 @@ impl Medium {
         };
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
         let h = self.voxel_size.as_dvec3();
-        let dual_origin = self.origin.as_dvec3() - 0.5 * h;
-        let dims = self.dims();
-        let dual_dims = [dims[0] + 1, dims[1] + 1, dims[2] + 1];
         let inv_h = DVec3::ONE / h;
         let orig = self.origin.as_dvec3();
         let rho = |t: f64| -> f64 {
@@ -263,20 +260,34 @@ impl Medium {
             self.density.trilinear([v.x as f32, v.y as f32, v.z as f32]) as f64
         };
         let mut sum = 0.0;
-        self.majorant.for_each_block(self, o, d, t0, t1, |ta, tb, maj| {
-            if maj <= 0.0 {
-                return true;
-            }
+        self.for_each_dual_block(o, d, t0, t1, |ta, cells| {
             let mut r0 = rho(ta as f64);
-            for s in Dda::new(dual_origin, h, dual_dims, od, dd, ta as f64, tb as f64) {
+            for s in cells {
                 let rm = rho(0.5 * (s.t0 + s.t1));
                 let r1 = rho(s.t1);
                 sum += (s.t1 - s.t0) / 6.0 * (r0 + 4.0 * rm + r1);
                 r0 = r1;
             }
-            true
         });
         sum
+    }
+
+    /// The one dual-lattice walk: along `o + t·d` for t ∈ [t0, t1] (inside the box), for every
+    /// majorant block that is not empty, `f(t_enter, cells)` with the DDA over the dual cells
+    /// (between adjacent voxel centres, where the trilinear ρ is a cubic in t, so Simpson's rule
+    /// on a cell is exact) crossed inside the block. Empty blocks are skipped.
+    pub fn for_each_dual_block(&self, o: Vec3, d: Vec3, t0: f32, t1: f32, mut f: impl FnMut(f32, Dda)) {
+        let (od, dd) = (o.as_dvec3(), d.as_dvec3());
+        let h = self.voxel_size.as_dvec3();
+        let dual_origin = self.origin.as_dvec3() - 0.5 * h;
+        let dims = self.dims();
+        let dual_dims = [dims[0] + 1, dims[1] + 1, dims[2] + 1];
+        self.majorant.for_each_block(self, o, d, t0, t1, |ta, tb, maj| {
+            if maj > 0.0 {
+                f(ta, Dda::new(dual_origin, h, dual_dims, od, dd, ta as f64, tb as f64));
+            }
+            true
+        });
     }
 
     /// Optical depth ∫ σt ρ ds (unitless) along a ray segment; exact.
