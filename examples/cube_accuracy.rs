@@ -80,7 +80,7 @@ fn main() {
     for (res, step, lod_bias) in configs {
         let opts = CubeOptions {
             res,
-            step,
+            step_level_voxels: step,
             lod_bias,
             ..Default::default()
         };

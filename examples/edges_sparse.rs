@@ -72,7 +72,7 @@ fn main() {
     let dense = |_: Vec3, _: Vec3| m.optics.albedo * Rgb::splat(1.0);
     let settings = EdgeSettings {
         cube_res: res,
-        step: scene.render.step * m.min_voxel(),
+        step_m: scene.render.step_voxels * m.min_voxel(),
         ..Default::default()
     };
     let t = Instant::now();

@@ -276,7 +276,7 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
             figure,
             title: title.into(),
             method: method.name().into(),
-            iterations: (method == Method::Full).then_some(scene.render.iterations),
+            iterations: (method == Method::Full).then_some(scene.render.clear_air.iterations),
             reference: references[which].id.clone(),
             seconds,
             stages: out.timings.stages.clone(),

@@ -6,7 +6,11 @@
 
 use crate::camera::Camera;
 pub use crate::camera::CameraDesc;
+use crate::cube::{ClearAirSettings, CubeOptions};
+use crate::diffusion::DiffusionSettings;
+use crate::edges::gather::EdgeSettings;
 use crate::error::{check, Error, Result};
+use crate::incident::IncidentSettings;
 use crate::lighting::{Ground, Sky, Sun};
 pub use crate::lighting::{GroundDesc, SkyDesc, SkyModel, SunDesc};
 use crate::math::{Rgb, Vec3};
@@ -99,15 +103,16 @@ impl Default for RenderDesc {
             max_depth: None,
             time_limit: None,
             stderr: false,
-            cube_resolution: crate::cube::render::DEFAULT_CUBE_RESOLUTION,
-            ground_samples: crate::cube::render::DEFAULT_GROUND_SAMPLES,
-            low_density_threshold: crate::edges::gather::DEFAULT_THRESHOLD,
-            iterations: crate::cube::DEFAULT_ITERATIONS,
-            propagation_tolerance: crate::cube::DEFAULT_PROPAGATION_TOLERANCE,
+            // One default per setting: the owning stage's.
+            cube_resolution: CubeOptions::default().res,
+            ground_samples: CubeOptions::default().ground_samples,
+            low_density_threshold: EdgeSettings::default().threshold,
+            iterations: ClearAirSettings::default().iterations,
+            propagation_tolerance: ClearAirSettings::default().propagation_tolerance,
             aov: false,
-            delta_scaling: false,
-            solver_tolerance: 1e-6,
-            solver_max_iterations: 200,
+            delta_scaling: IncidentSettings::default().delta_scaling,
+            solver_tolerance: DiffusionSettings::default().tolerance,
+            solver_max_iterations: DiffusionSettings::default().max_iterations,
             diffuse_anisotropy: false,
         }
     }
@@ -169,7 +174,8 @@ impl SceneDesc {
     }
 }
 
-/// Settings of the render itself (from `[render]` after validation).
+/// Settings of the render itself (from `[render]` after validation): the output's own, and each
+/// stage's settings struct, owned and validated by that stage.
 #[derive(Clone, Debug)]
 pub struct RenderSettings {
     /// The method.
@@ -180,29 +186,25 @@ pub struct RenderSettings {
     pub spp: u32,
     /// PNG exposure (stops).
     pub exposure: f32,
-    /// March step as a fraction of the smallest voxel edge.
-    pub step: f32,
+    /// The gathers' march step in voxels: a fraction of the smallest voxel edge (`render.step`).
+    pub step_voxels: f32,
     /// `reference`: most scattering events per path (None = unlimited).
     pub max_depth: Option<u32>,
     /// `reference`: wall-clock budget in seconds (None = render all spp).
     pub time_limit: Option<f64>,
     /// `reference`: write the standard-error layer.
     pub stderr: bool,
-    /// Viewing-cube and hemicube settings (`render.cube_resolution`, `render.ground_samples`).
-    pub cubes: crate::cube::CubeOptions,
-    /// Density below which the edge treatment applies (0: off).
-    pub low_density_threshold: f32,
-    /// Diffusion solver: relative residual to reach.
-    pub solver_tolerance: f64,
-    /// Diffusion solver: most iterations per band.
-    pub solver_max_iterations: usize,
-    /// `full`: most clear-air propagation iterations (0: diffusion plus edges only, paper Fig. 6).
-    pub iterations: usize,
-    /// Stage 1 with similarity (δ-) scaling, forward fraction f = g (docs/diffusion.md); false:
-    /// the paper's first-moment Q1 scheme exactly.
-    pub delta_scaling: bool,
-    /// `full`: stop iterating once I0 changes by less than this fraction (unitless).
-    pub propagation_tolerance: f64,
+    /// Stage 1 (`render.seed`, `render.delta_scaling`).
+    pub incident: IncidentSettings,
+    /// Stage 2's solver (`render.solver_tolerance`, `render.solver_max_iterations`).
+    pub solver: DiffusionSettings,
+    /// Viewing cubes and hemicubes (`render.cube_resolution`, `render.ground_samples`).
+    pub cubes: CubeOptions,
+    /// `full`: the clear-air loop (`render.iterations`, `render.propagation_tolerance`).
+    pub clear_air: ClearAirSettings,
+    /// `full`: the final gather's edge treatment (`render.low_density_threshold`, `render.step`
+    /// in metres, `render.cube_resolution`).
+    pub edges: EdgeSettings,
     /// `full`: write the components (diffusion, low_density, sun_single, background) as EXR layers.
     pub aov: bool,
     /// `diffusion`, `full`: the gather's diffuse source is a·max(0, I0 + g·I1·ω) instead of a·I0
@@ -261,47 +263,35 @@ impl Scene {
                 "the time limit is a positive number of seconds",
             )?;
         }
-        let cubes = crate::cube::CubeOptions {
+        // Each stage's settings from its keys, validated by the stage that owns them.
+        let cubes = CubeOptions {
             res: r.cube_resolution,
             ground_samples: r.ground_samples,
             ..Default::default()
         };
         cubes.validate(f)?;
-        check(
-            f,
-            "render.low_density_threshold",
-            r.low_density_threshold.is_finite() && r.low_density_threshold >= 0.0,
-            r.low_density_threshold,
-            "the edge threshold is a density ≥ 0 (0 turns the edge treatment off)",
-        )?;
-        check(
-            f,
-            "render.iterations",
-            r.iterations <= 20,
-            r.iterations,
-            "the clear-air iterations are a count from 0 to 20 (the paper found 1 enough)",
-        )?;
-        check(
-            f,
-            "render.propagation_tolerance",
-            r.propagation_tolerance.is_finite() && r.propagation_tolerance >= 0.0,
-            r.propagation_tolerance,
-            "the propagation tolerance is a relative change ≥ 0, e.g. 0.01",
-        )?;
-        check(
-            f,
-            "render.solver_tolerance",
-            r.solver_tolerance.is_finite() && r.solver_tolerance > 0.0 && r.solver_tolerance < 1.0,
-            r.solver_tolerance,
-            "the solver's relative residual must be in (0, 1), e.g. 1e-6",
-        )?;
-        check(
-            f,
-            "render.solver_max_iterations",
-            r.solver_max_iterations >= 1,
-            r.solver_max_iterations,
-            "the solver needs at least 1 iteration (default 200)",
-        )?;
+        let mut edges = EdgeSettings {
+            threshold: r.low_density_threshold,
+            cube_res: r.cube_resolution,
+            ..Default::default()
+        };
+        edges.validate(f)?;
+        let clear_air = ClearAirSettings {
+            iterations: r.iterations,
+            propagation_tolerance: r.propagation_tolerance,
+        };
+        clear_air.validate(f)?;
+        let solver = DiffusionSettings {
+            tolerance: r.solver_tolerance,
+            max_iterations: r.solver_max_iterations,
+            ..Default::default()
+        };
+        solver.validate(f)?;
+        let incident = IncidentSettings {
+            seed: r.seed,
+            delta_scaling: r.delta_scaling,
+            ..Default::default()
+        };
         let camera = Camera::from_desc(&desc.camera, f)?;
         let (sun, sky) = crate::lighting::sun_and_sky(&desc.sun, &desc.sky, f, base_dir)?;
         let ground = match &desc.ground {
@@ -309,23 +299,22 @@ impl Scene {
             None => None,
         };
         let medium = Medium::from_desc(&desc.medium, f, base_dir)?;
+        edges.step_m = r.step * medium.min_voxel();
         let render = RenderSettings {
             method: r.method,
             seed: r.seed,
             spp: r.spp,
             exposure: r.exposure,
-            step: r.step,
+            step_voxels: r.step,
             max_depth: r.max_depth,
             time_limit: r.time_limit,
             stderr: r.stderr,
+            incident,
+            solver,
             cubes,
-            low_density_threshold: r.low_density_threshold,
-            iterations: r.iterations,
-            propagation_tolerance: r.propagation_tolerance,
+            clear_air,
+            edges,
             aov: r.aov,
-            delta_scaling: r.delta_scaling,
-            solver_tolerance: r.solver_tolerance,
-            solver_max_iterations: r.solver_max_iterations,
             diffuse_anisotropy: r.diffuse_anisotropy,
         };
         Ok(Scene {

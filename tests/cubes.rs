@@ -179,7 +179,7 @@ fn pyramid_without_level_of_detail_matches_the_brute_force_march() {
     let r = CubeRenderer::new(&v, &opts);
     let p = Vec3::new(0.3, 5.2, 0.1);
     let a = r.render_cube(p, BinMask::ALL);
-    let b = render_cube_brute(&v, p, 8, BinMask::ALL, opts.step);
+    let b = render_cube_brute(&v, p, 8, BinMask::ALL, opts.step_level_voxels);
     for (x, y) in a.pixels.iter().zip(&b.pixels) {
         assert!(rel(*x, *y) < 1e-4, "{x} vs {y}");
     }

@@ -122,7 +122,7 @@ fn threshold_zero_is_the_pure_dense_gather() {
     let sun = |p: Vec3| Rgb::splat(2.0) * (-(p.y / 300.0)).exp();
     let settings = EdgeSettings {
         threshold: 0.0,
-        step: 2.0,
+        step_m: 2.0,
         ..Default::default()
     };
     let gather = EdgeGather::new(

@@ -14,15 +14,50 @@ pub use ground::{render_ground, LitGround};
 pub use image::CubeImage;
 pub use render::{opposite_bin, render_cube_brute, BinMask, CubeOptions, CubeRenderer};
 
+use crate::error::{check, Result};
 use crate::lighting::Ground;
 use crate::lit::LitVolume;
 use crate::pipeline::Progress;
 
-/// Default cap on clear-air iterations: on the default scene the first changes I0 by 2.5 %, the
-/// second by 0.03 % (images within 4·10⁻⁴ mean relative difference), as the paper found.
-pub const DEFAULT_ITERATIONS: usize = 1;
-/// Default stopping threshold on the relative change of I0 between iterations.
-pub const DEFAULT_PROPAGATION_TOLERANCE: f64 = 0.01;
+/// The clear-air loop of `full` (paper section 3).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ClearAirSettings {
+    /// Most propagation iterations (`render.iterations`; 0: diffusion plus edges only, paper
+    /// Fig. 6). Default 1: on the default scene the first changes I0 by 2.5 %, the second by
+    /// 0.03 % (images within 4·10⁻⁴ mean relative difference), as the paper found.
+    pub iterations: usize,
+    /// Stop once I0 changes by less than this fraction (`render.propagation_tolerance`, unitless).
+    pub propagation_tolerance: f64,
+}
+
+impl Default for ClearAirSettings {
+    fn default() -> Self {
+        ClearAirSettings {
+            iterations: 1,
+            propagation_tolerance: 0.01,
+        }
+    }
+}
+
+impl ClearAirSettings {
+    /// Check the settings; `file` names the scene file for messages.
+    pub fn validate(&self, file: &str) -> Result<()> {
+        check(
+            file,
+            "render.iterations",
+            self.iterations <= 20,
+            self.iterations,
+            "the clear-air iterations are a count from 0 to 20 (the paper found 1 enough)",
+        )?;
+        check(
+            file,
+            "render.propagation_tolerance",
+            self.propagation_tolerance.is_finite() && self.propagation_tolerance >= 0.0,
+            self.propagation_tolerance,
+            "the propagation tolerance is a relative change ≥ 0, e.g. 0.01",
+        )
+    }
+}
 
 /// What one propagation iteration gets from the cubes.
 #[derive(Clone, Debug)]

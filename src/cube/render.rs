@@ -25,8 +25,8 @@ use std::sync::OnceLock;
 pub struct CubeOptions {
     /// Pixels per face edge (a multiple of 4, so pixels nest in the 4×4 bins of a face).
     pub res: usize,
-    /// March step as a fraction of the current pyramid level's smallest voxel edge.
-    pub step: f32,
+    /// March step in voxels of the current pyramid level (a fraction of its smallest voxel edge).
+    pub step_level_voxels: f32,
     /// A ray stops when its transmittance falls below this (the dropped rest is at most this
     /// fraction of the brightest radiance behind).
     pub t_cutoff: f32,
@@ -51,7 +51,7 @@ impl Default for CubeOptions {
     fn default() -> Self {
         CubeOptions {
             res: DEFAULT_CUBE_RESOLUTION,
-            step: 1.0,
+            step_level_voxels: 1.0,
             t_cutoff: 1e-3,
             lod_bias: 0.0,
             max_levels: 8,
@@ -88,8 +88,12 @@ impl CubeOptions {
                 ),
             ));
         }
-        if !(self.step.is_finite() && self.step > 0.0 && self.step <= 4.0) {
-            return Err(Error::invalid(file, "cube step", format!("{} is not in (0, 4]", self.step)));
+        if !(self.step_level_voxels.is_finite() && self.step_level_voxels > 0.0 && self.step_level_voxels <= 4.0) {
+            return Err(Error::invalid(
+                file,
+                "cube step",
+                format!("{} is not in (0, 4]", self.step_level_voxels),
+            ));
         }
         if !(self.t_cutoff.is_finite() && (0.0..1.0).contains(&self.t_cutoff)) {
             return Err(Error::invalid(file, "cube cut-off", format!("{} is not in [0, 1)", self.t_cutoff)));
@@ -310,7 +314,7 @@ impl<'a> CubeRenderer<'a> {
                     continue;
                 }
                 let dims = dims_f(lev.dims);
-                let step = self.opts.step * lev.voxel_size.min_element();
+                let step = self.opts.step_level_voxels * lev.voxel_size.min_element();
                 let inv_vs = Vec3::ONE / lev.voxel_size;
                 let cell = lev.voxel_size * BLOCK as f32;
                 let inv_cell = Vec3::ONE / cell;
@@ -406,13 +410,13 @@ fn dims_f(d: [usize; 3]) -> Vec3 {
 }
 
 /// Brute-force reference: each pixel centre's ray marched on the exact trilinear fields (density
-/// of the medium, I0 and T_sun interpolated separately, no pyramid) with steps of `step` voxels,
-/// cut off only at transmittance 1e-6. Bins outside `needed` stay black.
-pub fn render_cube_brute(lit: &LitVolume, p: Vec3, res: usize, needed: BinMask, step: f32) -> CubeImage {
+/// of the medium, I0 (density-weighted) and T_sun, no pyramid) with steps of `step_voxels`
+/// voxels, cut off only at transmittance 1e-6. Bins outside `needed` stay black.
+pub fn render_cube_brute(lit: &LitVolume, p: Vec3, res: usize, needed: BinMask, step_voxels: f32) -> CubeImage {
     let table = PixelTable::new(res);
     let mut cube = CubeImage::new(res);
     let m = &lit.medium;
-    let step = step * m.min_voxel();
+    let step = step_voxels * m.min_voxel();
     for b in needed.iter() {
         for (face, i, j) in table.bin_pixels(b) {
             let k = cube.index(face, i, j);

@@ -108,6 +108,27 @@ impl Default for DiffusionSettings {
     }
 }
 
+impl DiffusionSettings {
+    /// Check the settings; `file` names the scene file for messages.
+    pub fn validate(&self, file: &str) -> crate::error::Result<()> {
+        use crate::error::check;
+        check(
+            file,
+            "render.solver_tolerance",
+            self.tolerance.is_finite() && self.tolerance > 0.0 && self.tolerance < 1.0,
+            self.tolerance,
+            "the solver's relative residual must be in (0, 1), e.g. 1e-6",
+        )?;
+        check(
+            file,
+            "render.solver_max_iterations",
+            self.max_iterations >= 1,
+            self.max_iterations,
+            "the solver needs at least 1 iteration (default 200)",
+        )
+    }
+}
+
 /// Default [`DiffusionSettings::min_optical_depth`].
 pub const DEFAULT_MIN_OPTICAL_DEPTH: f64 = 1e-3;
 

@@ -81,8 +81,9 @@ pub struct EdgeSettings {
     pub cube_res: usize,
     /// Bound on the omitted Poisson tail (eq. 8).
     pub tail: f64,
-    /// Longest compositing step (m); pieces are cut to at most this length.
-    pub step: f32,
+    /// Longest compositing step (m); pieces are cut to at most this length (the scene's
+    /// `render.step` voxels times the smallest voxel edge).
+    pub step_m: f32,
     /// Resolve bridges between segments smoothly (section 6 fix); false: the paper's hard switch.
     pub merge_transition: bool,
 }
@@ -94,9 +95,22 @@ impl Default for EdgeSettings {
             band: 0.5,
             cube_res: 16,
             tail: DEFAULT_TAIL,
-            step: 5.0,
+            step_m: 5.0,
             merge_transition: true,
         }
+    }
+}
+
+impl EdgeSettings {
+    /// Check the settings; `file` names the scene file for messages.
+    pub fn validate(&self, file: &str) -> crate::error::Result<()> {
+        crate::error::check(
+            file,
+            "render.low_density_threshold",
+            self.threshold.is_finite() && self.threshold >= 0.0,
+            self.threshold,
+            "the edge threshold is a density ≥ 0 (0 turns the edge treatment off)",
+        )
     }
 }
 
@@ -408,7 +422,7 @@ impl<'a> EdgeGather<'a> {
         let mut tr = 1.0f64;
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
         'pieces: for (k, p) in prof.pieces.iter().enumerate() {
-            let n = ((p.t1 - p.t0) / self.settings.step.max(1e-6) as f64).ceil().max(1.0) as usize;
+            let n = ((p.t1 - p.t0) / self.settings.step_m.max(1e-6) as f64).ceil().max(1.0) as usize;
             for s in 0..n {
                 let ta = p.t0 + (p.t1 - p.t0) * s as f64 / n as f64;
                 let tb = p.t0 + (p.t1 - p.t0) * (s + 1) as f64 / n as f64;

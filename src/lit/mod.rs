@@ -149,11 +149,11 @@ impl LitVolume {
         self.medium.optics.albedo * (self.diffuse(v, rho, to_eye) + sun)
     }
 
-    /// Front-to-back march of `o + t·d`, t ∈ [t_min, t_max], steps of at most `step` m, sample
+    /// Front-to-back march of `o + t·d`, t ∈ [t_min, t_max], steps of at most `step_m` m, sample
     /// offset `xi` ∈ [0, 1): radiance from the cloud and the transmittance through it.
     #[inline]
-    pub fn march(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32, step: f32, xi: f32) -> March {
-        march(&self.medium, o, d, t_min, t_max, step, xi, |v, rho| self.source(v, rho, -d))
+    pub fn march(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32, step_m: f32, xi: f32) -> March {
+        march(&self.medium, o, d, t_min, t_max, step_m, xi, |v, rho| self.source(v, rho, -d))
     }
 
     /// Radiance arriving at `o` from direction `d` beyond the medium: the lit ground where the

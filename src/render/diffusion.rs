@@ -6,25 +6,16 @@
 use super::single::{background, pixel_sample};
 use super::{render_rows, Progress, Timings};
 use crate::diffusion::flux::{diffuse_flux, FluxField};
-use crate::diffusion::{solve_diffusion, DiffusionSettings, DiffusionSolution};
+use crate::diffusion::{solve_diffusion, DiffusionSolution};
 use crate::error::Result;
 use crate::image::Image;
-use crate::incident::{compute_with_sun, EntryRadiance, IncidentLight, IncidentSettings, IncidentSources};
+use crate::incident::{compute_with_sun, EntryRadiance, IncidentLight, IncidentSources};
 use crate::lighting::bins::DirectionBins;
 use crate::lit::ground::LitGround;
 use crate::lit::LitVolume;
 use crate::math::Rgb;
 use crate::scene::Scene;
 use crate::sunlight::SunTransmittance;
-
-/// Solver settings from `[render]`.
-pub fn settings(scene: &Scene) -> DiffusionSettings {
-    DiffusionSettings {
-        tolerance: scene.render.solver_tolerance,
-        max_iterations: scene.render.solver_max_iterations,
-        ..DiffusionSettings::default()
-    }
-}
 
 /// Stage 1 for a scene with default sampling (seed from `render.seed`), the clear-air hook
 /// `entry` if any; the sun transmittance computed here unless given.
@@ -34,14 +25,10 @@ pub fn compute_incident(scene: &Scene, entry: Option<&EntryRadiance<'_>>) -> Inc
 
 /// [`compute_incident`] with the sun transmittance of the scene's medium already computed.
 pub fn compute_incident_with(scene: &Scene, entry: Option<&EntryRadiance<'_>>, sun_t: SunTransmittance) -> IncidentLight {
-    let settings = IncidentSettings {
-        seed: scene.render.seed,
-        delta_scaling: scene.render.delta_scaling,
-        ..IncidentSettings::default()
-    };
+    let settings = &scene.render.incident;
     let bins = DirectionBins::new();
     let sources = IncidentSources::from_lighting(&scene.sun, &scene.sky, scene.ground.as_ref(), &bins, settings.sky_subdivisions);
-    compute_with_sun(&scene.medium, &bins, &sources, &settings, entry, sun_t)
+    compute_with_sun(&scene.medium, &bins, &sources, settings, entry, sun_t)
 }
 
 /// The lit volume of a scene from I0 per voxel and the sun transmittance at voxel centres, the
@@ -73,7 +60,7 @@ pub fn i0_rgb(sol: &DiffusionSolution) -> Vec<Rgb> {
 pub fn solved_lit_volume(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution) -> LitVolume {
     let lit = scene_lit_volume(scene, i0_rgb(sol), &inc.sun_transmittance);
     if scene.render.diffuse_anisotropy {
-        let i1 = diffuse_flux(&scene.medium, inc, sol, settings(scene).min_optical_depth);
+        let i1 = diffuse_flux(&scene.medium, inc, sol, scene.render.solver.min_optical_depth);
         return lit.with_flux(FluxField::new(&scene.medium, &i1));
     }
     lit
@@ -82,7 +69,9 @@ pub fn solved_lit_volume(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolu
 /// Stages 1 and 2: the lit volume of a scene (no clear-air iterations).
 pub fn lit_volume(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<LitVolume> {
     let inc = timings.time("incident light", || compute_incident(scene, None));
-    let sol = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &inc, None, &settings(scene)))?;
+    let sol = timings.time("diffusion solve", || {
+        solve_diffusion(&scene.medium, &inc, None, &scene.render.solver)
+    })?;
     progress.log(&sol.summary());
     Ok(solved_lit_volume(scene, &inc, &sol))
 }
@@ -92,7 +81,7 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
     let lit = lit_volume(scene, progress, timings)?;
     let cam = &scene.camera;
     let spp = scene.render.spp;
-    let step = scene.render.step * scene.medium.min_voxel();
+    let step = scene.render.step_voxels * scene.medium.min_voxel();
     let px = timings.time("gather", || {
         render_rows(cam.width, cam.height, progress, "diffusion gather", |x, y| {
             let mut sum = Rgb::ZERO;

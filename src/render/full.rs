@@ -21,7 +21,7 @@ use super::single::pixel_sample;
 use super::{Progress, Timings};
 use crate::cube::{clear_air, CubeImage, CubeRenderer};
 use crate::diffusion::{solve_diffusion, DiffusionSolution};
-use crate::edges::gather::{CubeRequest, CubeSource, EdgeGather, EdgeSettings, SunInput};
+use crate::edges::gather::{CubeRequest, CubeSource, EdgeGather, SunInput};
 use crate::edges::sparse::{gather_image, PixelRay, SparseSettings};
 use crate::error::Result;
 use crate::image::Image;
@@ -62,17 +62,17 @@ pub fn relative_change(old: &DiffusionSolution, new: &DiffusionSolution) -> f64 
 
 /// Stages 1–2 and the clear-air iterations.
 pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Propagation> {
-    let settings = super::diffusion::settings(scene);
+    let settings = &scene.render.solver;
     // The sun transmittance depends only on the medium and the sun: once per run.
     let mut inc = timings.time("incident light", || compute_incident(scene, None));
     let sun_t = inc.sun_transmittance.clone();
-    let mut sol = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &inc, None, &settings))?;
+    let mut sol = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &inc, None, settings))?;
     progress.log(&sol.summary());
     let mut changes = Vec::new();
     let opts = &scene.render.cubes;
     let cubes = |sol: &DiffusionSolution| clear_air(scene_lit_volume(scene, i0_rgb(sol), &sun_t), scene.ground.as_ref(), opts, progress);
     let mut ca = timings.time("clear-air cubes", || cubes(&sol));
-    let iterations = scene.render.iterations;
+    let iterations = scene.render.clear_air.iterations;
     for it in 0..iterations {
         if it > 0 {
             ca = timings.time("clear-air cubes", || cubes(&sol));
@@ -81,9 +81,7 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         // which is the cube's own bin b ("radiance arriving from ω_b").
         let hook = ca.cubes.hook();
         let new_inc = timings.time("incident light", || compute_incident_with(scene, Some(&hook), sun_t.clone()));
-        let new = timings.time("diffusion solve", || {
-            solve_diffusion(&scene.medium, &new_inc, Some(&sol), &settings)
-        })?;
+        let new = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &new_inc, Some(&sol), settings))?;
         inc = new_inc;
         let change = relative_change(&sol, &new);
         // A change near or above 100 % is not noise: on grids whose voxels are optically very
@@ -108,7 +106,7 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         ));
         sol = new;
         changes.push(change);
-        if change < scene.render.propagation_tolerance {
+        if change < scene.render.clear_air.propagation_tolerance {
             break;
         }
     }
@@ -228,19 +226,6 @@ impl CubeSource for GatherCubes<'_> {
     }
 }
 
-/// The edge treatment's settings from a scene: T from `render.low_density_threshold`, the step
-/// from `render.step` (a fraction of the smallest voxel), the cube resolution from
-/// `render.cube_resolution` (docs/edges.md: res 8 is within 2.4 % of res 16 on the edge term at a
-/// quarter of the cost), the rest at their defaults.
-pub fn edge_settings(scene: &Scene) -> EdgeSettings {
-    EdgeSettings {
-        threshold: scene.render.low_density_threshold,
-        step: scene.render.step * scene.medium.min_voxel(),
-        cube_res: scene.render.cubes.res,
-        ..Default::default()
-    }
-}
-
 /// Final gather over a propagated scene: the image, with AOV layers when `render.aov` is set.
 /// K is computed sparsely and interpolated across pixels where neighbouring cubes lie at similar
 /// depths ([`crate::edges::sparse`], the paper's speed-up); `render.spp` > 1 averages whole
@@ -259,7 +244,7 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
         // a·I0, or a·max(0, I0 + g·I1·ω) with the first moment ([`LitVolume::diffuse`]).
         albedo * lit.diffuse(m.to_voxel(p), m.density_at(p), to_eye)
     };
-    let edge = EdgeGather::new(m, edge_settings(scene), &cubes, sun, &dense);
+    let edge = EdgeGather::new(m, scene.render.edges, &cubes, sun, &dense);
     let cam = &scene.camera;
     let spp = scene.render.spp;
     let n = cam.width as usize * cam.height as usize;

@@ -38,7 +38,7 @@ pub fn background(scene: &Scene, o: Vec3, d: Vec3) -> Rgb {
 pub fn radiance(scene: &Scene, sun_t: &SunTransmittance, o: Vec3, d: Vec3, xi: f32) -> Rgb {
     let m = &scene.medium;
     let t_max = scene.ground.as_ref().and_then(|g| g.intersect(o, d)).unwrap_or(f32::INFINITY);
-    let step = scene.render.step * m.min_voxel();
+    let step = scene.render.step_voxels * m.min_voxel();
     // Light travels from the sun (direction −sun.dir) towards the eye (direction −d).
     let phase = m.optics.phase.eval(scene.sun.dir, -d);
     let sun_term = m.optics.albedo * scene.sun.irradiance * phase;
