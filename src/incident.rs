@@ -148,7 +148,7 @@ impl IncidentLight {
 }
 
 /// Index box [lo, hi) of every non-empty voxel grown by `margin` voxels, clipped to the grid.
-pub fn active_box(m: &Medium, margin: usize) -> Option<([usize; 3], [usize; 3])> {
+pub(crate) fn active_box(m: &Medium, margin: usize) -> Option<([usize; 3], [usize; 3])> {
     let d = m.dims();
     let mut lo = d;
     let mut hi = [0usize; 3];
@@ -535,4 +535,89 @@ pub fn compute_with_sun(
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::medium::Grid3;
+
+    /// A 4³ block of density 1 in a 6³ grid, optically thin (τ = 4·10⁻⁴ across), albedo 0.9.
+    fn thin_block() -> Medium {
+        let mut g = Grid3::filled([6, 6, 6], 0.0);
+        for k in 1..5 {
+            for j in 1..5 {
+                for i in 1..5 {
+                    g.set(i, j, k, 1.0);
+                }
+            }
+        }
+        Medium::new(g, Vec3::ZERO, Vec3::ONE, 1e-4, Rgb::splat(0.9), 0.7)
+    }
+
+    fn uniform_sky(l: f32) -> IncidentSources {
+        IncidentSources {
+            bin_radiance: vec![Rgb::splat(l); NUM_BINS],
+            sun: None,
+        }
+    }
+
+    #[test]
+    fn active_box_is_the_occupied_box_grown_and_clipped() {
+        let m = thin_block();
+        assert_eq!(active_box(&m, 0), Some(([1, 1, 1], [5, 5, 5])));
+        assert_eq!(active_box(&m, 1), Some(([0, 0, 0], [6, 6, 6])));
+        assert_eq!(active_box(&m, 3), Some(([0, 0, 0], [6, 6, 6])));
+        let empty = Medium::new(Grid3::filled([3, 3, 3], 0.0), Vec3::ZERO, Vec3::ONE, 1.0, Rgb::ONE, 0.0);
+        assert_eq!(active_box(&empty, 1), None);
+    }
+
+    /// Optically thin, uniform sky L: every voxel sees L from all 4π, so Q0 = ρσs·L (eq. 5 with
+    /// ΣΔω = 4π) and Q1 = 0 (the bins' mean directions cancel), up to the attenuation ~τ.
+    #[test]
+    fn thin_block_under_a_uniform_sky_has_q0_of_the_sky_and_no_q1() {
+        let m = thin_block();
+        let inc = compute(&m, &DirectionBins::new(), &uniform_sky(2.0), &IncidentSettings::default(), None);
+        let want = 0.9 * 1e-4 * 2.0;
+        for (n, q) in inc.q0.iter().enumerate() {
+            if m.density.data()[n] > 0.0 {
+                assert!((q.x - want).abs() < 1e-3 * want, "voxel {n}: Q0 {q:?} vs {want}");
+                for ax in 0..3 {
+                    assert!(inc.q1[ax][n].x.abs() < 1e-3 * want, "voxel {n}: Q1 {:?}", inc.q1[ax][n]);
+                }
+            } else {
+                assert_eq!(*q, Rgb::ZERO);
+            }
+        }
+        assert_eq!(inc.fallback_rays, 0, "every full voxel is crossed by a family's lattice");
+    }
+
+    /// The clear-air hook replaces the radiance a ray carries where it enters the cloud from an
+    /// empty voxel: a black sky with a hook that returns L everywhere gives the uniform-sky Q0.
+    #[test]
+    fn entry_hook_replaces_the_entering_radiance() {
+        let m = thin_block();
+        let hook = |_: [usize; 3], _: usize| Some(Rgb::splat(2.0));
+        let inc = compute(
+            &m,
+            &DirectionBins::new(),
+            &uniform_sky(0.0),
+            &IncidentSettings::default(),
+            Some(&hook),
+        );
+        let want = 0.9 * 1e-4 * 2.0;
+        for (n, q) in inc.q0.iter().enumerate() {
+            if m.density.data()[n] > 0.0 {
+                assert!((q.x - want).abs() < 1e-3 * want, "voxel {n}: Q0 {q:?} vs {want}");
+            }
+        }
+        let none = compute(
+            &m,
+            &DirectionBins::new(),
+            &uniform_sky(0.0),
+            &IncidentSettings::default(),
+            Some(&|_, _| None),
+        );
+        assert!(none.q0.iter().all(|q| *q == Rgb::ZERO));
+    }
 }

@@ -75,7 +75,7 @@
 //! energy-balance test sums it.
 
 pub mod flux;
-pub mod multigrid;
+pub(crate) mod multigrid;
 pub mod slab;
 
 use crate::error::{Error, Result};
@@ -212,7 +212,7 @@ pub fn boundary_terms(rho_p: f64, sigma_tr: f64, h: f64, tau_min: f64) -> (f64, 
 
 /// The box of voxels the solver works on: every full voxel, `lo` its minimum corner in the grid.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Domain {
+pub(crate) struct Domain {
     /// Minimum corner (voxel index).
     pub lo: [usize; 3],
     /// Cells per axis.
@@ -236,7 +236,7 @@ impl Domain {
 }
 
 /// Assemble band `c`'s operator and right-hand side on `dom` (see the module docs).
-pub fn assemble(m: &Medium, inc: &IncidentLight, c: usize, tau_min: f64, dom: &Domain) -> (Stencil, Vec<f64>) {
+pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, c: usize, tau_min: f64, dom: &Domain) -> (Stencil, Vec<f64>) {
     let gd = m.dims();
     let d = dom.dims;
     let n = d[0] * d[1] * d[2];
