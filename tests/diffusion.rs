@@ -5,7 +5,7 @@ use cloudgi::diffusion::slab::{default_cells, solve_slab, Incidence};
 use cloudgi::diffusion::{boundary_outflow, solve_diffusion, DiffusionSettings};
 use cloudgi::incident::{compute, IncidentSettings, IncidentSources};
 use cloudgi::lighting::DirectionBins;
-use cloudgi::math::{Rgb, Rng, Vec3};
+use cloudgi::math::{Rgb, Vec3};
 use cloudgi::medium::{Grid3, Medium};
 use cloudgi::render::diffusion::compute_incident;
 use cloudgi::{Error, Method, NoProgress, Scene};
