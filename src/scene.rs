@@ -46,76 +46,78 @@ impl Method {
     }
 }
 
-/// `[render]`.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields, default)]
-pub struct RenderDesc {
+/// Declares the `[render]` table once: each row is a scene-file key with its doc and type, and
+/// the field of [`RenderSettings`] (usually a stage's settings struct) it sets. The key's default
+/// is that field's default, so a new setting is one row here plus its field in the stage that
+/// owns it. (serde's `flatten` would let the stage structs deserialise directly, but it loses the
+/// key and line in type errors and cannot be combined with `deny_unknown_fields`.)
+macro_rules! render_table {
+    ($( $(#[$doc:meta])* $key:ident : $ty:ty => $($path:ident).+ ; )*) => {
+        /// `[render]`: the flat table of the scene file (see [`RenderSettings`] for where each
+        /// key goes).
+        #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+        #[serde(deny_unknown_fields, default)]
+        pub struct RenderDesc {
+            $( $(#[$doc])* pub $key: $ty, )*
+        }
+
+        impl Default for RenderDesc {
+            fn default() -> Self {
+                let s = RenderSettings::default();
+                RenderDesc { $( $key: s.$($path).+.clone(), )* }
+            }
+        }
+
+        impl RenderDesc {
+            /// Set the fields the keys map to (validation is the owners' and [`Scene::build`]'s).
+            fn apply(&self, s: &mut RenderSettings) {
+                $( s.$($path).+ = self.$key.clone(); )*
+            }
+        }
+    };
+}
+
+render_table! {
     /// The method.
-    pub method: Method,
+    method: Method => method;
     /// Seed of every random stream.
-    pub seed: u64,
+    seed: u64 => seed;
     /// Samples per pixel.
-    pub spp: u32,
+    spp: u32 => spp;
     /// Exposure of the PNG preview, in stops (the EXR is never scaled).
-    pub exposure: f32,
+    exposure: f32 => exposure;
     /// Ray-march step of the gather, as a fraction of the smallest voxel edge (unitless).
-    pub step: f32,
+    step: f32 => step_voxels;
     /// `reference`: most scattering events (medium or ground) per path; absent = no cap.
-    pub max_depth: Option<u32>,
+    max_depth: Option<u32> => max_depth;
     /// `reference`: stop after the pass in progress once this many seconds have passed.
-    pub time_limit: Option<f64>,
+    time_limit: Option<f64> => time_limit;
     /// `reference`: add the per-pixel standard error of the mean as EXR layer `stderr`.
-    pub stderr: bool,
+    stderr: bool => stderr;
     /// Pixels per face edge of the viewing cubes (a multiple of 4; docs/cubes.md).
-    pub cube_resolution: usize,
+    cube_resolution: usize => cubes.res;
     /// Ground irradiance samples per edge (N×N hemicubes; docs/cubes.md).
-    pub ground_samples: usize,
+    ground_samples: usize => cubes.ground_samples;
     /// Density T below which the final gather uses the edge treatment (paper section 4); 0 turns it off.
-    pub low_density_threshold: f32,
+    low_density_threshold: f32 => edges.threshold;
     /// Relative residual the diffusion solver must reach (unitless).
-    pub solver_tolerance: f64,
+    solver_tolerance: f64 => solver.tolerance;
     /// Most conjugate-gradient iterations of the diffusion solver per band.
-    pub solver_max_iterations: usize,
+    solver_max_iterations: usize => solver.max_iterations;
     /// `full`: most clear-air propagation iterations (0: diffusion plus edges only, paper Fig. 6).
-    pub iterations: usize,
+    iterations: usize => clear_air.iterations;
     /// Stage 1 with similarity (δ-) scaling, forward fraction f = g (docs/diffusion.md): keeps I0
     /// positive on sunlit faces but, with the paper's gather, darkens the cloud (measured against
     /// `reference`: luminance bias −62 % vs −21 %), so off by default; false: the paper's
     /// first-moment Q1 scheme exactly.
-    pub delta_scaling: bool,
+    delta_scaling: bool => incident.delta_scaling;
     /// `full`: stop iterating once I0 changes by less than this fraction (unitless).
-    pub propagation_tolerance: f64,
+    propagation_tolerance: f64 => clear_air.propagation_tolerance;
     /// `full`: write the components (diffusion, low_density, sun_single, background) as EXR layers.
-    pub aov: bool,
+    aov: bool => aov;
     /// `diffusion`, `full`: the gather's diffuse source is a·max(0, I0 + g·I1·ω) instead of a·I0
     /// (src/diffusion/flux.rs, docs/diffusion.md).
-    pub diffuse_anisotropy: bool,
-}
-
-impl Default for RenderDesc {
-    fn default() -> Self {
-        RenderDesc {
-            method: Method::Single,
-            seed: 0,
-            spp: 1,
-            exposure: 0.0,
-            step: 0.5,
-            max_depth: None,
-            time_limit: None,
-            stderr: false,
-            // One default per setting: the owning stage's.
-            cube_resolution: CubeOptions::default().res,
-            ground_samples: CubeOptions::default().ground_samples,
-            low_density_threshold: EdgeSettings::default().threshold,
-            iterations: ClearAirSettings::default().iterations,
-            propagation_tolerance: ClearAirSettings::default().propagation_tolerance,
-            aov: false,
-            delta_scaling: IncidentSettings::default().delta_scaling,
-            solver_tolerance: DiffusionSettings::default().tolerance,
-            solver_max_iterations: DiffusionSettings::default().max_iterations,
-            diffuse_anisotropy: false,
-        }
-    }
+    diffuse_anisotropy: bool => diffuse_anisotropy;
 }
 
 /// The whole scene file, as written.
@@ -212,6 +214,29 @@ pub struct RenderSettings {
     pub diffuse_anisotropy: bool,
 }
 
+impl Default for RenderSettings {
+    /// The render's own defaults; each stage's struct brings its own.
+    fn default() -> Self {
+        RenderSettings {
+            method: Method::Single,
+            seed: 0,
+            spp: 1,
+            exposure: 0.0,
+            step_voxels: 0.5,
+            max_depth: None,
+            time_limit: None,
+            stderr: false,
+            incident: IncidentSettings::default(),
+            solver: DiffusionSettings::default(),
+            cubes: CubeOptions::default(),
+            clear_air: ClearAirSettings::default(),
+            edges: EdgeSettings::default(),
+            aov: false,
+            diffuse_anisotropy: false,
+        }
+    }
+}
+
 /// A validated scene, ready to render.
 #[derive(Clone, Debug)]
 pub struct Scene {
@@ -264,34 +289,14 @@ impl Scene {
             )?;
         }
         // Each stage's settings from its keys, validated by the stage that owns them.
-        let cubes = CubeOptions {
-            res: r.cube_resolution,
-            ground_samples: r.ground_samples,
-            ..Default::default()
-        };
-        cubes.validate(f)?;
-        let mut edges = EdgeSettings {
-            threshold: r.low_density_threshold,
-            cube_res: r.cube_resolution,
-            ..Default::default()
-        };
-        edges.validate(f)?;
-        let clear_air = ClearAirSettings {
-            iterations: r.iterations,
-            propagation_tolerance: r.propagation_tolerance,
-        };
-        clear_air.validate(f)?;
-        let solver = DiffusionSettings {
-            tolerance: r.solver_tolerance,
-            max_iterations: r.solver_max_iterations,
-            ..Default::default()
-        };
-        solver.validate(f)?;
-        let incident = IncidentSettings {
-            seed: r.seed,
-            delta_scaling: r.delta_scaling,
-            ..Default::default()
-        };
+        let mut render = RenderSettings::default();
+        r.apply(&mut render);
+        render.incident.seed = render.seed;
+        render.edges.cube_res = render.cubes.res;
+        render.cubes.validate(f)?;
+        render.edges.validate(f)?;
+        render.clear_air.validate(f)?;
+        render.solver.validate(f)?;
         let camera = Camera::from_desc(&desc.camera, f)?;
         let (sun, sky) = crate::lighting::sun_and_sky(&desc.sun, &desc.sky, f, base_dir)?;
         let ground = match &desc.ground {
@@ -299,24 +304,7 @@ impl Scene {
             None => None,
         };
         let medium = Medium::from_desc(&desc.medium, f, base_dir)?;
-        edges.step_m = r.step * medium.min_voxel();
-        let render = RenderSettings {
-            method: r.method,
-            seed: r.seed,
-            spp: r.spp,
-            exposure: r.exposure,
-            step_voxels: r.step,
-            max_depth: r.max_depth,
-            time_limit: r.time_limit,
-            stderr: r.stderr,
-            incident,
-            solver,
-            cubes,
-            clear_air,
-            edges,
-            aov: r.aov,
-            diffuse_anisotropy: r.diffuse_anisotropy,
-        };
+        render.edges.step_m = render.step_voxels * medium.min_voxel();
         Ok(Scene {
             source: source.to_string(),
             desc,
