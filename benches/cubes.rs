@@ -5,22 +5,23 @@
 use cloudgi::cube::border::{find_border_voxels, render_border_cubes_with};
 use cloudgi::cube::ground::render_ground;
 use cloudgi::cube::render::{BinMask, CubeRenderer};
-use cloudgi::cube::LitVolume;
 use cloudgi::math::{Rgb, Vec3};
+use cloudgi::render::diffusion::scene_lit_volume;
 use cloudgi::sunlight::SunTransmittance;
 use cloudgi::{NoProgress, Scene};
 use criterion::{criterion_group, criterion_main, Criterion};
 
 fn cubes(c: &mut Criterion) {
     let scene = Scene::default_scene().unwrap();
-    let sun_t = SunTransmittance::compute(&scene.medium, scene.sun.dir).grid;
+    let sun_t = SunTransmittance::compute(&scene.medium, scene.sun.dir);
     let l_sky = scene.sky.radiance(Vec3::Y);
     let i0: Vec<Rgb> = sun_t
+        .grid
         .data()
         .iter()
         .map(|&t| l_sky * 0.8 + scene.sun.irradiance * (t * 0.5 / std::f32::consts::PI))
         .collect();
-    let lit = LitVolume::from_scene(&scene, i0);
+    let lit = scene_lit_volume(&scene, i0, &sun_t);
     let opts = scene.render.cubes.clone();
     let renderer = CubeRenderer::new(&lit, &opts);
     let border = find_border_voxels(&scene.medium.density);

@@ -3,7 +3,7 @@
 //! history of the solve first.
 
 use cloudgi::diffusion::{solve_diffusion, DiffusionSettings};
-use cloudgi::incident::compute_incident;
+use cloudgi::render::diffusion::compute_incident;
 use cloudgi::{Method, NoProgress, Scene};
 use criterion::{criterion_group, criterion_main, Criterion};
 

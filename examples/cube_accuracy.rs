@@ -10,8 +10,8 @@
 use cloudgi::cube::border::{find_border_voxels, render_border_cubes};
 use cloudgi::cube::ground::render_ground;
 use cloudgi::cube::render::{render_cube_brute, BinMask, CubeOptions, CubeRenderer};
-use cloudgi::cube::LitVolume;
 use cloudgi::math::Rgb;
+use cloudgi::render::diffusion::scene_lit_volume;
 use cloudgi::sunlight::SunTransmittance;
 use cloudgi::{NoProgress, Scene};
 use std::time::Instant;
@@ -20,15 +20,16 @@ fn main() {
     let every: usize = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(200);
     let scene = Scene::default_scene().expect("default scene");
     let t = Instant::now();
-    let sun_t = SunTransmittance::compute(&scene.medium, scene.sun.dir).grid;
+    let sun_t = SunTransmittance::compute(&scene.medium, scene.sun.dir);
     let l_sky = scene.sky.radiance(cloudgi::math::Vec3::Y);
     let i0: Vec<Rgb> = sun_t
+        .grid
         .data()
         .iter()
         .map(|&t| l_sky * 0.8 + scene.sun.irradiance * (t * 0.5 / std::f32::consts::PI))
         .collect();
-    let lit = LitVolume::from_scene(&scene, i0);
-    println!("lit volume {:.2} s (sun transmittance twice)", t.elapsed().as_secs_f64());
+    let lit = scene_lit_volume(&scene, i0, &sun_t);
+    println!("lit volume {:.2} s", t.elapsed().as_secs_f64());
     let found = find_border_voxels(&scene.medium.density);
     let bins: u64 = found.iter().map(|(_, f)| BinMask::for_faces(*f).count() as u64).sum();
     println!(
@@ -79,7 +80,7 @@ fn main() {
     for (res, step, lod_bias) in configs {
         let opts = CubeOptions {
             res,
-            step,
+            step_level_voxels: step,
             lod_bias,
             ..Default::default()
         };

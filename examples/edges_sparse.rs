@@ -59,7 +59,7 @@ fn main() {
         println!(
             "  T = {t:.2}: {:.1} % of non-zero voxels below T; optical depth of one voxel at T: {:.3}",
             100.0 * below as f64 / nz.len() as f64,
-            t * m.sigma_t * m.min_voxel()
+            t * m.optics.sigma_t * m.min_voxel()
         );
     }
 
@@ -69,10 +69,10 @@ fn main() {
         sun_t: &sun_t,
     };
     let sun_irr = |p: Vec3| scene.sun.irradiance * sun_t.at_voxel(m.to_voxel(p));
-    let dense = |_: Vec3, _: Vec3| m.albedo * Rgb::splat(1.0);
+    let dense = |_: Vec3, _: Vec3| m.optics.albedo * Rgb::splat(1.0);
     let settings = EdgeSettings {
         cube_res: res,
-        step: scene.render.step * m.min_voxel(),
+        step_m: scene.render.step_voxels * m.min_voxel(),
         ..Default::default()
     };
     let t = Instant::now();

@@ -1,8 +1,40 @@
 //! Pinhole camera. The image's right is normalize(cross(forward, up)); pixel rows run top to bottom.
 
 use crate::error::Result;
+use crate::error::{check, finite3};
 use crate::math::{Ray, Vec3};
-use crate::scene::{check, finite3, CameraDesc};
+use serde::{Deserialize, Serialize};
+
+/// `[camera]`: a pinhole camera.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct CameraDesc {
+    /// Eye position (m).
+    pub position: [f32; 3],
+    /// Point looked at (m).
+    pub look_at: [f32; 3],
+    /// Up hint; must not be parallel to the view direction.
+    pub up: [f32; 3],
+    /// Vertical field of view (degrees).
+    pub fov_deg: f32,
+    /// Image width (pixels).
+    pub width: u32,
+    /// Image height (pixels).
+    pub height: u32,
+}
+
+impl Default for CameraDesc {
+    fn default() -> Self {
+        CameraDesc {
+            position: [0.0, 350.0, 1500.0],
+            look_at: [0.0, 330.0, 0.0],
+            up: [0.0, 1.0, 0.0],
+            fov_deg: 40.0,
+            width: 480,
+            height: 360,
+        }
+    }
+}
 
 /// A validated pinhole camera.
 #[derive(Clone, Debug)]

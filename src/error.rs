@@ -77,3 +77,24 @@ impl Error {
         Error::Io { path: path.into(), source }
     }
 }
+
+/// Check a finite number; `what` describes the allowed range for the message.
+pub fn check(file: &str, field: &str, ok: bool, value: impl std::fmt::Debug, what: &str) -> Result<()> {
+    if ok {
+        Ok(())
+    } else {
+        Err(Error::invalid(file, field, format!("{value:?} is not allowed: {what}")))
+    }
+}
+
+pub fn finite3(v: [f32; 3]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+pub fn rgb_in_unit(v: [f32; 3]) -> bool {
+    v.iter().all(|x| (0.0..=1.0).contains(x))
+}
+
+pub fn rgb_nonneg(v: [f32; 3]) -> bool {
+    v.iter().all(|x| x.is_finite() && *x >= 0.0)
+}

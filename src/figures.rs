@@ -26,8 +26,8 @@
 use crate::compare::{compare, write_diff_png, Metrics};
 use crate::error::{Error, Result};
 use crate::image::Image;
+use crate::pipeline::{Progress, Timings};
 use crate::reference::TRANSMITTANCE_LAYER;
-use crate::render::{Progress, Timings};
 use crate::scene::{Method, Scene, SceneDesc, SkyModel};
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -276,7 +276,7 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
             figure,
             title: title.into(),
             method: method.name().into(),
-            iterations: (method == Method::Full).then_some(scene.render.iterations),
+            iterations: (method == Method::Full).then_some(scene.render.clear_air.iterations),
             reference: references[which].id.clone(),
             seconds,
             stages: out.timings.stages.clone(),

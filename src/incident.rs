@@ -45,9 +45,9 @@
 //! order, so the result is bit-identical at any thread count.
 
 use crate::lighting::bins::{Bin, DirectionBins, NUM_BINS};
+use crate::lighting::{Ground, Sky, Sun};
 use crate::math::{mix64, Rgb, Rng, Vec3};
-use crate::medium::Medium;
-use crate::scene::Scene;
+use crate::medium::{Dda, Medium};
 use crate::sunlight::SunTransmittance;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -96,22 +96,22 @@ pub struct IncidentSources {
 }
 
 impl IncidentSources {
-    /// The scene's sky (any model, through [`DirectionBins::integrate`]), the ground below the
+    /// The sky (any model, through [`DirectionBins::integrate`]), the ground below the
     /// horizon (unshadowed), and the sun.
-    pub fn from_scene(scene: &Scene, bins: &DirectionBins, sky_subdivisions: usize) -> IncidentSources {
+    pub fn from_lighting(sun: &Sun, sky: &Sky, ground: Option<&Ground>, bins: &DirectionBins, sky_subdivisions: usize) -> IncidentSources {
         let power = bins.integrate(sky_subdivisions.max(1), |d| {
             if d.y < 0.0 {
-                if let Some(g) = &scene.ground {
+                if let Some(g) = ground {
                     // The Lambertian ground is uniform: its radiance does not depend on the point.
-                    return g.radiance(Vec3::ZERO, &scene.sun, &scene.sky, 1.0);
+                    return g.radiance(Vec3::ZERO, sun, sky, 1.0);
                 }
             }
-            scene.sky.radiance(d)
+            sky.radiance(d)
         });
         let bin_radiance = power.iter().zip(&bins.bins).map(|(p, b)| *p / b.solid_angle as f32).collect();
         IncidentSources {
             bin_radiance,
-            sun: Some((scene.sun.dir, scene.sun.irradiance)),
+            sun: Some((sun.dir, sun.irradiance)),
         }
     }
 }
@@ -147,20 +147,8 @@ impl IncidentLight {
     }
 }
 
-/// Stage 1 for a scene with default sampling (seed from `render.seed`).
-pub fn compute_incident(scene: &Scene, entry: Option<&EntryRadiance<'_>>) -> IncidentLight {
-    let settings = IncidentSettings {
-        seed: scene.render.seed,
-        delta_scaling: scene.render.delta_scaling,
-        ..IncidentSettings::default()
-    };
-    let bins = DirectionBins::new();
-    let sources = IncidentSources::from_scene(scene, &bins, settings.sky_subdivisions);
-    compute(&scene.medium, &bins, &sources, &settings, entry)
-}
-
 /// Index box [lo, hi) of every non-empty voxel grown by `margin` voxels, clipped to the grid.
-pub fn active_box(m: &Medium, margin: usize) -> Option<([usize; 3], [usize; 3])> {
+pub(crate) fn active_box(m: &Medium, margin: usize) -> Option<([usize; 3], [usize; 3])> {
     let d = m.dims();
     let mut lo = d;
     let mut hi = [0usize; 3];
@@ -186,58 +174,6 @@ pub fn active_box(m: &Medium, margin: usize) -> Option<([usize; 3], [usize; 3])>
         hi[a] = (hi[a] + margin).min(d[a]);
     }
     Some((lo, hi))
-}
-
-/// Walk the voxels of `dims` crossed by `o + t·dv` (voxel coordinates, t in metres since `dv` is
-/// the world direction divided by the voxel size) for t ∈ [t0, t1], calling
-/// `f(cell, length_m)`. Incremental Amanatides–Woo in f64.
-#[inline]
-fn walk(dims: [usize; 3], o: DVec3, dv: DVec3, t0: f64, t1: f64, mut f: impl FnMut([usize; 3], f64)) {
-    let p = o + dv * t0;
-    let mut cell = [0i64; 3];
-    let mut step = [0i64; 3];
-    let mut t_max = [f64::INFINITY; 3];
-    let mut t_delta = [f64::INFINITY; 3];
-    for a in 0..3 {
-        let n = dims[a] as i64;
-        let mut c = (p[a].floor() as i64).clamp(0, n - 1);
-        if dv[a] < 0.0 && c > 0 && (p[a] - c as f64).abs() < 1e-9 {
-            c -= 1;
-        }
-        cell[a] = c;
-        if dv[a] > 0.0 {
-            step[a] = 1;
-            t_delta[a] = 1.0 / dv[a];
-            t_max[a] = ((c + 1) as f64 - o[a]) / dv[a];
-        } else if dv[a] < 0.0 {
-            step[a] = -1;
-            t_delta[a] = -1.0 / dv[a];
-            t_max[a] = (c as f64 - o[a]) / dv[a];
-        }
-    }
-    let mut t = t0;
-    loop {
-        let a = if t_max[0] <= t_max[1] && t_max[0] <= t_max[2] {
-            0
-        } else if t_max[1] <= t_max[2] {
-            1
-        } else {
-            2
-        };
-        let tn = t_max[a].min(t1);
-        if tn > t {
-            f([cell[0] as usize, cell[1] as usize, cell[2] as usize], tn - t);
-            t = tn;
-        }
-        if t >= t1 {
-            return;
-        }
-        cell[a] += step[a];
-        if cell[a] < 0 || cell[a] >= dims[a] as i64 {
-            return;
-        }
-        t_max[a] += t_delta[a];
-    }
 }
 
 /// One propagated direction: a sky bin (jittered within it) or the sun (exact).
@@ -281,7 +217,9 @@ impl Ctx<'_> {
         let atten = self.atten;
         let mut l = l0;
         let mut prev: Option<([usize; 3], bool)> = None;
-        walk(self.bd, o, dv, t0, t1, |c, len| {
+        // The active box in voxel coordinates (t in metres, since `dv` is d / h).
+        for seg in Dda::new(DVec3::ZERO, DVec3::ONE, self.bd, o, dv, t0, t1) {
+            let (c, len) = (seg.cell, seg.len());
             let idx = self.lin(c);
             let rho = self.rho[idx];
             let full = rho > 0.0;
@@ -309,7 +247,7 @@ impl Ctx<'_> {
                 l *= Rgb::from_array(e);
             }
             prev = Some((c, full));
-        });
+        }
     }
 
     /// One family of parallel rays along `d` (world, unit): launched from the plane perpendicular
@@ -428,10 +366,24 @@ pub fn compute(
     settings: &IncidentSettings,
     entry: Option<&EntryRadiance<'_>>,
 ) -> IncidentLight {
+    let sun_dir = sources.sun.map_or(Vec3::Y, |s| s.0);
+    compute_with_sun(m, bins, sources, settings, entry, SunTransmittance::compute(m, sun_dir))
+}
+
+/// [`compute`] with the sun transmittance at voxel centres already known (it depends only on
+/// the medium and the sun, so a run computes it once; `sun_transmittance.dir` must be the
+/// sources' sun direction).
+pub fn compute_with_sun(
+    m: &Medium,
+    bins: &DirectionBins,
+    sources: &IncidentSources,
+    settings: &IncidentSettings,
+    entry: Option<&EntryRadiance<'_>>,
+    sun_transmittance: SunTransmittance,
+) -> IncidentLight {
     let dims = m.dims();
     let n = dims[0] * dims[1] * dims[2];
     let (sun_dir, sun_e) = sources.sun.unwrap_or((Vec3::Y, Rgb::ZERO));
-    let sun_transmittance = SunTransmittance::compute(m, sun_dir);
     let mut out = IncidentLight {
         dims,
         q0: vec![Rgb::ZERO; n],
@@ -456,6 +408,12 @@ pub fn compute(
             }
         }
     }
+    // δ-scaling (f = g) or the paper's scheme (f = 0, the identity): one transform of the optics.
+    let optics = if settings.delta_scaling {
+        m.optics.delta_scaled()
+    } else {
+        m.optics.similarity(0.0)
+    };
     let ctx = Ctx {
         m,
         lo,
@@ -464,12 +422,7 @@ pub fn compute(
         entry,
         seed: settings.seed,
         ss: settings.rays_per_face_edge.max(1),
-        atten: {
-            let f = if settings.delta_scaling { m.g as f64 } else { 0.0 };
-            let a = m.albedo.as_dvec3();
-            let st = m.sigma_t as f64;
-            [st * (1.0 - f * a.x), st * (1.0 - f * a.y), st * (1.0 - f * a.z)]
-        },
+        atten: optics.sigma_t,
     };
     // Sources: the 96 bins, then the sun. Each contributes Δω·Ī to Σ0 and Δω·Ī·flow to Σ1.
     let mut list: Vec<(Source, Rgb, Vec3)> = bins
@@ -554,11 +507,7 @@ pub fn compute(
     out.fallback_rays = fallback;
     // Scatter into the full grid with ρσs/(4π) and ρσs·g/(4π).
     // With δ-scaling (f = g) the scattering that changes direction is σs(1 − g), isotropic (g' = 0).
-    let (sigma_s, g) = if settings.delta_scaling {
-        (m.albedo * m.sigma_t * (1.0 - m.g), 0.0)
-    } else {
-        (m.albedo * m.sigma_t, m.g as f64)
-    };
+    let (sigma_s, g) = (optics.sigma_s, optics.phase.mean_cosine());
     for k in 0..bd[2] {
         for j in 0..bd[1] {
             for i in 0..bd[0] {
@@ -586,4 +535,89 @@ pub fn compute(
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::medium::Grid3;
+
+    /// A 4³ block of density 1 in a 6³ grid, optically thin (τ = 4·10⁻⁴ across), albedo 0.9.
+    fn thin_block() -> Medium {
+        let mut g = Grid3::filled([6, 6, 6], 0.0);
+        for k in 1..5 {
+            for j in 1..5 {
+                for i in 1..5 {
+                    g.set(i, j, k, 1.0);
+                }
+            }
+        }
+        Medium::new(g, Vec3::ZERO, Vec3::ONE, 1e-4, Rgb::splat(0.9), 0.7)
+    }
+
+    fn uniform_sky(l: f32) -> IncidentSources {
+        IncidentSources {
+            bin_radiance: vec![Rgb::splat(l); NUM_BINS],
+            sun: None,
+        }
+    }
+
+    #[test]
+    fn active_box_is_the_occupied_box_grown_and_clipped() {
+        let m = thin_block();
+        assert_eq!(active_box(&m, 0), Some(([1, 1, 1], [5, 5, 5])));
+        assert_eq!(active_box(&m, 1), Some(([0, 0, 0], [6, 6, 6])));
+        assert_eq!(active_box(&m, 3), Some(([0, 0, 0], [6, 6, 6])));
+        let empty = Medium::new(Grid3::filled([3, 3, 3], 0.0), Vec3::ZERO, Vec3::ONE, 1.0, Rgb::ONE, 0.0);
+        assert_eq!(active_box(&empty, 1), None);
+    }
+
+    /// Optically thin, uniform sky L: every voxel sees L from all 4π, so Q0 = ρσs·L (eq. 5 with
+    /// ΣΔω = 4π) and Q1 = 0 (the bins' mean directions cancel), up to the attenuation ~τ.
+    #[test]
+    fn thin_block_under_a_uniform_sky_has_q0_of_the_sky_and_no_q1() {
+        let m = thin_block();
+        let inc = compute(&m, &DirectionBins::new(), &uniform_sky(2.0), &IncidentSettings::default(), None);
+        let want = 0.9 * 1e-4 * 2.0;
+        for (n, q) in inc.q0.iter().enumerate() {
+            if m.density.data()[n] > 0.0 {
+                assert!((q.x - want).abs() < 1e-3 * want, "voxel {n}: Q0 {q:?} vs {want}");
+                for ax in 0..3 {
+                    assert!(inc.q1[ax][n].x.abs() < 1e-3 * want, "voxel {n}: Q1 {:?}", inc.q1[ax][n]);
+                }
+            } else {
+                assert_eq!(*q, Rgb::ZERO);
+            }
+        }
+        assert_eq!(inc.fallback_rays, 0, "every full voxel is crossed by a family's lattice");
+    }
+
+    /// The clear-air hook replaces the radiance a ray carries where it enters the cloud from an
+    /// empty voxel: a black sky with a hook that returns L everywhere gives the uniform-sky Q0.
+    #[test]
+    fn entry_hook_replaces_the_entering_radiance() {
+        let m = thin_block();
+        let hook = |_: [usize; 3], _: usize| Some(Rgb::splat(2.0));
+        let inc = compute(
+            &m,
+            &DirectionBins::new(),
+            &uniform_sky(0.0),
+            &IncidentSettings::default(),
+            Some(&hook),
+        );
+        let want = 0.9 * 1e-4 * 2.0;
+        for (n, q) in inc.q0.iter().enumerate() {
+            if m.density.data()[n] > 0.0 {
+                assert!((q.x - want).abs() < 1e-3 * want, "voxel {n}: Q0 {q:?} vs {want}");
+            }
+        }
+        let none = compute(
+            &m,
+            &DirectionBins::new(),
+            &uniform_sky(0.0),
+            &IncidentSettings::default(),
+            Some(&|_, _| None),
+        );
+        assert!(none.q0.iter().all(|q| *q == Rgb::ZERO));
+    }
 }

@@ -18,8 +18,9 @@ pub mod lighting;
 pub mod lit;
 pub mod math;
 pub mod medium;
+pub mod optics;
 pub mod orders;
-pub mod phase;
+pub mod pipeline;
 pub mod reference;
 pub mod render;
 pub mod scene;
@@ -27,5 +28,6 @@ pub mod sunlight;
 
 pub use error::{Error, Result};
 pub use image::Image;
-pub use render::{render, NoProgress, Progress, RenderOutput};
+pub use pipeline::{NoProgress, Progress};
+pub use render::{render, RenderOutput};
 pub use scene::{Method, Scene, SceneDesc};

@@ -146,6 +146,81 @@ pub fn cosine_hemisphere(u1: f32, u2: f32) -> Vec3 {
     Vec3::new(r * phi.cos(), r * phi.sin(), (1.0 - u1).max(0.0).sqrt())
 }
 
+/// floor for |x| < 2³¹ without a libm call (the default x86-64 target has no SSE4.1 round).
+#[inline]
+pub fn fast_floor(x: f32) -> f32 {
+    let t = x as i32 as f32;
+    if t > x {
+        t - 1.0
+    } else {
+        t
+    }
+}
+
+/// The one trilinear interpolation of the crate: the 8 corner indices and the fractions at
+/// continuous voxel coordinates `p` of a lattice of `dims` cells with centres at half-integers,
+/// indices clamped to the lattice (clamp-to-edge, so the field is defined on the whole box
+/// [0, n]³; the caller decides what lies outside it). Memory order x fastest.
+#[derive(Clone, Copy, Debug)]
+pub struct Trilinear {
+    /// Corner indices: (lo/hi x, lo/hi y, lo/hi z) with x fastest, i.e. corner c = x + 2y + 4z.
+    pub idx: [usize; 8],
+    /// Fractions along x, y, z, in [0, 1).
+    pub f: [f32; 3],
+}
+
+impl Trilinear {
+    /// Corners and fractions at `p`.
+    #[inline]
+    pub fn new(dims: [usize; 3], p: [f32; 3]) -> Trilinear {
+        let mut lo = [0usize; 3];
+        let mut hi = [0usize; 3];
+        let mut f = [0f32; 3];
+        for a in 0..3 {
+            let n = dims[a] as isize;
+            let x = p[a] - 0.5;
+            let fl = fast_floor(x);
+            let fi = fl as isize;
+            f[a] = x - fl;
+            lo[a] = fi.clamp(0, n - 1) as usize;
+            hi[a] = (fi + 1).clamp(0, n - 1) as usize;
+        }
+        let nx = dims[0];
+        let nxy = nx * dims[1];
+        let ix = |i: usize, j: usize, k: usize| i + nx * j + nxy * k;
+        Trilinear {
+            idx: [
+                ix(lo[0], lo[1], lo[2]),
+                ix(hi[0], lo[1], lo[2]),
+                ix(lo[0], hi[1], lo[2]),
+                ix(hi[0], hi[1], lo[2]),
+                ix(lo[0], lo[1], hi[2]),
+                ix(hi[0], lo[1], hi[2]),
+                ix(lo[0], hi[1], hi[2]),
+                ix(hi[0], hi[1], hi[2]),
+            ],
+            f,
+        }
+    }
+
+    /// Blend the corner values `at(index)` by successive linear interpolation along x, y, z.
+    #[inline]
+    pub fn blend<T>(&self, at: impl Fn(usize) -> T) -> T
+    where
+        T: Copy + std::ops::Add<Output = T> + std::ops::Mul<f32, Output = T>,
+    {
+        let [fx, fy, fz] = self.f;
+        let i = &self.idx;
+        let c00 = at(i[0]) * (1.0 - fx) + at(i[1]) * fx;
+        let c10 = at(i[2]) * (1.0 - fx) + at(i[3]) * fx;
+        let c01 = at(i[4]) * (1.0 - fx) + at(i[5]) * fx;
+        let c11 = at(i[6]) * (1.0 - fx) + at(i[7]) * fx;
+        let c0 = c00 * (1.0 - fy) + c10 * fy;
+        let c1 = c01 * (1.0 - fy) + c11 * fy;
+        c0 * (1.0 - fz) + c1 * fz
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -178,5 +253,21 @@ mod tests {
         let mut r = Rng::new(7, 7);
         let mean: f64 = (0..100_000).map(|_| r.uniform() as f64).sum::<f64>() / 100_000.0;
         assert!((mean - 0.5).abs() < 0.01);
+    }
+
+    #[test]
+    fn trilinear_is_exact_on_affine_fields_and_clamps_to_edge() {
+        let dims = [5, 4, 3];
+        let f = |i: usize, j: usize, k: usize| 1.0 + 2.0 * i as f32 - 0.5 * j as f32 + 0.25 * k as f32;
+        let vals: Vec<f32> = (0..60).map(|n| f(n % 5, (n / 5) % 4, n / 20)).collect();
+        let mut rng = Rng::new(3, 4);
+        for _ in 0..200 {
+            let p = [0.5 + 4.0 * rng.uniform(), 0.5 + 3.0 * rng.uniform(), 0.5 + 2.0 * rng.uniform()];
+            let v = Trilinear::new(dims, p).blend(|n| vals[n]);
+            let exact = 1.0 + 2.0 * (p[0] - 0.5) - 0.5 * (p[1] - 0.5) + 0.25 * (p[2] - 0.5);
+            assert!((v - exact).abs() < 1e-4, "{p:?}: {v} vs {exact}");
+        }
+        // Outside the centres the edge value holds.
+        assert_eq!(Trilinear::new(dims, [0.0, 0.1, 0.2]).blend(|n| vals[n]), vals[0]);
     }
 }

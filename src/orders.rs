@@ -3,7 +3,7 @@
 //! Along a segment of optical depth D, the number of scattering events is taken as Poisson:
 //! q_i = e^{−D} D^i / i! (eq. 8). The phase function of i successive Henyey–Greenstein events is
 //! the i-fold spherical self-convolution of HG(g), which is again HG with g^i (HG's Legendre
-//! coefficients are g^l, and convolution on the sphere multiplies them).
+//! coefficients are g^l, and convolution on the sphere multiplies them): [`crate::optics::Hg::order`].
 
 /// Poisson weights q_0, q_1, …, q_n for optical depth `d` (unitless), with n the smallest order
 /// such that the omitted tail 1 − Σ q_i is below `tail` (e.g. 1e-4).
@@ -27,16 +27,15 @@ pub fn poisson_weights(d: f64, tail: f64) -> Vec<f64> {
     q
 }
 
-/// Mean cosine of the i-fold HG phase function: g^i.
-#[inline]
-pub fn order_g(g: f32, i: usize) -> f32 {
-    g.powi(i as i32)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::phase::hg_f64;
+    use crate::optics::Hg;
+
+    fn hg_f64(mu: f64, g: f64) -> f64 {
+        let g = g as f32;
+        Hg::new(g).eval_cos_f64(mu)
+    }
     use std::f64::consts::PI;
 
     #[test]

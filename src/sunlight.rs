@@ -8,12 +8,13 @@
 use crate::math::Vec3;
 use crate::medium::{Grid3, Medium};
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// exp(−τ_sun) at voxel centres.
 #[derive(Clone, Debug)]
 pub struct SunTransmittance {
     /// Transmittance towards the sun at each voxel centre (unitless).
-    pub grid: Grid3,
+    pub grid: Arc<Grid3>,
     /// Unit direction towards the sun.
     pub dir: Vec3,
 }
@@ -46,7 +47,10 @@ impl SunTransmittance {
                 }
             }
         });
-        SunTransmittance { grid, dir: sun_dir }
+        SunTransmittance {
+            grid: Arc::new(grid),
+            dir: sun_dir,
+        }
     }
 
     /// Interpolated transmittance at a point inside the medium's box.

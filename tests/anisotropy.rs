@@ -1,13 +1,14 @@
 //! `render.diffuse_anisotropy`: the first moment I1 of the diffuse field (src/diffusion/flux.rs)
 //! and the a·(I0 + g·I1·ω) gather source it gives.
 
-use cloudgi::diffusion::flux::diffuse_flux;
+use cloudgi::diffusion::flux::{diffuse_flux, FluxField};
 use cloudgi::diffusion::{solve_diffusion, DiffusionSettings, DiffusionSolution};
 use cloudgi::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
-use cloudgi::lighting::DirectionBins;
+use cloudgi::lighting::{DirectionBins, Sky, Sun};
 use cloudgi::lit::LitVolume;
 use cloudgi::math::{Rgb, Vec3};
 use cloudgi::medium::{Grid3, Medium};
+use cloudgi::render::diffusion::i0_rgb;
 use cloudgi::{render, Method, NoProgress, Scene};
 
 const TAU_MIN: f64 = cloudgi::diffusion::DEFAULT_MIN_OPTICAL_DEPTH;
@@ -134,15 +135,20 @@ fn slab_lit_from_above_is_brighter_below_darker_above() {
     let settings = DiffusionSettings::default();
     let sol = solve_diffusion(&m, &inc, None, &settings).unwrap();
     let i1 = diffuse_flux(&m, &inc, &sol, settings.min_optical_depth);
-    let off = LitVolume::new(&m, &inc, &sol);
-    let on = off.clone().with_diffuse_anisotropy(&inc, &sol, settings.min_optical_depth);
+    let sun = Sun {
+        dir: Vec3::Y,
+        irradiance: inc.sun_irradiance,
+    };
+    let sun_t = inc.sun_transmittance.grid.clone();
+    let off = LitVolume::new(m.clone(), i0_rgb(&sol), sun_t, sun, Sky::constant(Rgb::ZERO), None);
+    let on = off.clone().with_flux(FluxField::new(&m, &i1));
     for j in 2..8 {
         let idx = 5 + d[0] * (j + d[1] * 5);
         assert!(i1[idx][1].y < 0.0, "layer {j}: I1 = {:?}", i1[idx][1]);
         let v = Vec3::new(5.5, j as f32 + 0.5, 5.5);
-        // view_dir is the direction the viewing ray travels: +Y looks up from below.
-        let below = (on.source_at_voxel(v, 1.0, Vec3::Y) - off.source_at_voxel(v, 1.0, Vec3::Y)).y;
-        let above = (on.source_at_voxel(v, 1.0, -Vec3::Y) - off.source_at_voxel(v, 1.0, -Vec3::Y)).y;
+        // The source takes the direction to the eye: −Y is an eye below looking up.
+        let below = (on.source(v, 1.0, -Vec3::Y) - off.source(v, 1.0, -Vec3::Y)).y;
+        let above = (on.source(v, 1.0, Vec3::Y) - off.source(v, 1.0, Vec3::Y)).y;
         assert!(below > 0.0, "layer {j}: from below {below}");
         assert!(above < 0.0, "layer {j}: from above {above}");
         // The change is ±a·g·|I1_y| (clamped at zero radiance from above).

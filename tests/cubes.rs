@@ -5,8 +5,8 @@
 use cloudgi::cube::border::{find_border_voxels, render_border_cubes};
 use cloudgi::cube::ground::{hemicube_irradiance, hemicube_weights, render_ground, LitGround};
 use cloudgi::cube::render::{opposite_bin, render_cube_brute, BinMask, CubeOptions, CubeRenderer};
-use cloudgi::cube::LitVolume;
 use cloudgi::lighting::{DirectionBins, Ground, Sky, Sun};
+use cloudgi::lit::LitVolume;
 use cloudgi::math::{Rgb, Vec3};
 use cloudgi::medium::{Grid3, Medium};
 use cloudgi::NoProgress;
@@ -179,7 +179,7 @@ fn pyramid_without_level_of_detail_matches_the_brute_force_march() {
     let r = CubeRenderer::new(&v, &opts);
     let p = Vec3::new(0.3, 5.2, 0.1);
     let a = r.render_cube(p, BinMask::ALL);
-    let b = render_cube_brute(&v, p, 8, BinMask::ALL, opts.step);
+    let b = render_cube_brute(&v, p, 8, BinMask::ALL, opts.step_level_voxels);
     for (x, y) in a.pixels.iter().zip(&b.pixels) {
         assert!(rel(*x, *y) < 1e-4, "{x} vs {y}");
     }
@@ -502,10 +502,11 @@ fn clear_air_on_a_small_scene_lights_the_ground_and_fills_every_needed_bin() {
     desc.medium.voxel_size = 40.0;
     desc.render.ground_samples = 8;
     let scene = cloudgi::Scene::build(desc, "small", std::path::Path::new(".")).unwrap();
-    let sun_t = cloudgi::sunlight::SunTransmittance::compute(&scene.medium, scene.sun.dir).grid;
+    let sun_t = cloudgi::sunlight::SunTransmittance::compute(&scene.medium, scene.sun.dir);
     let n = scene.medium.density.len();
     let l = scene.sky.radiance(Vec3::Y);
-    let out = cloudgi::cube::clear_air(&scene, vec![l; n], sun_t, &NoProgress);
+    let lit = cloudgi::render::diffusion::scene_lit_volume(&scene, vec![l; n], &sun_t);
+    let out = cloudgi::cube::clear_air(lit, scene.ground.as_ref(), &scene.render.cubes, &NoProgress);
     assert!(!out.cubes.is_empty());
     let g = out.lit.ground.as_ref().unwrap();
     let grid = g.grid.as_ref().expect("the cloud's ground is rendered");

@@ -5,7 +5,7 @@ use cloudgi::cube::CubeImage;
 use cloudgi::edges::{CubeRequest, CubeSource, EdgeGather, EdgeSettings, SunInput};
 use cloudgi::math::{Rgb, Rng, Vec3};
 use cloudgi::medium::{procedural, Grid3, Medium};
-use cloudgi::phase::{hg, sample_hg};
+use cloudgi::optics::Hg;
 use rayon::prelude::*;
 
 /// A cube filled with one radiance.
@@ -122,7 +122,7 @@ fn threshold_zero_is_the_pure_dense_gather() {
     let sun = |p: Vec3| Rgb::splat(2.0) * (-(p.y / 300.0)).exp();
     let settings = EdgeSettings {
         threshold: 0.0,
-        step: 2.0,
+        step_m: 2.0,
         ..Default::default()
     };
     let gather = EdgeGather::new(
@@ -146,12 +146,12 @@ fn threshold_zero_is_the_pure_dense_gather() {
         let n = 20_000;
         let dt = (t1 - t0) as f64 / n as f64;
         let (mut tr, mut sum) = (1.0f64, Rgb::ZERO);
-        let ph = hg(sun_dir.dot(d), m.g);
+        let ph = m.optics.phase.eval(sun_dir, -d);
         for k in 0..n {
             let t = t0 as f64 + (k as f64 + 0.5) * dt;
             let p = o + d * t as f32;
-            let delta = m.sigma_t as f64 * m.density_at(p) as f64 * dt;
-            let s = dense(p, -d) + m.albedo * sun(p) * ph;
+            let delta = m.optics.sigma_t as f64 * m.density_at(p) as f64 * dt;
+            let s = dense(p, -d) + m.optics.albedo * sun(p) * ph;
             sum += s * (tr * -(-delta).exp_m1()) as f32;
             tr *= (-delta).exp();
         }
@@ -533,7 +533,7 @@ fn sun_orders_are_not_double_counted_and_cube_request_is_the_segment() {
     let mut multi = 0.0f64;
     for (idx, qi) in q.iter().enumerate().skip(1) {
         let i = idx as i32 + 1;
-        multi += qi * (a as f64).powi(i) * cloudgi::phase::hg_f64(cos as f64, (g as f64).powi(i));
+        multi += qi * (a as f64).powi(i) * Hg::new(g).order(i as usize).eval_cos_f64(cos as f64);
     }
     let expect = e_sun * multi as f32;
     assert!((aov.edge - expect).abs().max_element() < 1e-5, "{} vs {expect}", aov.edge);
@@ -544,4 +544,14 @@ fn sun_orders_are_not_double_counted_and_cube_request_is_the_segment() {
     assert!((r.center - Vec3::new(3.0, 3.0, 3.0)).length() < 1e-4, "{:?}", r.center);
     assert_eq!(r.x_axis, d);
     assert!((r.exclude.0 - Vec3::new(0.0, 3.0, 3.0)).length() < 1e-5 && (r.exclude.1 - Vec3::new(6.0, 3.0, 3.0)).length() < 1e-5);
+}
+
+/// HG at cos θ through the crate's one phase function.
+fn hg(cos: f32, g: f32) -> f32 {
+    Hg::new(g).eval_cos(cos)
+}
+
+/// An HG-distributed direction after scattering from `dir`.
+fn sample_hg(dir: Vec3, g: f32, u1: f32, u2: f32) -> Vec3 {
+    Hg::new(g).sample(dir, u1, u2)
 }

@@ -3,7 +3,7 @@
 use cloudgi::lighting::{Sky, Sun};
 use cloudgi::math::{Rgb, Vec3};
 use cloudgi::medium::{loaders, Grid3, Medium};
-use cloudgi::phase::hg;
+use cloudgi::optics::Hg;
 use cloudgi::render::single;
 use cloudgi::scene::{Scene, SceneDesc};
 use cloudgi::sunlight::SunTransmittance;
@@ -63,7 +63,7 @@ fn single_scattering_in_thin_box_matches_analytic() {
     let scene = box_scene(sigma, a, g, Vec3::Y);
     let sun_t = SunTransmittance::compute(&scene.medium, scene.sun.dir);
     let (o, d) = (Vec3::new(5.0, 5.0, 40.0), Vec3::NEG_Z);
-    let p = hg((-Vec3::Y).dot(-d), g);
+    let p = Hg::new(g).eval(Vec3::Y, -d);
     let ss = Rgb::new(3.0, 2.0, 1.0) * (a * p * (-sigma * 5.0).exp() * (1.0 - (-sigma * 10.0).exp()));
     let expect = ss + Rgb::new(0.2, 0.3, 0.5) * (-sigma * 10.0f32).exp();
     let mut mean = Rgb::ZERO;

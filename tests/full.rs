@@ -109,7 +109,7 @@ fn light_crosses_clear_air_between_cloud_parts() {
             }
         }
     }
-    m = Medium::new(g, m.origin, m.voxel_size, m.sigma_t, m.albedo, m.g);
+    m = Medium::with_optics(g, m.origin, m.voxel_size, m.optics);
     let mut s = scene_with(m, |d| {
         d.ground = None;
         d.render.iterations = 1;
@@ -120,7 +120,7 @@ fn light_crosses_clear_air_between_cloud_parts() {
     s.sun.dir = Vec3::X;
     s.sky = Sky::constant(Rgb::ZERO);
     let mut before = s.clone();
-    before.render.iterations = 0;
+    before.render.clear_air.iterations = 0;
     let mut t = Timings::default();
     let p0 = propagate(&before, &NoProgress, &mut t).unwrap();
     let p1 = propagate(&s, &NoProgress, &mut t).unwrap();

@@ -3,7 +3,7 @@
 //! (cosθ, φ) cells, plus the sample mean cosine against g.
 
 use cloudgi::math::{Frame, Rng, Vec3};
-use cloudgi::phase::{hg_f64, sample_hg};
+use cloudgi::optics::Hg;
 
 /// ln Γ(x) (Lanczos, g = 7), accurate to ~1e-14 for x > 0.
 fn ln_gamma(x: f64) -> f64 {
@@ -104,7 +104,7 @@ fn chi2_hg_against(g_sample: f32, g: f32, n: usize, seed: u64) -> f64 {
     let band = |a: f64, b: f64| -> f64 {
         let m = 2000;
         let h = (b - a) / m as f64;
-        (0..m).map(|k| hg_f64(a + (k as f64 + 0.5) * h, g as f64)).sum::<f64>() * h * 2.0 * std::f64::consts::PI
+        (0..m).map(|k| Hg::new(g).eval_cos_f64(a + (k as f64 + 0.5) * h)).sum::<f64>() * h * 2.0 * std::f64::consts::PI
     };
     let mut expected = Vec::with_capacity(nt * np);
     for it in 0..nt {
@@ -175,4 +175,9 @@ fn sampled_mean_cosine_is_g() {
         // 4 standard errors + float rounding of the f32 sampler.
         assert!((mean - g as f64).abs() < 4.0 * se + 1e-4, "g = {g}: mean cosine {mean} ± {se}");
     }
+}
+
+/// An HG-distributed direction after scattering from `dir`.
+fn sample_hg(dir: Vec3, g: f32, u1: f32, u2: f32) -> Vec3 {
+    Hg::new(g).sample(dir, u1, u2)
 }

@@ -18,6 +18,31 @@ use cloudgi::scene::{Method, Scene};
 use scene_file::SceneFile;
 use std::path::{Path, PathBuf};
 
+/// `--method`: clap's view of [`Method`] (clap stays in the CLI).
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum MethodArg {
+    /// Exact single scattering of the sun plus the attenuated background (paper Fig. 4).
+    Single,
+    /// Unbiased volumetric path tracing (delta/ratio tracking, NEE + MIS): the ground truth.
+    Reference,
+    /// Diffusion (stage 1 + eq. 4 solved by multigrid) composited with exact sun single scattering (paper Fig. 5).
+    Diffusion,
+    /// Diffusion, clear-air propagation with viewing cubes and ground hemicubes, and the
+    /// low-density edge treatment in the final gather (paper Fig. 7).
+    Full,
+}
+
+impl From<MethodArg> for Method {
+    fn from(m: MethodArg) -> Method {
+        match m {
+            MethodArg::Single => Method::Single,
+            MethodArg::Reference => Method::Reference,
+            MethodArg::Diffusion => Method::Diffusion,
+            MethodArg::Full => Method::Full,
+        }
+    }
+}
+
 /// Physically based cloud renderer (Max et al. 2004: diffusion and multiple anisotropic scattering).
 #[derive(Parser, Debug)]
 #[command(name = "cloudgi", version, about)]
@@ -59,7 +84,7 @@ struct RenderArgs {
     output: PathBuf,
     /// Override render.method (default: full).
     #[arg(long, value_enum)]
-    method: Option<Method>,
+    method: Option<MethodArg>,
     /// Override camera.width (pixels).
     #[arg(long)]
     width: Option<u32>,
@@ -154,7 +179,7 @@ impl RenderArgs {
     /// Apply the overrides to a scene description.
     fn apply(&self, d: &mut cloudgi::SceneDesc) {
         if let Some(m) = self.method {
-            d.render.method = m;
+            d.render.method = m.into();
         }
         if let Some(w) = self.width {
             d.camera.width = w;

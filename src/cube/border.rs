@@ -15,12 +15,12 @@
 //! neighbours across several faces needs the union of those half cubes (for two faces sharing an
 //! edge, 72 of the 96 bins; the paper rendered 80).
 
-use super::lit::LitVolume;
 use super::render::{opposite_bin, BinMask, CubeOptions, CubeRenderer};
 use crate::lighting::bins::NUM_BINS;
+use crate::lit::LitVolume;
 use crate::math::Rgb;
 use crate::medium::Grid3;
-use crate::render::Progress;
+use crate::pipeline::Progress;
 use rayon::prelude::*;
 
 /// Face offsets in [`crate::lighting::CUBE_FACES`] order: +x, −x, +y, −y, +z, −z.

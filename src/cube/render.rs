@@ -12,12 +12,12 @@
 //! pixels stay black and their bins are reported as absent.
 
 use super::image::CubeImage;
-use super::lit::LitVolume;
-use super::pyramid::{LitPyramid, BLOCK};
 use crate::error::{Error, Result};
 use crate::lighting::bins::{DirectionBins, BINS_PER_EDGE, NUM_BINS};
-use crate::math::{Rgb, Vec3};
-use crate::phase::hg;
+use crate::lit::pyramid::{LitPyramid, BLOCK};
+use crate::lit::LitVolume;
+use crate::math::{fast_floor, Rgb, Vec3};
+use std::sync::Arc;
 use std::sync::OnceLock;
 
 /// Settings of the cube renderer.
@@ -25,8 +25,8 @@ use std::sync::OnceLock;
 pub struct CubeOptions {
     /// Pixels per face edge (a multiple of 4, so pixels nest in the 4×4 bins of a face).
     pub res: usize,
-    /// March step as a fraction of the current pyramid level's smallest voxel edge.
-    pub step: f32,
+    /// March step in voxels of the current pyramid level (a fraction of its smallest voxel edge).
+    pub step_level_voxels: f32,
     /// A ray stops when its transmittance falls below this (the dropped rest is at most this
     /// fraction of the brightest radiance behind).
     pub t_cutoff: f32,
@@ -51,7 +51,7 @@ impl Default for CubeOptions {
     fn default() -> Self {
         CubeOptions {
             res: DEFAULT_CUBE_RESOLUTION,
-            step: 1.0,
+            step_level_voxels: 1.0,
             t_cutoff: 1e-3,
             lod_bias: 0.0,
             max_levels: 8,
@@ -88,8 +88,12 @@ impl CubeOptions {
                 ),
             ));
         }
-        if !(self.step.is_finite() && self.step > 0.0 && self.step <= 4.0) {
-            return Err(Error::invalid(file, "cube step", format!("{} is not in (0, 4]", self.step)));
+        if !(self.step_level_voxels.is_finite() && self.step_level_voxels > 0.0 && self.step_level_voxels <= 4.0) {
+            return Err(Error::invalid(
+                file,
+                "cube step",
+                format!("{} is not in (0, 4]", self.step_level_voxels),
+            ));
         }
         if !(self.t_cutoff.is_finite() && (0.0..1.0).contains(&self.t_cutoff)) {
             return Err(Error::invalid(file, "cube cut-off", format!("{} is not in [0, 1)", self.t_cutoff)));
@@ -240,8 +244,10 @@ impl PixelTable {
 pub struct CubeRenderer<'a> {
     /// The scene.
     pub lit: &'a LitVolume,
-    /// Its mip pyramid.
-    pub pyramid: LitPyramid,
+    /// Its mip pyramid (shared with every renderer of the same lit volume).
+    pub pyramid: Arc<LitPyramid>,
+    /// Levels used: the first `opts.max_levels` of the pyramid.
+    levels: usize,
     /// The options.
     pub opts: CubeOptions,
     /// Pixel tables at `opts.res`.
@@ -254,7 +260,8 @@ impl<'a> CubeRenderer<'a> {
     pub fn new(lit: &'a LitVolume, opts: &CubeOptions) -> CubeRenderer<'a> {
         CubeRenderer {
             lit,
-            pyramid: LitPyramid::build(lit, opts.max_levels),
+            pyramid: lit.pyramid(),
+            levels: opts.max_levels.max(1),
             opts: opts.clone(),
             pixels: PixelTable::new(opts.res),
             h_min: lit.medium.min_voxel(),
@@ -269,12 +276,13 @@ impl<'a> CubeRenderer<'a> {
         let t_ground = lit.ground_hit(o, d);
         let t_end = t_ground.unwrap_or(f32::INFINITY);
         // Sunlight travels along −sun.dir; the scattered light travels towards the eye, −d.
-        let sun_e = lit.sun.irradiance * hg((-lit.sun.dir).dot(-d), m.g);
-        let albedo = m.albedo;
-        let sigma_t = m.sigma_t;
+        let sun_e = lit.sun.irradiance * m.optics.phase.eval(lit.sun.dir, -d);
+        let albedo = m.optics.albedo;
+        let sigma_t = m.optics.sigma_t;
         let cut = self.opts.t_cutoff;
         let inv_cone = 1.0 / (cone.max(1e-6) * self.opts.lod_bias.exp2());
-        let nlev = self.pyramid.levels.len();
+        let levels = &self.pyramid.levels[..self.levels.min(self.pyramid.levels.len())];
+        let nlev = levels.len();
         let origin = self.pyramid.origin;
         // Components of d below 1e-20 are nudged so the slab and block arithmetic stay finite.
         let dn = Vec3::select(d.abs().cmplt(Vec3::splat(1e-20)), Vec3::splat(1e-20), d);
@@ -282,7 +290,7 @@ impl<'a> CubeRenderer<'a> {
         let positive = d.cmpgt(Vec3::ZERO);
         // The coarsest level's box contains every level's box.
         let (t_box0, t_box1) = {
-            let top = self.pyramid.levels.last().expect("pyramid has a level");
+            let top = levels.last().expect("pyramid has a level");
             let hi = origin + top.voxel_size * dims_f(top.dims);
             let (ta, tb) = ((origin - o) * inv_d, (hi - o) * inv_d);
             (ta.min(tb).max_element().max(0.0), ta.max(tb).min_element().min(t_end))
@@ -290,7 +298,7 @@ impl<'a> CubeRenderer<'a> {
         let mut tr = 1.0f32;
         let mut l = Rgb::ZERO;
         if t_box0 < t_box1 {
-            'levels: for (li, lev) in self.pyramid.levels.iter().enumerate() {
+            'levels: for (li, lev) in levels.iter().enumerate() {
                 let ts = if li == 0 {
                     0.0
                 } else {
@@ -306,7 +314,7 @@ impl<'a> CubeRenderer<'a> {
                     continue;
                 }
                 let dims = dims_f(lev.dims);
-                let step = self.opts.step * lev.voxel_size.min_element();
+                let step = self.opts.step_level_voxels * lev.voxel_size.min_element();
                 let inv_vs = Vec3::ONE / lev.voxel_size;
                 let cell = lev.voxel_size * BLOCK as f32;
                 let inv_cell = Vec3::ONE / cell;
@@ -396,37 +404,26 @@ impl<'a> CubeRenderer<'a> {
     }
 }
 
-/// floor for |x| < 2³¹ without a libm call (the default x86-64 target has no SSE4.1 round).
-#[inline]
-pub(crate) fn fast_floor(x: f32) -> f32 {
-    let t = x as i32 as f32;
-    if t > x {
-        t - 1.0
-    } else {
-        t
-    }
-}
-
 #[inline]
 fn dims_f(d: [usize; 3]) -> Vec3 {
     Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32)
 }
 
 /// Brute-force reference: each pixel centre's ray marched on the exact trilinear fields (density
-/// of the medium, I0 and T_sun interpolated separately, no pyramid) with steps of `step` voxels,
-/// cut off only at transmittance 1e-6. Bins outside `needed` stay black.
-pub fn render_cube_brute(lit: &LitVolume, p: Vec3, res: usize, needed: BinMask, step: f32) -> CubeImage {
+/// of the medium, I0 (density-weighted) and T_sun, no pyramid) with steps of `step_voxels`
+/// voxels, cut off only at transmittance 1e-6. Bins outside `needed` stay black.
+pub fn render_cube_brute(lit: &LitVolume, p: Vec3, res: usize, needed: BinMask, step_voxels: f32) -> CubeImage {
     let table = PixelTable::new(res);
     let mut cube = CubeImage::new(res);
     let m = &lit.medium;
-    let step = step * m.min_voxel();
+    let step = step_voxels * m.min_voxel();
     for b in needed.iter() {
         for (face, i, j) in table.bin_pixels(b) {
             let k = cube.index(face, i, j);
             let d = table.dirs[k];
             let tg = lit.ground_hit(p, d);
-            let r = crate::render::march::march(m, p, d, 0.0, tg.unwrap_or(f32::INFINITY), step, 0.5, |v, _| {
-                lit.source_at_voxel(v, -d)
+            let r = crate::medium::march::march(m, p, d, 0.0, tg.unwrap_or(f32::INFINITY), step, 0.5, |v, rho| {
+                lit.source(v, rho, -d)
             });
             cube.pixels[k] = r.radiance + lit.background(p, d, tg) * r.transmittance;
         }

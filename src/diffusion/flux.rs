@@ -33,8 +33,7 @@ pub fn diffuse_flux(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, ta
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
     let stride = [1usize, d[0], d[0] * d[1]];
     let n = d[0] * d[1] * d[2];
-    let st = m.sigma_t as f64;
-    let sigma_tr: [f64; 3] = std::array::from_fn(|c| st * (1.0 - m.albedo[c] as f64 * m.g as f64));
+    let sigma_tr: [f64; 3] = std::array::from_fn(|c| m.optics.sigma_tr(c));
     (0..n)
         .into_par_iter()
         .map(|idx| {
@@ -99,7 +98,7 @@ impl FluxField {
         FluxField {
             dims: m.dims(),
             rho_i1,
-            g: m.g,
+            g: m.optics.phase.mean_cosine() as f32,
         }
     }
 
@@ -109,14 +108,8 @@ impl FluxField {
         if rho <= 0.0 {
             return [Vec3::ZERO; 3];
         }
-        let (idx, w) = crate::cube::lit::trilinear_taps(self.dims, v);
-        let mut s = [Vec3::ZERO; 3];
-        for k in 0..8 {
-            let t = &self.rho_i1[idx[k]];
-            for c in 0..3 {
-                s[c] += t[c] * w[k];
-            }
-        }
+        let t = crate::math::Trilinear::new(self.dims, v.to_array());
+        let s: [Vec3; 3] = std::array::from_fn(|c| t.blend(|n| self.rho_i1[n][c]));
         [s[0] / rho, s[1] / rho, s[2] / rho]
     }
 

@@ -75,7 +75,7 @@
 //! energy-balance test sums it.
 
 pub mod flux;
-pub mod multigrid;
+pub(crate) mod multigrid;
 pub mod slab;
 
 use crate::error::{Error, Result};
@@ -105,6 +105,27 @@ impl Default for DiffusionSettings {
             max_iterations: 200,
             min_optical_depth: DEFAULT_MIN_OPTICAL_DEPTH,
         }
+    }
+}
+
+impl DiffusionSettings {
+    /// Check the settings; `file` names the scene file for messages.
+    pub fn validate(&self, file: &str) -> crate::error::Result<()> {
+        use crate::error::check;
+        check(
+            file,
+            "render.solver_tolerance",
+            self.tolerance.is_finite() && self.tolerance > 0.0 && self.tolerance < 1.0,
+            self.tolerance,
+            "the solver's relative residual must be in (0, 1), e.g. 1e-6",
+        )?;
+        check(
+            file,
+            "render.solver_max_iterations",
+            self.max_iterations >= 1,
+            self.max_iterations,
+            "the solver needs at least 1 iteration (default 200)",
+        )
     }
 }
 
@@ -191,7 +212,7 @@ pub fn boundary_terms(rho_p: f64, sigma_tr: f64, h: f64, tau_min: f64) -> (f64, 
 
 /// The box of voxels the solver works on: every full voxel, `lo` its minimum corner in the grid.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Domain {
+pub(crate) struct Domain {
     /// Minimum corner (voxel index).
     pub lo: [usize; 3],
     /// Cells per axis.
@@ -215,15 +236,13 @@ impl Domain {
 }
 
 /// Assemble band `c`'s operator and right-hand side on `dom` (see the module docs).
-pub fn assemble(m: &Medium, inc: &IncidentLight, c: usize, tau_min: f64, dom: &Domain) -> (Stencil, Vec<f64>) {
+pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, c: usize, tau_min: f64, dom: &Domain) -> (Stencil, Vec<f64>) {
     let gd = m.dims();
     let d = dom.dims;
     let n = d[0] * d[1] * d[2];
     let rho = m.density.data();
-    let a = m.albedo[c] as f64;
-    let st = m.sigma_t as f64;
-    let sigma_a = st * (1.0 - a);
-    let sigma_tr = st * (1.0 - a * m.g as f64);
+    let sigma_a = m.optics.sigma_a(c);
+    let sigma_tr = m.optics.sigma_tr(c);
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
     let gstride = [1, gd[0], gd[0] * gd[1]];
     let mut st_out = Stencil::zeros(d);
@@ -292,8 +311,7 @@ pub fn boundary_outflow(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution
     let stride = [1, d[0], d[0] * d[1]];
     let mut out = [0f64; 3];
     for (c, o) in out.iter_mut().enumerate() {
-        let a = m.albedo[c] as f64;
-        let sigma_tr = m.sigma_t as f64 * (1.0 - a * m.g as f64);
+        let sigma_tr = m.optics.sigma_tr(c);
         for k in 0..d[2] {
             for j in 0..d[1] {
                 for i in 0..d[0] {
@@ -384,7 +402,7 @@ pub fn solve_diffusion(
     let mut hier: Vec<(f32, Hierarchy)> = Vec::new();
     let mut which = [0usize; 3];
     for (c, (a, _)) in systems.iter().enumerate() {
-        let alb = medium.albedo[c];
+        let alb = medium.optics.albedo[c];
         which[c] = match hier.iter().position(|(x, _)| *x == alb) {
             Some(p) => p,
             None => {

@@ -361,6 +361,7 @@ impl Hierarchy {
     }
 
     /// Number of levels (including the direct one).
+    #[cfg(test)]
     pub fn levels(&self) -> usize {
         self.levels.len()
     }
@@ -429,11 +430,6 @@ impl Hierarchy {
         self.vcycle(0, r, z);
     }
 
-    /// The scaled finest operator.
-    pub fn operator(&self) -> &Stencil {
-        &self.levels[0]
-    }
-
     /// Solve A x = b (unscaled A, as assembled) by MGPCG from `x0` (or zero) to relative residual
     /// `tol` of the scaled system, at most `max_iter` iterations.
     pub fn solve(&self, b: &[f64], x0: Option<&[f64]>, tol: f64, max_iter: usize) -> (Vec<f64>, SolveStats) {
@@ -494,5 +490,158 @@ impl Hierarchy {
         stats.relative_residual = dot(&r, &r).sqrt() / bnorm;
         let x = y.iter().zip(&self.scale).map(|(v, s)| v * s).collect();
         (x, stats)
+    }
+}
+
+/// The assembled operator (eq. 4 with eq. 7) and the solver, against dense linear algebra
+/// (moved here from tests/ so the solver's internals need not be public).
+#[cfg(test)]
+mod operator_tests {
+    use super::{Hierarchy, Stencil};
+    use crate::diffusion::{assemble, Domain};
+    use crate::incident::{compute, IncidentSettings, IncidentSources};
+    use crate::lighting::DirectionBins;
+    use crate::math::{Rgb, Rng, Vec3};
+    use crate::medium::{Grid3, Medium};
+
+    /// A random cloud: each voxel of the inner region full with probability 0.8, with optical depth
+    /// per voxel log-uniform in [1e-3, 10] (σt = 1 m⁻¹, 1 m voxels).
+    fn random_cloud(d: [usize; 3], seed: u64, albedo: f32, g: f32) -> Medium {
+        let mut grid = Grid3::filled(d, 0.0);
+        let mut rng = Rng::new(seed, 7);
+        for k in 1..d[2] - 1 {
+            for j in 1..d[1] - 1 {
+                for i in 1..d[0] - 1 {
+                    if rng.uniform() < 0.8 {
+                        grid.set(i, j, k, 10f32.powf(rng.uniform() * 4.0 - 3.0));
+                    }
+                }
+            }
+        }
+        Medium::new(grid, Vec3::ZERO, Vec3::ONE, 1.0, Rgb::splat(albedo), g)
+    }
+
+    fn sky_and_sun(l: f32, sun: Option<(Vec3, f32)>) -> IncidentSources {
+        IncidentSources {
+            bin_radiance: vec![Rgb::splat(l); 96],
+            sun: sun.map(|(d, e)| (d.normalize(), Rgb::splat(e))),
+        }
+    }
+
+    fn dense(s: &Stencil) -> (Vec<usize>, Vec<f64>) {
+        let cells: Vec<usize> = (0..s.diag.len()).filter(|c| s.diag[*c] > 0.0).collect();
+        let n = cells.len();
+        let mut idx = vec![usize::MAX; s.diag.len()];
+        for (q, c) in cells.iter().enumerate() {
+            idx[*c] = q;
+        }
+        let st = [1, s.dims[0], s.dims[0] * s.dims[1]];
+        let mut a = vec![0.0; n * n];
+        for (q, &c) in cells.iter().enumerate() {
+            a[q * n + q] = s.diag[c];
+            for ax in 0..3 {
+                if s.off[ax][c] != 0.0 {
+                    let r = idx[c + st[ax]];
+                    assert_ne!(r, usize::MAX, "coupling to a non-unknown");
+                    a[q * n + r] = s.off[ax][c];
+                    a[r * n + q] = s.off[ax][c];
+                }
+            }
+        }
+        (cells, a)
+    }
+
+    /// Gaussian elimination with partial pivoting.
+    fn dense_solve(mut a: Vec<f64>, mut b: Vec<f64>) -> Vec<f64> {
+        let n = b.len();
+        for c in 0..n {
+            let p = (c..n).max_by(|x, y| a[x * n + c].abs().total_cmp(&a[y * n + c].abs())).unwrap();
+            for k in 0..n {
+                a.swap(c * n + k, p * n + k);
+            }
+            b.swap(c, p);
+            for r in c + 1..n {
+                let f = a[r * n + c] / a[c * n + c];
+                for k in c..n {
+                    a[r * n + k] -= f * a[c * n + k];
+                }
+                b[r] -= f * b[c];
+            }
+        }
+        let mut x = vec![0.0; n];
+        for r in (0..n).rev() {
+            let s: f64 = (r + 1..n).map(|k| a[r * n + k] * x[k]).sum();
+            x[r] = (b[r] - s) / a[r * n + r];
+        }
+        x
+    }
+
+    #[test]
+    fn operator_is_symmetric_positive_definite() {
+        let m = random_cloud([9, 8, 7], 3, 0.95, 0.8);
+        let inc = compute(
+            &m,
+            &DirectionBins::new(),
+            &sky_and_sun(0.5, Some((Vec3::new(0.3, 1.0, 0.2), 3.0))),
+            &IncidentSettings::default(),
+            None,
+        );
+        let dom = Domain::of(&m).unwrap();
+        for tau_min in [0.0, 1e-3] {
+            let (s, _) = assemble(&m, &inc, 0, tau_min, &dom);
+            let (cells, a) = dense(&s);
+            let n = cells.len();
+            assert!(n > 100);
+            for q in 0..n {
+                for r in 0..n {
+                    assert_eq!(a[q * n + r], a[r * n + q]);
+                }
+            }
+            // Cholesky must succeed with positive pivots.
+            let mut l = a.clone();
+            for j in 0..n {
+                let mut d = l[j * n + j];
+                for k in 0..j {
+                    d -= l[j * n + k] * l[j * n + k];
+                }
+                assert!(d > 0.0, "pivot {j} = {d}: not positive definite");
+                let d = d.sqrt();
+                l[j * n + j] = d;
+                for i in j + 1..n {
+                    let mut v = l[i * n + j];
+                    for k in 0..j {
+                        v -= l[i * n + k] * l[j * n + k];
+                    }
+                    l[i * n + j] = v / d;
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn multigrid_matches_dense_solve() {
+        // Coarsened down to 16 unknowns, so several multigrid levels sit above the direct one.
+        for (d, seed) in [([14, 12, 10], 1u64), ([18, 14, 12], 2)] {
+            let m = random_cloud(d, seed, 0.99, 0.85);
+            let inc = compute(
+                &m,
+                &DirectionBins::new(),
+                &sky_and_sun(1.0, Some((Vec3::new(-0.2, 1.0, 0.4), 2.0))),
+                &IncidentSettings::default(),
+                None,
+            );
+            let dom = Domain::of(&m).unwrap();
+            let (s, b) = assemble(&m, &inc, 1, 0.0, &dom);
+            let h = Hierarchy::build_with(s.clone(), 16);
+            assert!(h.levels() >= 4, "levels {}", h.levels());
+            let (x, st) = h.solve(&b, None, 1e-12, 500);
+            assert!(st.relative_residual <= 1e-12, "{st:?}");
+            let (cells, a) = dense(&s);
+            let bd: Vec<f64> = cells.iter().map(|c| b[*c]).collect();
+            let xd = dense_solve(a, bd);
+            let num: f64 = cells.iter().zip(&xd).map(|(c, v)| (x[*c] - v).powi(2)).sum::<f64>().sqrt();
+            let den: f64 = xd.iter().map(|v| v * v).sum::<f64>().sqrt();
+            assert!(num / den < 1e-8, "relative difference {}", num / den);
+        }
     }
 }

@@ -32,7 +32,6 @@ use super::segments::{LowSegment, RayProfile};
 use crate::cube::CubeImage;
 use crate::math::{Rgb, Vec3};
 use crate::medium::Medium;
-use crate::phase::{hg, hg_f64};
 
 /// Bridges are resolved recursively at most this deep (2^depth sub-segments at worst).
 pub const MAX_BRIDGE_DEPTH: usize = 3;
@@ -82,8 +81,9 @@ pub struct EdgeSettings {
     pub cube_res: usize,
     /// Bound on the omitted Poisson tail (eq. 8).
     pub tail: f64,
-    /// Longest compositing step (m); pieces are cut to at most this length.
-    pub step: f32,
+    /// Longest compositing step (m); pieces are cut to at most this length (the scene's
+    /// `render.step` voxels times the smallest voxel edge).
+    pub step_m: f32,
     /// Resolve bridges between segments smoothly (section 6 fix); false: the paper's hard switch.
     pub merge_transition: bool,
 }
@@ -95,24 +95,22 @@ impl Default for EdgeSettings {
             band: 0.5,
             cube_res: 16,
             tail: DEFAULT_TAIL,
-            step: 5.0,
+            step_m: 5.0,
             merge_transition: true,
         }
     }
 }
 
 impl EdgeSettings {
-    /// Settings from a scene: T from `render.low_density_threshold`, the step from `render.step`
-    /// (a fraction of the smallest voxel), the cube resolution from `render.cube_resolution`
-    /// (docs/edges.md: res 8 is within 2.4 % of res 16 on the edge term at a quarter of the cost),
-    /// the rest at their defaults.
-    pub fn from_scene(scene: &crate::scene::Scene) -> Self {
-        EdgeSettings {
-            threshold: scene.render.low_density_threshold,
-            step: scene.render.step * scene.medium.min_voxel(),
-            cube_res: scene.render.cubes.res,
-            ..Default::default()
-        }
+    /// Check the settings; `file` names the scene file for messages.
+    pub fn validate(&self, file: &str) -> crate::error::Result<()> {
+        crate::error::check(
+            file,
+            "render.low_density_threshold",
+            self.threshold.is_finite() && self.threshold >= 0.0,
+            self.threshold,
+            "the edge threshold is a density ≥ 0 (0 turns the edge treatment off)",
+        )
     }
 }
 
@@ -192,8 +190,8 @@ impl<'a> EdgeGather<'a> {
         sun: SunInput<'a>,
         dense: &'a (dyn Fn(Vec3, Vec3) -> Rgb + Sync),
     ) -> Self {
-        let orders = OrderKernel::orders_to_tabulate(medium.g, MAX_TABULATED_DEPTH, settings.tail);
-        let kernel = OrderKernel::new(settings.cube_res.max(1), medium.g, orders);
+        let orders = OrderKernel::orders_to_tabulate(medium.optics.phase, MAX_TABULATED_DEPTH, settings.tail);
+        let kernel = OrderKernel::new(settings.cube_res.max(1), medium.optics.phase, orders);
         EdgeGather {
             medium,
             settings,
@@ -264,12 +262,14 @@ impl<'a> EdgeGather<'a> {
         let m = self.medium;
         let q = segment_orders(seg.depth, self.settings.tail);
         let kk: Vec<Rgb> = (0..q.len()).map(|i| k[i.min(k.len() - 1)]).collect();
-        let mut e = edge_radiance(&q, &kk, m.albedo, 1);
+        let mut e = edge_radiance(&q, &kk, m.optics.albedo, 1);
         let es = (self.sun.irradiance_at)(seg.center(o, d));
         if es.max_element() > 0.0 && q.len() >= 2 {
+            // cos θ = (−ω_sun)·(−d): sunlight leaving towards the eye.
             let c = self.sun.dir.dot(d) as f64;
-            let ks: Vec<Rgb> = (1..=q.len()).map(|i| es * hg_f64(c, (m.g as f64).powi(i as i32)) as f32).collect();
-            e += edge_radiance(&q, &ks, m.albedo, 2);
+            let phase = m.optics.phase;
+            let ks: Vec<Rgb> = (1..=q.len()).map(|i| es * phase.order(i).eval_cos_f64(c) as f32).collect();
+            e += edge_radiance(&q, &ks, m.optics.albedo, 2);
         }
         e
     }
@@ -417,12 +417,12 @@ impl<'a> EdgeGather<'a> {
                 *x += s;
             }
         }
-        let phase_sun = hg(self.sun.dir.dot(d), m.g);
+        let phase_sun = m.optics.phase.eval(self.sun.dir, -d);
         let to_eye = -d;
         let mut tr = 1.0f64;
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
         'pieces: for (k, p) in prof.pieces.iter().enumerate() {
-            let n = ((p.t1 - p.t0) / self.settings.step.max(1e-6) as f64).ceil().max(1.0) as usize;
+            let n = ((p.t1 - p.t0) / self.settings.step_m.max(1e-6) as f64).ceil().max(1.0) as usize;
             for s in 0..n {
                 let ta = p.t0 + (p.t1 - p.t0) * s as f64 / n as f64;
                 let tb = p.t0 + (p.t1 - p.t0) * (s + 1) as f64 / n as f64;
@@ -441,9 +441,9 @@ impl<'a> EdgeGather<'a> {
                 if w < 1.0 {
                     aov.edge += f * (1.0 - w) * edge_src[k];
                 }
-                aov.sun_single += f * m.albedo * (self.sun.irradiance_at)(pos) * phase_sun;
+                aov.sun_single += f * m.optics.albedo * (self.sun.irradiance_at)(pos) * phase_sun;
                 tr *= (-delta).exp();
-                if tr < crate::render::march::T_CUTOFF as f64 {
+                if tr < crate::medium::march::T_CUTOFF as f64 {
                     tr = 0.0;
                     break 'pieces;
                 }

@@ -23,8 +23,8 @@
 use crate::cube::CubeImage;
 use crate::lighting::bins::{rect_solid_angle, CUBE_FACES};
 use crate::math::Rgb;
+use crate::optics::Hg;
 use crate::orders::poisson_weights;
-use crate::phase::hg_f64;
 use rayon::prelude::*;
 
 /// Sub-pixels per rectangle edge in one step of the adaptive pixel integration.
@@ -51,7 +51,7 @@ fn rect_points(face: usize, u0: f64, u1: f64, v0: f64, v1: f64, k: usize, out: &
 }
 
 /// Midpoint rule with SUB² points on the cube-face rectangle [u0,u1]×[v0,v1] of `face`: Σ HG(g, ω_x)·dΩ.
-fn midpoint_rect(face: usize, u0: f64, u1: f64, v0: f64, v1: f64, g: f64) -> f64 {
+fn midpoint_rect(face: usize, u0: f64, u1: f64, v0: f64, v1: f64, g: Hg) -> f64 {
     let f = &CUBE_FACES[face];
     let mut s = 0.0;
     for b in 0..SUB {
@@ -61,7 +61,7 @@ fn midpoint_rect(face: usize, u0: f64, u1: f64, v0: f64, v1: f64, g: f64) -> f64
             let (u, v) = (0.5 * (ua + ub), 0.5 * (va + vb));
             let dir = f.n.as_dvec3() + f.tu.as_dvec3() * u + f.tv.as_dvec3() * v;
             let c = dir.x / dir.length();
-            s += hg_f64(c, g) * rect_solid_angle(ua, ub, va, vb);
+            s += g.eval_cos_f64(c) * rect_solid_angle(ua, ub, va, vb);
         }
     }
     s
@@ -71,7 +71,7 @@ fn midpoint_rect(face: usize, u0: f64, u1: f64, v0: f64, v1: f64, g: f64) -> f64
 /// estimate disagrees with the sum over its four quadrants by more than PIXEL_TOL (relative) is
 /// split. The forward peak of g = 0.9
 /// needs a few levels; the rest of the sphere none.
-fn integrate_rect(face: usize, u0: f64, u1: f64, v0: f64, v1: f64, g: f64, level: usize) -> f64 {
+fn integrate_rect(face: usize, u0: f64, u1: f64, v0: f64, v1: f64, g: Hg, level: usize) -> f64 {
     let coarse = midpoint_rect(face, u0, u1, v0, v1, g);
     let (um, vm) = (0.5 * (u0 + u1), 0.5 * (v0 + v1));
     let quads = [(u0, um, v0, vm), (um, u1, v0, vm), (u0, um, vm, v1), (um, u1, vm, v1)];
@@ -93,8 +93,8 @@ pub const DEFAULT_TAIL: f64 = 1e-4;
 pub struct OrderKernel {
     /// Pixels per face edge.
     pub res: usize,
-    /// HG mean cosine of one scattering event.
-    pub g: f32,
+    /// The phase function of one scattering event.
+    pub phase: Hg,
     /// Highest order tabulated.
     pub max_order: usize,
     /// w[(i − 1)·6res² + pixel], f32, each order sums to 1.
@@ -103,7 +103,7 @@ pub struct OrderKernel {
 
 impl OrderKernel {
     /// Tabulate orders 1..=`max_order` (at least 1) for cubes of `res` pixels per edge.
-    pub fn new(res: usize, g: f32, max_order: usize) -> Self {
+    pub fn new(res: usize, phase: Hg, max_order: usize) -> Self {
         assert!(res > 0, "cube resolution must be positive");
         let max_order = max_order.max(1);
         let n = 6 * res * res;
@@ -125,12 +125,12 @@ impl OrderKernel {
         let weights: Vec<f32> = (1..=max_order)
             .into_par_iter()
             .flat_map_iter(|i| {
-                let gi = (g as f64).powi(i as i32);
+                let gi = phase.order(i);
                 let acc: Vec<f64> = (0..n)
                     .map(|p| {
                         let (coarse, fine) = &pts[p];
-                        let c: f64 = coarse.iter().map(|(x, w)| hg_f64(*x, gi) * w).sum();
-                        let f: f64 = fine.iter().map(|(x, w)| hg_f64(*x, gi) * w).sum();
+                        let c: f64 = coarse.iter().map(|(x, w)| gi.eval_cos_f64(*x) * w).sum();
+                        let f: f64 = fine.iter().map(|(x, w)| gi.eval_cos_f64(*x) * w).sum();
                         let (face, j, ii) = (p / (res * res), (p / res) % res, p % res);
                         let (u0, u1) = CubeImage::pixel_range(res, ii);
                         let (v0, v1) = CubeImage::pixel_range(res, j);
@@ -147,7 +147,7 @@ impl OrderKernel {
             .collect();
         OrderKernel {
             res,
-            g,
+            phase,
             max_order,
             weights,
         }
@@ -203,9 +203,9 @@ impl OrderKernel {
     /// Orders worth tabulating for segments up to optical depth `d_max`: those eq. 8 needs, but no
     /// further than the first order with g^i < 0.02 (higher orders are within 2 % of isotropic
     /// in their first moment, and [`OrderKernel::convolve`] reuses the last tabulated one).
-    pub fn orders_to_tabulate(g: f32, d_max: f64, tail: f64) -> usize {
+    pub fn orders_to_tabulate(phase: Hg, d_max: f64, tail: f64) -> usize {
         let need = Self::orders_for_depth(d_max, tail);
-        let flat = (1..=need).find(|&i| (g.abs() as f64).powi(i as i32) < 0.02).unwrap_or(need);
+        let flat = (1..=need).find(|&i| phase.order(i).mean_cosine().abs() < 0.02).unwrap_or(need);
         need.min(flat).max(1)
     }
 
@@ -261,7 +261,7 @@ mod tests {
 
     #[test]
     fn weights_sum_to_one_and_peak_forward() {
-        let k = OrderKernel::new(8, 0.9, 6);
+        let k = OrderKernel::new(8, Hg::new(0.9), 6);
         for i in 1..=6 {
             let s: f64 = k.weights(i).iter().map(|w| *w as f64).sum();
             assert!((s - 1.0).abs() < 1e-5, "order {i}: {s}");
@@ -283,7 +283,7 @@ mod tests {
     fn bright_pixel_ahead_dominates_one_behind() {
         // One bright pixel straight ahead (+x face centre) versus straight behind (−x face centre).
         let res = 8;
-        let k = OrderKernel::new(res, 0.9, 1);
+        let k = OrderKernel::new(res, Hg::new(0.9), 1);
         let mut ahead = CubeImage::new(res);
         let mut behind = CubeImage::new(res);
         let ia = ahead.index(0, res / 2, res / 2);
@@ -304,7 +304,7 @@ mod tests {
                     let (du, dv) = ((u1 - u0) / n as f64, (u1 - u0) / n as f64);
                     let f = &CUBE_FACES[face];
                     let dir = f.n.as_dvec3() + f.tu.as_dvec3() * (ua + 0.5 * du) + f.tv.as_dvec3() * (va + 0.5 * dv);
-                    s += hg_f64(dir.x / dir.length(), 0.9) * rect_solid_angle(ua, ua + du, va, va + dv);
+                    s += Hg::new(0.9).eval_cos_f64(dir.x / dir.length()) * rect_solid_angle(ua, ua + du, va, va + dv);
                 }
             }
             s
@@ -325,7 +325,7 @@ mod tests {
     fn matches_brute_force_convolution_of_smooth_radiance() {
         let g = 0.8f32;
         let res = 24;
-        let k = OrderKernel::new(res, g, 4);
+        let k = OrderKernel::new(res, Hg::new(g), 4);
         let l = |w: Vec3| 1.0 + 0.8 * w.x + 0.5 * w.y * w.z + 0.3 * (3.0 * w.x * w.x - 1.0);
         let mut cube = CubeImage::new(res);
         for face in 0..6 {
@@ -338,7 +338,8 @@ mod tests {
         }
         let kk = k.convolve(&cube, 4);
         for i in 1..=4 {
-            let gi = (g as f64).powi(i as i32);
+            let phase_i = Hg::new(g).order(i);
+            let gi = phase_i.mean_cosine();
             // Quadrature with μ = 1 − 2s² (points crowd the forward peak).
             let (nt, np) = (800, 256);
             let mut sum = 0.0;
@@ -350,7 +351,7 @@ mod tests {
                 for b in 0..np {
                     let phi = (b as f64 + 0.5) / np as f64 * 2.0 * PI;
                     let w = Vec3::new(mu as f32, (st * phi.cos()) as f32, (st * phi.sin()) as f32);
-                    sum += hg_f64(mu, gi) * l(w) as f64 * dmu * 2.0 * PI / np as f64;
+                    sum += phase_i.eval_cos_f64(mu) * l(w) as f64 * dmu * 2.0 * PI / np as f64;
                 }
             }
             // Exact by Legendre: ∫ HG(g^i) L = L_0 + g^i·0.8 (the P1 term) + g^{2i}·0.3·2 (P2 = (3μ²−1)/2).
@@ -384,7 +385,7 @@ mod tests {
     #[test]
     fn uniform_cube_gives_closed_form() {
         // K_i = L for all i; E = Σ_{i≥1} q_i a^i L = (e^{−D(1−a)} − e^{−D}) L (up to the tail).
-        let k = OrderKernel::new(4, 0.9, 40);
+        let k = OrderKernel::new(4, Hg::new(0.9), 40);
         let mut cube = CubeImage::new(4);
         cube.pixels.iter_mut().for_each(|p| *p = Rgb::new(2.0, 1.0, 0.5));
         let a = Rgb::new(1.0, 0.9, 0.5);

@@ -10,7 +10,7 @@
 //! cell) is missed, which only moves a piece boundary, never the optical depth.
 
 use crate::math::Vec3;
-use crate::medium::{Dda, Medium};
+use crate::medium::Medium;
 use glam::DVec3;
 
 /// Samples per dual cell used to detect level crossings (cell quarters).
@@ -83,22 +83,15 @@ impl RayProfile {
             return prof;
         };
         let levels: Vec<f32> = levels.iter().copied().filter(|l| *l > 0.0).collect();
-        let sigma_t = m.sigma_t as f64;
-        let h = m.voxel_size.as_dvec3();
-        let dual_origin = m.origin.as_dvec3() - 0.5 * h;
-        let dims = m.dims();
-        let dual_dims = [dims[0] + 1, dims[1] + 1, dims[2] + 1];
+        let sigma_t = m.optics.sigma_t as f64;
         let rho = |t: f64| rho_at(m, od, dd, t);
         let simpson = |a: f64, b: f64| -> (f64, [f32; 3]) {
             let r = [rho(a), rho(0.5 * (a + b)), rho(b)];
             (sigma_t * (b - a) / 6.0 * (r[0] as f64 + 4.0 * r[1] as f64 + r[2] as f64), r)
         };
         let mut cuts: Vec<f64> = Vec::with_capacity(8);
-        m.majorant.for_each_block(m, o, d, t0, t1, |ta, tb, maj| {
-            if maj <= 0.0 {
-                return true;
-            }
-            for s in Dda::new(dual_origin, h, dual_dims, od, dd, ta as f64, tb as f64) {
+        m.for_each_dual_block(o, d, t0, t1, |_, cells| {
+            for s in cells {
                 let mut samples = [(0f64, 0f32); CELL_SAMPLES + 1];
                 for (k, sm) in samples.iter_mut().enumerate() {
                     let t = s.t0 + (s.t1 - s.t0) * k as f64 / CELL_SAMPLES as f64;
@@ -153,7 +146,6 @@ impl RayProfile {
                     }
                 }
             }
-            true
         });
         prof
     }
@@ -210,7 +202,7 @@ impl RayProfile {
         for p in &self.pieces[first..end] {
             if acc + p.tau >= target && p.tau > 0.0 {
                 let want = target - acc;
-                let sigma_t = m.sigma_t as f64;
+                let sigma_t = m.optics.sigma_t as f64;
                 let r0 = p.rho[0] as f64;
                 let (mut lo, mut hi) = (p.t0, p.t1);
                 for _ in 0..50 {
@@ -235,7 +227,7 @@ impl RayProfile {
     /// Optical depth between `t_a` and `t_b` (both inside one piece), exact.
     pub fn depth_within(&self, m: &Medium, t_a: f64, t_b: f64) -> f64 {
         let r = |t| rho_at(m, self.o, self.d, t) as f64;
-        m.sigma_t as f64 * (t_b - t_a) / 6.0 * (r(t_a) + 4.0 * r(0.5 * (t_a + t_b)) + r(t_b))
+        m.optics.sigma_t as f64 * (t_b - t_a) / 6.0 * (r(t_a) + 4.0 * r(0.5 * (t_a + t_b)) + r(t_b))
     }
 
     /// ρ at distance t.

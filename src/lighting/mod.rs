@@ -2,12 +2,14 @@
 
 pub mod atmosphere;
 pub mod bins;
+pub mod desc;
 pub mod envmap;
 
 use crate::error::Result;
+use crate::error::{check, finite3, rgb_in_unit, rgb_nonneg};
 use crate::image::Image;
 use crate::math::{Rgb, Vec3};
-use crate::scene::{check, finite3, rgb_in_unit, rgb_nonneg, GroundDesc, SkyDesc, SkyModel, SunDesc};
+pub use desc::{GroundDesc, SkyDesc, SkyModel, SunDesc};
 use glam::Vec2;
 use std::f32::consts::PI;
 use std::path::Path;

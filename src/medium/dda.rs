@@ -1,7 +1,9 @@
 //! Exact 3-D DDA (Amanatides & Woo 1987) over a regular lattice: yields every cell a ray
 //! crosses with the ray-parameter interval inside it. Boundaries are recomputed from the integer
 //! cell index at each step (no accumulated drift), so the segment lengths telescope exactly to the
-//! chord length. Stage 1 of the method weights by these lengths.
+//! chord length. Users: the dual-lattice Simpson walk of the exact optical depth
+//! ([`super::Medium::for_each_dual_cell`]), the majorant blocks, and stage 1's rays
+//! ([`crate::incident`]), which weight by these lengths.
 
 use glam::DVec3;
 
@@ -40,6 +42,9 @@ pub struct Dda {
     dims: [usize; 3],
     cell: [i64; 3],
     step: [i64; 3],
+    /// Ray parameter of the current cell's exit boundary per axis (recomputed only for the axis
+    /// that stepped, from the integer index, so it does not drift).
+    tb: [f64; 3],
     t: f64,
     t_end: f64,
     done: bool,
@@ -82,6 +87,7 @@ impl Dda {
             dims,
             cell: [0; 3],
             step: [0; 3],
+            tb: [f64::INFINITY; 3],
             t: 0.0,
             t_end: 0.0,
             done: true,
@@ -107,6 +113,7 @@ impl Dda {
                 0
             };
         }
+        dda.tb = [dda.t_boundary(0), dda.t_boundary(1), dda.t_boundary(2)];
         dda.t = t0;
         dda.t_end = t1;
         dda.done = false;
@@ -133,7 +140,7 @@ impl Iterator for Dda {
             if self.done {
                 return None;
             }
-            let tb = [self.t_boundary(0), self.t_boundary(1), self.t_boundary(2)];
+            let tb = self.tb;
             let axis = if tb[0] <= tb[1] && tb[0] <= tb[2] {
                 0
             } else if tb[1] <= tb[2] {
@@ -154,6 +161,8 @@ impl Iterator for Dda {
                 self.cell[axis] += self.step[axis];
                 if self.cell[axis] < 0 || self.cell[axis] >= self.dims[axis] as i64 {
                     self.done = true;
+                } else {
+                    self.tb[axis] = self.t_boundary(axis);
                 }
             }
             if seg.t1 > seg.t0 {

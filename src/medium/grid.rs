@@ -102,31 +102,7 @@ impl Grid3 {
     /// the field is defined on the whole box [0, n]³; the caller decides what lies outside it.
     #[inline]
     pub fn trilinear(&self, p: [f32; 3]) -> f32 {
-        let mut i0 = [0usize; 3];
-        let mut i1 = [0usize; 3];
-        let mut f = [0f32; 3];
-        for a in 0..3 {
-            let n = self.dims[a];
-            let x = p[a] - 0.5;
-            let fl = x.floor();
-            let fi = fl as isize;
-            f[a] = x - fl;
-            let lo = fi.clamp(0, n as isize - 1) as usize;
-            let hi = (fi + 1).clamp(0, n as isize - 1) as usize;
-            i0[a] = lo;
-            i1[a] = hi;
-        }
-        let nx = self.dims[0];
-        let nxy = nx * self.dims[1];
-        let d = &self.data;
-        let at = |i: usize, j: usize, k: usize| d[i + nx * j + nxy * k];
-        let c00 = at(i0[0], i0[1], i0[2]) * (1.0 - f[0]) + at(i1[0], i0[1], i0[2]) * f[0];
-        let c10 = at(i0[0], i1[1], i0[2]) * (1.0 - f[0]) + at(i1[0], i1[1], i0[2]) * f[0];
-        let c01 = at(i0[0], i0[1], i1[2]) * (1.0 - f[0]) + at(i1[0], i0[1], i1[2]) * f[0];
-        let c11 = at(i0[0], i1[1], i1[2]) * (1.0 - f[0]) + at(i1[0], i1[1], i1[2]) * f[0];
-        let c0 = c00 * (1.0 - f[1]) + c10 * f[1];
-        let c1 = c01 * (1.0 - f[1]) + c11 * f[1];
-        c0 * (1.0 - f[2]) + c1 * f[2]
+        crate::math::Trilinear::new(self.dims, p).blend(|n| self.data[n])
     }
 
     /// Largest value (0 for an all-zero grid).

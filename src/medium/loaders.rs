@@ -4,10 +4,11 @@
 //! Readers never trust a header: every size is checked against the bytes really present before
 //! anything is allocated, so a hostile file cannot cause an unbounded allocation or a panic.
 
+use super::MediumDesc;
 use super::{procedural, Grid3};
+use crate::error::check;
 use crate::error::{Error, Result};
 use crate::math::Vec3;
-use crate::scene::{check, MediumDesc};
 use std::path::{Path, PathBuf};
 
 /// A loaded grid with its placement in the world.

@@ -13,13 +13,16 @@ pub mod dda;
 pub mod grid;
 pub mod loaders;
 pub mod majorant;
+pub mod march;
 pub mod procedural;
 pub mod vdb;
 
+use crate::error::{check, finite3, rgb_in_unit};
 use crate::error::{Error, Result};
 use crate::math::{Rgb, Vec3};
-use crate::scene::{check, finite3, rgb_in_unit, MediumDesc};
+use crate::optics::Optics;
 use glam::DVec3;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -31,6 +34,55 @@ pub use majorant::MajorantGrid;
 /// sizes overflow f32; no cloud has voxels of 1000 km.
 pub const MAX_VOXEL_SIZE: f32 = 1.0e6;
 
+/// `[medium]`: the cloud's density grid and its optical properties.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct MediumDesc {
+    /// `"procedural"` or a path relative to the scene file: `.vol`, `.npy`, `.raw` (+ `.json`), `.vdb`.
+    pub grid: String,
+    /// Seed of the procedural cumulus.
+    pub seed: u64,
+    /// Procedural resolution (nx, ny, nz).
+    pub resolution: [usize; 3],
+    /// Voxel edge length (m), for `.npy`, `.raw` and procedural grids.
+    pub voxel_size: f32,
+    /// Minimum corner of the grid (m), for `.npy`, `.raw` and procedural grids.
+    pub origin: [f32; 3],
+    /// Extinction coefficient at density 1 (m⁻¹).
+    pub sigma_t: f32,
+    /// Single-scattering albedo per RGB band (unitless, in [0, 1]).
+    pub albedo: [f32; 3],
+    /// Henyey–Greenstein mean cosine (unitless, |g| < 1).
+    pub g: f32,
+    /// Grid to read from a `.vdb` file.
+    pub grid_name: String,
+    /// Extra factor on a `.vdb` file's index-to-world transform (unitless).
+    pub scale: f32,
+    /// Largest dense grid accepted, in voxels (memory guard; 4 bytes each plus solver storage).
+    pub max_voxels: u64,
+    /// Average N×N×N blocks after loading (1 = off).
+    pub downsample: usize,
+}
+
+impl Default for MediumDesc {
+    fn default() -> Self {
+        MediumDesc {
+            grid: "procedural".into(),
+            seed: 1,
+            resolution: [100, 80, 60],
+            voxel_size: 10.0,
+            origin: [-500.0, 0.0, -300.0],
+            sigma_t: 0.05,
+            albedo: [0.999, 0.999, 0.999],
+            g: 0.9,
+            grid_name: "density".into(),
+            scale: 1.0,
+            max_voxels: 200_000_000,
+            downsample: 1,
+        }
+    }
+}
+
 /// A validated medium.
 #[derive(Clone, Debug)]
 pub struct Medium {
@@ -40,12 +92,8 @@ pub struct Medium {
     pub origin: Vec3,
     /// Voxel edge lengths (m).
     pub voxel_size: Vec3,
-    /// Extinction at density 1 (m⁻¹).
-    pub sigma_t: f32,
-    /// Single-scattering albedo per band.
-    pub albedo: Rgb,
-    /// HG mean cosine.
-    pub g: f32,
+    /// σt, albedo and phase function at density 1 (the only place they are kept).
+    pub optics: Optics,
     /// Per-block bounds of ρ for empty-space skipping and delta tracking.
     pub majorant: Arc<MajorantGrid>,
 }
@@ -53,14 +101,17 @@ pub struct Medium {
 impl Medium {
     /// Wrap a density grid; densities must already be validated (finite, ≥ 0).
     pub fn new(density: Grid3, origin: Vec3, voxel_size: Vec3, sigma_t: f32, albedo: Rgb, g: f32) -> Medium {
+        Medium::with_optics(density, origin, voxel_size, Optics::new(sigma_t, albedo, g))
+    }
+
+    /// [`Medium::new`] from an [`Optics`] (e.g. another medium's).
+    pub fn with_optics(density: Grid3, origin: Vec3, voxel_size: Vec3, optics: Optics) -> Medium {
         let majorant = MajorantGrid::build(&density, 4);
         Medium {
             density: Arc::new(density),
             origin,
             voxel_size,
-            sigma_t,
-            albedo,
-            g,
+            optics,
             majorant: Arc::new(majorant),
         }
     }
@@ -206,9 +257,6 @@ impl Medium {
         };
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
         let h = self.voxel_size.as_dvec3();
-        let dual_origin = self.origin.as_dvec3() - 0.5 * h;
-        let dims = self.dims();
-        let dual_dims = [dims[0] + 1, dims[1] + 1, dims[2] + 1];
         let inv_h = DVec3::ONE / h;
         let orig = self.origin.as_dvec3();
         let rho = |t: f64| -> f64 {
@@ -216,26 +264,40 @@ impl Medium {
             self.density.trilinear([v.x as f32, v.y as f32, v.z as f32]) as f64
         };
         let mut sum = 0.0;
-        self.majorant.for_each_block(self, o, d, t0, t1, |ta, tb, maj| {
-            if maj <= 0.0 {
-                return true;
-            }
+        self.for_each_dual_block(o, d, t0, t1, |ta, cells| {
             let mut r0 = rho(ta as f64);
-            for s in Dda::new(dual_origin, h, dual_dims, od, dd, ta as f64, tb as f64) {
+            for s in cells {
                 let rm = rho(0.5 * (s.t0 + s.t1));
                 let r1 = rho(s.t1);
                 sum += (s.t1 - s.t0) / 6.0 * (r0 + 4.0 * rm + r1);
                 r0 = r1;
             }
-            true
         });
         sum
+    }
+
+    /// The one dual-lattice walk: along `o + t·d` for t ∈ [t0, t1] (inside the box), for every
+    /// majorant block that is not empty, `f(t_enter, cells)` with the DDA over the dual cells
+    /// (between adjacent voxel centres, where the trilinear ρ is a cubic in t, so Simpson's rule
+    /// on a cell is exact) crossed inside the block. Empty blocks are skipped.
+    pub fn for_each_dual_block(&self, o: Vec3, d: Vec3, t0: f32, t1: f32, mut f: impl FnMut(f32, Dda)) {
+        let (od, dd) = (o.as_dvec3(), d.as_dvec3());
+        let h = self.voxel_size.as_dvec3();
+        let dual_origin = self.origin.as_dvec3() - 0.5 * h;
+        let dims = self.dims();
+        let dual_dims = [dims[0] + 1, dims[1] + 1, dims[2] + 1];
+        self.majorant.for_each_block(self, o, d, t0, t1, |ta, tb, maj| {
+            if maj > 0.0 {
+                f(ta, Dda::new(dual_origin, h, dual_dims, od, dd, ta as f64, tb as f64));
+            }
+            true
+        });
     }
 
     /// Optical depth ∫ σt ρ ds (unitless) along a ray segment; exact.
     #[inline]
     pub fn optical_depth(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> f32 {
-        (self.sigma_t as f64 * self.density_integral(o, d, t_min, t_max)) as f32
+        (self.optics.sigma_t as f64 * self.density_integral(o, d, t_min, t_max)) as f32
     }
 
     /// Transmittance exp(−optical depth) along a ray segment; exact.

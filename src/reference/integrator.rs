@@ -13,7 +13,6 @@
 use super::sky::SkySampler;
 use super::tracking::{ratio_transmittance, sample_collision};
 use crate::math::{cosine_hemisphere, Frame, Rgb, Rng, Vec3};
-use crate::phase::{hg, sample_hg};
 use crate::scene::Scene;
 use std::f32::consts::FRAC_1_PI;
 
@@ -47,6 +46,7 @@ fn power(a: f32, b: f32) -> f32 {
 /// Radiance (W·m⁻²·sr⁻¹) arriving at `o` from direction `d` (the ray `o + t·d`), one sample.
 pub fn radiance(scene: &Scene, o: Vec3, d: Vec3, opts: &PathOptions, rng: &mut Rng) -> Rgb {
     let m = &scene.medium;
+    let phase = m.optics.phase;
     let sun = &scene.sun;
     let ground = scene.ground.as_ref();
     // Sky NEE through `Sky::sample`/`Sky::pdf` (uniform sphere for the constant sky, map importance sampling otherwise).
@@ -78,16 +78,16 @@ pub fn radiance(scene: &Scene, o: Vec3, d: Vec3, opts: &PathOptions, rng: &mut R
                 break;
             }
             let p = o + d * t;
-            beta *= m.albedo;
+            beta *= m.optics.albedo;
             if sun_on {
                 let tr = shadow(p, sun.dir, rng);
                 if tr > 0.0 {
-                    l += beta * sun.irradiance * (hg(d.dot(sun.dir), m.g) * tr);
+                    l += beta * sun.irradiance * (phase.eval(sun.dir, -d) * tr);
                 }
             }
             let (wi, ls, pl) = sky.sample([rng.uniform(), rng.uniform()]);
             if pl > 0.0 && ls.max_element() > 0.0 {
-                let f = hg(d.dot(wi), m.g);
+                let f = phase.eval(wi, -d);
                 let tr = shadow(p, wi, rng);
                 if tr > 0.0 {
                     l += beta * ls * (f * tr * power(pl, f) / pl);
@@ -96,8 +96,8 @@ pub fn radiance(scene: &Scene, o: Vec3, d: Vec3, opts: &PathOptions, rng: &mut R
             if !roulette(&mut beta, rng) {
                 break;
             }
-            let nd = sample_hg(d, m.g, rng.uniform(), rng.uniform());
-            prev_pdf = Some(hg(d.dot(nd), m.g));
+            let nd = phase.sample(d, rng.uniform(), rng.uniform());
+            prev_pdf = Some(phase.eval(nd, -d));
             o = p;
             d = nd;
         } else if let (Some(t), Some(g)) = (tg, ground) {

@@ -117,10 +117,14 @@ pub fn scene_xml(scene: &Scene, vol_name: &str) -> Result<String> {
     let _ = writeln!(w, "                    <translate value=\"{}\"/>", v3(lo));
     let _ = writeln!(w, "                </transform>");
     let _ = writeln!(w, "            </volume>");
-    let _ = writeln!(w, "            <float name=\"scale\" value=\"{}\"/>", m.sigma_t);
-    let _ = writeln!(w, "            <rgb name=\"albedo\" value=\"{}\"/>", v3(m.albedo));
+    let _ = writeln!(w, "            <float name=\"scale\" value=\"{}\"/>", m.optics.sigma_t);
+    let _ = writeln!(w, "            <rgb name=\"albedo\" value=\"{}\"/>", v3(m.optics.albedo));
     let _ = writeln!(w, "            <phase type=\"hg\">");
-    let _ = writeln!(w, "                <float name=\"g\" value=\"{}\"/>", m.g);
+    let _ = writeln!(
+        w,
+        "                <float name=\"g\" value=\"{}\"/>",
+        m.optics.phase.mean_cosine() as f32
+    );
     let _ = writeln!(w, "            </phase>");
     let _ = writeln!(w, "        </medium>");
     let _ = writeln!(w, "    </shape>");

@@ -30,7 +30,7 @@ pub use sky::SkySampler;
 use crate::error::Result;
 use crate::image::Image;
 use crate::math::{Rgb, Rng};
-use crate::render::{Progress, Timings};
+use crate::pipeline::{Progress, Timings};
 use crate::scene::Scene;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -131,7 +131,7 @@ pub fn render_image(scene: &Scene, spp: u32) -> Image {
     let mut s = scene.clone();
     s.render.spp = spp.max(1);
     s.render.time_limit = None;
-    render_with_stats(&s, &crate::render::NoProgress, &mut Timings::default()).0
+    render_with_stats(&s, &crate::pipeline::NoProgress, &mut Timings::default()).0
 }
 
 /// One sample of pixel (x, y): a jittered camera ray through the pixel, traced with stream

@@ -5,7 +5,7 @@
 //! against adding-doubling (`tests/data/slab_adding_doubling.csv`).
 //!
 //! The transport is the tracer's: exponential free paths (delta tracking in a homogeneous medium
-//! with a tight majorant is exactly this), Henyey–Greenstein directions from [`sample_hg_cos`], and
+//! with a tight majorant is exactly this), Henyey–Greenstein directions from [`Hg::sample_cos`], and
 //! the throughput multiplied by the albedo at each collision followed by Russian roulette with
 //! survival probability min(1, throughput) — which for a single band is the same as absorbing the
 //! photon with probability 1 − albedo, so every photon scores 0 or 1.
@@ -14,7 +14,7 @@
 
 use crate::error::{Error, Result};
 use crate::math::Rng;
-use crate::phase::sample_hg_cos;
+use crate::optics::Hg;
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -105,7 +105,7 @@ fn photon(p: &SlabParams, rng: &mut Rng) -> Fate {
         Incidence::Diffuse => rng.uniform_f64().sqrt().max(1e-12),
     };
     let mut z = 0.0f64;
-    let g = p.g as f32;
+    let phase = Hg::new(p.g as f32);
     loop {
         z += -(1.0 - rng.uniform_f64()).ln() * mu;
         if z <= 0.0 {
@@ -118,7 +118,7 @@ fn photon(p: &SlabParams, rng: &mut Rng) -> Fate {
         if rng.uniform_f64() >= p.albedo {
             return Fate::Absorbed;
         }
-        let c = sample_hg_cos(g, rng.uniform()) as f64;
+        let c = phase.sample_cos(rng.uniform()) as f64;
         let s = ((1.0 - c * c) * (1.0 - mu * mu)).max(0.0).sqrt();
         let phi = 2.0 * std::f64::consts::PI * rng.uniform_f64();
         mu = (mu * c + s * phi.cos()).clamp(-1.0, 1.0);

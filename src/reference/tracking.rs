@@ -26,7 +26,7 @@ fn tentative_collisions(
     rng: &mut Rng,
     mut at: impl FnMut(f32, f32, f32, &mut Rng) -> bool,
 ) {
-    let sigma_t = m.sigma_t;
+    let sigma_t = m.optics.sigma_t;
     // Remaining optical depth to the next tentative collision (memoryless across blocks).
     let mut tau = -(1.0 - rng.uniform()).ln();
     m.majorant.for_each_block(m, o, d, t0, t1, |ta, tb, maj| {
@@ -56,7 +56,7 @@ fn tentative_collisions(
 /// without one; the probability of `None` is exactly the transmittance.
 pub fn sample_collision(m: &Medium, o: Vec3, d: Vec3, t_max: f32, rng: &mut Rng) -> Option<f32> {
     let span = m.intersect(o, d, 0.0, t_max)?;
-    if m.sigma_t <= 0.0 {
+    if m.optics.sigma_t <= 0.0 {
         return None;
     }
     let mut hit = None;
@@ -76,7 +76,7 @@ pub fn ratio_transmittance(m: &Medium, o: Vec3, d: Vec3, t_max: f32, rng: &mut R
     let Some(span) = m.intersect(o, d, 0.0, t_max) else {
         return 1.0;
     };
-    if m.sigma_t <= 0.0 {
+    if m.optics.sigma_t <= 0.0 {
         return 1.0;
     }
     let mut tr = 1.0f32;

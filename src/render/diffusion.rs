@@ -5,33 +5,75 @@
 
 use super::single::{background, pixel_sample};
 use super::{render_rows, Progress, Timings};
-use crate::diffusion::{solve_diffusion, DiffusionSettings};
+use crate::diffusion::flux::{diffuse_flux, FluxField};
+use crate::diffusion::{solve_diffusion, DiffusionSolution};
 use crate::error::Result;
 use crate::image::Image;
-use crate::incident::compute_incident;
+use crate::incident::{compute_with_sun, EntryRadiance, IncidentLight, IncidentSources};
+use crate::lighting::bins::DirectionBins;
+use crate::lit::ground::LitGround;
 use crate::lit::LitVolume;
 use crate::math::Rgb;
 use crate::scene::Scene;
+use crate::sunlight::SunTransmittance;
 
-/// Solver settings from `[render]`.
-pub fn settings(scene: &Scene) -> DiffusionSettings {
-    DiffusionSettings {
-        tolerance: scene.render.solver_tolerance,
-        max_iterations: scene.render.solver_max_iterations,
-        ..DiffusionSettings::default()
+/// Stage 1 for a scene with default sampling (seed from `render.seed`), the clear-air hook
+/// `entry` if any; the sun transmittance computed here unless given.
+pub fn compute_incident(scene: &Scene, entry: Option<&EntryRadiance<'_>>) -> IncidentLight {
+    compute_incident_with(scene, entry, SunTransmittance::compute(&scene.medium, scene.sun.dir))
+}
+
+/// [`compute_incident`] with the sun transmittance of the scene's medium already computed.
+pub fn compute_incident_with(scene: &Scene, entry: Option<&EntryRadiance<'_>>, sun_t: SunTransmittance) -> IncidentLight {
+    let settings = &scene.render.incident;
+    let bins = DirectionBins::new();
+    let sources = IncidentSources::from_lighting(&scene.sun, &scene.sky, scene.ground.as_ref(), &bins, settings.sky_subdivisions);
+    compute_with_sun(&scene.medium, &bins, &sources, settings, entry, sun_t)
+}
+
+/// The lit volume of a scene from I0 per voxel and the sun transmittance at voxel centres, the
+/// ground (if any) lit by the unoccluded sun and sky.
+pub fn scene_lit_volume(scene: &Scene, i0: Vec<Rgb>, sun_t: &SunTransmittance) -> LitVolume {
+    let ground = scene
+        .ground
+        .as_ref()
+        .map(|g| LitGround::unoccluded(g.clone(), &scene.sun, &scene.sky));
+    LitVolume::new(
+        scene.medium.clone(),
+        i0,
+        sun_t.grid.clone(),
+        scene.sun.clone(),
+        scene.sky.clone(),
+        ground,
+    )
+}
+
+/// I0 per voxel as RGB.
+pub fn i0_rgb(sol: &DiffusionSolution) -> Vec<Rgb> {
+    (0..sol.i0[0].len())
+        .map(|k| Rgb::new(sol.i0[0][k], sol.i0[1][k], sol.i0[2][k]))
+        .collect()
+}
+
+/// The lit volume of a solved scene, with the first moment attached when
+/// `render.diffuse_anisotropy` is on.
+pub fn solved_lit_volume(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution) -> LitVolume {
+    let lit = scene_lit_volume(scene, i0_rgb(sol), &inc.sun_transmittance);
+    if scene.render.diffuse_anisotropy {
+        let i1 = diffuse_flux(&scene.medium, inc, sol, scene.render.solver.min_optical_depth);
+        return lit.with_flux(FluxField::new(&scene.medium, &i1));
     }
+    lit
 }
 
 /// Stages 1 and 2: the lit volume of a scene (no clear-air iterations).
 pub fn lit_volume(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<LitVolume> {
     let inc = timings.time("incident light", || compute_incident(scene, None));
-    let sol = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &inc, None, &settings(scene)))?;
+    let sol = timings.time("diffusion solve", || {
+        solve_diffusion(&scene.medium, &inc, None, &scene.render.solver)
+    })?;
     progress.log(&sol.summary());
-    let lit = LitVolume::new(&scene.medium, &inc, &sol);
-    if scene.render.diffuse_anisotropy {
-        return Ok(lit.with_diffuse_anisotropy(&inc, &sol, settings(scene).min_optical_depth));
-    }
-    Ok(lit)
+    Ok(solved_lit_volume(scene, &inc, &sol))
 }
 
 /// Render the image.
@@ -39,7 +81,7 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
     let lit = lit_volume(scene, progress, timings)?;
     let cam = &scene.camera;
     let spp = scene.render.aa_samples;
-    let step = scene.render.step * scene.medium.min_voxel();
+    let step = scene.render.step_voxels * scene.medium.min_voxel();
     let px = timings.time("gather", || {
         render_rows(cam.width, cam.height, progress, "diffusion gather", |x, y| {
             let mut sum = Rgb::ZERO;

@@ -10,7 +10,7 @@ use crate::scene::Scene;
 
 /// True when the medium neither absorbs nor scatters anywhere.
 pub fn is_transparent(m: &Medium) -> bool {
-    m.sigma_t == 0.0 || m.density.max_value() == 0.0
+    m.optics.sigma_t == 0.0 || m.density.max_value() == 0.0
 }
 
 /// The background-only image, with `full`'s AOV layers (all light is background) when asked.

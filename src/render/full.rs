@@ -16,23 +16,19 @@
 //! With `iterations = 0` this is the paper's Figure 6 (diffusion plus the low-density edges, the
 //! ground still lit by its hemicubes).
 
+use super::diffusion::{compute_incident, compute_incident_with, i0_rgb, scene_lit_volume, solved_lit_volume};
 use super::single::pixel_sample;
 use super::{Progress, Timings};
-use crate::cube::{clear_air, CubeImage, CubeRenderer, LitVolume};
+use crate::cube::{clear_air, CubeImage, CubeRenderer};
 use crate::diffusion::{solve_diffusion, DiffusionSolution};
-use crate::edges::gather::{CubeRequest, CubeSource, EdgeGather, EdgeSettings, SunInput};
+use crate::edges::gather::{CubeRequest, CubeSource, EdgeGather, SunInput};
 use crate::edges::sparse::{gather_image, PixelRay, SparseSettings};
 use crate::error::Result;
 use crate::image::Image;
-use crate::incident::{compute_incident, IncidentLight};
+use crate::incident::IncidentLight;
+use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
 use crate::scene::Scene;
-
-/// Default cap on clear-air iterations: on the default scene the first changes I0 by 2.5 %, the
-/// second by 0.03 % (images within 4·10⁻⁴ mean relative difference), as the paper found.
-pub const DEFAULT_ITERATIONS: usize = 1;
-/// Default stopping threshold on the relative change of I0 between iterations.
-pub const DEFAULT_PROPAGATION_TOLERANCE: f64 = 0.01;
 
 /// The lit scene after the clear-air iterations.
 pub struct Propagation {
@@ -46,20 +42,15 @@ pub struct Propagation {
     pub changes: Vec<f64>,
 }
 
-/// I0 per voxel as RGB.
-fn i0_rgb(sol: &DiffusionSolution) -> Vec<Rgb> {
-    (0..sol.i0[0].len())
-        .map(|k| Rgb::new(sol.i0[0][k], sol.i0[1][k], sol.i0[2][k]))
-        .collect()
-}
-
-/// ‖a − b‖₂ / ‖b‖₂ over all voxels and bands.
+/// ‖a − b‖₂ / ‖b‖₂ over all voxels and bands, of I0 clamped at 0 as the lit volume uses it (the
+/// raw P1 solution's negative dipoles on sunlit faces would count as change the image never sees).
 pub fn relative_change(old: &DiffusionSolution, new: &DiffusionSolution) -> f64 {
     let (mut num, mut den) = (0f64, 0f64);
     for c in 0..3 {
         for (a, b) in old.i0[c].iter().zip(&new.i0[c]) {
+            let (a, b) = (a.max(0.0), b.max(0.0));
             num += ((b - a) as f64).powi(2);
-            den += (*b as f64).powi(2);
+            den += (b as f64).powi(2);
         }
     }
     if den > 0.0 {
@@ -71,29 +62,42 @@ pub fn relative_change(old: &DiffusionSolution, new: &DiffusionSolution) -> f64 
 
 /// Stages 1–2 and the clear-air iterations.
 pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Propagation> {
-    let settings = super::diffusion::settings(scene);
+    let settings = &scene.render.solver;
+    // The sun transmittance depends only on the medium and the sun: once per run.
     let mut inc = timings.time("incident light", || compute_incident(scene, None));
-    let mut sol = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &inc, None, &settings))?;
+    let sun_t = inc.sun_transmittance.clone();
+    let mut sol = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &inc, None, settings))?;
     progress.log(&sol.summary());
-    let sun_t = inc.sun_transmittance.grid.clone();
     let mut changes = Vec::new();
-    let mut ca = timings.time("clear-air cubes", || clear_air(scene, i0_rgb(&sol), sun_t.clone(), progress));
-    let iterations = scene.render.iterations;
+    let opts = &scene.render.cubes;
+    let cubes = |sol: &DiffusionSolution| clear_air(scene_lit_volume(scene, i0_rgb(sol), &sun_t), scene.ground.as_ref(), opts, progress);
+    let mut ca = timings.time("clear-air cubes", || cubes(&sol));
+    let iterations = scene.render.clear_air.iterations;
     for it in 0..iterations {
         if it > 0 {
-            ca = timings.time("clear-air cubes", || clear_air(scene, i0_rgb(&sol), sun_t.clone(), progress));
+            ca = timings.time("clear-air cubes", || cubes(&sol));
         }
         // Stage 1 asks with bin b = the direction the light comes from (its rays flow along −ω_b),
         // which is the cube's own bin b ("radiance arriving from ω_b").
         let hook = ca.cubes.hook();
-        let new_inc = timings.time("incident light", || compute_incident(scene, Some(&hook)));
-        let new = timings.time("diffusion solve", || {
-            solve_diffusion(&scene.medium, &new_inc, Some(&sol), &settings)
-        })?;
+        let new_inc = timings.time("incident light", || compute_incident_with(scene, Some(&hook), sun_t.clone()));
+        let new = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &new_inc, Some(&sol), settings))?;
         inc = new_inc;
         let change = relative_change(&sol, &new);
+        // A change near or above 100 % is not noise: on grids whose voxels are optically very
+        // thick (τ ≫ 1 per voxel) stage 1 deposits all light in the first voxel, and the P1 dipole
+        // source −∇·(Q1/ρσtr) is not resolved, so the cubes' anisotropic light moves I0 a lot.
+        let tau_voxel = scene.medium.optics.sigma_t * scene.medium.density.max_value() * scene.medium.min_voxel();
+        let hint = if change > 0.5 && tau_voxel > 10.0 {
+            format!(
+                "; large because voxels reach optical depth {tau_voxel:.0}: stage 1's P1 source is resolved \
+                 only near 1 per voxel (raise medium.resolution or lower medium.sigma_t)"
+            )
+        } else {
+            String::new()
+        };
         progress.log(&format!(
-            "clear-air iteration {}/{}: {} border cubes, I0 changed by {:.3} % ({} warm-start iterations)",
+            "clear-air iteration {}/{}: {} border cubes, I0 changed by {:.3} % ({} warm-start iterations){hint}",
             it + 1,
             iterations,
             ca.cubes.len(),
@@ -102,23 +106,11 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         ));
         sol = new;
         changes.push(change);
-        if change < scene.render.propagation_tolerance {
+        if change < scene.render.clear_air.propagation_tolerance {
             break;
         }
     }
-    let ground = ca.lit.ground.clone();
-    let mut lit = LitVolume::new(
-        scene.medium.clone(),
-        i0_rgb(&sol),
-        sun_t,
-        scene.sun.clone(),
-        scene.sky.clone(),
-        ground,
-    );
-    if scene.render.diffuse_anisotropy {
-        let i1 = crate::diffusion::flux::diffuse_flux(&scene.medium, &inc, &sol, settings.min_optical_depth);
-        lit.flux = Some(std::sync::Arc::new(crate::diffusion::flux::FluxField::new(&scene.medium, &i1)));
-    }
+    let lit = solved_lit_volume(scene, &inc, &sol).with_ground(ca.lit.ground.clone());
     Ok(Propagation {
         lit,
         solution: sol,
@@ -247,18 +239,12 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
         dir: lit.sun.dir,
         irradiance_at: &sun_at,
     };
-    let albedo = m.albedo;
-    let flux = lit.flux.as_deref();
+    let albedo = m.optics.albedo;
     let dense = move |p: Vec3, to_eye: Vec3| {
-        let v = m.to_voxel(p);
-        let i0 = lit.i0_at_voxel(v);
-        match flux {
-            // a·max(0, I0 + g·I1·ω): the diffuse field's first moment (crate::diffusion::flux).
-            Some(f) => albedo * (i0 + f.anisotropic_at_voxel(v, m.density_at(p), to_eye)).max(Rgb::ZERO),
-            None => albedo * i0,
-        }
+        // a·I0, or a·max(0, I0 + g·I1·ω) with the first moment ([`LitVolume::diffuse`]).
+        albedo * lit.diffuse(m.to_voxel(p), m.density_at(p), to_eye)
     };
-    let edge = EdgeGather::new(m, EdgeSettings::from_scene(scene), &cubes, sun, &dense);
+    let edge = EdgeGather::new(m, scene.render.edges, &cubes, sun, &dense);
     let cam = &scene.camera;
     let spp = scene.render.aa_samples;
     let n = cam.width as usize * cam.height as usize;

@@ -2,12 +2,11 @@
 //! the Henyey–Greenstein phase function, plus the attenuated sky or ground behind the cloud.
 //! No multiple scattering: the cloud is dark, as the paper shows.
 
-use super::march::march;
 use super::{render_rows, Progress, Timings};
 use crate::error::Result;
 use crate::image::Image;
 use crate::math::{Rgb, Rng, Vec3};
-use crate::phase::hg;
+use crate::medium::march::march;
 use crate::scene::Scene;
 use crate::sunlight::SunTransmittance;
 
@@ -39,10 +38,10 @@ pub fn background(scene: &Scene, o: Vec3, d: Vec3) -> Rgb {
 pub fn radiance(scene: &Scene, sun_t: &SunTransmittance, o: Vec3, d: Vec3, xi: f32) -> Rgb {
     let m = &scene.medium;
     let t_max = scene.ground.as_ref().and_then(|g| g.intersect(o, d)).unwrap_or(f32::INFINITY);
-    let step = scene.render.step * m.min_voxel();
+    let step = scene.render.step_voxels * m.min_voxel();
     // Light travels from the sun (direction −sun.dir) towards the eye (direction −d).
-    let phase = hg((-scene.sun.dir).dot(-d), m.g);
-    let sun_term = m.albedo * scene.sun.irradiance * phase;
+    let phase = m.optics.phase.eval(scene.sun.dir, -d);
+    let sun_term = m.optics.albedo * scene.sun.irradiance * phase;
     let r = march(m, o, d, 0.0, t_max, step, xi, |v, _| sun_term * sun_t.at_voxel(v));
     if r.transmittance <= 0.0 {
         return r.radiance;

@@ -7,9 +7,10 @@
 //! trilinearly and divides by ρ to recover the colour, so empty space never darkens the colour.
 //! Each level has a block occupancy grid for empty-space skipping.
 
-use super::lit::{trilinear_taps, LitVolume};
-use crate::math::Vec3;
+use super::LitVolume;
+use crate::math::{Trilinear, Vec3};
 use crate::medium::{Grid3, MajorantGrid};
+use glam::Vec4;
 
 /// Block edge (in the level's voxels) of each level's occupancy grid.
 pub const BLOCK: usize = 4;
@@ -35,32 +36,16 @@ impl Level {
     /// None where the interpolated density is zero (the colour channels are then not gathered).
     #[inline]
     pub fn sample(&self, v: Vec3) -> Option<Cell> {
-        let (idx, w) = trilinear_taps(self.dims, v);
-        let cells = [
-            &self.cells[idx[0]],
-            &self.cells[idx[1]],
-            &self.cells[idx[2]],
-            &self.cells[idx[3]],
-            &self.cells[idx[4]],
-            &self.cells[idx[5]],
-            &self.cells[idx[6]],
-            &self.cells[idx[7]],
-        ];
-        let mut rho = 0.0;
-        for k in 0..8 {
-            rho += cells[k][0] * w[k];
-        }
+        let t = Trilinear::new(self.dims, v.to_array());
+        let rho = t.blend(|n| self.cells[n][0]);
         if rho <= 1e-12 {
             return None;
         }
-        let mut s = [rho, 0.0, 0.0, 0.0, 0.0];
-        for k in 0..8 {
-            let wk = w[k];
-            for a in 1..5 {
-                s[a] += cells[k][a] * wk;
-            }
-        }
-        Some(s)
+        let c = t.blend(|n| {
+            let c = &self.cells[n];
+            Vec4::new(c[1], c[2], c[3], c[4])
+        });
+        Some([rho, c.x, c.y, c.z, c.w])
     }
 }
 
@@ -81,11 +66,11 @@ impl LitPyramid {
         let dims = m.dims();
         let rho = m.density.data();
         let t = lit.sun_t.data();
+        let ri0 = [lit.rho_i0(0).data(), lit.rho_i0(1).data(), lit.rho_i0(2).data()];
         let cells: Vec<Cell> = (0..rho.len())
             .map(|n| {
                 let r = rho[n];
-                let c = lit.i0[n] * r;
-                [r, c.x, c.y, c.z, r * t[n]]
+                [r, ri0[0][n], ri0[1][n], ri0[2][n], r * t[n]]
             })
             .collect();
         let mut levels = vec![make_level(dims, m.voxel_size, cells)];

@@ -19,11 +19,20 @@ pub struct March {
     pub transmittance: f32,
 }
 
-/// March `o + t·d` for t ∈ [t_min, t_max] with steps of at most `step` metres, sampling each
+/// March `o + t·d` for t ∈ [t_min, t_max] with steps of at most `step_m` metres, sampling each
 /// sub-interval at fraction `xi` ∈ [0, 1). `source(p_voxel, rho)` returns S (W·m⁻²·sr⁻¹) at a
 /// point given in continuous voxel coordinates with density ρ > 0.
 #[inline]
-pub fn march(m: &Medium, o: Vec3, d: Vec3, t_min: f32, t_max: f32, step: f32, xi: f32, mut source: impl FnMut(Vec3, f32) -> Rgb) -> March {
+pub fn march(
+    m: &Medium,
+    o: Vec3,
+    d: Vec3,
+    t_min: f32,
+    t_max: f32,
+    step_m: f32,
+    xi: f32,
+    mut source: impl FnMut(Vec3, f32) -> Rgb,
+) -> March {
     let mut out = March {
         radiance: Rgb::ZERO,
         transmittance: 1.0,
@@ -33,14 +42,14 @@ pub fn march(m: &Medium, o: Vec3, d: Vec3, t_min: f32, t_max: f32, step: f32, xi
     };
     let dims = m.dims();
     let inv_h = Vec3::ONE / m.voxel_size;
-    let sigma_t = m.sigma_t;
+    let sigma_t = m.optics.sigma_t;
     let mut t_acc = 1.0f32;
     let mut l = Rgb::ZERO;
     m.majorant.for_each_block(m, o, d, t0, t1, |ta, tb, maj| {
         if maj <= 0.0 {
             return true;
         }
-        let n = ((tb - ta) / step).ceil().max(1.0);
+        let n = ((tb - ta) / step_m).ceil().max(1.0);
         let len = (tb - ta) / n;
         for k in 0..n as u32 {
             let t = ta + (k as f32 + xi) * len;

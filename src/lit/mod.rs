@@ -1,0 +1,174 @@
+//! The lit volume: what the diffusion stages leave for every later renderer — the `diffusion`
+//! gather, the viewing cubes of the clear-air stage (border cubes and the ground's hemicubes),
+//! and the `full` gather's dense source and edge cubes. One type, one source term, one
+//! interpolation rule; its mip pyramid ([`pyramid`]) beside it, built once per lit volume.
+//!
+//! **Source term.** Along a ray, radiance is ∫ T(s) κ(s) J(s) ds + T·background with κ = ρσt and
+//! J the in-scattered radiance per unit extinction, J(X, ω) = a ∫ p(ω, ω′) I(X, ω′) dω′. With the
+//! paper's split I = I_ri,sun + I0 + I1·ω (eq. 3), the sun's reduced radiance is a delta of
+//! irradiance E_sun·T_sun(X) from the sun's direction, and HG integrates the isotropic I0 to I0
+//! (∫p = 1), so
+//!
+//!   J(X, ω) = a · ( I0(X) + p(ω_sun → ω) · E_sun · T_sun(X) ),
+//!
+//! ω the direction the scattered light leaves in (towards the eye; [`crate::optics::Hg::eval`]).
+//! The g·I1·ω part of the diffuse field and the sky's own single scattering are left out (the
+//! paper's approximation: it volume-renders the colour I0 with opacity ρσt) unless
+//! `render.diffuse_anisotropy` attaches the first moment ([`LitVolume::with_flux`],
+//! [`crate::diffusion::flux`]): then the diffuse part is max(0, I0 + g·I1·ω).
+//!
+//! **The one I0 rule.** I0 is clamped at 0 — the P1 solution goes negative in thin voxels on
+//! sunlit tops (the −∇·(Q1/ρσtr) source of eq. 4 is a dipole) and a radiance cannot — and
+//! interpolated density-weighted, I0(p) = trilinear(ρ·I0)/trilinear(ρ): empty voxels (I0 = 0)
+//! do not darken the cloud's edge, and it is the rule a mip pyramid of pre-multiplied ρ·I0 obeys
+//! at every level, so the gathers and the cubes see one field.
+
+pub mod ground;
+pub mod pyramid;
+
+use crate::diffusion::flux::FluxField;
+use crate::lighting::{Sky, Sun};
+use crate::math::{Rgb, Vec3};
+use crate::medium::march::{march, March};
+use crate::medium::{Grid3, Medium};
+use ground::LitGround;
+use pyramid::LitPyramid;
+use std::sync::{Arc, OnceLock};
+
+/// A medium with its diffusion radiance and direct sun, ready to be rendered from any viewpoint.
+/// Cheap to clone (the grids are shared).
+#[derive(Clone, Debug)]
+pub struct LitVolume {
+    /// The medium (density, optics, box). Its pyramid is built from it once: do not replace it.
+    pub medium: Medium,
+    /// ρ·max(I0, 0) per band at voxel centres (W·m⁻²·sr⁻¹), for the density-weighted rule.
+    rho_i0: Arc<[Grid3; 3]>,
+    /// Transmittance towards the sun at voxel centres (unitless), the density grid's dims.
+    pub sun_t: Arc<Grid3>,
+    /// The sun (its light enters only through `sun_t` and the phase function, never as a disc).
+    pub sun: Sun,
+    /// The sky behind everything.
+    pub sky: Sky,
+    /// The ground with its irradiance, if the scene has a ground.
+    pub ground: Option<LitGround>,
+    /// The diffuse field's first moment I1 (`render.diffuse_anisotropy`); the gathers' source
+    /// uses it, the viewing cubes do not.
+    pub flux: Option<Arc<FluxField>>,
+    /// The mip pyramid, built on first use and shared by every clone (it does not depend on the
+    /// ground or the flux).
+    pyramid: Arc<OnceLock<Arc<LitPyramid>>>,
+}
+
+impl LitVolume {
+    /// Assemble a lit volume from I0 per voxel (index i + nx(j + ny k), W·m⁻²·sr⁻¹ per band;
+    /// clamped at 0 here) and the sun transmittance at voxel centres. Both must have the density
+    /// grid's dimensions (an internal invariant: the caller builds them from the same medium).
+    pub fn new(medium: Medium, i0: Vec<Rgb>, sun_t: impl Into<Arc<Grid3>>, sun: Sun, sky: Sky, ground: Option<LitGround>) -> LitVolume {
+        let sun_t = sun_t.into();
+        let d = medium.dims();
+        assert_eq!(i0.len(), medium.density.len(), "I0 must have one value per voxel");
+        assert_eq!(sun_t.dims(), d, "sun transmittance must have the density grid's dims");
+        let rho = medium.density.data();
+        let band = |c: usize| {
+            let data: Vec<f32> = i0.iter().zip(rho).map(|(v, r)| v[c].max(0.0) * r).collect();
+            Grid3::from_vec(d, data, "lit volume").expect("I0 has one value per voxel")
+        };
+        LitVolume {
+            rho_i0: Arc::new([band(0), band(1), band(2)]),
+            medium,
+            sun_t,
+            sun,
+            sky,
+            ground,
+            flux: None,
+            pyramid: Arc::new(OnceLock::new()),
+        }
+    }
+
+    /// The same scene with another ground (e.g. the one [`crate::cube::render_ground`] made).
+    pub fn with_ground(mut self, ground: Option<LitGround>) -> LitVolume {
+        self.ground = ground;
+        self
+    }
+
+    /// Add the anisotropic diffuse in-scattering g·I1·ω ([`crate::diffusion::flux`]).
+    pub fn with_flux(mut self, flux: FluxField) -> LitVolume {
+        self.flux = Some(Arc::new(flux));
+        self
+    }
+
+    /// Grid resolution.
+    #[inline]
+    pub fn dims(&self) -> [usize; 3] {
+        self.medium.dims()
+    }
+
+    /// ρ·I0 of band `c` at voxel centres (W·m⁻²·sr⁻¹).
+    #[inline]
+    pub fn rho_i0(&self, c: usize) -> &Grid3 {
+        &self.rho_i0[c]
+    }
+
+    /// The mip pyramid (all levels down to [`pyramid::BLOCK`] cells), built on first use.
+    pub fn pyramid(&self) -> Arc<LitPyramid> {
+        self.pyramid.get_or_init(|| Arc::new(LitPyramid::build(self, usize::MAX))).clone()
+    }
+
+    /// I0 (≥ 0, W·m⁻²·sr⁻¹) at continuous voxel coordinates `v` with trilinear density `rho`
+    /// there, by the module's rule; zero where `rho` ≤ 0.
+    #[inline]
+    pub fn i0(&self, v: Vec3, rho: f32) -> Rgb {
+        if rho <= 0.0 {
+            return Rgb::ZERO;
+        }
+        let a = v.to_array();
+        Rgb::new(
+            self.rho_i0[0].trilinear(a),
+            self.rho_i0[1].trilinear(a),
+            self.rho_i0[2].trilinear(a),
+        ) / rho
+    }
+
+    /// The diffuse radiance scattered towards `to_eye` per unit albedo (W·m⁻²·sr⁻¹): I0, or
+    /// max(0, I0 + g·I1·ω) with the first moment attached.
+    #[inline]
+    pub fn diffuse(&self, v: Vec3, rho: f32, to_eye: Vec3) -> Rgb {
+        let i0 = self.i0(v, rho);
+        match &self.flux {
+            Some(f) => (i0 + f.anisotropic_at_voxel(v, rho, to_eye)).max(Rgb::ZERO),
+            None => i0,
+        }
+    }
+
+    /// The source J per unit extinction (W·m⁻²·sr⁻¹) at continuous voxel coordinates `v` with
+    /// trilinear density `rho`, leaving towards the eye along `to_eye` (unit); module docs.
+    #[inline]
+    pub fn source(&self, v: Vec3, rho: f32, to_eye: Vec3) -> Rgb {
+        let phase = self.medium.optics.phase.eval(self.sun.dir, to_eye);
+        let sun = self.sun.irradiance * (phase * self.sun_t.trilinear(v.to_array()));
+        self.medium.optics.albedo * (self.diffuse(v, rho, to_eye) + sun)
+    }
+
+    /// Front-to-back march of `o + t·d`, t ∈ [t_min, t_max], steps of at most `step_m` m, sample
+    /// offset `xi` ∈ [0, 1): radiance from the cloud and the transmittance through it.
+    #[inline]
+    pub fn march(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32, step_m: f32, xi: f32) -> March {
+        march(&self.medium, o, d, t_min, t_max, step_m, xi, |v, rho| self.source(v, rho, -d))
+    }
+
+    /// Radiance arriving at `o` from direction `d` beyond the medium: the lit ground where the
+    /// ray meets it, else the sky. `t_ground` is the ground hit distance from [`Self::ground_hit`].
+    #[inline]
+    pub fn background(&self, o: Vec3, d: Vec3, t_ground: Option<f32>) -> Rgb {
+        match (t_ground, &self.ground) {
+            (Some(t), Some(g)) => g.radiance(o + d * t),
+            _ => self.sky.radiance(d),
+        }
+    }
+
+    /// Distance (m) along `o + t·d` to the ground, if the scene has one and the ray meets it.
+    #[inline]
+    pub fn ground_hit(&self, o: Vec3, d: Vec3) -> Option<f32> {
+        self.ground.as_ref().and_then(|g| g.ground.intersect(o, d))
+    }
+}

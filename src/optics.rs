@@ -1,0 +1,216 @@
+//! The medium's optical properties, owned once: extinction, albedo and the Henyey–Greenstein
+//! phase function, with everything derived from them (σs, σa, σtr, the i-fold phase functions of
+//! the scattering orders, the similarity transform). No other module reads g or writes the HG
+//! formula, so a change of optics (e.g. δ-scaling) is made here and every stage sees it.
+//!
+//! **Phase convention.** [`Hg::eval`]`(to_light, to_eye)` takes the unit direction *towards* the
+//! light (the light travels along −to_light) and the unit direction the scattered light leaves in
+//! (towards the eye); the scattering angle is cos θ = (−to_light)·to_eye, so g > 0 scatters
+//! forward. [`Hg::eval_cos`] takes that cosine directly. Values are per steradian and integrate
+//! to 1 over the sphere.
+
+use crate::math::{Frame, Rgb, Vec3};
+use std::f32::consts::PI;
+
+/// Henyey–Greenstein phase function with mean cosine g (|g| < 1). g is kept in f64 so the
+/// orders' HG(gⁱ) (paper section 4) are exact to f64 rounding.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hg {
+    g: f64,
+}
+
+impl Hg {
+    /// HG with mean cosine `g` (unitless, |g| < 1).
+    #[inline]
+    pub fn new(g: f32) -> Hg {
+        Hg { g: g as f64 }
+    }
+
+    /// The mean cosine g (unitless).
+    #[inline]
+    pub fn mean_cosine(&self) -> f64 {
+        self.g
+    }
+
+    /// p(θ) = (1 − g²) / (4π (1 − 2g cosθ + g²)^{3/2}) in sr⁻¹, from cos θ (see the module docs).
+    #[inline]
+    pub fn eval_cos(&self, cos_theta: f32) -> f32 {
+        let g = self.g as f32;
+        let denom = 1.0 + g * g - 2.0 * g * cos_theta;
+        (1.0 - g * g) / (4.0 * PI * denom * denom.sqrt().max(1e-12))
+    }
+
+    /// [`Self::eval_cos`] in f64, for quadratures and the order kernels.
+    #[inline]
+    pub fn eval_cos_f64(&self, cos_theta: f64) -> f64 {
+        let g = self.g;
+        let denom = 1.0 + g * g - 2.0 * g * cos_theta;
+        (1.0 - g * g) / (4.0 * std::f64::consts::PI * denom * denom.sqrt().max(1e-300))
+    }
+
+    /// p for light arriving from `to_light` (unit, towards the light) and leaving along `to_eye`
+    /// (unit): cos θ = (−to_light)·to_eye (sr⁻¹).
+    #[inline]
+    pub fn eval(&self, to_light: Vec3, to_eye: Vec3) -> f32 {
+        self.eval_cos((-to_light).dot(to_eye))
+    }
+
+    /// Sample cos θ with density p (inverse CDF; exact, also for g = 0) from a uniform `u`.
+    #[inline]
+    pub fn sample_cos(&self, u: f32) -> f32 {
+        let g = self.g as f32;
+        if g.abs() < 1e-3 {
+            return 1.0 - 2.0 * u;
+        }
+        let s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u);
+        ((1.0 + g * g - s * s) / (2.0 * g)).clamp(-1.0, 1.0)
+    }
+
+    /// Sample a new propagation direction after scattering from propagation direction `dir`
+    /// (unit), using two uniforms; its density is `eval_cos(dir·new)`.
+    #[inline]
+    pub fn sample(&self, dir: Vec3, u1: f32, u2: f32) -> Vec3 {
+        let cos_t = self.sample_cos(u1);
+        let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+        let phi = 2.0 * PI * u2;
+        Frame::from_normal(dir)
+            .to_world(Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t))
+            .normalize()
+    }
+
+    /// The phase function of `i` successive scatterings: the i-fold spherical self-convolution
+    /// of HG(g) is HG(gⁱ) (HG's Legendre coefficients are g^l; convolution multiplies them).
+    #[inline]
+    pub fn order(&self, i: usize) -> Hg {
+        Hg { g: self.g.powi(i as i32) }
+    }
+}
+
+/// Optical properties of the medium at density 1.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Optics {
+    /// Extinction σt at density 1 (m⁻¹).
+    pub sigma_t: f32,
+    /// Single-scattering albedo a = σs/σt per band (unitless, in [0, 1]).
+    pub albedo: Rgb,
+    /// The phase function.
+    pub phase: Hg,
+}
+
+/// Optics after a similarity transform with forward fraction f (see [`Optics::similarity`]):
+/// per-band extinction, since σt' = σt(1 − a·f) depends on the albedo.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScaledOptics {
+    /// Extinction per band at density 1 (m⁻¹), f64.
+    pub sigma_t: [f64; 3],
+    /// Scattering per band at density 1 (m⁻¹): σs(1 − f).
+    pub sigma_s: Rgb,
+    /// The phase function of the remaining (not forward-peaked) scattering, g' = (g − f)/(1 − f).
+    pub phase: Hg,
+}
+
+impl Optics {
+    /// σt (m⁻¹), albedo a (per band) and HG mean cosine g.
+    pub fn new(sigma_t: f32, albedo: Rgb, g: f32) -> Optics {
+        Optics {
+            sigma_t,
+            albedo,
+            phase: Hg::new(g),
+        }
+    }
+
+    /// Scattering σs = a·σt per band at density 1 (m⁻¹).
+    #[inline]
+    pub fn sigma_s(&self) -> Rgb {
+        self.albedo * self.sigma_t
+    }
+
+    /// Absorption σa = σt(1 − a) of band `c` at density 1 (m⁻¹), f64.
+    #[inline]
+    pub fn sigma_a(&self, c: usize) -> f64 {
+        self.sigma_t as f64 * (1.0 - self.albedo[c] as f64)
+    }
+
+    /// Transport extinction σtr = σt(1 − a·g) of band `c` at density 1 (m⁻¹), f64: the
+    /// diffusion coefficient is 1/(3ρσtr) (paper eq. 4).
+    #[inline]
+    pub fn sigma_tr(&self, c: usize) -> f64 {
+        self.sigma_t as f64 * (1.0 - self.albedo[c] as f64 * self.phase.g)
+    }
+
+    /// Similarity transform with forward fraction `f` (0 ≤ f < 1): the fraction f of the
+    /// scattering, taken as exactly forward, is treated as unscattered, so σt' = σt(1 − a·f),
+    /// σs' = σs(1 − f) and g' = (g − f)/(1 − f). f = 0 is the identity (exactly); f = g is the
+    /// δ-scaling stage 1 offers (`render.delta_scaling`, g' = 0).
+    pub fn similarity(&self, f: f32) -> ScaledOptics {
+        let a = self.albedo.as_dvec3();
+        let st = self.sigma_t as f64;
+        let fd = f as f64;
+        let g = self.phase.g as f32;
+        ScaledOptics {
+            sigma_t: [st * (1.0 - fd * a.x), st * (1.0 - fd * a.y), st * (1.0 - fd * a.z)],
+            sigma_s: self.sigma_s() * (1.0 - f),
+            phase: Hg::new((g - f) / (1.0 - f)),
+        }
+    }
+
+    /// The δ-scaling of stage 1: [`Self::similarity`] with f = g.
+    pub fn delta_scaled(&self) -> ScaledOptics {
+        self.similarity(self.phase.g as f32)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hg_normalised_and_mean_cosine_is_g() {
+        for &g in &[-0.5f32, 0.0, 0.3, 0.9, 0.95] {
+            let p = Hg::new(g);
+            // Integrate over cosθ with a fine midpoint rule (2π from φ).
+            let n = 200_000;
+            let (mut total, mut mean) = (0.0, 0.0);
+            for i in 0..n {
+                let mu = -1.0 + (i as f64 + 0.5) * 2.0 / n as f64;
+                let w = p.eval_cos_f64(mu) * 2.0 * std::f64::consts::PI * (2.0 / n as f64);
+                total += w;
+                mean += w * mu;
+            }
+            assert!((total - 1.0).abs() < 1e-4, "g={g} total={total}");
+            assert!((mean - g as f64).abs() < 1e-4, "g={g} mean={mean}");
+        }
+    }
+
+    #[test]
+    fn eval_convention_is_forward_for_positive_g() {
+        let p = Hg::new(0.8);
+        let sun = Vec3::new(0.0, 1.0, 0.0);
+        // Light from above travelling down, leaving downwards: forward (cos θ = 1).
+        assert_eq!(p.eval(sun, -sun), p.eval_cos(1.0));
+        assert_eq!(p.eval(sun, sun), p.eval_cos(-1.0));
+        assert!(p.eval(sun, -sun) > p.eval(sun, sun));
+        assert_eq!(p.order(2).mean_cosine(), 0.8f32 as f64 * 0.8f32 as f64);
+    }
+
+    #[test]
+    fn similarity_is_identity_at_zero_and_keeps_absorption() {
+        let o = Optics::new(0.05, Rgb::new(0.9, 0.99, 1.0), 0.85);
+        let s0 = o.similarity(0.0);
+        for c in 0..3 {
+            assert_eq!(s0.sigma_t[c], o.sigma_t as f64);
+        }
+        assert_eq!(s0.sigma_s, o.sigma_s());
+        assert_eq!(s0.phase, o.phase);
+        let s = o.delta_scaled();
+        assert_eq!(s.phase.mean_cosine(), 0.0);
+        for c in 0..3 {
+            // σa' = σt' − σs' = σa: the transform moves scattering, never absorption.
+            let sa = s.sigma_t[c] - s.sigma_s[c] as f64;
+            assert!((sa - o.sigma_a(c)).abs() < 1e-8, "band {c}: {sa} vs {}", o.sigma_a(c));
+            // σtr = σt'(1 − a'g') is invariant: the diffusion operator does not change.
+            let tr = s.sigma_t[c] - s.sigma_s[c] as f64 * s.phase.mean_cosine();
+            assert!((tr - o.sigma_tr(c)).abs() < 1e-8);
+        }
+    }
+}
