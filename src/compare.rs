@@ -16,6 +16,20 @@
 //! * `mean_relative_error`: mean of |Y_test − Y_ref| / Y_ref over masked pixels with Y_ref > 0;
 //! * `luminance_bias`: (mean Y_test − mean Y_ref) / mean Y_ref, the relative bias of the mean luminance.
 //!
+//! **Block means** (the scores every change of physics is judged by; per-pixel noise of a Monte
+//! Carlo reference averages down 4× in a block): the image is tiled into [`BLOCK`]×[`BLOCK`]-pixel
+//! blocks from its top-left corner (a partial block at the right or bottom edge is dropped); a
+//! block counts when at least [`BLOCK_MIN_CLOUD`] = 12 of its 16 pixels are in the mask; its
+//! value is the mean luminance of all 16 pixels.
+//! * `block_mean_relative_error`: mean over counted blocks of |B_test − B_ref| / B_ref;
+//! * `block_bias`: (Σ B_test − Σ B_ref) / Σ B_ref over counted blocks;
+//! * `blocks`: how many blocks count (`null` metrics when none does);
+//! * `reference_block_noise`: when REF has a `stderr` layer, the mean over counted blocks of
+//!   σ(B_ref) / B_ref, σ(B_ref) = √(Σ σ_Y²) / 16 with σ_Y the luminance of the pixel's per-band
+//!   standard errors (exact when the bands' noise is fully correlated, as with a grey albedo; an
+//!   upper bound otherwise). It is the floor that the reference's own noise puts under
+//!   `block_mean_relative_error` (roughly: a perfect method scores about 0.8× this).
+//!
 //! **The difference image** shows the relative luminance difference (Y_test − Y_ref)/Y_ref:
 //! white where equal, towards red where the test is brighter and blue where it is darker,
 //! saturating at ±[`DIFF_SCALE`] (25 %); pixels outside the mask are dark grey.
@@ -45,6 +59,85 @@ pub struct Metrics {
     pub pixels: usize,
     /// Where the mask came from: `transmittance < 0.99` or `all`.
     pub mask: String,
+    /// Mean relative luminance error of 4×4 block means (unitless); `None` when no block counts.
+    pub block_mean_relative_error: Option<f64>,
+    /// Relative bias of the summed 4×4 block means (unitless, signed); `None` when no block counts.
+    pub block_bias: Option<f64>,
+    /// Number of 4×4 blocks compared.
+    pub blocks: usize,
+    /// The reference's own relative noise on its block means (unitless), from its `stderr` layer.
+    pub reference_block_noise: Option<f64>,
+}
+
+/// Edge of a scoring block (pixels).
+pub const BLOCK: usize = 4;
+/// Pixels of a block (of [`BLOCK`]²) that must be in the mask for the block to count.
+pub const BLOCK_MIN_CLOUD: usize = 12;
+
+/// The pixel indices of each counted block (see the module notes), in row-major block order.
+pub fn cloud_blocks(width: u32, height: u32, mask: Option<&[bool]>) -> Vec<[usize; BLOCK * BLOCK]> {
+    let (w, h) = (width as usize, height as usize);
+    let mut out = Vec::new();
+    for by in 0..h / BLOCK {
+        for bx in 0..w / BLOCK {
+            let mut px = [0usize; BLOCK * BLOCK];
+            for (k, p) in px.iter_mut().enumerate() {
+                *p = (by * BLOCK + k / BLOCK) * w + bx * BLOCK + k % BLOCK;
+            }
+            if px.iter().filter(|&&i| mask.map_or(true, |m| m[i])).count() >= BLOCK_MIN_CLOUD {
+                out.push(px);
+            }
+        }
+    }
+    out
+}
+
+/// Mean of `values` over each block.
+pub fn block_means(values: &[f64], blocks: &[[usize; BLOCK * BLOCK]]) -> Vec<f64> {
+    blocks
+        .iter()
+        .map(|b| b.iter().map(|&i| values[i]).sum::<f64>() / b.len() as f64)
+        .collect()
+}
+
+/// (mean relative error over blocks with B_ref > 0, relative bias of the sums) of block means;
+/// `None` when there is no block.
+pub fn block_scores(test: &[f64], reference: &[f64]) -> Option<(f64, f64)> {
+    if reference.is_empty() {
+        return None;
+    }
+    let (mut rel, mut n) = (0f64, 0usize);
+    for (t, r) in test.iter().zip(reference) {
+        if *r > 0.0 {
+            rel += (t - r).abs() / r;
+            n += 1;
+        }
+    }
+    let (st, sr) = (test.iter().sum::<f64>(), reference.iter().sum::<f64>());
+    Some((
+        if n > 0 { rel / n as f64 } else { 0.0 },
+        if sr > 0.0 { (st - sr) / sr } else { 0.0 },
+    ))
+}
+
+/// Luminance of every pixel, in f64.
+pub fn luminances(px: &[Rgb]) -> Vec<f64> {
+    px.iter().map(|p| luminance(*p) as f64).collect()
+}
+
+/// Mean over `blocks` of σ(B) / B from a per-band standard-error layer (see the module notes).
+pub fn block_noise(reference: &[Rgb], stderr: &[Rgb], blocks: &[[usize; BLOCK * BLOCK]]) -> Option<f64> {
+    let y = luminances(reference);
+    let (mut sum, mut n) = (0f64, 0usize);
+    for b in blocks {
+        let mean = b.iter().map(|&i| y[i]).sum::<f64>() / b.len() as f64;
+        let var = b.iter().map(|&i| (luminance(stderr[i]) as f64).powi(2)).sum::<f64>();
+        if mean > 0.0 {
+            sum += var.sqrt() / b.len() as f64 / mean;
+            n += 1;
+        }
+    }
+    (n > 0).then(|| sum / n as f64)
 }
 
 /// The cloud mask from a transmittance layer: true where T < [`CLOUD_T`].
@@ -114,6 +207,14 @@ pub fn compare(test: &Image, reference: &Image, mask: Option<&[bool]>) -> Result
     }
     let rmse = (se / (3 * n) as f64).sqrt();
     let psnr = if rmse > 0.0 { 20.0 * (peak / rmse).log10() } else { f64::INFINITY };
+    let blocks = cloud_blocks(reference.width, reference.height, mask);
+    let scores = block_scores(
+        &block_means(&luminances(&test.pixels), &blocks),
+        &block_means(&luminances(&reference.pixels), &blocks),
+    );
+    let noise = reference
+        .layer(crate::reference::STDERR_LAYER)
+        .and_then(|se| block_noise(&reference.pixels, se, &blocks));
     Ok(Metrics {
         rmse,
         psnr,
@@ -125,6 +226,10 @@ pub fn compare(test: &Image, reference: &Image, mask: Option<&[bool]>) -> Result
         } else {
             "all".into()
         },
+        block_mean_relative_error: scores.map(|s| s.0),
+        block_bias: scores.map(|s| s.1),
+        blocks: blocks.len(),
+        reference_block_noise: noise,
     })
 }
 
@@ -212,6 +317,61 @@ mod tests {
         assert!((m.rmse - rmse).abs() < 1e-6, "{m:?}");
         assert!((m.psnr - 20.0 * (4.0 / rmse).log10()).abs() < 1e-4);
         assert_eq!(m.pixels, 3);
+    }
+
+    /// A w×h image of constant value `v`.
+    fn flat(w: u32, h: u32, v: f32) -> Image {
+        let mut i = Image::new(w, h);
+        i.pixels = vec![Rgb::splat(v); (w * h) as usize];
+        i
+    }
+
+    #[test]
+    fn block_means_with_known_answers() {
+        // 8×4: two blocks. Reference 1 everywhere; the test is 2 on the left block's pixels in
+        // a checkerboard (block mean 1.5) and alternates 0 / 2 on the right (block mean 1: the
+        // per-pixel error is 100 %, the block error 0).
+        let r = flat(8, 4, 1.0);
+        let mut t = flat(8, 4, 1.0);
+        for y in 0..4 {
+            for x in 0..8 {
+                let odd = (x + y) % 2 == 1;
+                t.pixels[y * 8 + x] = Rgb::splat(match (x < 4, odd) {
+                    (true, true) => 2.0,
+                    (true, false) => 1.0,
+                    (false, true) => 2.0,
+                    (false, false) => 0.0,
+                });
+            }
+        }
+        let m = compare(&t, &r, None).unwrap();
+        assert_eq!(m.blocks, 2);
+        assert!((m.block_mean_relative_error.unwrap() - 0.25).abs() < 1e-12, "{m:?}");
+        assert!((m.block_bias.unwrap() - 0.25).abs() < 1e-12, "{m:?}");
+        assert!((m.mean_relative_error - 0.75).abs() < 1e-6, "{m:?}");
+        // A block counts with 12 of 16 pixels in the mask, not with 11; partial blocks never.
+        let mut mask = vec![true; 32];
+        for i in [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11].map(|k| 4 + (k / 4) * 8 + k % 4) {
+            mask[i] = false; // right block: 12 of 16 out
+        }
+        assert_eq!(cloud_blocks(8, 4, Some(&mask)).len(), 1);
+        mask[4] = true; // left block untouched, right block 5 in
+        mask[12] = true;
+        mask[20] = true;
+        mask[21] = true;
+        mask[22] = true;
+        mask[23] = true;
+        mask[13] = true;
+        assert_eq!(cloud_blocks(8, 4, Some(&mask)).len(), 1, "11 of 16 is not enough");
+        mask[14] = true;
+        assert_eq!(cloud_blocks(8, 4, Some(&mask)).len(), 2, "12 of 16 is enough");
+        assert_eq!(cloud_blocks(9, 5, None).len(), 2);
+        // Reference noise: σ = 0.4 per pixel on B = 1 gives σ(B) = √16·0.4/16 = 0.1.
+        let mut rn = r.clone();
+        rn.add_layer(crate::reference::STDERR_LAYER, vec![Rgb::splat(0.4); 32]);
+        let m = compare(&t, &rn, None).unwrap();
+        assert!((m.reference_block_noise.unwrap() - 0.1).abs() < 1e-6, "{m:?}");
+        assert!(m.block_mean_relative_error.is_some() && compare(&t, &r, None).unwrap().reference_block_noise.is_none());
     }
 
     #[test]
