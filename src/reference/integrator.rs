@@ -73,7 +73,8 @@ fn power(a: f32, b: f32) -> f32 {
 }
 
 /// Radiance (W·m⁻²·sr⁻¹) arriving at `o` from direction `d` (the ray `o + t·d`), one sample;
-/// `None` when the path passed `opts.deadline` and was abandoned. Every term of the sum is also
+/// `None` when the path passed `opts.deadline` (checked between vertices and inside long tracking
+/// walks) and was abandoned. Every term of the sum is also
 /// handed to `sink(order, light, contribution)` (order = medium scattering events before the
 /// light is reached; see the module notes).
 pub fn radiance(scene: &Scene, o: Vec3, d: Vec3, opts: &PathOptions, rng: &mut Rng, mut sink: impl FnMut(u32, Light, Rgb)) -> Option<Rgb> {
@@ -85,11 +86,11 @@ pub fn radiance(scene: &Scene, o: Vec3, d: Vec3, opts: &PathOptions, rng: &mut R
     let sun_on = sun.irradiance.max_element() > 0.0;
     let ground_t = |p: Vec3, dir: Vec3| ground.and_then(|g| g.intersect(p, dir));
     // Transmittance towards the sky or sun: zero if the ground is in the way.
-    let shadow = |p: Vec3, dir: Vec3, rng: &mut Rng| -> f32 {
+    let shadow = |p: Vec3, dir: Vec3, rng: &mut Rng| -> Option<f32> {
         if ground_t(p, dir).is_some() {
-            0.0
+            Some(0.0)
         } else {
-            ratio_transmittance(m, p, dir, f32::INFINITY, rng)
+            ratio_transmittance(m, p, dir, f32::INFINITY, rng, opts.deadline).ok()
         }
     };
 
@@ -109,7 +110,7 @@ pub fn radiance(scene: &Scene, o: Vec3, d: Vec3, opts: &PathOptions, rng: &mut R
         }
         let tg = ground_t(o, d);
         let t_max = tg.unwrap_or(f32::INFINITY);
-        if let Some(t) = sample_collision(m, o, d, t_max, rng) {
+        if let Some(t) = sample_collision(m, o, d, t_max, rng, opts.deadline).ok()? {
             // Real collision in the medium.
             depth += 1;
             if depth > opts.max_depth {
@@ -119,7 +120,7 @@ pub fn radiance(scene: &Scene, o: Vec3, d: Vec3, opts: &PathOptions, rng: &mut R
             let p = o + d * t;
             beta *= m.albedo;
             if sun_on {
-                let tr = shadow(p, sun.dir, rng);
+                let tr = shadow(p, sun.dir, rng)?;
                 if tr > 0.0 {
                     let c = beta * sun.irradiance * (hg(d.dot(sun.dir), m.g) * tr);
                     l += c;
@@ -129,7 +130,7 @@ pub fn radiance(scene: &Scene, o: Vec3, d: Vec3, opts: &PathOptions, rng: &mut R
             let (wi, ls, pl) = sky.sample([rng.uniform(), rng.uniform()]);
             if pl > 0.0 && ls.max_element() > 0.0 {
                 let f = hg(d.dot(wi), m.g);
-                let tr = shadow(p, wi, rng);
+                let tr = shadow(p, wi, rng)?;
                 if tr > 0.0 {
                     let c = beta * ls * (f * tr * power(pl, f) / pl);
                     l += c;
@@ -154,7 +155,7 @@ pub fn radiance(scene: &Scene, o: Vec3, d: Vec3, opts: &PathOptions, rng: &mut R
             beta *= g.albedo;
             via_ground = true;
             if sun_on && sun.dir.y > 0.0 {
-                let tr = shadow(p, sun.dir, rng);
+                let tr = shadow(p, sun.dir, rng)?;
                 if tr > 0.0 {
                     let c = beta * sun.irradiance * (sun.dir.y * FRAC_1_PI * tr);
                     l += c;
@@ -164,7 +165,7 @@ pub fn radiance(scene: &Scene, o: Vec3, d: Vec3, opts: &PathOptions, rng: &mut R
             let (wi, ls, pl) = sky.sample([rng.uniform(), rng.uniform()]);
             if pl > 0.0 && wi.y > 0.0 && ls.max_element() > 0.0 {
                 let f = wi.y * FRAC_1_PI;
-                let tr = shadow(p, wi, rng);
+                let tr = shadow(p, wi, rng)?;
                 if tr > 0.0 {
                     let c = beta * ls * (f * tr * power(pl, f) / pl);
                     l += c;
