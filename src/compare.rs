@@ -233,6 +233,178 @@ pub fn compare(test: &Image, reference: &Image, mask: Option<&[bool]>) -> Result
     })
 }
 
+/// How a fast method's `--aov` layers map to the reference's order/light layers: (part name, test
+/// layers summed, reference layers summed). A part is scored when the test has all its layers.
+/// `full`'s `background` is the sky and ground seen through the cloud (the reference's order 0);
+/// `sun_single` the sun's single scattering (`order1_sun`); its `diffusion` and `low_density`
+/// (the edge treatment, blended with the diffusion by density) together carry everything else:
+/// the single scattering of sky and ground light and every order ≥ 2.
+pub const PARTS: [(&str, &[&str], &[&str]); 3] = [
+    ("background", &["background"], &["order0"]),
+    ("sun_single", &["sun_single"], &["order1_sun"]),
+    (
+        "multiple",
+        &["diffusion", "low_density"],
+        &["order1_sky", "order1_ground", "order2", "order3_4", "order5_8", "order9plus"],
+    ),
+];
+
+/// Reference layers whose share of the light [`budget`] reports per region.
+pub const SHARE_LAYERS: [&str; 12] = [
+    "order0",
+    "order1",
+    "order2",
+    "order3_4",
+    "order5_8",
+    "order9plus",
+    "light_sun",
+    "light_sky",
+    "light_ground",
+    "order1_sun",
+    "order1_sky",
+    "order1_ground",
+];
+
+/// Block transmittance bounds of the `edges` region.
+pub const EDGE_T: (f64, f64) = (0.05, 0.9);
+
+/// The error of one part of the image over one region, in units of the reference's total.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct PartScore {
+    /// `total` or a name from [`PARTS`].
+    pub part: String,
+    /// Σ B_ref,part / Σ B_ref over the region's blocks.
+    pub reference_share: f64,
+    /// Σ B_test,part / Σ B_ref.
+    pub test_share: f64,
+    /// Mean over blocks of |B_test,part − B_ref,part| / B_ref (B_ref: the block's total).
+    pub error: f64,
+    /// Σ (B_test,part − B_ref,part) / Σ B_ref: the parts' biases add up to the total's.
+    pub bias: f64,
+}
+
+/// The budget of one region.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct RegionBudget {
+    /// `all`, `lit`, `base`, `core`, `edges` or `haze` (see [`budget`]).
+    pub region: String,
+    /// Blocks in the region.
+    pub blocks: usize,
+    /// Share of the reference's light per layer of [`SHARE_LAYERS`] (present in REF), in order.
+    pub reference: Vec<(String, f64)>,
+    /// `total` first, then every scored part.
+    pub parts: Vec<PartScore>,
+}
+
+/// Luminance of the sum of `names` (`None` if any is missing).
+fn layers_luminance(img: &Image, names: &[&str]) -> Option<Vec<f64>> {
+    let mut out = vec![0f64; img.pixels.len()];
+    for n in names {
+        for (o, p) in out.iter_mut().zip(img.layer(n)?) {
+            *o += luminance(*p) as f64;
+        }
+    }
+    Some(out)
+}
+
+/// The error budget of `test` against `reference` over the cloud blocks of `mask`, by part and by
+/// region. Regions, from the reference's own layers on each counted block (B = block mean):
+/// * `edges`: block transmittance (REF's `transmittance` layer) in [0.05, 0.9];
+/// * `haze`: transmittance above 0.9 (thin wisps; the mask stops at 0.99);
+/// * the opaque blocks (transmittance below 0.05) split three ways: `lit` where the sun's
+///   single scattering is at least its cloud-wide share (B(order1_sun)/B ≥ Σ order1_sun / Σ total
+///   over all counted blocks: the sunlit surface the camera sees), else `base` where the
+///   ground-reflected light is at least its cloud-wide share (B(light_ground)/B ≥ Σ light_ground /
+///   Σ total: the underside the ground lights), else `core`.
+///
+/// Errors when REF lacks the order/light layers or the transmittance layer (render it with
+/// `--method reference`), or when no block counts.
+pub fn budget(test: &Image, reference: &Image, mask: Option<&[bool]>) -> Result<Vec<RegionBudget>> {
+    check_size(test, reference, "TEST.exr")?;
+    let missing = |what: &str| {
+        Error::invalid(
+            "command line",
+            "REF.exr",
+            format!("has no `{what}` layer; --budget needs a reference rendered by this version of `--method reference`"),
+        )
+    };
+    let blocks = cloud_blocks(reference.width, reference.height, mask);
+    if blocks.is_empty() {
+        return Err(Error::invalid("command line", "--budget", "no 4×4 block shows cloud"));
+    }
+    let bm = |v: &[f64]| block_means(v, &blocks);
+    let ref_total = bm(&luminances(&reference.pixels));
+    let test_total = bm(&luminances(&test.pixels));
+    let t_layer = reference
+        .layer(crate::reference::TRANSMITTANCE_LAYER)
+        .ok_or_else(|| missing(crate::reference::TRANSMITTANCE_LAYER))?;
+    let t_block = bm(&t_layer.iter().map(|p| p.x as f64).collect::<Vec<_>>());
+    let ref_layer = |n: &str| layers_luminance(reference, &[n]).map(|v| bm(&v)).ok_or_else(|| missing(n));
+    let (sun1, ground) = (ref_layer("order1_sun")?, ref_layer("light_ground")?);
+    let sum = |v: &[f64]| v.iter().sum::<f64>();
+    let (f_sun1, f_ground) = (sum(&sun1) / sum(&ref_total), sum(&ground) / sum(&ref_total));
+    let region_of = |b: usize| -> &'static str {
+        let (t, y) = (t_block[b], ref_total[b]);
+        if t > EDGE_T.1 {
+            "haze"
+        } else if t >= EDGE_T.0 {
+            "edges"
+        } else if y > 0.0 && sun1[b] / y >= f_sun1 {
+            "lit"
+        } else if y > 0.0 && ground[b] / y >= f_ground {
+            "base"
+        } else {
+            "core"
+        }
+    };
+    let shares: Vec<(&str, Vec<f64>)> = SHARE_LAYERS.iter().filter_map(|n| ref_layer(n).ok().map(|v| (*n, v))).collect();
+    // (part, test block means, reference block means) for the total and every scored part.
+    let mut parts = vec![("total", test_total.clone(), ref_total.clone())];
+    for (name, tl, rl) in PARTS {
+        if let Some(t) = layers_luminance(test, tl) {
+            let r = layers_luminance(reference, rl).ok_or_else(|| missing(rl[0]))?;
+            parts.push((name, bm(&t), bm(&r)));
+        }
+    }
+    let mut out = Vec::new();
+    for region in ["all", "lit", "base", "core", "edges", "haze"] {
+        let sel: Vec<usize> = (0..blocks.len()).filter(|&b| region == "all" || region_of(b) == region).collect();
+        if sel.is_empty() {
+            continue;
+        }
+        let total: f64 = sel.iter().map(|&b| ref_total[b]).sum();
+        let share = |v: &[f64]| {
+            if total > 0.0 {
+                sel.iter().map(|&b| v[b]).sum::<f64>() / total
+            } else {
+                0.0
+            }
+        };
+        let score = |(name, t, r): &(&str, Vec<f64>, Vec<f64>)| {
+            let err: f64 = sel
+                .iter()
+                .filter(|&&b| ref_total[b] > 0.0)
+                .map(|&b| (t[b] - r[b]).abs() / ref_total[b])
+                .sum::<f64>()
+                / sel.len() as f64;
+            PartScore {
+                part: name.to_string(),
+                reference_share: share(r),
+                test_share: share(t),
+                error: err,
+                bias: share(t) - share(r),
+            }
+        };
+        out.push(RegionBudget {
+            region: region.into(),
+            blocks: sel.len(),
+            reference: shares.iter().map(|(n, v)| (n.to_string(), share(v))).collect(),
+            parts: parts.iter().map(score).collect(),
+        });
+    }
+    Ok(out)
+}
+
 /// False-colour map of a relative difference: white at 0, red for positive, blue for negative.
 #[inline]
 pub fn diverging(rel: f32) -> [u8; 3] {
@@ -372,6 +544,48 @@ mod tests {
         let m = compare(&t, &rn, None).unwrap();
         assert!((m.reference_block_noise.unwrap() - 0.1).abs() < 1e-6, "{m:?}");
         assert!(m.block_mean_relative_error.is_some() && compare(&t, &r, None).unwrap().reference_block_noise.is_none());
+    }
+
+    #[test]
+    fn budget_splits_the_error_by_part_and_region() {
+        // Two blocks of the same light: the left opaque (T = 0), the right an edge (T = 0.5).
+        let mut r = flat(8, 4, 1.0);
+        let t_layer = (0..32).map(|i| Rgb::splat(if i % 8 < 4 { 0.0 } else { 0.5 })).collect();
+        r.add_layer(crate::reference::TRANSMITTANCE_LAYER, t_layer);
+        for (n, v) in [
+            ("order0", 0.2),
+            ("order1_sun", 0.1),
+            ("order1_sky", 0.1),
+            ("order1_ground", 0.0),
+            ("order2", 0.6),
+            ("order3_4", 0.0),
+            ("order5_8", 0.0),
+            ("order9plus", 0.0),
+            ("light_ground", 0.0),
+        ] {
+            r.add_layer(n, vec![Rgb::splat(v); 32]);
+        }
+        // The test gets background and sun exactly and 0.4 of the 0.7 of the rest.
+        let mut t = flat(8, 4, 0.7);
+        for (n, v) in [("background", 0.2), ("sun_single", 0.1), ("diffusion", 0.3), ("low_density", 0.1)] {
+            t.add_layer(n, vec![Rgb::splat(v); 32]);
+        }
+        let b = budget(&t, &r, None).unwrap();
+        let names: Vec<&str> = b.iter().map(|x| x.region.as_str()).collect();
+        // The left block's sun share equals the cloud-wide one (≥ counts): lit.
+        assert_eq!(names, ["all", "lit", "edges"]);
+        for region in &b {
+            let p = |n: &str| region.parts.iter().find(|x| x.part == n).unwrap().clone();
+            let close = |a: f64, b: f64| (a - b).abs() < 1e-6;
+            assert!(close(p("total").bias, -0.3) && close(p("total").error, 0.3), "{region:?}");
+            assert!(close(p("multiple").bias, -0.3) && close(p("multiple").reference_share, 0.7));
+            assert!(close(p("background").error, 0.0) && close(p("sun_single").bias, 0.0));
+            let order2 = region.reference.iter().find(|x| x.0 == "order2").unwrap().1;
+            assert!(close(order2, 0.6));
+        }
+        // A reference without the order layers is refused with a fix.
+        let e = budget(&t, &flat(8, 4, 1.0), None).unwrap_err().to_string();
+        assert!(e.contains("REF.exr") && e.contains("--method reference"), "{e}");
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! an optional false-colour difference PNG (see `cloudgi::compare` for the mask and metrics).
 
 use clap::Args;
-use cloudgi::compare::{choose_mask, compare, write_diff_png};
+use cloudgi::compare::{budget, choose_mask, compare, write_diff_png};
 use cloudgi::error::{Error, Result};
 use cloudgi::Image;
 use std::path::PathBuf;
@@ -19,6 +19,11 @@ pub struct CompareArgs {
     /// Take the cloud mask (transmittance < 0.99) from this EXR's `transmittance` layer instead of REF's.
     #[arg(long)]
     mask: Option<PathBuf>,
+    /// Add `budget` to the JSON: block-mean error and bias by part of TEST's AOVs (against REF's
+    /// order/light layers) and by region of the cloud (lit, base, core, edges, haze), with REF's
+    /// share of light per order and light (docs/budget.md).
+    #[arg(long)]
+    budget: bool,
 }
 
 pub fn run(a: CompareArgs) -> Result<()> {
@@ -62,7 +67,13 @@ pub fn run(a: CompareArgs) -> Result<()> {
     if let Some(d) = &a.diff {
         write_diff_png(d, &test, &reference, mask.as_deref())?;
     }
-    let line = serde_json::to_string(&metrics).map_err(|e| Error::format("<json>", e.to_string()))?;
+    let json = |e: serde_json::Error| Error::format("<json>", e.to_string());
+    let mut out = serde_json::to_value(&metrics).map_err(json)?;
+    if a.budget {
+        let b = budget(&test, &reference, mask.as_deref())?;
+        out["budget"] = serde_json::to_value(b).map_err(json)?;
+    }
+    let line = serde_json::to_string(&out).map_err(json)?;
     println!("{line}");
     Ok(())
 }
