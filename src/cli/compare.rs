@@ -24,6 +24,10 @@ pub struct CompareArgs {
     /// share of light per order and light (docs/budget.md).
     #[arg(long)]
     budget: bool,
+    /// Judge TEST against this layer of REF instead of its image (e.g. `light_sun` for a render
+    /// with only the sun on and a black ground); the mask still comes from REF's transmittance.
+    #[arg(long, value_name = "NAME")]
+    ref_layer: Option<String>,
 }
 
 pub fn run(a: CompareArgs) -> Result<()> {
@@ -41,7 +45,27 @@ pub fn run(a: CompareArgs) -> Result<()> {
         }
     }
     let test = Image::read_exr(&a.test)?;
-    let reference = Image::read_exr(&a.reference)?;
+    if a.budget && a.ref_layer.is_some() {
+        return Err(Error::invalid(
+            "command line",
+            "--ref-layer",
+            "cannot be combined with --budget (the budget splits REF's whole image); drop one",
+        ));
+    }
+    let mut reference = Image::read_exr(&a.reference)?;
+    if let Some(name) = &a.ref_layer {
+        let Some(px) = reference.layer(name) else {
+            let have: Vec<&str> = reference.layers.iter().map(|l| l.0.as_str()).collect();
+            return Err(Error::invalid(
+                &a.reference.display().to_string(),
+                "--ref-layer",
+                format!("no layer `{name}`; it has: {}", have.join(", ")),
+            ));
+        };
+        reference.pixels = px.to_vec();
+        // The standard errors are the image's, not the layer's.
+        reference.layers.retain(|l| l.0 != cloudgi::reference::STDERR_LAYER);
+    }
     let mask_img = match &a.mask {
         Some(p) => Some(Image::read_exr(p)?),
         None => None,
