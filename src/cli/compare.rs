@@ -57,7 +57,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
         let Some(px) = reference.layer(name) else {
             let have: Vec<&str> = reference.layers.iter().map(|l| l.0.as_str()).collect();
             return Err(Error::invalid(
-                &a.reference.display().to_string(),
+                a.reference.display().to_string(),
                 "--ref-layer",
                 format!("no layer `{name}`; it has: {}", have.join(", ")),
             ));
