@@ -317,9 +317,13 @@ fn layers_luminance(img: &Image, names: &[&str]) -> Option<Vec<f64>> {
 ///   ground-reflected light is at least its cloud-wide share (B(light_ground)/B ≥ Σ light_ground /
 ///   Σ total: the underside the ground lights), else `core`.
 ///
+/// With `ref_layer` (e.g. `light_sun`, for a test rendered with only the sun on and a black
+/// ground) the test's image is judged against that layer of REF instead of REF's image, shares and
+/// errors are in units of that layer, and no AOV part is scored; the regions stay REF's.
+///
 /// Errors when REF lacks the order/light layers or the transmittance layer (render it with
 /// `--method reference`), or when no block counts.
-pub fn budget(test: &Image, reference: &Image, mask: Option<&[bool]>) -> Result<Vec<RegionBudget>> {
+pub fn budget(test: &Image, reference: &Image, mask: Option<&[bool]>, ref_layer: Option<&str>) -> Result<Vec<RegionBudget>> {
     check_size(test, reference, "TEST.exr")?;
     let missing = |what: &str| {
         Error::invalid(
@@ -339,8 +343,8 @@ pub fn budget(test: &Image, reference: &Image, mask: Option<&[bool]>) -> Result<
         .layer(crate::reference::TRANSMITTANCE_LAYER)
         .ok_or_else(|| missing(crate::reference::TRANSMITTANCE_LAYER))?;
     let t_block = bm(&t_layer.iter().map(|p| p.x as f64).collect::<Vec<_>>());
-    let ref_layer = |n: &str| layers_luminance(reference, &[n]).map(|v| bm(&v)).ok_or_else(|| missing(n));
-    let (sun1, ground) = (ref_layer("order1_sun")?, ref_layer("light_ground")?);
+    let ref_blocks = |n: &str| layers_luminance(reference, &[n]).map(|v| bm(&v)).ok_or_else(|| missing(n));
+    let (sun1, ground) = (ref_blocks("order1_sun")?, ref_blocks("light_ground")?);
     let sum = |v: &[f64]| v.iter().sum::<f64>();
     let (f_sun1, f_ground) = (sum(&sun1) / sum(&ref_total), sum(&ground) / sum(&ref_total));
     let region_of = |b: usize| -> &'static str {
@@ -357,10 +361,15 @@ pub fn budget(test: &Image, reference: &Image, mask: Option<&[bool]>) -> Result<
             "core"
         }
     };
-    let shares: Vec<(&str, Vec<f64>)> = SHARE_LAYERS.iter().filter_map(|n| ref_layer(n).ok().map(|v| (*n, v))).collect();
+    let shares: Vec<(&str, Vec<f64>)> = SHARE_LAYERS.iter().filter_map(|n| ref_blocks(n).ok().map(|v| (*n, v))).collect();
     // (part, test block means, reference block means) for the total and every scored part.
-    let mut parts = vec![("total", test_total.clone(), ref_total.clone())];
-    for (name, tl, rl) in PARTS {
+    // What the test is judged against: REF's image, or one of its layers.
+    let ref_judged = match ref_layer {
+        Some(n) => ref_blocks(n)?,
+        None => ref_total.clone(),
+    };
+    let mut parts = vec![("total", test_total.clone(), ref_judged.clone())];
+    for (name, tl, rl) in PARTS.iter().filter(|_| ref_layer.is_none()) {
         if let Some(t) = layers_luminance(test, tl) {
             let r = layers_luminance(reference, rl).ok_or_else(|| missing(rl[0]))?;
             parts.push((name, bm(&t), bm(&r)));
@@ -372,7 +381,7 @@ pub fn budget(test: &Image, reference: &Image, mask: Option<&[bool]>) -> Result<
         if sel.is_empty() {
             continue;
         }
-        let total: f64 = sel.iter().map(|&b| ref_total[b]).sum();
+        let total: f64 = sel.iter().map(|&b| ref_judged[b]).sum();
         let share = |v: &[f64]| {
             if total > 0.0 {
                 sel.iter().map(|&b| v[b]).sum::<f64>() / total
@@ -383,8 +392,8 @@ pub fn budget(test: &Image, reference: &Image, mask: Option<&[bool]>) -> Result<
         let score = |(name, t, r): &(&str, Vec<f64>, Vec<f64>)| {
             let err: f64 = sel
                 .iter()
-                .filter(|&&b| ref_total[b] > 0.0)
-                .map(|&b| (t[b] - r[b]).abs() / ref_total[b])
+                .filter(|&&b| ref_judged[b] > 0.0)
+                .map(|&b| (t[b] - r[b]).abs() / ref_judged[b])
                 .sum::<f64>()
                 / sel.len() as f64;
             PartScore {
@@ -570,7 +579,7 @@ mod tests {
         for (n, v) in [("background", 0.2), ("sun_single", 0.1), ("diffusion", 0.3), ("low_density", 0.1)] {
             t.add_layer(n, vec![Rgb::splat(v); 32]);
         }
-        let b = budget(&t, &r, None).unwrap();
+        let b = budget(&t, &r, None, None).unwrap();
         let names: Vec<&str> = b.iter().map(|x| x.region.as_str()).collect();
         // The left block's sun share equals the cloud-wide one (≥ counts): lit.
         assert_eq!(names, ["all", "lit", "edges"]);
@@ -583,8 +592,15 @@ mod tests {
             let order2 = region.reference.iter().find(|x| x.0 == "order2").unwrap().1;
             assert!(close(order2, 0.6));
         }
+        // Against one layer: shares and errors in units of that layer, no parts.
+        let b = budget(&t, &r, None, Some("order2")).unwrap();
+        let total = &b[0].parts[0];
+        assert_eq!(b[0].parts.len(), 1);
+        assert!((total.bias - 1.0 / 6.0).abs() < 1e-6 && (total.reference_share - 1.0).abs() < 1e-9);
+        let order2 = b[0].reference.iter().find(|x| x.0 == "order2").unwrap().1;
+        assert!((order2 - 1.0).abs() < 1e-6, "order2 is the whole of itself");
         // A reference without the order layers is refused with a fix.
-        let e = budget(&t, &flat(8, 4, 1.0), None).unwrap_err().to_string();
+        let e = budget(&t, &flat(8, 4, 1.0), None, None).unwrap_err().to_string();
         assert!(e.contains("REF.exr") && e.contains("--method reference"), "{e}");
     }
 

@@ -73,6 +73,12 @@ fn render_compare_and_export() {
         v["block_bias"].as_f64().unwrap() > 0.5,
         "single adds the background to the sun's single scattering"
     );
+    let out = cloudgi(&["compare", "single.exr", "ref.exr", "--ref-layer", "order1_sun", "--budget"], d);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        v["budget"][0]["parts"][0]["bias"], v["block_bias"],
+        "the budget judges against the layer too"
+    );
     let out = cloudgi(&["compare", "single.exr", "ref.exr", "--ref-layer", "nope"], d);
     assert!(String::from_utf8_lossy(&out.stderr).contains("order0"), "lists the layers");
     let out = cloudgi(&["compare", "ref.exr", "single.exr", "--budget"], d);

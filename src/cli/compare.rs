@@ -25,7 +25,7 @@ pub struct CompareArgs {
     #[arg(long)]
     budget: bool,
     /// Judge TEST against this layer of REF instead of its image (e.g. `light_sun` for a render
-    /// with only the sun on and a black ground); the mask still comes from REF's transmittance.
+    /// with only the sun on and a black ground); the mask (and --budget's regions) still come from REF.
     #[arg(long, value_name = "NAME")]
     ref_layer: Option<String>,
 }
@@ -45,14 +45,8 @@ pub fn run(a: CompareArgs) -> Result<()> {
         }
     }
     let test = Image::read_exr(&a.test)?;
-    if a.budget && a.ref_layer.is_some() {
-        return Err(Error::invalid(
-            "command line",
-            "--ref-layer",
-            "cannot be combined with --budget (the budget splits REF's whole image); drop one",
-        ));
-    }
-    let mut reference = Image::read_exr(&a.reference)?;
+    let full_reference = Image::read_exr(&a.reference)?;
+    let mut reference = full_reference.clone();
     if let Some(name) = &a.ref_layer {
         let Some(px) = reference.layer(name) else {
             let have: Vec<&str> = reference.layers.iter().map(|l| l.0.as_str()).collect();
@@ -94,7 +88,8 @@ pub fn run(a: CompareArgs) -> Result<()> {
     let json = |e: serde_json::Error| Error::format("<json>", e.to_string());
     let mut out = serde_json::to_value(&metrics).map_err(json)?;
     if a.budget {
-        let b = budget(&test, &reference, mask.as_deref())?;
+        // Regions come from REF's own layers, whatever the test is judged against.
+        let b = budget(&test, &full_reference, mask.as_deref(), a.ref_layer.as_deref())?;
         out["budget"] = serde_json::to_value(b).map_err(json)?;
     }
     let line = serde_json::to_string(&out).map_err(json)?;
