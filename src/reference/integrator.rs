@@ -74,9 +74,9 @@ fn power(a: f32, b: f32) -> f32 {
 
 /// Radiance (W·m⁻²·sr⁻¹) arriving at `o` from direction `d` (the ray `o + t·d`), one sample;
 /// `None` when the path passed `opts.deadline` (checked between vertices and inside long tracking
-/// walks) and was abandoned. Every term of the sum is also
-/// handed to `sink(order, light, contribution)` (order = medium scattering events before the
-/// light is reached; see the module notes).
+/// walks) and was abandoned. Every term of the sum is also handed to
+/// `sink(order, light, contribution)` (order = medium scattering events before the light is
+/// reached; see the module notes).
 pub fn radiance(scene: &Scene, o: Vec3, d: Vec3, opts: &PathOptions, rng: &mut Rng, mut sink: impl FnMut(u32, Light, Rgb)) -> Option<Rgb> {
     let m = &scene.medium;
     let sun = &scene.sun;
