@@ -38,13 +38,20 @@ impl Lines {
             let start = Instant::now();
             let (lock, cv) = &*d;
             let Ok(mut finished) = lock.lock() else { return };
-            loop {
-                let Ok((g, _)) = cv.wait_timeout(finished, interval) else { return };
-                finished = g;
-                if *finished {
-                    return;
+            let mut next = start + interval;
+            // The flag is checked before every wait: `finish` may have run before this thread
+            // took the lock, and a wakeup may be spurious.
+            while !*finished {
+                let now = Instant::now();
+                if now >= next {
+                    eprintln!("{}", line(&stage, p.load(Ordering::Relaxed), total, start.elapsed()));
+                    next += interval;
+                    continue;
                 }
-                eprintln!("{}", line(&stage, p.load(Ordering::Relaxed), total, start.elapsed()));
+                let Ok((g, _)) = cv.wait_timeout(finished, next - now) else {
+                    return;
+                };
+                finished = g;
             }
         });
         Lines { pos, done, thread }
@@ -154,10 +161,14 @@ mod tests {
             "reference: 1200/19200 (6.2 %), 10 s, eta 150 s"
         );
         assert_eq!(line("x", 0, 0, Duration::ZERO), "x: 0/0 (0.0 %), 0 s, eta unknown");
-        // The printer stops at once when the stage ends, without waiting out its interval.
-        let l = Lines::start("x".into(), 10, Duration::from_secs(3600));
-        let t = Instant::now();
-        l.finish();
-        assert!(t.elapsed() < Duration::from_secs(5));
+        // The printer stops at once when the stage ends, without waiting out its interval,
+        // whether it ends before or after the thread first waits.
+        for pause in [0, 50] {
+            let l = Lines::start("x".into(), 10, Duration::from_secs(3600));
+            std::thread::sleep(Duration::from_millis(pause));
+            let t = Instant::now();
+            l.finish();
+            assert!(t.elapsed() < Duration::from_secs(5));
+        }
     }
 }
