@@ -278,6 +278,18 @@ fn order_and_light_layers_sum_to_the_image() {
     assert!(ng.layer("light_ground").unwrap().iter().all(|p| *p == Rgb::ZERO));
     assert_eq!(ng.layer("order0").unwrap()[0], ng.pixels[0]);
     assert_eq!(ng.pixels[0], Rgb::new(0.3, 0.4, 0.8));
+    // Order 0 is the unscattered sky: its mean over the image is the sky times the camera rays'
+    // mean transmittance (binomial noise of 384 samples; 2 % for the pixel-centre transmittance
+    // against jittered rays). Counting the escape of a camera ray as order 1 would fail this.
+    let t = ng.layer(TRANSMITTANCE_LAYER).unwrap();
+    let mean_t = t.iter().map(|p| p.x as f64).sum::<f64>() / t.len() as f64;
+    let o0 = ng.layer("order0").unwrap().iter().map(|p| p.y as f64).sum::<f64>() / t.len() as f64 / 0.4;
+    let se = (mean_t * (1.0 - mean_t) / 384.0).sqrt();
+    assert!(
+        (o0 - mean_t).abs() < 4.0 * se + 0.02 * mean_t,
+        "order 0 {o0} vs transmittance {mean_t} ± {se}"
+    );
+    assert!(mean_t < 0.9, "the ball must cover part of the image: {mean_t}");
 }
 
 #[test]
