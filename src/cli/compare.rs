@@ -86,13 +86,14 @@ pub fn run(a: CompareArgs) -> Result<()> {
         write_diff_png(d, &test, &reference, mask.as_deref())?;
     }
     let json = |e: serde_json::Error| Error::format("<json>", e.to_string());
-    let mut out = serde_json::to_value(&metrics).map_err(json)?;
+    let mut line = serde_json::to_string(&metrics).map_err(json)?;
     if a.budget {
         // Regions come from REF's own layers, whatever the test is judged against.
         let b = budget(&test, &full_reference, mask.as_deref(), a.ref_layer.as_deref())?;
-        out["budget"] = serde_json::to_value(b).map_err(json)?;
+        // Appended to the metrics' object so their key order stays as it was.
+        line.pop();
+        line += &format!(",\"budget\":{}}}", serde_json::to_string(&b).map_err(json)?);
     }
-    let line = serde_json::to_string(&out).map_err(json)?;
     println!("{line}");
     Ok(())
 }
