@@ -312,10 +312,10 @@ fn layers_luminance(img: &Image, names: &[&str]) -> Option<Vec<f64>> {
 /// * `edges`: block transmittance (REF's `transmittance` layer) in [0.05, 0.9];
 /// * `haze`: transmittance above 0.9 (thin wisps; the mask stops at 0.99);
 /// * the opaque blocks (transmittance below 0.05) split three ways: `lit` where the sun's
-///   single scattering is at least its cloud-wide share (B(order1_sun)/B ≥ Σ order1_sun / Σ total
-///   over all counted blocks: the sunlit surface the camera sees), else `base` where the
-///   ground-reflected light is at least its cloud-wide share (B(light_ground)/B ≥ Σ light_ground /
-///   Σ total: the underside the ground lights), else `core`.
+///   single scattering is positive and at least its cloud-wide share (B(order1_sun)/B ≥
+///   Σ order1_sun / Σ total over all counted blocks: the sunlit surface the camera sees), else
+///   `base` where the ground-reflected light is positive and at least its cloud-wide share
+///   (B(light_ground)/B ≥ Σ light_ground / Σ total: the underside the ground lights), else `core`.
 ///
 /// With `ref_layer` (e.g. `light_sun`, for a test rendered with only the sun on and a black
 /// ground) the test's image is judged against that layer of REF instead of REF's image, shares and
@@ -353,9 +353,9 @@ pub fn budget(test: &Image, reference: &Image, mask: Option<&[bool]>, ref_layer:
             "haze"
         } else if t >= EDGE_T.0 {
             "edges"
-        } else if y > 0.0 && sun1[b] / y >= f_sun1 {
+        } else if sun1[b] > 0.0 && y > 0.0 && sun1[b] / y >= f_sun1 {
             "lit"
-        } else if y > 0.0 && ground[b] / y >= f_ground {
+        } else if ground[b] > 0.0 && y > 0.0 && ground[b] / y >= f_ground {
             "base"
         } else {
             "core"
