@@ -140,6 +140,10 @@ pub fn render_with_stats(scene: &Scene, progress: &dyn Progress, timings: &mut T
     let stop = AtomicBool::new(false);
     let mut passes = 0u32;
     timings.time("path tracing", || {
+        if let Some(t) = rs.time_limit {
+            // The progress counts towards `spp`; the limit usually ends the render first.
+            progress.log(&format!("reference: time limit {t} s"));
+        }
         progress.begin("reference", rs.spp as u64 * (w * h) as u64);
         while passes < rs.spp && !stop.load(Ordering::Relaxed) {
             let s = passes;
