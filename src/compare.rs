@@ -16,6 +16,20 @@
 //! * `mean_relative_error`: mean of |Y_test − Y_ref| / Y_ref over masked pixels with Y_ref > 0;
 //! * `luminance_bias`: (mean Y_test − mean Y_ref) / mean Y_ref, the relative bias of the mean luminance.
 //!
+//! **Block means** (the scores every change of physics is judged by; per-pixel noise of a Monte
+//! Carlo reference averages down 4× in a block): the image is tiled into [`BLOCK`]×[`BLOCK`]-pixel
+//! blocks from its top-left corner (a partial block at the right or bottom edge is dropped); a
+//! block counts when at least [`BLOCK_MIN_CLOUD`] = 12 of its 16 pixels are in the mask; its
+//! value is the mean luminance of all 16 pixels.
+//! * `block_mean_relative_error`: mean over counted blocks of |B_test − B_ref| / B_ref;
+//! * `block_bias`: (Σ B_test − Σ B_ref) / Σ B_ref over counted blocks;
+//! * `blocks`: how many blocks count (`null` metrics when none does);
+//! * `reference_block_noise`: when REF has a `stderr` layer, the mean over counted blocks of
+//!   σ(B_ref) / B_ref, σ(B_ref) = √(Σ σ_Y²) / 16 with σ_Y the luminance of the pixel's per-band
+//!   standard errors (exact when the bands' noise is fully correlated, as with a grey albedo; an
+//!   upper bound otherwise). It is the floor that the reference's own noise puts under
+//!   `block_mean_relative_error` (roughly: a perfect method scores about 0.8× this).
+//!
 //! **The difference image** shows the relative luminance difference (Y_test − Y_ref)/Y_ref:
 //! white where equal, towards red where the test is brighter and blue where it is darker,
 //! saturating at ±[`DIFF_SCALE`] (25 %); pixels outside the mask are dark grey.
@@ -45,6 +59,85 @@ pub struct Metrics {
     pub pixels: usize,
     /// Where the mask came from: `transmittance < 0.99` or `all`.
     pub mask: String,
+    /// Mean relative luminance error of 4×4 block means (unitless); `None` when no block counts.
+    pub block_mean_relative_error: Option<f64>,
+    /// Relative bias of the summed 4×4 block means (unitless, signed); `None` when no block counts.
+    pub block_bias: Option<f64>,
+    /// Number of 4×4 blocks compared.
+    pub blocks: usize,
+    /// The reference's own relative noise on its block means (unitless), from its `stderr` layer.
+    pub reference_block_noise: Option<f64>,
+}
+
+/// Edge of a scoring block (pixels).
+pub const BLOCK: usize = 4;
+/// Pixels of a block (of [`BLOCK`]²) that must be in the mask for the block to count.
+pub const BLOCK_MIN_CLOUD: usize = 12;
+
+/// The pixel indices of each counted block (see the module notes), in row-major block order.
+pub fn cloud_blocks(width: u32, height: u32, mask: Option<&[bool]>) -> Vec<[usize; BLOCK * BLOCK]> {
+    let (w, h) = (width as usize, height as usize);
+    let mut out = Vec::new();
+    for by in 0..h / BLOCK {
+        for bx in 0..w / BLOCK {
+            let mut px = [0usize; BLOCK * BLOCK];
+            for (k, p) in px.iter_mut().enumerate() {
+                *p = (by * BLOCK + k / BLOCK) * w + bx * BLOCK + k % BLOCK;
+            }
+            if px.iter().filter(|&&i| mask.map_or(true, |m| m[i])).count() >= BLOCK_MIN_CLOUD {
+                out.push(px);
+            }
+        }
+    }
+    out
+}
+
+/// Mean of `values` over each block.
+pub fn block_means(values: &[f64], blocks: &[[usize; BLOCK * BLOCK]]) -> Vec<f64> {
+    blocks
+        .iter()
+        .map(|b| b.iter().map(|&i| values[i]).sum::<f64>() / b.len() as f64)
+        .collect()
+}
+
+/// (mean relative error over blocks with B_ref > 0, relative bias of the sums) of block means;
+/// `None` when there is no block.
+pub fn block_scores(test: &[f64], reference: &[f64]) -> Option<(f64, f64)> {
+    if reference.is_empty() {
+        return None;
+    }
+    let (mut rel, mut n) = (0f64, 0usize);
+    for (t, r) in test.iter().zip(reference) {
+        if *r > 0.0 {
+            rel += (t - r).abs() / r;
+            n += 1;
+        }
+    }
+    let (st, sr) = (test.iter().sum::<f64>(), reference.iter().sum::<f64>());
+    Some((
+        if n > 0 { rel / n as f64 } else { 0.0 },
+        if sr > 0.0 { (st - sr) / sr } else { 0.0 },
+    ))
+}
+
+/// Luminance of every pixel, in f64.
+pub fn luminances(px: &[Rgb]) -> Vec<f64> {
+    px.iter().map(|p| luminance(*p) as f64).collect()
+}
+
+/// Mean over `blocks` of σ(B) / B from a per-band standard-error layer (see the module notes).
+pub fn block_noise(reference: &[Rgb], stderr: &[Rgb], blocks: &[[usize; BLOCK * BLOCK]]) -> Option<f64> {
+    let y = luminances(reference);
+    let (mut sum, mut n) = (0f64, 0usize);
+    for b in blocks {
+        let mean = b.iter().map(|&i| y[i]).sum::<f64>() / b.len() as f64;
+        let var = b.iter().map(|&i| (luminance(stderr[i]) as f64).powi(2)).sum::<f64>();
+        if mean > 0.0 {
+            sum += var.sqrt() / b.len() as f64 / mean;
+            n += 1;
+        }
+    }
+    (n > 0).then(|| sum / n as f64)
 }
 
 /// The cloud mask from a transmittance layer: true where T < [`CLOUD_T`].
@@ -114,6 +207,14 @@ pub fn compare(test: &Image, reference: &Image, mask: Option<&[bool]>) -> Result
     }
     let rmse = (se / (3 * n) as f64).sqrt();
     let psnr = if rmse > 0.0 { 20.0 * (peak / rmse).log10() } else { f64::INFINITY };
+    let blocks = cloud_blocks(reference.width, reference.height, mask);
+    let scores = block_scores(
+        &block_means(&luminances(&test.pixels), &blocks),
+        &block_means(&luminances(&reference.pixels), &blocks),
+    );
+    let noise = reference
+        .layer(crate::reference::STDERR_LAYER)
+        .and_then(|se| block_noise(&reference.pixels, se, &blocks));
     Ok(Metrics {
         rmse,
         psnr,
@@ -125,7 +226,192 @@ pub fn compare(test: &Image, reference: &Image, mask: Option<&[bool]>) -> Result
         } else {
             "all".into()
         },
+        block_mean_relative_error: scores.map(|s| s.0),
+        block_bias: scores.map(|s| s.1),
+        blocks: blocks.len(),
+        reference_block_noise: noise,
     })
+}
+
+/// How a fast method's `--aov` layers map to the reference's order/light layers: (part name, test
+/// layers summed, reference layers summed). A part is scored when the test has all its layers.
+/// `full`'s `background` is the sky and ground seen through the cloud (the reference's order 0);
+/// `sun_single` the sun's single scattering (`order1_sun`); its `diffusion` and `low_density`
+/// (the edge treatment, blended with the diffusion by density) together carry everything else:
+/// the single scattering of sky and ground light and every order ≥ 2.
+pub const PARTS: [(&str, &[&str], &[&str]); 3] = [
+    ("background", &["background"], &["order0"]),
+    ("sun_single", &["sun_single"], &["order1_sun"]),
+    (
+        "multiple",
+        &["diffusion", "low_density"],
+        &["order1_sky", "order1_ground", "order2", "order3_4", "order5_8", "order9plus"],
+    ),
+];
+
+/// Reference layers whose share of the light [`budget`] reports per region.
+pub const SHARE_LAYERS: [&str; 12] = [
+    "order0",
+    "order1",
+    "order2",
+    "order3_4",
+    "order5_8",
+    "order9plus",
+    "light_sun",
+    "light_sky",
+    "light_ground",
+    "order1_sun",
+    "order1_sky",
+    "order1_ground",
+];
+
+/// Block transmittance bounds of the `edges` region.
+pub const EDGE_T: (f64, f64) = (0.05, 0.9);
+
+/// The error of one part of the image over one region, in units of the reference's total.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct PartScore {
+    /// `total` or a name from [`PARTS`].
+    pub part: String,
+    /// Σ B_ref,part / Σ B_ref over the region's blocks.
+    pub reference_share: f64,
+    /// Σ B_test,part / Σ B_ref.
+    pub test_share: f64,
+    /// Mean over blocks of |B_test,part − B_ref,part| / B_ref (B_ref: the block's total).
+    pub error: f64,
+    /// Σ (B_test,part − B_ref,part) / Σ B_ref: the parts' biases add up to the total's.
+    pub bias: f64,
+}
+
+/// The budget of one region.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct RegionBudget {
+    /// `all`, `lit`, `base`, `core`, `edges` or `haze` (see [`budget`]).
+    pub region: String,
+    /// Blocks in the region.
+    pub blocks: usize,
+    /// Share of the reference's light per layer of [`SHARE_LAYERS`] (present in REF), in order.
+    pub reference: Vec<(String, f64)>,
+    /// `total` first, then every scored part.
+    pub parts: Vec<PartScore>,
+}
+
+/// Luminance of the sum of `names` (`None` if any is missing).
+fn layers_luminance(img: &Image, names: &[&str]) -> Option<Vec<f64>> {
+    let mut out = vec![0f64; img.pixels.len()];
+    for n in names {
+        for (o, p) in out.iter_mut().zip(img.layer(n)?) {
+            *o += luminance(*p) as f64;
+        }
+    }
+    Some(out)
+}
+
+/// The error budget of `test` against `reference` over the cloud blocks of `mask`, by part and by
+/// region. Regions, from the reference's own layers on each counted block (B = block mean):
+/// * `edges`: block transmittance (REF's `transmittance` layer) in [0.05, 0.9];
+/// * `haze`: transmittance above 0.9 (thin wisps; the mask stops at 0.99);
+/// * the opaque blocks (transmittance below 0.05) split three ways: `lit` where the sun's
+///   single scattering is positive and at least its cloud-wide share (B(order1_sun)/B ≥
+///   Σ order1_sun / Σ total over all counted blocks: the sunlit surface the camera sees), else
+///   `base` where the ground-reflected light is positive and at least its cloud-wide share
+///   (B(light_ground)/B ≥ Σ light_ground / Σ total: the underside the ground lights), else `core`.
+///
+/// With `ref_layer` (e.g. `light_sun`, for a test rendered with only the sun on and a black
+/// ground) the test's image is judged against that layer of REF instead of REF's image, shares and
+/// errors are in units of that layer, and no AOV part is scored; the regions stay REF's.
+///
+/// Errors when REF lacks the order/light layers or the transmittance layer (render it with
+/// `--method reference`), or when no block counts.
+pub fn budget(test: &Image, reference: &Image, mask: Option<&[bool]>, ref_layer: Option<&str>) -> Result<Vec<RegionBudget>> {
+    check_size(test, reference, "TEST.exr")?;
+    let missing = |what: &str| {
+        Error::invalid(
+            "command line",
+            "REF.exr",
+            format!("has no `{what}` layer; --budget needs a reference rendered by this version of `--method reference`"),
+        )
+    };
+    let blocks = cloud_blocks(reference.width, reference.height, mask);
+    if blocks.is_empty() {
+        return Err(Error::invalid("command line", "--budget", "no 4×4 block shows cloud"));
+    }
+    let bm = |v: &[f64]| block_means(v, &blocks);
+    let ref_total = bm(&luminances(&reference.pixels));
+    let test_total = bm(&luminances(&test.pixels));
+    let t_layer = reference
+        .layer(crate::reference::TRANSMITTANCE_LAYER)
+        .ok_or_else(|| missing(crate::reference::TRANSMITTANCE_LAYER))?;
+    let t_block = bm(&t_layer.iter().map(|p| p.x as f64).collect::<Vec<_>>());
+    let ref_blocks = |n: &str| layers_luminance(reference, &[n]).map(|v| bm(&v)).ok_or_else(|| missing(n));
+    let (sun1, ground) = (ref_blocks("order1_sun")?, ref_blocks("light_ground")?);
+    let sum = |v: &[f64]| v.iter().sum::<f64>();
+    let (f_sun1, f_ground) = (sum(&sun1) / sum(&ref_total), sum(&ground) / sum(&ref_total));
+    let region_of = |b: usize| -> &'static str {
+        let (t, y) = (t_block[b], ref_total[b]);
+        if t > EDGE_T.1 {
+            "haze"
+        } else if t >= EDGE_T.0 {
+            "edges"
+        } else if sun1[b] > 0.0 && y > 0.0 && sun1[b] / y >= f_sun1 {
+            "lit"
+        } else if ground[b] > 0.0 && y > 0.0 && ground[b] / y >= f_ground {
+            "base"
+        } else {
+            "core"
+        }
+    };
+    let shares: Vec<(&str, Vec<f64>)> = SHARE_LAYERS.iter().filter_map(|n| ref_blocks(n).ok().map(|v| (*n, v))).collect();
+    // (part, test block means, reference block means) for the total and every scored part.
+    // What the test is judged against: REF's image, or one of its layers.
+    let ref_judged = match ref_layer {
+        Some(n) => ref_blocks(n)?,
+        None => ref_total.clone(),
+    };
+    let mut parts = vec![("total", test_total.clone(), ref_judged.clone())];
+    for (name, tl, rl) in PARTS.iter().filter(|_| ref_layer.is_none()) {
+        if let Some(t) = layers_luminance(test, tl) {
+            let r = layers_luminance(reference, rl).ok_or_else(|| missing(rl[0]))?;
+            parts.push((name, bm(&t), bm(&r)));
+        }
+    }
+    let mut out = Vec::new();
+    for region in ["all", "lit", "base", "core", "edges", "haze"] {
+        let sel: Vec<usize> = (0..blocks.len()).filter(|&b| region == "all" || region_of(b) == region).collect();
+        if sel.is_empty() {
+            continue;
+        }
+        let total: f64 = sel.iter().map(|&b| ref_judged[b]).sum();
+        let share = |v: &[f64]| {
+            if total > 0.0 {
+                sel.iter().map(|&b| v[b]).sum::<f64>() / total
+            } else {
+                0.0
+            }
+        };
+        let score = |(name, t, r): &(&str, Vec<f64>, Vec<f64>)| {
+            let err: f64 = sel
+                .iter()
+                .filter(|&&b| ref_judged[b] > 0.0)
+                .map(|&b| (t[b] - r[b]).abs() / ref_judged[b])
+                .sum::<f64>()
+                / sel.len() as f64;
+            PartScore {
+                part: name.to_string(),
+                reference_share: share(r),
+                test_share: share(t),
+                error: err,
+                bias: share(t) - share(r),
+            }
+        };
+        out.push(RegionBudget {
+            region: region.into(),
+            blocks: sel.len(),
+            reference: shares.iter().map(|(n, v)| (n.to_string(), share(v))).collect(),
+            parts: parts.iter().map(score).collect(),
+        });
+    }
+    Ok(out)
 }
 
 /// False-colour map of a relative difference: white at 0, red for positive, blue for negative.
@@ -212,6 +498,110 @@ mod tests {
         assert!((m.rmse - rmse).abs() < 1e-6, "{m:?}");
         assert!((m.psnr - 20.0 * (4.0 / rmse).log10()).abs() < 1e-4);
         assert_eq!(m.pixels, 3);
+    }
+
+    /// A w×h image of constant value `v`.
+    fn flat(w: u32, h: u32, v: f32) -> Image {
+        let mut i = Image::new(w, h);
+        i.pixels = vec![Rgb::splat(v); (w * h) as usize];
+        i
+    }
+
+    #[test]
+    fn block_means_with_known_answers() {
+        // 8×4: two blocks. Reference 1 everywhere; the test is 2 on the left block's pixels in
+        // a checkerboard (block mean 1.5) and alternates 0 / 2 on the right (block mean 1: the
+        // per-pixel error is 100 %, the block error 0).
+        let r = flat(8, 4, 1.0);
+        let mut t = flat(8, 4, 1.0);
+        for y in 0..4 {
+            for x in 0..8 {
+                let odd = (x + y) % 2 == 1;
+                t.pixels[y * 8 + x] = Rgb::splat(match (x < 4, odd) {
+                    (true, true) => 2.0,
+                    (true, false) => 1.0,
+                    (false, true) => 2.0,
+                    (false, false) => 0.0,
+                });
+            }
+        }
+        let m = compare(&t, &r, None).unwrap();
+        assert_eq!(m.blocks, 2);
+        assert!((m.block_mean_relative_error.unwrap() - 0.25).abs() < 1e-12, "{m:?}");
+        assert!((m.block_bias.unwrap() - 0.25).abs() < 1e-12, "{m:?}");
+        assert!((m.mean_relative_error - 0.75).abs() < 1e-6, "{m:?}");
+        // A block counts with 12 of 16 pixels in the mask, not with 11; partial blocks never.
+        let mut mask = vec![true; 32];
+        for i in [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11].map(|k| 4 + (k / 4) * 8 + k % 4) {
+            mask[i] = false; // right block: 12 of 16 out
+        }
+        assert_eq!(cloud_blocks(8, 4, Some(&mask)).len(), 1);
+        mask[4] = true; // left block untouched, right block 5 in
+        mask[12] = true;
+        mask[20] = true;
+        mask[21] = true;
+        mask[22] = true;
+        mask[23] = true;
+        mask[13] = true;
+        assert_eq!(cloud_blocks(8, 4, Some(&mask)).len(), 1, "11 of 16 is not enough");
+        mask[14] = true;
+        assert_eq!(cloud_blocks(8, 4, Some(&mask)).len(), 2, "12 of 16 is enough");
+        assert_eq!(cloud_blocks(9, 5, None).len(), 2);
+        // Reference noise: σ = 0.4 per pixel on B = 1 gives σ(B) = √16·0.4/16 = 0.1.
+        let mut rn = r.clone();
+        rn.add_layer(crate::reference::STDERR_LAYER, vec![Rgb::splat(0.4); 32]);
+        let m = compare(&t, &rn, None).unwrap();
+        assert!((m.reference_block_noise.unwrap() - 0.1).abs() < 1e-6, "{m:?}");
+        assert!(m.block_mean_relative_error.is_some() && compare(&t, &r, None).unwrap().reference_block_noise.is_none());
+    }
+
+    #[test]
+    fn budget_splits_the_error_by_part_and_region() {
+        // Two blocks of the same light: the left opaque (T = 0), the right an edge (T = 0.5).
+        let mut r = flat(8, 4, 1.0);
+        let t_layer = (0..32).map(|i| Rgb::splat(if i % 8 < 4 { 0.0 } else { 0.5 })).collect();
+        r.add_layer(crate::reference::TRANSMITTANCE_LAYER, t_layer);
+        for (n, v) in [
+            ("order0", 0.2),
+            ("order1_sun", 0.1),
+            ("order1_sky", 0.1),
+            ("order1_ground", 0.0),
+            ("order2", 0.6),
+            ("order3_4", 0.0),
+            ("order5_8", 0.0),
+            ("order9plus", 0.0),
+            ("light_ground", 0.0),
+        ] {
+            r.add_layer(n, vec![Rgb::splat(v); 32]);
+        }
+        // The test gets background and sun exactly and 0.4 of the 0.7 of the rest.
+        let mut t = flat(8, 4, 0.7);
+        for (n, v) in [("background", 0.2), ("sun_single", 0.1), ("diffusion", 0.3), ("low_density", 0.1)] {
+            t.add_layer(n, vec![Rgb::splat(v); 32]);
+        }
+        let b = budget(&t, &r, None, None).unwrap();
+        let names: Vec<&str> = b.iter().map(|x| x.region.as_str()).collect();
+        // The left block's sun share equals the cloud-wide one (≥ counts): lit.
+        assert_eq!(names, ["all", "lit", "edges"]);
+        for region in &b {
+            let p = |n: &str| region.parts.iter().find(|x| x.part == n).unwrap().clone();
+            let close = |a: f64, b: f64| (a - b).abs() < 1e-6;
+            assert!(close(p("total").bias, -0.3) && close(p("total").error, 0.3), "{region:?}");
+            assert!(close(p("multiple").bias, -0.3) && close(p("multiple").reference_share, 0.7));
+            assert!(close(p("background").error, 0.0) && close(p("sun_single").bias, 0.0));
+            let order2 = region.reference.iter().find(|x| x.0 == "order2").unwrap().1;
+            assert!(close(order2, 0.6));
+        }
+        // Against one layer: shares and errors in units of that layer, no parts.
+        let b = budget(&t, &r, None, Some("order2")).unwrap();
+        let total = &b[0].parts[0];
+        assert_eq!(b[0].parts.len(), 1);
+        assert!((total.bias - 1.0 / 6.0).abs() < 1e-6 && (total.reference_share - 1.0).abs() < 1e-9);
+        let order2 = b[0].reference.iter().find(|x| x.0 == "order2").unwrap().1;
+        assert!((order2 - 1.0).abs() < 1e-6, "order2 is the whole of itself");
+        // A reference without the order layers is refused with a fix.
+        let e = budget(&t, &flat(8, 4, 1.0), None, None).unwrap_err().to_string();
+        assert!(e.contains("REF.exr") && e.contains("--method reference"), "{e}");
     }
 
     #[test]

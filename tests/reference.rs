@@ -5,7 +5,7 @@
 use cloudgi::lighting::{Sky, Sun};
 use cloudgi::math::{Rgb, Vec3};
 use cloudgi::medium::{Grid3, Medium};
-use cloudgi::reference::{render_with_stats, STDERR_LAYER, TRANSMITTANCE_LAYER};
+use cloudgi::reference::{render_with_stats, LIGHT_LAYERS, ORDER_LAYERS, SAMPLES_LAYER, SINGLE_LAYERS, STDERR_LAYER, TRANSMITTANCE_LAYER};
 use cloudgi::render::Timings;
 use cloudgi::scene::{Method, Scene, SceneDesc};
 use cloudgi::{Image, NoProgress};
@@ -219,6 +219,104 @@ fn time_limit_stops_early_and_layers_round_trip() {
     img.write_exr(&p).unwrap();
     let back = Image::read_exr(&p).unwrap();
     assert!(back.layer(TRANSMITTANCE_LAYER).is_some() && back.layer(STDERR_LAYER).is_some());
+}
+
+/// Sum of the named layers of `img`.
+fn layer_sum(img: &Image, names: &[&str]) -> Vec<Rgb> {
+    let mut out = vec![Rgb::ZERO; img.pixels.len()];
+    for n in names {
+        for (o, v) in out.iter_mut().zip(img.layer(n).unwrap_or_else(|| panic!("layer {n}"))) {
+            *o += *v;
+        }
+    }
+    out
+}
+
+#[test]
+fn order_and_light_layers_sum_to_the_image() {
+    // Sun, sky and a ground below a ball: every kind of path. The layers split the same f32
+    // terms the image sums, so they add up to it to rounding.
+    let mut s = scene(
+        ball(0.8, 0.95, 0.7),
+        Rgb::new(3.0, 3.0, 3.0),
+        Rgb::new(0.3, 0.4, 0.8),
+        30.0,
+        40.0,
+        (8, 6),
+        8,
+    );
+    s.ground = Some(cloudgi::lighting::Ground {
+        height: -7.5,
+        albedo: Rgb::splat(0.4),
+    });
+    let (img, _) = render(&s);
+    let orders: Vec<&str> = ORDER_LAYERS.iter().map(|l| l.0).collect();
+    for (what, sum) in [("orders", layer_sum(&img, &orders)), ("lights", layer_sum(&img, &LIGHT_LAYERS))] {
+        for (i, (a, b)) in sum.iter().zip(&img.pixels).enumerate() {
+            assert!(
+                ((*a - *b).abs() - *b * 1e-5 - Rgb::splat(1e-6)).max_element() <= 0.0,
+                "{what}, pixel {i}: {a} vs {b}"
+            );
+        }
+    }
+    let single = layer_sum(&img, &SINGLE_LAYERS);
+    for (a, b) in single.iter().zip(img.layer("order1").unwrap()) {
+        assert!(((*a - *b).abs() - *b * 1e-5).max_element() <= 1e-6);
+    }
+    // Every layer has light somewhere (orders 9+ too: albedo 0.95, optical diameter 11).
+    for n in orders.iter().chain(&LIGHT_LAYERS) {
+        assert!(layer_sum(&img, &[n]).iter().any(|p| p.x > 0.0), "layer {n} is black");
+    }
+    // Single scattering only: no order ≥ 2; order 0 and 1 still sum to the image.
+    s.render.max_depth = Some(1);
+    let (one, _) = render(&s);
+    assert!(layer_sum(&one, &orders[2..]).iter().all(|p| *p == Rgb::ZERO));
+    // No ground: no ground light, and the sky seen past the ball is order 0 and the whole pixel.
+    s.ground = None;
+    s.render.max_depth = None;
+    let (ng, _) = render(&s);
+    assert!(ng.layer("light_ground").unwrap().iter().all(|p| *p == Rgb::ZERO));
+    assert_eq!(ng.layer("order0").unwrap()[0], ng.pixels[0]);
+    assert_eq!(ng.pixels[0], Rgb::new(0.3, 0.4, 0.8));
+    // Order 0 is the unscattered sky: its mean over the image is the sky times the camera rays'
+    // mean transmittance (binomial noise of 384 samples; 2 % for the pixel-centre transmittance
+    // against jittered rays). Counting the escape of a camera ray as order 1 would fail this.
+    let t = ng.layer(TRANSMITTANCE_LAYER).unwrap();
+    let mean_t = t.iter().map(|p| p.x as f64).sum::<f64>() / t.len() as f64;
+    let o0 = ng.layer("order0").unwrap().iter().map(|p| p.y as f64).sum::<f64>() / t.len() as f64 / 0.4;
+    let se = (mean_t * (1.0 - mean_t) / 384.0).sqrt();
+    assert!(
+        (o0 - mean_t).abs() < 4.0 * se + 0.02 * mean_t,
+        "order 0 {o0} vs transmittance {mean_t} ± {se}"
+    );
+    assert!(mean_t < 0.9, "the ball must cover part of the image: {mean_t}");
+}
+
+#[test]
+fn time_limit_holds_inside_a_pass_on_a_dense_medium() {
+    // The camera inside a ball of albedo 1 and optical radius 7e4: each path random-walks for
+    // ~1e8 vertices before it escapes, so only a clock inside the path can stop it. Before that
+    // check this test ran for hours.
+    let mut s = scene(ball(1e4, 1.0, 0.9), Rgb::splat(2.0), Rgb::splat(0.3), 0.5, 30.0, (6, 4), 1);
+    s.render.time_limit = Some(0.5);
+    let t = std::time::Instant::now();
+    let (img, stats) = render_with_stats(&s, &NoProgress, &mut Timings::default());
+    let dt = t.elapsed().as_secs_f64();
+    assert!(dt < 2.5, "took {dt} s with a 0.5 s limit");
+    assert!(stats.min_spp == 0 && stats.spp <= 1, "{stats:?}");
+    assert!(img.pixels.iter().all(|p| p.is_finite() && p.min_element() >= 0.0));
+    assert!(img.layer(SAMPLES_LAYER).is_some());
+    // σt = 1e6 at albedo 0.999 (the case), and --max-depth bounding a path without a limit.
+    let mut d = scene(ball(1e6, 0.999, 0.9), Rgb::splat(2.0), Rgb::splat(0.3), 40.0, 30.0, (6, 4), 1);
+    d.render.time_limit = Some(0.5);
+    let t = std::time::Instant::now();
+    render(&d);
+    assert!(t.elapsed().as_secs_f64() < 2.5);
+    s.render.time_limit = None;
+    s.render.max_depth = Some(200);
+    let t = std::time::Instant::now();
+    let (_, spp) = render(&s);
+    assert!(spp == 1 && t.elapsed().as_secs_f64() < 2.5);
 }
 
 #[test]

@@ -54,7 +54,38 @@ fn render_compare_and_export() {
     }
     assert!(v["luminance_bias"].as_f64().unwrap() < -0.2, "{text}");
     assert!(v["pixels"].as_u64().unwrap() > 0);
+    assert!(
+        v["block_mean_relative_error"].is_f64() && v["block_bias"].as_f64().unwrap() < -0.2,
+        "{text}"
+    );
     assert!(d.join("diff.png").exists());
+    // --budget: by region, with the reference's order shares; `single` has no AOVs, so only the total.
+    let out = cloudgi(&["compare", "single.exr", "ref.exr", "--budget"], d);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let all = &v["budget"][0];
+    assert_eq!(all["region"], "all");
+    assert_eq!(all["parts"][0]["part"], "total");
+    assert_eq!(all["parts"][0]["bias"], v["block_bias"]);
+    let out = cloudgi(&["compare", "single.exr", "ref.exr", "--ref-layer", "order1_sun"], d);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(
+        v["block_bias"].as_f64().unwrap() > 0.5,
+        "single adds the background to the sun's single scattering"
+    );
+    let out = cloudgi(&["compare", "single.exr", "ref.exr", "--ref-layer", "order1_sun", "--budget"], d);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        v["budget"][0]["parts"][0]["bias"], v["block_bias"],
+        "the budget judges against the layer too"
+    );
+    let out = cloudgi(&["compare", "single.exr", "ref.exr", "--ref-layer", "nope"], d);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("order0"), "lists the layers");
+    let out = cloudgi(&["compare", "ref.exr", "single.exr", "--budget"], d);
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("REF.exr"),
+        "a reference without layers"
+    );
 
     // Bad input: clear messages, no panic.
     let out = cloudgi(&["compare", "single.exr", "missing.exr"], d);

@@ -2,7 +2,7 @@
 //! an optional false-colour difference PNG (see `cloudgi::compare` for the mask and metrics).
 
 use clap::Args;
-use cloudgi::compare::{choose_mask, compare, write_diff_png};
+use cloudgi::compare::{budget, choose_mask, compare, write_diff_png};
 use cloudgi::error::{Error, Result};
 use cloudgi::Image;
 use std::path::PathBuf;
@@ -19,6 +19,15 @@ pub struct CompareArgs {
     /// Take the cloud mask (transmittance < 0.99) from this EXR's `transmittance` layer instead of REF's.
     #[arg(long)]
     mask: Option<PathBuf>,
+    /// Add `budget` to the JSON: block-mean error and bias by part of TEST's AOVs (against REF's
+    /// order/light layers) and by region of the cloud (lit, base, core, edges, haze), with REF's
+    /// share of light per order and light (docs/budget.md).
+    #[arg(long)]
+    budget: bool,
+    /// Judge TEST against this layer of REF instead of its image (e.g. `light_sun` for a render
+    /// with only the sun on and a black ground); the mask (and --budget's regions) still come from REF.
+    #[arg(long, value_name = "NAME")]
+    ref_layer: Option<String>,
 }
 
 pub fn run(a: CompareArgs) -> Result<()> {
@@ -39,7 +48,21 @@ pub fn run(a: CompareArgs) -> Result<()> {
         super::output::check_files(&[d], "--diff", &inputs)?;
     }
     let test = Image::read_exr(&a.test)?;
-    let reference = Image::read_exr(&a.reference)?;
+    let full_reference = Image::read_exr(&a.reference)?;
+    let mut reference = full_reference.clone();
+    if let Some(name) = &a.ref_layer {
+        let Some(px) = reference.layer(name) else {
+            let have: Vec<&str> = reference.layers.iter().map(|l| l.0.as_str()).collect();
+            return Err(Error::invalid(
+                a.reference.display().to_string(),
+                "--ref-layer",
+                format!("no layer `{name}`; it has: {}", have.join(", ")),
+            ));
+        };
+        reference.pixels = px.to_vec();
+        // The standard errors are the image's, not the layer's.
+        reference.layers.retain(|l| l.0 != cloudgi::reference::STDERR_LAYER);
+    }
     let mask_img = match &a.mask {
         Some(p) => Some(Image::read_exr(p)?),
         None => None,
@@ -65,7 +88,15 @@ pub fn run(a: CompareArgs) -> Result<()> {
     if let Some(d) = &a.diff {
         write_diff_png(d, &test, &reference, mask.as_deref())?;
     }
-    let line = serde_json::to_string(&metrics).map_err(|e| Error::format("<json>", e.to_string()))?;
+    let json = |e: serde_json::Error| Error::format("<json>", e.to_string());
+    let mut line = serde_json::to_string(&metrics).map_err(json)?;
+    if a.budget {
+        // Regions come from REF's own layers, whatever the test is judged against.
+        let b = budget(&test, &full_reference, mask.as_deref(), a.ref_layer.as_deref())?;
+        // Appended to the metrics' object so their key order stays as it was.
+        line.pop();
+        line += &format!(",\"budget\":{}}}", serde_json::to_string(&b).map_err(json)?);
+    }
     println!("{line}");
     Ok(())
 }

@@ -103,7 +103,7 @@ struct RenderArgs {
     /// Override render.max_depth (reference: most scattering events per path).
     #[arg(long)]
     max_depth: Option<u32>,
-    /// Override render.time_limit (reference: seconds; stops after the pass in progress).
+    /// Override render.time_limit (reference: seconds; checked inside a pass and a path).
     #[arg(long)]
     time_limit: Option<f64>,
     /// Set render.stderr (reference: write the per-pixel standard error as EXR layer `stderr`).

@@ -11,12 +11,15 @@
 //!
 //! Rendering is progressive: pass after pass of one sample per pixel, each pixel sample drawing
 //! from its own stream [`Rng::for_pixel`]`(seed, x, y, sample)`, summed per pixel in sample order,
-//! so the image is bit-identical at any thread count. `render.time_limit` stops after the pass in
-//! progress once the budget is spent (the image then depends on the machine's speed).
+//! so the image is bit-identical at any thread count. `render.time_limit` is checked before each
+//! pixel sample and inside paths; pixels then average the samples they completed (the image
+//! then depends on the machine's speed; layer `samples` holds the counts).
 //!
 //! Extra EXR layers: `transmittance` (the exact transmittance of the pixel-centre camera ray
-//! through the cloud, up to the ground; R = G = B; `cloudgi compare` masks with it) and, with
-//! `render.stderr`, `stderr` (the standard error of each pixel's mean, per band).
+//! through the cloud, up to the ground; R = G = B; `cloudgi compare` masks with it); with
+//! `render.stderr`, `stderr` (the standard error of each pixel's mean, per band); and the image
+//! split by scattering order ([`ORDER_LAYERS`]) and by light ([`LIGHT_LAYERS`], [`SINGLE_LAYERS`]),
+//! each set summing to the image (docs/reference.md).
 
 pub mod integrator;
 pub mod mitsuba;
@@ -24,7 +27,7 @@ pub mod sky;
 pub mod slab;
 pub mod tracking;
 
-pub use integrator::{radiance, PathOptions};
+pub use integrator::{radiance, Light, PathOptions};
 pub use sky::SkySampler;
 
 use crate::error::Result;
@@ -33,18 +36,72 @@ use crate::math::{Rgb, Rng};
 use crate::pipeline::{Progress, Timings};
 use crate::scene::Scene;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// Name of the camera-ray transmittance layer.
 pub const TRANSMITTANCE_LAYER: &str = "transmittance";
 /// Name of the standard-error layer.
 pub const STDERR_LAYER: &str = "stderr";
+/// Name of the per-pixel sample-count layer (R = G = B = samples averaged), written when the time
+/// limit ended the render (it may end a pass part-way, so pixels hold different counts).
+pub const SAMPLES_LAYER: &str = "samples";
+
+/// Scattering-order classes of the order layers: (layer name, lowest order, highest order).
+/// Order = medium scattering events on the path; ground bounces do not count (they change the
+/// light, see [`Light`]). Order 0 is the background: sky and ground seen through the cloud.
+pub const ORDER_LAYERS: [(&str, u32, u32); 6] = [
+    ("order0", 0, 0),
+    ("order1", 1, 1),
+    ("order2", 2, 2),
+    ("order3_4", 3, 4),
+    ("order5_8", 5, 8),
+    ("order9plus", 9, u32::MAX),
+];
+/// Light layers, indexed by [`Light`] as usize: sun and sky on paths that never touch the
+/// ground, and every path with a ground vertex.
+pub const LIGHT_LAYERS: [&str; 3] = ["light_sun", "light_sky", "light_ground"];
+/// Single scattering (order 1) split by light, indexed by [`Light`] as usize.
+pub const SINGLE_LAYERS: [&str; 3] = ["order1_sun", "order1_sky", "order1_ground"];
+
+/// Index of `order` in [`ORDER_LAYERS`].
+#[inline]
+pub fn order_class(order: u32) -> usize {
+    match order {
+        0..=2 => order as usize,
+        3..=4 => 3,
+        5..=8 => 4,
+        _ => 5,
+    }
+}
+
+/// Per-band sums of one pixel: Σx, Σx² of the sample values, and Σx per (order class, light) bin.
+#[derive(Clone)]
+struct PixelSums {
+    n: u32,
+    sum: [f64; 3],
+    sum2: [f64; 3],
+    bins: [[f64; 3]; 18],
+}
+
+impl Default for PixelSums {
+    fn default() -> Self {
+        PixelSums {
+            n: 0,
+            sum: [0.0; 3],
+            sum2: [0.0; 3],
+            bins: [[0.0; 3]; 18],
+        }
+    }
+}
 
 /// What a reference render did besides the image.
 #[derive(Clone, Debug)]
 pub struct ReferenceStats {
-    /// Samples per pixel actually taken (fewer than asked when the time limit hit).
+    /// Samples per pixel of the pixels with the most (fewer than asked when the time limit hit).
     pub spp: u32,
+    /// Fewest samples any pixel holds (below `spp` when the time limit ended a pass part-way).
+    pub min_spp: u32,
     /// Wall-clock seconds of the path tracing.
     pub seconds: f64,
 }
@@ -53,80 +110,127 @@ pub struct ReferenceStats {
 /// time_limit, stderr).
 pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
     let (img, stats) = render_with_stats(scene, progress, timings);
-    progress.log(&format!("reference: {} spp in {:.2} s", stats.spp, stats.seconds));
+    let spp = if stats.min_spp == stats.spp {
+        format!("{} spp", stats.spp)
+    } else {
+        format!("{}–{} spp (time limit inside a pass; layer `samples`)", stats.min_spp, stats.spp)
+    };
+    progress.log(&format!("reference: {spp} in {:.2} s", stats.seconds));
     Ok(img)
 }
 
 /// [`render`], also returning how many samples were taken.
+///
+/// The time limit is checked before every pixel sample and every [`integrator::DEADLINE_CHECK`]
+/// vertices inside a path, so it holds to well under a second; a path cut off by it is dropped,
+/// and each pixel averages the samples it completed.
 pub fn render_with_stats(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> (Image, ReferenceStats) {
     let cam = &scene.camera;
     let (w, h) = (cam.width as usize, cam.height as usize);
     let rs = &scene.render;
+    let start = Instant::now();
+    let deadline = rs.time_limit.map(|s| start + std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9)));
     let opts = PathOptions {
         max_depth: rs.max_depth.unwrap_or(u32::MAX),
+        deadline,
     };
     let transmittance = timings.time("camera transmittance", || camera_transmittance(scene));
-    // Per pixel: Σx and Σx² per band, in f64, summed in sample order.
-    let mut sum = vec![[0f64; 6]; w * h];
-    let start = Instant::now();
-    let mut done = 0u32;
+    // Per pixel, in f64, summed in sample order (so any thread count gives the same image).
+    let mut acc = vec![PixelSums::default(); w * h];
+    let stop = AtomicBool::new(false);
+    let mut passes = 0u32;
     timings.time("path tracing", || {
-        progress.begin("reference", rs.spp as u64 * h as u64);
-        while done < rs.spp {
-            let s = done;
-            sum.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-                for (x, acc) in row.iter_mut().enumerate() {
-                    let v = sample_pixel(scene, &opts, x as u32, y as u32, s);
+        if let Some(t) = rs.time_limit {
+            // The progress counts towards `spp`; the limit usually ends the render first.
+            progress.log(&format!("reference: time limit {t} s"));
+        }
+        progress.begin("reference", rs.spp as u64 * (w * h) as u64);
+        while passes < rs.spp && !stop.load(Ordering::Relaxed) {
+            let s = passes;
+            acc.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+                for (x, a) in row.iter_mut().enumerate() {
+                    if stop.load(Ordering::Relaxed) || deadline.is_some_and(|t| Instant::now() >= t) {
+                        stop.store(true, Ordering::Relaxed);
+                        return;
+                    }
+                    let mut bins = [Rgb::ZERO; 18];
+                    let sink = |order: u32, light: Light, c: Rgb| bins[order_class(order) * 3 + light as usize] += c;
+                    let Some(v) = sample_pixel(scene, &opts, x as u32, y as u32, s, sink) else {
+                        stop.store(true, Ordering::Relaxed);
+                        return;
+                    };
+                    a.n += 1;
                     for c in 0..3 {
                         let v = v[c] as f64;
-                        acc[c] += v;
-                        acc[c + 3] += v * v;
+                        a.sum[c] += v;
+                        a.sum2[c] += v * v;
+                        for (b, sb) in a.bins.iter_mut().zip(&bins) {
+                            b[c] += sb[c] as f64;
+                        }
                     }
+                    progress.advance(1);
                 }
-                progress.advance(1);
             });
-            done += 1;
-            if let Some(limit) = rs.time_limit {
-                if start.elapsed().as_secs_f64() >= limit {
-                    break;
-                }
-            }
+            passes += 1;
         }
         progress.end();
     });
-    let n = done.max(1) as f64;
+    let spp = acc.iter().map(|a| a.n).max().unwrap_or(0);
+    let min_spp = acc.iter().map(|a| a.n).min().unwrap_or(0);
+    // A pixel with no completed sample (time limit below one pass) reads 0.
+    let mean = |a: &PixelSums, s: &[f64; 3]| -> Rgb {
+        let n = a.n.max(1) as f64;
+        Rgb::new((s[0] / n) as f32, (s[1] / n) as f32, (s[2] / n) as f32)
+    };
     let mut img = Image::new(cam.width, cam.height);
-    img.pixels = sum
-        .iter()
-        .map(|a| Rgb::new((a[0] / n) as f32, (a[1] / n) as f32, (a[2] / n) as f32))
-        .collect();
+    img.pixels = acc.iter().map(|a| mean(a, &a.sum)).collect();
     img.add_layer(TRANSMITTANCE_LAYER, transmittance.iter().map(|&t| Rgb::splat(t)).collect());
+    let binsum = |a: &PixelSums, pick: &dyn Fn(usize, usize) -> bool| -> [f64; 3] {
+        let mut s = [0f64; 3];
+        for (i, b) in a.bins.iter().enumerate() {
+            if pick(i / 3, i % 3) {
+                for c in 0..3 {
+                    s[c] += b[c];
+                }
+            }
+        }
+        s
+    };
+    for (k, (name, _, _)) in ORDER_LAYERS.iter().enumerate() {
+        img.add_layer(name, acc.iter().map(|a| mean(a, &binsum(a, &|o, _| o == k))).collect());
+    }
+    for (k, name) in LIGHT_LAYERS.iter().enumerate() {
+        img.add_layer(name, acc.iter().map(|a| mean(a, &binsum(a, &|_, l| l == k))).collect());
+    }
+    for (k, name) in SINGLE_LAYERS.iter().enumerate() {
+        img.add_layer(name, acc.iter().map(|a| mean(a, &binsum(a, &|o, l| o == 1 && l == k))).collect());
+    }
     if rs.stderr {
-        let se = |s: f64, s2: f64| -> f32 {
-            if done < 2 {
+        let se = |a: &PixelSums, c: usize| -> f32 {
+            if a.n < 2 {
                 return f32::INFINITY;
             }
-            let mean = s / n;
-            let var = ((s2 - n * mean * mean) / (n - 1.0)).max(0.0);
+            let n = a.n as f64;
+            let mean = a.sum[c] / n;
+            let var = ((a.sum2[c] - n * mean * mean) / (n - 1.0)).max(0.0);
             (var / n).sqrt() as f32
         };
-        img.add_layer(
-            STDERR_LAYER,
-            sum.iter()
-                .map(|a| Rgb::new(se(a[0], a[3]), se(a[1], a[4]), se(a[2], a[5])))
-                .collect(),
-        );
+        img.add_layer(STDERR_LAYER, acc.iter().map(|a| Rgb::new(se(a, 0), se(a, 1), se(a, 2))).collect());
+    }
+    if min_spp < rs.spp {
+        img.add_layer(SAMPLES_LAYER, acc.iter().map(|a| Rgb::splat(a.n as f32)).collect());
     }
     let stats = ReferenceStats {
-        spp: done,
+        spp,
+        min_spp,
         seconds: start.elapsed().as_secs_f64(),
     };
     (img, stats)
 }
 
 /// Convenience for tests and other methods' comparisons: the reference image of `scene` at `spp`
-/// samples per pixel (no time limit, no progress), with the `transmittance` layer and, if
-/// `scene.render.stderr`, the `stderr` layer. All other settings come from `scene.render`.
+/// samples per pixel (no time limit, no progress), with the `transmittance` and order/light
+/// layers and, if `scene.render.stderr`, the `stderr` layer. All other settings come from `scene.render`.
 pub fn render_image(scene: &Scene, spp: u32) -> Image {
     let mut s = scene.clone();
     s.render.spp = spp.max(1);
@@ -135,13 +239,14 @@ pub fn render_image(scene: &Scene, spp: u32) -> Image {
 }
 
 /// One sample of pixel (x, y): a jittered camera ray through the pixel, traced with stream
-/// `Rng::for_pixel(seed, x, y, s)`.
+/// `Rng::for_pixel(seed, x, y, s)`; `None` when the path passed `opts.deadline`. The terms by
+/// order and light go to `sink` (see [`integrator::radiance`]).
 #[inline]
-pub fn sample_pixel(scene: &Scene, opts: &PathOptions, x: u32, y: u32, s: u32) -> Rgb {
+pub fn sample_pixel(scene: &Scene, opts: &PathOptions, x: u32, y: u32, s: u32, sink: impl FnMut(u32, Light, Rgb)) -> Option<Rgb> {
     let mut rng = Rng::for_pixel(scene.render.seed, x, y, s);
     let (px, py) = (x as f32 + rng.uniform(), y as f32 + rng.uniform());
     let ray = scene.camera.ray(px, py);
-    radiance(scene, ray.origin, ray.dir, opts, &mut rng)
+    radiance(scene, ray.origin, ray.dir, opts, &mut rng, sink)
 }
 
 /// Exact transmittance of each pixel-centre camera ray through the medium, up to the ground.
