@@ -46,6 +46,7 @@
 
 use crate::lighting::bins::{Bin, DirectionBins, NUM_BINS};
 use crate::lighting::{Ground, Sky, Sun};
+use crate::lit::sky_single::{sh9, SH_COEFFS};
 use crate::math::{mix64, Rgb, Rng, Vec3};
 use crate::medium::{Dda, Medium};
 use crate::sunlight::SunTransmittance;
@@ -73,6 +74,11 @@ pub struct IncidentSettings {
     /// scaling. `false` is the paper's scheme exactly (Q1 from the first moment, decay with σt);
     /// see docs/diffusion.md for why the default scene uses it (`render.delta_scaling`).
     pub delta_scaling: bool,
+    /// Also project the reduced sky and ground radiance per voxel onto degree-≤ 2 spherical
+    /// harmonics ([`IncidentLight::sky_sh`]) for the gather's single scattering of sky and ground
+    /// light ([`crate::lit::sky_single`], `render.sky_single_scattering`). `false`: the paper's
+    /// gather, which leaves it out.
+    pub sky_single: bool,
 }
 
 impl Default for IncidentSettings {
@@ -82,6 +88,7 @@ impl Default for IncidentSettings {
             sky_subdivisions: 8,
             seed: 0,
             delta_scaling: false,
+            sky_single: false,
         }
     }
 }
@@ -133,6 +140,10 @@ pub struct IncidentLight {
     pub sun_irradiance: Rgb,
     /// The mean radiance per bin that was propagated (W·m⁻²·sr⁻¹).
     pub bin_radiance: Vec<Rgb>,
+    /// With [`IncidentSettings::sky_single`]: per voxel, the reduced sky and ground radiance (all
+    /// bins, not the sun) projected onto the real spherical harmonics of degree ≤ 2 of the flow
+    /// direction, L_lm = Σ_b Δω_b Ī_b Y_lm(ω_b), `[band * 9 + lm]` (W·m⁻²·sr⁻¹); zero where ρ = 0.
+    pub sky_sh: Option<Vec<[f32; 3 * SH_COEFFS]>>,
     /// Rays that crossed the medium's active box (all bins and the sun).
     pub rays: u64,
     /// Extra rays traced through the centre of a full voxel that no ray had crossed.
@@ -392,6 +403,7 @@ pub fn compute_with_sun(
         sun_transmittance,
         sun_irradiance: sun_e,
         bin_radiance: sources.bin_radiance.clone(),
+        sky_sh: None,
         rays: 0,
         fallback_rays: 0,
     };
@@ -458,6 +470,13 @@ pub fn compute_with_sun(
     let mut s0 = vec![[0f64; 3]; nb];
     let mut s1 = vec![[0f64; 9]; nb];
     let mut sun_t = vec![1f32; nb];
+    // Σ_b Δω_b Ī_b Y_lm(ω_b) over the sky and ground bins (not the sun), when asked for.
+    let mut sh = if settings.sky_single {
+        vec![[0f32; 3 * SH_COEFFS]; nb]
+    } else {
+        Vec::new()
+    };
+    let sh_basis: Vec<[f32; SH_COEFFS]> = list.iter().map(|(_, _, flow)| sh9(flow.normalize())).collect();
     let chunk = rayon::current_num_threads().max(1) * 2;
     let mut rays = 0u64;
     let mut fallback = 0u64;
@@ -474,13 +493,22 @@ pub fn compute_with_sun(
         rays += results.iter().map(|r| r.1).sum::<u64>();
         fallback += results.iter().map(|r| r.2).sum::<u64>();
         let base = ci * chunk;
+        // Without the projection `sh` is empty: give every chunk an empty slice of it.
+        let sh_chunk = if sh.is_empty() { 0 } else { 4096 };
+        let mut sh_chunks: Vec<&mut [[f32; 3 * SH_COEFFS]]> = if sh.is_empty() {
+            (0..nb.div_ceil(4096)).map(|_| &mut [][..]).collect()
+        } else {
+            sh.chunks_mut(sh_chunk).collect()
+        };
         s0.par_chunks_mut(4096)
             .zip(s1.par_chunks_mut(4096))
             .zip(sun_t.par_chunks_mut(4096))
+            .zip(sh_chunks.par_iter_mut())
             .enumerate()
-            .for_each(|(bi, ((a0, a1), st))| {
+            .for_each(|(bi, (((a0, a1), st), ash))| {
                 for (o, ((v0, v1), t)) in a0.iter_mut().zip(a1.iter_mut()).zip(st.iter_mut()).enumerate() {
                     let idx = bi * 4096 + o;
+                    let mut vsh = ash.get_mut(o);
                     for (gi, (res, _, _)) in results.iter().enumerate() {
                         let s = res[idx];
                         if s[3] <= 0.0 {
@@ -499,12 +527,24 @@ pub fn compute_with_sun(
                                 v1[3 * ax + c] += p * flow[ax] as f64;
                             }
                         }
+                        if let Some(acc) = vsh.as_mut() {
+                            if base + gi != sun_index {
+                                let y = &sh_basis[base + gi];
+                                for c in 0..3 {
+                                    let p = (mean[c] * dw[c] as f64) as f32;
+                                    for k in 0..SH_COEFFS {
+                                        acc[c * SH_COEFFS + k] += p * y[k];
+                                    }
+                                }
+                            }
+                        }
                     }
                 }
             });
     }
     out.rays = rays;
     out.fallback_rays = fallback;
+    let mut sky_sh = settings.sky_single.then(|| vec![[0f32; 3 * SH_COEFFS]; n]);
     // Scatter into the full grid with ρσs/(4π) and ρσs·g/(4π).
     // With δ-scaling (f = g) the scattering that changes direction is σs(1 − g), isotropic (g' = 0).
     let (sigma_s, g) = (optics.sigma_s, optics.phase.mean_cosine());
@@ -531,9 +571,13 @@ pub fn compute_with_sun(
                     );
                 }
                 out.sun_mean_transmittance[gi] = sun_t[bi];
+                if let Some(full) = sky_sh.as_mut() {
+                    full[gi] = sh[bi];
+                }
             }
         }
     }
+    out.sky_sh = sky_sh;
     out
 }
 

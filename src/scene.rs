@@ -121,6 +121,9 @@ render_table! {
     /// `diffusion`, `full`: the gather's diffuse source is a·max(0, I0 + g·I1·ω) instead of a·I0
     /// (src/diffusion/flux.rs, docs/diffusion.md).
     diffuse_anisotropy: bool => diffuse_anisotropy;
+    /// `diffusion`, `full`: add the single scattering of the reduced sky and ground light to the
+    /// gather's source, a·∫p·I_ri,sky (src/lit/sky_single.rs); false: the paper's gather.
+    sky_single_scattering: bool => incident.sky_single;
 }
 
 /// The whole scene file, as written.
@@ -212,7 +215,7 @@ pub struct RenderSettings {
     pub time_limit: Option<f64>,
     /// `reference`: write the standard-error layer.
     pub stderr: bool,
-    /// Stage 1 (`render.seed`, `render.delta_scaling`).
+    /// Stage 1 (`render.seed`, `render.delta_scaling`, `render.sky_single_scattering`).
     pub incident: IncidentSettings,
     /// Stage 2's solver (`render.solver_tolerance`, `render.solver_max_iterations`).
     pub solver: DiffusionSettings,

@@ -1,9 +1,10 @@
 //! `cloudgi slab`: reflectance and transmittance of a plane-parallel slab, as one JSON line, by
 //! the reference transport (Monte Carlo, with standard errors) or by the diffusion discretisation
-//! of eq. 4 with eq. 7 ([`cloudgi::diffusion::slab`], deterministic: standard errors 0).
+//! of eq. 4 with eq. 7 ([`cloudgi::diffusion::slab`], deterministic: standard errors 0), by
+//! default after the δ-M transform with f = g² (`--forward-fraction 0`: the paper's scheme).
 
 use clap::{Args, ValueEnum};
-use cloudgi::diffusion::slab::{default_cells, solve_slab, Incidence as DiffusionIncidence};
+use cloudgi::diffusion::slab::{slab_forward_fraction, solve_slab_similar, Incidence as DiffusionIncidence};
 use cloudgi::error::{Error, Result};
 use cloudgi::reference::slab::{slab, Incidence, SlabParams, SlabResult};
 
@@ -36,6 +37,10 @@ pub struct SlabArgs {
     /// Photons.
     #[arg(long, default_value_t = 1_000_000)]
     samples: u64,
+    /// `diffusion`: forward fraction f of the δ-M similarity transform, 0 ≤ f < 1 (default g²,
+    /// measured against adding-doubling in docs/budget.md); 0 is the paper's scheme exactly.
+    #[arg(long)]
+    forward_fraction: Option<f64>,
     /// Seed of the photon streams.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -56,7 +61,15 @@ pub fn run(a: SlabArgs) -> Result<()> {
                 Incidence::Collimated => DiffusionIncidence::Normal,
                 Incidence::Diffuse => DiffusionIncidence::Diffuse,
             };
-            let d = solve_slab(a.thickness, a.albedo, a.g, inc, default_cells(a.thickness));
+            let f = a.forward_fraction.unwrap_or_else(|| slab_forward_fraction(a.g));
+            if !(0.0..1.0).contains(&f) {
+                return Err(Error::invalid(
+                    "command line",
+                    "--forward-fraction",
+                    format!("{f} is outside [0, 1); give a fraction such as 0.81 (g²) or 0 for the paper's scheme"),
+                ));
+            }
+            let d = solve_slab_similar(a.thickness, a.albedo, a.g, f, inc);
             SlabResult {
                 r: d.r,
                 t: d.t,

@@ -129,6 +129,7 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
         "render.solver_max_iterations",
         "render.delta_scaling",
         "render.diffuse_anisotropy",
+        "render.sky_single_scattering",
     ] {
         rule(key, solved, &only_solved);
     }

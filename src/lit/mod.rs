@@ -17,6 +17,9 @@
 //! `render.diffuse_anisotropy` attaches the first moment ([`LitVolume::with_flux`],
 //! [`crate::diffusion::flux`]): then the diffuse part is max(0, I0 + g·I1·ω).
 //!
+//! `render.sky_single_scattering` adds the missing single scattering of the reduced sky and
+//! ground light, a·∫p(ω′·ω) I_ri,sky(X, ω′) dω′ ([`sky_single`], [`LitVolume::with_sky_single`]).
+//!
 //! **The one I0 rule.** I0 is clamped at 0 — the P1 solution goes negative in thin voxels on
 //! sunlit tops (the −∇·(Q1/ρσtr) source of eq. 4 is a dipole) and a radiance cannot — and
 //! interpolated density-weighted, I0(p) = trilinear(ρ·I0)/trilinear(ρ): empty voxels (I0 = 0)
@@ -25,6 +28,7 @@
 
 pub mod ground;
 pub mod pyramid;
+pub mod sky_single;
 
 use crate::diffusion::flux::FluxField;
 use crate::lighting::{Sky, Sun};
@@ -33,6 +37,7 @@ use crate::medium::march::{march, March};
 use crate::medium::{Grid3, Medium};
 use ground::LitGround;
 use pyramid::LitPyramid;
+use sky_single::SkySingle;
 use std::sync::{Arc, OnceLock};
 
 /// A medium with its diffusion radiance and direct sun, ready to be rendered from any viewpoint.
@@ -54,6 +59,9 @@ pub struct LitVolume {
     /// The diffuse field's first moment I1 (`render.diffuse_anisotropy`); the gathers' source
     /// uses it, the viewing cubes do not.
     pub flux: Option<Arc<FluxField>>,
+    /// The single scattering of the reduced sky and ground light (`render.sky_single_scattering`),
+    /// added to the diffuse part of the source; [`sky_single`].
+    pub sky_single: Option<Arc<SkySingle>>,
     /// The mip pyramid, built on first use and shared by every clone (it does not depend on the
     /// ground or the flux).
     pyramid: Arc<OnceLock<Arc<LitPyramid>>>,
@@ -81,6 +89,7 @@ impl LitVolume {
             sky,
             ground,
             flux: None,
+            sky_single: None,
             pyramid: Arc::new(OnceLock::new()),
         }
     }
@@ -94,6 +103,12 @@ impl LitVolume {
     /// Add the anisotropic diffuse in-scattering g·I1·ω ([`crate::diffusion::flux`]).
     pub fn with_flux(mut self, flux: FluxField) -> LitVolume {
         self.flux = Some(Arc::new(flux));
+        self
+    }
+
+    /// Add the single scattering of the reduced sky and ground light ([`sky_single`]).
+    pub fn with_sky_single(mut self, s: SkySingle) -> LitVolume {
+        self.sky_single = Some(Arc::new(s));
         self
     }
 
@@ -130,13 +145,18 @@ impl LitVolume {
     }
 
     /// The diffuse radiance scattered towards `to_eye` per unit albedo (W·m⁻²·sr⁻¹): I0, or
-    /// max(0, I0 + g·I1·ω) with the first moment attached.
+    /// max(0, I0 + g·I1·ω) with the first moment attached; plus the reduced sky and ground
+    /// light's single scattering ∫p·I_ri,sky when attached.
     #[inline]
     pub fn diffuse(&self, v: Vec3, rho: f32, to_eye: Vec3) -> Rgb {
         let i0 = self.i0(v, rho);
-        match &self.flux {
+        let d = match &self.flux {
             Some(f) => (i0 + f.anisotropic_at_voxel(v, rho, to_eye)).max(Rgb::ZERO),
             None => i0,
+        };
+        match &self.sky_single {
+            Some(s) => d + s.at_voxel(v, rho, to_eye),
+            None => d,
         }
     }
 

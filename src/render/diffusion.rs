@@ -12,6 +12,7 @@ use crate::image::Image;
 use crate::incident::{compute_with_sun, EntryRadiance, IncidentLight, IncidentSources};
 use crate::lighting::bins::DirectionBins;
 use crate::lit::ground::LitGround;
+use crate::lit::sky_single::SkySingle;
 use crate::lit::LitVolume;
 use crate::math::Rgb;
 use crate::scene::Scene;
@@ -56,12 +57,16 @@ pub fn i0_rgb(sol: &DiffusionSolution) -> Vec<Rgb> {
 }
 
 /// The lit volume of a solved scene, with the first moment attached when
-/// `render.diffuse_anisotropy` is on.
+/// `render.diffuse_anisotropy` is on and the sky and ground single scattering when stage 1
+/// projected it (`render.sky_single_scattering`).
 pub fn solved_lit_volume(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution) -> LitVolume {
-    let lit = scene_lit_volume(scene, i0_rgb(sol), &inc.sun_transmittance);
+    let mut lit = scene_lit_volume(scene, i0_rgb(sol), &inc.sun_transmittance);
     if scene.render.diffuse_anisotropy {
         let i1 = diffuse_flux(&scene.medium, inc, sol, scene.render.solver.min_optical_depth);
-        return lit.with_flux(FluxField::new(&scene.medium, &i1));
+        lit = lit.with_flux(FluxField::new(&scene.medium, &i1));
+    }
+    if let Some(sh) = &inc.sky_sh {
+        lit = lit.with_sky_single(SkySingle::new(&scene.medium, sh));
     }
     lit
 }
