@@ -95,6 +95,10 @@ pub struct Optics {
     pub albedo: Rgb,
     /// The phase function.
     pub phase: Hg,
+    /// Albedo per band and phase function of the *exact* single scattering of the sun, per unit
+    /// of this medium's extinction: (a, p) untransformed; after [`Optics::delta_m`] the true
+    /// albedo and HG with the TMS factor, (a σt/σt′, p) (Nakajima & Tanaka 1988).
+    pub sun_single: (Rgb, Hg),
 }
 
 /// Optics after a similarity transform with forward fraction f (see [`Optics::similarity`]):
@@ -116,7 +120,39 @@ impl Optics {
             sigma_t,
             albedo,
             phase: Hg::new(g),
+            sun_single: (albedo, Hg::new(g)),
         }
+    }
+
+    /// The δ-M medium (`render.forward_fraction`; Wiscombe 1977) every stage of `diffusion` and
+    /// `full` runs on: the forward fraction `f` (0 ≤ f < 1) of the scattering is treated as
+    /// unscattered, σt′ = σt(1 − ā f) with ā the bands' mean albedo (one extinction for all bands,
+    /// exact for grey albedo), the absorption σa kept per band (a′ = 1 − σa/σt′), g′ = (g − f)/(1 − f);
+    /// the sun's single scattering stays exact (TMS): true HG with albedo a·σt/σt′ per unit of
+    /// the transformed extinction, seen through the transformed transmittance. f = 0 returns
+    /// `self` unchanged.
+    pub fn delta_m(&self, f: f32) -> Optics {
+        if f == 0.0 {
+            return *self;
+        }
+        let mean_a = (self.albedo.x + self.albedo.y + self.albedo.z) / 3.0;
+        let st = self.sigma_t * (1.0 - mean_a * f);
+        let sigma_a = Rgb::ONE - self.albedo;
+        let albedo = (Rgb::ONE - sigma_a * (self.sigma_t / st)).clamp(Rgb::ZERO, Rgb::ONE);
+        let g = self.phase.g as f32;
+        Optics {
+            sigma_t: st,
+            albedo,
+            phase: Hg::new((g - f) / (1.0 - f)),
+            sun_single: (self.albedo * (self.sigma_t / st), self.phase),
+        }
+    }
+
+    /// The sun's exact single-scattering source per unit extinction and unit irradiance (sr⁻¹
+    /// per band): albedo × p(sun → eye), with `to_sun` and `to_eye` unit ([`Self::sun_single`]).
+    #[inline]
+    pub fn sun_scatter(&self, to_sun: Vec3, to_eye: Vec3) -> Rgb {
+        self.sun_single.0 * self.sun_single.1.eval(to_sun, to_eye)
     }
 
     /// Scattering σs = a·σt per band at density 1 (m⁻¹).
@@ -191,6 +227,21 @@ mod tests {
         assert_eq!(p.eval(sun, sun), p.eval_cos(-1.0));
         assert!(p.eval(sun, -sun) > p.eval(sun, sun));
         assert_eq!(p.order(2).mean_cosine(), 0.8f32 as f64 * 0.8f32 as f64);
+    }
+
+    #[test]
+    fn delta_m_keeps_absorption_and_sun_single_scattering() {
+        let o = Optics::new(0.05, Rgb::new(0.9, 0.9, 0.9), 0.85);
+        assert_eq!(o.delta_m(0.0), o);
+        let t = o.delta_m(0.4);
+        let (to_sun, to_eye) = (Vec3::Y, Vec3::new(0.6, -0.8, 0.0));
+        for c in 0..3 {
+            // σa′ = σa, and κ′·(sun source) = κ·a·p: the exact single scattering per unit length.
+            assert!(((t.sigma_t * (1.0 - t.albedo[c])) - o.sigma_t * (1.0 - o.albedo[c])).abs() < 1e-7);
+            let want = o.sigma_t * o.albedo[c] * o.phase.eval(to_sun, to_eye);
+            assert!((t.sigma_t * t.sun_scatter(to_sun, to_eye)[c] - want).abs() < 1e-6 * want);
+        }
+        assert!((t.phase.mean_cosine() - (0.85f64 - 0.4) / 0.6).abs() < 1e-6);
     }
 
     #[test]

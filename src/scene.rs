@@ -124,6 +124,9 @@ render_table! {
     /// `diffusion`, `full`: add the single scattering of the reduced sky and ground light to the
     /// gather's source, a·∫p·I_ri,sky (src/lit/sky_single.rs); false: the paper's gather.
     sky_single_scattering: bool => incident.sky_single;
+    /// `diffusion`, `full`: forward fraction f of the δ-M transform every stage runs on
+    /// (0 ≤ f < 1; src/optics.rs, docs/budget.md); 0 is the paper's scheme exactly.
+    forward_fraction: f32 => forward_fraction;
 }
 
 /// The whole scene file, as written.
@@ -231,6 +234,9 @@ pub struct RenderSettings {
     /// `diffusion`, `full`: the gather's diffuse source is a·max(0, I0 + g·I1·ω) instead of a·I0
     /// (src/diffusion/flux.rs, docs/diffusion.md).
     pub diffuse_anisotropy: bool,
+    /// `diffusion`, `full`: δ-M forward fraction f (unitless, 0 ≤ f < 1) of the medium every
+    /// stage sees ([`crate::optics::Optics::delta_m`], with TMS sun single scattering); 0 = off.
+    pub forward_fraction: f32,
 }
 
 impl Default for RenderSettings {
@@ -253,6 +259,7 @@ impl Default for RenderSettings {
             edges: EdgeSettings::default(),
             aov: false,
             diffuse_anisotropy: false,
+            forward_fraction: 0.0,
         }
     }
 }
@@ -315,6 +322,13 @@ impl Scene {
                 "the time limit is a positive number of seconds",
             )?;
         }
+        check(
+            f,
+            "render.forward_fraction",
+            (0.0..1.0).contains(&r.forward_fraction),
+            r.forward_fraction,
+            "the δ-M forward fraction is in [0, 1), e.g. 0.43 (g⁸ for g = 0.9); 0 turns it off",
+        )?;
         // Each stage's settings from its keys, validated by the stage that owns them.
         let mut render = RenderSettings::default();
         r.apply(&mut render);

@@ -130,6 +130,7 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
         "render.delta_scaling",
         "render.diffuse_anisotropy",
         "render.sky_single_scattering",
+        "render.forward_fraction",
     ] {
         rule(key, solved, &only_solved);
     }

@@ -276,7 +276,8 @@ impl<'a> CubeRenderer<'a> {
         let t_ground = lit.ground_hit(o, d);
         let t_end = t_ground.unwrap_or(f32::INFINITY);
         // Sunlight travels along −sun.dir; the scattered light travels towards the eye, −d.
-        let sun_e = lit.sun.irradiance * m.optics.phase.eval(lit.sun.dir, -d);
+        // The sun's exact single scattering per unit extinction (albedo included; TMS under δ-M).
+        let sun_e = lit.sun.irradiance * m.optics.sun_scatter(lit.sun.dir, -d);
         let albedo = m.optics.albedo;
         let sigma_t = m.optics.sigma_t;
         let cut = self.opts.t_cutoff;
@@ -347,9 +348,9 @@ impl<'a> CubeRenderer<'a> {
                             };
                             let rho = c[0];
                             let e = (-sigma_t * rho * len).exp();
-                            // T(1 − e)·J with J = a(ρI0 + p E_sun ρT_sun)/ρ from the pre-multiplied cell.
+                            // T(1 − e)·J with J = (a ρI0 + a p E_sun ρT_sun)/ρ from the pre-multiplied cell.
                             let w = tr * (1.0 - e) / rho;
-                            l += albedo * (Rgb::new(c[1], c[2], c[3]) + sun_e * c[4]) * w;
+                            l += (albedo * Rgb::new(c[1], c[2], c[3]) + sun_e * c[4]) * w;
                             tr *= e;
                             if tr < cut {
                                 tr = 0.0;

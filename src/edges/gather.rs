@@ -417,7 +417,7 @@ impl<'a> EdgeGather<'a> {
                 *x += s;
             }
         }
-        let phase_sun = m.optics.phase.eval(self.sun.dir, -d);
+        let sun_scatter = m.optics.sun_scatter(self.sun.dir, -d);
         let to_eye = -d;
         let mut tr = 1.0f64;
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
@@ -441,7 +441,7 @@ impl<'a> EdgeGather<'a> {
                 if w < 1.0 {
                     aov.edge += f * (1.0 - w) * edge_src[k];
                 }
-                aov.sun_single += f * m.optics.albedo * (self.sun.irradiance_at)(pos) * phase_sun;
+                aov.sun_single += f * (self.sun.irradiance_at)(pos) * sun_scatter;
                 tr *= (-delta).exp();
                 if tr < crate::medium::march::T_CUTOFF as f64 {
                     tr = 0.0;

@@ -164,9 +164,9 @@ impl LitVolume {
     /// trilinear density `rho`, leaving towards the eye along `to_eye` (unit); module docs.
     #[inline]
     pub fn source(&self, v: Vec3, rho: f32, to_eye: Vec3) -> Rgb {
-        let phase = self.medium.optics.phase.eval(self.sun.dir, to_eye);
-        let sun = self.sun.irradiance * (phase * self.sun_t.trilinear(v.to_array()));
-        self.medium.optics.albedo * (self.diffuse(v, rho, to_eye) + sun)
+        let optics = &self.medium.optics;
+        let sun = self.sun.irradiance * optics.sun_scatter(self.sun.dir, to_eye) * self.sun_t.trilinear(v.to_array());
+        optics.albedo * self.diffuse(v, rho, to_eye) + sun
     }
 
     /// Front-to-back march of `o + t·d`, t ∈ [t_min, t_max], steps of at most `step_m` m, sample

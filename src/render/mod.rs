@@ -30,8 +30,20 @@ pub fn render(scene: &Scene, progress: &dyn Progress) -> Result<RenderOutput> {
     let image = match scene.render.method {
         Method::Single => single::render(scene, progress, &mut timings)?,
         Method::Reference => crate::reference::render(scene, progress, &mut timings)?,
-        Method::Diffusion => diffusion::render(scene, progress, &mut timings)?,
-        Method::Full => full::render(scene, progress, &mut timings)?,
+        Method::Diffusion => diffusion::render(&delta_m(scene), progress, &mut timings)?,
+        Method::Full => full::render(&delta_m(scene), progress, &mut timings)?,
     };
     Ok(RenderOutput { image, timings })
+}
+
+/// The scene every stage of `diffusion` and `full` runs on: its medium after the δ-M transform
+/// with `render.forward_fraction` (the same scene when it is 0, the paper's scheme).
+pub fn delta_m(scene: &Scene) -> std::borrow::Cow<'_, Scene> {
+    let f = scene.render.forward_fraction;
+    if f == 0.0 {
+        return std::borrow::Cow::Borrowed(scene);
+    }
+    let mut s = scene.clone();
+    s.medium.optics = s.medium.optics.delta_m(f);
+    std::borrow::Cow::Owned(s)
 }
