@@ -8,6 +8,9 @@
 //! * Fig. 7 `full`: also the clear-air cube iterations;
 //! * Fig. 8 `full` of the same scene at sunset (sun 4° high at the scene sun's azimuth, reddened
 //!   by the atmosphere, atmosphere sky), compared against its own reference;
+//! * `fig7-full-fixed`: `full` with the scene's own settings, by default the measured fixes to
+//!   the paper's method (sky and ground single scattering, δ-M, g·I1·ω; docs/budget.md), where
+//!   Figs. 5–8 render the paper's scheme (those switches off);
 //! * `reference` of the scene (and of the sunset scene), the unbiased path tracer.
 //!
 //! Writes `DIR/<id>.exr` + `.png` per render, `DIR/diff-<id>.png` (relative luminance difference
@@ -207,9 +210,15 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
     })?;
     let sunset_base = Scene::build(sunset_desc(&base.desc), &format!("{} (sunset)", base.source), &base_dir(scene_path))?;
 
-    let with = |s: &Scene, method: Method, iterations: Option<usize>| -> Result<Scene> {
+    // `paper`: the paper's scheme (the measured fixes of docs/budget.md off); else the scene's own settings.
+    let with = |s: &Scene, method: Method, iterations: Option<usize>, paper: bool| -> Result<Scene> {
         let mut d = s.desc.clone();
         d.render.method = method;
+        if paper {
+            d.render.sky_single_scattering = false;
+            d.render.forward_fraction = 0.0;
+            d.render.diffuse_anisotropy = false;
+        }
         if let Some(n) = iterations {
             d.render.iterations = n;
         }
@@ -225,7 +234,7 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
     let mut references = Vec::new();
     let mut refs = Vec::new();
     for (id, s) in [("reference", &base), ("fig8-reference", &sunset_base)] {
-        let scene = with(s, Method::Reference, None)?;
+        let scene = with(s, Method::Reference, None, false)?;
         let mut timings = Timings::default();
         let t0 = Instant::now();
         let (img, stats) = crate::reference::render_with_stats(&scene, progress, &mut timings);
@@ -246,16 +255,33 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
     }
 
     let plan = [
-        ("fig4-single", 4, "single scattering", Method::Single, None, 0),
-        ("fig5-diffusion", 5, "diffusion", Method::Diffusion, None, 0),
-        ("fig6-diffusion-low-density", 6, "diffusion + low-density", Method::Full, Some(0), 0),
-        ("fig7-full", 7, "full (+ clear-air iterations)", Method::Full, None, 0),
-        ("fig8-sunset-full", 8, "full, at sunset", Method::Full, None, 1),
+        ("fig4-single", 4, "single scattering", Method::Single, None, 0, true),
+        ("fig5-diffusion", 5, "diffusion", Method::Diffusion, None, 0, true),
+        (
+            "fig6-diffusion-low-density",
+            6,
+            "diffusion + low-density",
+            Method::Full,
+            Some(0),
+            0,
+            true,
+        ),
+        ("fig7-full", 7, "full (+ clear-air iterations)", Method::Full, None, 0, true),
+        ("fig8-sunset-full", 8, "full, at sunset", Method::Full, None, 1, true),
+        (
+            "fig7-full-fixed",
+            7,
+            "full with the measured fixes (scene settings)",
+            Method::Full,
+            None,
+            0,
+            false,
+        ),
     ];
     let mut figures = Vec::new();
-    for (id, figure, title, method, iterations, which) in plan {
+    for (id, figure, title, method, iterations, which, paper) in plan {
         let src = if which == 0 { &base } else { &sunset_base };
-        let scene = with(src, method, iterations)?;
+        let scene = with(src, method, iterations, paper)?;
         let t0 = Instant::now();
         let out = crate::render::render(&scene, progress)?;
         let seconds = t0.elapsed().as_secs_f64();

@@ -76,8 +76,8 @@ pub struct IncidentSettings {
     pub delta_scaling: bool,
     /// Also project the reduced sky and ground radiance per voxel onto degree-≤ 2 spherical
     /// harmonics ([`IncidentLight::sky_sh`]) for the gather's single scattering of sky and ground
-    /// light ([`crate::lit::sky_single`], `render.sky_single_scattering`). `false`: the paper's
-    /// gather, which leaves it out.
+    /// light ([`crate::lit::sky_single`], `render.sky_single_scattering`, default on). `false`:
+    /// the paper's gather, which leaves it out.
     pub sky_single: bool,
 }
 
@@ -88,7 +88,7 @@ impl Default for IncidentSettings {
             sky_subdivisions: 8,
             seed: 0,
             delta_scaling: false,
-            sky_single: false,
+            sky_single: true,
         }
     }
 }

@@ -130,8 +130,10 @@ impl Optics {
     /// exact for grey albedo), the absorption σa kept per band (a′ = 1 − σa/σt′), g′ = (g − f)/(1 − f);
     /// the sun's single scattering stays exact (TMS): true HG with albedo a·σt/σt′ per unit of
     /// the transformed extinction, seen through the transformed transmittance. f = 0 returns
-    /// `self` unchanged.
+    /// `self` unchanged; f is capped at g (a transform may not make g′ negative), so it is the
+    /// identity for g ≤ 0.
     pub fn delta_m(&self, f: f32) -> Optics {
+        let f = f.min(self.phase.g.max(0.0) as f32);
         if f == 0.0 {
             return *self;
         }

@@ -119,13 +119,16 @@ render_table! {
     /// `full`: write the components (diffusion, low_density, sun_single, background) as EXR layers.
     aov: bool => aov;
     /// `diffusion`, `full`: the gather's diffuse source is a·max(0, I0 + g·I1·ω) instead of a·I0
-    /// (src/diffusion/flux.rs, docs/diffusion.md).
+    /// (src/diffusion/flux.rs, docs/diffusion.md); default on (measured with the δ-M transform,
+    /// docs/budget.md "Fixes"), false: the paper's gather.
     diffuse_anisotropy: bool => diffuse_anisotropy;
     /// `diffusion`, `full`: add the single scattering of the reduced sky and ground light to the
-    /// gather's source, a·∫p·I_ri,sky (src/lit/sky_single.rs); false: the paper's gather.
+    /// gather's source, a·∫p·I_ri,sky (src/lit/sky_single.rs); default on (docs/budget.md
+    /// "Fixes"), false: the paper's gather.
     sky_single_scattering: bool => incident.sky_single;
     /// `diffusion`, `full`: forward fraction f of the δ-M transform every stage runs on
-    /// (0 ≤ f < 1; src/optics.rs, docs/budget.md); 0 is the paper's scheme exactly.
+    /// (0 ≤ f < 1, capped at g; src/optics.rs); default 0.7, measured in docs/budget.md ("fixes");
+    /// 0 is the paper's scheme exactly.
     forward_fraction: f32 => forward_fraction;
 }
 
@@ -258,8 +261,8 @@ impl Default for RenderSettings {
             clear_air: ClearAirSettings::default(),
             edges: EdgeSettings::default(),
             aov: false,
-            diffuse_anisotropy: false,
-            forward_fraction: 0.0,
+            diffuse_anisotropy: true,
+            forward_fraction: 0.7,
         }
     }
 }
