@@ -7,6 +7,15 @@ use cloudgi::diffusion::slab::{default_cells, solve_slab, Incidence as Diffusion
 use cloudgi::error::{Error, Result};
 use cloudgi::reference::slab::{slab, Incidence, SlabParams, SlabResult};
 
+/// `--incidence`: clap's view of [`Incidence`] (clap stays in the CLI).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum IncidenceArg {
+    /// A beam at normal incidence.
+    Collimated,
+    /// Uniform radiance from the whole upper hemisphere (cosine-weighted incident directions).
+    Diffuse,
+}
+
 /// Method for the slab.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum SlabMethod {
@@ -29,7 +38,7 @@ pub struct SlabArgs {
     g: f64,
     /// Illumination from above: a normal beam or uniform diffuse light.
     #[arg(long, value_enum)]
-    incidence: Incidence,
+    incidence: IncidenceArg,
     /// Transport method.
     #[arg(long, value_enum, default_value = "reference")]
     method: SlabMethod,
@@ -46,15 +55,18 @@ pub fn run(a: SlabArgs) -> Result<()> {
         thickness: a.thickness,
         albedo: a.albedo,
         g: a.g,
-        incidence: a.incidence,
+        incidence: match a.incidence {
+            IncidenceArg::Collimated => Incidence::Collimated,
+            IncidenceArg::Diffuse => Incidence::Diffuse,
+        },
     };
     p.validate("command line")?;
     let r = match a.method {
         SlabMethod::Reference => slab(&p, a.samples, a.seed)?,
         SlabMethod::Diffusion => {
             let inc = match a.incidence {
-                Incidence::Collimated => DiffusionIncidence::Normal,
-                Incidence::Diffuse => DiffusionIncidence::Diffuse,
+                IncidenceArg::Collimated => DiffusionIncidence::Normal,
+                IncidenceArg::Diffuse => DiffusionIncidence::Diffuse,
             };
             let d = solve_slab(a.thickness, a.albedo, a.g, inc, default_cells(a.thickness));
             SlabResult {
