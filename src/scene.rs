@@ -205,6 +205,8 @@ pub enum Method {
     /// Diffusion, clear-air propagation with viewing cubes and ground hemicubes, and the
     /// low-density edge treatment in the final gather (paper Fig. 7).
     Full,
+    /// Converged discrete-ordinates transport (δ-M, SH source, DSA) with TMS single scattering.
+    Transport,
 }
 
 impl Method {
@@ -215,6 +217,7 @@ impl Method {
             Method::Reference => "reference",
             Method::Diffusion => "diffusion",
             Method::Full => "full",
+            Method::Transport => "transport",
         }
     }
 }

@@ -82,6 +82,7 @@ pub fn render(scene: &Scene, progress: &dyn Progress) -> Result<RenderOutput> {
         Method::Reference => crate::reference::render(scene, progress, &mut timings)?,
         Method::Diffusion => diffusion::render(scene, progress, &mut timings)?,
         Method::Full => full::render(scene, progress, &mut timings)?,
+        Method::Transport => crate::transport::render::render(scene, progress, &mut timings)?,
     };
     Ok(RenderOutput { image, timings })
 }

@@ -5,8 +5,12 @@
 //! - [`Optics`]: the medium's optics after the δ-M similarity transform (Wiscombe 1977), the one
 //!   place the transport solver reads σt, albedo and g.
 //! - [`slab`]: the solver on a plane-parallel column (checked against adding-doubling).
+//! - [`solve`]: the 3-D solver (SH source per full voxel, sweeps, DSA); [`render`]: the gather.
 
+pub mod render;
 pub mod slab;
+pub mod solve;
+pub mod sphere;
 
 use crate::medium::Medium;
 

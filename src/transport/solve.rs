@@ -1,0 +1,511 @@
+//! The 3-D solver (after SHDOM, Evans 1998): the diffuse radiance's source function stored in real
+//! spherical harmonics per full voxel, swept through the grid along discrete ordinates, iterated
+//! with diffusion synthetic acceleration.
+//!
+//! **Sweep.** For an ordinate Ω, the axis a with the largest |Ω_a|/h_a orders the voxel planes
+//! upwind. A voxel's centre looks back along −Ω to the plane of the previous centres, a distance
+//! s = h_a/|Ω_a|; there, the radiance, source and density are bilinear in the four upwind centres
+//! (the offsets are ≤ 1 voxel because a is the major axis). Across the step the source is linear
+//! in optical path and integrated exactly: I = I_b e^{−τ} + w_in S_b + w_out S (τ = σt′ s (ρ_b + ρ)/2).
+//! Empty voxels carry the radiance unchanged. Outside the grid the ordinate sees the sky, or, going
+//! up, the Lambertian ground: below the grid per column (shadowed sun plus the downward diffuse
+//! flux of the last sweep, so all ground bounces are iterated), elsewhere the unshadowed ground.
+//!
+//! **Source.** J(Ω) = Σ_lm a′χ′_l (I_lm + E T′_sun Y_lm(Ω_sun)) Y_lm(Ω), I_lm the diffuse
+//! radiance's moments; the δ-M reduced sun E T′_sun = E T^{1 − a f} is exact and apart.
+//!
+//! **Acceleration.** After a sweep the isotropic change ΔI0 drives the diffusion equation
+//! −∇·(∇δ/(3ρσtr′)) + ρσa′ δ = ρσs′ ΔI0 (the diffusion module's face couplings and Marshak
+//! boundary, δ-M coefficients), solved by multigrid-preconditioned CG; I_00 += √(4π) δ.
+
+use super::slab::linear_source_weights;
+use super::sphere::{real_sh, sh_count, Quadrature};
+use super::Optics;
+use crate::diffusion::multigrid::{Hierarchy, Stencil};
+use crate::diffusion::{boundary_terms, interior_coupling, Domain, DEFAULT_MIN_OPTICAL_DEPTH};
+use crate::lighting::{Ground, Sky, Sun};
+use crate::math::{Rgb, Vec3};
+use crate::medium::Medium;
+use crate::render::Progress;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+
+/// Settings of the 3-D solver.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TransportSettings {
+    /// Legendre/SH truncation order L of the δ-M phase function and of the source.
+    pub order: usize,
+    /// Ordinates in cos θ (the azimuths are 2× this).
+    pub n_mu: usize,
+    /// Convergence: max over full voxels of |ΔI0| / max I0 between iterations.
+    pub tolerance: f64,
+    /// Iteration cap.
+    pub max_iterations: usize,
+    /// Diffusion synthetic acceleration on.
+    pub acceleration: bool,
+}
+
+impl Default for TransportSettings {
+    fn default() -> Self {
+        TransportSettings {
+            order: 7,
+            n_mu: 8,
+            tolerance: 2e-3,
+            max_iterations: 60,
+            acceleration: true,
+        }
+    }
+}
+
+/// The converged solution.
+#[derive(Clone, Debug)]
+pub struct TransportField {
+    /// The optics it was solved with.
+    pub optics: Optics,
+    /// SH order.
+    pub order: usize,
+    /// Per voxel: index into the full-voxel arrays, or `u32::MAX` where ρ = 0.
+    pub full: Vec<u32>,
+    /// Diffuse source coefficients a′χ′_l I_lm per full voxel, band, lm (W·m⁻²·sr⁻¹); the sun's
+    /// first scattering is not in it (the gather adds it exactly).
+    pub diffuse_source: Vec<f32>,
+    /// δ-M sun transmittance T′ per voxel centre and band (1 where no cloud is near).
+    pub sun_t: Vec<[f32; 3]>,
+    /// Ground radiance per grid column x + nx·z (W·m⁻²·sr⁻¹), and unshadowed.
+    pub ground: Vec<Rgb>,
+    /// Ground radiance outside the grid's footprint.
+    pub ground_clear: Rgb,
+    /// Relative change of I0 after each iteration.
+    pub history: Vec<f64>,
+    /// Full voxels.
+    pub full_voxels: usize,
+    /// Ordinates.
+    pub ordinates: usize,
+}
+
+impl TransportField {
+    /// Iterations done.
+    pub fn iterations(&self) -> usize {
+        self.history.len()
+    }
+
+    /// Memory of the per-voxel solution arrays (bytes per full voxel: SH source, 3 bands, f32,
+    /// plus the same again for the moments accumulated during a sweep).
+    pub fn bytes_per_full_voxel(&self) -> usize {
+        2 * 3 * sh_count(self.order) * 4
+    }
+}
+
+/// Raw pointer for disjoint parallel writes: within one plane of a sweep every voxel (and every
+/// ground column) is written by exactly one cell.
+#[derive(Clone, Copy)]
+struct Shared<T>(*mut T);
+unsafe impl<T> Send for Shared<T> {}
+unsafe impl<T> Sync for Shared<T> {}
+impl<T> Shared<T> {
+    /// SAFETY: the caller writes index `i` from one thread only while the pointer is shared.
+    #[inline]
+    unsafe fn at(self, i: usize) -> *mut T {
+        self.0.add(i)
+    }
+}
+
+/// Everything the sweeps read.
+struct Ctx<'a> {
+    dims: [usize; 3],
+    h: [f64; 3],
+    rho: &'a [f32],
+    full: &'a [u32],
+    nsh: usize,
+    sigma_t: [f64; 3],
+    sky: &'a Sky,
+    has_ground: bool,
+}
+
+impl Ctx<'_> {
+    /// Radiance entering the grid along `om` at the outside position (i, j, k).
+    #[inline]
+    fn boundary(&self, om: DVec3, i: isize, j: isize, k: isize, ground: &[Rgb], clear: Rgb, sky: Rgb) -> [f64; 3] {
+        let c = if om.y > 0.0 && self.has_ground {
+            if j < 0 {
+                let ii = i.clamp(0, self.dims[0] as isize - 1) as usize;
+                let kk = k.clamp(0, self.dims[2] as isize - 1) as usize;
+                ground[ii + self.dims[0] * kk]
+            } else {
+                clear
+            }
+        } else {
+            sky
+        };
+        [c.x as f64, c.y as f64, c.z as f64]
+    }
+}
+
+/// One sweep of every ordinate: the diffuse radiance moments I_lm per full voxel (f64
+/// accumulators), and the downward diffuse irradiance at the bottom voxel of each column.
+fn sweep(c: &Ctx, q: &Quadrature, ylm: &[Vec<f64>], source: &[f32], ground: &[Rgb], clear: Rgb) -> (Vec<f64>, Vec<[f64; 3]>) {
+    let [nx, ny, nz] = c.dims;
+    let nfull = source.len() / (3 * c.nsh);
+    let mut moments = vec![0f64; nfull * 3 * c.nsh];
+    let mut e_down = vec![[0f64; 3]; nx * nz];
+    let mp = Shared(moments.as_mut_ptr());
+    let ep = Shared(e_down.as_mut_ptr());
+    for (d, om) in q.dirs.iter().enumerate() {
+        let om = *om;
+        let w = q.weights[d];
+        let y = &ylm[d];
+        let skyr = c.sky.radiance(Vec3::new(-om.x as f32, -om.y as f32, -om.z as f32));
+        // Major axis and the two others.
+        let r = [om.x.abs() / c.h[0], om.y.abs() / c.h[1], om.z.abs() / c.h[2]];
+        let a = (0..3).max_by(|p, q| r[*p].total_cmp(&r[*q])).unwrap_or(0);
+        let (b, cc) = match a {
+            0 => (1, 2),
+            1 => (0, 2),
+            _ => (0, 1),
+        };
+        let n = c.dims;
+        let (na, nb, nc) = (n[a], n[b], n[cc]);
+        let oa = om[a];
+        let s = c.h[a] / oa.abs();
+        // Back point offsets in the previous plane (voxels), split into floor and fraction.
+        let ob = -s * om[b] / c.h[b];
+        let oc = -s * om[cc] / c.h[cc];
+        let (fb, fc) = (ob.floor(), oc.floor());
+        let (tb, tc) = (ob - fb, oc - fc);
+        let (fb, fc) = (fb as isize, fc as isize);
+        let wts = [(1.0 - tb) * (1.0 - tc), tb * (1.0 - tc), (1.0 - tb) * tc, tb * tc];
+        let offs = [(0isize, 0isize), (1, 0), (0, 1), (1, 1)];
+        let stride = nb + 2;
+        let plane_len = stride * (nc + 2);
+        // Plane buffers (radiance, source per band; density) with a one-cell ghost ring.
+        let mut prev_i = vec![[0f64; 3]; plane_len];
+        let mut prev_s = vec![[0f64; 3]; plane_len];
+        let mut prev_r = vec![0f64; plane_len];
+        let mut cur_i = prev_i.clone();
+        let mut cur_s = prev_s.clone();
+        let mut cur_r = prev_r.clone();
+        let coord = |pa: isize, pb: isize, pc: isize| {
+            let mut v = [0isize; 3];
+            v[a] = pa;
+            v[b] = pb;
+            v[cc] = pc;
+            v
+        };
+        let fill_ghosts = |pa: isize, whole: bool, bi: &mut [[f64; 3]], bs: &mut [[f64; 3]], br: &mut [f64]| {
+            for ic in -1..=nc as isize {
+                for ib in -1..=nb as isize {
+                    let inside = ib >= 0 && ic >= 0 && ib < nb as isize && ic < nc as isize;
+                    if inside && !whole {
+                        continue;
+                    }
+                    let v = coord(pa, ib, ic);
+                    let l = (ib + 1) as usize + stride * (ic + 1) as usize;
+                    bi[l] = c.boundary(om, v[0], v[1], v[2], ground, clear, skyr);
+                    bs[l] = [0.0; 3];
+                    br[l] = 0.0;
+                }
+            }
+        };
+        let first = if oa > 0.0 { -1 } else { na as isize };
+        fill_ghosts(first, true, &mut prev_i, &mut prev_s, &mut prev_r);
+        for step in 0..na {
+            let pa = if oa > 0.0 { step as isize } else { (na - 1 - step) as isize };
+            cur_i
+                .par_chunks_mut(stride)
+                .zip(cur_s.par_chunks_mut(stride))
+                .zip(cur_r.par_chunks_mut(stride))
+                .enumerate()
+                .filter(|(row, _)| *row >= 1 && *row <= nc)
+                .for_each(|(row, ((ri, rs), rr))| {
+                    let ic = row as isize - 1;
+                    for ib in 0..nb as isize {
+                        let v = coord(pa, ib, ic);
+                        let vi = v[0] as usize + nx * (v[1] as usize + ny * v[2] as usize);
+                        let rho = c.rho[vi] as f64;
+                        let fi = c.full[vi];
+                        // Source in this ordinate, clamped at 0 (the truncated expansion may dip).
+                        let mut sc = [0f64; 3];
+                        if fi != u32::MAX {
+                            for (band, scb) in sc.iter_mut().enumerate() {
+                                let base = (fi as usize * 3 + band) * c.nsh;
+                                let js = &source[base..base + c.nsh];
+                                *scb = js.iter().zip(y).map(|(j, y)| *j as f64 * y).sum::<f64>().max(0.0);
+                            }
+                        }
+                        let (mut ib_, mut sb, mut rb) = ([0f64; 3], [0f64; 3], 0f64);
+                        for (wk, (db, dc)) in wts.iter().zip(offs) {
+                            if *wk == 0.0 {
+                                continue;
+                            }
+                            let l = (ib + fb + db + 1) as usize + stride * (ic + fc + dc + 1) as usize;
+                            for band in 0..3 {
+                                ib_[band] += wk * prev_i[l][band];
+                                sb[band] += wk * prev_s[l][band];
+                            }
+                            rb += wk * prev_r[l];
+                        }
+                        let mut out = ib_;
+                        let rm = 0.5 * (rb + rho) * s;
+                        if rm > 0.0 {
+                            for band in 0..3 {
+                                let tau = c.sigma_t[band] * rm;
+                                let (wi, wo) = linear_source_weights(tau);
+                                out[band] = ib_[band] * (-tau).exp() + wi * sb[band] + wo * sc[band];
+                            }
+                        }
+                        let l = (ib + 1) as usize;
+                        ri[l] = out;
+                        rs[l] = sc;
+                        rr[l] = rho;
+                        if fi != u32::MAX {
+                            for (band, ob) in out.iter().enumerate() {
+                                let base = (fi as usize * 3 + band) * c.nsh;
+                                for (k, yk) in y.iter().enumerate() {
+                                    // SAFETY: voxel `fi` belongs to this cell only, in this plane.
+                                    unsafe { *mp.at(base + k) += w * yk * ob };
+                                }
+                            }
+                        }
+                        if v[1] == 0 && om.y < 0.0 {
+                            let col = v[0] as usize + nx * v[2] as usize;
+                            // SAFETY: column `col` has one bottom voxel, this cell's.
+                            let e = unsafe { &mut *ep.at(col) };
+                            for band in 0..3 {
+                                e[band] += w * (-om.y) * out[band];
+                            }
+                        }
+                    }
+                });
+            std::mem::swap(&mut prev_i, &mut cur_i);
+            std::mem::swap(&mut prev_s, &mut cur_s);
+            std::mem::swap(&mut prev_r, &mut cur_r);
+            fill_ghosts(pa, false, &mut prev_i, &mut prev_s, &mut prev_r);
+        }
+    }
+    (moments, e_down)
+}
+
+/// The DSA operator of one band on the full voxels' box (δ-M coefficients).
+fn dsa_operator(m: &Medium, dom: &Domain, sigma_t: f64, albedo: f64, chi1: f64) -> Stencil {
+    let gd = m.dims();
+    let rho = m.density.data();
+    let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
+    let sigma_tr = sigma_t * (1.0 - albedo * chi1);
+    let sigma_a = sigma_t * (1.0 - albedo);
+    let tau_min = DEFAULT_MIN_OPTICAL_DEPTH;
+    let d = dom.dims;
+    let mut st = Stencil::zeros(d);
+    for k in 0..d[2] {
+        for j in 0..d[1] {
+            for i in 0..d[0] {
+                let l = i + d[0] * (j + d[1] * k);
+                let idx = dom.global(gd, i, j, k);
+                let rp = rho[idx] as f64;
+                if rp <= 0.0 {
+                    continue;
+                }
+                let cell = [i + dom.lo[0], j + dom.lo[1], k + dom.lo[2]];
+                let mut diag = rp * sigma_a;
+                for ax in 0..3 {
+                    for side in [-1i64, 1] {
+                        let nc = cell[ax] as i64 + side;
+                        let mut nb = cell;
+                        let rn = if nc >= 0 && nc < gd[ax] as i64 {
+                            nb[ax] = nc as usize;
+                            rho[nb[0] + gd[0] * (nb[1] + gd[1] * nb[2])] as f64
+                        } else {
+                            0.0
+                        };
+                        if rn > 0.0 {
+                            let cf = interior_coupling(rp, rn, sigma_tr, h[ax], tau_min);
+                            diag += cf;
+                            if side > 0 {
+                                st.off[ax][l] = -cf;
+                            }
+                        } else {
+                            diag += boundary_terms(rp, sigma_tr, h[ax], tau_min).0;
+                        }
+                    }
+                }
+                st.diag[l] = diag;
+            }
+        }
+    }
+    st
+}
+
+/// Solve the transport problem for the scene's medium, sun, sky and ground.
+pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &TransportSettings, progress: &dyn Progress) -> TransportField {
+    let optics = Optics::from_medium(m, s.order);
+    let dims = m.dims();
+    let [nx, _, nz] = dims;
+    let rho = m.density.data();
+    let mut full = vec![u32::MAX; rho.len()];
+    let mut nfull = 0usize;
+    for (f, r) in full.iter_mut().zip(rho) {
+        if *r > 0.0 {
+            *f = nfull as u32;
+            nfull += 1;
+        }
+    }
+    let nsh = sh_count(s.order);
+    let q = Quadrature::product(s.n_mu, 2 * s.n_mu);
+    let ylm: Vec<Vec<f64>> = q
+        .dirs
+        .iter()
+        .map(|d| {
+            let mut y = vec![0.0; nsh];
+            real_sh(s.order, *d, &mut y);
+            y
+        })
+        .collect();
+    let bands = &optics.bands;
+    // δ-M sun transmittance T′ = T^{1 − a f} at the voxel centres.
+    let exact_t = crate::sunlight::SunTransmittance::compute(m, sun.dir);
+    let sun_t: Vec<[f32; 3]> = exact_t
+        .grid
+        .data()
+        .iter()
+        .map(|t| [0, 1, 2].map(|b| t.powf((bands[b].sigma_t / optics.sigma_t) as f32)))
+        .collect();
+    let e_sun = [sun.irradiance.x as f64, sun.irradiance.y as f64, sun.irradiance.z as f64];
+    let mut y_sun = vec![0.0; nsh];
+    let beam = -DVec3::new(sun.dir.x as f64, sun.dir.y as f64, sun.dir.z as f64);
+    real_sh(s.order, beam, &mut y_sun);
+    let lidx: Vec<usize> = (0..nsh).map(|k| (k as f64).sqrt().floor() as usize).collect();
+    // J_lm = a′χ′_l (I_lm + E T′ Y_lm(Ω_sun)) per full voxel.
+    let full_vox: Vec<usize> = (0..rho.len()).filter(|v| full[*v] != u32::MAX).collect();
+    let make_source = |moments: &[f64], with_sun: bool| -> Vec<f32> {
+        let mut out = vec![0f32; nfull * 3 * nsh];
+        out.par_chunks_mut(3 * nsh).zip(&full_vox).enumerate().for_each(|(f, (o, v))| {
+            for band in 0..3 {
+                let bo = &bands[band];
+                let sun = if with_sun { e_sun[band] * sun_t[*v][band] as f64 } else { 0.0 };
+                for k in 0..nsh {
+                    let i = moments[(f * 3 + band) * nsh + k] + sun * y_sun[k];
+                    o[band * nsh + k] = (bo.albedo * bo.chi[lidx[k]] * i) as f32;
+                }
+            }
+        });
+        out
+    };
+    // Ground: ρ_g/π (E_sun μ_s T′ + E_down), per column; E_down starts as the clear sky's.
+    let ground_t: Vec<[f64; 3]> = (0..nx * nz)
+        .map(|col| match ground {
+            Some(g) => {
+                let (i, k) = (col % nx, col / nx);
+                let c = m.voxel_center(i, 0, k);
+                let p = Vec3::new(c.x, g.height, c.z);
+                let t = m.transmittance(p, sun.dir, 0.0, f32::INFINITY) as f64;
+                [0, 1, 2].map(|b| t.powf(bands[b].sigma_t / optics.sigma_t))
+            }
+            None => [0.0; 3],
+        })
+        .collect();
+    let ground_of = |e_down: &[[f64; 3]]| -> (Vec<Rgb>, Rgb) {
+        let Some(g) = ground else {
+            return (vec![Rgb::ZERO; nx * nz], Rgb::ZERO);
+        };
+        let mu_s = sun.dir.y.max(0.0) as f64;
+        let col = (0..nx * nz)
+            .map(|c| {
+                let e = [0, 1, 2].map(|b| (g.albedo[b] as f64 / PI * (e_sun[b] * mu_s * ground_t[c][b] + e_down[c][b])) as f32);
+                Rgb::from(e)
+            })
+            .collect();
+        (col, g.radiance(Vec3::ZERO, sun, sky, 1.0))
+    };
+    let sky_down = [sky.irradiance_up.x as f64, sky.irradiance_up.y as f64, sky.irradiance_up.z as f64];
+    let (mut ground_rad, clear) = ground_of(&vec![sky_down; nx * nz]);
+    let ctx = Ctx {
+        dims,
+        h: [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64],
+        rho,
+        full: &full,
+        nsh,
+        sigma_t: [0, 1, 2].map(|b| bands[b].sigma_t),
+        sky,
+        has_ground: ground.is_some(),
+    };
+    let dom = Domain::of(m);
+    let hier: Vec<Hierarchy> = match (&dom, s.acceleration) {
+        (Some(dom), true) => (0..3)
+            .map(|b| {
+                let bo = &bands[b];
+                Hierarchy::build(dsa_operator(m, dom, bo.sigma_t, bo.albedo, bo.chi.get(1).copied().unwrap_or(0.0)))
+            })
+            .collect(),
+        _ => Vec::new(),
+    };
+    let y00 = 1.0 / (4.0 * PI).sqrt();
+    let mut moments = vec![0f64; nfull * 3 * nsh];
+    let mut source = make_source(&moments, true);
+    let mut history = Vec::new();
+    progress.begin("transport iterations", s.max_iterations as u64);
+    for _ in 0..s.max_iterations {
+        let (mut next, e_down) = sweep(&ctx, &q, &ylm, &source, &ground_rad, clear);
+        if let (Some(dom), false) = (&dom, hier.is_empty()) {
+            let dd = dom.dims;
+            for (b, h) in hier.iter().enumerate() {
+                let bo = &bands[b];
+                let mut rhs = vec![0f64; dd[0] * dd[1] * dd[2]];
+                for k in 0..dd[2] {
+                    for j in 0..dd[1] {
+                        for i in 0..dd[0] {
+                            let v = dom.global(dims, i, j, k);
+                            if let Some(f) = (full[v] != u32::MAX).then(|| full[v] as usize) {
+                                let d0 = (next[(f * 3 + b) * nsh] - moments[(f * 3 + b) * nsh]) * y00;
+                                rhs[i + dd[0] * (j + dd[1] * k)] = rho[v] as f64 * bo.sigma_t * bo.albedo * d0;
+                            }
+                        }
+                    }
+                }
+                let (delta, _) = h.solve(&rhs, None, 1e-4, 100);
+                for k in 0..dd[2] {
+                    for j in 0..dd[1] {
+                        for i in 0..dd[0] {
+                            let v = dom.global(dims, i, j, k);
+                            if full[v] != u32::MAX {
+                                next[(full[v] as usize * 3 + b) * nsh] += delta[i + dd[0] * (j + dd[1] * k)] / y00;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let scale = next.iter().step_by(nsh).fold(1e-30f64, |a, x| a.max(x.abs()));
+        let change = next
+            .iter()
+            .step_by(nsh)
+            .zip(moments.iter().step_by(nsh))
+            .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()))
+            / scale;
+        history.push(change);
+        moments = next;
+        source = make_source(&moments, true);
+        ground_rad = ground_of(&e_down).0;
+        progress.advance(1);
+        progress.log(&format!(
+            "transport: iteration {}, relative change of I0 {change:.2e}",
+            history.len()
+        ));
+        if change < s.tolerance {
+            break;
+        }
+    }
+    progress.end();
+    let diffuse_source = make_source(&moments, false);
+    TransportField {
+        optics: optics.clone(),
+        order: s.order,
+        full,
+        diffuse_source,
+        sun_t,
+        ground: ground_rad,
+        ground_clear: clear,
+        history,
+        full_voxels: nfull,
+        ordinates: q.dirs.len(),
+    }
+}
