@@ -114,46 +114,63 @@ impl<T> Shared<T> {
 /// Everything the sweeps read.
 struct Ctx<'a> {
     dims: [usize; 3],
+    /// The swept box: minimum corner and cells per axis (the full voxels plus one voxel).
+    lo: [usize; 3],
+    n: [usize; 3],
     h: [f64; 3],
     rho: &'a [f32],
     full: &'a [u32],
     nsh: usize,
-    sigma_t: [f64; 3],
+    sigma_t: [f32; 3],
     sky: &'a Sky,
-    has_ground: bool,
+    /// Grid origin (m) and the ground's height (m), if any.
+    origin: DVec3,
+    ground_height: Option<f64>,
 }
 
 impl Ctx<'_> {
-    /// Radiance entering the grid along `om` at the outside position (i, j, k).
+    /// Radiance entering the swept box along `om` at the outside grid position (i, j, k): clear
+    /// air outside the box carries it unchanged from the sky or, going up, from the ground point
+    /// straight back along −om (its grid column's radiance, or the unshadowed ground beyond).
     #[inline]
-    fn boundary(&self, om: DVec3, i: isize, j: isize, k: isize, ground: &[Rgb], clear: Rgb, sky: Rgb) -> [f64; 3] {
-        let c = if om.y > 0.0 && self.has_ground {
-            if j < 0 {
-                let ii = i.clamp(0, self.dims[0] as isize - 1) as usize;
-                let kk = k.clamp(0, self.dims[2] as isize - 1) as usize;
-                ground[ii + self.dims[0] * kk]
-            } else {
-                clear
+    fn boundary(&self, om: DVec3, i: isize, j: isize, k: isize, ground: &[Rgb], clear: Rgb, sky: Rgb) -> [f32; 3] {
+        let c = match self.ground_height {
+            Some(gh) if om.y > 0.0 => {
+                let p = self.origin
+                    + DVec3::new(
+                        (i as f64 + 0.5) * self.h[0],
+                        (j as f64 + 0.5) * self.h[1],
+                        (k as f64 + 0.5) * self.h[2],
+                    );
+                let q = p - om * ((p.y - gh).max(0.0) / om.y);
+                let (gi, gk) = (
+                    ((q.x - self.origin.x) / self.h[0]).floor(),
+                    ((q.z - self.origin.z) / self.h[2]).floor(),
+                );
+                if gi >= 0.0 && gk >= 0.0 && (gi as usize) < self.dims[0] && (gk as usize) < self.dims[2] {
+                    ground[gi as usize + self.dims[0] * gk as usize]
+                } else {
+                    clear
+                }
             }
-        } else {
-            sky
+            _ => sky,
         };
-        [c.x as f64, c.y as f64, c.z as f64]
+        [c.x, c.y, c.z]
     }
 }
 
-/// One sweep of every ordinate: the diffuse radiance moments I_lm per full voxel (f64
-/// accumulators), and the downward diffuse irradiance at the bottom voxel of each column.
-fn sweep(c: &Ctx, q: &Quadrature, ylm: &[Vec<f64>], source: &[f32], ground: &[Rgb], clear: Rgb) -> (Vec<f64>, Vec<[f64; 3]>) {
+/// One sweep of every ordinate: the diffuse radiance moments I_lm per full voxel, and the
+/// downward diffuse irradiance at the bottom of the swept box per grid column (0 outside it).
+fn sweep(c: &Ctx, q: &Quadrature, ylm: &[Vec<f32>], source: &[f32], ground: &[Rgb], clear: Rgb) -> (Vec<f32>, Vec<[f64; 3]>) {
     let [nx, ny, nz] = c.dims;
     let nfull = source.len() / (3 * c.nsh);
-    let mut moments = vec![0f64; nfull * 3 * c.nsh];
+    let mut moments = vec![0f32; nfull * 3 * c.nsh];
     let mut e_down = vec![[0f64; 3]; nx * nz];
     let mp = Shared(moments.as_mut_ptr());
     let ep = Shared(e_down.as_mut_ptr());
     for (d, om) in q.dirs.iter().enumerate() {
         let om = *om;
-        let w = q.weights[d];
+        let w = q.weights[d] as f32;
         let y = &ylm[d];
         let skyr = c.sky.radiance(Vec3::new(-om.x as f32, -om.y as f32, -om.z as f32));
         // Major axis and the two others.
@@ -164,35 +181,35 @@ fn sweep(c: &Ctx, q: &Quadrature, ylm: &[Vec<f64>], source: &[f32], ground: &[Rg
             1 => (0, 2),
             _ => (0, 1),
         };
-        let n = c.dims;
-        let (na, nb, nc) = (n[a], n[b], n[cc]);
+        let (na, nb, nc) = (c.n[a], c.n[b], c.n[cc]);
         let oa = om[a];
-        let s = c.h[a] / oa.abs();
+        let s = (c.h[a] / oa.abs()) as f32;
         // Back point offsets in the previous plane (voxels), split into floor and fraction.
-        let ob = -s * om[b] / c.h[b];
-        let oc = -s * om[cc] / c.h[cc];
+        let ob = -(s as f64) * om[b] / c.h[b];
+        let oc = -(s as f64) * om[cc] / c.h[cc];
         let (fb, fc) = (ob.floor(), oc.floor());
-        let (tb, tc) = (ob - fb, oc - fc);
+        let (tb, tc) = ((ob - fb) as f32, (oc - fc) as f32);
         let (fb, fc) = (fb as isize, fc as isize);
         let wts = [(1.0 - tb) * (1.0 - tc), tb * (1.0 - tc), (1.0 - tb) * tc, tb * tc];
         let offs = [(0isize, 0isize), (1, 0), (0, 1), (1, 1)];
         let stride = nb + 2;
         let plane_len = stride * (nc + 2);
         // Plane buffers (radiance, source per band; density) with a one-cell ghost ring.
-        let mut prev_i = vec![[0f64; 3]; plane_len];
-        let mut prev_s = vec![[0f64; 3]; plane_len];
-        let mut prev_r = vec![0f64; plane_len];
+        let mut prev_i = vec![[0f32; 3]; plane_len];
+        let mut prev_s = vec![[0f32; 3]; plane_len];
+        let mut prev_r = vec![0f32; plane_len];
         let mut cur_i = prev_i.clone();
         let mut cur_s = prev_s.clone();
         let mut cur_r = prev_r.clone();
+        // Grid coordinates of box cell (pa, pb, pc) in the (a, b, c) frame.
         let coord = |pa: isize, pb: isize, pc: isize| {
             let mut v = [0isize; 3];
-            v[a] = pa;
-            v[b] = pb;
-            v[cc] = pc;
+            v[a] = pa + c.lo[a] as isize;
+            v[b] = pb + c.lo[b] as isize;
+            v[cc] = pc + c.lo[cc] as isize;
             v
         };
-        let fill_ghosts = |pa: isize, whole: bool, bi: &mut [[f64; 3]], bs: &mut [[f64; 3]], br: &mut [f64]| {
+        let fill_ghosts = |pa: isize, whole: bool, bi: &mut [[f32; 3]], bs: &mut [[f32; 3]], br: &mut [f32]| {
             for ic in -1..=nc as isize {
                 for ib in -1..=nb as isize {
                     let inside = ib >= 0 && ic >= 0 && ib < nb as isize && ic < nc as isize;
@@ -222,18 +239,18 @@ fn sweep(c: &Ctx, q: &Quadrature, ylm: &[Vec<f64>], source: &[f32], ground: &[Rg
                     for ib in 0..nb as isize {
                         let v = coord(pa, ib, ic);
                         let vi = v[0] as usize + nx * (v[1] as usize + ny * v[2] as usize);
-                        let rho = c.rho[vi] as f64;
+                        let rho = c.rho[vi];
                         let fi = c.full[vi];
                         // Source in this ordinate, clamped at 0 (the truncated expansion may dip).
-                        let mut sc = [0f64; 3];
+                        let mut sc = [0f32; 3];
                         if fi != u32::MAX {
                             for (band, scb) in sc.iter_mut().enumerate() {
                                 let base = (fi as usize * 3 + band) * c.nsh;
                                 let js = &source[base..base + c.nsh];
-                                *scb = js.iter().zip(y).map(|(j, y)| *j as f64 * y).sum::<f64>().max(0.0);
+                                *scb = js.iter().zip(y).map(|(j, y)| j * y).sum::<f32>().max(0.0);
                             }
                         }
-                        let (mut ib_, mut sb, mut rb) = ([0f64; 3], [0f64; 3], 0f64);
+                        let (mut ib_, mut sb, mut rb) = ([0f32; 3], [0f32; 3], 0f32);
                         for (wk, (db, dc)) in wts.iter().zip(offs) {
                             if *wk == 0.0 {
                                 continue;
@@ -250,8 +267,8 @@ fn sweep(c: &Ctx, q: &Quadrature, ylm: &[Vec<f64>], source: &[f32], ground: &[Rg
                         if rm > 0.0 {
                             for band in 0..3 {
                                 let tau = c.sigma_t[band] * rm;
-                                let (wi, wo) = linear_source_weights(tau);
-                                out[band] = ib_[band] * (-tau).exp() + wi * sb[band] + wo * sc[band];
+                                let (wi, wo) = linear_source_weights(tau as f64);
+                                out[band] = ib_[band] * (-tau).exp() + wi as f32 * sb[band] + wo as f32 * sc[band];
                             }
                         }
                         let l = (ib + 1) as usize;
@@ -261,18 +278,19 @@ fn sweep(c: &Ctx, q: &Quadrature, ylm: &[Vec<f64>], source: &[f32], ground: &[Rg
                         if fi != u32::MAX {
                             for (band, ob) in out.iter().enumerate() {
                                 let base = (fi as usize * 3 + band) * c.nsh;
+                                let wo = w * ob;
                                 for (k, yk) in y.iter().enumerate() {
                                     // SAFETY: voxel `fi` belongs to this cell only, in this plane.
-                                    unsafe { *mp.at(base + k) += w * yk * ob };
+                                    unsafe { *mp.at(base + k) += wo * yk };
                                 }
                             }
                         }
-                        if v[1] == 0 && om.y < 0.0 {
+                        if v[1] == c.lo[1] as isize && om.y < 0.0 {
                             let col = v[0] as usize + nx * v[2] as usize;
-                            // SAFETY: column `col` has one bottom voxel, this cell's.
+                            // SAFETY: column `col` has one bottom cell in the box, this one.
                             let e = unsafe { &mut *ep.at(col) };
                             for band in 0..3 {
-                                e[band] += w * (-om.y) * out[band];
+                                e[band] += (w * (-om.y as f32) * out[band]) as f64;
                             }
                         }
                     }
@@ -351,13 +369,13 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
     }
     let nsh = sh_count(s.order);
     let q = Quadrature::product(s.n_mu, 2 * s.n_mu);
-    let ylm: Vec<Vec<f64>> = q
+    let ylm: Vec<Vec<f32>> = q
         .dirs
         .iter()
         .map(|d| {
             let mut y = vec![0.0; nsh];
             real_sh(s.order, *d, &mut y);
-            y
+            y.iter().map(|v| *v as f32).collect()
         })
         .collect();
     let bands = &optics.bands;
@@ -376,14 +394,14 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
     let lidx: Vec<usize> = (0..nsh).map(|k| (k as f64).sqrt().floor() as usize).collect();
     // J_lm = a′χ′_l (I_lm + E T′ Y_lm(Ω_sun)) per full voxel.
     let full_vox: Vec<usize> = (0..rho.len()).filter(|v| full[*v] != u32::MAX).collect();
-    let make_source = |moments: &[f64], with_sun: bool| -> Vec<f32> {
+    let make_source = |moments: &[f32], with_sun: bool| -> Vec<f32> {
         let mut out = vec![0f32; nfull * 3 * nsh];
         out.par_chunks_mut(3 * nsh).zip(&full_vox).enumerate().for_each(|(f, (o, v))| {
             for band in 0..3 {
                 let bo = &bands[band];
                 let sun = if with_sun { e_sun[band] * sun_t[*v][band] as f64 } else { 0.0 };
                 for k in 0..nsh {
-                    let i = moments[(f * 3 + band) * nsh + k] + sun * y_sun[k];
+                    let i = moments[(f * 3 + band) * nsh + k] as f64 + sun * y_sun[k];
                     o[band * nsh + k] = (bo.albedo * bo.chi[lidx[k]] * i) as f32;
                 }
             }
@@ -418,15 +436,19 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
     };
     let sky_down = [sky.irradiance_up.x as f64, sky.irradiance_up.y as f64, sky.irradiance_up.z as f64];
     let (mut ground_rad, clear) = ground_of(&vec![sky_down; nx * nz]);
+    let (lo, hi) = crate::incident::active_box(m, 1).unwrap_or(([0; 3], dims));
     let ctx = Ctx {
         dims,
+        lo,
+        n: [0, 1, 2].map(|a| hi[a] - lo[a]),
         h: [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64],
         rho,
         full: &full,
         nsh,
-        sigma_t: [0, 1, 2].map(|b| bands[b].sigma_t),
+        sigma_t: [0, 1, 2].map(|b| bands[b].sigma_t as f32),
         sky,
-        has_ground: ground.is_some(),
+        origin: DVec3::new(m.origin.x as f64, m.origin.y as f64, m.origin.z as f64),
+        ground_height: ground.map(|g| g.height as f64),
     };
     let dom = Domain::of(m);
     let hier: Vec<Hierarchy> = match (&dom, s.acceleration) {
@@ -439,12 +461,19 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         _ => Vec::new(),
     };
     let y00 = 1.0 / (4.0 * PI).sqrt();
-    let mut moments = vec![0f64; nfull * 3 * nsh];
+    let mut moments = vec![0f32; nfull * 3 * nsh];
     let mut source = make_source(&moments, true);
     let mut history = Vec::new();
     progress.begin("transport iterations", s.max_iterations as u64);
     for _ in 0..s.max_iterations {
-        let (mut next, e_down) = sweep(&ctx, &q, &ylm, &source, &ground_rad, clear);
+        let (mut next, mut e_down) = sweep(&ctx, &q, &ylm, &source, &ground_rad, clear);
+        // Columns beside the swept box see the clear sky.
+        for (col, e) in e_down.iter_mut().enumerate() {
+            let (i, k) = (col % nx, col / nx);
+            if i < lo[0] || i >= hi[0] || k < lo[2] || k >= hi[2] {
+                *e = sky_down;
+            }
+        }
         if let (Some(dom), false) = (&dom, hier.is_empty()) {
             let dd = dom.dims;
             for (b, h) in hier.iter().enumerate() {
@@ -455,7 +484,7 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
                         for i in 0..dd[0] {
                             let v = dom.global(dims, i, j, k);
                             if let Some(f) = (full[v] != u32::MAX).then(|| full[v] as usize) {
-                                let d0 = (next[(f * 3 + b) * nsh] - moments[(f * 3 + b) * nsh]) * y00;
+                                let d0 = (next[(f * 3 + b) * nsh] - moments[(f * 3 + b) * nsh]) as f64 * y00;
                                 rhs[i + dd[0] * (j + dd[1] * k)] = rho[v] as f64 * bo.sigma_t * bo.albedo * d0;
                             }
                         }
@@ -467,19 +496,19 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
                         for i in 0..dd[0] {
                             let v = dom.global(dims, i, j, k);
                             if full[v] != u32::MAX {
-                                next[(full[v] as usize * 3 + b) * nsh] += delta[i + dd[0] * (j + dd[1] * k)] / y00;
+                                next[(full[v] as usize * 3 + b) * nsh] += (delta[i + dd[0] * (j + dd[1] * k)] / y00) as f32;
                             }
                         }
                     }
                 }
             }
         }
-        let scale = next.iter().step_by(nsh).fold(1e-30f64, |a, x| a.max(x.abs()));
+        let scale = next.iter().step_by(nsh).fold(1e-30f64, |a, x| a.max(x.abs() as f64));
         let change = next
             .iter()
             .step_by(nsh)
             .zip(moments.iter().step_by(nsh))
-            .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()))
+            .fold(0.0f64, |a, (x, y)| a.max((x - y).abs() as f64))
             / scale;
         history.push(change);
         moments = next;
