@@ -250,25 +250,31 @@ fn sweep(c: &Ctx, q: &Quadrature, ylm: &[Vec<f32>], source: &[f32], ground: &[Rg
                                 *scb = js.iter().zip(y).map(|(j, y)| j * y).sum::<f32>().max(0.0);
                             }
                         }
-                        let (mut ib_, mut sb, mut rb) = ([0f32; 3], [0f32; 3], 0f32);
+                        // Radiance and density bilinear; the source (per unit extinction, defined
+                        // only where ρ > 0) density-weighted, so that empty neighbours do not
+                        // pull it towards 0 (a uniform source stays uniform: the furnace holds).
+                        let (mut ib_, mut sbw, mut rb) = ([0f32; 3], [0f32; 3], 0f32);
                         for (wk, (db, dc)) in wts.iter().zip(offs) {
                             if *wk == 0.0 {
                                 continue;
                             }
                             let l = (ib + fb + db + 1) as usize + stride * (ic + fc + dc + 1) as usize;
+                            let wr = wk * prev_r[l];
                             for band in 0..3 {
                                 ib_[band] += wk * prev_i[l][band];
-                                sb[band] += wk * prev_s[l][band];
+                                sbw[band] += wr * prev_s[l][band];
                             }
-                            rb += wk * prev_r[l];
+                            rb += wr;
                         }
                         let mut out = ib_;
                         let rm = 0.5 * (rb + rho) * s;
                         if rm > 0.0 {
+                            let sb = if rb > 0.0 { sbw.map(|x| x / rb) } else { sc };
+                            let se = if fi == u32::MAX { sb } else { sc };
                             for band in 0..3 {
                                 let tau = c.sigma_t[band] * rm;
                                 let (wi, wo) = linear_source_weights(tau as f64);
-                                out[band] = ib_[band] * (-tau).exp() + wi as f32 * sb[band] + wo as f32 * sc[band];
+                                out[band] = ib_[band] * (-tau).exp() + wi as f32 * sb[band] + wo as f32 * se[band];
                             }
                         }
                         let l = (ib + 1) as usize;
