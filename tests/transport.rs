@@ -76,6 +76,13 @@ fn furnace_conservative_cloud_under_uniform_sky_is_invisible() {
         .map(|j| (j[0] * y00 / 1.0f32).max(0.0))
         .collect::<Vec<_>>();
     let wt = wt.chunks(3).map(|c| worst(Rgb::new(c[0], c[1], c[2]))).fold(0.0, f32::max);
+    // A quadrature with ties |Ω_b| = |Ω_a| between axes sweeps too.
+    let ties = TransportSettings {
+        n_mu: 10,
+        max_iterations: 2,
+        ..tight
+    };
+    assert_eq!(solve(&s.medium, &s.sun, &s.sky, None, &ties, &NoProgress).iterations(), 2);
     eprintln!("furnace: worst pixel error {w:.4} (default tolerance), worst voxel I0 error {wt:.2e} (tolerance 1e-5)");
     assert!(w < 0.02 && wt < 1e-3, "{w} {wt}");
 }

@@ -110,12 +110,16 @@ fn background(scene: &Scene, f: &TransportField, o: Vec3, d: Vec3) -> Rgb {
     scene.sky.radiance(d)
 }
 
-/// Render with `--method transport`.
+/// Render with `--method transport` and the default settings.
 pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
-    let s = TransportSettings::default();
+    render_with(scene, &TransportSettings::default(), progress, timings)
+}
+
+/// Render with `--method transport` and settings `s`.
+pub fn render_with(scene: &Scene, s: &TransportSettings, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
     let m = &scene.medium;
     let field = timings.time("transport solve", || {
-        solve(m, &scene.sun, &scene.sky, scene.ground.as_ref(), &s, progress)
+        solve(m, &scene.sun, &scene.sky, scene.ground.as_ref(), s, progress)
     });
     progress.log(&format!(
         "transport: {} full voxels × {} B, {} ordinates, order {}, {} iterations (last change {:.1e})",

@@ -82,7 +82,7 @@ fn mesh(tau: f64, surface: f64, max: f64) -> Vec<f64> {
 
 /// Weights (w_in, w_out) of a source linear in optical path between the two ends of a step of
 /// optical length x: ∫₀ˣ S(t) e^{−(x−t)} dt = w_in S(0) + w_out S(x). Both are ≥ 0.
-pub(crate) fn linear_source_weights(x: f64) -> (f64, f64) {
+fn linear_source_weights(x: f64) -> (f64, f64) {
     if x < 1e-3 {
         // Series; the closed form cancels catastrophically here.
         let w_out = x / 2.0 - x * x / 6.0 + x * x * x / 24.0;
