@@ -1,6 +1,6 @@
 //! `--method transport` in 3-D: the furnace (a conservative cloud under a uniform sky is
 //! invisible), the acceleration (iterations do not grow with optical thickness), the
-//! single-scattering limit of a thin cloud, and determinism across thread counts.
+//! single-scattering limit of a thin cloud, determinism across thread counts and the AOV layers.
 
 use cloudgi::image::Image;
 use cloudgi::lighting::{Sky, Sun};
@@ -138,7 +138,8 @@ fn thin_cloud_is_its_single_scattering() {
 
 #[test]
 fn image_is_identical_for_any_thread_count() {
-    let s = scene(ball(0.2, 0.99), Method::Transport);
+    let mut s = scene(ball(0.2, 0.99), Method::Transport);
+    s.render.aov = true;
     let run = |n| {
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
@@ -148,6 +149,16 @@ fn image_is_identical_for_any_thread_count() {
     };
     let (a, b) = (run(1), run(3));
     assert_valid(&a);
+    // The AOV layers sum to the image, and each is lit.
+    let parts: Vec<&[Rgb]> = ["diffuse", "sun_single", "background"]
+        .iter()
+        .map(|n| a.layer(n).unwrap())
+        .collect();
+    for (i, p) in a.pixels.iter().enumerate() {
+        let sum = parts[0][i] + parts[1][i] + parts[2][i];
+        assert!((*p - sum).abs().max_element() <= 1e-5 * p.max_element().max(1.0));
+    }
+    assert!(parts.iter().all(|l| l.iter().any(|p| p.max_element() > 0.0)));
     assert!(a
         .pixels
         .iter()

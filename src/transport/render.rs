@@ -5,6 +5,9 @@
 //! p(Θ) E T′ per unit scaled optical depth). Behind the cloud: the sky, or the ground with the
 //! solver's per-column irradiance (shadowed sun and the cloud's diffuse light).
 //!
+//! With `render.aov` the EXR has the layers `diffuse` (the converged diffuse source: orders ≥ 2 of the sun,
+//! all orders of sky and ground light), `sun_single` (TMS) and `background`; they sum to the image.
+//!
 //! The eye-direction source is evaluated once per full voxel in the direction from the camera to
 //! the voxel's centre (a voxel subtends a small angle from the eye), then interpolated
 //! trilinearly over full voxels only, so empty neighbours do not darken the cloud's rim.
@@ -23,8 +26,9 @@ use crate::scene::Scene;
 use glam::DVec3;
 use rayon::prelude::*;
 
-/// Source per unit scaled optical depth towards the eye, per voxel (zero where ρ = 0).
-pub fn eye_source(scene: &Scene, f: &TransportField) -> Vec<Rgb> {
+/// Source per unit scaled optical depth towards the eye, per voxel (zero where ρ = 0): the
+/// diffuse (multiple-scattering) part and the sun's exact single scattering.
+pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
     let m = &scene.medium;
     let [nx, ny, _] = m.dims();
     let nsh = sh_count(f.order);
@@ -36,7 +40,7 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> Vec<Rgb> {
         .map(|v| {
             let fi = f.full[v];
             if fi == u32::MAX {
-                return Rgb::ZERO;
+                return (Rgb::ZERO, Rgb::ZERO);
             }
             let (i, j, k) = (v % nx, (v / nx) % ny, v / (nx * ny));
             let d = (m.voxel_center(i, j, k) - eye).normalize_or_zero();
@@ -44,18 +48,17 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> Vec<Rgb> {
             let mut y = vec![0.0; nsh];
             real_sh(f.order, -DVec3::new(d.x as f64, d.y as f64, d.z as f64), &mut y);
             let p = hg((-sun_dir).dot(-d), o.g as f32);
-            let mut out = [0f32; 3];
-            for (b, ob) in out.iter_mut().enumerate() {
+            let (mut diffuse, mut sun) = ([0f32; 3], [0f32; 3]);
+            for b in 0..3 {
                 let base = (fi as usize * 3 + b) * nsh;
                 let js = &f.diffuse_source[base..base + nsh];
-                let diffuse = js.iter().zip(&y).map(|(j, y)| *j as f64 * y).sum::<f64>().max(0.0);
+                diffuse[b] = js.iter().zip(&y).map(|(j, y)| *j as f64 * y).sum::<f64>().max(0.0) as f32;
                 let a = o.albedo[b];
-                let tms = a / (1.0 - a * o.bands[b].f) * (e_sun[b] * p * f.sun_t[v][b]) as f64;
-                *ob = (diffuse + tms) as f32;
+                sun[b] = (a / (1.0 - a * o.bands[b].f) * (e_sun[b] * p * f.sun_t[v][b]) as f64) as f32;
             }
-            Rgb::from(out)
+            (Rgb::from(diffuse), Rgb::from(sun))
         })
-        .collect()
+        .unzip()
 }
 
 /// Trilinear interpolation of `grid` at continuous voxel coordinates `v`, over full voxels only.
@@ -130,33 +133,44 @@ pub fn render_with(scene: &Scene, s: &TransportSettings, progress: &dyn Progress
         field.iterations(),
         field.history.last().copied().unwrap_or(0.0)
     ));
-    let src = timings.time("eye source", || eye_source(scene, &field));
+    let (diffuse, sun) = timings.time("eye source", || eye_source(scene, &field));
     // March with the δ-M extinction of the middle band (the bands differ only by σt f Δa).
     let mut scaled = m.clone();
     scaled.sigma_t = field.optics.bands[1].sigma_t as f32;
     let cam = &scene.camera;
     let spp = scene.render.spp;
     let step = scene.render.step * m.min_voxel();
+    // Per pixel: [diffuse source, sun single scattering, background]; the image is their sum.
     let px = timings.time("gather", || {
         render_rows(cam.width, cam.height, progress, "transport gather", |x, y| {
-            let mut sum = Rgb::ZERO;
+            let mut sum = [Rgb::ZERO; 3];
             for smp in 0..spp {
                 let (px, py, xi) = pixel_sample(scene, x, y, smp, spp);
                 let ray = cam.ray(px, py);
                 let (o, d) = (ray.origin, ray.dir);
                 let t_max = scene.ground.as_ref().and_then(|g| g.intersect(o, d)).unwrap_or(f32::INFINITY);
-                let r = march(&scaled, o, d, 0.0, t_max, step, xi, |v, _| full_trilinear(m, &field.full, &src, v));
-                let bg = if r.transmittance > 0.0 {
+                let ms = march(&scaled, o, d, 0.0, t_max, step, xi, |v, _| {
+                    full_trilinear(m, &field.full, &diffuse, v)
+                });
+                let ss = march(&scaled, o, d, 0.0, t_max, step, xi, |v, _| full_trilinear(m, &field.full, &sun, v));
+                let bg = if ms.transmittance > 0.0 {
                     background(scene, &field, o, d)
                 } else {
                     Rgb::ZERO
                 };
-                sum += r.radiance + bg * r.transmittance;
+                sum[0] += ms.radiance;
+                sum[1] += ss.radiance;
+                sum[2] += bg * ms.transmittance;
             }
-            (sum / spp as f32).max(Rgb::ZERO)
+            sum.map(|c| (c / spp as f32).max(Rgb::ZERO))
         })
     });
     let mut img = Image::new(cam.width, cam.height);
-    img.pixels = px;
+    img.pixels = px.iter().map(|p| p[0] + p[1] + p[2]).collect();
+    if scene.render.aov {
+        for (c, name) in ["diffuse", "sun_single", "background"].iter().enumerate() {
+            img.add_layer(name, px.iter().map(|p| p[c]).collect());
+        }
+    }
     Ok(img)
 }
