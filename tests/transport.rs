@@ -166,3 +166,50 @@ fn image_is_identical_for_any_thread_count() {
         .zip(&b.pixels)
         .all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits)));
 }
+
+#[test]
+fn cli_renders_with_method_transport_and_reports_iterations() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("small.toml");
+    std::fs::write(
+        &scene,
+        "[medium]\nresolution = [20, 16, 12]\norigin = [-100.0, 0.0, -60.0]\n\
+         [camera]\nposition = [0.0, 80.0, 400.0]\nlook_at = [0.0, 80.0, 0.0]\nwidth = 16\nheight = 12\n",
+    )
+    .unwrap();
+    let out = dir.path().join("t.exr");
+    let r = std::process::Command::new(env!("CARGO_BIN_EXE_cloudgi"))
+        .args([
+            "render",
+            scene.to_str().unwrap(),
+            "--method",
+            "transport",
+            "--aov",
+            "-o",
+            out.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{err}");
+    assert!(err.contains("iterations") && err.contains("transport solve"), "{err}");
+    let img = Image::read_exr(&out).unwrap();
+    assert_valid(&img);
+    assert!(img.layer("sun_single").is_some());
+}
+
+#[test]
+fn empty_medium_shows_the_sky() {
+    let mut s = scene(ball(0.0, 0.9), Method::Transport);
+    s.medium = Medium::new(
+        Grid3::filled([4; 3], 0.0),
+        Vec3::ZERO,
+        Vec3::splat(10.0),
+        0.1,
+        Rgb::splat(0.9),
+        0.85,
+    );
+    let img = render(&s, &NoProgress).unwrap().image;
+    let sky = s.sky.radiance(Vec3::Z);
+    assert!(img.pixels.iter().all(|p| (*p - sky).abs().max_element() < 1e-6));
+}

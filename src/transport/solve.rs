@@ -507,7 +507,8 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
     let mut source = make_source(&moments, true);
     let mut history = Vec::new();
     progress.begin("transport iterations", s.max_iterations as u64);
-    for _ in 0..s.max_iterations {
+    // An empty medium has nothing to iterate: the sky and ground pass unchanged.
+    for _ in 0..if nfull == 0 { 0 } else { s.max_iterations } {
         let (mut next, mut e_down) = sweep(&ctx, &q, &ylm, &source, &ground_rad, clear);
         // Columns beside the swept box see the clear sky.
         for (col, e) in e_down.iter_mut().enumerate() {
