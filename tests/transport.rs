@@ -213,3 +213,19 @@ fn empty_medium_shows_the_sky() {
     let sky = s.sky.radiance(Vec3::Z);
     assert!(img.pixels.iter().all(|p| (*p - sky).abs().max_element() < 1e-6));
 }
+
+#[test]
+fn a_cloud_too_large_for_memory_is_refused_with_the_fix() {
+    let mut s = scene(ball(0.1, 0.9), Method::Transport);
+    // 11 M full voxels × 1.5 kB of source arrays > 16 GB.
+    s.medium = Medium::new(
+        Grid3::filled([230, 230, 210], 1.0),
+        Vec3::ZERO,
+        Vec3::splat(1.0),
+        0.1,
+        Rgb::splat(0.9),
+        0.85,
+    );
+    let e = render(&s, &NoProgress).unwrap_err().to_string();
+    assert!(e.contains("GB") && e.contains("medium.downsample"), "{e}");
+}

@@ -14,7 +14,7 @@
 
 use super::solve::{solve, TransportField, TransportSettings};
 use super::sphere::{real_sh, sh_count};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::image::Image;
 use crate::math::{Rgb, Vec3};
 use crate::medium::Medium;
@@ -113,6 +113,10 @@ fn background(scene: &Scene, f: &TransportField, o: Vec3, d: Vec3) -> Rgb {
     scene.sky.radiance(d)
 }
 
+/// Most memory the solver may ask for (bytes): the SH arrays of every full voxel and the
+/// per-voxel grids.
+const MAX_BYTES: f64 = 16e9;
+
 /// Render with `--method transport` and the default settings.
 pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
     render_with(scene, &TransportSettings::default(), progress, timings)
@@ -121,6 +125,21 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
 /// Render with `--method transport` and settings `s`.
 pub fn render_with(scene: &Scene, s: &TransportSettings, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
     let m = &scene.medium;
+    // Refuse, with the fix, a cloud whose source arrays would not fit (rather than abort).
+    let full = m.density.data().iter().filter(|r| **r > 0.0).count() as f64;
+    let bytes = full * (2 * 3 * sh_count(s.order) * 4) as f64 + m.density.len() as f64 * 20.0;
+    if bytes > MAX_BYTES {
+        return Err(Error::invalid(
+            &scene.source,
+            "medium",
+            format!(
+                "--method transport needs about {:.1} GB for {} full voxels (1.5 kB each); \
+                 coarsen the cloud with medium.downsample or medium.max_voxels",
+                bytes / 1e9,
+                full
+            ),
+        ));
+    }
     let field = timings.time("transport solve", || {
         solve(m, &scene.sun, &scene.sky, scene.ground.as_ref(), s, progress)
     });
