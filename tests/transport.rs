@@ -229,3 +229,30 @@ fn a_cloud_too_large_for_memory_is_refused_with_the_fix() {
     let e = render(&s, &NoProgress).unwrap_err().to_string();
     assert!(e.contains("GB") && e.contains("medium.downsample"), "{e}");
 }
+
+#[test]
+fn the_clouds_shadow_reaches_the_ground_beyond_the_grid() {
+    use cloudgi::lighting::Ground;
+    // Ball centred 100 m up, sun 30° high along +x: the shadow's centre is 170 m beyond the grid.
+    let sun = Sun {
+        dir: Vec3::new(0.866, 0.5, 0.0),
+        irradiance: Rgb::splat(3.0),
+    };
+    let sky = Sky::constant(Rgb::new(0.3, 0.45, 0.8));
+    let ground = Ground {
+        height: 0.0,
+        albedo: Rgb::splat(0.3),
+    };
+    let s = TransportSettings {
+        max_iterations: 3,
+        ..TransportSettings::default()
+    };
+    let f = solve(&ball(0.2, 0.99), &sun, &sky, Some(&ground), &s, &NoProgress);
+    let shadow = f.ground.at(-173.0, 0.0);
+    assert!(
+        luminance(shadow) < 0.75 * luminance(f.ground.clear),
+        "{shadow} vs {}",
+        f.ground.clear
+    );
+    assert!(f.ground.radiance.iter().all(|p| p.is_finite() && p.min_element() >= 0.0));
+}

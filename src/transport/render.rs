@@ -95,20 +95,12 @@ fn full_trilinear(m: &Medium, full: &[u32], grid: &[Rgb], v: Vec3) -> Rgb {
     }
 }
 
-/// The background along a ray: the ground with the solver's irradiance (per grid column under
-/// the grid, unshadowed elsewhere), or the sky.
+/// The background along a ray: the ground with the solver's irradiance (shadowed sun and the
+/// cloud's diffuse light), or the sky.
 fn background(scene: &Scene, f: &TransportField, o: Vec3, d: Vec3) -> Rgb {
-    if let Some(g) = &scene.ground {
-        if let Some(t) = g.intersect(o, d) {
-            let m = &scene.medium;
-            let v = m.to_voxel(o + d * t);
-            let dims = m.dims();
-            let (i, k) = (v.x.floor(), v.z.floor());
-            if i >= 0.0 && k >= 0.0 && (i as usize) < dims[0] && (k as usize) < dims[2] {
-                return f.ground[i as usize + dims[0] * k as usize];
-            }
-            return f.ground_clear;
-        }
+    if let Some(t) = scene.ground.as_ref().and_then(|g| g.intersect(o, d)) {
+        let p = o + d * t;
+        return f.ground.at(p.x as f64, p.z as f64);
     }
     scene.sky.radiance(d)
 }

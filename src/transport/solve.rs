@@ -7,9 +7,10 @@
 //! s = h_a/|Ω_a|; there, the radiance, source and density are bilinear in the four upwind centres
 //! (the offsets are ≤ 1 voxel because a is the major axis). Across the step the source is linear
 //! in optical path and integrated exactly: I = I_b e^{−τ} + w_in S_b + w_out S (τ = σt′ s (ρ_b + ρ)/2).
-//! Empty voxels carry the radiance unchanged. Outside the grid the ordinate sees the sky, or, going
-//! up, the Lambertian ground: below the grid per column (shadowed sun plus the downward diffuse
-//! flux of the last sweep, so all ground bounces are iterated), elsewhere the unshadowed ground.
+//! Empty voxels carry the radiance unchanged. Outside the swept box the ordinate sees the sky,
+//! or, going up, the Lambertian ground at the point straight back along −Ω ([`GroundMap`]: the
+//! δ-M shadowed sun plus the sky's and the cloud's downward diffuse light of the last sweep, so
+//! every ground bounce is iterated; the map reaches as far as the cloud's shadow).
 //!
 //! **Source.** J(Ω) = Σ_lm a′χ′_l (I_lm + E T′_sun Y_lm(Ω_sun)) Y_lm(Ω), I_lm the diffuse
 //! radiance's moments; the δ-M reduced sun E T′_sun = E T^{1 − a f} is exact and apart.
@@ -71,10 +72,8 @@ pub struct TransportField {
     pub diffuse_source: Vec<f32>,
     /// δ-M sun transmittance T′ per voxel centre and band (1 where no cloud is near).
     pub sun_t: Vec<[f32; 3]>,
-    /// Ground radiance per grid column x + nx·z (W·m⁻²·sr⁻¹), and unshadowed.
-    pub ground: Vec<Rgb>,
-    /// Ground radiance outside the grid's footprint.
-    pub ground_clear: Rgb,
+    /// The ground's radiance.
+    pub ground: GroundMap,
     /// Relative change of I0 after each iteration.
     pub history: Vec<f64>,
     /// Full voxels.
@@ -96,8 +95,44 @@ impl TransportField {
     }
 }
 
-/// Raw pointer for disjoint parallel writes: within one plane of a sweep every voxel (and every
-/// ground column) is written by exactly one cell.
+/// Radiance of the Lambertian ground (W·m⁻²·sr⁻¹) on columns of the grid's horizontal spacing,
+/// over the grid's footprint grown by `margin` columns (as far as the cloud's shadow reaches);
+/// `clear`, the unshadowed ground, beyond.
+#[derive(Clone, Debug)]
+pub struct GroundMap {
+    /// Columns added on every side of the footprint.
+    pub margin: usize,
+    /// Columns per axis (x, z).
+    pub dims: [usize; 2],
+    /// Per column, x fastest.
+    pub radiance: Vec<Rgb>,
+    /// Beyond the map.
+    pub clear: Rgb,
+    /// World x, z of the grid's minimum corner (m) and the column size (m).
+    pub origin: [f64; 2],
+    /// Column size (m).
+    pub h: [f64; 2],
+}
+
+impl GroundMap {
+    /// Column index (x, z) of world (x, z), if on the map.
+    #[inline]
+    fn column(&self, x: f64, z: f64) -> Option<usize> {
+        let gi = ((x - self.origin[0]) / self.h[0]).floor() + self.margin as f64;
+        let gk = ((z - self.origin[1]) / self.h[1]).floor() + self.margin as f64;
+        (gi >= 0.0 && gk >= 0.0 && (gi as usize) < self.dims[0] && (gk as usize) < self.dims[1])
+            .then(|| gi as usize + self.dims[0] * gk as usize)
+    }
+
+    /// Radiance at world (x, z).
+    #[inline]
+    pub fn at(&self, x: f64, z: f64) -> Rgb {
+        self.column(x, z).map_or(self.clear, |c| self.radiance[c])
+    }
+}
+
+/// Raw pointer for disjoint parallel writes: within one plane of a sweep every voxel is written by
+/// exactly one cell.
 #[derive(Clone, Copy)]
 struct Shared<T>(*mut T);
 unsafe impl<T> Send for Shared<T> {}
@@ -162,9 +197,9 @@ struct Ctx<'a> {
 impl Ctx<'_> {
     /// Radiance entering the swept box along `om` at the outside grid position (i, j, k): clear
     /// air outside the box carries it unchanged from the sky or, going up, from the ground point
-    /// straight back along −om (its grid column's radiance, or the unshadowed ground beyond).
+    /// straight back along −om.
     #[inline]
-    fn boundary(&self, om: DVec3, i: isize, j: isize, k: isize, ground: &[Rgb], clear: Rgb, sky: Rgb) -> [f32; 3] {
+    fn boundary(&self, om: DVec3, i: isize, j: isize, k: isize, ground: &GroundMap, sky: Rgb) -> [f32; 3] {
         let c = match self.ground_height {
             Some(gh) if om.y > 0.0 => {
                 let p = self.origin
@@ -174,15 +209,7 @@ impl Ctx<'_> {
                         (k as f64 + 0.5) * self.h[2],
                     );
                 let q = p - om * ((p.y - gh).max(0.0) / om.y);
-                let (gi, gk) = (
-                    ((q.x - self.origin.x) / self.h[0]).floor(),
-                    ((q.z - self.origin.z) / self.h[2]).floor(),
-                );
-                if gi >= 0.0 && gk >= 0.0 && (gi as usize) < self.dims[0] && (gk as usize) < self.dims[2] {
-                    ground[gi as usize + self.dims[0] * gk as usize]
-                } else {
-                    clear
-                }
+                ground.at(q.x, q.z)
             }
             _ => sky,
         };
@@ -190,20 +217,21 @@ impl Ctx<'_> {
     }
 }
 
-/// One sweep of every ordinate: the diffuse radiance moments I_lm per full voxel, and the
-/// downward diffuse irradiance at the bottom of the swept box per grid column (0 outside it).
-fn sweep(c: &Ctx, q: &Quadrature, ylm: &[Vec<f32>], source: &[f32], ground: &[Rgb], clear: Rgb) -> (Vec<f32>, Vec<[f64; 3]>) {
-    let [nx, ny, nz] = c.dims;
+/// One sweep of every ordinate: the diffuse radiance moments I_lm per full voxel, and how much the
+/// cloud changes the ground's downward diffuse irradiance, per ground map column.
+fn sweep(c: &Ctx, q: &Quadrature, ylm: &[Vec<f32>], source: &[f32], ground: &GroundMap) -> (Vec<f32>, Vec<[f64; 3]>) {
+    let [nx, ny, _] = c.dims;
     let nfull = source.len() / (3 * c.nsh);
     let mut moments = vec![0f32; nfull * 3 * c.nsh];
-    let mut e_down = vec![[0f64; 3]; nx * nz];
+    // Change of the ground's downward irradiance by the cloud, per ground map column (W/m²).
+    let mut e_down = vec![[0f64; 3]; ground.radiance.len()];
     let mp = Shared(moments.as_mut_ptr());
-    let ep = Shared(e_down.as_mut_ptr());
     for (d, om) in q.dirs.iter().enumerate() {
         let om = *om;
         let w = q.weights[d] as f32;
         let y = &ylm[d];
         let skyr = c.sky.radiance(Vec3::new(-om.x as f32, -om.y as f32, -om.z as f32));
+        let splat = om.y < 0.0 && c.ground_height.is_some();
         // Major axis and the two others.
         let r = [om.x.abs() / c.h[0], om.y.abs() / c.h[1], om.z.abs() / c.h[2]];
         let a = (0..3).max_by(|p, q| r[*p].total_cmp(&r[*q])).unwrap_or(0);
@@ -251,7 +279,7 @@ fn sweep(c: &Ctx, q: &Quadrature, ylm: &[Vec<f32>], source: &[f32], ground: &[Rg
                     }
                     let v = coord(pa, ib, ic);
                     let l = (ib + 1) as usize + stride * (ic + 1) as usize;
-                    bi[l] = c.boundary(om, v[0], v[1], v[2], ground, clear, skyr);
+                    bi[l] = c.boundary(om, v[0], v[1], v[2], ground, skyr);
                     bs[l] = [0.0; 3];
                     br[l] = 0.0;
                 }
@@ -326,16 +354,39 @@ fn sweep(c: &Ctx, q: &Quadrature, ylm: &[Vec<f32>], source: &[f32], ground: &[Rg
                                 }
                             }
                         }
-                        if v[1] == c.lo[1] as isize && om.y < 0.0 {
-                            let col = v[0] as usize + nx * v[2] as usize;
-                            // SAFETY: column `col` has one bottom cell in the box, this one.
-                            let e = unsafe { &mut *ep.at(col) };
-                            for band in 0..3 {
-                                e[band] += (w * (-om.y as f32) * out[band]) as f64;
-                            }
-                        }
                     }
                 });
+            if splat {
+                // Light leaving the box downwards lands on the ground along Ω: splat its flux
+                // change against the sky it hides, (I − L_sky) w |Ω·n| A_face, per column area.
+                let exit_b = if om[b] > 0.0 { nb - 1 } else { 0 };
+                let exit_c = if om[cc] > 0.0 { nc - 1 } else { 0 };
+                let mut faces: Vec<(usize, usize, usize)> = (0..nc).map(|ic| (exit_b, ic, b)).collect();
+                faces.extend((0..nb).map(|ib| (ib, exit_c, cc)));
+                if step + 1 == na {
+                    faces.extend((0..nc).flat_map(|ic| (0..nb).map(move |ib| (ib, ic, a))));
+                }
+                for (ib, ic, ax) in faces {
+                    let v = coord(pa, ib as isize, ic as isize);
+                    let mut face = c.origin
+                        + DVec3::new(
+                            (v[0] as f64 + 0.5) * c.h[0],
+                            (v[1] as f64 + 0.5) * c.h[1],
+                            (v[2] as f64 + 0.5) * c.h[2],
+                        );
+                    face[ax] += 0.5 * c.h[ax] * om[ax].signum();
+                    let gh = c.ground_height.unwrap_or(0.0);
+                    let q = face + om * ((gh - face.y).min(0.0) / om.y);
+                    if let Some(col) = ground.column(q.x, q.z) {
+                        let area = c.h[0] * c.h[1] * c.h[2] / c.h[ax];
+                        let f = w as f64 * om[ax].abs() * area / (c.h[0] * c.h[2]);
+                        let i = cur_i[ib + 1 + stride * (ic + 1)];
+                        for band in 0..3 {
+                            e_down[col][band] += f * (i[band] as f64 - skyr[band] as f64);
+                        }
+                    }
+                }
+            }
             std::mem::swap(&mut prev_i, &mut cur_i);
             std::mem::swap(&mut prev_s, &mut cur_s);
             std::mem::swap(&mut prev_r, &mut cur_r);
@@ -449,35 +500,60 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         });
         out
     };
-    // Ground: ρ_g/π (E_sun μ_s T′ + E_down), per column; E_down starts as the clear sky's.
-    let ground_t: Vec<[f64; 3]> = (0..nx * nz)
-        .map(|col| match ground {
+    let (lo, hi) = crate::incident::active_box(m, 1).unwrap_or(([0; 3], dims));
+    // Ground: ρ_g/π (E_sun μ_s T′ + E_down) per column, over the footprint grown as far as the
+    // cloud's shadow reaches; E_down is the clear sky's plus the cloud's change to it in the last
+    // sweep (light leaving the box downwards minus the sky it hides).
+    let (hx, hz) = (m.voxel_size.x as f64, m.voxel_size.z as f64);
+    let margin = match ground {
+        Some(g) => {
+            let top = (m.origin.y + m.voxel_size.y * dims[1] as f32 - g.height).max(0.0) as f64;
+            let tan = (1.0 - (sun.dir.y as f64).powi(2)).max(0.0).sqrt() / (sun.dir.y as f64).max(1e-3);
+            ((top * tan / hx.min(hz)).ceil() as usize).min(2 * nx.max(nz))
+        }
+        None => 0,
+    };
+    let gdims = [nx + 2 * margin, nz + 2 * margin];
+    let col_xz = |c: usize| {
+        let (i, k) = ((c % gdims[0]) as f64 - margin as f64, (c / gdims[0]) as f64 - margin as f64);
+        (m.origin.x as f64 + (i + 0.5) * hx, m.origin.z as f64 + (k + 0.5) * hz)
+    };
+    let ground_t: Vec<[f64; 3]> = (0..gdims[0] * gdims[1])
+        .into_par_iter()
+        .map(|c| match ground {
             Some(g) => {
-                let (i, k) = (col % nx, col / nx);
-                let c = m.voxel_center(i, 0, k);
-                let p = Vec3::new(c.x, g.height, c.z);
-                let t = m.transmittance(p, sun.dir, 0.0, f32::INFINITY) as f64;
+                let (x, z) = col_xz(c);
+                let t = m.transmittance(Vec3::new(x as f32, g.height, z as f32), sun.dir, 0.0, f32::INFINITY) as f64;
                 [0, 1, 2].map(|b| t.powf(bands[b].sigma_t / optics.sigma_t))
             }
             None => [0.0; 3],
         })
         .collect();
-    let ground_of = |e_down: &[[f64; 3]]| -> (Vec<Rgb>, Rgb) {
-        let Some(g) = ground else {
-            return (vec![Rgb::ZERO; nx * nz], Rgb::ZERO);
-        };
-        let mu_s = sun.dir.y.max(0.0) as f64;
-        let col = (0..nx * nz)
-            .map(|c| {
-                let e = [0, 1, 2].map(|b| (g.albedo[b] as f64 / PI * (e_sun[b] * mu_s * ground_t[c][b] + e_down[c][b])) as f32);
-                Rgb::from(e)
-            })
-            .collect();
-        (col, g.radiance(Vec3::ZERO, sun, sky, 1.0))
-    };
     let sky_down = [sky.irradiance_up.x as f64, sky.irradiance_up.y as f64, sky.irradiance_up.z as f64];
-    let (mut ground_rad, clear) = ground_of(&vec![sky_down; nx * nz]);
-    let (lo, hi) = crate::incident::active_box(m, 1).unwrap_or(([0; 3], dims));
+    let ground_of = |e_down: Option<&[[f64; 3]]>| -> GroundMap {
+        let radiance = match ground {
+            Some(g) => {
+                let mu_s = sun.dir.y.max(0.0) as f64;
+                (0..gdims[0] * gdims[1])
+                    .map(|c| {
+                        let de = e_down.map_or([0.0; 3], |e| e[c]);
+                        let e = [0, 1, 2].map(|b| (sky_down[b] + de[b]).max(0.0));
+                        Rgb::from([0, 1, 2].map(|b| (g.albedo[b] as f64 / PI * (e_sun[b] * mu_s * ground_t[c][b] + e[b])) as f32))
+                    })
+                    .collect()
+            }
+            None => vec![Rgb::ZERO; gdims[0] * gdims[1]],
+        };
+        GroundMap {
+            margin,
+            dims: gdims,
+            radiance,
+            clear: ground.map_or(Rgb::ZERO, |g| g.radiance(Vec3::ZERO, sun, sky, 1.0)),
+            origin: [m.origin.x as f64, m.origin.z as f64],
+            h: [hx, hz],
+        }
+    };
+    let mut ground_map = ground_of(None);
     let ctx = Ctx {
         dims,
         lo,
@@ -509,14 +585,7 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
     progress.begin("transport iterations", s.max_iterations as u64);
     // An empty medium has nothing to iterate: the sky and ground pass unchanged.
     for _ in 0..if nfull == 0 { 0 } else { s.max_iterations } {
-        let (mut next, mut e_down) = sweep(&ctx, &q, &ylm, &source, &ground_rad, clear);
-        // Columns beside the swept box see the clear sky.
-        for (col, e) in e_down.iter_mut().enumerate() {
-            let (i, k) = (col % nx, col / nx);
-            if i < lo[0] || i >= hi[0] || k < lo[2] || k >= hi[2] {
-                *e = sky_down;
-            }
-        }
+        let (mut next, e_down) = sweep(&ctx, &q, &ylm, &source, &ground_map);
         if let (Some(dom), false) = (&dom, hier.is_empty()) {
             let dd = dom.dims;
             for (b, h) in hier.iter().enumerate() {
@@ -556,7 +625,7 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         history.push(change);
         moments = next;
         source = make_source(&moments, true);
-        ground_rad = ground_of(&e_down).0;
+        ground_map = ground_of(Some(&e_down));
         progress.advance(1);
         progress.log(&format!(
             "transport: iteration {}, relative change of I0 {change:.2e}",
@@ -574,8 +643,7 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         full,
         diffuse_source,
         sun_t,
-        ground: ground_rad,
-        ground_clear: clear,
+        ground: ground_map,
         history,
         full_voxels: nfull,
         ordinates: q.dirs.len(),
