@@ -141,6 +141,10 @@ fn thin_cloud_is_its_single_scattering() {
 fn image_is_identical_for_any_thread_count() {
     let mut s = scene(ball(0.2, 0.99), Method::Transport);
     s.render.aov = true;
+    s.ground = Some(cloudgi::lighting::Ground {
+        height: 0.0,
+        albedo: Rgb::splat(0.3),
+    });
     let run = |n| {
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
