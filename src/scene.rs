@@ -32,6 +32,8 @@ pub enum Method {
     /// Diffusion, clear-air propagation with viewing cubes and ground hemicubes, and the
     /// low-density edge treatment in the final gather (paper Fig. 7).
     Full,
+    /// Converged discrete-ordinates transport (δ-M, SH source, DSA) with TMS single scattering.
+    Transport,
 }
 
 impl Method {
@@ -42,6 +44,7 @@ impl Method {
             Method::Reference => "reference",
             Method::Diffusion => "diffusion",
             Method::Full => "full",
+            Method::Transport => "transport",
         }
     }
 }

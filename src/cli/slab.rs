@@ -1,6 +1,7 @@
 //! `cloudgi slab`: reflectance and transmittance of a plane-parallel slab, as one JSON line, by
 //! the reference transport (Monte Carlo, with standard errors) or by the diffusion discretisation
-//! of eq. 4 with eq. 7 ([`cloudgi::diffusion::slab`], deterministic: standard errors 0).
+//! of eq. 4 with eq. 7 ([`cloudgi::diffusion::slab`]) or discrete-ordinates transport
+//! ([`cloudgi::transport::slab`]), both deterministic: standard errors 0.
 
 use clap::{Args, ValueEnum};
 use cloudgi::diffusion::slab::{default_cells, solve_slab, Incidence as DiffusionIncidence};
@@ -23,6 +24,8 @@ pub enum SlabMethod {
     Reference,
     /// The finite-difference diffusion solve (eq. 4 with eq. 7) on a 1-D grid.
     Diffusion,
+    /// Discrete-ordinates transport (δ-M, DSA-accelerated source iteration).
+    Transport,
 }
 
 #[derive(Args, Debug)]
@@ -63,12 +66,18 @@ pub fn run(a: SlabArgs) -> Result<()> {
     p.validate("command line")?;
     let r = match a.method {
         SlabMethod::Reference => slab(&p, a.samples, a.seed)?,
-        SlabMethod::Diffusion => {
+        SlabMethod::Diffusion | SlabMethod::Transport => {
             let inc = match a.incidence {
                 IncidenceArg::Collimated => DiffusionIncidence::Normal,
                 IncidenceArg::Diffuse => DiffusionIncidence::Diffuse,
             };
-            let d = solve_slab(a.thickness, a.albedo, a.g, inc, default_cells(a.thickness));
+            let d = if a.method == SlabMethod::Transport {
+                let s = cloudgi::transport::slab::SlabSettings::default();
+                let x = cloudgi::transport::slab::solve_slab(a.thickness, a.albedo, a.g, inc, &s);
+                cloudgi::diffusion::slab::SlabResult { r: x.r, t: x.t }
+            } else {
+                solve_slab(a.thickness, a.albedo, a.g, inc, default_cells(a.thickness))
+            };
             SlabResult {
                 r: d.r,
                 t: d.t,
