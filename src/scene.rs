@@ -237,7 +237,7 @@ impl Default for RenderSettings {
     /// The render's own defaults; each stage's struct brings its own.
     fn default() -> Self {
         RenderSettings {
-            method: Method::Full,
+            method: Method::Transport,
             seed: 0,
             spp: 1,
             aa_samples: 1,
