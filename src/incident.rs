@@ -150,14 +150,6 @@ pub struct IncidentLight {
     pub fallback_rays: u64,
 }
 
-impl IncidentLight {
-    /// Reduced sun radiance (irradiance, W/m²) I_risun at a point in continuous voxel coordinates.
-    #[inline]
-    pub fn sun_at_voxel(&self, v: Vec3) -> Rgb {
-        self.sun_irradiance * self.sun_transmittance.at_voxel(v)
-    }
-}
-
 /// Index box [lo, hi) of every non-empty voxel grown by `margin` voxels, clipped to the grid.
 pub(crate) fn active_box(m: &Medium, margin: usize) -> Option<([usize; 3], [usize; 3])> {
     let d = m.dims();

@@ -25,6 +25,7 @@ pub mod reference;
 pub mod render;
 pub mod scene;
 pub mod sunlight;
+pub mod transport;
 
 pub use error::{Error, Result};
 pub use image::Image;

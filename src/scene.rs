@@ -32,6 +32,8 @@ pub enum Method {
     /// Diffusion, clear-air propagation with viewing cubes and ground hemicubes, and the
     /// low-density edge treatment in the final gather (paper Fig. 7).
     Full,
+    /// Converged discrete-ordinates transport (δ-M, SH source, DSA) with TMS single scattering.
+    Transport,
 }
 
 impl Method {
@@ -42,6 +44,7 @@ impl Method {
             Method::Reference => "reference",
             Method::Diffusion => "diffusion",
             Method::Full => "full",
+            Method::Transport => "transport",
         }
     }
 }
@@ -246,7 +249,7 @@ impl Default for RenderSettings {
     /// The render's own defaults; each stage's struct brings its own.
     fn default() -> Self {
         RenderSettings {
-            method: Method::Full,
+            method: Method::Transport,
             seed: 0,
             spp: 1,
             aa_samples: 1,

@@ -720,9 +720,9 @@ fn default_render_writes_exr_and_png() {
 }
 
 #[test]
-fn the_default_method_is_full_and_default_toml_is_the_default_scene() {
+fn the_default_method_is_transport_and_default_toml_is_the_default_scene() {
     let d = cloudgi::SceneDesc::default();
-    assert_eq!(d.render.method, cloudgi::scene::Method::Full);
+    assert_eq!(d.render.method, cloudgi::scene::Method::Transport);
     let text = include_str!("../examples/default.toml");
     assert_eq!(cloudgi::SceneDesc::from_toml(text, "default.toml").unwrap(), d);
 }

@@ -8,7 +8,13 @@ use cloudgi::medium::{Grid3, Medium};
 use cloudgi::optics::Hg;
 use cloudgi::{Image, Method, NoProgress, Scene, SceneDesc};
 
-const METHODS: [Method; 4] = [Method::Single, Method::Diffusion, Method::Full, Method::Reference];
+const METHODS: [Method; 5] = [
+    Method::Single,
+    Method::Diffusion,
+    Method::Full,
+    Method::Transport,
+    Method::Reference,
+];
 
 /// A small scene: the built-in one on a coarse grid, a tiny image, no ground, `method`.
 fn scene(method: Method, w: u32, h: u32, edit: impl FnOnce(&mut SceneDesc)) -> Scene {
@@ -76,6 +82,9 @@ fn furnace() {
             Method::Single => (5e-3, 5e-4),
             Method::Reference => (0.15, 0.012),
             Method::Diffusion | Method::Full => (0.6, 0.09),
+            // Measured 0.42 % worst, 0.033 % mean: the converged transport solution keeps the
+            // furnace up to its sweep discretisation.
+            Method::Transport => (0.01, 1e-3),
         };
         assert!(worst < tol_worst && mean < tol_mean, "{}: worst {worst}, mean {mean}", m.name());
         // No method may be brighter than the furnace on average: that would be energy made.
@@ -124,6 +133,9 @@ fn thin_box_single_scattering() {
             Method::Single => 2e-3,
             Method::Reference => 0.05,
             Method::Diffusion | Method::Full => 0.1,
+            // Measured +4.8 %: exact TMS single scattering plus a converged multiple-scattering
+            // field about 2 % above the reference's on this 8³ box.
+            Method::Transport => 0.07,
         };
         assert!(rel(p, exact) < tol, "{}: {p} vs closed form {exact}", m.name());
         assert!(p > exact * 0.995, "{}: {p} below the single scattering {exact}", m.name());

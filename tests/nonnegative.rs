@@ -48,7 +48,13 @@ fn assert_nonnegative(label: &str, s: &Scene) {
 }
 
 fn every_method(label: &str, example: Option<&str>, edit: impl Fn(&mut SceneDesc)) {
-    for m in [Method::Single, Method::Diffusion, Method::Full, Method::Reference] {
+    for m in [
+        Method::Single,
+        Method::Diffusion,
+        Method::Full,
+        Method::Transport,
+        Method::Reference,
+    ] {
         let s = scene(example, m, &edit);
         assert_nonnegative(&format!("{label} {}", m.name()), &s);
     }

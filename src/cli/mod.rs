@@ -30,6 +30,8 @@ enum MethodArg {
     /// Diffusion, clear-air propagation with viewing cubes and ground hemicubes, and the
     /// low-density edge treatment in the final gather (paper Fig. 7).
     Full,
+    /// Converged discrete-ordinates transport (δ-M, SH source, DSA) with TMS single scattering.
+    Transport,
 }
 
 impl From<MethodArg> for Method {
@@ -39,6 +41,7 @@ impl From<MethodArg> for Method {
             MethodArg::Reference => Method::Reference,
             MethodArg::Diffusion => Method::Diffusion,
             MethodArg::Full => Method::Full,
+            MethodArg::Transport => Method::Transport,
         }
     }
 }

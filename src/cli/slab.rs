@@ -1,12 +1,22 @@
 //! `cloudgi slab`: reflectance and transmittance of a plane-parallel slab, as one JSON line, by
 //! the reference transport (Monte Carlo, with standard errors) or by the diffusion discretisation
-//! of eq. 4 with eq. 7 ([`cloudgi::diffusion::slab`], deterministic: standard errors 0), by
-//! default after the δ-M transform with f = g² (`--forward-fraction 0`: the paper's scheme).
+//! of eq. 4 with eq. 7 ([`cloudgi::diffusion::slab`], by default after the δ-M transform with
+//! f = g², `--forward-fraction 0`: the paper's scheme) or discrete-ordinates transport
+//! ([`cloudgi::transport::slab`]), both deterministic: standard errors 0.
 
 use clap::{Args, ValueEnum};
 use cloudgi::diffusion::slab::{slab_forward_fraction, solve_slab_similar, Incidence as DiffusionIncidence};
 use cloudgi::error::{Error, Result};
 use cloudgi::reference::slab::{slab, Incidence, SlabParams, SlabResult};
+
+/// `--incidence`: clap's view of [`Incidence`] (clap stays in the CLI).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum IncidenceArg {
+    /// A beam at normal incidence.
+    Collimated,
+    /// Uniform radiance from the whole upper hemisphere (cosine-weighted incident directions).
+    Diffuse,
+}
 
 /// Method for the slab.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -15,6 +25,8 @@ pub enum SlabMethod {
     Reference,
     /// The finite-difference diffusion solve (eq. 4 with eq. 7) on a 1-D grid.
     Diffusion,
+    /// Discrete-ordinates transport (δ-M, DSA-accelerated source iteration).
+    Transport,
 }
 
 #[derive(Args, Debug)]
@@ -30,7 +42,7 @@ pub struct SlabArgs {
     g: f64,
     /// Illumination from above: a normal beam or uniform diffuse light.
     #[arg(long, value_enum)]
-    incidence: Incidence,
+    incidence: IncidenceArg,
     /// Transport method.
     #[arg(long, value_enum, default_value = "reference")]
     method: SlabMethod,
@@ -51,25 +63,34 @@ pub fn run(a: SlabArgs) -> Result<()> {
         thickness: a.thickness,
         albedo: a.albedo,
         g: a.g,
-        incidence: a.incidence,
+        incidence: match a.incidence {
+            IncidenceArg::Collimated => Incidence::Collimated,
+            IncidenceArg::Diffuse => Incidence::Diffuse,
+        },
     };
     p.validate("command line")?;
     let r = match a.method {
         SlabMethod::Reference => slab(&p, a.samples, a.seed)?,
-        SlabMethod::Diffusion => {
+        SlabMethod::Diffusion | SlabMethod::Transport => {
             let inc = match a.incidence {
-                Incidence::Collimated => DiffusionIncidence::Normal,
-                Incidence::Diffuse => DiffusionIncidence::Diffuse,
+                IncidenceArg::Collimated => DiffusionIncidence::Normal,
+                IncidenceArg::Diffuse => DiffusionIncidence::Diffuse,
             };
-            let f = a.forward_fraction.unwrap_or_else(|| slab_forward_fraction(a.g));
-            if !(0.0..1.0).contains(&f) {
-                return Err(Error::invalid(
-                    "command line",
-                    "--forward-fraction",
-                    format!("{f} is outside [0, 1); give a fraction such as 0.81 (g²) or 0 for the paper's scheme"),
-                ));
-            }
-            let d = solve_slab_similar(a.thickness, a.albedo, a.g, f, inc);
+            let d = if a.method == SlabMethod::Transport {
+                let s = cloudgi::transport::slab::SlabSettings::default();
+                let x = cloudgi::transport::slab::solve_slab(a.thickness, a.albedo, a.g, inc, &s);
+                cloudgi::diffusion::slab::SlabResult { r: x.r, t: x.t }
+            } else {
+                let f = a.forward_fraction.unwrap_or_else(|| slab_forward_fraction(a.g));
+                if !(0.0..1.0).contains(&f) {
+                    return Err(Error::invalid(
+                        "command line",
+                        "--forward-fraction",
+                        format!("{f} is outside [0, 1); give a fraction such as 0.81 (g²) or 0 for the paper's scheme"),
+                    ));
+                }
+                solve_slab_similar(a.thickness, a.albedo, a.g, f, inc)
+            };
             SlabResult {
                 r: d.r,
                 t: d.t,

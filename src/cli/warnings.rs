@@ -117,11 +117,15 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
         "render.ground_samples",
         "render.iterations",
         "render.propagation_tolerance",
-        "render.aov",
         "render.low_density_threshold",
     ] {
         rule(key, m == Method::Full, &only_full);
     }
+    rule(
+        "render.aov",
+        matches!(m, Method::Full | Method::Transport),
+        &format!("to method {name} (only full and transport write AOV layers)"),
+    );
     let solved = matches!(m, Method::Diffusion | Method::Full);
     let only_solved = format!("to method {name} (only diffusion and full use it)");
     for key in [

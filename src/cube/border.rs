@@ -124,11 +124,6 @@ impl BorderCubes {
     pub fn hook(&self) -> impl Fn([usize; 3], usize) -> Option<Rgb> + Sync + '_ {
         move |v, b| self.lookup(v, b)
     }
-
-    /// Number of bins rendered over all cubes.
-    pub fn bins_rendered(&self) -> u64 {
-        self.needed.iter().map(|m| m.count() as u64).sum()
-    }
 }
 
 /// Render a cube at every border voxel of `lit`'s density grid (its needed bins only), in

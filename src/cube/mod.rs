@@ -1,7 +1,7 @@
 //! Viewing cubes (paper sections 3 and 4): radiance images on the six faces of a cube around a
 //! point. [`image`] holds the image type shared by the clear-air propagation and the final
-//! gather's low-density edges; [`lit`] the lit volume cubes render; [`pyramid`] its mip pyramid;
-//! [`render`] the cone-matched cube renderer (and a brute-force reference); [`border`] the cubes
+//! gather's low-density edges; [`render`] the cone-matched cube renderer over the lit volume's
+//! pyramid ([`crate::lit`]) (and a brute-force reference); [`border`] the cubes
 //! at the cloud's border voxels for stage 1; [`ground`] the ground's hemicubes. See docs/cubes.md.
 
 pub mod border;

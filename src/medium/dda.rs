@@ -1,9 +1,10 @@
-//! Exact 3-D DDA (Amanatides & Woo 1987) over a regular lattice: yields every cell a ray
-//! crosses with the ray-parameter interval inside it. Boundaries are recomputed from the integer
-//! cell index at each step (no accumulated drift), so the segment lengths telescope exactly to the
-//! chord length. Users: the dual-lattice Simpson walk of the exact optical depth
-//! ([`super::Medium::for_each_dual_cell`]), the majorant blocks, and stage 1's rays
-//! ([`crate::incident`]), which weight by these lengths.
+//! The one 3-D DDA (Amanatides & Woo 1987) over a regular lattice: yields every cell a ray
+//! crosses with the ray-parameter interval inside it. The entry boundaries come from the integer
+//! cell index, then each step adds one cell's ray length (no division per step: stage 1 walks
+//! about 10⁸ cells per run); each segment starts where the previous ended, so the lengths
+//! telescope exactly to the chord length. Users: the dual-lattice Simpson walk of the exact
+//! optical depth ([`super::Medium::for_each_dual_block`]), the majorant blocks, and stage 1's
+//! rays ([`crate::incident`]), which weight by these lengths.
 
 use glam::DVec3;
 
@@ -42,9 +43,10 @@ pub struct Dda {
     dims: [usize; 3],
     cell: [i64; 3],
     step: [i64; 3],
-    /// Ray parameter of the current cell's exit boundary per axis (recomputed only for the axis
-    /// that stepped, from the integer index, so it does not drift).
+    /// Ray parameter of the current cell's exit boundary per axis.
     tb: [f64; 3],
+    /// Ray-parameter length of one cell per axis, cell_size/|ray_d| (∞ for a zero component).
+    t_delta: [f64; 3],
     t: f64,
     t_end: f64,
     done: bool,
@@ -88,6 +90,7 @@ impl Dda {
             cell: [0; 3],
             step: [0; 3],
             tb: [f64::INFINITY; 3],
+            t_delta: [f64::INFINITY; 3],
             t: 0.0,
             t_end: 0.0,
             done: true,
@@ -114,6 +117,11 @@ impl Dda {
             };
         }
         dda.tb = [dda.t_boundary(0), dda.t_boundary(1), dda.t_boundary(2)];
+        for a in 0..3 {
+            if dda.step[a] != 0 {
+                dda.t_delta[a] = cell_size[a] / ray_d[a].abs();
+            }
+        }
         dda.t = t0;
         dda.t_end = t1;
         dda.done = false;
@@ -162,7 +170,7 @@ impl Iterator for Dda {
                 if self.cell[axis] < 0 || self.cell[axis] >= self.dims[axis] as i64 {
                     self.done = true;
                 } else {
-                    self.tb[axis] = self.t_boundary(axis);
+                    self.tb[axis] += self.t_delta[axis];
                 }
             }
             if seg.t1 > seg.t0 {

@@ -236,19 +236,6 @@ impl Medium {
         ray_box(lo.as_dvec3(), hi.as_dvec3(), o.as_dvec3(), d.as_dvec3(), t_min as f64, t_max as f64).map(|(a, b)| (a as f32, b as f32))
     }
 
-    /// The voxels a ray crosses in [t_min, t_max], with their segments (exact DDA).
-    pub fn voxel_segments(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> Dda {
-        Dda::new(
-            self.origin.as_dvec3(),
-            self.voxel_size.as_dvec3(),
-            self.dims(),
-            o.as_dvec3(),
-            d.as_dvec3(),
-            t_min as f64,
-            t_max as f64,
-        )
-    }
-
     /// Exact ∫ ρ ds (m, density × length) along `o + t·d`, t ∈ [t_min, t_max], `d` unit.
     /// Skips empty majorant blocks; inside the others walks the dual lattice with Simpson's rule.
     pub fn density_integral(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> f64 {

@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 /// How the slab is lit.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Incidence {
     /// A beam at normal incidence.

@@ -5,6 +5,7 @@ pub mod diffusion;
 pub mod empty;
 pub mod full;
 pub mod single;
+pub mod transport;
 
 use crate::error::Result;
 use crate::image::Image;
@@ -32,6 +33,7 @@ pub fn render(scene: &Scene, progress: &dyn Progress) -> Result<RenderOutput> {
         Method::Reference => crate::reference::render(scene, progress, &mut timings)?,
         Method::Diffusion => diffusion::render(&delta_m(scene), progress, &mut timings)?,
         Method::Full => full::render(&delta_m(scene), progress, &mut timings)?,
+        Method::Transport => transport::render(scene, progress, &mut timings)?,
     };
     Ok(RenderOutput { image, timings })
 }

@@ -1,0 +1,152 @@
+//! `--method transport`: a converged discrete-ordinates solution of the radiative transfer
+//! equation, with δ-M scaled optics, the sun exact and apart, and the iteration accelerated by a
+//! diffusion solve (diffusion synthetic acceleration, DSA). See docs/transport.md.
+//!
+//! - [`Optics`]: the medium's optics after the δ-M similarity transform (Wiscombe 1977), the one
+//!   place the transport solver reads σt, albedo and g.
+//! - [`slab`]: the solver on a plane-parallel column (checked against adding-doubling).
+//! - [`solve`]: the 3-D solver (SH source per full voxel, sweeps, DSA); the gather is `crate::render::transport`.
+
+pub mod slab;
+pub mod solve;
+pub mod sphere;
+
+use crate::medium::Medium;
+
+/// One band's optics after the δ-M transform of a Henyey–Greenstein phase function truncated
+/// after Legendre order `L`: the forward fraction f = g^{L+1} moves into the unscattered beam,
+/// σt′ = σt(1 − a f), a′ = a(1 − f)/(1 − a f), χ′_l = (g^l − f)/(1 − f) for l ≤ L.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BandOptics {
+    /// Scaled extinction σt′ per unit density (m⁻¹, or per unit optical depth on a slab).
+    pub sigma_t: f64,
+    /// Scaled single-scattering albedo a′.
+    pub albedo: f64,
+    /// Truncated fraction f.
+    pub f: f64,
+    /// Scaled Legendre moments χ′_0..χ′_L of the phase function (χ′_0 = 1).
+    pub chi: Vec<f64>,
+}
+
+impl BandOptics {
+    /// δ-M transform of (σt, a, HG g) truncated after order `order`.
+    pub fn delta_m(sigma_t: f64, albedo: f64, g: f64, order: usize) -> BandOptics {
+        let f = g.powi(order as i32 + 1);
+        let chi = (0..=order).map(|l| (g.powi(l as i32) - f) / (1.0 - f)).collect();
+        BandOptics {
+            sigma_t: sigma_t * (1.0 - albedo * f),
+            albedo: albedo * (1.0 - f) / (1.0 - albedo * f),
+            f,
+            chi,
+        }
+    }
+
+    /// The truncated phase function p′(cos Θ) = Σ (2l+1) χ′_l P_l(cos Θ) (normalised to 4π over
+    /// the sphere; it may be slightly negative far from the peak, which the sweeps tolerate).
+    pub fn phase(&self, cos_theta: f64) -> f64 {
+        let p = legendre(self.chi.len() - 1, cos_theta);
+        self.chi
+            .iter()
+            .zip(&p)
+            .enumerate()
+            .map(|(l, (c, p))| (2 * l + 1) as f64 * c * p)
+            .sum()
+    }
+}
+
+/// The medium's optics for the transport solver: the exact HG g and, per RGB band, the δ-M
+/// scaled extinction, albedo and phase moments.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Optics {
+    /// Exact HG mean cosine (for the exact single scattering).
+    pub g: f64,
+    /// Exact extinction per unit density (m⁻¹).
+    pub sigma_t: f64,
+    /// Exact albedo per band.
+    pub albedo: [f64; 3],
+    /// δ-M scaled optics per band.
+    pub bands: [BandOptics; 3],
+}
+
+impl Optics {
+    /// The medium's optics truncated after Legendre order `order`. The only reader of the
+    /// medium's σt, albedo and g in this module.
+    pub fn from_medium(m: &Medium, order: usize) -> Optics {
+        let o = &m.optics;
+        let a = [o.albedo.x as f64, o.albedo.y as f64, o.albedo.z as f64];
+        let (st, g) = (o.sigma_t as f64, o.phase.mean_cosine());
+        Optics {
+            g,
+            sigma_t: st,
+            albedo: a,
+            bands: a.map(|a| BandOptics::delta_m(st, a, g, order)),
+        }
+    }
+}
+
+/// Legendre polynomials P_0(x)..P_n(x) by the three-term recurrence.
+pub fn legendre(n: usize, x: f64) -> Vec<f64> {
+    let mut p = vec![1.0; n + 1];
+    if n >= 1 {
+        p[1] = x;
+    }
+    for l in 2..=n {
+        p[l] = ((2 * l - 1) as f64 * x * p[l - 1] - (l - 1) as f64 * p[l - 2]) / l as f64;
+    }
+    p
+}
+
+/// `n`-point Gauss–Legendre nodes and weights on [−1, 1] (Newton on P_n; weights sum to 2).
+pub fn gauss_legendre(n: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut x = vec![0.0; n];
+    let mut w = vec![0.0; n];
+    for i in 0..n {
+        let mut z = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
+        let mut dp = 1.0;
+        for _ in 0..100 {
+            let p = legendre(n, z);
+            // P_n′(z) = n (z P_n − P_{n−1}) / (z² − 1).
+            dp = n as f64 * (z * p[n] - p[n - 1]) / (z * z - 1.0);
+            let dz = p[n] / dp;
+            z -= dz;
+            if dz.abs() < 1e-15 {
+                break;
+            }
+        }
+        x[i] = -z;
+        w[i] = 2.0 / ((1.0 - z * z) * dp * dp);
+    }
+    (x, w)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gauss_legendre_integrates_polynomials_exactly() {
+        let (x, w) = gauss_legendre(8);
+        assert!((w.iter().sum::<f64>() - 2.0).abs() < 1e-13);
+        // ∫ x^14 dx over [−1, 1] = 2/15 (degree 2n − 2 is exact).
+        let s: f64 = x.iter().zip(&w).map(|(x, w)| w * x.powi(14)).sum();
+        assert!((s - 2.0 / 15.0).abs() < 1e-13, "{s}");
+        assert!(x.windows(2).all(|p| p[0] < p[1]));
+    }
+
+    #[test]
+    fn delta_m_keeps_the_scaled_moments_and_normalisation() {
+        let b = BandOptics::delta_m(2.0, 0.9, 0.8, 7);
+        let f = 0.8f64.powi(8);
+        assert!((b.f - f).abs() < 1e-15);
+        assert!((b.sigma_t - 2.0 * (1.0 - 0.9 * f)).abs() < 1e-15);
+        // Scattering optical depth of the non-truncated part is preserved: σt′a′ = σt a (1 − f).
+        assert!((b.sigma_t * b.albedo - 2.0 * 0.9 * (1.0 - f)).abs() < 1e-14);
+        assert_eq!(b.chi[0], 1.0);
+        // (1/2)∫ p′ dμ = 1 and (1/2)∫ μ p′ dμ = χ′_1.
+        let (x, w) = gauss_legendre(16);
+        let n: f64 = x.iter().zip(&w).map(|(x, w)| 0.5 * w * b.phase(*x)).sum();
+        let m1: f64 = x.iter().zip(&w).map(|(x, w)| 0.5 * w * x * b.phase(*x)).sum();
+        assert!((n - 1.0).abs() < 1e-12, "{n}");
+        assert!((m1 - b.chi[1]).abs() < 1e-12 && (b.chi[1] - (0.8 - f) / (1.0 - f)).abs() < 1e-14);
+    }
+}
