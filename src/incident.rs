@@ -46,8 +46,8 @@
 
 use crate::lighting::bins::{Bin, DirectionBins, NUM_BINS};
 use crate::lighting::{Ground, Sky, Sun};
-use crate::lit::sky_single::{sh9, SH_COEFFS};
 use crate::math::{mix64, Rgb, Rng, Vec3};
+use crate::math::{sh9, SH_COEFFS};
 use crate::medium::{Dda, Medium};
 use crate::sunlight::SunTransmittance;
 use glam::DVec3;

@@ -221,6 +221,26 @@ impl Trilinear {
     }
 }
 
+/// Number of real spherical harmonics of degree ≤ 2 (the sky single-scattering field per band).
+pub const SH_COEFFS: usize = 9;
+
+/// The 9 real orthonormal spherical harmonics of degree ≤ 2 at unit `d`.
+#[inline]
+pub fn sh9(d: Vec3) -> [f32; SH_COEFFS] {
+    let (x, y, z) = (d.x, d.y, d.z);
+    [
+        0.282_094_8,
+        0.488_602_5 * y,
+        0.488_602_5 * z,
+        0.488_602_5 * x,
+        1.092_548_4 * x * y,
+        1.092_548_4 * y * z,
+        0.315_391_6 * (3.0 * z * z - 1.0),
+        1.092_548_4 * x * z,
+        0.546_274_2 * (x * x - y * y),
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -21,28 +21,8 @@
 //! forward-scattering phase function to degree 2; the sum is clamped at 0 per band. The field is
 //! interpolated density-weighted like I0 (trilinear(ρ·L)/trilinear(ρ)).
 
-use crate::math::{Rgb, Vec3};
+use crate::math::{sh9, Rgb, Vec3, SH_COEFFS};
 use crate::medium::Medium;
-
-/// Real spherical harmonics per band stored per voxel.
-pub const SH_COEFFS: usize = 9;
-
-/// The 9 real orthonormal spherical harmonics of degree ≤ 2 at unit `d`.
-#[inline]
-pub fn sh9(d: Vec3) -> [f32; SH_COEFFS] {
-    let (x, y, z) = (d.x, d.y, d.z);
-    [
-        0.282_094_8,
-        0.488_602_5 * y,
-        0.488_602_5 * z,
-        0.488_602_5 * x,
-        1.092_548_4 * x * y,
-        1.092_548_4 * y * z,
-        0.315_391_6 * (3.0 * z * z - 1.0),
-        1.092_548_4 * x * z,
-        0.546_274_2 * (x * x - y * y),
-    ]
-}
 
 /// Degree of each coefficient of [`sh9`].
 const DEGREE: [i32; SH_COEFFS] = [0, 1, 1, 1, 2, 2, 2, 2, 2];
