@@ -439,7 +439,7 @@ impl Hierarchy {
             bc.par_chunks_mut(cp).enumerate().for_each(|(kc, bp)| {
                 for k in 2 * kc..(2 * kc + 2).min(nz) {
                     for j in 0..ny {
-                        for i in 0..nx {
+                        for i in s.span(j + ny * k) {
                             bp[i / 2 + cd[0] * (j / 2)] += r[i + nx * j + fp * k];
                         }
                     }
@@ -450,7 +450,7 @@ impl Hierarchy {
             let w = self.over_correction;
             x.par_chunks_mut(fp).enumerate().for_each(|(k, xp)| {
                 for j in 0..ny {
-                    for i in 0..nx {
+                    for i in s.span(j + ny * k) {
                         let f = i + nx * j;
                         if s.diag[f + fp * k] > 0.0 {
                             xp[f] += w * xc[i / 2 + cd[0] * (j / 2) + cp * (k / 2)];
