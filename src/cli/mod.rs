@@ -1,5 +1,6 @@
 //! Subcommands of the `cloudgi` binary.
 
+mod bench;
 mod compare;
 mod export;
 mod figures;
@@ -76,6 +77,8 @@ enum Command {
     Export(export::ExportArgs),
     /// Render the paper's figure series (Figs. 4–8) and the reference, with errors, into a folder with index.md.
     Figures(figures::FiguresArgs),
+    /// Time every stage of the chosen methods on three sizes of the procedural cloud: a markdown table.
+    Bench(bench::BenchArgs),
 }
 
 #[derive(Args, Debug)]
@@ -139,6 +142,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Sky(a) => sky::run(a, cli.quiet),
         Command::Export(a) => export::run(a, cli.quiet),
         Command::Figures(a) => figures::run(a, cli.quiet),
+        Command::Bench(a) => bench::run(a),
     }
 }
 

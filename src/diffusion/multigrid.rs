@@ -11,7 +11,9 @@
 //!   jumps and the domain's shape exactly, keep symmetry and definiteness, and need no
 //!   re-discretisation. A coarse cell exists where any child is full.
 //! * **Smoother:** red-black Gauss–Seidel, red then black before the coarse correction and black
-//!   then red after it, so the V-cycle is a symmetric preconditioner.
+//!   then red after it, so the cycle is a symmetric preconditioner. Sweeps, residuals and transfers
+//!   visit only each row's span of unknowns (the cloud fills ~10 % of its box).
+//! * **Cycle:** a W-cycle whose coarse correction is scaled by [`OVER_CORRECTION`].
 //! * **Coarsest level** (≤ [`COARSE_CELLS`] unknowns): dense Cholesky, exact.
 //! * **Determinism:** updates within a colour are independent; reductions sum per-plane partial
 //!   sums in plane order. Bit-identical at any thread count.
@@ -22,6 +24,14 @@ use rayon::prelude::*;
 /// Unknowns at or below which a level is solved directly.
 pub const COARSE_CELLS: usize = 800;
 
+/// Default [`Hierarchy::over_correction`]. Piecewise-constant prolongation under-corrects smooth
+/// errors (the interpolant jumps at every aggregate face, so PᵀAP overestimates a smooth error's
+/// energy and the correction comes out too small), so the correction is scaled up (Braess 1995). Measured on the procedural cloud at tolerance
+/// 1e-6 (iterations per band at 50×40×30, 100×80×60, 200×160×120): 1.0 → 31/36/46, 1.3 → 29/33/40,
+/// 1.5 → 28/32/38, 1.6 → 28/32/38, at no cost per iteration. A K-cycle (a Krylov step on every
+/// level) and two smoothing sweeps were tried and did not do better per unit of work.
+pub const OVER_CORRECTION: f64 = 1.5;
+
 /// A symmetric 7-point stencil on a box of cells, x fastest.
 #[derive(Clone, Debug)]
 pub struct Stencil {
@@ -31,6 +41,10 @@ pub struct Stencil {
     pub diag: Vec<f64>,
     /// `off[a][c]`: matrix entry between cell c and its +a neighbour (0 at the box edge).
     pub off: [Vec<f64>; 3],
+    /// Per row (j + ny·k): the x range [first, last + 1) of its unknowns, so that the sweeps skip
+    /// the empty part of the box (the cloud fills ~10 % of its tight box); empty until
+    /// [`Stencil::find_spans`], which means whole rows.
+    spans: Vec<[u32; 2]>,
 }
 
 impl Stencil {
@@ -41,6 +55,31 @@ impl Stencil {
             dims,
             diag: vec![0.0; n],
             off: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+            spans: Vec::new(),
+        }
+    }
+
+    /// Record each row's range of unknowns (call once the diagonal is final).
+    fn find_spans(&mut self) {
+        let nx = self.dims[0];
+        self.spans = self
+            .diag
+            .chunks(nx)
+            .map(
+                |row| match (row.iter().position(|d| *d > 0.0), row.iter().rposition(|d| *d > 0.0)) {
+                    (Some(a), Some(b)) => [a as u32, b as u32 + 1],
+                    _ => [0, 0],
+                },
+            )
+            .collect();
+    }
+
+    /// Row `r`'s x range holding all its unknowns.
+    #[inline]
+    fn span(&self, r: usize) -> std::ops::Range<usize> {
+        match self.spans.get(r) {
+            Some([a, b]) => *a as usize..*b as usize,
+            None => 0..self.dims[0],
         }
     }
 
@@ -87,7 +126,10 @@ impl Stencil {
         let [nx, ny, _] = self.dims;
         y.par_chunks_mut(p).enumerate().for_each(|(k, yp)| {
             for j in 0..ny {
-                for i in 0..nx {
+                let sp = self.span(j + ny * k);
+                yp[nx * j..nx * j + sp.start].fill(0.0);
+                yp[nx * j + sp.end..nx * (j + 1)].fill(0.0);
+                for i in sp {
                     let l = i + nx * j;
                     let c = l + p * k;
                     yp[l] = if self.diag[c] > 0.0 { self.row(x, c, [i, j, k]) } else { 0.0 };
@@ -102,7 +144,10 @@ impl Stencil {
         let [nx, ny, _] = self.dims;
         r.par_chunks_mut(p).enumerate().for_each(|(k, rp)| {
             for j in 0..ny {
-                for i in 0..nx {
+                let sp = self.span(j + ny * k);
+                rp[nx * j..nx * j + sp.start].fill(0.0);
+                rp[nx * j + sp.end..nx * (j + 1)].fill(0.0);
+                for i in sp {
                     let l = i + nx * j;
                     let c = l + p * k;
                     rp[l] = if self.diag[c] > 0.0 {
@@ -126,8 +171,10 @@ impl Stencil {
             // have the other colour; each cell is written by exactly one task (its plane k).
             let x = unsafe { std::slice::from_raw_parts_mut(ptr.get(), len) };
             for j in 0..ny {
-                let start = (color + j + k) % 2;
-                for i in (start..nx).step_by(2) {
+                let sp = self.span(j + ny * k);
+                // First cell of this colour in the span: i ≡ color + j + k (mod 2).
+                let start = sp.start + (color + j + k + sp.start) % 2;
+                for i in (start..sp.end).step_by(2) {
                     let c = i + nx * j + p * k;
                     let d = self.diag[c];
                     if d > 0.0 {
@@ -339,13 +386,15 @@ impl Hierarchy {
             }
         });
         let unknowns = a.unknowns();
+        a.find_spans();
         let mut levels = vec![a];
         loop {
             let last = levels.last().expect("at least one level");
             if last.unknowns() <= coarse_cells || last.dims.iter().all(|d| *d <= 1) {
                 break;
             }
-            let c = last.coarsen();
+            let mut c = last.coarsen();
+            c.find_spans();
             levels.push(c);
         }
         let coarse = Dense::build(levels.last().expect("level"));
@@ -355,7 +404,7 @@ impl Hierarchy {
             coarse,
             unknowns,
             cycle: 2,
-            over_correction: 1.0,
+            over_correction: OVER_CORRECTION,
             sweeps: 1,
         }
     }
@@ -392,7 +441,7 @@ impl Hierarchy {
             bc.par_chunks_mut(cp).enumerate().for_each(|(kc, bp)| {
                 for k in 2 * kc..(2 * kc + 2).min(nz) {
                     for j in 0..ny {
-                        for i in 0..nx {
+                        for i in s.span(j + ny * k) {
                             bp[i / 2 + cd[0] * (j / 2)] += r[i + nx * j + fp * k];
                         }
                     }
@@ -403,7 +452,7 @@ impl Hierarchy {
             let w = self.over_correction;
             x.par_chunks_mut(fp).enumerate().for_each(|(k, xp)| {
                 for j in 0..ny {
-                    for i in 0..nx {
+                    for i in s.span(j + ny * k) {
                         let f = i + nx * j;
                         if s.diag[f + fp * k] > 0.0 {
                             xp[f] += w * xc[i / 2 + cd[0] * (j / 2) + cp * (k / 2)];

@@ -1,0 +1,194 @@
+//! `cloudgi bench`: every stage's time (the `Timings` the renderer collects) for the
+//! chosen methods on three sizes of the procedural cloud, as a markdown table (the README's
+//! performance table is this command's output).
+
+use super::scene_file::SceneFile;
+use super::MethodArg;
+use clap::Args;
+use cloudgi::error::{Error, Result};
+use cloudgi::scene::{Method, Scene};
+use cloudgi::Progress;
+use std::path::PathBuf;
+use std::sync::Mutex;
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Scene file (TOML) with a procedural grid. Without it, the built-in default scene.
+    scene: Option<PathBuf>,
+    /// Methods to time, in order; the first is the baseline of the `× first` column.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "single,diffusion,full")]
+    methods: Vec<MethodArg>,
+    /// Procedural resolutions NXxNYxNZ; the voxel size is scaled so the cloud keeps its extent.
+    #[arg(long, value_delimiter = ',', default_value = "50x40x30,100x80x60,200x160x120")]
+    sizes: Vec<String>,
+    /// Override camera.width (pixels).
+    #[arg(long)]
+    width: Option<u32>,
+    /// Override camera.height (pixels).
+    #[arg(long)]
+    height: Option<u32>,
+}
+
+/// Keeps the solver's one-line summaries (iterations per band), drops the progress bars.
+struct Log(Mutex<Vec<String>>);
+
+impl Progress for Log {
+    fn begin(&self, _: &str, _: u64) {}
+    fn advance(&self, _: u64) {}
+    fn end(&self) {}
+    fn log(&self, msg: &str) {
+        if let Ok(mut v) = self.0.lock() {
+            v.push(msg.to_string());
+        }
+    }
+}
+
+/// `NXxNYxNZ` as three positive counts.
+fn parse_size(s: &str) -> Result<[usize; 3]> {
+    let v: Vec<usize> = s.split('x').filter_map(|p| p.trim().parse().ok()).collect();
+    match v[..] {
+        [x, y, z] if x > 0 && y > 0 && z > 0 => Ok([x, y, z]),
+        _ => Err(Error::invalid(
+            "command line",
+            "--sizes",
+            format!("`{s}` is not NXxNYxNZ with positive counts, e.g. 100x80x60"),
+        )),
+    }
+}
+
+/// One table row: the cloud, the method, seconds per stage (in `stages`' order) and the total.
+struct Row {
+    size: [usize; 3],
+    method: Method,
+    stages: Vec<(String, f64)>,
+    total: f64,
+}
+
+/// The markdown table: one column per stage any method ran (in order of first appearance),
+/// the total, and the total over that of the first method on the same cloud.
+fn table(rows: &[Row]) -> String {
+    let mut names: Vec<&str> = Vec::new();
+    for r in rows {
+        for (n, _) in &r.stages {
+            if !names.contains(&n.as_str()) {
+                names.push(n);
+            }
+        }
+    }
+    let first = rows.first().map(|r| r.method);
+    let mut out = format!(
+        "| cloud | method | {} | total | × {} |\n",
+        names.join(" | "),
+        first.map_or("", |m| m.name())
+    );
+    out += &format!("|---|---|{}---|---|\n", "---|".repeat(names.len()));
+    for r in rows {
+        let base = rows.iter().find(|b| b.size == r.size && Some(b.method) == first).map(|b| b.total);
+        let cells: Vec<String> = names
+            .iter()
+            .map(|n| r.stages.iter().find(|s| s.0 == *n).map_or("–".into(), |s| format!("{:.2} s", s.1)))
+            .collect();
+        let ratio = base.filter(|b| *b > 0.0).map_or("–".into(), |b| format!("{:.1}", r.total / b));
+        out += &format!(
+            "| {}×{}×{} | {} | {} | {:.2} s | {ratio} |\n",
+            r.size[0],
+            r.size[1],
+            r.size[2],
+            r.method.name(),
+            cells.join(" | "),
+            r.total
+        );
+    }
+    out
+}
+
+pub fn run(a: BenchArgs) -> Result<()> {
+    let sizes = a.sizes.iter().map(|s| parse_size(s)).collect::<Result<Vec<_>>>()?;
+    let file = SceneFile::read(a.scene.as_deref())?;
+    if file.desc.medium.grid != "procedural" {
+        return Err(Error::invalid(
+            &file.source,
+            "medium.grid",
+            "`cloudgi bench` scales the procedural cloud's resolution; set medium.grid = \"procedural\"",
+        ));
+    }
+    let base = &file.desc.medium;
+    let extent = base.voxel_size * base.resolution[0] as f32;
+    let mut rows = Vec::new();
+    let mut notes = Vec::new();
+    for size in &sizes {
+        for m in &a.methods {
+            let mut desc = file.desc.clone();
+            desc.medium.resolution = *size;
+            desc.medium.voxel_size = extent / size[0] as f32;
+            desc.render.method = (*m).into();
+            if let Some(w) = a.width {
+                desc.camera.width = w;
+            }
+            if let Some(h) = a.height {
+                desc.camera.height = h;
+            }
+            super::memory::check_image(&desc, &file.source)?;
+            let scene = Scene::build(desc, &file.source, &file.base)?;
+            let log = Log(Mutex::new(Vec::new()));
+            let out = cloudgi::render(&scene, &log)?;
+            let method = scene.render.method;
+            for l in log.0.into_inner().unwrap_or_default() {
+                notes.push(format!("{}×{}×{} {}: {l}", size[0], size[1], size[2], method.name()));
+            }
+            rows.push(Row {
+                size: *size,
+                method,
+                total: out.timings.total(),
+                stages: out.timings.stages,
+            });
+        }
+    }
+    let cam = &file.desc.camera;
+    println!(
+        "{}×{} pixels, {} threads\n",
+        a.width.unwrap_or(cam.width),
+        a.height.unwrap_or(cam.height),
+        rayon::current_num_threads()
+    );
+    print!("{}", table(&rows));
+    if !notes.is_empty() {
+        println!();
+    }
+    for n in notes {
+        println!("- {n}");
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_parse_or_name_the_flag() {
+        assert_eq!(parse_size("100x80x60").unwrap(), [100, 80, 60]);
+        for bad in ["100x80", "0x1x1", "axbxc"] {
+            let e = parse_size(bad).unwrap_err().to_string();
+            assert!(e.contains("--sizes"), "{e}");
+        }
+    }
+
+    #[test]
+    fn table_has_a_column_per_stage_and_the_ratio_to_the_first_method() {
+        let row = |method, stages: &[(&str, f64)]| Row {
+            size: [2, 2, 2],
+            method,
+            total: stages.iter().map(|s| s.1).sum(),
+            stages: stages.iter().map(|(n, t)| (n.to_string(), *t)).collect(),
+        };
+        let t = table(&[
+            row(Method::Single, &[("gather", 0.5)]),
+            row(Method::Diffusion, &[("incident light", 1.0), ("gather", 1.0)]),
+        ]);
+        let lines: Vec<&str> = t.lines().collect();
+        assert_eq!(lines[0], "| cloud | method | gather | incident light | total | × single |");
+        assert_eq!(lines[2], "| 2×2×2 | single | 0.50 s | – | 0.50 s | 1.0 |");
+        assert_eq!(lines[3], "| 2×2×2 | diffusion | 1.00 s | 1.00 s | 2.00 s | 4.0 |");
+    }
+}
