@@ -68,12 +68,6 @@ pub struct IncidentSettings {
     pub sky_subdivisions: usize,
     /// Seed of the ray jitter.
     pub seed: u64,
-    /// Similarity (δ-) scaling with forward fraction f = g: the forward peak of the HG phase
-    /// function is treated as unscattered, so incident light decays with σt(1 − a·g) and scatters
-    /// isotropically with σs(1 − g) (Q1 = 0). The diffusion operator (σtr, σa) is unchanged by the
-    /// scaling. `false` is the paper's scheme exactly (Q1 from the first moment, decay with σt);
-    /// see docs/diffusion.md for why the default scene uses it (`render.delta_scaling`).
-    pub delta_scaling: bool,
     /// Also project the reduced sky and ground radiance per voxel onto degree-≤ 2 spherical
     /// harmonics ([`IncidentLight::sky_sh`]) for the gather's single scattering of sky and ground
     /// light ([`crate::lit::sky_single`], `render.sky_single_scattering`, default on). `false`:
@@ -87,7 +81,6 @@ impl Default for IncidentSettings {
             rays_per_face_edge: 1,
             sky_subdivisions: 8,
             seed: 0,
-            delta_scaling: false,
             sky_single: true,
         }
     }
@@ -412,12 +405,10 @@ pub fn compute_with_sun(
             }
         }
     }
-    // δ-scaling (f = g) or the paper's scheme (f = 0, the identity): one transform of the optics.
-    let optics = if settings.delta_scaling {
-        m.optics.delta_scaled()
-    } else {
-        m.optics.similarity(0.0)
-    };
+    // The medium's optics per band. A similarity transform is never applied here alone: it is
+    // already in `m.optics` when `render.forward_fraction` asks for one (`render::delta_m`, the
+    // same medium for every stage).
+    let optics = m.optics.similarity(0.0);
     let ctx = Ctx {
         m,
         lo,

@@ -178,8 +178,8 @@ impl Optics {
 
     /// Similarity transform with forward fraction `f` (0 ≤ f < 1): the fraction f of the
     /// scattering, taken as exactly forward, is treated as unscattered, so σt' = σt(1 − a·f),
-    /// σs' = σs(1 − f) and g' = (g − f)/(1 − f). f = 0 is the identity (exactly); f = g is the
-    /// δ-scaling stage 1 offers (`render.delta_scaling`, g' = 0).
+    /// σs' = σs(1 − f) and g' = (g − f)/(1 − f). f = 0 is the identity (exactly), the per-band
+    /// view stage 1 reads; f = g gives g' = 0.
     pub fn similarity(&self, f: f32) -> ScaledOptics {
         let a = self.albedo.as_dvec3();
         let st = self.sigma_t as f64;
@@ -190,11 +190,6 @@ impl Optics {
             sigma_s: self.sigma_s() * (1.0 - f),
             phase: Hg::new((g - f) / (1.0 - f)),
         }
-    }
-
-    /// The δ-scaling of stage 1: [`Self::similarity`] with f = g.
-    pub fn delta_scaled(&self) -> ScaledOptics {
-        self.similarity(self.phase.g as f32)
     }
 }
 
@@ -255,7 +250,7 @@ mod tests {
         }
         assert_eq!(s0.sigma_s, o.sigma_s());
         assert_eq!(s0.phase, o.phase);
-        let s = o.delta_scaled();
+        let s = o.similarity(o.phase.g as f32);
         assert_eq!(s.phase.mean_cosine(), 0.0);
         for c in 0..3 {
             // σa' = σt' − σs' = σa: the transform moves scattering, never absorption.

@@ -112,11 +112,6 @@ render_table! {
     solver_max_iterations: usize => solver.max_iterations;
     /// `full`: most clear-air propagation iterations (0: diffusion plus edges only, paper Fig. 6).
     iterations: usize => clear_air.iterations;
-    /// Stage 1 with similarity (δ-) scaling, forward fraction f = g (docs/diffusion.md): keeps I0
-    /// positive on sunlit faces but, with the paper's gather, darkens the cloud (measured against
-    /// `reference`: luminance bias −62 % vs −21 %), so off by default; false: the paper's
-    /// first-moment Q1 scheme exactly.
-    delta_scaling: bool => incident.delta_scaling;
     /// `full`: stop iterating once I0 changes by less than this fraction (unitless).
     propagation_tolerance: f64 => clear_air.propagation_tolerance;
     /// `full`: write the components (diffusion, low_density, sun_single, background) as EXR layers.
@@ -224,7 +219,7 @@ pub struct RenderSettings {
     pub time_limit: Option<f64>,
     /// `reference`: write the standard-error layer.
     pub stderr: bool,
-    /// Stage 1 (`render.seed`, `render.delta_scaling`, `render.sky_single_scattering`).
+    /// Stage 1 (`render.seed`, `render.sky_single_scattering`).
     pub incident: IncidentSettings,
     /// Stage 2's solver (`render.solver_tolerance`, `render.solver_max_iterations`).
     pub solver: DiffusionSettings,

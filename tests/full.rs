@@ -114,11 +114,14 @@ fn light_crosses_clear_air_between_cloud_parts() {
         d.ground = None;
         d.render.iterations = 1;
         // The paper's Q1 scheme drives I0 negative on a face lit by a g = 0.85 beam
-        // (docs/diffusion.md); δ-scaling keeps it positive, so the rise is measurable.
-        d.render.delta_scaling = true;
+        // (docs/diffusion.md); the δ-M medium with f = g (every stage) keeps it positive, so the
+        // rise is measurable.
+        d.render.forward_fraction = 0.85;
     });
     s.sun.dir = Vec3::X;
     s.sky = Sky::constant(Rgb::ZERO);
+    // The stages run on the δ-M medium, as `render` hands it to them.
+    let s = cloudgi::render::delta_m(&s).into_owned();
     let mut before = s.clone();
     before.render.clear_air.iterations = 0;
     let mut t = Timings::default();

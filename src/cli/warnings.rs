@@ -131,7 +131,6 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
     for key in [
         "render.solver_tolerance",
         "render.solver_max_iterations",
-        "render.delta_scaling",
         "render.diffuse_anisotropy",
         "render.sky_single_scattering",
         "render.forward_fraction",
