@@ -270,6 +270,30 @@ struct Dense {
     l: Vec<f64>,
 }
 
+/// In-place lower Cholesky factor of the dense n×n SPD matrix `a` (row-major). Pivots are clamped
+/// at 1e-300 so a singular coarse grid still factors; returns the smallest pivot before the clamp
+/// (> 0 exactly when `a` is positive definite).
+fn cholesky_in_place(a: &mut [f64], n: usize) -> f64 {
+    let mut smallest = f64::INFINITY;
+    for j in 0..n {
+        let mut d = a[j * n + j];
+        for k in 0..j {
+            d -= a[j * n + k] * a[j * n + k];
+        }
+        smallest = smallest.min(d);
+        let d = d.max(1e-300).sqrt();
+        a[j * n + j] = d;
+        for i in j + 1..n {
+            let mut v = a[i * n + j];
+            for k in 0..j {
+                v -= a[i * n + k] * a[j * n + k];
+            }
+            a[i * n + j] = v / d;
+        }
+    }
+    smallest
+}
+
 impl Dense {
     fn build(s: &Stencil) -> Dense {
         let cells: Vec<usize> = (0..s.diag.len()).filter(|c| s.diag[*c] > 0.0).collect();
@@ -294,22 +318,7 @@ impl Dense {
                 }
             }
         }
-        // In-place Cholesky (lower).
-        for j in 0..n {
-            let mut d = a[j * n + j];
-            for k in 0..j {
-                d -= a[j * n + k] * a[j * n + k];
-            }
-            let d = d.max(1e-300).sqrt();
-            a[j * n + j] = d;
-            for i in j + 1..n {
-                let mut v = a[i * n + j];
-                for k in 0..j {
-                    v -= a[i * n + k] * a[j * n + k];
-                }
-                a[i * n + j] = v / d;
-            }
-        }
+        cholesky_in_place(&mut a, n);
         Dense { cells, l: a }
     }
 
@@ -648,22 +657,8 @@ mod operator_tests {
             }
             // Cholesky must succeed with positive pivots.
             let mut l = a.clone();
-            for j in 0..n {
-                let mut d = l[j * n + j];
-                for k in 0..j {
-                    d -= l[j * n + k] * l[j * n + k];
-                }
-                assert!(d > 0.0, "pivot {j} = {d}: not positive definite");
-                let d = d.sqrt();
-                l[j * n + j] = d;
-                for i in j + 1..n {
-                    let mut v = l[i * n + j];
-                    for k in 0..j {
-                        v -= l[i * n + k] * l[j * n + k];
-                    }
-                    l[i * n + j] = v / d;
-                }
-            }
+            let smallest = super::cholesky_in_place(&mut l, n);
+            assert!(smallest > 0.0, "smallest pivot {smallest}: not positive definite");
         }
     }
 
