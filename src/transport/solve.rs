@@ -17,10 +17,11 @@
 //!
 //! **Acceleration.** After a sweep the isotropic change ΔI0 drives the diffusion equation
 //! −∇·(∇δ/(3ρσtr′)) + ρσa′ δ = ρσs′ ΔI0 (the diffusion module's face couplings and Marshak
-//! boundary, δ-M coefficients), solved by multigrid-preconditioned CG; I_00 += √(4π) δ.
+//! boundary, δ-M coefficients), solved by multigrid-preconditioned CG; I_00 += √(4π) δ, and the
+//! correction's P1 current (Fick's law) goes into the first moments ([`accelerate`]).
 
 use super::sphere::{real_sh, sh_count, Quadrature};
-use super::Optics;
+use super::{BandOptics, Optics};
 use crate::diffusion::multigrid::{Hierarchy, Stencil};
 use crate::diffusion::{boundary_terms, interior_coupling, Domain, DEFAULT_MIN_OPTICAL_DEPTH};
 use crate::lighting::{Ground, Sky, Sun};
@@ -217,183 +218,226 @@ impl Ctx<'_> {
     }
 }
 
+/// One ordinate's sweep: the radiance at every full voxel's centre (W·m⁻²·sr⁻¹, per band), and
+/// its ground splats (map column, change of the downward irradiance in W/m² per band).
+type Swept = (Vec<[f32; 3]>, Vec<(usize, [f64; 3])>);
+
+/// Ordinates swept side by side: their per-voxel sources and radiances are held at once
+/// (2 × 12 B per full voxel each). Fixed, so the sums are the same for any thread count.
+const ORDINATE_BATCH: usize = 16;
+
 /// One sweep of every ordinate: the diffuse radiance moments I_lm per full voxel, and how much the
 /// cloud changes the ground's downward diffuse irradiance, per ground map column.
+///
+/// Ordinates go in batches: (1) the source in each ordinate of the batch, per full voxel (one read
+/// of the voxel's coefficients serves the whole batch); (2) the batch's sweeps, one ordinate per
+/// task; (3) the moments I_lm += w I Y_lm, per full voxel, the ordinates in their fixed order.
 fn sweep(c: &Ctx, q: &Quadrature, ylm: &[Vec<f32>], source: &[f32], ground: &GroundMap) -> (Vec<f32>, Vec<[f64; 3]>) {
-    let [nx, ny, _] = c.dims;
-    let nfull = source.len() / (3 * c.nsh);
-    let mut moments = vec![0f32; nfull * 3 * c.nsh];
+    let nsh = c.nsh;
+    let nfull = source.len() / (3 * nsh);
+    let mut moments = vec![0f32; nfull * 3 * nsh];
     // Change of the ground's downward irradiance by the cloud, per ground map column (W/m²).
     let mut e_down = vec![[0f64; 3]; ground.radiance.len()];
-    let mp = Shared(moments.as_mut_ptr());
-    for (d, om) in q.dirs.iter().enumerate() {
-        let om = *om;
-        let w = q.weights[d] as f32;
-        let y = &ylm[d];
-        let skyr = c.sky.radiance(Vec3::new(-om.x as f32, -om.y as f32, -om.z as f32));
-        let splat = om.y < 0.0 && c.ground_height.is_some();
-        // Major axis and the two others.
-        let r = [om.x.abs() / c.h[0], om.y.abs() / c.h[1], om.z.abs() / c.h[2]];
-        let a = (0..3).max_by(|p, q| r[*p].total_cmp(&r[*q])).unwrap_or(0);
-        let (b, cc) = match a {
-            0 => (1, 2),
-            1 => (0, 2),
-            _ => (0, 1),
-        };
-        let (na, nb, nc) = (c.n[a], c.n[b], c.n[cc]);
-        let oa = om[a];
-        let s = (c.h[a] / oa.abs()) as f32;
-        // Back point offsets in the previous plane (voxels), split into floor and fraction.
-        // |offset| ≤ 1 as a is the major axis; clamp rounding and keep the floor in {−1, 0}, so
-        // ties (|Ω_b|/h_b = |Ω_a|/h_a) stay inside the 2×2 upwind neighbourhood.
-        let ob = (-(s as f64) * om[b] / c.h[b]).clamp(-1.0, 1.0);
-        let oc = (-(s as f64) * om[cc] / c.h[cc]).clamp(-1.0, 1.0);
-        let (fb, fc) = (ob.floor().min(0.0), oc.floor().min(0.0));
-        let (tb, tc) = ((ob - fb) as f32, (oc - fc) as f32);
-        let (fb, fc) = (fb as isize, fc as isize);
-        let wts = [(1.0 - tb) * (1.0 - tc), tb * (1.0 - tc), (1.0 - tb) * tc, tb * tc];
-        let offs = [(0isize, 0isize), (1, 0), (0, 1), (1, 1)];
-        let stride = nb + 2;
-        let plane_len = stride * (nc + 2);
-        // Plane buffers (radiance, source per band; density) with a one-cell ghost ring.
-        let mut prev_i = vec![[0f32; 3]; plane_len];
-        let mut prev_s = vec![[0f32; 3]; plane_len];
-        let mut prev_r = vec![0f32; plane_len];
-        let mut cur_i = prev_i.clone();
-        let mut cur_s = prev_s.clone();
-        let mut cur_r = prev_r.clone();
-        // Grid coordinates of box cell (pa, pb, pc) in the (a, b, c) frame.
-        let coord = |pa: isize, pb: isize, pc: isize| {
-            let mut v = [0isize; 3];
-            v[a] = pa + c.lo[a] as isize;
-            v[b] = pb + c.lo[b] as isize;
-            v[cc] = pc + c.lo[cc] as isize;
-            v
-        };
-        let fill_ghosts = |pa: isize, whole: bool, bi: &mut [[f32; 3]], bs: &mut [[f32; 3]], br: &mut [f32]| {
-            for ic in -1..=nc as isize {
-                for ib in -1..=nb as isize {
-                    let inside = ib >= 0 && ic >= 0 && ib < nb as isize && ic < nc as isize;
-                    if inside && !whole {
-                        continue;
-                    }
-                    let v = coord(pa, ib, ic);
-                    let l = (ib + 1) as usize + stride * (ic + 1) as usize;
-                    bi[l] = c.boundary(om, v[0], v[1], v[2], ground, skyr);
-                    bs[l] = [0.0; 3];
-                    br[l] = 0.0;
+    let chunk = 256;
+    let mut src = vec![[0f32; 3]; ORDINATE_BATCH * nfull];
+    for first in (0..q.dirs.len()).step_by(ORDINATE_BATCH) {
+        let batch = first..(first + ORDINATE_BATCH).min(q.dirs.len());
+        let nb = batch.len();
+        // (1) Source in each ordinate, clamped at 0 (the truncated expansion may dip).
+        let sp = Shared(src.as_mut_ptr());
+        source.par_chunks(chunk * 3 * nsh).enumerate().for_each(|(ci, block)| {
+            for (k, coef) in block.chunks_exact(3 * nsh).enumerate() {
+                let f = ci * chunk + k;
+                for (d, y) in ylm[batch.clone()].iter().enumerate() {
+                    let sc = [0, 1, 2].map(|band| dot(&coef[band * nsh..(band + 1) * nsh], y).max(0.0));
+                    // SAFETY: entry (d, f) is written by the task owning voxel f only.
+                    unsafe { *sp.at(d * nfull + f) = sc };
                 }
             }
-        };
-        let first = if oa > 0.0 { -1 } else { na as isize };
-        fill_ghosts(first, true, &mut prev_i, &mut prev_s, &mut prev_r);
-        for step in 0..na {
-            let pa = if oa > 0.0 { step as isize } else { (na - 1 - step) as isize };
-            cur_i
-                .par_chunks_mut(stride)
-                .zip(cur_s.par_chunks_mut(stride))
-                .zip(cur_r.par_chunks_mut(stride))
-                .enumerate()
-                .filter(|(row, _)| *row >= 1 && *row <= nc)
-                .for_each(|(row, ((ri, rs), rr))| {
-                    let ic = row as isize - 1;
-                    for ib in 0..nb as isize {
-                        let v = coord(pa, ib, ic);
-                        let vi = v[0] as usize + nx * (v[1] as usize + ny * v[2] as usize);
-                        let rho = c.rho[vi];
-                        let fi = c.full[vi];
-                        // Source in this ordinate, clamped at 0 (the truncated expansion may dip).
-                        let mut sc = [0f32; 3];
-                        if fi != u32::MAX {
-                            for (band, scb) in sc.iter_mut().enumerate() {
-                                let base = (fi as usize * 3 + band) * c.nsh;
-                                *scb = dot(&source[base..base + c.nsh], y).max(0.0);
-                            }
-                        }
-                        // Radiance and density bilinear; the source (per unit extinction, defined
-                        // only where ρ > 0) density-weighted, so that empty neighbours do not
-                        // pull it towards 0 (a uniform source stays uniform: the furnace holds).
-                        let (mut ib_, mut sbw, mut rb) = ([0f32; 3], [0f32; 3], 0f32);
-                        for (wk, (db, dc)) in wts.iter().zip(offs) {
-                            if *wk == 0.0 {
-                                continue;
-                            }
-                            let l = (ib + fb + db + 1) as usize + stride * (ic + fc + dc + 1) as usize;
-                            let wr = wk * prev_r[l];
-                            for band in 0..3 {
-                                ib_[band] += wk * prev_i[l][band];
-                                sbw[band] += wr * prev_s[l][band];
-                            }
-                            rb += wr;
-                        }
-                        let mut out = ib_;
-                        let rm = 0.5 * (rb + rho) * s;
-                        if rm > 0.0 {
-                            let sb = if rb > 0.0 { sbw.map(|x| x / rb) } else { sc };
-                            let se = if fi == u32::MAX { sb } else { sc };
-                            let mut wgt = step_weights(c.sigma_t[0] * rm);
-                            for band in 0..3 {
-                                if band > 0 && !c.grey {
-                                    wgt = step_weights(c.sigma_t[band] * rm);
-                                }
-                                let (e, wi, wo) = wgt;
-                                out[band] = ib_[band] * e + wi * sb[band] + wo * se[band];
-                            }
-                        }
-                        let l = (ib + 1) as usize;
-                        ri[l] = out;
-                        rs[l] = sc;
-                        rr[l] = rho;
-                        if fi != u32::MAX {
-                            // SAFETY: voxel `fi` belongs to this cell only, in this plane.
-                            let acc = unsafe { std::slice::from_raw_parts_mut(mp.at(fi as usize * 3 * c.nsh), 3 * c.nsh) };
-                            for (band, ob) in out.iter().enumerate() {
-                                let wo = w * ob;
-                                for (m, yk) in acc[band * c.nsh..(band + 1) * c.nsh].iter_mut().zip(y) {
-                                    *m += wo * yk;
-                                }
-                            }
-                        }
-                    }
-                });
-            if splat {
-                // Light leaving the box downwards lands on the ground along Ω: splat its flux
-                // change against the sky it hides, (I − L_sky) w |Ω·n| A_face, per column area.
-                let exit_b = if om[b] > 0.0 { nb - 1 } else { 0 };
-                let exit_c = if om[cc] > 0.0 { nc - 1 } else { 0 };
-                let mut faces: Vec<(usize, usize, usize)> = (0..nc).map(|ic| (exit_b, ic, b)).collect();
-                faces.extend((0..nb).map(|ib| (ib, exit_c, cc)));
-                if step + 1 == na {
-                    faces.extend((0..nc).flat_map(|ic| (0..nb).map(move |ib| (ib, ic, a))));
-                }
-                for (ib, ic, ax) in faces {
-                    let v = coord(pa, ib as isize, ic as isize);
-                    let mut face = c.origin
-                        + DVec3::new(
-                            (v[0] as f64 + 0.5) * c.h[0],
-                            (v[1] as f64 + 0.5) * c.h[1],
-                            (v[2] as f64 + 0.5) * c.h[2],
-                        );
-                    face[ax] += 0.5 * c.h[ax] * om[ax].signum();
-                    let gh = c.ground_height.unwrap_or(0.0);
-                    let q = face + om * ((gh - face.y).min(0.0) / om.y);
-                    if let Some(col) = ground.column(q.x, q.z) {
-                        let area = c.h[0] * c.h[1] * c.h[2] / c.h[ax];
-                        let f = w as f64 * om[ax].abs() * area / (c.h[0] * c.h[2]);
-                        let i = cur_i[ib + 1 + stride * (ic + 1)];
-                        for band in 0..3 {
-                            e_down[col][band] += f * (i[band] as f64 - skyr[band] as f64);
-                        }
-                    }
+        });
+        // (2) The sweeps.
+        let swept: Vec<Swept> = batch
+            .clone()
+            .into_par_iter()
+            .zip(src.par_chunks(nfull.max(1)))
+            .map(|(d, sd)| sweep_ordinate(c, q.dirs[d], q.weights[d], sd, ground, nfull))
+            .collect();
+        for (_, splats) in &swept {
+            for (col, e) in splats {
+                for band in 0..3 {
+                    e_down[*col][band] += e[band];
                 }
             }
-            std::mem::swap(&mut prev_i, &mut cur_i);
-            std::mem::swap(&mut prev_s, &mut cur_s);
-            std::mem::swap(&mut prev_r, &mut cur_r);
-            fill_ghosts(pa, false, &mut prev_i, &mut prev_s, &mut prev_r);
         }
+        // (3) Moments.
+        moments.par_chunks_mut(chunk * 3 * nsh).enumerate().for_each(|(ci, block)| {
+            for (k, acc) in block.chunks_exact_mut(3 * nsh).enumerate() {
+                let f = ci * chunk + k;
+                for (d, (radiance, _)) in swept.iter().enumerate() {
+                    let w = q.weights[first + d] as f32;
+                    let y = &ylm[first + d];
+                    for (band, ob) in radiance[f].iter().enumerate() {
+                        let wo = w * ob;
+                        for (m, yk) in acc[band * nsh..(band + 1) * nsh].iter_mut().zip(y) {
+                            *m += wo * yk;
+                        }
+                    }
+                }
+            }
+        });
+        debug_assert_eq!(swept.len(), nb);
     }
     (moments, e_down)
+}
+
+/// Sweep one ordinate `om` (weight `w`, sr) through the box upwind plane by plane: the radiance at
+/// every full voxel's centre, and the ground splats (column, change of downward irradiance, W/m²)
+/// of the light leaving the box downwards. `src` is the source in this ordinate per full voxel.
+fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, nfull: usize) -> Swept {
+    let [nx, ny, _] = c.dims;
+    let mut radiance = vec![[0f32; 3]; nfull];
+    let mut splats = Vec::new();
+    let skyr = c.sky.radiance(Vec3::new(-om.x as f32, -om.y as f32, -om.z as f32));
+    let splat = om.y < 0.0 && c.ground_height.is_some();
+    // Major axis and the two others.
+    let r = [om.x.abs() / c.h[0], om.y.abs() / c.h[1], om.z.abs() / c.h[2]];
+    let a = (0..3).max_by(|p, q| r[*p].total_cmp(&r[*q])).unwrap_or(0);
+    let (b, cc) = match a {
+        0 => (1, 2),
+        1 => (0, 2),
+        _ => (0, 1),
+    };
+    let (na, nb, nc) = (c.n[a], c.n[b], c.n[cc]);
+    let oa = om[a];
+    let s = (c.h[a] / oa.abs()) as f32;
+    // Back point offsets in the previous plane (voxels), split into floor and fraction.
+    // |offset| ≤ 1 as a is the major axis; clamp rounding and keep the floor in {−1, 0}, so
+    // ties (|Ω_b|/h_b = |Ω_a|/h_a) stay inside the 2×2 upwind neighbourhood.
+    let ob = (-(s as f64) * om[b] / c.h[b]).clamp(-1.0, 1.0);
+    let oc = (-(s as f64) * om[cc] / c.h[cc]).clamp(-1.0, 1.0);
+    let (fb, fc) = (ob.floor().min(0.0), oc.floor().min(0.0));
+    let (tb, tc) = ((ob - fb) as f32, (oc - fc) as f32);
+    let (fb, fc) = (fb as isize, fc as isize);
+    let wts = [(1.0 - tb) * (1.0 - tc), tb * (1.0 - tc), (1.0 - tb) * tc, tb * tc];
+    let offs = [(0isize, 0isize), (1, 0), (0, 1), (1, 1)];
+    let stride = nb + 2;
+    let plane_len = stride * (nc + 2);
+    // Plane buffers (radiance, source per band; density) with a one-cell ghost ring.
+    let mut prev_i = vec![[0f32; 3]; plane_len];
+    let mut prev_s = vec![[0f32; 3]; plane_len];
+    let mut prev_r = vec![0f32; plane_len];
+    let mut cur_i = prev_i.clone();
+    let mut cur_s = prev_s.clone();
+    let mut cur_r = prev_r.clone();
+    // Grid coordinates of box cell (pa, pb, pc) in the (a, b, c) frame.
+    let coord = |pa: isize, pb: isize, pc: isize| {
+        let mut v = [0isize; 3];
+        v[a] = pa + c.lo[a] as isize;
+        v[b] = pb + c.lo[b] as isize;
+        v[cc] = pc + c.lo[cc] as isize;
+        v
+    };
+    let fill_ghosts = |pa: isize, whole: bool, bi: &mut [[f32; 3]], bs: &mut [[f32; 3]], br: &mut [f32]| {
+        for ic in -1..=nc as isize {
+            for ib in -1..=nb as isize {
+                let inside = ib >= 0 && ic >= 0 && ib < nb as isize && ic < nc as isize;
+                if inside && !whole {
+                    continue;
+                }
+                let v = coord(pa, ib, ic);
+                let l = (ib + 1) as usize + stride * (ic + 1) as usize;
+                bi[l] = c.boundary(om, v[0], v[1], v[2], ground, skyr);
+                bs[l] = [0.0; 3];
+                br[l] = 0.0;
+            }
+        }
+    };
+    let first = if oa > 0.0 { -1 } else { na as isize };
+    fill_ghosts(first, true, &mut prev_i, &mut prev_s, &mut prev_r);
+    for step in 0..na {
+        let pa = if oa > 0.0 { step as isize } else { (na - 1 - step) as isize };
+        for ic in 0..nc as isize {
+            let row = stride * (ic + 1) as usize;
+            for ib in 0..nb as isize {
+                let v = coord(pa, ib, ic);
+                let vi = v[0] as usize + nx * (v[1] as usize + ny * v[2] as usize);
+                let rho = c.rho[vi];
+                let fi = c.full[vi];
+                let sc = if fi != u32::MAX { src[fi as usize] } else { [0f32; 3] };
+                // Radiance and density bilinear; the source (per unit extinction, defined
+                // only where ρ > 0) density-weighted, so that empty neighbours do not
+                // pull it towards 0 (a uniform source stays uniform: the furnace holds).
+                let (mut ib_, mut sbw, mut rb) = ([0f32; 3], [0f32; 3], 0f32);
+                for (wk, (db, dc)) in wts.iter().zip(offs) {
+                    if *wk == 0.0 {
+                        continue;
+                    }
+                    let l = (ib + fb + db + 1) as usize + stride * (ic + fc + dc + 1) as usize;
+                    let wr = wk * prev_r[l];
+                    for band in 0..3 {
+                        ib_[band] += wk * prev_i[l][band];
+                        sbw[band] += wr * prev_s[l][band];
+                    }
+                    rb += wr;
+                }
+                let mut out = ib_;
+                let rm = 0.5 * (rb + rho) * s;
+                if rm > 0.0 {
+                    let sb = if rb > 0.0 { sbw.map(|x| x / rb) } else { sc };
+                    let se = if fi == u32::MAX { sb } else { sc };
+                    let mut wgt = step_weights(c.sigma_t[0] * rm);
+                    for band in 0..3 {
+                        if band > 0 && !c.grey {
+                            wgt = step_weights(c.sigma_t[band] * rm);
+                        }
+                        let (e, wi, wo) = wgt;
+                        out[band] = ib_[band] * e + wi * sb[band] + wo * se[band];
+                    }
+                }
+                let l = row + (ib + 1) as usize;
+                cur_i[l] = out;
+                cur_s[l] = sc;
+                cur_r[l] = rho;
+                if fi != u32::MAX {
+                    radiance[fi as usize] = out;
+                }
+            }
+        }
+        if splat {
+            // Light leaving the box downwards lands on the ground along Ω: splat its flux
+            // change against the sky it hides, (I − L_sky) w |Ω·n| A_face, per column area.
+            let exit_b = if om[b] > 0.0 { nb - 1 } else { 0 };
+            let exit_c = if om[cc] > 0.0 { nc - 1 } else { 0 };
+            let mut faces: Vec<(usize, usize, usize)> = (0..nc).map(|ic| (exit_b, ic, b)).collect();
+            faces.extend((0..nb).map(|ib| (ib, exit_c, cc)));
+            if step + 1 == na {
+                faces.extend((0..nc).flat_map(|ic| (0..nb).map(move |ib| (ib, ic, a))));
+            }
+            for (ib, ic, ax) in faces {
+                let v = coord(pa, ib as isize, ic as isize);
+                let mut face = c.origin
+                    + DVec3::new(
+                        (v[0] as f64 + 0.5) * c.h[0],
+                        (v[1] as f64 + 0.5) * c.h[1],
+                        (v[2] as f64 + 0.5) * c.h[2],
+                    );
+                face[ax] += 0.5 * c.h[ax] * om[ax].signum();
+                let gh = c.ground_height.unwrap_or(0.0);
+                let q = face + om * ((gh - face.y).min(0.0) / om.y);
+                if let Some(col) = ground.column(q.x, q.z) {
+                    let area = c.h[0] * c.h[1] * c.h[2] / c.h[ax];
+                    let f = w as f32 as f64 * om[ax].abs() * area / (c.h[0] * c.h[2]);
+                    let i = cur_i[ib + 1 + stride * (ic + 1)];
+                    splats.push((col, [0, 1, 2].map(|band| f * (i[band] as f64 - skyr[band] as f64))));
+                }
+            }
+        }
+        std::mem::swap(&mut prev_i, &mut cur_i);
+        std::mem::swap(&mut prev_s, &mut cur_s);
+        std::mem::swap(&mut prev_r, &mut cur_r);
+        fill_ghosts(pa, false, &mut prev_i, &mut prev_s, &mut prev_r);
+    }
+    (radiance, splats)
 }
 
 /// The DSA operator of one band on the full voxels' box (δ-M coefficients).
@@ -443,6 +487,86 @@ fn dsa_operator(m: &Medium, dom: &Domain, sigma_t: f64, albedo: f64, chi1: f64) 
         }
     }
     st
+}
+
+/// Diffusion synthetic acceleration of band `b` after a sweep (module docs): the isotropic change
+/// ΔI0 of the sweep drives the diffusion equation for the error δ of the mean radiance (W·m⁻²·sr⁻¹);
+/// I_00 += √(4π) δ, and the P1 radiance of the correction, δI(Ω) = δ − Ω·∇δ/(ρσtr′) (Fick's law
+/// with the operator's own face couplings), adds its first moments I_1m += −√(4π/3) ∂_m δ/(ρσtr′).
+/// Without the first moments the current's error decays only by a′χ′_1 ≈ 0.8 per sweep: the
+/// noon cloud at σt × 4 took 18 iterations with δ alone, 13 with both.
+fn accelerate(c: &Ctx, dom: &Domain, h: &Hierarchy, bo: &BandOptics, b: usize, moments: &[f32], next: &mut [f32]) {
+    let (dims, dd, nsh) = (c.dims, dom.dims, c.nsh);
+    let y00 = 1.0 / (4.0 * PI).sqrt();
+    let cells = dd[0] * dd[1] * dd[2];
+    let full_at = |l: usize| {
+        let (i, j, k) = (l % dd[0], (l / dd[0]) % dd[1], l / (dd[0] * dd[1]));
+        let v = dom.global(dims, i, j, k);
+        (v, (c.full[v] != u32::MAX).then(|| c.full[v] as usize))
+    };
+    let rhs: Vec<f64> = (0..cells)
+        .into_par_iter()
+        .map(|l| match full_at(l) {
+            (v, Some(f)) => {
+                let d0 = (next[(f * 3 + b) * nsh] - moments[(f * 3 + b) * nsh]) as f64 * y00;
+                c.rho[v] as f64 * bo.sigma_t * bo.albedo * d0
+            }
+            _ => 0.0,
+        })
+        .collect();
+    // The correction need only be as good as the iteration's tolerance: 1e-2 instead of 1e-4
+    // changed the dense cloud's image by 3e-6 and halved the time of the solve.
+    let (delta, _) = h.solve(&rhs, None, 1e-2, 100);
+    let sigma_tr = bo.sigma_t * (1.0 - bo.albedo * bo.chi.get(1).copied().unwrap_or(0.0));
+    let (stride, gstride) = ([1, dd[0], dd[0] * dd[1]], [1, dims[0], dims[0] * dims[1]]);
+    for l in 0..cells {
+        let (v, Some(f)) = full_at(l) else { continue };
+        let fo = (f * 3 + b) * nsh;
+        next[fo] += (delta[l] / y00) as f32;
+        if nsh < 4 {
+            continue;
+        }
+        let cell = [l % dd[0], (l / dd[0]) % dd[1], l / (dd[0] * dd[1])];
+        for ax in 0..3 {
+            // ∂δ/∂x_ax / (ρσtr′): the mean over this voxel's faces to full neighbours of
+            // 3 D_f (δ_n − δ_p)/h, D_f/h² being the operator's face coupling.
+            let (mut sum, mut faces) = (0.0, 0.0);
+            for side in [-1i64, 1] {
+                let nc = cell[ax] as i64 + side;
+                if nc < 0 || nc >= dd[ax] as i64 {
+                    continue;
+                }
+                let nv = (v as i64 + side * gstride[ax] as i64) as usize;
+                if c.full[nv] == u32::MAX {
+                    continue;
+                }
+                let nl = (l as i64 + side * stride[ax] as i64) as usize;
+                let cf = interior_coupling(c.rho[v] as f64, c.rho[nv] as f64, sigma_tr, c.h[ax], DEFAULT_MIN_OPTICAL_DEPTH);
+                sum += 3.0 * cf * c.h[ax] * (delta[nl] - delta[l]) * side as f64;
+                faces += 1.0;
+            }
+            if faces > 0.0 {
+                // real_sh's l = 1 functions are √(3/4π) (z, y, x) at indices 1, 2, 3.
+                next[fo + [3, 2, 1][ax]] -= ((4.0 * PI / 3.0).sqrt() * sum / faces) as f32;
+            }
+        }
+    }
+}
+
+/// Extrapolation of the slowest error mode (Lyusternik's): once DSA has removed the diffusive
+/// modes, the change shrinks geometrically, by r per iteration (≈ 0.6–0.75 measured: the
+/// anisotropic orders DSA does not reach), so the remaining error is r/(1 − r) times the last step.
+/// Every third iteration, when the last two ratios agree within 0.1 and r ∈ (0.3, 0.9), the
+/// factor to add the last step with; None otherwise (an erratic history is left alone). Measured
+/// on the five evaluation scenes: 13/13/6/13/13 → 8/11/5/9/8 iterations, the same images within
+/// the tolerance.
+fn dominant_mode_step(history: &[f64]) -> Option<f32> {
+    let n = history.len();
+    if n < 4 || n % 3 != 1 {
+        return None;
+    }
+    let (r0, r1) = (history[n - 2] / history[n - 3], history[n - 1] / history[n - 2]);
+    (r1 > 0.3 && r1 < 0.9 && (r1 - r0).abs() < 0.1).then(|| (r1 / (1.0 - r1)) as f32)
 }
 
 /// Solve the transport problem for the scene's medium, sun, sky and ground.
@@ -578,7 +702,6 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
             .collect(),
         _ => Vec::new(),
     };
-    let y00 = 1.0 / (4.0 * PI).sqrt();
     let mut moments = vec![0f32; nfull * 3 * nsh];
     let mut source = make_source(&moments, true);
     let mut history = Vec::new();
@@ -587,32 +710,8 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
     for _ in 0..if nfull == 0 { 0 } else { s.max_iterations } {
         let (mut next, e_down) = sweep(&ctx, &q, &ylm, &source, &ground_map);
         if let (Some(dom), false) = (&dom, hier.is_empty()) {
-            let dd = dom.dims;
             for (b, h) in hier.iter().enumerate() {
-                let bo = &bands[b];
-                let mut rhs = vec![0f64; dd[0] * dd[1] * dd[2]];
-                for k in 0..dd[2] {
-                    for j in 0..dd[1] {
-                        for i in 0..dd[0] {
-                            let v = dom.global(dims, i, j, k);
-                            if let Some(f) = (full[v] != u32::MAX).then(|| full[v] as usize) {
-                                let d0 = (next[(f * 3 + b) * nsh] - moments[(f * 3 + b) * nsh]) as f64 * y00;
-                                rhs[i + dd[0] * (j + dd[1] * k)] = rho[v] as f64 * bo.sigma_t * bo.albedo * d0;
-                            }
-                        }
-                    }
-                }
-                let (delta, _) = h.solve(&rhs, None, 1e-4, 100);
-                for k in 0..dd[2] {
-                    for j in 0..dd[1] {
-                        for i in 0..dd[0] {
-                            let v = dom.global(dims, i, j, k);
-                            if full[v] != u32::MAX {
-                                next[(full[v] as usize * 3 + b) * nsh] += (delta[i + dd[0] * (j + dd[1] * k)] / y00) as f32;
-                            }
-                        }
-                    }
-                }
+                accelerate(&ctx, dom, h, &bands[b], b, &moments, &mut next);
             }
         }
         let scale = next.iter().step_by(nsh).fold(1e-30f64, |a, x| a.max(x.abs() as f64));
@@ -623,6 +722,9 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
             .fold(0.0f64, |a, (x, y)| a.max((x - y).abs() as f64))
             / scale;
         history.push(change);
+        if let Some(k) = s.acceleration.then(|| dominant_mode_step(&history)).flatten() {
+            next.par_iter_mut().zip(moments.par_iter()).for_each(|(x, o)| *x += k * (*x - o));
+        }
         moments = next;
         source = make_source(&moments, true);
         ground_map = ground_of(Some(&e_down));
@@ -667,6 +769,18 @@ mod tests {
             assert!(((wo as f64) - wod).abs() < 1e-5 * wod, "x={x}: {wo} vs {wod}");
             assert!(wi >= 0.0 && wo >= 0.0);
         }
+    }
+
+    #[test]
+    fn dominant_mode_step_extrapolates_only_a_steady_geometric_decay() {
+        let geometric: Vec<f64> = (0..7).map(|i| 0.75f64.powi(i)).collect();
+        // r = 0.75: the remaining error is 3 steps.
+        assert!((dominant_mode_step(&geometric[..4]).unwrap() - 3.0).abs() < 1e-5);
+        assert_eq!(dominant_mode_step(&geometric[..5]), None, "only every third iteration");
+        assert!((dominant_mode_step(&geometric).unwrap() - 3.0).abs() < 1e-5);
+        assert_eq!(dominant_mode_step(&[1.0, 0.5, 0.6, 0.3]), None, "erratic");
+        assert_eq!(dominant_mode_step(&[1.0, 0.95, 0.9025, 0.857]), None, "too slow to trust");
+        assert_eq!(dominant_mode_step(&[1.0, 0.1, 0.01, 0.001]), None, "fast already");
     }
 
     #[test]
