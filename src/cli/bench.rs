@@ -130,6 +130,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
             }
             super::memory::check_image(&desc, &file.source)?;
             let scene = Scene::build(desc, &file.source, &file.base)?;
+            super::memory::check_solver(&scene)?;
             let log = Log(Mutex::new(Vec::new()));
             let out = cloudgi::render(&scene, &log)?;
             let method = scene.render.method;
