@@ -203,6 +203,36 @@ fn cli_renders_with_method_transport_and_reports_iterations() {
 }
 
 #[test]
+fn bench_times_transport_with_its_iterations_and_memory_and_skips_what_would_take_too_long() {
+    let bench = |extra: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_cloudgi"))
+            .args(["bench", "--methods", "transport", "--sizes", "10x8x6,20x16x12"])
+            .args(["--width", "16", "--height", "12"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = bench(&["--max-seconds", "1e-4"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        text.contains("| transport solve | eye source |") && text.contains("| 10×8×6 | transport |"),
+        "{text}"
+    );
+    assert!(
+        text.contains("10×8×6 transport: transport:") && text.contains("iterations") && text.contains("B + grid"),
+        "{text}"
+    );
+    assert!(!text.contains("iteration 1,"), "per-iteration lines are dropped: {text}");
+    assert!(
+        !text.contains("| 20×16×12 |") && text.contains("20×16×12 transport: skipped"),
+        "{text}"
+    );
+    let bad = bench(&["--max-seconds", "0"]);
+    assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("--max-seconds"));
+}
+
+#[test]
 fn empty_medium_shows_the_sky() {
     let mut s = scene(ball(0.0, 0.9), Method::Transport);
     s.medium = Medium::new(

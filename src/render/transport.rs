@@ -129,18 +129,21 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
     let m = &scene.medium;
     let s = &scene.render.transport;
     // Refuse, with the fix, a cloud whose arrays would not fit (rather than abort).
-    TransportMemory::of(m, s).check(&scene.source, MAX_BYTES, "the library's limit")?;
+    let memory = TransportMemory::of(m, s);
+    memory.check(&scene.source, MAX_BYTES, "the library's limit")?;
     let field = timings.time("transport solve", || {
         solve(m, &scene.sun, &scene.sky, scene.ground.as_ref(), s, progress)
     });
     let last = field.history.last().copied().unwrap_or(0.0);
     progress.log(&format!(
-        "transport: {} full voxels × {} B, {} ordinates, order {}, {} iterations (last change {last:.1e})",
-        field.full_voxels,
-        field.bytes_per_full_voxel(),
+        "transport: {} ordinates, order {}, {} iterations (last change {last:.1e}); memory ≈ {:.0} MB: \
+         {} full voxels × {} B + grid and DSA box (estimate)",
         field.ordinates,
         field.order,
         field.iterations(),
+        memory.bytes as f64 / 1e6,
+        field.full_voxels,
+        TransportMemory::bytes_per_full_voxel(field.order),
     ));
     if let Some(w) = unconverged(&scene.source, &field.history, s) {
         progress.warn(&w);
