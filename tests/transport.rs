@@ -178,7 +178,8 @@ fn cli_renders_with_method_transport_and_reports_iterations() {
     std::fs::write(
         &scene,
         "[medium]\nresolution = [20, 16, 12]\norigin = [-100.0, 0.0, -60.0]\n\
-         [camera]\nposition = [0.0, 80.0, 400.0]\nlook_at = [0.0, 80.0, 0.0]\nwidth = 16\nheight = 12\n",
+         [camera]\nposition = [0.0, 80.0, 400.0]\nlook_at = [0.0, 80.0, 0.0]\nwidth = 16\nheight = 12\n\
+         [render]\ntransport_order = 5\ntransport_polar_ordinates = 6\n",
     )
     .unwrap();
     let out = dir.path().join("t.exr");
@@ -197,6 +198,8 @@ fn cli_renders_with_method_transport_and_reports_iterations() {
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(r.status.success(), "{err}");
     assert!(err.contains("iterations") && err.contains("transport solve"), "{err}");
+    // The scene's keys reach the solver: 6 × 12 ordinates at order 5.
+    assert!(err.contains("72 ordinates, order 5") && !err.contains("warning"), "{err}");
     let img = Image::read_exr(&out).unwrap();
     assert_valid(&img);
     assert!(img.layer("sun_single").is_some());

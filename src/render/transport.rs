@@ -189,3 +189,26 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
     }
     Ok(img)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_an_iteration_stopped_by_its_cap_above_the_tolerance_is_warned_about() {
+        let s = TransportSettings {
+            max_iterations: 3,
+            tolerance: 1e-2,
+            ..TransportSettings::default()
+        };
+        let w = unconverged("s.toml", &[1.0, 0.3, 0.05], &s).expect("stopped at the cap");
+        assert!(
+            w.contains("s.toml") && w.contains("= 3") && w.contains("5.0e-2") && w.contains("raise render.transport_max_iterations"),
+            "{w}"
+        );
+        // Converged on the last allowed iteration, converged early, or nothing to iterate.
+        assert_eq!(unconverged("s.toml", &[1.0, 0.3, 0.005], &s), None);
+        assert_eq!(unconverged("s.toml", &[1.0, 0.005], &s), None);
+        assert_eq!(unconverged("s.toml", &[], &s), None);
+    }
+}
