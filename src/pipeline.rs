@@ -14,6 +14,11 @@ pub trait Progress: Sync {
     fn end(&self);
     /// A one-line message (e.g. solver convergence).
     fn log(&self, _msg: &str) {}
+    /// A one-line warning the user must see even when progress is quiet (e.g. a solver stopped
+    /// at its iteration cap); by default a [`Progress::log`] line.
+    fn warn(&self, msg: &str) {
+        self.log(msg)
+    }
 }
 
 /// Progress sink that ignores everything.

@@ -16,6 +16,7 @@ pub use crate::lighting::{GroundDesc, SkyDesc, SkyModel, SunDesc};
 use crate::math::{Rgb, Vec3};
 use crate::medium::Medium;
 pub use crate::medium::MediumDesc;
+use crate::transport::solve::TransportSettings;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -128,6 +129,20 @@ render_table! {
     /// (0 ≤ f < 1, capped at g; src/optics.rs); default 0.7, measured in docs/budget.md ("fixes");
     /// 0 is the paper's scheme exactly.
     forward_fraction: f32 => forward_fraction;
+    /// `transport`: Legendre order L of the δ-M phase function and of the spherical-harmonic
+    /// source, 1 to 15 (memory 24·(L + 1)² bytes per full voxel; docs/transport.md).
+    transport_order: usize => transport.order;
+    /// `transport`: Gauss–Legendre ordinates in cos θ, even, 2 to 32; the azimuths are twice as
+    /// many (8: 8 × 16 = 128 ordinates). Exact for order L when ≥ L + 1.
+    transport_polar_ordinates: usize => transport.n_mu;
+    /// `transport`: stop iterating once I0 changes by less than this fraction of its largest
+    /// value between iterations (unitless, 0 < t < 1).
+    transport_tolerance: f64 => transport.tolerance;
+    /// `transport`: most source iterations (sweeps of every ordinate), at least 1.
+    transport_max_iterations: usize => transport.max_iterations;
+    /// `transport`: accelerate the iteration with a diffusion solve (DSA); false: plain source
+    /// iteration (many more sweeps in thick clouds).
+    transport_acceleration: bool => transport.acceleration;
 }
 
 /// The whole scene file, as written.
@@ -238,6 +253,10 @@ pub struct RenderSettings {
     /// `diffusion`, `full`: δ-M forward fraction f (unitless, 0 ≤ f < 1) of the medium every
     /// stage sees ([`crate::optics::Optics::delta_m`], with TMS sun single scattering); 0 = off.
     pub forward_fraction: f32,
+    /// `transport`: the solver (`render.transport_order`, `render.transport_polar_ordinates`,
+    /// `render.transport_tolerance`, `render.transport_max_iterations`,
+    /// `render.transport_acceleration`).
+    pub transport: TransportSettings,
 }
 
 impl Default for RenderSettings {
@@ -261,6 +280,7 @@ impl Default for RenderSettings {
             aov: false,
             diffuse_anisotropy: true,
             forward_fraction: 0.7,
+            transport: TransportSettings::default(),
         }
     }
 }
@@ -339,6 +359,7 @@ impl Scene {
         render.edges.validate(f)?;
         render.clear_air.validate(f)?;
         render.solver.validate(f)?;
+        render.transport.validate(f)?;
         let camera = Camera::from_desc(&desc.camera, f)?;
         let (sun, sky) = crate::lighting::sun_and_sky(&desc.sun, &desc.sky, f, base_dir)?;
         let ground = match &desc.ground {

@@ -179,7 +179,8 @@ fn cli_renders_with_method_transport_and_reports_iterations() {
     std::fs::write(
         &scene,
         "[medium]\nresolution = [20, 16, 12]\norigin = [-100.0, 0.0, -60.0]\n\
-         [camera]\nposition = [0.0, 80.0, 400.0]\nlook_at = [0.0, 80.0, 0.0]\nwidth = 16\nheight = 12\n",
+         [camera]\nposition = [0.0, 80.0, 400.0]\nlook_at = [0.0, 80.0, 0.0]\nwidth = 16\nheight = 12\n\
+         [render]\ntransport_order = 5\ntransport_polar_ordinates = 6\n",
     )
     .unwrap();
     let out = dir.path().join("t.exr");
@@ -198,9 +199,41 @@ fn cli_renders_with_method_transport_and_reports_iterations() {
     let err = String::from_utf8_lossy(&r.stderr);
     assert!(r.status.success(), "{err}");
     assert!(err.contains("iterations") && err.contains("transport solve"), "{err}");
+    // The scene's keys reach the solver: 6 × 12 ordinates at order 5.
+    assert!(err.contains("72 ordinates, order 5") && !err.contains("warning"), "{err}");
     let img = Image::read_exr(&out).unwrap();
     assert_valid(&img);
     assert!(img.layer("sun_single").is_some());
+}
+
+#[test]
+fn bench_times_transport_with_its_iterations_and_memory_and_skips_what_would_take_too_long() {
+    let bench = |extra: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_cloudgi"))
+            .args(["bench", "--methods", "transport", "--sizes", "10x8x6,20x16x12"])
+            .args(["--width", "16", "--height", "12"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = bench(&["--max-seconds", "1e-4"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        text.contains("| transport solve | eye source |") && text.contains("| 10×8×6 | transport |"),
+        "{text}"
+    );
+    assert!(
+        text.contains("10×8×6 transport: transport:") && text.contains("iterations") && text.contains("B + grid"),
+        "{text}"
+    );
+    assert!(!text.contains("iteration 1,"), "per-iteration lines are dropped: {text}");
+    assert!(
+        !text.contains("| 20×16×12 |") && text.contains("20×16×12 transport: skipped"),
+        "{text}"
+    );
+    let bad = bench(&["--max-seconds", "0"]);
+    assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("--max-seconds"));
 }
 
 #[test]
@@ -222,7 +255,7 @@ fn empty_medium_shows_the_sky() {
 #[test]
 fn a_cloud_too_large_for_memory_is_refused_with_the_fix() {
     let mut s = scene(ball(0.1, 0.9), Method::Transport);
-    // 11 M full voxels × 1.5 kB of source arrays > 16 GB.
+    // 11 M full voxels × 2.3 kB of source arrays > 16 GiB.
     s.medium = Medium::new(
         Grid3::filled([230, 230, 210], 1.0),
         Vec3::ZERO,
@@ -232,7 +265,10 @@ fn a_cloud_too_large_for_memory_is_refused_with_the_fix() {
         0.85,
     );
     let e = render(&s, &NoProgress).unwrap_err().to_string();
-    assert!(e.contains("GB") && e.contains("medium.downsample"), "{e}");
+    assert!(
+        e.contains("GiB") && e.contains("medium.downsample") && e.contains("method transport"),
+        "{e}"
+    );
 }
 
 #[test]

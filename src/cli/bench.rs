@@ -16,11 +16,16 @@ pub struct BenchArgs {
     /// Scene file (TOML) with a procedural grid. Without it, the built-in default scene.
     scene: Option<PathBuf>,
     /// Methods to time, in order; the first is the baseline of the `× first` column.
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "single,diffusion,full")]
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "single,diffusion,full,transport")]
     methods: Vec<MethodArg>,
     /// Procedural resolutions NXxNYxNZ; the voxel size is scaled so the cloud keeps its extent.
     #[arg(long, value_delimiter = ',', default_value = "50x40x30,100x80x60,200x160x120")]
     sizes: Vec<String>,
+    /// Skip a method on a cloud when its time there, predicted from its previous cloud's time
+    /// scaled by the voxel count, exceeds this many seconds (transport at 200×160×120 takes
+    /// minutes); a note names the skipped runs.
+    #[arg(long, default_value_t = 120.0)]
+    max_seconds: f64,
     /// Override camera.width (pixels).
     #[arg(long)]
     width: Option<u32>,
@@ -29,17 +34,27 @@ pub struct BenchArgs {
     height: Option<u32>,
 }
 
-/// Keeps the solver's one-line summaries (iterations per band), drops the progress bars.
+/// Keeps the solver's one-line summaries (iterations per band), drops the progress bars and the
+/// transport solver's line per iteration (its summary has the count).
 struct Log(Mutex<Vec<String>>);
+
+/// The start of the transport solver's per-iteration lines.
+const PER_ITERATION: &str = "transport: iteration ";
 
 impl Progress for Log {
     fn begin(&self, _: &str, _: u64) {}
     fn advance(&self, _: u64) {}
     fn end(&self) {}
     fn log(&self, msg: &str) {
+        if msg.starts_with(PER_ITERATION) {
+            return;
+        }
         if let Ok(mut v) = self.0.lock() {
             v.push(msg.to_string());
         }
+    }
+    fn warn(&self, msg: &str) {
+        self.log(&format!("warning: {msg}"));
     }
 }
 
@@ -54,6 +69,13 @@ fn parse_size(s: &str) -> Result<[usize; 3]> {
             format!("`{s}` is not NXxNYxNZ with positive counts, e.g. 100x80x60"),
         )),
     }
+}
+
+/// Seconds a run on `size` is predicted to take from the same method's run on `prev` that took
+/// `seconds`: proportional to the voxels (the methods' work is per voxel).
+fn predicted(prev: [usize; 3], seconds: f64, size: [usize; 3]) -> f64 {
+    let n = |s: [usize; 3]| s.iter().map(|&v| v as f64).product::<f64>();
+    seconds * n(size) / n(prev)
 }
 
 /// One table row: the cloud, the method, seconds per stage (in `stages`' order) and the total.
@@ -104,6 +126,13 @@ fn table(rows: &[Row]) -> String {
 
 pub fn run(a: BenchArgs) -> Result<()> {
     let sizes = a.sizes.iter().map(|s| parse_size(s)).collect::<Result<Vec<_>>>()?;
+    if !(a.max_seconds.is_finite() && a.max_seconds > 0.0) {
+        return Err(Error::invalid(
+            "command line",
+            "--max-seconds",
+            format!("{} is not a positive number of seconds, e.g. 60", a.max_seconds),
+        ));
+    }
     let file = SceneFile::read(a.scene.as_deref())?;
     if file.desc.medium.grid != "procedural" {
         return Err(Error::invalid(
@@ -116,12 +145,25 @@ pub fn run(a: BenchArgs) -> Result<()> {
     let extent = base.voxel_size * base.resolution[0] as f32;
     let mut rows = Vec::new();
     let mut notes = Vec::new();
+    let name = |s: &[usize; 3]| format!("{}×{}×{}", s[0], s[1], s[2]);
     for size in &sizes {
         for m in &a.methods {
+            let method: Method = (*m).into();
+            let last = rows.iter().rev().find(|r: &&Row| r.method == method);
+            if let Some(t) = last.map(|r| predicted(r.size, r.total, *size)).filter(|t| *t > a.max_seconds) {
+                notes.push(format!(
+                    "{} {}: skipped, ≈ {t:.0} s predicted from {} (raise --max-seconds {} to run it)",
+                    name(size),
+                    method.name(),
+                    name(&last.map_or(*size, |r| r.size)),
+                    a.max_seconds
+                ));
+                continue;
+            }
             let mut desc = file.desc.clone();
             desc.medium.resolution = *size;
             desc.medium.voxel_size = extent / size[0] as f32;
-            desc.render.method = (*m).into();
+            desc.render.method = method;
             if let Some(w) = a.width {
                 desc.camera.width = w;
             }
@@ -130,11 +172,11 @@ pub fn run(a: BenchArgs) -> Result<()> {
             }
             super::memory::check_image(&desc, &file.source)?;
             let scene = Scene::build(desc, &file.source, &file.base)?;
+            super::memory::check_solver(&scene)?;
             let log = Log(Mutex::new(Vec::new()));
             let out = cloudgi::render(&scene, &log)?;
-            let method = scene.render.method;
             for l in log.0.into_inner().unwrap_or_default() {
-                notes.push(format!("{}×{}×{} {}: {l}", size[0], size[1], size[2], method.name()));
+                notes.push(format!("{} {}: {l}", name(size), method.name()));
             }
             rows.push(Row {
                 size: *size,
@@ -172,6 +214,15 @@ mod tests {
             let e = parse_size(bad).unwrap_err().to_string();
             assert!(e.contains("--sizes"), "{e}");
         }
+    }
+
+    #[test]
+    fn runs_are_predicted_by_voxels_and_per_iteration_lines_dropped() {
+        assert_eq!(predicted([50, 40, 30], 4.0, [100, 80, 60]), 32.0);
+        let log = Log(Mutex::new(Vec::new()));
+        log.log("transport: iteration 3, relative change of I0 2.09e-1");
+        log.log("transport: 128 ordinates, order 7, 14 iterations");
+        assert_eq!(log.0.into_inner().unwrap(), ["transport: 128 ordinates, order 7, 14 iterations"]);
     }
 
     #[test]

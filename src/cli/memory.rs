@@ -2,18 +2,21 @@
 //! allocator abort mid-render.
 
 use cloudgi::error::{Error, Result};
-use cloudgi::scene::{Method, SceneDesc};
+use cloudgi::scene::{Method, Scene, SceneDesc};
+use cloudgi::transport::TransportMemory;
 
 /// Bytes per pixel a render holds at its peak: the method's accumulators, the image, its layers
 /// and their EXR/PNG encodings. Peak resident memory of 1500×1000 renders of an 8³ grid on the
 /// development sandbox (`/usr/bin/time -f %M`), less the grid, was 33 B per pixel for `single`,
-/// 78 B for `reference` and 271 B for `full` (its per-pixel gather components and low-density
-/// segment lists); these are those, rounded up, plus 36 B per extra RGB layer.
+/// 78 B for `reference`, 271 B for `full` (its per-pixel gather components and low-density
+/// segment lists) and 62 B for `transport` (120 B with its three AOV layers); these are those,
+/// rounded up, plus 36 B per extra RGB layer.
 pub fn bytes_per_pixel(method: Method, aov: bool, stderr: bool) -> u64 {
     const LAYER: u64 = 36;
     match method {
         Method::Single | Method::Diffusion => 48,
         Method::Reference => 96 + LAYER * u64::from(stderr),
+        Method::Transport => 64 + 2 * LAYER * u64::from(aov),
         // full, and any method added later: the largest estimate.
         _ => 300 + 4 * LAYER * u64::from(aov),
     }
@@ -59,6 +62,27 @@ pub fn check_image(desc: &SceneDesc, source: &str) -> Result<()> {
     check_image_fits(desc, source, available_bytes())
 }
 
+/// The solver's arrays, estimated from the loaded medium for the scene's method, must fit in
+/// `available` bytes beside the image. Only `transport`'s are estimated (its spherical-harmonic
+/// source per full voxel dominates; [`TransportMemory`]); the other methods pass.
+pub fn check_solver_fits(scene: &Scene, available: Option<u64>) -> Result<()> {
+    let (Method::Transport, Some(avail)) = (scene.render.method, available) else {
+        return Ok(());
+    };
+    let r = &scene.render;
+    let image = (scene.camera.width as u64 * scene.camera.height as u64).saturating_mul(bytes_per_pixel(r.method, r.aov, r.stderr));
+    TransportMemory::of(&scene.medium, &r.transport).check(
+        &scene.source,
+        avail.saturating_sub(image),
+        "the memory available beside the image",
+    )
+}
+
+/// [`check_solver_fits`] against this machine's available memory.
+pub fn check_solver(scene: &Scene) -> Result<()> {
+    check_solver_fits(scene, available_bytes())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -74,5 +98,19 @@ mod tests {
         d.camera.height = 360;
         assert!(check_image_fits(&d, "s.toml", Some(16 << 30)).is_ok());
         assert!(check_image_fits(&d, "s.toml", None).is_ok());
+    }
+
+    #[test]
+    fn the_transport_solver_is_refused_beyond_the_memory_and_named() {
+        let mut scene = Scene::default_scene().unwrap();
+        let need = TransportMemory::of(&scene.medium, &scene.render.transport).bytes;
+        // The default cloud: ~44 k full voxels × 2.3 kB, about 0.13 GB.
+        assert!((100_000_000..160_000_000).contains(&need), "{need}");
+        let e = check_solver_fits(&scene, Some(need)).unwrap_err().to_string();
+        assert!(e.contains("method transport") && e.contains("render.transport_order = 7"), "{e}");
+        assert!(check_solver_fits(&scene, Some(2 * need)).is_ok());
+        assert!(check_solver_fits(&scene, None).is_ok());
+        scene.render.method = Method::Full;
+        assert!(check_solver_fits(&scene, Some(0)).is_ok());
     }
 }

@@ -230,6 +230,7 @@ fn render(a: RenderArgs, quiet: bool) -> Result<()> {
     output::check_files(&[&a.output, &png], "--output", &file.inputs(&desc))?;
     memory::check_image(&desc, &file.source)?;
     let scene = Scene::build(desc, &file.source, &file.base)?;
+    memory::check_solver(&scene)?;
     for w in warnings::warnings(&file, &a.flags(), &scene) {
         eprintln!("warning: {w}");
     }

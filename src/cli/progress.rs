@@ -87,6 +87,14 @@ impl Bars {
             lines: Mutex::new(None),
         }
     }
+
+    /// One line on stderr, above the bar if one is drawn.
+    fn println(&self, msg: &str) {
+        match self.bar.lock().ok().and_then(|b| b.clone()) {
+            Some(pb) if !pb.is_hidden() => pb.println(msg),
+            _ => eprintln!("{msg}"),
+        }
+    }
 }
 
 impl Progress for Bars {
@@ -143,10 +151,12 @@ impl Progress for Bars {
         if self.quiet {
             return;
         }
-        match self.bar.lock().ok().and_then(|b| b.clone()) {
-            Some(pb) if !pb.is_hidden() => pb.println(msg),
-            _ => eprintln!("{msg}"),
-        }
+        self.println(msg);
+    }
+
+    /// Printed with `--quiet` too, like the scene's warnings.
+    fn warn(&self, msg: &str) {
+        self.println(&format!("warning: {msg}"));
     }
 }
 

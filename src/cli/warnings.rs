@@ -137,6 +137,29 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
     ] {
         rule(key, solved, &only_solved);
     }
+    let only_transport = format!("to method {name} (only transport uses it)");
+    for key in [
+        "render.transport_order",
+        "render.transport_polar_ordinates",
+        "render.transport_tolerance",
+        "render.transport_max_iterations",
+        "render.transport_acceleration",
+    ] {
+        rule(key, m == Method::Transport, &only_transport);
+    }
+    let t = &scene.render.transport;
+    if m == Method::Transport && t.n_mu < t.order + 1 {
+        out.push(format!(
+            "{}: render.transport_polar_ordinates = {} is less than render.transport_order + 1 = {}: \
+             the ordinates do not integrate the order-{} source exactly (docs/transport.md measures \
+             the cost); raise render.transport_polar_ordinates to {} or lower render.transport_order",
+            scene.source,
+            t.n_mu,
+            t.order + 1,
+            t.order,
+            (t.order + 1).next_multiple_of(2)
+        ));
+    }
 
     out.extend(frame_warning(scene));
     out

@@ -12,7 +12,7 @@
 //! the voxel's centre (a voxel subtends a small angle from the eye), then interpolated
 //! trilinearly over full voxels only, so empty neighbours do not darken the cloud's rim.
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::image::Image;
 use crate::math::{Rgb, Vec3};
 use crate::medium::march::march;
@@ -22,6 +22,7 @@ use crate::render::single::pixel_sample;
 use crate::scene::Scene;
 use crate::transport::solve::{solve, TransportField, TransportSettings};
 use crate::transport::sphere::{real_sh, sh_count};
+use crate::transport::TransportMemory;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -104,45 +105,49 @@ fn background(scene: &Scene, f: &TransportField, o: Vec3, d: Vec3) -> Rgb {
     scene.sky.radiance(d)
 }
 
-/// Most memory the solver may ask for (bytes): the SH arrays of every full voxel and the
-/// per-voxel grids.
-const MAX_BYTES: f64 = 16e9;
+/// Most memory a transport render may ask for (bytes), whatever the machine has; the CLI also
+/// checks the estimate against the memory available before it starts.
+const MAX_BYTES: u64 = 16 << 30;
 
-/// Render with `--method transport` and the default settings.
-pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
-    render_with(scene, &TransportSettings::default(), progress, timings)
+/// The warning when the iteration stopped at `render.transport_max_iterations` with the last
+/// relative change of I0 (`history`, one entry per iteration) still at or above the tolerance
+/// (an empty medium does not iterate and is not warned about).
+fn unconverged(source: &str, history: &[f64], s: &TransportSettings) -> Option<String> {
+    let last = *history.last()?;
+    (history.len() >= s.max_iterations && last >= s.tolerance).then(|| {
+        format!(
+            "{source}: the transport iteration stopped at render.transport_max_iterations = {} with a \
+             relative change of I0 of {last:.1e}, above render.transport_tolerance = {:.1e}; raise \
+             render.transport_max_iterations (the image is not converged)",
+            s.max_iterations, s.tolerance
+        )
+    })
 }
 
-/// Render with `--method transport` and settings `s`.
-pub fn render_with(scene: &Scene, s: &TransportSettings, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
+/// Render with `--method transport` and the scene's `render.transport_*` settings.
+pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
     let m = &scene.medium;
-    // Refuse, with the fix, a cloud whose source arrays would not fit (rather than abort).
-    let full = m.density.data().iter().filter(|r| **r > 0.0).count() as f64;
-    let bytes = full * (2 * 3 * sh_count(s.order) * 4) as f64 + m.density.len() as f64 * 20.0;
-    if bytes > MAX_BYTES {
-        return Err(Error::invalid(
-            &scene.source,
-            "medium",
-            format!(
-                "--method transport needs about {:.1} GB for {} full voxels (1.5 kB each); \
-                 coarsen the cloud with medium.downsample or medium.max_voxels",
-                bytes / 1e9,
-                full
-            ),
-        ));
-    }
+    let s = &scene.render.transport;
+    // Refuse, with the fix, a cloud whose arrays would not fit (rather than abort).
+    let memory = TransportMemory::of(m, s);
+    memory.check(&scene.source, MAX_BYTES, "the library's limit")?;
     let field = timings.time("transport solve", || {
         solve(m, &scene.sun, &scene.sky, scene.ground.as_ref(), s, progress)
     });
+    let last = field.history.last().copied().unwrap_or(0.0);
     progress.log(&format!(
-        "transport: {} full voxels × {} B, {} ordinates, order {}, {} iterations (last change {:.1e})",
-        field.full_voxels,
-        field.bytes_per_full_voxel(),
+        "transport: {} ordinates, order {}, {} iterations (last change {last:.1e}); memory ≈ {:.0} MB: \
+         {} full voxels × {} B + grid and DSA box (estimate)",
         field.ordinates,
         field.order,
         field.iterations(),
-        field.history.last().copied().unwrap_or(0.0)
+        memory.bytes as f64 / 1e6,
+        field.full_voxels,
+        TransportMemory::bytes_per_full_voxel(field.order),
     ));
+    if let Some(w) = unconverged(&scene.source, &field.history, s) {
+        progress.warn(&w);
+    }
     let (diffuse, sun) = timings.time("eye source", || eye_source(scene, &field));
     // March with the δ-M extinction of the middle band (the bands differ only by σt f Δa).
     let mut scaled = m.clone();
@@ -183,4 +188,27 @@ pub fn render_with(scene: &Scene, s: &TransportSettings, progress: &dyn Progress
         }
     }
     Ok(img)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_an_iteration_stopped_by_its_cap_above_the_tolerance_is_warned_about() {
+        let s = TransportSettings {
+            max_iterations: 3,
+            tolerance: 1e-2,
+            ..TransportSettings::default()
+        };
+        let w = unconverged("s.toml", &[1.0, 0.3, 0.05], &s).expect("stopped at the cap");
+        assert!(
+            w.contains("s.toml") && w.contains("= 3") && w.contains("5.0e-2") && w.contains("raise render.transport_max_iterations"),
+            "{w}"
+        );
+        // Converged on the last allowed iteration, converged early, or nothing to iterate.
+        assert_eq!(unconverged("s.toml", &[1.0, 0.3, 0.005], &s), None);
+        assert_eq!(unconverged("s.toml", &[1.0, 0.005], &s), None);
+        assert_eq!(unconverged("s.toml", &[], &s), None);
+    }
 }

@@ -11,7 +11,122 @@ pub mod slab;
 pub mod solve;
 pub mod sphere;
 
+use crate::error::{check, Error, Result};
 use crate::medium::Medium;
+use solve::TransportSettings;
+
+/// Most Legendre order `render.transport_order` accepts (memory grows as (L + 1)², the sweeps'
+/// work as (L + 1)² times the ordinates).
+pub const MAX_ORDER: usize = 15;
+
+/// Most Gauss–Legendre nodes `render.transport_polar_ordinates` accepts (2·32² = 2048 ordinates).
+pub const MAX_POLAR_ORDINATES: usize = 32;
+
+impl TransportSettings {
+    /// Check the `render.transport_*` keys that set these settings (`file` names the scene).
+    pub fn validate(&self, file: &str) -> Result<()> {
+        check(
+            file,
+            "render.transport_order",
+            (1..=MAX_ORDER).contains(&self.order),
+            self.order,
+            &format!("the Legendre order is 1 to {MAX_ORDER} (default 7; 5 is faster, 9 resolves backlit glow better)"),
+        )?;
+        // An odd count puts a ring of ordinates on the horizon (μ = 0), which the plane sweeps
+        // handle worse (docs/transport.md).
+        check(
+            file,
+            "render.transport_polar_ordinates",
+            (2..=MAX_POLAR_ORDINATES).contains(&self.n_mu) && self.n_mu % 2 == 0,
+            self.n_mu,
+            &format!(
+                "the ordinates in cos θ are an even count from 2 to {MAX_POLAR_ORDINATES} (default 8; \
+                 at least render.transport_order + 1 integrates the source exactly)"
+            ),
+        )?;
+        check(
+            file,
+            "render.transport_tolerance",
+            self.tolerance.is_finite() && self.tolerance > 0.0 && self.tolerance < 1.0,
+            self.tolerance,
+            "the relative change of I0 that stops the iteration is in (0, 1), e.g. 5e-3",
+        )?;
+        check(
+            file,
+            "render.transport_max_iterations",
+            self.max_iterations >= 1,
+            self.max_iterations,
+            "the solver needs at least 1 iteration (default 60)",
+        )
+    }
+}
+
+/// Peak memory of a transport render (solve, eye source and gather; not the image), estimated
+/// from the medium before anything is allocated. Peak resident memory measured on the
+/// development sandbox (`/usr/bin/time -f %M`, 8×8 images, less a `single` render of the same
+/// grid): the default cloud at 100×80×60 (44 k full voxels) 127.5 MB at order 7 and 52.8 MB at
+/// order 3, at 50×40×30 16.4 MB, a full 48³ cube at order 3 87.2 MB; the model below is within
+/// 3 % of each.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TransportMemory {
+    /// Voxels with ρ > 0.
+    pub full_voxels: u64,
+    /// The SH order it was estimated for.
+    pub order: usize,
+    /// The estimate (bytes).
+    pub bytes: u64,
+}
+
+impl TransportMemory {
+    /// Bytes per voxel of the whole grid at the solve's peak: the full-voxel index (4) and the
+    /// δ-M sun transmittance per band (12), rounded up to the fit of the measurements (the
+    /// gather's eye-source grids, 24 B, come after the solve has freed its sweep arrays).
+    pub const GRID_BYTES: u64 = 24;
+    /// Bytes per voxel of the tight box of full voxels: the acceleration's three multigrid
+    /// hierarchies (f64 stencils, one per band) and its solve's vectors.
+    pub const DOMAIN_BYTES: u64 = 200;
+
+    /// Bytes per full voxel: at a sweep's peak three spherical-harmonic arrays (the moments, the
+    /// source and the sweep's new moments) of 3 bands × (L + 1)² f32, 2.3 kB at order 7.
+    pub fn bytes_per_full_voxel(order: usize) -> u64 {
+        3 * 3 * 4 * sphere::sh_count(order) as u64
+    }
+
+    /// The estimate for medium `m` solved with `s`.
+    pub fn of(m: &Medium, s: &TransportSettings) -> TransportMemory {
+        let full = m.density.data().iter().filter(|r| **r > 0.0).count() as u64;
+        let domain = crate::diffusion::Domain::of(m).map_or(0, |d| d.dims.iter().product::<usize>()) as u64;
+        TransportMemory {
+            full_voxels: full,
+            order: s.order,
+            bytes: full * Self::bytes_per_full_voxel(s.order) + m.density.len() as u64 * Self::GRID_BYTES + domain * Self::DOMAIN_BYTES,
+        }
+    }
+
+    /// Refuse, naming the fixes, an estimate over `limit` bytes (`what` says what the limit is,
+    /// e.g. "the memory available"); `file` names the scene.
+    pub fn check(&self, file: &str, limit: u64, what: &str) -> Result<()> {
+        if self.bytes <= limit {
+            return Ok(());
+        }
+        let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
+        Err(Error::invalid(
+            file,
+            "medium",
+            format!(
+                "method transport needs about {:.1} GiB ({} full voxels × {} B at render.transport_order = {}, \
+                 plus the grid and the acceleration's box) but {what} is {:.1} GiB; coarsen the cloud \
+                 (medium.downsample, medium.resolution or medium.max_voxels), lower \
+                 render.transport_order, or use --method full",
+                gib(self.bytes),
+                self.full_voxels,
+                Self::bytes_per_full_voxel(self.order),
+                self.order,
+                gib(limit)
+            ),
+        ))
+    }
+}
 
 /// One band's optics after the δ-M transform of a Henyey–Greenstein phase function truncated
 /// after Legendre order `L`: the forward fraction f = g^{L+1} moves into the unscattered beam,
