@@ -88,12 +88,6 @@ impl TransportField {
     pub fn iterations(&self) -> usize {
         self.history.len()
     }
-
-    /// Memory of the per-voxel solution arrays (bytes per full voxel: SH source, 3 bands, f32,
-    /// plus the same again for the moments accumulated during a sweep).
-    pub fn bytes_per_full_voxel(&self) -> usize {
-        2 * 3 * sh_count(self.order) * 4
-    }
 }
 
 /// Radiance of the Lambertian ground (W·m⁻²·sr⁻¹) on columns of the grid's horizontal spacing,
@@ -224,7 +218,7 @@ type Swept = (Vec<[f32; 3]>, Vec<(usize, [f64; 3])>);
 
 /// Ordinates swept side by side: their per-voxel sources and radiances are held at once
 /// (2 × 12 B per full voxel each). Fixed, so the sums are the same for any thread count.
-const ORDINATE_BATCH: usize = 16;
+pub(crate) const ORDINATE_BATCH: usize = 16;
 
 /// One sweep of every ordinate: the diffuse radiance moments I_lm per full voxel, and how much the
 /// cloud changes the ground's downward diffuse irradiance, per ground map column.
