@@ -224,26 +224,91 @@ impl Trilinear {
 /// Number of real spherical harmonics of degree ≤ 2 (the sky single-scattering field per band).
 pub const SH_COEFFS: usize = 9;
 
-/// The 9 real orthonormal spherical harmonics of degree ≤ 2 at unit `d`.
+/// The 9 real orthonormal spherical harmonics of degree ≤ 2 at unit `d`: [`real_sh`] at order 2
+/// in closed form and f32 (the same functions, order and signs; tested equal), for the per-voxel
+/// and per-pixel sky single scattering.
 #[inline]
 pub fn sh9(d: Vec3) -> [f32; SH_COEFFS] {
     let (x, y, z) = (d.x, d.y, d.z);
     [
         0.282_094_8,
-        0.488_602_5 * y,
         0.488_602_5 * z,
+        0.488_602_5 * y,
         0.488_602_5 * x,
-        1.092_548_4 * x * y,
-        1.092_548_4 * y * z,
-        0.315_391_6 * (3.0 * z * z - 1.0),
         1.092_548_4 * x * z,
-        0.546_274_2 * (x * x - y * y),
+        1.092_548_4 * y * z,
+        0.315_391_6 * (3.0 * y * y - 1.0),
+        1.092_548_4 * x * y,
+        0.546_274_2 * (x * x - z * z),
     ]
+}
+
+/// Number of real spherical harmonics up to order `l_max`: (L + 1)².
+pub fn sh_count(l_max: usize) -> usize {
+    (l_max + 1) * (l_max + 1)
+}
+
+/// Real orthonormal spherical harmonics Y_lm(dir) for l ≤ `l_max` into `out` (length (L+1)²),
+/// θ measured from +y and φ = atan2(z, x).
+pub fn real_sh(l_max: usize, dir: glam::DVec3, out: &mut [f64]) {
+    let x = dir.y.clamp(-1.0, 1.0);
+    let s = (1.0 - x * x).max(0.0).sqrt();
+    let phi = dir.z.atan2(dir.x);
+    // Associated Legendre P_l^m(x) (no Condon–Shortley phase; the sign cancels in products).
+    let n = l_max + 1;
+    let mut p = vec![0.0; n * n];
+    let at = |l: usize, m: usize| l * n + m;
+    let mut pmm = 1.0;
+    for m in 0..n {
+        if m > 0 {
+            pmm *= (2 * m - 1) as f64 * s;
+        }
+        p[at(m, m)] = pmm;
+        if m + 1 < n {
+            p[at(m + 1, m)] = x * (2 * m + 1) as f64 * pmm;
+        }
+        for l in m + 2..n {
+            p[at(l, m)] = ((2 * l - 1) as f64 * x * p[at(l - 1, m)] - (l + m - 1) as f64 * p[at(l - 2, m)]) / (l - m) as f64;
+        }
+    }
+    for l in 0..n {
+        let mut fact = 1.0; // (l − m)!/(l + m)!, built up as m grows
+        for m in 0..=l {
+            if m > 0 {
+                fact /= ((l + m) * (l - m + 1)) as f64;
+            }
+            let k = ((2 * l + 1) as f64 / (4.0 * std::f64::consts::PI) * fact).sqrt();
+            if m == 0 {
+                out[l * l + l] = k * p[at(l, 0)];
+            } else {
+                let c = std::f64::consts::SQRT_2 * k * p[at(l, m)];
+                out[l * l + l + m] = c * (m as f64 * phi).cos();
+                out[l * l + l - m] = c * (m as f64 * phi).sin();
+            }
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sh9_is_real_sh_of_order_two() {
+        for d in [
+            Vec3::X,
+            Vec3::Y,
+            -Vec3::Z,
+            Vec3::new(0.3, -0.8, 0.5).normalize(),
+            Vec3::new(-0.6, 0.2, -0.77).normalize(),
+        ] {
+            let mut want = [0f64; SH_COEFFS];
+            real_sh(2, glam::DVec3::new(d.x as f64, d.y as f64, d.z as f64), &mut want);
+            for (k, (a, b)) in sh9(d).iter().zip(want).enumerate() {
+                assert!((*a as f64 - b).abs() < 1e-6, "{d:?} coefficient {k}: {a} vs {b}");
+            }
+        }
+    }
 
     #[test]
     fn frame_is_orthonormal() {

@@ -14,6 +14,7 @@
 
 use crate::error::Result;
 use crate::image::Image;
+use crate::math::{real_sh, sh_count};
 use crate::math::{Rgb, Vec3};
 use crate::medium::march::march;
 use crate::medium::Medium;
@@ -21,7 +22,6 @@ use crate::pipeline::{render_rows, Progress, Timings};
 use crate::render::single::pixel_sample;
 use crate::scene::Scene;
 use crate::transport::solve::{solve, TransportField, TransportSettings};
-use crate::transport::sphere::{real_sh, sh_count};
 use crate::transport::TransportMemory;
 use glam::DVec3;
 use rayon::prelude::*;

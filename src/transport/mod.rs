@@ -90,7 +90,7 @@ impl TransportMemory {
     /// source and the sweep's new moments) of 3 bands × (L + 1)² f32, plus a batch of ordinates'
     /// sources and radiances (2 × 12 B each): 2.7 kB at order 7.
     pub fn bytes_per_full_voxel(order: usize) -> u64 {
-        3 * 3 * 4 * sphere::sh_count(order) as u64 + 2 * 12 * solve::ORDINATE_BATCH as u64
+        3 * 3 * 4 * crate::math::sh_count(order) as u64 + 2 * 12 * solve::ORDINATE_BATCH as u64
     }
 
     /// The estimate for medium `m` solved with `s`.

@@ -20,11 +20,12 @@
 //! boundary, δ-M coefficients), solved by multigrid-preconditioned CG; I_00 += √(4π) δ, and the
 //! correction's P1 current (Fick's law) goes into the first moments ([`accelerate`]).
 
-use super::sphere::{real_sh, sh_count, Quadrature};
+use super::sphere::Quadrature;
 use super::{BandOptics, Optics};
 use crate::diffusion::multigrid::{Hierarchy, Stencil};
 use crate::diffusion::{boundary_terms, interior_coupling, Domain, DEFAULT_MIN_OPTICAL_DEPTH};
 use crate::lighting::{Ground, Sky, Sun};
+use crate::math::{real_sh, sh_count};
 use crate::math::{Rgb, Vec3};
 use crate::medium::Medium;
 use crate::pipeline::Progress;

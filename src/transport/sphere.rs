@@ -1,5 +1,5 @@
-//! Directions and functions on the sphere: a product quadrature (Gauss–Legendre in cos θ about
-//! +y, uniform in azimuth) and real orthonormal spherical harmonics Y_lm, index l² + l + m.
+//! Directions on the sphere: a product quadrature (Gauss–Legendre in cos θ about +y, uniform in
+//! azimuth) for the real spherical harmonics of [`crate::math::real_sh`].
 
 use super::gauss_legendre;
 use glam::DVec3;
@@ -34,55 +34,10 @@ impl Quadrature {
     }
 }
 
-/// Number of real spherical harmonics up to order `l_max`: (L + 1)².
-pub fn sh_count(l_max: usize) -> usize {
-    (l_max + 1) * (l_max + 1)
-}
-
-/// Real orthonormal spherical harmonics Y_lm(dir) for l ≤ `l_max` into `out` (length (L+1)²),
-/// θ measured from +y and φ = atan2(z, x).
-pub fn real_sh(l_max: usize, dir: DVec3, out: &mut [f64]) {
-    let x = dir.y.clamp(-1.0, 1.0);
-    let s = (1.0 - x * x).max(0.0).sqrt();
-    let phi = dir.z.atan2(dir.x);
-    // Associated Legendre P_l^m(x) (no Condon–Shortley phase; the sign cancels in products).
-    let n = l_max + 1;
-    let mut p = vec![0.0; n * n];
-    let at = |l: usize, m: usize| l * n + m;
-    let mut pmm = 1.0;
-    for m in 0..n {
-        if m > 0 {
-            pmm *= (2 * m - 1) as f64 * s;
-        }
-        p[at(m, m)] = pmm;
-        if m + 1 < n {
-            p[at(m + 1, m)] = x * (2 * m + 1) as f64 * pmm;
-        }
-        for l in m + 2..n {
-            p[at(l, m)] = ((2 * l - 1) as f64 * x * p[at(l - 1, m)] - (l + m - 1) as f64 * p[at(l - 2, m)]) / (l - m) as f64;
-        }
-    }
-    for l in 0..n {
-        let mut fact = 1.0; // (l − m)!/(l + m)!, built up as m grows
-        for m in 0..=l {
-            if m > 0 {
-                fact /= ((l + m) * (l - m + 1)) as f64;
-            }
-            let k = ((2 * l + 1) as f64 / (4.0 * PI) * fact).sqrt();
-            if m == 0 {
-                out[l * l + l] = k * p[at(l, 0)];
-            } else {
-                let c = std::f64::consts::SQRT_2 * k * p[at(l, m)];
-                out[l * l + l + m] = c * (m as f64 * phi).cos();
-                out[l * l + l - m] = c * (m as f64 * phi).sin();
-            }
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::{real_sh, sh_count};
     use crate::transport::legendre;
 
     #[test]
