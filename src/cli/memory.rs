@@ -62,20 +62,57 @@ pub fn check_image(desc: &SceneDesc, source: &str) -> Result<()> {
     check_image_fits(desc, source, available_bytes())
 }
 
+/// Bytes per voxel of the grid the per-voxel stages hold at their peak, by method. Peak resident
+/// memory of 8×8 renders of the noon evaluation cloud at 100×80×60 and at 200×160×120 voxels on
+/// the development sandbox (`/usr/bin/time -f %M`) over the grid's voxels: `diffusion` 388 and
+/// 352 B (stage 1's Q0/Q1, sun transmittances and sky harmonics per band, the solver's box),
+/// `full` 482 and 443 B (plus the mip pyramid of the lit volume and the clear-air re-solve),
+/// `single` and `reference` 16 and 6 B (the grid, a majorant or transmittance grid). Rounded up.
+/// `transport` is estimated per full voxel instead ([`TransportMemory`]).
+pub fn bytes_per_grid_voxel(method: Method) -> u64 {
+    match method {
+        Method::Single | Method::Reference => 16,
+        Method::Diffusion => 400,
+        // full, and any method added later: the largest estimate.
+        _ => 500,
+    }
+}
+
 /// The solver's arrays, estimated from the loaded medium for the scene's method, must fit in
-/// `available` bytes beside the image. Only `transport`'s are estimated (its spherical-harmonic
-/// source per full voxel dominates; [`TransportMemory`]); the other methods pass.
+/// `available` bytes beside the image: `transport` per full voxel ([`TransportMemory`]), the other
+/// methods per grid voxel ([`bytes_per_grid_voxel`]).
 pub fn check_solver_fits(scene: &Scene, available: Option<u64>) -> Result<()> {
-    let (Method::Transport, Some(avail)) = (scene.render.method, available) else {
+    let Some(avail) = available else {
         return Ok(());
     };
     let r = &scene.render;
     let image = (scene.camera.width as u64 * scene.camera.height as u64).saturating_mul(bytes_per_pixel(r.method, r.aov, r.stderr));
-    TransportMemory::of(&scene.medium, &r.transport).check(
+    let beside = avail.saturating_sub(image);
+    if r.method == Method::Transport {
+        return TransportMemory::of(&scene.medium, &r.transport).check(&scene.source, beside, "the memory available beside the image");
+    }
+    let voxels = scene.medium.density.len() as u64;
+    let per = bytes_per_grid_voxel(r.method);
+    let need = voxels.saturating_mul(per);
+    if need <= beside {
+        return Ok(());
+    }
+    let other = match r.method {
+        Method::Single | Method::Reference => "",
+        _ => ", or use --method transport (memory per full voxel, not per grid voxel: sparse clouds need far less)",
+    };
+    Err(Error::invalid(
         &scene.source,
-        avail.saturating_sub(image),
-        "the memory available beside the image",
-    )
+        "medium",
+        format!(
+            "method {} needs about {} ({voxels} grid voxels × {per} B) but the memory available beside \
+             the image is {}; coarsen the cloud (medium.downsample, medium.resolution or \
+             medium.max_voxels){other}",
+            r.method.name(),
+            gib(need),
+            gib(beside)
+        ),
+    ))
 }
 
 /// [`check_solver_fits`] against this machine's available memory.
@@ -110,7 +147,24 @@ mod tests {
         assert!(e.contains("method transport") && e.contains("render.transport_order = 7"), "{e}");
         assert!(check_solver_fits(&scene, Some(2 * need)).is_ok());
         assert!(check_solver_fits(&scene, None).is_ok());
-        scene.render.method = Method::Full;
-        assert!(check_solver_fits(&scene, Some(0)).is_ok());
+    }
+
+    #[test]
+    fn the_grid_methods_are_refused_beyond_the_memory_and_named() {
+        let mut scene = Scene::default_scene().unwrap();
+        scene.camera.width = 8;
+        scene.camera.height = 8;
+        let voxels = scene.medium.density.len() as u64;
+        for (method, per) in [(Method::Full, 500), (Method::Diffusion, 400), (Method::Single, 16)] {
+            scene.render.method = method;
+            let image = 64 * bytes_per_pixel(method, false, false);
+            let e = check_solver_fits(&scene, Some(image + voxels * per - 1)).unwrap_err().to_string();
+            assert!(
+                e.contains(&format!("method {}", method.name())) && e.contains("medium.downsample"),
+                "{e}"
+            );
+            assert_eq!(e.contains("--method transport"), method != Method::Single, "{e}");
+            assert!(check_solver_fits(&scene, Some(image + voxels * per)).is_ok());
+        }
     }
 }
