@@ -139,7 +139,7 @@ mod tests {
 
     #[test]
     fn the_transport_solver_is_refused_beyond_the_memory_and_named() {
-        let mut scene = Scene::default_scene().unwrap();
+        let scene = Scene::default_scene().unwrap();
         let need = TransportMemory::of(&scene.medium, &scene.render.transport).bytes;
         // The default cloud: ~44 k full voxels × 2.3 kB, about 0.13 GB.
         assert!((100_000_000..160_000_000).contains(&need), "{need}");
