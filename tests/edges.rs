@@ -46,6 +46,16 @@ impl CubeSource for NoCubes {
     }
 }
 
+/// Σ_{i≥2} q_i a^i HG(g^i, cos) for a segment of optical depth `depth` (eqs. 8–9): the sun's
+/// orders ≥ 2 per unit irradiance (sr⁻¹).
+fn sun_orders_from_2(depth: f64, a: f32, g: f32, cos: f64) -> f64 {
+    // q[k] is the weight of order k + 1.
+    let q = cloudgi::edges::segment_orders(depth, 1e-4);
+    (1..q.len())
+        .map(|k| q[k] * (a as f64).powi(k as i32 + 1) * Hg::new(g).order(k + 1).eval_cos_f64(cos))
+        .sum()
+}
+
 fn no_sun(_: Vec3) -> Rgb {
     Rgb::ZERO
 }
@@ -523,12 +533,7 @@ fn sun_orders_are_not_double_counted_and_cube_request_is_the_segment() {
         "{} vs {single}",
         aov.sun_single
     );
-    let q = cloudgi::edges::segment_orders(depth, 1e-4);
-    let mut multi = 0.0f64;
-    for (idx, qi) in q.iter().enumerate().skip(1) {
-        let i = idx as i32 + 1;
-        multi += qi * (a as f64).powi(i) * Hg::new(g).order(i as usize).eval_cos_f64(cos as f64);
-    }
+    let multi = sun_orders_from_2(depth, a, g, cos as f64);
     let expect = e_sun * multi as f32;
     assert!((aov.edge - expect).abs().max_element() < 1e-5, "{} vs {expect}", aov.edge);
     // The cube: centred at half depth (x = 3), along the ray, excluding exactly the segment.
@@ -607,4 +612,49 @@ fn surface_layer_of_a_thick_slab_is_the_poisson_segment_of_its_first_optical_dep
             assert!((r.x_axis - u).length() < 1e-6);
         }
     }
+}
+
+#[test]
+fn surface_layer_sun_orders_start_from_the_layers_mean_sun() {
+    // The thick slab's surface layer (D_s = 3, a 65 m stretch) under a sun that decays as
+    // E0·e^{−y/40 m}, black cube and dense source: the edge part is the sun's orders ≥ 2,
+    // Σ_{i≥2} a^i q_i Ē HG(g^i, cos), with Ē the mean of the sun over the layer per unit optical
+    // depth — here (homogeneous) the mean over height, E0·(40/65)(1 − e^{−65/40}) — not the
+    // irradiance at the layer's centre (10 % lower).
+    let (h, sigma_t, a, g) = (100.0f32, 0.04f32, 0.8f32, 0.6f32);
+    let m = slab(sigma_t, h, a, g);
+    let e0 = Rgb::new(3.0, 2.0, 1.0);
+    let sun = move |p: Vec3| e0 * (-p.y.max(0.0) / 40.0).exp();
+    let sun_dir = Vec3::new(0.3, 0.9, 0.3).normalize();
+    let cubes = Uniform(Rgb::ZERO);
+    let dense = |_: Vec3, _: Vec3| Rgb::ZERO;
+    let ds = 3.0f64;
+    let settings = EdgeSettings {
+        threshold: 0.3,
+        cube_res: 4,
+        surface_depth: ds as f32,
+        surface_band: 0.0,
+        ..Default::default()
+    };
+    let gather = EdgeGather::new(
+        &m,
+        settings,
+        &cubes,
+        SunInput {
+            dir: sun_dir,
+            irradiance_at: &sun,
+        },
+        &dense,
+    );
+    let u = Vec3::new(0.5, 3f32.sqrt() / 2.0, 0.0);
+    let px = gather.radiance(Vec3::new(0.0, -1.0, 0.0), u, f32::INFINITY, Rgb::ZERO);
+    let top = (ds * u.y as f64 / sigma_t as f64) as f32;
+    let mean = e0 * (40.0 / top) * (1.0 - (-top / 40.0).exp());
+    let multi = sun_orders_from_2(ds, a, g, sun_dir.dot(u) as f64);
+    let expect = mean * multi as f32;
+    assert!(
+        (px.edge - expect).abs().max_element() < 5e-3 * expect.max_element(),
+        "{} vs {expect}",
+        px.edge
+    );
 }
