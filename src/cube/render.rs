@@ -253,9 +253,11 @@ pub struct CubeRenderer<'a> {
     /// Pixel tables at `opts.res`.
     pub pixels: PixelTable,
     h_min: f32,
-    /// At the finest level, add the gather's own diffuse terms beyond I0 (g·I1·ω and the sky's
-    /// single scattering, [`LitVolume::diffuse`]) to the source, so a cube sees the cloud near it
-    /// as the final gather does (the edge and surface cubes); false: I0 only, the paper's cubes.
+    /// Add the gather's own diffuse terms beyond I0 (g·I1·ω and the sky's single scattering,
+    /// [`LitVolume::diffuse`]) to the source, so a cube sees the cloud as the final gather does
+    /// (the edge and surface cubes); false: I0 only, the paper's cubes. Evaluated on the fine
+    /// grid at each sample, also at coarser levels (measured: the furnace −14.2 → −12.5 % against
+    /// the finest level only).
     pub gather_source: bool,
     /// The sun's single scattering in the cube with the transformed medium's own albedo and phase
     /// (a′, HG(g′)) instead of the exact TMS pair: right where the cube's light is scattered again
@@ -365,8 +367,18 @@ impl<'a> CubeRenderer<'a> {
                             // T(1 − e)·J with J = (a ρI0 + a p E_sun ρT_sun)/ρ from the pre-multiplied cell.
                             let w = tr * (1.0 - e) / rho;
                             let mut src = albedo * Rgb::new(c[1], c[2], c[3]) + sun_e * c[4];
-                            if li == 0 && self.gather_source {
-                                src += albedo * lit.diffuse_beyond_i0(v, rho, -d) * rho;
+                            if self.gather_source {
+                                // The fine field at the sample (at coarser levels a point sample
+                                // of it, scaled by the level's ρ like its I0).
+                                let (v0, r0) = if li == 0 {
+                                    (v, rho)
+                                } else {
+                                    let v0 = m.to_voxel(o + d * ts);
+                                    (v0, m.density.trilinear(v0.to_array()))
+                                };
+                                if r0 > 0.0 {
+                                    src += albedo * lit.diffuse_beyond_i0(v0, r0, -d) * rho;
+                                }
                             }
                             l += src * w;
                             tr *= e;
