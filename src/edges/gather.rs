@@ -11,6 +11,12 @@
 //!   unblended segment adds exactly E_j times the transmittance in front of it), weighted 1 − w(ρ);
 //! * what lies behind is attenuated by the exact transmittance, the background last.
 //!
+//! **The surface layer** (`surface_depth` = D_s > 0; docs/edges.md): the first D_s of optical depth
+//! of the ray, whatever its density, joins its first segment(s) — the segments are the runs of
+//! pieces with ρ < T *or* in the layer — and there the edge weight is 1 (falling over the last
+//! `surface_band` of D_s), so eqs. 8–9 render the layer the eye's light comes from, the diffusion
+//! only what lies behind it. With D_s = 0 the gather is the paper's.
+//!
 //! **No double counting of the sun.** The cube must not contain the direct sun (a point light is
 //! never in a cube image). Its multiple scattering inside the segment is added analytically as a
 //! delta in the sun's direction for orders i ≥ 2: a^i q_i E_sun(c_j) HG(g^i, ω_sun·d). Order 1 of the
