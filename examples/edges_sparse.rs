@@ -73,6 +73,8 @@ fn main() {
     let settings = EdgeSettings {
         cube_res: res,
         step_m: scene.render.step_voxels * m.min_voxel(),
+        // The paper's edges only (the measurements of docs/edges.md).
+        surface_depth: 0.0,
         ..Default::default()
     };
     let t = Instant::now();

@@ -107,6 +107,13 @@ render_table! {
     ground_samples: usize => cubes.ground_samples;
     /// Density T below which the final gather uses the edge treatment (paper section 4); 0 turns it off.
     low_density_threshold: f32 => edges.threshold;
+    /// `full`: optical depth D_s (after the δ-M transform) of every eye ray's surface layer that
+    /// the final gather renders with the Poisson orders of eqs. 8–9, like a low-density segment,
+    /// instead of the diffusion source (docs/edges.md, "The surface layer"); 0: the paper's scheme.
+    surface_depth: f32 => edges.surface_depth;
+    /// `full`: fraction of `surface_depth` over which the surface layer blends into the diffusion
+    /// source (smoothstep in optical depth), in [0, 1].
+    surface_band: f32 => edges.surface_band;
     /// Relative residual the diffusion solver must reach (unitless).
     solver_tolerance: f64 => solver.tolerance;
     /// Most conjugate-gradient iterations of the diffusion solver per band.

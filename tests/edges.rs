@@ -46,8 +46,37 @@ impl CubeSource for NoCubes {
     }
 }
 
+/// Σ_{i≥2} q_i a^i HG(g^i, cos) for a segment of optical depth `depth` (eqs. 8–9): the sun's
+/// orders ≥ 2 per unit irradiance (sr⁻¹).
+fn sun_orders_from_2(depth: f64, a: f32, g: f32, cos: f64) -> f64 {
+    // q[k] is the weight of order k + 1.
+    let q = cloudgi::edges::segment_orders(depth, 1e-4);
+    (1..q.len())
+        .map(|k| q[k] * (a as f64).powi(k as i32 + 1) * Hg::new(g).order(k + 1).eval_cos_f64(cos))
+        .sum()
+}
+
 fn no_sun(_: Vec3) -> Rgb {
     Rgb::ZERO
+}
+
+/// A gather without sun.
+fn unlit_gather<'a>(
+    m: &'a Medium,
+    settings: EdgeSettings,
+    cubes: &'a dyn CubeSource,
+    dense: &'a (dyn Fn(Vec3, Vec3) -> Rgb + Sync),
+) -> EdgeGather<'a> {
+    EdgeGather::new(
+        m,
+        settings,
+        cubes,
+        SunInput {
+            dir: Vec3::Y,
+            irradiance_at: &no_sun,
+        },
+        dense,
+    )
 }
 
 fn cumulus_medium(albedo: f32, g: f32) -> Medium {
@@ -81,22 +110,26 @@ fn furnace_every_pixel_reads_l() {
     let l = Rgb::new(0.7, 1.0, 1.3);
     let dense = move |_: Vec3, _: Vec3| l;
     let cubes = Uniform(l);
-    for threshold in [0.0, 0.3, 1.0, 10.0] {
+    // (T, D_s, surface band): the paper's edges, then the surface layer alone, over the edges,
+    // with and without its blend.
+    for (threshold, surface_depth, surface_band) in [
+        (0.0, 0.0, 0.0),
+        (0.3, 0.0, 0.0),
+        (1.0, 0.0, 0.0),
+        (10.0, 0.0, 0.0),
+        (0.0, 3.0, 0.0),
+        (0.3, 3.0, 0.0),
+        (0.3, 2.0, 0.5),
+        (1.0, 0.5, 1.0),
+    ] {
         let settings = EdgeSettings {
             threshold,
             cube_res: 4,
+            surface_depth,
+            surface_band,
             ..Default::default()
         };
-        let gather = EdgeGather::new(
-            &m,
-            settings,
-            &cubes,
-            SunInput {
-                dir: Vec3::Y,
-                irradiance_at: &no_sun,
-            },
-            &dense,
-        );
+        let gather = unlit_gather(&m, settings, &cubes, &dense);
         let mut edge_seen = false;
         for (o, d) in rays(150, 1) {
             let a = gather.radiance(o, d, f32::INFINITY, l);
@@ -104,11 +137,11 @@ fn furnace_every_pixel_reads_l() {
             // f32 compositing over a few hundred steps: 1e-5 relative.
             assert!(
                 (a.total() - l).abs().max_element() < 2e-5 * 1.3,
-                "T={threshold}: {} vs {l}",
+                "T={threshold}, D_s={surface_depth}: {} vs {l}",
                 a.total()
             );
         }
-        assert_eq!(edge_seen, threshold > 0.0, "T={threshold}");
+        assert_eq!(edge_seen, threshold > 0.0 || surface_depth > 0.0, "T={threshold}");
     }
 }
 
@@ -123,6 +156,7 @@ fn threshold_zero_is_the_pure_dense_gather() {
     let settings = EdgeSettings {
         threshold: 0.0,
         step_m: 2.0,
+        surface_depth: 0.0,
         ..Default::default()
     };
     let gather = EdgeGather::new(
@@ -175,6 +209,7 @@ fn deterministic_at_any_thread_count() {
     let sun = |_: Vec3| Rgb::splat(3.0);
     let settings = EdgeSettings {
         cube_res: 4,
+        surface_depth: 0.0,
         ..Default::default()
     };
     let gather = EdgeGather::new(
@@ -264,18 +299,10 @@ fn thin_slab_under_sky_matches_monte_carlo() {
         let settings = EdgeSettings {
             threshold: 2.0,
             cube_res: 32,
+            surface_depth: 0.0,
             ..Default::default()
         };
-        let gather = EdgeGather::new(
-            &m,
-            settings,
-            &cubes,
-            SunInput {
-                dir: Vec3::Y,
-                irradiance_at: &no_sun,
-            },
-            &dense,
-        );
+        let gather = unlit_gather(&m, settings, &cubes, &dense);
         let a = gather.radiance(o, u, f32::INFINITY, Rgb::ONE);
         assert_eq!(a.cubes, 1);
         let d = tau0 / (u.y as f64);
@@ -318,18 +345,10 @@ fn merging_segments_is_continuous_with_the_fix_and_jumps_without() {
             band: 0.5,
             cube_res: 8,
             merge_transition: fix,
+            surface_depth: 0.0,
             ..Default::default()
         };
-        let g = EdgeGather::new(
-            &m,
-            settings,
-            &cubes,
-            SunInput {
-                dir: Vec3::Y,
-                irradiance_at: &no_sun,
-            },
-            &dense,
-        );
+        let g = unlit_gather(&m, settings, &cubes, &dense);
         g.radiance(Vec3::new(-5.0, 15.0, 15.0), Vec3::X, f32::INFINITY, Rgb::ZERO).total().x
     };
     let eps = 1e-4;
@@ -367,18 +386,10 @@ fn wisps_joining_across_clear_air_leave_no_seam() {
             threshold: 0.3,
             cube_res: 8,
             merge_transition: fix,
+            surface_depth: 0.0,
             ..Default::default()
         };
-        let g = EdgeGather::new(
-            &m,
-            settings,
-            &cubes,
-            SunInput {
-                dir: Vec3::Y,
-                irradiance_at: &no_sun,
-            },
-            &dense,
-        );
+        let g = unlit_gather(&m, settings, &cubes, &dense);
         g.radiance(Vec3::new(-5.0, 15.0, 15.0), Vec3::X, f32::INFINITY, Rgb::ZERO).total().x
     };
     let (with_fix, without) = (
@@ -431,18 +442,10 @@ fn sparse_gather_matches_per_pixel_cubes_on_a_smooth_scene() {
     let dense = |_: Vec3, _: Vec3| Rgb::splat(0.5);
     let settings = EdgeSettings {
         cube_res: 4,
+        surface_depth: 0.0,
         ..Default::default()
     };
-    let g = EdgeGather::new(
-        &m,
-        settings,
-        &Smooth,
-        SunInput {
-            dir: Vec3::Y,
-            irradiance_at: &no_sun,
-        },
-        &dense,
-    );
+    let g = unlit_gather(&m, settings, &Smooth, &dense);
     let (w, h) = (40u32, 24u32);
     let ray = |x: u32, y: u32| {
         let o = Vec3::new(200.0, 120.0, -500.0);
@@ -507,6 +510,7 @@ fn sun_orders_are_not_double_counted_and_cube_request_is_the_segment() {
     let dense = |_: Vec3, _: Vec3| Rgb::ZERO;
     let settings = EdgeSettings {
         cube_res: 4,
+        surface_depth: 0.0,
         ..Default::default()
     };
     let gather = EdgeGather::new(
@@ -529,12 +533,7 @@ fn sun_orders_are_not_double_counted_and_cube_request_is_the_segment() {
         "{} vs {single}",
         aov.sun_single
     );
-    let q = cloudgi::edges::segment_orders(depth, 1e-4);
-    let mut multi = 0.0f64;
-    for (idx, qi) in q.iter().enumerate().skip(1) {
-        let i = idx as i32 + 1;
-        multi += qi * (a as f64).powi(i) * Hg::new(g).order(i as usize).eval_cos_f64(cos as f64);
-    }
+    let multi = sun_orders_from_2(depth, a, g, cos as f64);
     let expect = e_sun * multi as f32;
     assert!((aov.edge - expect).abs().max_element() < 1e-5, "{} vs {expect}", aov.edge);
     // The cube: centred at half depth (x = 3), along the ray, excluding exactly the segment.
@@ -554,4 +553,108 @@ fn hg(cos: f32, g: f32) -> f32 {
 /// An HG-distributed direction after scattering from `dir`.
 fn sample_hg(dir: Vec3, g: f32, u1: f32, u2: f32) -> Vec3 {
     Hg::new(g).sample(dir, u1, u2)
+}
+
+#[test]
+fn surface_layer_of_a_thick_slab_is_the_poisson_segment_of_its_first_optical_depths() {
+    // A homogeneous slab of optical depth 4 (ρ = 1 ≥ T: no low-density segment), albedo 0.8, seen
+    // from below at 30° from the zenith (path depth τ_p = 4/cos 30° = 4.62). With a uniform cube L,
+    // a constant dense source S and background B, the surface layer D_s = 3 (no blend) gives
+    // exactly (eqs. 8–9 with albedo, then the diffusion behind it):
+    //   (e^{−D_s(1−a)} − e^{−D_s})·L + e^{−D_s}(1 − e^{−(τ_p − D_s)})·S + e^{−τ_p}·B,
+    // from one cube centred at optical depth D_s/2 along the ray; with D_s = 0 the same slab is the
+    // pure dense gather (1 − e^{−τ_p})·S + e^{−τ_p}·B and no cube.
+    use std::sync::Mutex;
+    struct Recording(Mutex<Vec<CubeRequest>>, Rgb);
+    impl CubeSource for Recording {
+        fn render_cube(&self, req: &CubeRequest) -> CubeImage {
+            self.0.lock().unwrap().push(*req);
+            Uniform(self.1).render_cube(req)
+        }
+    }
+    let (h, sigma_t, a) = (100.0f32, 0.04f32, 0.8f32);
+    let m = slab(sigma_t, h, a, 0.9);
+    let (l, s, b) = (Rgb::new(1.0, 0.5, 0.25), Rgb::new(0.2, 0.4, 0.6), Rgb::new(0.3, 0.3, 0.9));
+    let dense = move |_: Vec3, _: Vec3| s;
+    let u = Vec3::new(0.5, 3f32.sqrt() / 2.0, 0.0);
+    let o = Vec3::new(0.0, -1.0, 0.0);
+    let tau_p = (sigma_t * h / u.y) as f64;
+    for ds in [0.0f64, 3.0] {
+        let cubes = Recording(Mutex::new(Vec::new()), l);
+        let settings = EdgeSettings {
+            threshold: 0.3,
+            cube_res: 8,
+            surface_depth: ds as f32,
+            surface_band: 0.0,
+            ..Default::default()
+        };
+        let gather = unlit_gather(&m, settings, &cubes, &dense);
+        let px = gather.radiance(o, u, f32::INFINITY, b);
+        let e = |x: f64| (-x).exp() as f32;
+        let edge = l * (e(ds * (1.0 - a as f64)) - e(ds));
+        let expect = edge + s * (e(ds) - e(tau_p)) + b * e(tau_p);
+        assert!(
+            (px.total() - expect).abs().max_element() < 1e-3 * expect.max_element(),
+            "D_s = {ds}: {} vs {expect}",
+            px.total()
+        );
+        assert!(
+            (px.edge - edge).abs().max_element() < 1e-3 * l.max_element(),
+            "{} vs {edge}",
+            px.edge
+        );
+        let reqs = cubes.0.into_inner().unwrap();
+        assert_eq!(reqs.len(), usize::from(ds > 0.0), "{reqs:?}");
+        if let Some(r) = reqs.first() {
+            // Optical depth from the slab's bottom to the centre: D_s/2.
+            let half = (sigma_t * r.center.y / u.y) as f64;
+            assert!((half - 0.5 * ds).abs() < 1e-4, "{half}");
+            assert!((r.x_axis - u).length() < 1e-6);
+        }
+    }
+}
+
+#[test]
+fn surface_layer_sun_orders_start_from_the_layers_mean_sun() {
+    // The thick slab's surface layer (D_s = 3, a 65 m stretch) under a sun that decays as
+    // E0·e^{−y/40 m}, black cube and dense source: the edge part is the sun's orders ≥ 2,
+    // Σ_{i≥2} a^i q_i Ē HG(g^i, cos), with Ē the mean of the sun over the layer per unit optical
+    // depth — here (homogeneous) the mean over height, E0·(40/65)(1 − e^{−65/40}) — not the
+    // irradiance at the layer's centre (10 % lower).
+    let (h, sigma_t, a, g) = (100.0f32, 0.04f32, 0.8f32, 0.6f32);
+    let m = slab(sigma_t, h, a, g);
+    let e0 = Rgb::new(3.0, 2.0, 1.0);
+    let sun = move |p: Vec3| e0 * (-p.y.max(0.0) / 40.0).exp();
+    let sun_dir = Vec3::new(0.3, 0.9, 0.3).normalize();
+    let cubes = Uniform(Rgb::ZERO);
+    let dense = |_: Vec3, _: Vec3| Rgb::ZERO;
+    let ds = 3.0f64;
+    let settings = EdgeSettings {
+        threshold: 0.3,
+        cube_res: 4,
+        surface_depth: ds as f32,
+        surface_band: 0.0,
+        ..Default::default()
+    };
+    let gather = EdgeGather::new(
+        &m,
+        settings,
+        &cubes,
+        SunInput {
+            dir: sun_dir,
+            irradiance_at: &sun,
+        },
+        &dense,
+    );
+    let u = Vec3::new(0.5, 3f32.sqrt() / 2.0, 0.0);
+    let px = gather.radiance(Vec3::new(0.0, -1.0, 0.0), u, f32::INFINITY, Rgb::ZERO);
+    let top = (ds * u.y as f64 / sigma_t as f64) as f32;
+    let mean = e0 * (40.0 / top) * (1.0 - (-top / 40.0).exp());
+    let multi = sun_orders_from_2(ds, a, g, sun_dir.dot(u) as f64);
+    let expect = mean * multi as f32;
+    assert!(
+        (px.edge - expect).abs().max_element() < 5e-3 * expect.max_element(),
+        "{} vs {expect}",
+        px.edge
+    );
 }

@@ -146,6 +146,9 @@ fn full_render_is_deterministic_and_aovs_add_up() {
     let s = scene_with(two_blocks(0.95), |d| {
         d.render.aov = true;
         d.render.iterations = 1;
+        // The blocks are ~2 optical depths deep after δ-M: a surface layer of 1 leaves a dense
+        // stretch behind it, so both the diffusion and the orders carry light.
+        d.render.surface_depth = 1.0;
         d.camera.position = [0.0, 60.0, 600.0];
         d.camera.look_at = [0.0, 60.0, 0.0];
     });
@@ -168,8 +171,9 @@ fn full_render_is_deterministic_and_aovs_add_up() {
         );
         assert!(p.is_finite() && p.min_element() >= 0.0);
     }
-    // The cloud is in view and lit: some pixels carry diffusion light.
+    // The cloud is in view and lit: some pixels carry diffusion light, some the surface layer's.
     assert!(a.layer("diffusion").unwrap().iter().any(|p| p.max_element() > 0.0));
+    assert!(a.layer("low_density").unwrap().iter().any(|p| p.max_element() > 0.0));
 }
 
 #[test]

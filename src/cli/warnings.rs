@@ -118,6 +118,8 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
         "render.iterations",
         "render.propagation_tolerance",
         "render.low_density_threshold",
+        "render.surface_depth",
+        "render.surface_band",
     ] {
         rule(key, m == Method::Full, &only_full);
     }

@@ -253,6 +253,16 @@ pub struct CubeRenderer<'a> {
     /// Pixel tables at `opts.res`.
     pub pixels: PixelTable,
     h_min: f32,
+    /// Add the gather's own diffuse terms beyond I0 (g·I1·ω and the sky's single scattering,
+    /// [`LitVolume::diffuse`]) to the source, so a cube sees the cloud as the final gather does
+    /// (the edge and surface cubes); false: I0 only, the paper's cubes. Evaluated on the fine
+    /// grid at each sample, also at coarser levels (measured: the furnace −14.2 → −12.5 % against
+    /// the finest level only).
+    pub gather_source: bool,
+    /// The sun's single scattering in the cube with the transformed medium's own albedo and phase
+    /// (a′, HG(g′)) instead of the exact TMS pair: right where the cube's light is scattered again
+    /// (the edge and surface orders), whose forward peak the δ-M transmittance already carries.
+    pub sun_transformed: bool,
 }
 
 impl<'a> CubeRenderer<'a> {
@@ -265,6 +275,8 @@ impl<'a> CubeRenderer<'a> {
             opts: opts.clone(),
             pixels: PixelTable::new(opts.res),
             h_min: lit.medium.min_voxel(),
+            gather_source: false,
+            sun_transformed: false,
         }
     }
 
@@ -277,7 +289,11 @@ impl<'a> CubeRenderer<'a> {
         let t_end = t_ground.unwrap_or(f32::INFINITY);
         // Sunlight travels along −sun.dir; the scattered light travels towards the eye, −d.
         // The sun's exact single scattering per unit extinction (albedo included; TMS under δ-M).
-        let sun_e = lit.sun.irradiance * m.optics.sun_scatter(lit.sun.dir, -d);
+        let sun_e = if self.sun_transformed {
+            lit.sun.irradiance * m.optics.albedo * m.optics.phase.eval(lit.sun.dir, -d)
+        } else {
+            lit.sun.irradiance * m.optics.sun_scatter(lit.sun.dir, -d)
+        };
         let albedo = m.optics.albedo;
         let sigma_t = m.optics.sigma_t;
         let cut = self.opts.t_cutoff;
@@ -350,7 +366,21 @@ impl<'a> CubeRenderer<'a> {
                             let e = (-sigma_t * rho * len).exp();
                             // T(1 − e)·J with J = (a ρI0 + a p E_sun ρT_sun)/ρ from the pre-multiplied cell.
                             let w = tr * (1.0 - e) / rho;
-                            l += (albedo * Rgb::new(c[1], c[2], c[3]) + sun_e * c[4]) * w;
+                            let mut src = albedo * Rgb::new(c[1], c[2], c[3]) + sun_e * c[4];
+                            if self.gather_source {
+                                // The fine field at the sample (at coarser levels a point sample
+                                // of it, scaled by the level's ρ like its I0).
+                                let (v0, r0) = if li == 0 {
+                                    (v, rho)
+                                } else {
+                                    let v0 = m.to_voxel(o + d * ts);
+                                    (v0, m.density.trilinear(v0.to_array()))
+                                };
+                                if r0 > 0.0 {
+                                    src += albedo * lit.diffuse_beyond_i0(v0, r0, -d) * rho;
+                                }
+                            }
+                            l += src * w;
                             tr *= e;
                             if tr < cut {
                                 tr = 0.0;

@@ -11,6 +11,12 @@
 //!   unblended segment adds exactly E_j times the transmittance in front of it), weighted 1 − w(ρ);
 //! * what lies behind is attenuated by the exact transmittance, the background last.
 //!
+//! **The surface layer** (`surface_depth` = D_s > 0; docs/edges.md): the first D_s of optical depth
+//! of the ray, whatever its density, joins its first segment(s) — the segments are the runs of
+//! pieces with ρ < T *or* in the layer — and there the edge weight is 1 (falling over the last
+//! `surface_band` of D_s), so eqs. 8–9 render the layer the eye's light comes from, the diffusion
+//! only what lies behind it. With D_s = 0 the gather is the paper's.
+//!
 //! **No double counting of the sun.** The cube must not contain the direct sun (a point light is
 //! never in a cube image). Its multiple scattering inside the segment is added analytically as a
 //! delta in the sun's direction for orders i ≥ 2: a^i q_i E_sun(c_j) HG(g^i, ω_sun·d). Order 1 of the
@@ -86,6 +92,14 @@ pub struct EdgeSettings {
     pub step_m: f32,
     /// Resolve bridges between segments smoothly (section 6 fix); false: the paper's hard switch.
     pub merge_transition: bool,
+    /// D_s: optical depth (unitless, of the medium the gather sees, i.e. after the δ-M transform)
+    /// of the **surface layer** — the first D_s of every eye ray, whatever its density — that is
+    /// rendered with the Poisson orders of eqs. 8–9 like a low-density segment, not with the
+    /// dense source (`render.surface_depth`); 0: only ρ < T, the paper's scheme.
+    pub surface_depth: f32,
+    /// Fraction of D_s over which the surface layer's edge weight falls from 1 to 0 (smoothstep in
+    /// optical depth, ending at D_s), in [0, 1]; 0 switches abruptly at D_s.
+    pub surface_band: f32,
 }
 
 impl Default for EdgeSettings {
@@ -97,6 +111,8 @@ impl Default for EdgeSettings {
             tail: DEFAULT_TAIL,
             step_m: 5.0,
             merge_transition: true,
+            surface_depth: DEFAULT_SURFACE_DEPTH,
+            surface_band: 0.0,
         }
     }
 }
@@ -110,9 +126,27 @@ impl EdgeSettings {
             self.threshold.is_finite() && self.threshold >= 0.0,
             self.threshold,
             "the edge threshold is a density ≥ 0 (0 turns the edge treatment off)",
+        )?;
+        crate::error::check(
+            file,
+            "render.surface_depth",
+            self.surface_depth.is_finite() && self.surface_depth >= 0.0,
+            self.surface_depth,
+            "the surface layer's depth is an optical depth ≥ 0, e.g. 2 (0 turns it off)",
+        )?;
+        crate::error::check(
+            file,
+            "render.surface_band",
+            (0.0..=1.0).contains(&self.surface_band),
+            self.surface_band,
+            "the surface layer's blend is a fraction of its depth in [0, 1]",
         )
     }
 }
+
+/// Default D_s for `render.surface_depth` (optical depth of the δ-M medium); measured in
+/// docs/budget.md ("The surface layer"): the five scenes' scores stop changing beyond 3.
+pub const DEFAULT_SURFACE_DEPTH: f32 = 3.0;
 
 /// Default T for `render.low_density_threshold` (density units); see docs/edges.md.
 pub const DEFAULT_THRESHOLD: f32 = 0.3;
@@ -174,7 +208,12 @@ pub struct PixelPlan {
     pub profile: RayProfile,
     /// The segments whose E the composite needs.
     pub jobs: Vec<EdgeJob>,
+    /// Pieces `0..surface_end` lie in the surface layer (the first D_s of optical depth).
+    pub surface_end: usize,
 }
+
+/// Samples along a segment of the sun irradiance its orders ≥ 2 start from (with the surface layer).
+const SUN_SAMPLES: usize = 8;
 
 /// Largest segment optical depth whose orders are tabulated separately (deeper ones reuse the last).
 const MAX_TABULATED_DEPTH: f64 = 40.0;
@@ -263,7 +302,7 @@ impl<'a> EdgeGather<'a> {
         let q = segment_orders(seg.depth, self.settings.tail);
         let kk: Vec<Rgb> = (0..q.len()).map(|i| k[i.min(k.len() - 1)]).collect();
         let mut e = edge_radiance(&q, &kk, m.optics.albedo, 1);
-        let es = (self.sun.irradiance_at)(seg.center(o, d));
+        let es = self.segment_sun(o, d, seg);
         if es.max_element() > 0.0 && q.len() >= 2 {
             // cos θ = (−ω_sun)·(−d): sunlight leaving towards the eye.
             let c = self.sun.dir.dot(d) as f64;
@@ -272,6 +311,31 @@ impl<'a> EdgeGather<'a> {
             e += edge_radiance(&q, &ks, m.optics.albedo, 2);
         }
         e
+    }
+
+    /// The sun irradiance (W m⁻² per band) the segment's orders ≥ 2 start from. The paper's
+    /// segments are thin and take it at c_j; with the surface layer (`surface_depth` > 0) a
+    /// segment spans optical depths of 1–3, across which the sun decays convexly, so it is the mean
+    /// over the segment per unit optical depth (given i collisions, Poisson's first one is uniform
+    /// in optical depth): density-weighted over [`SUN_SAMPLES`] midpoints (8 and 16 score alike).
+    fn segment_sun(&self, o: Vec3, d: Vec3, seg: &LowSegment) -> Rgb {
+        let at_centre = || (self.sun.irradiance_at)(seg.center(o, d));
+        if self.settings.surface_depth <= 0.0 {
+            return at_centre();
+        }
+        let (mut acc, mut rho_sum) = (Rgb::ZERO, 0f32);
+        for k in 0..SUN_SAMPLES {
+            let t = seg.t0 + (seg.t1 - seg.t0) * (k as f64 + 0.5) / SUN_SAMPLES as f64;
+            let p = (o.as_dvec3() + d.as_dvec3() * t).as_vec3();
+            let rho = self.medium.density_at(p);
+            acc += (self.sun.irradiance_at)(p) * rho;
+            rho_sum += rho;
+        }
+        if rho_sum > 0.0 {
+            acc / rho_sum
+        } else {
+            at_centre()
+        }
     }
 
     /// E_j for a segment, rendering its cube.
@@ -385,13 +449,55 @@ impl<'a> EdgeGather<'a> {
         if self.settings.merge_transition && t > 0.0 {
             refine_extrema(&mut profile, m, self.gap_level(), self.t_lo(), t);
         }
+        let surface_end = self.cut_surface(&mut profile);
         let mut jobs = Vec::new();
-        if t > 0.0 {
-            for (j, seg) in profile.segments(m, t).into_iter().enumerate() {
-                self.plan_edge(&profile, seg.first, seg.end, 1.0, 0, Some(j), &mut jobs);
-            }
+        for (j, seg) in self.top_segments(&profile, surface_end).into_iter().enumerate() {
+            // A segment in the surface layer is one Poisson segment: no bridge splits it (its
+            // dense stretches are what it is for).
+            let depth = if seg.first < surface_end { MAX_BRIDGE_DEPTH } else { 0 };
+            self.plan_edge(&profile, seg.first, seg.end, 1.0, depth, Some(j), &mut jobs);
         }
-        PixelPlan { o, d, profile, jobs }
+        PixelPlan {
+            o,
+            d,
+            profile,
+            jobs,
+            surface_end,
+        }
+    }
+
+    /// Cut `profile` at the surface layer's depth D_s; the number of pieces in the layer.
+    pub fn cut_surface(&self, profile: &mut RayProfile) -> usize {
+        if self.settings.surface_depth > 0.0 {
+            profile.cut_at_depth(self.medium, self.settings.surface_depth as f64)
+        } else {
+            0
+        }
+    }
+
+    /// The ray's top-level edge segments: maximal contiguous runs of pieces with ρ < T (the
+    /// paper's S_j) or in the surface layer (pieces `0..surface_end`).
+    pub fn top_segments(&self, profile: &RayProfile, surface_end: usize) -> Vec<LowSegment> {
+        let t = self.settings.threshold;
+        if t <= 0.0 && surface_end == 0 {
+            return Vec::new();
+        }
+        profile.segments_where(self.medium, |k, p| k < surface_end || p.rho[1] < t)
+    }
+
+    /// Edge weight of the surface layer at optical depth `tau` from the ray's start: 1, falling
+    /// by a smoothstep to 0 over the last `surface_band` of D_s.
+    fn surface_weight(&self, tau: f64) -> f32 {
+        let ds = self.settings.surface_depth as f64;
+        if tau >= ds {
+            return 0.0;
+        }
+        let lo = ds * (1.0 - self.settings.surface_band.clamp(0.0, 1.0) as f64);
+        if tau <= lo {
+            return 1.0;
+        }
+        let x = ((tau - lo) / (ds - lo)) as f32;
+        1.0 - x * x * (3.0 - 2.0 * x)
     }
 
     /// Radiance along `o + t·d` (`d` unit) for t ∈ [0, t_max], with `background` the radiance
@@ -420,6 +526,8 @@ impl<'a> EdgeGather<'a> {
         let sun_scatter = m.optics.sun_scatter(self.sun.dir, -d);
         let to_eye = -d;
         let mut tr = 1.0f64;
+        // Optical depth from the ray's start (the surface layer's coordinate).
+        let mut tau = 0.0f64;
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
         'pieces: for (k, p) in prof.pieces.iter().enumerate() {
             let n = ((p.t1 - p.t0) / self.settings.step_m.max(1e-6) as f64).ceil().max(1.0) as usize;
@@ -433,7 +541,11 @@ impl<'a> EdgeGather<'a> {
                 let tm = 0.5 * (ta + tb);
                 let pos = (od + dd * tm).as_vec3();
                 let rho = prof.rho(m, tm);
-                let w = self.dense_weight(rho);
+                let mut w = self.dense_weight(rho);
+                if k < plan.surface_end {
+                    w = w.min(1.0 - self.surface_weight(tau + 0.5 * delta));
+                }
+                tau += delta;
                 let f = (tr * -(-delta).exp_m1()) as f32;
                 if w > 0.0 {
                     aov.diffusion += f * w * (self.dense)(pos, to_eye);
@@ -482,24 +594,7 @@ fn refine_extrema(prof: &mut RayProfile, m: &Medium, gap: f32, lo: f32, hi: f32)
         }
         let tc = 0.5 * (a + b);
         if tc > p.t0 && tc < p.t1 {
-            let left_tau = prof.depth_within(m, p.t0, tc);
-            let right_tau = prof.depth_within(m, tc, p.t1);
-            let rc = prof.rho(m, tc);
-            let mid = |x: f64, y: f64| prof.rho(m, 0.5 * (x + y));
-            let left = super::segments::Piece {
-                t0: p.t0,
-                t1: tc,
-                tau: left_tau,
-                rho: [p.rho[0], mid(p.t0, tc), rc],
-            };
-            let right = super::segments::Piece {
-                t0: tc,
-                t1: p.t1,
-                tau: right_tau,
-                rho: [rc, mid(tc, p.t1), p.rho[2]],
-            };
-            prof.pieces[k] = left;
-            prof.pieces.insert(k + 1, right);
+            prof.split_piece(m, k, tc);
             k += 2;
         } else {
             k += 1;

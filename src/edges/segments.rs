@@ -163,22 +163,72 @@ impl RayProfile {
     /// Maximal runs of contiguous pieces with mid-density below `level` (the paper's segments
     /// for level = T), with D_j and c_j.
     pub fn segments(&self, m: &Medium, level: f32) -> Vec<LowSegment> {
+        self.segments_where(m, |_, p| p.rho[1] < level)
+    }
+
+    /// Maximal runs of contiguous pieces for which `inside(k, piece)` holds, with D_j and c_j.
+    pub fn segments_where(&self, m: &Medium, inside: impl Fn(usize, &Piece) -> bool) -> Vec<LowSegment> {
         let mut out = Vec::new();
         let mut k = 0;
         let n = self.pieces.len();
         while k < n {
-            if self.pieces[k].rho[1] >= level {
+            if !inside(k, &self.pieces[k]) {
                 k += 1;
                 continue;
             }
             let first = k;
             k += 1;
-            while k < n && self.pieces[k].rho[1] < level && self.pieces[k].t0 == self.pieces[k - 1].t1 {
+            while k < n && inside(k, &self.pieces[k]) && self.pieces[k].t0 == self.pieces[k - 1].t1 {
                 k += 1;
             }
             out.push(self.segment(m, first, k));
         }
         out
+    }
+
+    /// Split the piece in which the optical depth accumulated from the ray's start reaches
+    /// `target` (unitless) there, so that a piece boundary lies at exactly that depth; returns the
+    /// number of pieces before it (all of them when the whole ray is shallower).
+    pub fn cut_at_depth(&mut self, m: &Medium, target: f64) -> usize {
+        let mut acc = 0.0;
+        for k in 0..self.pieces.len() {
+            let p = self.pieces[k];
+            if acc + p.tau <= target {
+                acc += p.tau;
+                continue;
+            }
+            if acc >= target {
+                return k;
+            }
+            let tc = self.t_at_depth(m, k, k + 1, target - acc);
+            if tc <= p.t0 || tc >= p.t1 {
+                return if tc <= p.t0 { k } else { k + 1 };
+            }
+            self.split_piece(m, k, tc);
+            return k + 1;
+        }
+        self.pieces.len()
+    }
+
+    /// Split piece `k` at distance `tc` (strictly inside it) into two, with exact depths.
+    pub fn split_piece(&mut self, m: &Medium, k: usize, tc: f64) {
+        let p = self.pieces[k];
+        let mid = |a: f64, b: f64| self.rho(m, 0.5 * (a + b));
+        let rc = self.rho(m, tc);
+        let left = Piece {
+            t0: p.t0,
+            t1: tc,
+            tau: self.depth_within(m, p.t0, tc),
+            rho: [p.rho[0], mid(p.t0, tc), rc],
+        };
+        let right = Piece {
+            t0: tc,
+            t1: p.t1,
+            tau: self.depth_within(m, tc, p.t1),
+            rho: [rc, mid(tc, p.t1), p.rho[2]],
+        };
+        self.pieces[k] = left;
+        self.pieces.insert(k + 1, right);
     }
 
     /// The segment made of pieces `first..end` (contiguous), with its depth and centre.

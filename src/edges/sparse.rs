@@ -103,10 +103,9 @@ pub fn gather_image(
         .map(|i| {
             let r = ray((i % w) as u32, (i / w) as u32);
             let t = g.settings().threshold;
-            if t <= 0.0 {
-                return Vec::new();
-            }
-            super::segments::RayProfile::trace(g.medium(), r.o, r.d, 0.0, r.t_max, &[t]).segments(g.medium(), t)
+            let mut prof = super::segments::RayProfile::trace(g.medium(), r.o, r.d, 0.0, r.t_max, &[t]);
+            let surface_end = g.cut_surface(&mut prof);
+            g.top_segments(&prof, surface_end)
         })
         .collect();
     let cache: Vec<Vec<OnceLock<Vec<Rgb>>>> = tops.iter().map(|t| (0..t.len()).map(|_| OnceLock::new()).collect()).collect();
@@ -139,8 +138,8 @@ pub fn gather_image(
                         direct.fetch_add(1, Ordering::Relaxed);
                         return g.segment_radiance(r.o, r.d, &job.seg);
                     };
-                    // The plan's top segments are the same as `tops[i]` (same threshold) but its
-                    // profile is also cut at T_lo: match by centre distance.
+                    // The plan's top segments are the same as `tops[i]` (same threshold and surface
+                    // layer) but its profile is also cut at T_lo: match by centre distance.
                     let tc = job.seg.t_center;
                     let j_own = nearest(&tops[i], tc).map(|(j, _)| j);
                     let mut s = block;

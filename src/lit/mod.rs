@@ -160,6 +160,16 @@ impl LitVolume {
         }
     }
 
+    /// [`Self::diffuse`] less I0: the first moment's and the reduced sky's single scattering
+    /// terms, where attached (W·m⁻²·sr⁻¹ per unit albedo; zero without them).
+    #[inline]
+    pub fn diffuse_beyond_i0(&self, v: Vec3, rho: f32, to_eye: Vec3) -> Rgb {
+        if self.flux.is_none() && self.sky_single.is_none() {
+            return Rgb::ZERO;
+        }
+        self.diffuse(v, rho, to_eye) - self.i0(v, rho)
+    }
+
     /// The source J per unit extinction (W·m⁻²·sr⁻¹) at continuous voxel coordinates `v` with
     /// trilinear density `rho`, leaving towards the eye along `to_eye` (unit); module docs.
     #[inline]

@@ -133,8 +133,17 @@ pub struct GatherCubes<'a> {
 impl<'a> GatherCubes<'a> {
     /// Cubes over `lit` with the scene's cube settings.
     pub fn new(lit: &'a LitVolume, scene: &Scene) -> Self {
+        let mut renderer = CubeRenderer::new(lit, &scene.render.cubes);
+        // With the surface layer (`render.surface_depth` > 0) the cubes see the dense cloud around
+        // them, and what they see is scattered again by the orders: the cloud emits the gather's
+        // own diffuse source, and the sun's single scattering uses the δ-M medium's (a′, g′) —
+        // the TMS pair would count the forward peak twice, once in the δ-M transmittance
+        // (docs/edges.md, "The surface layer"). Off: the paper's cubes.
+        let surface = scene.render.edges.surface_depth > 0.0;
+        renderer.gather_source = surface;
+        renderer.sun_transformed = surface;
         GatherCubes {
-            renderer: CubeRenderer::new(lit, &scene.render.cubes),
+            renderer,
             exclude_radius: lit.medium.min_voxel(),
             rear_half_resolution: true,
         }
