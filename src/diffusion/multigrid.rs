@@ -1,9 +1,11 @@
 //! Matrix-free geometric multigrid on the voxel lattice, used as the preconditioner of conjugate
 //! gradients (MGPCG, McAdams et al. 2010).
 //!
-//! * **Operator.** A symmetric 7-point stencil stored as arrays on the level's box: the diagonal and
-//!   one coupling per axis to the +axis neighbour. A cell with zero diagonal is not an unknown
-//!   (empty space), so the irregular cloud domain needs no special casing.
+//! * **Operator.** A symmetric 7-point stencil. Callers assemble it as a [`Stencil`] on the box of
+//!   the domain (a cell with zero diagonal is not an unknown); [`Hierarchy::build`] turns every
+//!   level into a [`Level`] that stores only the unknowns, with their six neighbours' indices and
+//!   couplings, so the memory and the work of an iteration scale with the cloud, not its box (the
+//!   cloud fills ~10 % of its tight box).
 //! * **Coarsening** by 2×2×2 aggregation with the Galerkin product Aᶜ = PᵀAP, P the piecewise-
 //!   constant prolongation: the coarse operator is again a 7-point stencil (an aggregate's diagonal
 //!   sums its children's diagonals and the couplings inside it; a coarse coupling sums the fine
@@ -11,12 +13,12 @@
 //!   jumps and the domain's shape exactly, keep symmetry and definiteness, and need no
 //!   re-discretisation. A coarse cell exists where any child is full.
 //! * **Smoother:** red-black Gauss–Seidel, red then black before the coarse correction and black
-//!   then red after it, so the cycle is a symmetric preconditioner. Sweeps, residuals and transfers
-//!   visit only each row's span of unknowns (the cloud fills ~10 % of its box).
+//!   then red after it, so the cycle is a symmetric preconditioner. A level stores its red
+//!   unknowns first, then its black ones, so a colour's pass streams through its own rows.
 //! * **Cycle:** a W-cycle whose coarse correction is scaled by [`OVER_CORRECTION`].
 //! * **Coarsest level** (≤ [`COARSE_CELLS`] unknowns): dense Cholesky, exact.
-//! * **Determinism:** updates within a colour are independent; reductions sum per-plane partial
-//!   sums in plane order. Bit-identical at any thread count.
+//! * **Determinism:** updates within a colour are independent; reductions sum fixed-size chunks'
+//!   partial sums in order. Bit-identical at any thread count.
 
 use super::SolveStats;
 use rayon::prelude::*;
@@ -32,7 +34,14 @@ pub const COARSE_CELLS: usize = 800;
 /// level) and two smoothing sweeps were tried and did not do better per unit of work.
 pub const OVER_CORRECTION: f64 = 1.5;
 
-/// A symmetric 7-point stencil on a box of cells, x fastest.
+/// Rows per parallel task (and per partial sum of the reductions: fixed, so sums do not depend
+/// on the thread count).
+const CHUNK: usize = 4096;
+
+/// Marks a pad entry in [`Level::pos`].
+const PAD: u32 = u32::MAX;
+
+/// A symmetric 7-point stencil on a box of cells, x fastest: the form the callers assemble.
 #[derive(Clone, Debug)]
 pub struct Stencil {
     /// Cells per axis.
@@ -41,10 +50,6 @@ pub struct Stencil {
     pub diag: Vec<f64>,
     /// `off[a][c]`: matrix entry between cell c and its +a neighbour (0 at the box edge).
     pub off: [Vec<f64>; 3],
-    /// Per row (j + ny·k): the x range [first, last + 1) of its unknowns, so that the sweeps skip
-    /// the empty part of the box (the cloud fills ~10 % of its tight box); empty until
-    /// [`Stencil::find_spans`], which means whole rows.
-    spans: Vec<[u32; 2]>,
 }
 
 impl Stencil {
@@ -55,135 +60,7 @@ impl Stencil {
             dims,
             diag: vec![0.0; n],
             off: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
-            spans: Vec::new(),
         }
-    }
-
-    /// Record each row's range of unknowns (call once the diagonal is final).
-    fn find_spans(&mut self) {
-        let nx = self.dims[0];
-        self.spans = self
-            .diag
-            .chunks(nx)
-            .map(
-                |row| match (row.iter().position(|d| *d > 0.0), row.iter().rposition(|d| *d > 0.0)) {
-                    (Some(a), Some(b)) => [a as u32, b as u32 + 1],
-                    _ => [0, 0],
-                },
-            )
-            .collect();
-    }
-
-    /// Row `r`'s x range holding all its unknowns.
-    #[inline]
-    fn span(&self, r: usize) -> std::ops::Range<usize> {
-        match self.spans.get(r) {
-            Some([a, b]) => *a as usize..*b as usize,
-            None => 0..self.dims[0],
-        }
-    }
-
-    /// Number of unknowns.
-    pub fn unknowns(&self) -> usize {
-        self.diag.iter().filter(|d| **d > 0.0).count()
-    }
-
-    #[inline]
-    fn plane(&self) -> usize {
-        self.dims[0] * self.dims[1]
-    }
-
-    /// (A x)_c for one cell.
-    #[inline]
-    fn row(&self, x: &[f64], c: usize, ijk: [usize; 3]) -> f64 {
-        let [nx, ny, nz] = self.dims;
-        let p = nx * ny;
-        let mut s = self.diag[c] * x[c];
-        if ijk[0] + 1 < nx {
-            s += self.off[0][c] * x[c + 1];
-        }
-        if ijk[0] > 0 {
-            s += self.off[0][c - 1] * x[c - 1];
-        }
-        if ijk[1] + 1 < ny {
-            s += self.off[1][c] * x[c + nx];
-        }
-        if ijk[1] > 0 {
-            s += self.off[1][c - nx] * x[c - nx];
-        }
-        if ijk[2] + 1 < nz {
-            s += self.off[2][c] * x[c + p];
-        }
-        if ijk[2] > 0 {
-            s += self.off[2][c - p] * x[c - p];
-        }
-        s
-    }
-
-    /// y = A x (zero on non-unknowns).
-    pub fn apply(&self, x: &[f64], y: &mut [f64]) {
-        let p = self.plane();
-        let [nx, ny, _] = self.dims;
-        y.par_chunks_mut(p).enumerate().for_each(|(k, yp)| {
-            for j in 0..ny {
-                let sp = self.span(j + ny * k);
-                yp[nx * j..nx * j + sp.start].fill(0.0);
-                yp[nx * j + sp.end..nx * (j + 1)].fill(0.0);
-                for i in sp {
-                    let l = i + nx * j;
-                    let c = l + p * k;
-                    yp[l] = if self.diag[c] > 0.0 { self.row(x, c, [i, j, k]) } else { 0.0 };
-                }
-            }
-        });
-    }
-
-    /// r = b − A x.
-    fn residual(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
-        let p = self.plane();
-        let [nx, ny, _] = self.dims;
-        r.par_chunks_mut(p).enumerate().for_each(|(k, rp)| {
-            for j in 0..ny {
-                let sp = self.span(j + ny * k);
-                rp[nx * j..nx * j + sp.start].fill(0.0);
-                rp[nx * j + sp.end..nx * (j + 1)].fill(0.0);
-                for i in sp {
-                    let l = i + nx * j;
-                    let c = l + p * k;
-                    rp[l] = if self.diag[c] > 0.0 {
-                        b[c] - self.row(x, c, [i, j, k])
-                    } else {
-                        0.0
-                    };
-                }
-            }
-        });
-    }
-
-    /// One Gauss–Seidel pass over the cells of `color` ((i + j + k) mod 2).
-    fn gs_color(&self, x: &mut [f64], b: &[f64], color: usize) {
-        let p = self.plane();
-        let [nx, ny, _] = self.dims;
-        let ptr = SyncPtr(x.as_mut_ptr());
-        let len = x.len();
-        (0..self.dims[2]).into_par_iter().for_each(|k| {
-            // SAFETY: this pass writes only cells of one colour and reads only their neighbours, which
-            // have the other colour; each cell is written by exactly one task (its plane k).
-            let x = unsafe { std::slice::from_raw_parts_mut(ptr.get(), len) };
-            for j in 0..ny {
-                let sp = self.span(j + ny * k);
-                // First cell of this colour in the span: i ≡ color + j + k (mod 2).
-                let start = sp.start + (color + j + k + sp.start) % 2;
-                for i in (start..sp.end).step_by(2) {
-                    let c = i + nx * j + p * k;
-                    let d = self.diag[c];
-                    if d > 0.0 {
-                        let s = self.row(x, c, [i, j, k]) - d * x[c];
-                        x[c] = (b[c] - s) / d;
-                    }
-                }
-            }
-        });
     }
 
     /// Galerkin coarse operator PᵀAP for 2×2×2 piecewise-constant aggregation.
@@ -240,25 +117,253 @@ impl Stencil {
     }
 }
 
-#[derive(Clone, Copy)]
-struct SyncPtr(*mut f64);
-// SAFETY: used only for the colour-disjoint writes of `gs_color`.
-unsafe impl Send for SyncPtr {}
-unsafe impl Sync for SyncPtr {}
-impl SyncPtr {
-    #[inline]
-    fn get(self) -> *mut f64 {
-        self.0
+/// One row of a [`Level`]: the couplings to the six neighbours (−x, +x, −y, +y, −z, +z), the
+/// diagonal and the neighbours' entries.
+#[derive(Clone, Copy, Debug)]
+struct Row {
+    cpl: [f64; 6],
+    diag: f64,
+    nbr: [u32; 6],
+}
+
+/// One level's operator on its unknowns only.
+///
+/// Entries `0..red` are the unknowns of colour 0 ((i + j + k) even) in box order, entry `red` a
+/// pad, then the unknowns of colour 1 and a last pad. A level's vectors have one value per entry;
+/// the pads hold 0 and stand in for missing neighbours (a coupling of 0 to the other colour's
+/// pad), so the rows need no branches and a colour's pass reads only the other colour.
+#[derive(Clone, Debug)]
+struct Level {
+    red: usize,
+    rows: Vec<Row>,
+    /// Box index (x fastest, on the level's box) per entry; [`PAD`] on the pads.
+    pos: Vec<u32>,
+    /// Entry of the next coarser level holding each entry (a pad of it for the pads); empty on
+    /// the coarsest level.
+    parent: Vec<u32>,
+    /// The finer level's entries aggregated into entry e: `children[child_start[e]..child_start[e + 1]]`;
+    /// empty on the finest level.
+    child_start: Vec<u32>,
+    children: Vec<u32>,
+}
+
+/// Σ_q cpl_q · x[nbr_q − off]: a row's off-diagonal part, `x` the slice of entries from `off` on.
+#[inline]
+fn couple(row: &Row, x: &[f64], off: usize) -> f64 {
+    let v = |q: usize| row.cpl[q] * x[row.nbr[q] as usize - off];
+    (v(0) + v(1)) + (v(2) + v(3)) + (v(4) + v(5))
+}
+
+impl Level {
+    /// The unknowns of `s` and the map from its box cells to their entries ([`PAD`] elsewhere).
+    fn from_stencil(s: &Stencil) -> (Level, Vec<u32>) {
+        let [nx, ny, nz] = s.dims;
+        let (mut reds, mut blacks) = (Vec::new(), Vec::new());
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    let c = i + nx * (j + ny * k);
+                    if s.diag[c] > 0.0 {
+                        if (i + j + k) % 2 == 0 { &mut reds } else { &mut blacks }.push(c as u32);
+                    }
+                }
+            }
+        }
+        let red = reds.len();
+        let mut pos = reds;
+        pos.push(PAD);
+        pos.append(&mut blacks);
+        pos.push(PAD);
+        let mut index = vec![PAD; s.diag.len()];
+        for (e, c) in pos.iter().enumerate() {
+            if *c != PAD {
+                index[*c as usize] = e as u32;
+            }
+        }
+        let pads = [(pos.len() - 1) as u32, red as u32];
+        let strides = [1, nx, nx * ny];
+        let rows = pos
+            .par_iter()
+            .enumerate()
+            .map(|(e, &c)| {
+                if c == PAD {
+                    return Row {
+                        cpl: [0.0; 6],
+                        diag: 0.0,
+                        nbr: [e as u32; 6],
+                    };
+                }
+                let c = c as usize;
+                let ijk = [c % nx, (c / nx) % ny, c / (nx * ny)];
+                let mut row = Row {
+                    cpl: [0.0; 6],
+                    diag: s.diag[c],
+                    nbr: [pads[usize::from(e > red)]; 6],
+                };
+                for ax in 0..3 {
+                    let mut link = |q: usize, nb: usize, v: f64| {
+                        if v != 0.0 && index[nb] != PAD {
+                            row.nbr[q] = index[nb];
+                            row.cpl[q] = v;
+                        }
+                    };
+                    if ijk[ax] > 0 {
+                        link(2 * ax, c - strides[ax], s.off[ax][c - strides[ax]]);
+                    }
+                    if ijk[ax] + 1 < s.dims[ax] {
+                        link(2 * ax + 1, c + strides[ax], s.off[ax][c]);
+                    }
+                }
+                row
+            })
+            .collect();
+        let level = Level {
+            red,
+            rows,
+            pos,
+            parent: Vec::new(),
+            child_start: Vec::new(),
+            children: Vec::new(),
+        };
+        (level, index)
+    }
+
+    /// Entries, pads included (the length of the level's vectors).
+    fn len(&self) -> usize {
+        self.rows.len()
+    }
+
+    fn unknowns(&self) -> usize {
+        self.len() - 2
+    }
+
+    /// Record that `coarse` (with box-to-entry map `index`) aggregates this level, whose box has
+    /// `dims` cells: each entry's parent and each coarse entry's children.
+    fn link(&mut self, dims: [usize; 3], coarse: &mut Level, index: &[u32]) {
+        let [nx, ny, _] = dims;
+        let cd = [nx.div_ceil(2), ny.div_ceil(2)];
+        let pad = coarse.red as u32;
+        self.parent = self
+            .pos
+            .par_iter()
+            .map(|&c| {
+                if c == PAD {
+                    return pad;
+                }
+                let c = c as usize;
+                let (i, j, k) = (c % nx, (c / nx) % ny, c / (nx * ny));
+                // A coarse cell exists wherever a child is full (its diagonal sums theirs).
+                let p = index[i / 2 + cd[0] * (j / 2 + cd[1] * (k / 2))];
+                if p == PAD {
+                    pad
+                } else {
+                    p
+                }
+            })
+            .collect();
+        let mut start = vec![0u32; coarse.len() + 1];
+        for (p, c) in self.parent.iter().zip(&self.pos) {
+            if *c != PAD {
+                start[*p as usize + 1] += 1;
+            }
+        }
+        for e in 0..coarse.len() {
+            start[e + 1] += start[e];
+        }
+        let mut fill = start.clone();
+        let mut children = vec![0u32; start[coarse.len()] as usize];
+        for (f, (p, c)) in self.parent.iter().zip(&self.pos).enumerate() {
+            if *c != PAD {
+                children[fill[*p as usize] as usize] = f as u32;
+                fill[*p as usize] += 1;
+            }
+        }
+        coarse.child_start = start;
+        coarse.children = children;
+    }
+
+    /// r = b − A x, or r = A x without `b` (0 on the pads).
+    fn residual(&self, x: &[f64], b: Option<&[f64]>, r: &mut [f64]) {
+        r.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, rs)| {
+            let first = ci * CHUNK;
+            for (t, rv) in rs.iter_mut().enumerate() {
+                let e = first + t;
+                let row = &self.rows[e];
+                let ax = row.diag * x[e] + couple(row, x, 0);
+                *rv = match b {
+                    Some(b) => b[e] - ax,
+                    None => ax,
+                };
+            }
+        });
+    }
+
+    /// One Gauss–Seidel pass over the unknowns of `colour`: each reads only the other colour.
+    fn smooth(&self, x: &mut [f64], b: &[f64], colour: usize) {
+        let red = self.red;
+        let (xr, xb) = x.split_at_mut(red + 1);
+        let black = xb.len() - 1;
+        let (mine, other, first, off) = if colour == 0 {
+            (&mut xr[..red], &*xb, 0, red + 1)
+        } else {
+            (&mut xb[..black], &*xr, red + 1, 0)
+        };
+        mine.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, xs)| {
+            let start = first + ci * CHUNK;
+            for (t, xv) in xs.iter_mut().enumerate() {
+                let row = &self.rows[start + t];
+                *xv = (b[start + t] - couple(row, other, off)) / row.diag;
+            }
+        });
+    }
+
+    /// b = Pᵀ r: each entry sums its children's residuals `r` (of the finer level).
+    fn restrict(&self, r: &[f64], b: &mut [f64]) {
+        b.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, bs)| {
+            let first = ci * CHUNK;
+            for (t, v) in bs.iter_mut().enumerate() {
+                let e = first + t;
+                let ch = &self.children[self.child_start[e] as usize..self.child_start[e + 1] as usize];
+                *v = ch.iter().map(|f| r[*f as usize]).sum();
+            }
+        });
+    }
+
+    /// x += w P xc: each entry adds its parent's correction.
+    fn prolong(&self, x: &mut [f64], xc: &[f64], w: f64) {
+        x.par_chunks_mut(CHUNK).zip(self.parent.par_chunks(CHUNK)).for_each(|(xs, ps)| {
+            for (v, p) in xs.iter_mut().zip(ps) {
+                *v += w * xc[*p as usize];
+            }
+        });
     }
 }
 
 /// Deterministic dot product: per-chunk partial sums added in order.
-pub fn dot(a: &[f64], b: &[f64]) -> f64 {
-    const CH: usize = 8192;
+fn dot(a: &[f64], b: &[f64]) -> f64 {
     let parts: Vec<f64> = a
-        .par_chunks(CH)
-        .zip(b.par_chunks(CH))
+        .par_chunks(CHUNK)
+        .zip(b.par_chunks(CHUNK))
         .map(|(x, y)| x.iter().zip(y).map(|(p, q)| p * q).sum::<f64>())
+        .collect();
+    parts.iter().sum()
+}
+
+/// The CG step y += α p, r −= α q; returns r·r (summed as [`dot`] does).
+fn cg_step(y: &mut [f64], r: &mut [f64], p: &[f64], q: &[f64], alpha: f64) -> f64 {
+    let parts: Vec<f64> = y
+        .par_chunks_mut(CHUNK)
+        .zip(r.par_chunks_mut(CHUNK))
+        .zip(p.par_chunks(CHUNK).zip(q.par_chunks(CHUNK)))
+        .map(|((ys, rs), (ps, qs))| {
+            let mut s = 0.0;
+            for (((yv, rv), pv), qv) in ys.iter_mut().zip(rs.iter_mut()).zip(ps).zip(qs) {
+                *yv += alpha * pv;
+                *rv -= alpha * qv;
+                s += *rv * *rv;
+            }
+            s
+        })
         .collect();
     parts.iter().sum()
 }
@@ -266,6 +371,7 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
 /// Dense Cholesky factor of the coarsest level.
 #[derive(Clone, Debug)]
 struct Dense {
+    /// The level's entries that are unknowns.
     cells: Vec<usize>,
     l: Vec<f64>,
 }
@@ -295,26 +401,21 @@ fn cholesky_in_place(a: &mut [f64], n: usize) -> f64 {
 }
 
 impl Dense {
-    fn build(s: &Stencil) -> Dense {
-        let cells: Vec<usize> = (0..s.diag.len()).filter(|c| s.diag[*c] > 0.0).collect();
+    fn build(s: &Level) -> Dense {
+        let cells: Vec<usize> = (0..s.len()).filter(|e| s.pos[*e] != PAD).collect();
         let n = cells.len();
-        let mut index = vec![usize::MAX; s.diag.len()];
-        for (q, c) in cells.iter().enumerate() {
-            index[*c] = q;
+        let mut index = vec![usize::MAX; s.len()];
+        for (q, e) in cells.iter().enumerate() {
+            index[*e] = q;
         }
         let mut a = vec![0f64; n * n];
-        let [nx, ny, _] = s.dims;
-        let strides = [1, nx, nx * ny];
-        for (q, &c) in cells.iter().enumerate() {
-            a[q * n + q] = s.diag[c];
-            for ax in 0..3 {
-                let v = s.off[ax][c];
-                if v != 0.0 {
-                    let r = index[c + strides[ax]];
-                    if r != usize::MAX {
-                        a[q * n + r] += v;
-                        a[r * n + q] += v;
-                    }
+        for (q, &e) in cells.iter().enumerate() {
+            let row = &s.rows[e];
+            a[q * n + q] = row.diag;
+            for (v, nb) in row.cpl.iter().zip(row.nbr) {
+                let r = index[nb as usize];
+                if *v != 0.0 && r != usize::MAX {
+                    a[q * n + r] += v;
                 }
             }
         }
@@ -340,22 +441,29 @@ impl Dense {
             }
             y[i] = v / self.l[i * n + i];
         }
-        x.iter_mut().for_each(|v| *v = 0.0);
+        x.fill(0.0);
         for (q, c) in self.cells.iter().enumerate() {
             x[*c] = y[q];
         }
     }
 }
 
+/// Vectors of one multigrid level's cycle: its residual and the next level's right-hand side
+/// and correction.
+struct Work {
+    r: Vec<f64>,
+    bc: Vec<f64>,
+    xc: Vec<f64>,
+}
+
 /// The multigrid hierarchy of one (diagonally scaled) operator.
 #[derive(Clone, Debug)]
 pub struct Hierarchy {
-    /// D^{-1/2} of the finest operator (0 on non-unknowns).
+    /// D^{-1/2} of the finest operator per entry of the finest level (0 on the pads).
     scale: Vec<f64>,
     /// Levels, finest first (scaled).
-    levels: Vec<Stencil>,
+    levels: Vec<Level>,
     coarse: Dense,
-    unknowns: usize,
     /// Coarse-grid visits per level (1: V-cycle, 2: W-cycle).
     pub cycle: usize,
     /// Scale of the coarse-grid correction (over-correction of piecewise-constant aggregation).
@@ -372,8 +480,8 @@ impl Hierarchy {
 
     /// As [`Hierarchy::build`], coarsening until a level has at most `coarse_cells` unknowns.
     pub fn build_with(mut a: Stencil, coarse_cells: usize) -> Hierarchy {
-        let scale: Vec<f64> = a.diag.iter().map(|d| if *d > 0.0 { 1.0 / d.sqrt() } else { 0.0 }).collect();
-        let [nx, ny, nz] = a.dims;
+        let box_scale: Vec<f64> = a.diag.iter().map(|d| if *d > 0.0 { 1.0 / d.sqrt() } else { 0.0 }).collect();
+        let [nx, ny, _] = a.dims;
         let strides = [1, nx, nx * ny];
         let dims = a.dims;
         for (ax, off) in a.off.iter_mut().enumerate() {
@@ -381,37 +489,42 @@ impl Hierarchy {
                 if *v != 0.0 {
                     let ijk = [c % nx, (c / nx) % ny, c / (nx * ny)];
                     if ijk[ax] + 1 < dims[ax] {
-                        *v *= scale[c] * scale[c + strides[ax]];
+                        *v *= box_scale[c] * box_scale[c + strides[ax]];
                     } else {
                         *v = 0.0;
                     }
                 }
             });
         }
-        let _ = nz;
         a.diag.iter_mut().for_each(|d| {
             if *d > 0.0 {
                 *d = 1.0;
             }
         });
-        let unknowns = a.unknowns();
-        a.find_spans();
-        let mut levels = vec![a];
-        loop {
-            let last = levels.last().expect("at least one level");
-            if last.unknowns() <= coarse_cells || last.dims.iter().all(|d| *d <= 1) {
-                break;
-            }
-            let mut c = last.coarsen();
-            c.find_spans();
-            levels.push(c);
+        // Each level is built from its box form, which is dropped once the next one exists.
+        let (mut level, _) = Level::from_stencil(&a);
+        let scale = level
+            .pos
+            .iter()
+            .map(|c| if *c == PAD { 0.0 } else { box_scale[*c as usize] })
+            .collect();
+        drop(box_scale);
+        let mut levels = Vec::new();
+        let mut fine = a;
+        while level.unknowns() > coarse_cells && fine.dims.iter().any(|d| *d > 1) {
+            let c = fine.coarsen();
+            let (mut next, index) = Level::from_stencil(&c);
+            level.link(fine.dims, &mut next, &index);
+            levels.push(std::mem::replace(&mut level, next));
+            fine = c;
         }
-        let coarse = Dense::build(levels.last().expect("level"));
+        drop(fine);
+        let coarse = Dense::build(&level);
+        levels.push(level);
         Hierarchy {
             scale,
             levels,
             coarse,
-            unknowns,
             cycle: 2,
             over_correction: OVER_CORRECTION,
             sweeps: 1,
@@ -424,119 +537,119 @@ impl Hierarchy {
         self.levels.len()
     }
 
-    /// One V-cycle on level `l` for A_l x = b, x starting at zero.
-    fn vcycle(&self, l: usize, b: &[f64], x: &mut [f64]) {
-        let s = &self.levels[l];
+    /// One cycle on level `l` for A_l x = b, x starting at zero; `work` holds the vectors of
+    /// levels l and below.
+    fn cycle(&self, l: usize, b: &[f64], x: &mut [f64], work: &mut [Work]) {
         if l + 1 == self.levels.len() {
             self.coarse.solve(b, x);
             return;
         }
-        x.iter_mut().for_each(|v| *v = 0.0);
+        let s = &self.levels[l];
+        x.fill(0.0);
         for _ in 0..self.sweeps {
-            s.gs_color(x, b, 0);
-            s.gs_color(x, b, 1);
+            s.smooth(x, b, 0);
+            s.smooth(x, b, 1);
         }
-        let mut r = vec![0f64; x.len()];
-        let c = &self.levels[l + 1];
+        let (w, rest) = work.split_first_mut().expect("a work entry per level above the coarsest");
         let coarse_is_direct = l + 2 == self.levels.len();
         let visits = if coarse_is_direct { 1 } else { self.cycle.max(1) };
         for visit in 0..visits {
-            s.residual(x, b, &mut r);
-            let [nx, ny, nz] = s.dims;
-            let cd = c.dims;
-            let cp = cd[0] * cd[1];
-            let fp = nx * ny;
-            let mut bc = vec![0f64; c.diag.len()];
-            bc.par_chunks_mut(cp).enumerate().for_each(|(kc, bp)| {
-                for k in 2 * kc..(2 * kc + 2).min(nz) {
-                    for j in 0..ny {
-                        for i in s.span(j + ny * k) {
-                            bp[i / 2 + cd[0] * (j / 2)] += r[i + nx * j + fp * k];
-                        }
-                    }
-                }
-            });
-            let mut xc = vec![0f64; c.diag.len()];
-            self.vcycle(l + 1, &bc, &mut xc);
-            let w = self.over_correction;
-            x.par_chunks_mut(fp).enumerate().for_each(|(k, xp)| {
-                for j in 0..ny {
-                    for i in s.span(j + ny * k) {
-                        let f = i + nx * j;
-                        if s.diag[f + fp * k] > 0.0 {
-                            xp[f] += w * xc[i / 2 + cd[0] * (j / 2) + cp * (k / 2)];
-                        }
-                    }
-                }
-            });
+            s.residual(x, Some(b), &mut w.r);
+            self.levels[l + 1].restrict(&w.r, &mut w.bc);
+            self.cycle(l + 1, &w.bc, &mut w.xc, rest);
+            s.prolong(x, &w.xc, self.over_correction);
             if visit + 1 < visits {
                 // Between the two coarse visits of a W-cycle: a symmetric sweep pair.
-                s.gs_color(x, b, 1);
-                s.gs_color(x, b, 0);
-                s.gs_color(x, b, 0);
-                s.gs_color(x, b, 1);
+                s.smooth(x, b, 1);
+                s.smooth(x, b, 0);
+                s.smooth(x, b, 0);
+                s.smooth(x, b, 1);
             }
         }
         for _ in 0..self.sweeps {
-            s.gs_color(x, b, 1);
-            s.gs_color(x, b, 0);
+            s.smooth(x, b, 1);
+            s.smooth(x, b, 0);
         }
     }
 
-    /// Apply the preconditioner z = M⁻¹ r (one V-cycle).
-    pub fn precondition(&self, r: &[f64], z: &mut [f64]) {
-        self.vcycle(0, r, z);
+    /// Solve A x = b (unscaled A, as assembled; `b`, `x0` and the result on its box) by MGPCG
+    /// from `x0` (or zero) to relative residual `tol` of the scaled system, at most `max_iter`
+    /// iterations.
+    pub fn solve(&self, b: &[f64], x0: Option<&[f64]>, tol: f64, max_iter: usize) -> (Vec<f64>, SolveStats) {
+        let a = &self.levels[0];
+        let gather = |v: &[f64], f: fn(f64, f64) -> f64| -> Vec<f64> {
+            a.pos
+                .par_iter()
+                .zip(&self.scale)
+                .map(|(c, s)| if *c == PAD { 0.0 } else { f(v[*c as usize], *s) })
+                .collect()
+        };
+        let bs = gather(b, |v, s| v * s);
+        let mut y = match x0 {
+            Some(x) => gather(x, |v, s| v / s),
+            None => vec![0.0; a.len()],
+        };
+        let stats = self.solve_scaled(&bs, &mut y, tol, max_iter);
+        let mut out = vec![0.0; b.len()];
+        for ((c, v), s) in a.pos.iter().zip(&y).zip(&self.scale) {
+            if *c != PAD {
+                out[*c as usize] = v * s;
+            }
+        }
+        (out, stats)
     }
 
-    /// Solve A x = b (unscaled A, as assembled) by MGPCG from `x0` (or zero) to relative residual
-    /// `tol` of the scaled system, at most `max_iter` iterations.
-    pub fn solve(&self, b: &[f64], x0: Option<&[f64]>, tol: f64, max_iter: usize) -> (Vec<f64>, SolveStats) {
-        let n = b.len();
+    /// MGPCG on the scaled system A y = bs (vectors on the finest level's entries).
+    fn solve_scaled(&self, bs: &[f64], y: &mut [f64], tol: f64, max_iter: usize) -> SolveStats {
         let a = &self.levels[0];
-        let bs: Vec<f64> = b.iter().zip(&self.scale).map(|(v, s)| v * s).collect();
-        let mut y: Vec<f64> = match x0 {
-            Some(x) => x.iter().zip(&self.scale).map(|(v, s)| if *s > 0.0 { v / s } else { 0.0 }).collect(),
-            None => vec![0.0; n],
-        };
-        let bnorm = dot(&bs, &bs).sqrt();
+        let n = a.len();
+        let bnorm = dot(bs, bs).sqrt();
         let mut stats = SolveStats {
             iterations: 0,
             relative_residual: 0.0,
             history: Vec::new(),
-            unknowns: self.unknowns,
+            unknowns: a.unknowns(),
             levels: self.levels.len(),
         };
         if bnorm == 0.0 {
+            y.fill(0.0);
             stats.history.push(0.0);
-            return (vec![0.0; n], stats);
+            return stats;
         }
+        let mut work: Vec<Work> = self
+            .levels
+            .windows(2)
+            .map(|w| Work {
+                r: vec![0.0; w[0].len()],
+                bc: vec![0.0; w[1].len()],
+                xc: vec![0.0; w[1].len()],
+            })
+            .collect();
         let mut r = vec![0f64; n];
-        a.residual(&y, &bs, &mut r);
+        a.residual(y, Some(bs), &mut r);
         let mut rel = dot(&r, &r).sqrt() / bnorm;
         stats.history.push(rel);
         let mut z = vec![0f64; n];
         let mut p = vec![0f64; n];
         let mut ap = vec![0f64; n];
         if rel > tol {
-            self.precondition(&r, &mut z);
+            self.cycle(0, &r, &mut z, &mut work);
             p.copy_from_slice(&z);
             let mut rz = dot(&r, &z);
             while stats.iterations < max_iter {
-                a.apply(&p, &mut ap);
+                a.residual(&p, None, &mut ap);
                 let pap = dot(&p, &ap);
                 if pap.is_nan() || pap <= 0.0 {
                     break;
                 }
-                let alpha = rz / pap;
-                y.par_iter_mut().zip(&p).for_each(|(v, q)| *v += alpha * q);
-                r.par_iter_mut().zip(&ap).for_each(|(v, q)| *v -= alpha * q);
+                let rr = cg_step(y, &mut r, &p, &ap, rz / pap);
                 stats.iterations += 1;
-                rel = dot(&r, &r).sqrt() / bnorm;
+                rel = rr.sqrt() / bnorm;
                 stats.history.push(rel);
                 if rel <= tol {
                     break;
                 }
-                self.precondition(&r, &mut z);
+                self.cycle(0, &r, &mut z, &mut work);
                 let rz_new = dot(&r, &z);
                 let beta = rz_new / rz;
                 rz = rz_new;
@@ -544,10 +657,9 @@ impl Hierarchy {
             }
         }
         // Report the true residual.
-        a.residual(&y, &bs, &mut r);
+        a.residual(y, Some(bs), &mut r);
         stats.relative_residual = dot(&r, &r).sqrt() / bnorm;
-        let x = y.iter().zip(&self.scale).map(|(v, s)| v * s).collect();
-        (x, stats)
+        stats
     }
 }
 
