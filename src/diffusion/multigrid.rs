@@ -117,21 +117,56 @@ impl Stencil {
     }
 }
 
+/// The scalar of the multigrid levels ([`Level`]) and of the CG vectors.
+trait Real: Copy + Send + Sync {
+    fn of(v: f64) -> Self;
+    fn get(self) -> f64;
+}
+
+impl Real for f32 {
+    #[inline]
+    fn of(v: f64) -> f32 {
+        v as f32
+    }
+    #[inline]
+    fn get(self) -> f64 {
+        self as f64
+    }
+}
+
+impl Real for f64 {
+    #[inline]
+    fn of(v: f64) -> f64 {
+        v
+    }
+    #[inline]
+    fn get(self) -> f64 {
+        self
+    }
+}
+
+/// The multigrid's scalar: the cycle is only a preconditioner of the f64 CG, and single
+/// precision halves its memory traffic (iterations unchanged at tolerance 1e-6, and 1e-12 is
+/// still reached).
+type Mg = f32;
+
 /// One row of a [`Level`]: the couplings to the six neighbours (−x, +x, −y, +y, −z, +z), the
 /// diagonal and the neighbours' entries.
 #[derive(Clone, Copy, Debug)]
 struct Row {
-    cpl: [f64; 6],
-    diag: f64,
+    cpl: [Mg; 6],
+    diag: Mg,
     nbr: [u32; 6],
 }
 
 /// One level's operator on its unknowns only.
 ///
 /// Entries `0..red` are the unknowns of colour 0 ((i + j + k) even) in box order, entry `red` a
-/// pad, then the unknowns of colour 1 and a last pad. A level's vectors have one value per entry;
-/// the pads hold 0 and stand in for missing neighbours (a coupling of 0 to the other colour's
-/// pad), so the rows need no branches and a colour's pass reads only the other colour.
+/// pad, then the unknowns of colour 1 and a last pad. A level's vectors have one value per entry
+/// and right-hand side (`[T; K]`, the K systems that share the operator solved together, so the
+/// rows are read once for all of them); the pads hold 0 and stand in for missing neighbours (a
+/// coupling of 0 to the other colour's pad), so the rows need no branches and a colour's pass
+/// reads only the other colour.
 #[derive(Clone, Debug)]
 struct Level {
     red: usize,
@@ -147,16 +182,22 @@ struct Level {
     children: Vec<u32>,
 }
 
-/// Σ_q cpl_q · x[nbr_q − off]: a row's off-diagonal part, `x` the slice of entries from `off` on.
+/// Σ_q cpl_q · x[nbr_q − off] per system: a row's off-diagonal part, `x` the slice of entries
+/// from `off` on.
 #[inline]
-fn couple(row: &Row, x: &[f64], off: usize) -> f64 {
-    let v = |q: usize| row.cpl[q] * x[row.nbr[q] as usize - off];
-    (v(0) + v(1)) + (v(2) + v(3)) + (v(4) + v(5))
+fn couple<const K: usize>(row: &Row, x: &[[Mg; K]], off: usize) -> [Mg; K] {
+    let n = row.nbr.map(|q| &x[q as usize - off]);
+    std::array::from_fn(|k| {
+        let v = |q: usize| row.cpl[q] * n[q][k];
+        (v(0) + v(1)) + (v(2) + v(3)) + (v(4) + v(5))
+    })
 }
 
 impl Level {
     /// The unknowns of `s` and the map from its box cells to their entries ([`PAD`] elsewhere).
-    fn from_stencil(s: &Stencil) -> (Level, Vec<u32>) {
+    /// `plus` also returns each entry's +x, +y, +z couplings in f64 (the finest level's operator
+    /// for CG).
+    fn from_stencil(s: &Stencil, want_plus: bool) -> (Level, Vec<u32>, Vec<[f64; 3]>) {
         let [nx, ny, nz] = s.dims;
         let (mut reds, mut blacks) = (Vec::new(), Vec::new());
         for k in 0..nz {
@@ -182,41 +223,48 @@ impl Level {
         }
         let pads = [(pos.len() - 1) as u32, red as u32];
         let strides = [1, nx, nx * ny];
-        let rows = pos
+        let (rows, plus): (Vec<Row>, Vec<[f64; 3]>) = pos
             .par_iter()
             .enumerate()
             .map(|(e, &c)| {
                 if c == PAD {
-                    return Row {
-                        cpl: [0.0; 6],
-                        diag: 0.0,
-                        nbr: [e as u32; 6],
-                    };
+                    return (
+                        Row {
+                            cpl: [0.0; 6],
+                            diag: 0.0,
+                            nbr: [e as u32; 6],
+                        },
+                        [0.0; 3],
+                    );
                 }
                 let c = c as usize;
                 let ijk = [c % nx, (c / nx) % ny, c / (nx * ny)];
                 let mut row = Row {
                     cpl: [0.0; 6],
-                    diag: s.diag[c],
+                    diag: Mg::of(s.diag[c]),
                     nbr: [pads[usize::from(e > red)]; 6],
                 };
+                let mut up = [0.0; 3];
                 for ax in 0..3 {
                     let mut link = |q: usize, nb: usize, v: f64| {
-                        if v != 0.0 && index[nb] != PAD {
+                        let linked = v != 0.0 && index[nb] != PAD;
+                        if linked {
                             row.nbr[q] = index[nb];
-                            row.cpl[q] = v;
+                            row.cpl[q] = Mg::of(v);
                         }
+                        linked
                     };
                     if ijk[ax] > 0 {
                         link(2 * ax, c - strides[ax], s.off[ax][c - strides[ax]]);
                     }
-                    if ijk[ax] + 1 < s.dims[ax] {
-                        link(2 * ax + 1, c + strides[ax], s.off[ax][c]);
+                    if ijk[ax] + 1 < s.dims[ax] && link(2 * ax + 1, c + strides[ax], s.off[ax][c]) {
+                        up[ax] = s.off[ax][c];
                     }
                 }
-                row
+                (row, up)
             })
-            .collect();
+            .unzip();
+        let plus = if want_plus { plus } else { Vec::new() };
         let level = Level {
             red,
             rows,
@@ -225,7 +273,7 @@ impl Level {
             child_start: Vec::new(),
             children: Vec::new(),
         };
-        (level, index)
+        (level, index, plus)
     }
 
     /// Entries, pads included (the length of the level's vectors).
@@ -282,24 +330,38 @@ impl Level {
         coarse.children = children;
     }
 
-    /// r = b − A x, or r = A x without `b` (0 on the pads).
-    fn residual(&self, x: &[f64], b: Option<&[f64]>, r: &mut [f64]) {
-        r.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, rs)| {
+    /// r = b − A x on the red unknowns. Called right after a black pass, which leaves the black
+    /// residuals at zero, so r's black entries (and pads) keep the zeros they start with.
+    fn residual_red<const K: usize>(&self, x: &[[Mg; K]], b: &[[Mg; K]], r: &mut [[Mg; K]]) {
+        let (xr, xb) = x.split_at(self.red + 1);
+        r[..self.red].par_chunks_mut(CHUNK).enumerate().for_each(|(ci, rs)| {
             let first = ci * CHUNK;
             for (t, rv) in rs.iter_mut().enumerate() {
                 let e = first + t;
                 let row = &self.rows[e];
-                let ax = row.diag * x[e] + couple(row, x, 0);
-                *rv = match b {
-                    Some(b) => b[e] - ax,
-                    None => ax,
+                let s = couple(row, xb, self.red + 1);
+                *rv = std::array::from_fn(|k| b[e][k] - (row.diag * xr[e][k] + s[k]));
+            }
+        });
+    }
+
+    /// The first red pass from x = 0: x = b / diag on the red unknowns, 0 elsewhere.
+    fn smooth_red_from_zero<const K: usize>(&self, x: &mut [[Mg; K]], b: &[[Mg; K]]) {
+        x.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, xs)| {
+            let first = ci * CHUNK;
+            for (t, xv) in xs.iter_mut().enumerate() {
+                let e = first + t;
+                *xv = if e < self.red {
+                    b[e].map(|v| v / self.rows[e].diag)
+                } else {
+                    [0.0; K]
                 };
             }
         });
     }
 
     /// One Gauss–Seidel pass over the unknowns of `colour`: each reads only the other colour.
-    fn smooth(&self, x: &mut [f64], b: &[f64], colour: usize) {
+    fn smooth<const K: usize>(&self, x: &mut [[Mg; K]], b: &[[Mg; K]], colour: usize) {
         let red = self.red;
         let (xr, xb) = x.split_at_mut(red + 1);
         let black = xb.len() - 1;
@@ -312,60 +374,104 @@ impl Level {
             let start = first + ci * CHUNK;
             for (t, xv) in xs.iter_mut().enumerate() {
                 let row = &self.rows[start + t];
-                *xv = (b[start + t] - couple(row, other, off)) / row.diag;
+                let s = couple(row, other, off);
+                *xv = std::array::from_fn(|k| (b[start + t][k] - s[k]) / row.diag);
             }
         });
     }
 
     /// b = Pᵀ r: each entry sums its children's residuals `r` (of the finer level).
-    fn restrict(&self, r: &[f64], b: &mut [f64]) {
+    fn restrict<const K: usize>(&self, r: &[[Mg; K]], b: &mut [[Mg; K]]) {
         b.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, bs)| {
             let first = ci * CHUNK;
             for (t, v) in bs.iter_mut().enumerate() {
                 let e = first + t;
-                let ch = &self.children[self.child_start[e] as usize..self.child_start[e + 1] as usize];
-                *v = ch.iter().map(|f| r[*f as usize]).sum();
+                let mut s = [0.0; K];
+                for f in &self.children[self.child_start[e] as usize..self.child_start[e + 1] as usize] {
+                    let rf = &r[*f as usize];
+                    for k in 0..K {
+                        s[k] += rf[k];
+                    }
+                }
+                *v = s;
             }
         });
     }
 
-    /// x += w P xc: each entry adds its parent's correction.
-    fn prolong(&self, x: &mut [f64], xc: &[f64], w: f64) {
-        x.par_chunks_mut(CHUNK).zip(self.parent.par_chunks(CHUNK)).for_each(|(xs, ps)| {
-            for (v, p) in xs.iter_mut().zip(ps) {
-                *v += w * xc[*p as usize];
-            }
-        });
+    /// x += w P xc on the red unknowns, each adding its parent's correction: a black pass
+    /// follows, which overwrites the black ones whatever they hold.
+    fn prolong_red<const K: usize>(&self, x: &mut [[Mg; K]], xc: &[[Mg; K]], w: Mg) {
+        x[..self.red]
+            .par_chunks_mut(CHUNK)
+            .zip(self.parent[..self.red].par_chunks(CHUNK))
+            .for_each(|(xs, ps)| {
+                for (v, p) in xs.iter_mut().zip(ps) {
+                    let c = &xc[*p as usize];
+                    for k in 0..K {
+                        v[k] += w * c[k];
+                    }
+                }
+            });
     }
 }
 
-/// Deterministic dot product: per-chunk partial sums added in order.
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let parts: Vec<f64> = a
+/// Deterministic dot products per system: per-chunk partial sums added in order.
+fn dot<A: Real, B: Real, const K: usize>(a: &[[A; K]], b: &[[B; K]]) -> [f64; K] {
+    let parts: Vec<[f64; K]> = a
         .par_chunks(CHUNK)
         .zip(b.par_chunks(CHUNK))
-        .map(|(x, y)| x.iter().zip(y).map(|(p, q)| p * q).sum::<f64>())
-        .collect();
-    parts.iter().sum()
-}
-
-/// The CG step y += α p, r −= α q; returns r·r (summed as [`dot`] does).
-fn cg_step(y: &mut [f64], r: &mut [f64], p: &[f64], q: &[f64], alpha: f64) -> f64 {
-    let parts: Vec<f64> = y
-        .par_chunks_mut(CHUNK)
-        .zip(r.par_chunks_mut(CHUNK))
-        .zip(p.par_chunks(CHUNK).zip(q.par_chunks(CHUNK)))
-        .map(|((ys, rs), (ps, qs))| {
-            let mut s = 0.0;
-            for (((yv, rv), pv), qv) in ys.iter_mut().zip(rs.iter_mut()).zip(ps).zip(qs) {
-                *yv += alpha * pv;
-                *rv -= alpha * qv;
-                s += *rv * *rv;
+        .map(|(x, y)| {
+            let mut s = [0.0; K];
+            for (p, q) in x.iter().zip(y) {
+                for k in 0..K {
+                    s[k] += p[k].get() * q[k].get();
+                }
             }
             s
         })
         .collect();
-    parts.iter().sum()
+    sum_parts(&parts)
+}
+
+fn sum_parts<const K: usize>(parts: &[[f64; K]]) -> [f64; K] {
+    let mut s = [0.0; K];
+    for p in parts {
+        for k in 0..K {
+            s[k] += p[k];
+        }
+    }
+    s
+}
+
+/// The CG step y += α p, r −= α q per system, and r in the multigrid's precision into `rm`;
+/// returns r·r (summed as [`dot`] does).
+fn cg_step<const K: usize>(
+    y: &mut [[f64; K]],
+    r: &mut [[f64; K]],
+    rm: &mut [[Mg; K]],
+    p: &[[f64; K]],
+    q: &[[f64; K]],
+    alpha: [f64; K],
+) -> [f64; K] {
+    let parts: Vec<[f64; K]> = y
+        .par_chunks_mut(CHUNK)
+        .zip(r.par_chunks_mut(CHUNK))
+        .zip(rm.par_chunks_mut(CHUNK))
+        .zip(p.par_chunks(CHUNK).zip(q.par_chunks(CHUNK)))
+        .map(|(((ys, rs), rms), (ps, qs))| {
+            let mut s = [0.0; K];
+            for ((((yv, rv), rmv), pv), qv) in ys.iter_mut().zip(rs.iter_mut()).zip(rms.iter_mut()).zip(ps).zip(qs) {
+                for k in 0..K {
+                    yv[k] += alpha[k] * pv[k];
+                    rv[k] -= alpha[k] * qv[k];
+                    rmv[k] = Mg::of(rv[k]);
+                    s[k] += rv[k] * rv[k];
+                }
+            }
+            s
+        })
+        .collect();
+    sum_parts(&parts)
 }
 
 /// Dense Cholesky factor of the coarsest level.
@@ -401,21 +507,28 @@ fn cholesky_in_place(a: &mut [f64], n: usize) -> f64 {
 }
 
 impl Dense {
-    fn build(s: &Level) -> Dense {
-        let cells: Vec<usize> = (0..s.len()).filter(|e| s.pos[*e] != PAD).collect();
+    /// The factor of box operator `s`, whose unknowns are the entries of `level` (`index` maps
+    /// its cells to them).
+    fn build(s: &Stencil, level: &Level, index: &[u32]) -> Dense {
+        let cells: Vec<usize> = (0..level.len()).filter(|e| level.pos[*e] != PAD).collect();
         let n = cells.len();
-        let mut index = vec![usize::MAX; s.len()];
+        let mut q_of = vec![usize::MAX; level.len()];
         for (q, e) in cells.iter().enumerate() {
-            index[*e] = q;
+            q_of[*e] = q;
         }
         let mut a = vec![0f64; n * n];
+        let [nx, ny, _] = s.dims;
+        let strides = [1, nx, nx * ny];
         for (q, &e) in cells.iter().enumerate() {
-            let row = &s.rows[e];
-            a[q * n + q] = row.diag;
-            for (v, nb) in row.cpl.iter().zip(row.nbr) {
-                let r = index[nb as usize];
-                if *v != 0.0 && r != usize::MAX {
+            let c = level.pos[e] as usize;
+            a[q * n + q] = s.diag[c];
+            let ijk = [c % nx, (c / nx) % ny, c / (nx * ny)];
+            for ax in 0..3 {
+                let v = s.off[ax][c];
+                if v != 0.0 && ijk[ax] + 1 < s.dims[ax] && index[c + strides[ax]] != PAD {
+                    let r = q_of[index[c + strides[ax]] as usize];
                     a[q * n + r] += v;
+                    a[r * n + q] += v;
                 }
             }
         }
@@ -424,36 +537,38 @@ impl Dense {
     }
 
     #[allow(clippy::needless_range_loop)]
-    fn solve(&self, b: &[f64], x: &mut [f64]) {
+    fn solve<const K: usize>(&self, b: &[[Mg; K]], x: &mut [[Mg; K]]) {
         let n = self.cells.len();
-        let mut y: Vec<f64> = self.cells.iter().map(|c| b[*c]).collect();
-        for i in 0..n {
-            let mut v = y[i];
-            for k in 0..i {
-                v -= self.l[i * n + k] * y[k];
+        x.fill([0.0; K]);
+        for lane in 0..K {
+            let mut y: Vec<f64> = self.cells.iter().map(|c| b[*c][lane].get()).collect();
+            for i in 0..n {
+                let mut v = y[i];
+                for k in 0..i {
+                    v -= self.l[i * n + k] * y[k];
+                }
+                y[i] = v / self.l[i * n + i];
             }
-            y[i] = v / self.l[i * n + i];
-        }
-        for i in (0..n).rev() {
-            let mut v = y[i];
-            for k in i + 1..n {
-                v -= self.l[k * n + i] * y[k];
+            for i in (0..n).rev() {
+                let mut v = y[i];
+                for k in i + 1..n {
+                    v -= self.l[k * n + i] * y[k];
+                }
+                y[i] = v / self.l[i * n + i];
             }
-            y[i] = v / self.l[i * n + i];
-        }
-        x.fill(0.0);
-        for (q, c) in self.cells.iter().enumerate() {
-            x[*c] = y[q];
+            for (q, c) in self.cells.iter().enumerate() {
+                x[*c][lane] = Mg::of(y[q]);
+            }
         }
     }
 }
 
 /// Vectors of one multigrid level's cycle: its residual and the next level's right-hand side
 /// and correction.
-struct Work {
-    r: Vec<f64>,
-    bc: Vec<f64>,
-    xc: Vec<f64>,
+struct Work<const K: usize> {
+    r: Vec<[Mg; K]>,
+    bc: Vec<[Mg; K]>,
+    xc: Vec<[Mg; K]>,
 }
 
 /// The multigrid hierarchy of one (diagonally scaled) operator.
@@ -461,6 +576,9 @@ struct Work {
 pub struct Hierarchy {
     /// D^{-1/2} of the finest operator per entry of the finest level (0 on the pads).
     scale: Vec<f64>,
+    /// The scaled finest operator's +x, +y, +z couplings per entry in f64 (its diagonal is 1):
+    /// the operator CG solves.
+    plus: Vec<[f64; 3]>,
     /// Levels, finest first (scaled).
     levels: Vec<Level>,
     coarse: Dense,
@@ -502,7 +620,7 @@ impl Hierarchy {
             }
         });
         // Each level is built from its box form, which is dropped once the next one exists.
-        let (mut level, _) = Level::from_stencil(&a);
+        let (mut level, mut index, plus) = Level::from_stencil(&a, true);
         let scale = level
             .pos
             .iter()
@@ -513,16 +631,16 @@ impl Hierarchy {
         let mut fine = a;
         while level.unknowns() > coarse_cells && fine.dims.iter().any(|d| *d > 1) {
             let c = fine.coarsen();
-            let (mut next, index) = Level::from_stencil(&c);
-            level.link(fine.dims, &mut next, &index);
+            let (mut next, next_index, _) = Level::from_stencil(&c, false);
+            level.link(fine.dims, &mut next, &next_index);
             levels.push(std::mem::replace(&mut level, next));
-            fine = c;
+            (fine, index) = (c, next_index);
         }
-        drop(fine);
-        let coarse = Dense::build(&level);
+        let coarse = Dense::build(&fine, &level, &index);
         levels.push(level);
         Hierarchy {
             scale,
+            plus,
             levels,
             coarse,
             cycle: 2,
@@ -537,16 +655,31 @@ impl Hierarchy {
         self.levels.len()
     }
 
+    /// Bytes the hierarchy holds.
+    fn bytes(&self) -> usize {
+        let level = |l: &Level| {
+            l.rows.len() * std::mem::size_of::<Row>() + 4 * (l.pos.len() + l.parent.len() + l.child_start.len() + l.children.len())
+        };
+        self.levels.iter().map(level).sum::<usize>()
+            + 8 * self.scale.len()
+            + 24 * self.plus.len()
+            + 8 * (self.coarse.l.len() + self.coarse.cells.len())
+    }
+
     /// One cycle on level `l` for A_l x = b, x starting at zero; `work` holds the vectors of
     /// levels l and below.
-    fn cycle(&self, l: usize, b: &[f64], x: &mut [f64], work: &mut [Work]) {
+    fn cycle<const K: usize>(&self, l: usize, b: &[[Mg; K]], x: &mut [[Mg; K]], work: &mut [Work<K>]) {
         if l + 1 == self.levels.len() {
             self.coarse.solve(b, x);
             return;
         }
         let s = &self.levels[l];
-        x.fill(0.0);
-        for _ in 0..self.sweeps {
+        // Red, black before the corrections; black, red after; a symmetric black-red-black
+        // between the two corrections of a W-cycle (its red-red pair in the middle is one pass:
+        // a second red pass recomputes the same values).
+        s.smooth_red_from_zero(x, b);
+        s.smooth(x, b, 1);
+        for _ in 1..self.sweeps {
             s.smooth(x, b, 0);
             s.smooth(x, b, 1);
         }
@@ -554,14 +687,12 @@ impl Hierarchy {
         let coarse_is_direct = l + 2 == self.levels.len();
         let visits = if coarse_is_direct { 1 } else { self.cycle.max(1) };
         for visit in 0..visits {
-            s.residual(x, Some(b), &mut w.r);
+            s.residual_red(x, b, &mut w.r);
             self.levels[l + 1].restrict(&w.r, &mut w.bc);
             self.cycle(l + 1, &w.bc, &mut w.xc, rest);
-            s.prolong(x, &w.xc, self.over_correction);
+            s.prolong_red(x, &w.xc, Mg::of(self.over_correction));
             if visit + 1 < visits {
-                // Between the two coarse visits of a W-cycle: a symmetric sweep pair.
                 s.smooth(x, b, 1);
-                s.smooth(x, b, 0);
                 s.smooth(x, b, 0);
                 s.smooth(x, b, 1);
             }
@@ -572,93 +703,189 @@ impl Hierarchy {
         }
     }
 
+    /// y = A x with the scaled finest operator in f64 (unit diagonal, couplings `plus`, each
+    /// −a coupling read from the −a neighbour's +a one); returns x·y (summed as [`dot`] does).
+    fn apply<const K: usize>(&self, x: &[[f64; K]], y: &mut [[f64; K]]) -> [f64; K] {
+        let rows = &self.levels[0].rows;
+        let parts: Vec<[f64; K]> = y
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .map(|(ci, ys)| {
+                let first = ci * CHUNK;
+                let mut xy = [0.0; K];
+                for (t, yv) in ys.iter_mut().enumerate() {
+                    let e = first + t;
+                    let (nb, up) = (&rows[e].nbr, &self.plus[e]);
+                    let v = |q: usize, c: f64, k: usize| c * x[nb[q] as usize][k];
+                    for k in 0..K {
+                        let s = (v(0, self.plus[nb[0] as usize][0], k) + v(1, up[0], k))
+                            + (v(2, self.plus[nb[2] as usize][1], k) + v(3, up[1], k))
+                            + (v(4, self.plus[nb[4] as usize][2], k) + v(5, up[2], k));
+                        yv[k] = x[e][k] + s;
+                        xy[k] += x[e][k] * yv[k];
+                    }
+                }
+                xy
+            })
+            .collect();
+        sum_parts(&parts)
+    }
+
     /// Solve A x = b (unscaled A, as assembled; `b`, `x0` and the result on its box) by MGPCG
     /// from `x0` (or zero) to relative residual `tol` of the scaled system, at most `max_iter`
     /// iterations.
     pub fn solve(&self, b: &[f64], x0: Option<&[f64]>, tol: f64, max_iter: usize) -> (Vec<f64>, SolveStats) {
+        let [out] = self.solve_many([b], x0.map(|x| [x]), tol, max_iter);
+        out
+    }
+
+    /// [`Hierarchy::solve`] for K right-hand sides at once (the bands that share the operator):
+    /// each system's iterates are exactly those of its own solve, and the rows are read once per
+    /// pass for all of them.
+    pub fn solve_many<const K: usize>(
+        &self,
+        b: [&[f64]; K],
+        x0: Option<[&[f64]; K]>,
+        tol: f64,
+        max_iter: usize,
+    ) -> [(Vec<f64>, SolveStats); K] {
         let a = &self.levels[0];
-        let gather = |v: &[f64], f: fn(f64, f64) -> f64| -> Vec<f64> {
+        let gather = |v: [&[f64]; K], f: fn(f64, f64) -> f64| -> Vec<[f64; K]> {
             a.pos
                 .par_iter()
                 .zip(&self.scale)
-                .map(|(c, s)| if *c == PAD { 0.0 } else { f(v[*c as usize], *s) })
+                .map(|(c, s)| if *c == PAD { [0.0; K] } else { v.map(|v| f(v[*c as usize], *s)) })
                 .collect()
         };
         let bs = gather(b, |v, s| v * s);
         let mut y = match x0 {
             Some(x) => gather(x, |v, s| v / s),
-            None => vec![0.0; a.len()],
+            None => vec![[0.0; K]; a.len()],
         };
         let stats = self.solve_scaled(&bs, &mut y, tol, max_iter);
-        let mut out = vec![0.0; b.len()];
-        for ((c, v), s) in a.pos.iter().zip(&y).zip(&self.scale) {
-            if *c != PAD {
-                out[*c as usize] = v * s;
+        let mut lane = 0;
+        stats.map(|st| {
+            let mut out = vec![0.0; b[lane].len()];
+            for ((c, v), s) in a.pos.iter().zip(&y).zip(&self.scale) {
+                if *c != PAD {
+                    out[*c as usize] = v[lane] * s;
+                }
             }
-        }
-        (out, stats)
+            lane += 1;
+            (out, st)
+        })
     }
 
-    /// MGPCG on the scaled system A y = bs (vectors on the finest level's entries).
-    fn solve_scaled(&self, bs: &[f64], y: &mut [f64], tol: f64, max_iter: usize) -> SolveStats {
+    /// MGPCG on the scaled systems A y = bs (vectors on the finest level's entries), each system
+    /// stopping on its own.
+    fn solve_scaled<const K: usize>(&self, bs: &[[f64; K]], y: &mut [[f64; K]], tol: f64, max_iter: usize) -> [SolveStats; K] {
         let a = &self.levels[0];
         let n = a.len();
-        let bnorm = dot(bs, bs).sqrt();
-        let mut stats = SolveStats {
+        let bnorm = dot(bs, bs).map(f64::sqrt);
+        let mut stats: [SolveStats; K] = std::array::from_fn(|_| SolveStats {
             iterations: 0,
             relative_residual: 0.0,
             history: Vec::new(),
             unknowns: a.unknowns(),
             levels: self.levels.len(),
-        };
-        if bnorm == 0.0 {
-            y.fill(0.0);
-            stats.history.push(0.0);
-            return stats;
-        }
-        let mut work: Vec<Work> = self
+            bytes_per_unknown: 0.0,
+        });
+        let mut work: Vec<Work<K>> = self
             .levels
             .windows(2)
             .map(|w| Work {
-                r: vec![0.0; w[0].len()],
-                bc: vec![0.0; w[1].len()],
-                xc: vec![0.0; w[1].len()],
+                r: vec![[0.0; K]; w[0].len()],
+                bc: vec![[0.0; K]; w[1].len()],
+                xc: vec![[0.0; K]; w[1].len()],
             })
             .collect();
-        let mut r = vec![0f64; n];
-        a.residual(y, Some(bs), &mut r);
-        let mut rel = dot(&r, &r).sqrt() / bnorm;
-        stats.history.push(rel);
-        let mut z = vec![0f64; n];
-        let mut p = vec![0f64; n];
-        let mut ap = vec![0f64; n];
-        if rel > tol {
-            self.cycle(0, &r, &mut z, &mut work);
-            p.copy_from_slice(&z);
-            let mut rz = dot(&r, &z);
-            while stats.iterations < max_iter {
-                a.residual(&p, None, &mut ap);
-                let pap = dot(&p, &ap);
-                if pap.is_nan() || pap <= 0.0 {
-                    break;
-                }
-                let rr = cg_step(y, &mut r, &p, &ap, rz / pap);
-                stats.iterations += 1;
-                rel = rr.sqrt() / bnorm;
-                stats.history.push(rel);
-                if rel <= tol {
-                    break;
-                }
-                self.cycle(0, &r, &mut z, &mut work);
-                let rz_new = dot(&r, &z);
-                let beta = rz_new / rz;
-                rz = rz_new;
-                p.par_iter_mut().zip(&z).for_each(|(q, zz)| *q = zz + beta * *q);
+        let (mut r, mut ap, mut p) = (vec![[0f64; K]; n], vec![[0f64; K]; n], vec![[0f64; K]; n]);
+        let (mut rm, mut z) = (vec![[0.0; K]; n], vec![[0.0; K]; n]);
+        // The hierarchy; bs, y, r, p and A p in f64; r and z in the multigrid's precision, and
+        // three vectors per level in `work` (the caller's box-shaped b and x not counted).
+        let lanes = |v: usize, bytes: usize| v * bytes * K;
+        let held = self.bytes()
+            + lanes(5 * n, 8)
+            + lanes(2 * n, std::mem::size_of::<Mg>())
+            + self
+                .levels
+                .windows(2)
+                .map(|w| lanes(w[0].len() + 2 * w[1].len(), std::mem::size_of::<Mg>()))
+                .sum::<usize>();
+        for st in &mut stats {
+            st.bytes_per_unknown = held as f64 / (K * a.unknowns().max(1)) as f64;
+        }
+        // r = bs − A y.
+        let residual = |y: &[[f64; K]], r: &mut Vec<[f64; K]>, ap: &mut Vec<[f64; K]>| {
+            self.apply(y, ap);
+            r.par_iter_mut()
+                .zip(bs.par_iter().zip(&*ap))
+                .for_each(|(r, (b, q))| *r = std::array::from_fn(|k| b[k] - q[k]));
+        };
+        residual(y, &mut r, &mut ap);
+        rm.par_iter_mut().zip(&r).for_each(|(m, v)| *m = v.map(Mg::of));
+        let rr = dot(&r, &r);
+        let mut active = [false; K];
+        for k in 0..K {
+            if bnorm[k] == 0.0 {
+                y.iter_mut().for_each(|v| v[k] = 0.0);
+                stats[k].history.push(0.0);
+            } else {
+                let rel = rr[k].sqrt() / bnorm[k];
+                stats[k].history.push(rel);
+                active[k] = rel > tol;
             }
         }
-        // Report the true residual.
-        a.residual(y, Some(bs), &mut r);
-        stats.relative_residual = dot(&r, &r).sqrt() / bnorm;
+        if active.iter().any(|a| *a) {
+            self.cycle(0, &rm, &mut z, &mut work);
+            p.par_iter_mut().zip(&z).for_each(|(p, z)| *p = z.map(Real::get));
+            let mut rz = dot(&r, &z);
+            let mut iterations = 0;
+            while iterations < max_iter {
+                let pap = self.apply(&p, &mut ap);
+                let mut alpha = [0.0; K];
+                for k in 0..K {
+                    if pap[k].is_nan() || pap[k] <= 0.0 {
+                        active[k] = false;
+                    }
+                    if active[k] {
+                        alpha[k] = rz[k] / pap[k];
+                    }
+                }
+                if !active.iter().any(|a| *a) {
+                    break;
+                }
+                let rr = cg_step(y, &mut r, &mut rm, &p, &ap, alpha);
+                iterations += 1;
+                for k in 0..K {
+                    if !active[k] {
+                        continue;
+                    }
+                    stats[k].iterations += 1;
+                    let rel = rr[k].sqrt() / bnorm[k];
+                    stats[k].history.push(rel);
+                    active[k] = rel > tol;
+                }
+                if !active.iter().any(|a| *a) {
+                    break;
+                }
+                self.cycle(0, &rm, &mut z, &mut work);
+                let rz_new = dot(&r, &z);
+                let beta: [f64; K] = std::array::from_fn(|k| if active[k] { rz_new[k] / rz[k] } else { 0.0 });
+                rz = rz_new;
+                p.par_iter_mut()
+                    .zip(&z)
+                    .for_each(|(q, zz)| *q = std::array::from_fn(|k| zz[k].get() + beta[k] * q[k]));
+            }
+        }
+        // Report the true residuals.
+        residual(y, &mut r, &mut ap);
+        let rr = dot(&r, &r);
+        for k in 0..K {
+            if bnorm[k] > 0.0 {
+                stats[k].relative_residual = rr[k].sqrt() / bnorm[k];
+            }
+        }
         stats
     }
 }
@@ -669,7 +896,7 @@ impl Hierarchy {
 mod operator_tests {
     use super::{Hierarchy, Stencil};
     use crate::diffusion::{assemble, Domain};
-    use crate::incident::{compute, IncidentSettings, IncidentSources};
+    use crate::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
     use crate::lighting::DirectionBins;
     use crate::math::{Rgb, Rng, Vec3};
     use crate::medium::{Grid3, Medium};
@@ -696,6 +923,11 @@ mod operator_tests {
             bin_radiance: vec![Rgb::splat(l); 96],
             sun: sun.map(|(d, e)| (d.normalize(), Rgb::splat(e))),
         }
+    }
+
+    /// Stage 1 on `m` under a uniform sky of radiance `l` and an optional sun (direction, irradiance).
+    fn lit(m: &Medium, l: f32, sun: Option<(Vec3, f32)>) -> IncidentLight {
+        compute(m, &DirectionBins::new(), &sky_and_sun(l, sun), &IncidentSettings::default(), None)
     }
 
     fn dense(s: &Stencil) -> (Vec<usize>, Vec<f64>) {
@@ -749,13 +981,7 @@ mod operator_tests {
     #[test]
     fn operator_is_symmetric_positive_definite() {
         let m = random_cloud([9, 8, 7], 3, 0.95, 0.8);
-        let inc = compute(
-            &m,
-            &DirectionBins::new(),
-            &sky_and_sun(0.5, Some((Vec3::new(0.3, 1.0, 0.2), 3.0))),
-            &IncidentSettings::default(),
-            None,
-        );
+        let inc = lit(&m, 0.5, Some((Vec3::new(0.3, 1.0, 0.2), 3.0)));
         let dom = Domain::of(&m).unwrap();
         for tau_min in [0.0, 1e-3] {
             let (s, _) = assemble(&m, &inc, 0, tau_min, &dom);
@@ -779,13 +1005,7 @@ mod operator_tests {
         // Coarsened down to 16 unknowns, so several multigrid levels sit above the direct one.
         for (d, seed) in [([14, 12, 10], 1u64), ([18, 14, 12], 2)] {
             let m = random_cloud(d, seed, 0.99, 0.85);
-            let inc = compute(
-                &m,
-                &DirectionBins::new(),
-                &sky_and_sun(1.0, Some((Vec3::new(-0.2, 1.0, 0.4), 2.0))),
-                &IncidentSettings::default(),
-                None,
-            );
+            let inc = lit(&m, 1.0, Some((Vec3::new(-0.2, 1.0, 0.4), 2.0)));
             let dom = Domain::of(&m).unwrap();
             let (s, b) = assemble(&m, &inc, 1, 0.0, &dom);
             let h = Hierarchy::build_with(s.clone(), 16);
@@ -799,5 +1019,26 @@ mod operator_tests {
             let den: f64 = xd.iter().map(|v| v * v).sum::<f64>().sqrt();
             assert!(num / den < 1e-8, "relative difference {}", num / den);
         }
+    }
+
+    #[test]
+    fn systems_solved_together_match_their_own_solves_exactly() {
+        let m = random_cloud([12, 10, 9], 5, 0.97, 0.8);
+        let inc = lit(&m, 1.0, Some((Vec3::new(0.3, 1.0, -0.2), 2.0)));
+        let dom = Domain::of(&m).unwrap();
+        let (s, b) = assemble(&m, &inc, 0, 1e-3, &dom);
+        let h = Hierarchy::build_with(s, 16);
+        // A second right-hand side that converges at another iteration, and a zero one.
+        let b2: Vec<f64> = b.iter().enumerate().map(|(c, v)| if c % 3 == 0 { -2.0 * v } else { *v }).collect();
+        let zero = vec![0.0; b.len()];
+        let together = h.solve_many([&b, &b2, &zero], None, 1e-9, 200);
+        for (one, rhs) in together.iter().zip([&b, &b2, &zero]) {
+            let alone = h.solve(rhs, None, 1e-9, 200);
+            assert_eq!(one.0, alone.0);
+            assert_eq!(one.1.history, alone.1.history);
+            assert_eq!(one.1.relative_residual, alone.1.relative_residual);
+        }
+        assert!(together[0].1.iterations > 5 && together[0].1.relative_residual <= 1e-9);
+        assert_eq!(together[2].0, zero);
     }
 }
