@@ -146,6 +146,9 @@ pub struct SolveStats {
     pub unknowns: usize,
     /// Multigrid levels.
     pub levels: usize,
+    /// Bytes the solve held (its hierarchy and vectors) per unknown and band: a hierarchy shared
+    /// by bands solved together counts once for all of them.
+    pub bytes_per_unknown: f64,
 }
 
 impl SolveStats {
@@ -181,9 +184,11 @@ impl DiffusionSolution {
     pub fn summary(&self) -> String {
         let s = &self.stats;
         format!(
-            "diffusion: {} unknowns, {} levels; iterations R/G/B {}/{}/{}, relative residual {:.1e}/{:.1e}/{:.1e}",
+            "diffusion: {} unknowns, {} levels, {:.0} B per unknown and band; iterations R/G/B {}/{}/{}, \
+             relative residual {:.1e}/{:.1e}/{:.1e}",
             s[0].unknowns,
             s[0].levels,
+            s[0].bytes_per_unknown,
             s[0].iterations,
             s[1].iterations,
             s[2].iterations,
@@ -395,32 +400,48 @@ pub fn solve_diffusion(
         }
         out
     };
-    // Bands with identical coefficients share one hierarchy; the bands are solved in parallel.
+    // Bands with identical coefficients share one hierarchy.
     let systems: Vec<(Stencil, Vec<f64>)> = (0..3)
         .into_par_iter()
         .map(|c| assemble(medium, incident, c, settings.min_optical_depth, &dom))
         .collect();
     let mut hier: Vec<(f32, Hierarchy)> = Vec::new();
-    let mut which = [0usize; 3];
+    let mut groups: Vec<Vec<usize>> = Vec::new();
     for (c, (a, _)) in systems.iter().enumerate() {
         let alb = medium.optics.albedo[c];
-        which[c] = match hier.iter().position(|(x, _)| *x == alb) {
-            Some(p) => p,
+        match hier.iter().position(|(x, _)| *x == alb) {
+            Some(p) => groups[p].push(c),
             None => {
                 hier.push((alb, Hierarchy::build(a.clone())));
-                hier.len() - 1
+                groups.push(vec![c]);
             }
-        };
+        }
     }
-    let results: Vec<(Vec<f64>, SolveStats)> = (0..3)
-        .into_par_iter()
-        .map(|c| {
-            let x0 = previous.map(|p| to_local(&p.i0[c]));
-            hier[which[c]]
-                .1
-                .solve(&systems[c].1, x0.as_deref(), settings.tolerance, settings.max_iterations)
+    // The bands of a group share the operator and are solved together (its rows read once).
+    let x0: Vec<Option<Vec<f64>>> = (0..3).map(|c| previous.map(|p| to_local(&p.i0[c]))).collect();
+    let solved: Vec<Vec<(Vec<f64>, SolveStats)>> = groups
+        .par_iter()
+        .zip(&hier)
+        .map(|(g, (_, h))| {
+            let (tol, max) = (settings.tolerance, settings.max_iterations);
+            let b = |k: usize| systems[g[k]].1.as_slice();
+            let x = |k: usize| x0[g[k]].as_deref();
+            match g.len() {
+                1 => h.solve_many([b(0)], x(0).map(|a| [a]), tol, max).into(),
+                2 => h.solve_many([b(0), b(1)], x(0).zip(x(1)).map(|(a, b)| [a, b]), tol, max).into(),
+                _ => h
+                    .solve_many([b(0), b(1), b(2)], x(0).zip(x(1)).zip(x(2)).map(|((a, b), c)| [a, b, c]), tol, max)
+                    .into(),
+            }
         })
         .collect();
+    let mut results: Vec<Option<(Vec<f64>, SolveStats)>> = vec![None, None, None];
+    for (g, out) in groups.iter().zip(solved) {
+        for (c, r) in g.iter().zip(out) {
+            results[*c] = Some(r);
+        }
+    }
+    let results: Vec<(Vec<f64>, SolveStats)> = results.into_iter().map(|r| r.expect("every band is in a group")).collect();
     for (c, (_, stats)) in results.iter().enumerate() {
         if stats.relative_residual.is_nan() || stats.relative_residual > settings.tolerance {
             return Err(Error::Numerical {
@@ -452,6 +473,7 @@ impl Default for SolveStats {
             history: vec![0.0],
             unknowns: 0,
             levels: 0,
+            bytes_per_unknown: 0.0,
         }
     }
 }

@@ -1,9 +1,11 @@
 //! Matrix-free geometric multigrid on the voxel lattice, used as the preconditioner of conjugate
 //! gradients (MGPCG, McAdams et al. 2010).
 //!
-//! * **Operator.** A symmetric 7-point stencil stored as arrays on the level's box: the diagonal and
-//!   one coupling per axis to the +axis neighbour. A cell with zero diagonal is not an unknown
-//!   (empty space), so the irregular cloud domain needs no special casing.
+//! * **Operator.** A symmetric 7-point stencil. Callers assemble it as a [`Stencil`] on the box of
+//!   the domain (a cell with zero diagonal is not an unknown); [`Hierarchy::build`] turns every
+//!   level into a [`Level`] that stores only the unknowns, with their six neighbours' indices and
+//!   couplings, so the memory and the work of an iteration scale with the cloud, not its box (the
+//!   cloud fills ~10 % of its tight box).
 //! * **Coarsening** by 2×2×2 aggregation with the Galerkin product Aᶜ = PᵀAP, P the piecewise-
 //!   constant prolongation: the coarse operator is again a 7-point stencil (an aggregate's diagonal
 //!   sums its children's diagonals and the couplings inside it; a coarse coupling sums the fine
@@ -11,12 +13,12 @@
 //!   jumps and the domain's shape exactly, keep symmetry and definiteness, and need no
 //!   re-discretisation. A coarse cell exists where any child is full.
 //! * **Smoother:** red-black Gauss–Seidel, red then black before the coarse correction and black
-//!   then red after it, so the cycle is a symmetric preconditioner. Sweeps, residuals and transfers
-//!   visit only each row's span of unknowns (the cloud fills ~10 % of its box).
+//!   then red after it, so the cycle is a symmetric preconditioner. A level stores its red
+//!   unknowns first, then its black ones, so a colour's pass streams through its own rows.
 //! * **Cycle:** a W-cycle whose coarse correction is scaled by [`OVER_CORRECTION`].
 //! * **Coarsest level** (≤ [`COARSE_CELLS`] unknowns): dense Cholesky, exact.
-//! * **Determinism:** updates within a colour are independent; reductions sum per-plane partial
-//!   sums in plane order. Bit-identical at any thread count.
+//! * **Determinism:** updates within a colour are independent; reductions sum fixed-size chunks'
+//!   partial sums in order. Bit-identical at any thread count.
 
 use super::SolveStats;
 use rayon::prelude::*;
@@ -32,7 +34,14 @@ pub const COARSE_CELLS: usize = 800;
 /// level) and two smoothing sweeps were tried and did not do better per unit of work.
 pub const OVER_CORRECTION: f64 = 1.5;
 
-/// A symmetric 7-point stencil on a box of cells, x fastest.
+/// Rows per parallel task (and per partial sum of the reductions: fixed, so sums do not depend
+/// on the thread count).
+const CHUNK: usize = 4096;
+
+/// Marks a pad entry in [`Level::pos`].
+const PAD: u32 = u32::MAX;
+
+/// A symmetric 7-point stencil on a box of cells, x fastest: the form the callers assemble.
 #[derive(Clone, Debug)]
 pub struct Stencil {
     /// Cells per axis.
@@ -41,10 +50,6 @@ pub struct Stencil {
     pub diag: Vec<f64>,
     /// `off[a][c]`: matrix entry between cell c and its +a neighbour (0 at the box edge).
     pub off: [Vec<f64>; 3],
-    /// Per row (j + ny·k): the x range [first, last + 1) of its unknowns, so that the sweeps skip
-    /// the empty part of the box (the cloud fills ~10 % of its tight box); empty until
-    /// [`Stencil::find_spans`], which means whole rows.
-    spans: Vec<[u32; 2]>,
 }
 
 impl Stencil {
@@ -55,135 +60,7 @@ impl Stencil {
             dims,
             diag: vec![0.0; n],
             off: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
-            spans: Vec::new(),
         }
-    }
-
-    /// Record each row's range of unknowns (call once the diagonal is final).
-    fn find_spans(&mut self) {
-        let nx = self.dims[0];
-        self.spans = self
-            .diag
-            .chunks(nx)
-            .map(
-                |row| match (row.iter().position(|d| *d > 0.0), row.iter().rposition(|d| *d > 0.0)) {
-                    (Some(a), Some(b)) => [a as u32, b as u32 + 1],
-                    _ => [0, 0],
-                },
-            )
-            .collect();
-    }
-
-    /// Row `r`'s x range holding all its unknowns.
-    #[inline]
-    fn span(&self, r: usize) -> std::ops::Range<usize> {
-        match self.spans.get(r) {
-            Some([a, b]) => *a as usize..*b as usize,
-            None => 0..self.dims[0],
-        }
-    }
-
-    /// Number of unknowns.
-    pub fn unknowns(&self) -> usize {
-        self.diag.iter().filter(|d| **d > 0.0).count()
-    }
-
-    #[inline]
-    fn plane(&self) -> usize {
-        self.dims[0] * self.dims[1]
-    }
-
-    /// (A x)_c for one cell.
-    #[inline]
-    fn row(&self, x: &[f64], c: usize, ijk: [usize; 3]) -> f64 {
-        let [nx, ny, nz] = self.dims;
-        let p = nx * ny;
-        let mut s = self.diag[c] * x[c];
-        if ijk[0] + 1 < nx {
-            s += self.off[0][c] * x[c + 1];
-        }
-        if ijk[0] > 0 {
-            s += self.off[0][c - 1] * x[c - 1];
-        }
-        if ijk[1] + 1 < ny {
-            s += self.off[1][c] * x[c + nx];
-        }
-        if ijk[1] > 0 {
-            s += self.off[1][c - nx] * x[c - nx];
-        }
-        if ijk[2] + 1 < nz {
-            s += self.off[2][c] * x[c + p];
-        }
-        if ijk[2] > 0 {
-            s += self.off[2][c - p] * x[c - p];
-        }
-        s
-    }
-
-    /// y = A x (zero on non-unknowns).
-    pub fn apply(&self, x: &[f64], y: &mut [f64]) {
-        let p = self.plane();
-        let [nx, ny, _] = self.dims;
-        y.par_chunks_mut(p).enumerate().for_each(|(k, yp)| {
-            for j in 0..ny {
-                let sp = self.span(j + ny * k);
-                yp[nx * j..nx * j + sp.start].fill(0.0);
-                yp[nx * j + sp.end..nx * (j + 1)].fill(0.0);
-                for i in sp {
-                    let l = i + nx * j;
-                    let c = l + p * k;
-                    yp[l] = if self.diag[c] > 0.0 { self.row(x, c, [i, j, k]) } else { 0.0 };
-                }
-            }
-        });
-    }
-
-    /// r = b − A x.
-    fn residual(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
-        let p = self.plane();
-        let [nx, ny, _] = self.dims;
-        r.par_chunks_mut(p).enumerate().for_each(|(k, rp)| {
-            for j in 0..ny {
-                let sp = self.span(j + ny * k);
-                rp[nx * j..nx * j + sp.start].fill(0.0);
-                rp[nx * j + sp.end..nx * (j + 1)].fill(0.0);
-                for i in sp {
-                    let l = i + nx * j;
-                    let c = l + p * k;
-                    rp[l] = if self.diag[c] > 0.0 {
-                        b[c] - self.row(x, c, [i, j, k])
-                    } else {
-                        0.0
-                    };
-                }
-            }
-        });
-    }
-
-    /// One Gauss–Seidel pass over the cells of `color` ((i + j + k) mod 2).
-    fn gs_color(&self, x: &mut [f64], b: &[f64], color: usize) {
-        let p = self.plane();
-        let [nx, ny, _] = self.dims;
-        let ptr = SyncPtr(x.as_mut_ptr());
-        let len = x.len();
-        (0..self.dims[2]).into_par_iter().for_each(|k| {
-            // SAFETY: this pass writes only cells of one colour and reads only their neighbours, which
-            // have the other colour; each cell is written by exactly one task (its plane k).
-            let x = unsafe { std::slice::from_raw_parts_mut(ptr.get(), len) };
-            for j in 0..ny {
-                let sp = self.span(j + ny * k);
-                // First cell of this colour in the span: i ≡ color + j + k (mod 2).
-                let start = sp.start + (color + j + k + sp.start) % 2;
-                for i in (start..sp.end).step_by(2) {
-                    let c = i + nx * j + p * k;
-                    let d = self.diag[c];
-                    if d > 0.0 {
-                        let s = self.row(x, c, [i, j, k]) - d * x[c];
-                        x[c] = (b[c] - s) / d;
-                    }
-                }
-            }
-        });
     }
 
     /// Galerkin coarse operator PᵀAP for 2×2×2 piecewise-constant aggregation.
@@ -240,32 +117,367 @@ impl Stencil {
     }
 }
 
-#[derive(Clone, Copy)]
-struct SyncPtr(*mut f64);
-// SAFETY: used only for the colour-disjoint writes of `gs_color`.
-unsafe impl Send for SyncPtr {}
-unsafe impl Sync for SyncPtr {}
-impl SyncPtr {
+/// The scalar of the multigrid levels ([`Level`]) and of the CG vectors.
+trait Real: Copy + Send + Sync {
+    fn of(v: f64) -> Self;
+    fn get(self) -> f64;
+}
+
+impl Real for f32 {
     #[inline]
-    fn get(self) -> *mut f64 {
-        self.0
+    fn of(v: f64) -> f32 {
+        v as f32
+    }
+    #[inline]
+    fn get(self) -> f64 {
+        self as f64
     }
 }
 
-/// Deterministic dot product: per-chunk partial sums added in order.
-pub fn dot(a: &[f64], b: &[f64]) -> f64 {
-    const CH: usize = 8192;
-    let parts: Vec<f64> = a
-        .par_chunks(CH)
-        .zip(b.par_chunks(CH))
-        .map(|(x, y)| x.iter().zip(y).map(|(p, q)| p * q).sum::<f64>())
+impl Real for f64 {
+    #[inline]
+    fn of(v: f64) -> f64 {
+        v
+    }
+    #[inline]
+    fn get(self) -> f64 {
+        self
+    }
+}
+
+/// The multigrid's scalar: the cycle is only a preconditioner of the f64 CG, and single
+/// precision halves its memory traffic (iterations unchanged at tolerance 1e-6, and 1e-12 is
+/// still reached).
+type Mg = f32;
+
+/// One row of a [`Level`]: the couplings to the six neighbours (−x, +x, −y, +y, −z, +z), the
+/// diagonal and the neighbours' entries.
+#[derive(Clone, Copy, Debug)]
+struct Row {
+    cpl: [Mg; 6],
+    diag: Mg,
+    nbr: [u32; 6],
+}
+
+/// One level's operator on its unknowns only.
+///
+/// Entries `0..red` are the unknowns of colour 0 ((i + j + k) even) in box order, entry `red` a
+/// pad, then the unknowns of colour 1 and a last pad. A level's vectors have one value per entry
+/// and right-hand side (`[T; K]`, the K systems that share the operator solved together, so the
+/// rows are read once for all of them); the pads hold 0 and stand in for missing neighbours (a
+/// coupling of 0 to the other colour's pad), so the rows need no branches and a colour's pass
+/// reads only the other colour.
+#[derive(Clone, Debug)]
+struct Level {
+    red: usize,
+    rows: Vec<Row>,
+    /// Box index (x fastest, on the level's box) per entry; [`PAD`] on the pads.
+    pos: Vec<u32>,
+    /// Entry of the next coarser level holding each entry (a pad of it for the pads); empty on
+    /// the coarsest level.
+    parent: Vec<u32>,
+    /// The finer level's entries aggregated into entry e: `children[child_start[e]..child_start[e + 1]]`;
+    /// empty on the finest level.
+    child_start: Vec<u32>,
+    children: Vec<u32>,
+}
+
+/// Σ_q cpl_q · x[nbr_q − off] per system: a row's off-diagonal part, `x` the slice of entries
+/// from `off` on.
+#[inline]
+fn couple<const K: usize>(row: &Row, x: &[[Mg; K]], off: usize) -> [Mg; K] {
+    let n = row.nbr.map(|q| &x[q as usize - off]);
+    std::array::from_fn(|k| {
+        let v = |q: usize| row.cpl[q] * n[q][k];
+        (v(0) + v(1)) + (v(2) + v(3)) + (v(4) + v(5))
+    })
+}
+
+impl Level {
+    /// The unknowns of `s` and the map from its box cells to their entries ([`PAD`] elsewhere).
+    /// `plus` also returns each entry's +x, +y, +z couplings in f64 (the finest level's operator
+    /// for CG).
+    fn from_stencil(s: &Stencil, want_plus: bool) -> (Level, Vec<u32>, Vec<[f64; 3]>) {
+        let [nx, ny, nz] = s.dims;
+        let (mut reds, mut blacks) = (Vec::new(), Vec::new());
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    let c = i + nx * (j + ny * k);
+                    if s.diag[c] > 0.0 {
+                        if (i + j + k) % 2 == 0 { &mut reds } else { &mut blacks }.push(c as u32);
+                    }
+                }
+            }
+        }
+        let red = reds.len();
+        let mut pos = reds;
+        pos.push(PAD);
+        pos.append(&mut blacks);
+        pos.push(PAD);
+        let mut index = vec![PAD; s.diag.len()];
+        for (e, c) in pos.iter().enumerate() {
+            if *c != PAD {
+                index[*c as usize] = e as u32;
+            }
+        }
+        let pads = [(pos.len() - 1) as u32, red as u32];
+        let strides = [1, nx, nx * ny];
+        let (rows, plus): (Vec<Row>, Vec<[f64; 3]>) = pos
+            .par_iter()
+            .enumerate()
+            .map(|(e, &c)| {
+                if c == PAD {
+                    return (
+                        Row {
+                            cpl: [0.0; 6],
+                            diag: 0.0,
+                            nbr: [e as u32; 6],
+                        },
+                        [0.0; 3],
+                    );
+                }
+                let c = c as usize;
+                let ijk = [c % nx, (c / nx) % ny, c / (nx * ny)];
+                let mut row = Row {
+                    cpl: [0.0; 6],
+                    diag: Mg::of(s.diag[c]),
+                    nbr: [pads[usize::from(e > red)]; 6],
+                };
+                let mut up = [0.0; 3];
+                for ax in 0..3 {
+                    let mut link = |q: usize, nb: usize, v: f64| {
+                        let linked = v != 0.0 && index[nb] != PAD;
+                        if linked {
+                            row.nbr[q] = index[nb];
+                            row.cpl[q] = Mg::of(v);
+                        }
+                        linked
+                    };
+                    if ijk[ax] > 0 {
+                        link(2 * ax, c - strides[ax], s.off[ax][c - strides[ax]]);
+                    }
+                    if ijk[ax] + 1 < s.dims[ax] && link(2 * ax + 1, c + strides[ax], s.off[ax][c]) {
+                        up[ax] = s.off[ax][c];
+                    }
+                }
+                (row, up)
+            })
+            .unzip();
+        let plus = if want_plus { plus } else { Vec::new() };
+        let level = Level {
+            red,
+            rows,
+            pos,
+            parent: Vec::new(),
+            child_start: Vec::new(),
+            children: Vec::new(),
+        };
+        (level, index, plus)
+    }
+
+    /// Entries, pads included (the length of the level's vectors).
+    fn len(&self) -> usize {
+        self.rows.len()
+    }
+
+    fn unknowns(&self) -> usize {
+        self.len() - 2
+    }
+
+    /// Record that `coarse` (with box-to-entry map `index`) aggregates this level, whose box has
+    /// `dims` cells: each entry's parent and each coarse entry's children.
+    fn link(&mut self, dims: [usize; 3], coarse: &mut Level, index: &[u32]) {
+        let [nx, ny, _] = dims;
+        let cd = [nx.div_ceil(2), ny.div_ceil(2)];
+        let pad = coarse.red as u32;
+        self.parent = self
+            .pos
+            .par_iter()
+            .map(|&c| {
+                if c == PAD {
+                    return pad;
+                }
+                let c = c as usize;
+                let (i, j, k) = (c % nx, (c / nx) % ny, c / (nx * ny));
+                // A coarse cell exists wherever a child is full (its diagonal sums theirs).
+                let p = index[i / 2 + cd[0] * (j / 2 + cd[1] * (k / 2))];
+                if p == PAD {
+                    pad
+                } else {
+                    p
+                }
+            })
+            .collect();
+        let mut start = vec![0u32; coarse.len() + 1];
+        for (p, c) in self.parent.iter().zip(&self.pos) {
+            if *c != PAD {
+                start[*p as usize + 1] += 1;
+            }
+        }
+        for e in 0..coarse.len() {
+            start[e + 1] += start[e];
+        }
+        let mut fill = start.clone();
+        let mut children = vec![0u32; start[coarse.len()] as usize];
+        for (f, (p, c)) in self.parent.iter().zip(&self.pos).enumerate() {
+            if *c != PAD {
+                children[fill[*p as usize] as usize] = f as u32;
+                fill[*p as usize] += 1;
+            }
+        }
+        coarse.child_start = start;
+        coarse.children = children;
+    }
+
+    /// r = b − A x on the red unknowns. Called right after a black pass, which leaves the black
+    /// residuals at zero, so r's black entries (and pads) keep the zeros they start with.
+    fn residual_red<const K: usize>(&self, x: &[[Mg; K]], b: &[[Mg; K]], r: &mut [[Mg; K]]) {
+        let (xr, xb) = x.split_at(self.red + 1);
+        r[..self.red].par_chunks_mut(CHUNK).enumerate().for_each(|(ci, rs)| {
+            let first = ci * CHUNK;
+            for (t, rv) in rs.iter_mut().enumerate() {
+                let e = first + t;
+                let row = &self.rows[e];
+                let s = couple(row, xb, self.red + 1);
+                *rv = std::array::from_fn(|k| b[e][k] - (row.diag * xr[e][k] + s[k]));
+            }
+        });
+    }
+
+    /// The first red pass from x = 0: x = b / diag on the red unknowns, 0 elsewhere.
+    fn smooth_red_from_zero<const K: usize>(&self, x: &mut [[Mg; K]], b: &[[Mg; K]]) {
+        x.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, xs)| {
+            let first = ci * CHUNK;
+            for (t, xv) in xs.iter_mut().enumerate() {
+                let e = first + t;
+                *xv = if e < self.red {
+                    b[e].map(|v| v / self.rows[e].diag)
+                } else {
+                    [0.0; K]
+                };
+            }
+        });
+    }
+
+    /// One Gauss–Seidel pass over the unknowns of `colour`: each reads only the other colour.
+    fn smooth<const K: usize>(&self, x: &mut [[Mg; K]], b: &[[Mg; K]], colour: usize) {
+        let red = self.red;
+        let (xr, xb) = x.split_at_mut(red + 1);
+        let black = xb.len() - 1;
+        let (mine, other, first, off) = if colour == 0 {
+            (&mut xr[..red], &*xb, 0, red + 1)
+        } else {
+            (&mut xb[..black], &*xr, red + 1, 0)
+        };
+        mine.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, xs)| {
+            let start = first + ci * CHUNK;
+            for (t, xv) in xs.iter_mut().enumerate() {
+                let row = &self.rows[start + t];
+                let s = couple(row, other, off);
+                *xv = std::array::from_fn(|k| (b[start + t][k] - s[k]) / row.diag);
+            }
+        });
+    }
+
+    /// b = Pᵀ r: each entry sums its children's residuals `r` (of the finer level).
+    fn restrict<const K: usize>(&self, r: &[[Mg; K]], b: &mut [[Mg; K]]) {
+        b.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, bs)| {
+            let first = ci * CHUNK;
+            for (t, v) in bs.iter_mut().enumerate() {
+                let e = first + t;
+                let mut s = [0.0; K];
+                for f in &self.children[self.child_start[e] as usize..self.child_start[e + 1] as usize] {
+                    let rf = &r[*f as usize];
+                    for k in 0..K {
+                        s[k] += rf[k];
+                    }
+                }
+                *v = s;
+            }
+        });
+    }
+
+    /// x += w P xc on the red unknowns, each adding its parent's correction: a black pass
+    /// follows, which overwrites the black ones whatever they hold.
+    fn prolong_red<const K: usize>(&self, x: &mut [[Mg; K]], xc: &[[Mg; K]], w: Mg) {
+        x[..self.red]
+            .par_chunks_mut(CHUNK)
+            .zip(self.parent[..self.red].par_chunks(CHUNK))
+            .for_each(|(xs, ps)| {
+                for (v, p) in xs.iter_mut().zip(ps) {
+                    let c = &xc[*p as usize];
+                    for k in 0..K {
+                        v[k] += w * c[k];
+                    }
+                }
+            });
+    }
+}
+
+/// Deterministic dot products per system: per-chunk partial sums added in order.
+fn dot<A: Real, B: Real, const K: usize>(a: &[[A; K]], b: &[[B; K]]) -> [f64; K] {
+    let parts: Vec<[f64; K]> = a
+        .par_chunks(CHUNK)
+        .zip(b.par_chunks(CHUNK))
+        .map(|(x, y)| {
+            let mut s = [0.0; K];
+            for (p, q) in x.iter().zip(y) {
+                for k in 0..K {
+                    s[k] += p[k].get() * q[k].get();
+                }
+            }
+            s
+        })
         .collect();
-    parts.iter().sum()
+    sum_parts(&parts)
+}
+
+fn sum_parts<const K: usize>(parts: &[[f64; K]]) -> [f64; K] {
+    let mut s = [0.0; K];
+    for p in parts {
+        for k in 0..K {
+            s[k] += p[k];
+        }
+    }
+    s
+}
+
+/// The CG step y += α p, r −= α q per system, and r in the multigrid's precision into `rm`;
+/// returns r·r (summed as [`dot`] does).
+fn cg_step<const K: usize>(
+    y: &mut [[f64; K]],
+    r: &mut [[f64; K]],
+    rm: &mut [[Mg; K]],
+    p: &[[f64; K]],
+    q: &[[f64; K]],
+    alpha: [f64; K],
+) -> [f64; K] {
+    let parts: Vec<[f64; K]> = y
+        .par_chunks_mut(CHUNK)
+        .zip(r.par_chunks_mut(CHUNK))
+        .zip(rm.par_chunks_mut(CHUNK))
+        .zip(p.par_chunks(CHUNK).zip(q.par_chunks(CHUNK)))
+        .map(|(((ys, rs), rms), (ps, qs))| {
+            let mut s = [0.0; K];
+            for ((((yv, rv), rmv), pv), qv) in ys.iter_mut().zip(rs.iter_mut()).zip(rms.iter_mut()).zip(ps).zip(qs) {
+                for k in 0..K {
+                    yv[k] += alpha[k] * pv[k];
+                    rv[k] -= alpha[k] * qv[k];
+                    rmv[k] = Mg::of(rv[k]);
+                    s[k] += rv[k] * rv[k];
+                }
+            }
+            s
+        })
+        .collect();
+    sum_parts(&parts)
 }
 
 /// Dense Cholesky factor of the coarsest level.
 #[derive(Clone, Debug)]
 struct Dense {
+    /// The level's entries that are unknowns.
     cells: Vec<usize>,
     l: Vec<f64>,
 }
@@ -295,26 +507,28 @@ fn cholesky_in_place(a: &mut [f64], n: usize) -> f64 {
 }
 
 impl Dense {
-    fn build(s: &Stencil) -> Dense {
-        let cells: Vec<usize> = (0..s.diag.len()).filter(|c| s.diag[*c] > 0.0).collect();
+    /// The factor of box operator `s`, whose unknowns are the entries of `level` (`index` maps
+    /// its cells to them).
+    fn build(s: &Stencil, level: &Level, index: &[u32]) -> Dense {
+        let cells: Vec<usize> = (0..level.len()).filter(|e| level.pos[*e] != PAD).collect();
         let n = cells.len();
-        let mut index = vec![usize::MAX; s.diag.len()];
-        for (q, c) in cells.iter().enumerate() {
-            index[*c] = q;
+        let mut q_of = vec![usize::MAX; level.len()];
+        for (q, e) in cells.iter().enumerate() {
+            q_of[*e] = q;
         }
         let mut a = vec![0f64; n * n];
         let [nx, ny, _] = s.dims;
         let strides = [1, nx, nx * ny];
-        for (q, &c) in cells.iter().enumerate() {
+        for (q, &e) in cells.iter().enumerate() {
+            let c = level.pos[e] as usize;
             a[q * n + q] = s.diag[c];
+            let ijk = [c % nx, (c / nx) % ny, c / (nx * ny)];
             for ax in 0..3 {
                 let v = s.off[ax][c];
-                if v != 0.0 {
-                    let r = index[c + strides[ax]];
-                    if r != usize::MAX {
-                        a[q * n + r] += v;
-                        a[r * n + q] += v;
-                    }
+                if v != 0.0 && ijk[ax] + 1 < s.dims[ax] && index[c + strides[ax]] != PAD {
+                    let r = q_of[index[c + strides[ax]] as usize];
+                    a[q * n + r] += v;
+                    a[r * n + q] += v;
                 }
             }
         }
@@ -323,39 +537,51 @@ impl Dense {
     }
 
     #[allow(clippy::needless_range_loop)]
-    fn solve(&self, b: &[f64], x: &mut [f64]) {
+    fn solve<const K: usize>(&self, b: &[[Mg; K]], x: &mut [[Mg; K]]) {
         let n = self.cells.len();
-        let mut y: Vec<f64> = self.cells.iter().map(|c| b[*c]).collect();
-        for i in 0..n {
-            let mut v = y[i];
-            for k in 0..i {
-                v -= self.l[i * n + k] * y[k];
+        x.fill([0.0; K]);
+        for lane in 0..K {
+            let mut y: Vec<f64> = self.cells.iter().map(|c| b[*c][lane].get()).collect();
+            for i in 0..n {
+                let mut v = y[i];
+                for k in 0..i {
+                    v -= self.l[i * n + k] * y[k];
+                }
+                y[i] = v / self.l[i * n + i];
             }
-            y[i] = v / self.l[i * n + i];
-        }
-        for i in (0..n).rev() {
-            let mut v = y[i];
-            for k in i + 1..n {
-                v -= self.l[k * n + i] * y[k];
+            for i in (0..n).rev() {
+                let mut v = y[i];
+                for k in i + 1..n {
+                    v -= self.l[k * n + i] * y[k];
+                }
+                y[i] = v / self.l[i * n + i];
             }
-            y[i] = v / self.l[i * n + i];
-        }
-        x.iter_mut().for_each(|v| *v = 0.0);
-        for (q, c) in self.cells.iter().enumerate() {
-            x[*c] = y[q];
+            for (q, c) in self.cells.iter().enumerate() {
+                x[*c][lane] = Mg::of(y[q]);
+            }
         }
     }
+}
+
+/// Vectors of one multigrid level's cycle: its residual and the next level's right-hand side
+/// and correction.
+struct Work<const K: usize> {
+    r: Vec<[Mg; K]>,
+    bc: Vec<[Mg; K]>,
+    xc: Vec<[Mg; K]>,
 }
 
 /// The multigrid hierarchy of one (diagonally scaled) operator.
 #[derive(Clone, Debug)]
 pub struct Hierarchy {
-    /// D^{-1/2} of the finest operator (0 on non-unknowns).
+    /// D^{-1/2} of the finest operator per entry of the finest level (0 on the pads).
     scale: Vec<f64>,
+    /// The scaled finest operator's +x, +y, +z couplings per entry in f64 (its diagonal is 1):
+    /// the operator CG solves.
+    plus: Vec<[f64; 3]>,
     /// Levels, finest first (scaled).
-    levels: Vec<Stencil>,
+    levels: Vec<Level>,
     coarse: Dense,
-    unknowns: usize,
     /// Coarse-grid visits per level (1: V-cycle, 2: W-cycle).
     pub cycle: usize,
     /// Scale of the coarse-grid correction (over-correction of piecewise-constant aggregation).
@@ -372,8 +598,8 @@ impl Hierarchy {
 
     /// As [`Hierarchy::build`], coarsening until a level has at most `coarse_cells` unknowns.
     pub fn build_with(mut a: Stencil, coarse_cells: usize) -> Hierarchy {
-        let scale: Vec<f64> = a.diag.iter().map(|d| if *d > 0.0 { 1.0 / d.sqrt() } else { 0.0 }).collect();
-        let [nx, ny, nz] = a.dims;
+        let box_scale: Vec<f64> = a.diag.iter().map(|d| if *d > 0.0 { 1.0 / d.sqrt() } else { 0.0 }).collect();
+        let [nx, ny, _] = a.dims;
         let strides = [1, nx, nx * ny];
         let dims = a.dims;
         for (ax, off) in a.off.iter_mut().enumerate() {
@@ -381,37 +607,42 @@ impl Hierarchy {
                 if *v != 0.0 {
                     let ijk = [c % nx, (c / nx) % ny, c / (nx * ny)];
                     if ijk[ax] + 1 < dims[ax] {
-                        *v *= scale[c] * scale[c + strides[ax]];
+                        *v *= box_scale[c] * box_scale[c + strides[ax]];
                     } else {
                         *v = 0.0;
                     }
                 }
             });
         }
-        let _ = nz;
         a.diag.iter_mut().for_each(|d| {
             if *d > 0.0 {
                 *d = 1.0;
             }
         });
-        let unknowns = a.unknowns();
-        a.find_spans();
-        let mut levels = vec![a];
-        loop {
-            let last = levels.last().expect("at least one level");
-            if last.unknowns() <= coarse_cells || last.dims.iter().all(|d| *d <= 1) {
-                break;
-            }
-            let mut c = last.coarsen();
-            c.find_spans();
-            levels.push(c);
+        // Each level is built from its box form, which is dropped once the next one exists.
+        let (mut level, mut index, plus) = Level::from_stencil(&a, true);
+        let scale = level
+            .pos
+            .iter()
+            .map(|c| if *c == PAD { 0.0 } else { box_scale[*c as usize] })
+            .collect();
+        drop(box_scale);
+        let mut levels = Vec::new();
+        let mut fine = a;
+        while level.unknowns() > coarse_cells && fine.dims.iter().any(|d| *d > 1) {
+            let c = fine.coarsen();
+            let (mut next, next_index, _) = Level::from_stencil(&c, false);
+            level.link(fine.dims, &mut next, &next_index);
+            levels.push(std::mem::replace(&mut level, next));
+            (fine, index) = (c, next_index);
         }
-        let coarse = Dense::build(levels.last().expect("level"));
+        let coarse = Dense::build(&fine, &level, &index);
+        levels.push(level);
         Hierarchy {
             scale,
+            plus,
             levels,
             coarse,
-            unknowns,
             cycle: 2,
             over_correction: OVER_CORRECTION,
             sweeps: 1,
@@ -424,130 +655,238 @@ impl Hierarchy {
         self.levels.len()
     }
 
-    /// One V-cycle on level `l` for A_l x = b, x starting at zero.
-    fn vcycle(&self, l: usize, b: &[f64], x: &mut [f64]) {
-        let s = &self.levels[l];
+    /// Bytes the hierarchy holds.
+    fn bytes(&self) -> usize {
+        let level = |l: &Level| {
+            l.rows.len() * std::mem::size_of::<Row>() + 4 * (l.pos.len() + l.parent.len() + l.child_start.len() + l.children.len())
+        };
+        self.levels.iter().map(level).sum::<usize>()
+            + 8 * self.scale.len()
+            + 24 * self.plus.len()
+            + 8 * (self.coarse.l.len() + self.coarse.cells.len())
+    }
+
+    /// One cycle on level `l` for A_l x = b, x starting at zero; `work` holds the vectors of
+    /// levels l and below.
+    fn cycle<const K: usize>(&self, l: usize, b: &[[Mg; K]], x: &mut [[Mg; K]], work: &mut [Work<K>]) {
         if l + 1 == self.levels.len() {
             self.coarse.solve(b, x);
             return;
         }
-        x.iter_mut().for_each(|v| *v = 0.0);
-        for _ in 0..self.sweeps {
-            s.gs_color(x, b, 0);
-            s.gs_color(x, b, 1);
+        let s = &self.levels[l];
+        // Red, black before the corrections; black, red after; a symmetric black-red-black
+        // between the two corrections of a W-cycle (its red-red pair in the middle is one pass:
+        // a second red pass recomputes the same values).
+        s.smooth_red_from_zero(x, b);
+        s.smooth(x, b, 1);
+        for _ in 1..self.sweeps {
+            s.smooth(x, b, 0);
+            s.smooth(x, b, 1);
         }
-        let mut r = vec![0f64; x.len()];
-        let c = &self.levels[l + 1];
+        let (w, rest) = work.split_first_mut().expect("a work entry per level above the coarsest");
         let coarse_is_direct = l + 2 == self.levels.len();
         let visits = if coarse_is_direct { 1 } else { self.cycle.max(1) };
         for visit in 0..visits {
-            s.residual(x, b, &mut r);
-            let [nx, ny, nz] = s.dims;
-            let cd = c.dims;
-            let cp = cd[0] * cd[1];
-            let fp = nx * ny;
-            let mut bc = vec![0f64; c.diag.len()];
-            bc.par_chunks_mut(cp).enumerate().for_each(|(kc, bp)| {
-                for k in 2 * kc..(2 * kc + 2).min(nz) {
-                    for j in 0..ny {
-                        for i in s.span(j + ny * k) {
-                            bp[i / 2 + cd[0] * (j / 2)] += r[i + nx * j + fp * k];
-                        }
-                    }
-                }
-            });
-            let mut xc = vec![0f64; c.diag.len()];
-            self.vcycle(l + 1, &bc, &mut xc);
-            let w = self.over_correction;
-            x.par_chunks_mut(fp).enumerate().for_each(|(k, xp)| {
-                for j in 0..ny {
-                    for i in s.span(j + ny * k) {
-                        let f = i + nx * j;
-                        if s.diag[f + fp * k] > 0.0 {
-                            xp[f] += w * xc[i / 2 + cd[0] * (j / 2) + cp * (k / 2)];
-                        }
-                    }
-                }
-            });
+            s.residual_red(x, b, &mut w.r);
+            self.levels[l + 1].restrict(&w.r, &mut w.bc);
+            self.cycle(l + 1, &w.bc, &mut w.xc, rest);
+            s.prolong_red(x, &w.xc, Mg::of(self.over_correction));
             if visit + 1 < visits {
-                // Between the two coarse visits of a W-cycle: a symmetric sweep pair.
-                s.gs_color(x, b, 1);
-                s.gs_color(x, b, 0);
-                s.gs_color(x, b, 0);
-                s.gs_color(x, b, 1);
+                s.smooth(x, b, 1);
+                s.smooth(x, b, 0);
+                s.smooth(x, b, 1);
             }
         }
         for _ in 0..self.sweeps {
-            s.gs_color(x, b, 1);
-            s.gs_color(x, b, 0);
+            s.smooth(x, b, 1);
+            s.smooth(x, b, 0);
         }
     }
 
-    /// Apply the preconditioner z = M⁻¹ r (one V-cycle).
-    pub fn precondition(&self, r: &[f64], z: &mut [f64]) {
-        self.vcycle(0, r, z);
+    /// y = A x with the scaled finest operator in f64 (unit diagonal, couplings `plus`, each
+    /// −a coupling read from the −a neighbour's +a one); returns x·y (summed as [`dot`] does).
+    fn apply<const K: usize>(&self, x: &[[f64; K]], y: &mut [[f64; K]]) -> [f64; K] {
+        let rows = &self.levels[0].rows;
+        let parts: Vec<[f64; K]> = y
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .map(|(ci, ys)| {
+                let first = ci * CHUNK;
+                let mut xy = [0.0; K];
+                for (t, yv) in ys.iter_mut().enumerate() {
+                    let e = first + t;
+                    let (nb, up) = (&rows[e].nbr, &self.plus[e]);
+                    let v = |q: usize, c: f64, k: usize| c * x[nb[q] as usize][k];
+                    for k in 0..K {
+                        let s = (v(0, self.plus[nb[0] as usize][0], k) + v(1, up[0], k))
+                            + (v(2, self.plus[nb[2] as usize][1], k) + v(3, up[1], k))
+                            + (v(4, self.plus[nb[4] as usize][2], k) + v(5, up[2], k));
+                        yv[k] = x[e][k] + s;
+                        xy[k] += x[e][k] * yv[k];
+                    }
+                }
+                xy
+            })
+            .collect();
+        sum_parts(&parts)
     }
 
-    /// Solve A x = b (unscaled A, as assembled) by MGPCG from `x0` (or zero) to relative residual
-    /// `tol` of the scaled system, at most `max_iter` iterations.
+    /// Solve A x = b (unscaled A, as assembled; `b`, `x0` and the result on its box) by MGPCG
+    /// from `x0` (or zero) to relative residual `tol` of the scaled system, at most `max_iter`
+    /// iterations.
     pub fn solve(&self, b: &[f64], x0: Option<&[f64]>, tol: f64, max_iter: usize) -> (Vec<f64>, SolveStats) {
-        let n = b.len();
+        let [out] = self.solve_many([b], x0.map(|x| [x]), tol, max_iter);
+        out
+    }
+
+    /// [`Hierarchy::solve`] for K right-hand sides at once (the bands that share the operator):
+    /// each system's iterates are exactly those of its own solve, and the rows are read once per
+    /// pass for all of them.
+    pub fn solve_many<const K: usize>(
+        &self,
+        b: [&[f64]; K],
+        x0: Option<[&[f64]; K]>,
+        tol: f64,
+        max_iter: usize,
+    ) -> [(Vec<f64>, SolveStats); K] {
         let a = &self.levels[0];
-        let bs: Vec<f64> = b.iter().zip(&self.scale).map(|(v, s)| v * s).collect();
-        let mut y: Vec<f64> = match x0 {
-            Some(x) => x.iter().zip(&self.scale).map(|(v, s)| if *s > 0.0 { v / s } else { 0.0 }).collect(),
-            None => vec![0.0; n],
+        let gather = |v: [&[f64]; K], f: fn(f64, f64) -> f64| -> Vec<[f64; K]> {
+            a.pos
+                .par_iter()
+                .zip(&self.scale)
+                .map(|(c, s)| if *c == PAD { [0.0; K] } else { v.map(|v| f(v[*c as usize], *s)) })
+                .collect()
         };
-        let bnorm = dot(&bs, &bs).sqrt();
-        let mut stats = SolveStats {
+        let bs = gather(b, |v, s| v * s);
+        let mut y = match x0 {
+            Some(x) => gather(x, |v, s| v / s),
+            None => vec![[0.0; K]; a.len()],
+        };
+        let stats = self.solve_scaled(&bs, &mut y, tol, max_iter);
+        let mut lane = 0;
+        stats.map(|st| {
+            let mut out = vec![0.0; b[lane].len()];
+            for ((c, v), s) in a.pos.iter().zip(&y).zip(&self.scale) {
+                if *c != PAD {
+                    out[*c as usize] = v[lane] * s;
+                }
+            }
+            lane += 1;
+            (out, st)
+        })
+    }
+
+    /// MGPCG on the scaled systems A y = bs (vectors on the finest level's entries), each system
+    /// stopping on its own.
+    fn solve_scaled<const K: usize>(&self, bs: &[[f64; K]], y: &mut [[f64; K]], tol: f64, max_iter: usize) -> [SolveStats; K] {
+        let a = &self.levels[0];
+        let n = a.len();
+        let bnorm = dot(bs, bs).map(f64::sqrt);
+        let mut stats: [SolveStats; K] = std::array::from_fn(|_| SolveStats {
             iterations: 0,
             relative_residual: 0.0,
             history: Vec::new(),
-            unknowns: self.unknowns,
+            unknowns: a.unknowns(),
             levels: self.levels.len(),
-        };
-        if bnorm == 0.0 {
-            stats.history.push(0.0);
-            return (vec![0.0; n], stats);
+            bytes_per_unknown: 0.0,
+        });
+        let mut work: Vec<Work<K>> = self
+            .levels
+            .windows(2)
+            .map(|w| Work {
+                r: vec![[0.0; K]; w[0].len()],
+                bc: vec![[0.0; K]; w[1].len()],
+                xc: vec![[0.0; K]; w[1].len()],
+            })
+            .collect();
+        let (mut r, mut ap, mut p) = (vec![[0f64; K]; n], vec![[0f64; K]; n], vec![[0f64; K]; n]);
+        let (mut rm, mut z) = (vec![[0.0; K]; n], vec![[0.0; K]; n]);
+        // The hierarchy; bs, y, r, p and A p in f64; r and z in the multigrid's precision, and
+        // three vectors per level in `work` (the caller's box-shaped b and x not counted).
+        let lanes = |v: usize, bytes: usize| v * bytes * K;
+        let held = self.bytes()
+            + lanes(5 * n, 8)
+            + lanes(2 * n, std::mem::size_of::<Mg>())
+            + self
+                .levels
+                .windows(2)
+                .map(|w| lanes(w[0].len() + 2 * w[1].len(), std::mem::size_of::<Mg>()))
+                .sum::<usize>();
+        for st in &mut stats {
+            st.bytes_per_unknown = held as f64 / (K * a.unknowns().max(1)) as f64;
         }
-        let mut r = vec![0f64; n];
-        a.residual(&y, &bs, &mut r);
-        let mut rel = dot(&r, &r).sqrt() / bnorm;
-        stats.history.push(rel);
-        let mut z = vec![0f64; n];
-        let mut p = vec![0f64; n];
-        let mut ap = vec![0f64; n];
-        if rel > tol {
-            self.precondition(&r, &mut z);
-            p.copy_from_slice(&z);
-            let mut rz = dot(&r, &z);
-            while stats.iterations < max_iter {
-                a.apply(&p, &mut ap);
-                let pap = dot(&p, &ap);
-                if pap.is_nan() || pap <= 0.0 {
-                    break;
-                }
-                let alpha = rz / pap;
-                y.par_iter_mut().zip(&p).for_each(|(v, q)| *v += alpha * q);
-                r.par_iter_mut().zip(&ap).for_each(|(v, q)| *v -= alpha * q);
-                stats.iterations += 1;
-                rel = dot(&r, &r).sqrt() / bnorm;
-                stats.history.push(rel);
-                if rel <= tol {
-                    break;
-                }
-                self.precondition(&r, &mut z);
-                let rz_new = dot(&r, &z);
-                let beta = rz_new / rz;
-                rz = rz_new;
-                p.par_iter_mut().zip(&z).for_each(|(q, zz)| *q = zz + beta * *q);
+        // r = bs − A y.
+        let residual = |y: &[[f64; K]], r: &mut Vec<[f64; K]>, ap: &mut Vec<[f64; K]>| {
+            self.apply(y, ap);
+            r.par_iter_mut()
+                .zip(bs.par_iter().zip(&*ap))
+                .for_each(|(r, (b, q))| *r = std::array::from_fn(|k| b[k] - q[k]));
+        };
+        residual(y, &mut r, &mut ap);
+        rm.par_iter_mut().zip(&r).for_each(|(m, v)| *m = v.map(Mg::of));
+        let rr = dot(&r, &r);
+        let mut active = [false; K];
+        for k in 0..K {
+            if bnorm[k] == 0.0 {
+                y.iter_mut().for_each(|v| v[k] = 0.0);
+                stats[k].history.push(0.0);
+            } else {
+                let rel = rr[k].sqrt() / bnorm[k];
+                stats[k].history.push(rel);
+                active[k] = rel > tol;
             }
         }
-        // Report the true residual.
-        a.residual(&y, &bs, &mut r);
-        stats.relative_residual = dot(&r, &r).sqrt() / bnorm;
-        let x = y.iter().zip(&self.scale).map(|(v, s)| v * s).collect();
-        (x, stats)
+        if active.iter().any(|a| *a) {
+            self.cycle(0, &rm, &mut z, &mut work);
+            p.par_iter_mut().zip(&z).for_each(|(p, z)| *p = z.map(Real::get));
+            let mut rz = dot(&r, &z);
+            let mut iterations = 0;
+            while iterations < max_iter {
+                let pap = self.apply(&p, &mut ap);
+                let mut alpha = [0.0; K];
+                for k in 0..K {
+                    if pap[k].is_nan() || pap[k] <= 0.0 {
+                        active[k] = false;
+                    }
+                    if active[k] {
+                        alpha[k] = rz[k] / pap[k];
+                    }
+                }
+                if !active.iter().any(|a| *a) {
+                    break;
+                }
+                let rr = cg_step(y, &mut r, &mut rm, &p, &ap, alpha);
+                iterations += 1;
+                for k in 0..K {
+                    if !active[k] {
+                        continue;
+                    }
+                    stats[k].iterations += 1;
+                    let rel = rr[k].sqrt() / bnorm[k];
+                    stats[k].history.push(rel);
+                    active[k] = rel > tol;
+                }
+                if !active.iter().any(|a| *a) {
+                    break;
+                }
+                self.cycle(0, &rm, &mut z, &mut work);
+                let rz_new = dot(&r, &z);
+                let beta: [f64; K] = std::array::from_fn(|k| if active[k] { rz_new[k] / rz[k] } else { 0.0 });
+                rz = rz_new;
+                p.par_iter_mut()
+                    .zip(&z)
+                    .for_each(|(q, zz)| *q = std::array::from_fn(|k| zz[k].get() + beta[k] * q[k]));
+            }
+        }
+        // Report the true residuals.
+        residual(y, &mut r, &mut ap);
+        let rr = dot(&r, &r);
+        for k in 0..K {
+            if bnorm[k] > 0.0 {
+                stats[k].relative_residual = rr[k].sqrt() / bnorm[k];
+            }
+        }
+        stats
     }
 }
 
@@ -557,7 +896,7 @@ impl Hierarchy {
 mod operator_tests {
     use super::{Hierarchy, Stencil};
     use crate::diffusion::{assemble, Domain};
-    use crate::incident::{compute, IncidentSettings, IncidentSources};
+    use crate::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
     use crate::lighting::DirectionBins;
     use crate::math::{Rgb, Rng, Vec3};
     use crate::medium::{Grid3, Medium};
@@ -584,6 +923,11 @@ mod operator_tests {
             bin_radiance: vec![Rgb::splat(l); 96],
             sun: sun.map(|(d, e)| (d.normalize(), Rgb::splat(e))),
         }
+    }
+
+    /// Stage 1 on `m` under a uniform sky of radiance `l` and an optional sun (direction, irradiance).
+    fn lit(m: &Medium, l: f32, sun: Option<(Vec3, f32)>) -> IncidentLight {
+        compute(m, &DirectionBins::new(), &sky_and_sun(l, sun), &IncidentSettings::default(), None)
     }
 
     fn dense(s: &Stencil) -> (Vec<usize>, Vec<f64>) {
@@ -637,13 +981,7 @@ mod operator_tests {
     #[test]
     fn operator_is_symmetric_positive_definite() {
         let m = random_cloud([9, 8, 7], 3, 0.95, 0.8);
-        let inc = compute(
-            &m,
-            &DirectionBins::new(),
-            &sky_and_sun(0.5, Some((Vec3::new(0.3, 1.0, 0.2), 3.0))),
-            &IncidentSettings::default(),
-            None,
-        );
+        let inc = lit(&m, 0.5, Some((Vec3::new(0.3, 1.0, 0.2), 3.0)));
         let dom = Domain::of(&m).unwrap();
         for tau_min in [0.0, 1e-3] {
             let (s, _) = assemble(&m, &inc, 0, tau_min, &dom);
@@ -667,13 +1005,7 @@ mod operator_tests {
         // Coarsened down to 16 unknowns, so several multigrid levels sit above the direct one.
         for (d, seed) in [([14, 12, 10], 1u64), ([18, 14, 12], 2)] {
             let m = random_cloud(d, seed, 0.99, 0.85);
-            let inc = compute(
-                &m,
-                &DirectionBins::new(),
-                &sky_and_sun(1.0, Some((Vec3::new(-0.2, 1.0, 0.4), 2.0))),
-                &IncidentSettings::default(),
-                None,
-            );
+            let inc = lit(&m, 1.0, Some((Vec3::new(-0.2, 1.0, 0.4), 2.0)));
             let dom = Domain::of(&m).unwrap();
             let (s, b) = assemble(&m, &inc, 1, 0.0, &dom);
             let h = Hierarchy::build_with(s.clone(), 16);
@@ -687,5 +1019,26 @@ mod operator_tests {
             let den: f64 = xd.iter().map(|v| v * v).sum::<f64>().sqrt();
             assert!(num / den < 1e-8, "relative difference {}", num / den);
         }
+    }
+
+    #[test]
+    fn systems_solved_together_match_their_own_solves_exactly() {
+        let m = random_cloud([12, 10, 9], 5, 0.97, 0.8);
+        let inc = lit(&m, 1.0, Some((Vec3::new(0.3, 1.0, -0.2), 2.0)));
+        let dom = Domain::of(&m).unwrap();
+        let (s, b) = assemble(&m, &inc, 0, 1e-3, &dom);
+        let h = Hierarchy::build_with(s, 16);
+        // A second right-hand side that converges at another iteration, and a zero one.
+        let b2: Vec<f64> = b.iter().enumerate().map(|(c, v)| if c % 3 == 0 { -2.0 * v } else { *v }).collect();
+        let zero = vec![0.0; b.len()];
+        let together = h.solve_many([&b, &b2, &zero], None, 1e-9, 200);
+        for (one, rhs) in together.iter().zip([&b, &b2, &zero]) {
+            let alone = h.solve(rhs, None, 1e-9, 200);
+            assert_eq!(one.0, alone.0);
+            assert_eq!(one.1.history, alone.1.history);
+            assert_eq!(one.1.relative_residual, alone.1.relative_residual);
+        }
+        assert!(together[0].1.iterations > 5 && together[0].1.relative_residual <= 1e-9);
+        assert_eq!(together[2].0, zero);
     }
 }
