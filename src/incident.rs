@@ -489,12 +489,11 @@ impl Family {
     }
 }
 
-/// Per full voxel: Σ0 (3 bands), Σ1 (3 axes × 3 bands) in f64, the sky SH (3 bands × 9) and the
+/// Per full voxel: Σ0 (3 bands) then Σ1 (3 axes × 3 bands) in f64, the sky SH (3 bands × 9) and the
 /// sun's mean transmittance.
 #[derive(Clone)]
 struct Acc {
-    s0: [f64; 3],
-    s1: [f64; 9],
+    m: [f64; 12],
     sh: [f32; 3 * SH_COEFFS],
     sun_t: f32,
 }
@@ -508,32 +507,56 @@ struct Sweep<'a> {
     atten: [f64; 3],
 }
 
-/// Add the current plane's sums of `fams` into voxel `c`'s accumulators, in family order.
-#[inline]
-fn reduce_voxel(sw: &Sweep, fams: &[Family], lay: &Layout, c: [usize; 3], acc: &mut Acc) {
-    let pi = c[lay.v] * lay.nu + c[lay.u];
-    for f in fams {
-        let s = f.sums[pi];
-        let src = &sw.sources[f.src];
+/// What one family's voxel sums S (Σ w∫I ds per band) add to the accumulators: Σ0 and Σ1 gain
+/// Δω·Ī·(1, flow) with Ī = S / Σ w l, precomputed as one coefficient per band and term.
+struct Coef {
+    /// Σ0 per band, then Σ1 per (axis, band): Δω_c·flow_ax / Σ w l.
+    m: [f64; 12],
+    /// The sky SH per (band, lm): Δω_c·Y_lm / Σ w l (bins only).
+    sh: Option<[f32; 3 * SH_COEFFS]>,
+    /// For the sun: 1 / Σ w l, its mean transmittance per unit S.
+    sun: Option<f64>,
+}
+
+impl Coef {
+    fn new(src: &Source) -> Coef {
         let inv = 1.0 / src.norm;
-        // The voxel-mean radiance Ī = Σ w∫I ds / Σ w l, weighted by Δω (or E for the sun).
-        let mean = [s[0] as f64 * inv, s[1] as f64 * inv, s[2] as f64 * inv];
-        if src.bin.is_none() {
-            acc.sun_t = mean[0] as f32;
-        }
-        let dw = src.weight;
-        let p = [mean[0] * dw.x as f64, mean[1] * dw.y as f64, mean[2] * dw.z as f64];
-        for (c, &pc) in p.iter().enumerate() {
-            acc.s0[c] += pc;
+        let k = [src.weight.x as f64 * inv, src.weight.y as f64 * inv, src.weight.z as f64 * inv];
+        let mut m = [0.0; 12];
+        for c in 0..3 {
+            m[c] = k[c];
             for ax in 0..3 {
-                acc.s1[3 * ax + c] += pc * src.flow[ax] as f64;
+                m[3 + 3 * ax + c] = k[c] * src.flow[ax] as f64;
             }
         }
-        if let Some(y) = &src.sh {
-            for (c, &pc) in p.iter().enumerate() {
-                let pc = pc as f32;
-                for (a, yk) in acc.sh[c * SH_COEFFS..(c + 1) * SH_COEFFS].iter_mut().zip(y) {
-                    *a += pc * yk;
+        Coef {
+            m,
+            sh: src.sh.map(|y| std::array::from_fn(|j| k[j / SH_COEFFS] as f32 * y[j % SH_COEFFS])),
+            sun: src.bin.is_none().then_some(inv),
+        }
+    }
+}
+
+/// Add the current plane's sums of `fams` (coefficients `coef`) into voxel `c`'s accumulators,
+/// in family order.
+#[inline]
+fn reduce_voxel(fams: &[Family], coef: &[Coef], lay: &Layout, c: [usize; 3], acc: &mut Acc) {
+    let pi = c[lay.v] * lay.nu + c[lay.u];
+    for (f, k) in fams.iter().zip(coef) {
+        let s = f.sums[pi];
+        if let Some(inv) = k.sun {
+            acc.sun_t = (s[0] as f64 * inv) as f32;
+        }
+        let sd = [s[0] as f64, s[1] as f64, s[2] as f64];
+        for (a, km) in acc.m.chunks_exact_mut(3).zip(k.m.chunks_exact(3)) {
+            for c in 0..3 {
+                a[c] += sd[c] * km[c];
+            }
+        }
+        if let Some(ksh) = &k.sh {
+            for ((a, kc), sc) in acc.sh.chunks_exact_mut(SH_COEFFS).zip(ksh.chunks_exact(SH_COEFFS)).zip(s) {
+                for (a, kj) in a.iter_mut().zip(kc) {
+                    *a += sc * kj;
                 }
             }
         }
@@ -713,8 +736,7 @@ pub fn compute_with_sun(
     }
     let full: usize = row_len.iter().sum();
     let zero = Acc {
-        s0: [0.0; 3],
-        s1: [0.0; 9],
+        m: [0.0; 12],
         sh: [0.0; 3 * SH_COEFFS],
         sun_t: 1.0,
     };
@@ -745,17 +767,18 @@ pub fn compute_with_sun(
                     fam
                 })
                 .collect();
+            let coef: Vec<Coef> = fams.iter().map(|f| Coef::new(&sw.sources[f.src])).collect();
             for p in 0..lay.na {
                 fams.par_iter_mut().for_each(|f| f.step(&sw, lay, p));
                 let ca = fams[0].plane(lay, p);
                 let by = bd[1];
-                let fams = &fams[..];
+                let (fams, coef) = (&fams[..], &coef[..]);
                 match a {
                     2 => rows[ca * by..(ca + 1) * by].par_iter_mut().enumerate().for_each(|(y, row)| {
                         let mut r = 0;
                         for x in 0..bd[0] {
                             if rho[x + bd[0] * (y + by * ca)] > 0.0 {
-                                reduce_voxel(&sw, fams, lay, [x, y, ca], &mut row[r]);
+                                reduce_voxel(fams, coef, lay, [x, y, ca], &mut row[r]);
                                 r += 1;
                             }
                         }
@@ -765,14 +788,14 @@ pub fn compute_with_sun(
                             for (y, row) in rz.iter_mut().enumerate() {
                                 let idx = ca + bd[0] * (y + by * z);
                                 if rho[idx] > 0.0 {
-                                    reduce_voxel(&sw, fams, lay, [ca, y, z], &mut row[rank[idx] as usize]);
+                                    reduce_voxel(fams, coef, lay, [ca, y, z], &mut row[rank[idx] as usize]);
                                 }
                             }
                         } else {
                             let mut r = 0;
                             for x in 0..bd[0] {
                                 if rho[x + bd[0] * (ca + by * z)] > 0.0 {
-                                    reduce_voxel(&sw, fams, lay, [x, ca, z], &mut rz[ca][r]);
+                                    reduce_voxel(fams, coef, lay, [x, ca, z], &mut rz[ca][r]);
                                     r += 1;
                                 }
                             }
@@ -805,12 +828,12 @@ pub fn compute_with_sun(
                     rho * sigma_s.y as f64 / (4.0 * PI),
                     rho * sigma_s.z as f64 / (4.0 * PI),
                 ];
-                out.q0[gi] = Rgb::new((f[0] * v.s0[0]) as f32, (f[1] * v.s0[1]) as f32, (f[2] * v.s0[2]) as f32);
+                out.q0[gi] = Rgb::new((f[0] * v.m[0]) as f32, (f[1] * v.m[1]) as f32, (f[2] * v.m[2]) as f32);
                 for ax in 0..3 {
                     out.q1[ax][gi] = Rgb::new(
-                        (f[0] * g * v.s1[3 * ax]) as f32,
-                        (f[1] * g * v.s1[3 * ax + 1]) as f32,
-                        (f[2] * g * v.s1[3 * ax + 2]) as f32,
+                        (f[0] * g * v.m[3 + 3 * ax]) as f32,
+                        (f[1] * g * v.m[4 + 3 * ax]) as f32,
+                        (f[2] * g * v.m[5 + 3 * ax]) as f32,
                     );
                 }
                 out.sun_mean_transmittance[gi] = v.sun_t;
