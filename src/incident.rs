@@ -329,8 +329,9 @@ fn slab_length(h: Vec3, d: Vec3, a: usize) -> f64 {
 }
 
 impl Family {
-    /// The planned family `f` swept through `lay` (voxel size `h`, m).
-    fn new(f: &Planned, lay: &Layout, h: Vec3) -> Family {
+    /// The planned family `f` swept through `lay` (voxel size `h`, m), its rays carrying
+    /// `radiance` (W·m⁻²·sr⁻¹ per band) into the box.
+    fn new(f: &Planned, lay: &Layout, h: Vec3, radiance: Rgb) -> Family {
         let (a, u, v) = (lay.a, lay.u, lay.v);
         let (d, ou, ov) = (f.d, f.ou, f.ov);
         let fv = d.as_dvec3() / h.as_dvec3();
@@ -383,7 +384,7 @@ impl Family {
             u0,
             v0,
             nru,
-            l: Vec::new(),
+            l: vec![radiance; nru * nrv],
             hit: vec![false; nru * nrv],
             sums: vec![[0.0; 3]; lay.nu * lay.nv],
         }
@@ -706,14 +707,12 @@ pub fn compute_with_sun(
     // already in `m.optics` when `render.forward_fraction` asks for one (`render::delta_m`, the
     // same medium for every stage).
     let optics = m.optics.similarity(0.0);
-    // Sources: the bins, then the sun. Each contributes Δω·Ī to Σ0 and Δω·Ī·flow to Σ1.
     let mut srcs = source_list(bins, sources, settings, entry.is_some());
     let h = m.voxel_size;
     let plan = plan_families(&srcs, bins, settings);
     let layouts: [Option<Layout>; 3] = std::array::from_fn(|a| plan.iter().any(|f| f.axis == a).then(|| Layout::new(a, bd, &rho)));
     // Σ w·l per voxel and source: every voxel of a plane is crossed by one ray per pattern
     // segment, so it receives one slab's ray length, w·T, from each family.
-    let make = |f: &Planned| Family::new(f, layouts[f.axis].as_ref().expect("layout of a planned axis"), h);
     for f in &plan {
         srcs[f.src].norm += cross_section(h, f.d, f.axis, f.share) as f64 * slab_length(h, f.d, f.axis);
     }
@@ -759,14 +758,7 @@ pub fn compute_with_sun(
                 continue;
             }
             let lay = layouts[a].as_ref().expect("layout of a planned axis");
-            let mut fams: Vec<Family> = group
-                .iter()
-                .map(|f| {
-                    let mut fam = make(f);
-                    fam.l = vec![sw.sources[f.src].radiance; fam.hit.len()];
-                    fam
-                })
-                .collect();
+            let mut fams: Vec<Family> = group.iter().map(|f| Family::new(f, lay, h, sw.sources[f.src].radiance)).collect();
             let coef: Vec<Coef> = fams.iter().map(|f| Coef::new(&sw.sources[f.src])).collect();
             for p in 0..lay.na {
                 fams.par_iter_mut().for_each(|f| f.step(&sw, lay, p));
