@@ -1,10 +1,11 @@
 //! The one 3-D DDA (Amanatides & Woo 1987) over a regular lattice: yields every cell a ray
 //! crosses with the ray-parameter interval inside it. The entry boundaries come from the integer
-//! cell index, then each step adds one cell's ray length (no division per step: stage 1 walks
-//! about 10⁸ cells per run); each segment starts where the previous ended, so the lengths
-//! telescope exactly to the chord length. Users: the dual-lattice Simpson walk of the exact
-//! optical depth ([`super::Medium::for_each_dual_block`]), the majorant blocks, and stage 1's
-//! rays ([`crate::incident`]), which weight by these lengths.
+//! cell index, then each step adds one cell's ray length (no division per step); each segment
+//! starts where the previous ended, so the lengths telescope exactly to the chord length. Users:
+//! the dual-lattice Simpson walk of the exact optical depth
+//! ([`super::Medium::for_each_dual_block`]) and the majorant blocks; stage 1
+//! ([`crate::incident`]) sweeps its ray lattices plane by plane instead and is tested against a
+//! per-ray walk with this DDA.
 
 use glam::DVec3;
 
