@@ -297,3 +297,37 @@ fn the_clouds_shadow_reaches_the_ground_beyond_the_grid() {
     );
     assert!(f.ground.radiance.iter().all(|p| p.is_finite() && p.min_element() >= 0.0));
 }
+
+#[test]
+fn each_band_of_a_coloured_cloud_is_the_grey_solve_of_its_albedo() {
+    // Bands are independent in the solver: with albedo (0.999, 0.9, 0.6) (three DSA hierarchies)
+    // each band's diffuse source equals that of the grey cloud of its albedo (one hierarchy, the
+    // bands solved together), within the iteration's tolerance.
+    let sun = Sun {
+        dir: Vec3::new(0.3, 0.8, 0.5).normalize(),
+        irradiance: Rgb::splat(3.0),
+    };
+    let sky = Sky::constant(Rgb::new(0.3, 0.45, 0.8));
+    let s = TransportSettings {
+        tolerance: 1e-4,
+        ..TransportSettings::default()
+    };
+    let albedo = [0.999f32, 0.9, 0.6];
+    let mut coloured = ball(0.2, 0.5);
+    coloured.optics.albedo = Rgb::from(albedo);
+    let c = solve(&coloured, &sun, &sky, None, &s, &NoProgress);
+    let nsh = c.diffuse_source.len() / (3 * c.full_voxels);
+    for (band, a) in albedo.iter().enumerate() {
+        let g = solve(&ball(0.2, *a), &sun, &sky, None, &s, &NoProgress);
+        let i00 = |f: &cloudgi::transport::solve::TransportField| -> Vec<f32> {
+            (0..f.full_voxels).map(|v| f.diffuse_source[(v * 3 + band) * nsh]).collect()
+        };
+        let (cv, gv) = (i00(&c), i00(&g));
+        let scale = gv.iter().fold(0f32, |m, x| m.max(x.abs()));
+        let worst = cv.iter().zip(&gv).fold(0f32, |m, (x, y)| m.max((x - y).abs())) / scale;
+        assert!(
+            scale > 0.0 && worst < 2e-3,
+            "band {band} (albedo {a}): worst relative difference {worst}"
+        );
+    }
+}
