@@ -31,6 +31,15 @@ fn ball(sigma_t: f32, albedo: f32) -> Medium {
     )
 }
 
+/// A sun 53° high (3 W/m²) and a constant blue sky (W·m⁻²·sr⁻¹).
+fn high_sun_and_blue_sky() -> (Sun, Sky) {
+    let sun = Sun {
+        dir: Vec3::new(0.3, 0.8, 0.5).normalize(),
+        irradiance: Rgb::splat(3.0),
+    };
+    (sun, Sky::constant(Rgb::new(0.3, 0.45, 0.8)))
+}
+
 fn scene(m: Medium, method: Method) -> Scene {
     let mut s = Scene::load(None, |d| {
         d.camera.position = [0.0, 120.0, 400.0];
@@ -89,11 +98,7 @@ fn furnace_conservative_cloud_under_uniform_sky_is_invisible() {
 
 #[test]
 fn acceleration_keeps_iterations_flat_in_optical_thickness() {
-    let sun = Sun {
-        dir: Vec3::new(0.3, 0.8, 0.5).normalize(),
-        irradiance: Rgb::splat(3.0),
-    };
-    let sky = Sky::constant(Rgb::new(0.3, 0.45, 0.8));
+    let (sun, sky) = high_sun_and_blue_sky();
     let s = TransportSettings {
         tolerance: 1e-3,
         max_iterations: 80,
@@ -303,11 +308,7 @@ fn each_band_of_a_coloured_cloud_is_the_grey_solve_of_its_albedo() {
     // Bands are independent in the solver: with albedo (0.999, 0.9, 0.6) (three DSA hierarchies)
     // each band's diffuse source equals that of the grey cloud of its albedo (one hierarchy, the
     // bands solved together), within the iteration's tolerance.
-    let sun = Sun {
-        dir: Vec3::new(0.3, 0.8, 0.5).normalize(),
-        irradiance: Rgb::splat(3.0),
-    };
-    let sky = Sky::constant(Rgb::new(0.3, 0.45, 0.8));
+    let (sun, sky) = high_sun_and_blue_sky();
     let s = TransportSettings {
         tolerance: 1e-4,
         ..TransportSettings::default()
