@@ -533,22 +533,20 @@ fn dsa_rhs(c: &Ctx, dom: &Domain, bo: &BandOptics, b: usize, moments: &[f32], ne
 fn dsa_apply(c: &Ctx, dom: &Domain, bo: &BandOptics, b: usize, delta: &[f64], next: &mut [f32]) {
     let (dims, dd, nsh) = (c.dims, dom.dims, c.nsh);
     let y00 = 1.0 / (4.0 * PI).sqrt();
-    let cells = dd[0] * dd[1] * dd[2];
-    let full_at = |l: usize| {
-        let (i, j, k) = (l % dd[0], (l / dd[0]) % dd[1], l / (dd[0] * dd[1]));
-        let v = dom.global(dims, i, j, k);
-        (v, (c.full[v] != u32::MAX).then(|| c.full[v] as usize))
-    };
     let sigma_tr = bo.sigma_t * (1.0 - bo.albedo * bo.chi.get(1).copied().unwrap_or(0.0));
     let (stride, gstride) = ([1, dd[0], dd[0] * dd[1]], [1, dims[0], dims[0] * dims[1]]);
-    for l in 0..cells {
-        let (v, Some(f)) = full_at(l) else { continue };
+    for l in 0..dd[0] * dd[1] * dd[2] {
+        let cell = [l % dd[0], (l / dd[0]) % dd[1], l / (dd[0] * dd[1])];
+        let v = dom.global(dims, cell[0], cell[1], cell[2]);
+        let f = match c.full[v] {
+            u32::MAX => continue,
+            f => f as usize,
+        };
         let fo = (f * 3 + b) * nsh;
         next[fo] += (delta[l] / y00) as f32;
         if nsh < 4 {
             continue;
         }
-        let cell = [l % dd[0], (l / dd[0]) % dd[1], l / (dd[0] * dd[1])];
         for ax in 0..3 {
             // ∂δ/∂x_ax / (ρσtr′): the mean over this voxel's faces to full neighbours of
             // 3 D_f (δ_n − δ_p)/h, D_f/h² being the operator's face coupling.
