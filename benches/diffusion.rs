@@ -5,14 +5,14 @@
 //! solver's scaling (issue 16's target: 200×160×120 in at most 9× the time of 100×80×60).
 
 use cloudgi::diffusion::{solve_diffusion, DiffusionSettings};
-use cloudgi::render::diffusion::compute_incident;
+use cloudgi::render::diffusion::{boundary_light, compute_incident};
 use cloudgi::{Method, NoProgress, Scene};
 use criterion::{criterion_group, criterion_main, Criterion};
 
 fn diffusion(c: &mut Criterion) {
     let mut scene = Scene::default_scene().unwrap();
     let inc = compute_incident(&scene, None);
-    let sol = solve_diffusion(&scene.medium, &inc, None, &DiffusionSettings::default()).unwrap();
+    let sol = solve_diffusion(&scene.medium, &inc, &boundary_light(&scene), None, &DiffusionSettings::default()).unwrap();
     println!("{}", sol.summary());
     for (band, s) in sol.stats.iter().enumerate() {
         let h: Vec<String> = s.history.iter().map(|r| format!("{r:.2e}")).collect();
@@ -44,11 +44,11 @@ fn solver(c: &mut Criterion) {
         })
         .unwrap();
         let inc = compute_incident(&scene, None);
-        let sol = solve_diffusion(&scene.medium, &inc, None, &DiffusionSettings::default()).unwrap();
+        let sol = solve_diffusion(&scene.medium, &inc, &boundary_light(&scene), None, &DiffusionSettings::default()).unwrap();
         println!("{}x{}x{}: {}", r[0], r[1], r[2], sol.summary());
         let name = format!("solve 3 bands to 1e-6, {}x{}x{}", r[0], r[1], r[2]);
         g.bench_function(name, |b| {
-            b.iter(|| solve_diffusion(&scene.medium, &inc, None, &DiffusionSettings::default()).unwrap())
+            b.iter(|| solve_diffusion(&scene.medium, &inc, &boundary_light(&scene), None, &DiffusionSettings::default()).unwrap())
         });
     }
     g.finish();

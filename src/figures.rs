@@ -216,6 +216,7 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
         d.render.method = method;
         if paper {
             d.render.sky_single_scattering = false;
+            d.render.sky_boundary = false;
             d.render.forward_fraction = 0.0;
             d.render.diffuse_anisotropy = false;
             d.render.surface_depth = 0.0;

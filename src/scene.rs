@@ -132,8 +132,13 @@ render_table! {
     /// gather's source, a·∫p·I_ri,sky (src/lit/sky_single.rs); default on (docs/budget.md
     /// "Fixes"), false: the paper's gather.
     sky_single_scattering: bool => incident.sky_single;
+    /// `diffusion`, `full`: the sky and ground light enter through the diffusion's boundary
+    /// condition (eq. 7 with each boundary face's incoming radiance; `full`'s clear-air cubes give
+    /// it per face) instead of as stage 1's reduced sky bins (src/diffusion/boundary.rs); default
+    /// on (docs/budget.md "The sky through the boundary"), false: the paper's scheme.
+    sky_boundary: bool => solver.sky_boundary;
     /// `diffusion`, `full`: forward fraction f of the δ-M transform every stage runs on
-    /// (0 ≤ f < 1, capped at g; src/optics.rs); default 0.7, measured in docs/budget.md ("fixes");
+    /// (0 ≤ f < 1, capped at g; src/optics.rs); default 0.65, measured in docs/budget.md ("The sky through the boundary");
     /// 0 is the paper's scheme exactly.
     forward_fraction: f32 => forward_fraction;
     /// `transport`: Legendre order L of the δ-M phase function and of the spherical-harmonic
@@ -286,7 +291,7 @@ impl Default for RenderSettings {
             edges: EdgeSettings::default(),
             aov: false,
             diffuse_anisotropy: true,
-            forward_fraction: 0.7,
+            forward_fraction: 0.65,
             transport: TransportSettings::default(),
         }
     }

@@ -2,7 +2,7 @@
 //! and the a·(I0 + g·I1·ω) gather source it gives.
 
 use cloudgi::diffusion::flux::{diffuse_flux, FluxField};
-use cloudgi::diffusion::{solve_diffusion, DiffusionSettings, DiffusionSolution};
+use cloudgi::diffusion::{solve_diffusion, BoundaryLight, DiffusionSettings, DiffusionSolution};
 use cloudgi::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
 use cloudgi::lighting::{DirectionBins, Sky, Sun};
 use cloudgi::lit::LitVolume;
@@ -40,6 +40,7 @@ fn solution_of(m: &Medium, f: impl Fn(usize, usize, usize) -> f32) -> DiffusionS
         dims: d,
         i0: [v.clone(), v.clone(), v],
         stats: Default::default(),
+        boundary: BoundaryLight::none(),
     }
 }
 
@@ -133,7 +134,7 @@ fn slab_lit_from_above_is_brighter_below_darker_above() {
     };
     let inc = compute(&m, &DirectionBins::new(), &src, &IncidentSettings::default(), None);
     let settings = DiffusionSettings::default();
-    let sol = solve_diffusion(&m, &inc, None, &settings).unwrap();
+    let sol = solve_diffusion(&m, &inc, &BoundaryLight::none(), None, &settings).unwrap();
     let i1 = diffuse_flux(&m, &inc, &sol, settings.min_optical_depth);
     let sun = Sun {
         dir: Vec3::Y,

@@ -2,12 +2,12 @@
 //! the diffusion render.
 
 use cloudgi::diffusion::slab::{default_cells, slab_forward_fraction, solve_slab, solve_slab_similar, Incidence};
-use cloudgi::diffusion::{boundary_outflow, solve_diffusion, DiffusionSettings};
+use cloudgi::diffusion::{boundary_outflow, solve_diffusion, BoundaryLight, DiffusionSettings};
 use cloudgi::incident::{compute, IncidentSettings, IncidentSources};
 use cloudgi::lighting::DirectionBins;
 use cloudgi::math::{Rgb, Vec3};
 use cloudgi::medium::{Grid3, Medium};
-use cloudgi::render::diffusion::compute_incident;
+use cloudgi::render::diffusion::{boundary_light, compute_incident};
 use cloudgi::{Error, Method, NoProgress, Scene};
 use std::f64::consts::PI;
 
@@ -204,8 +204,9 @@ fn energy_balance_with_albedo_one() {
         tolerance: 1e-10,
         max_iterations: 500,
         min_optical_depth: 0.0,
+        sky_boundary: false,
     };
-    let sol = solve_diffusion(&m, &inc, None, &settings).unwrap();
+    let sol = solve_diffusion(&m, &inc, &BoundaryLight::none(), None, &settings).unwrap();
     let out = boundary_outflow(&m, &inc, &sol, 0.0);
     let removed = 3.0 * 6.0 * 5.0 * (1.0 - (-0.4f64 * 8.0).exp());
     assert!(((out.x as f64) - removed).abs() < 1e-5 * removed, "out {} removed {removed}", out.x);
@@ -240,7 +241,7 @@ fn convergence_independent_of_resolution_warm_start_and_failure() {
     let mut iters = vec![];
     for scene in [&half, &full] {
         let inc = compute_incident(scene, None);
-        let sol = solve_diffusion(&scene.medium, &inc, None, &DiffusionSettings::default()).unwrap();
+        let sol = solve_diffusion(&scene.medium, &inc, &boundary_light(scene), None, &DiffusionSettings::default()).unwrap();
         for s in &sol.stats {
             assert!(s.relative_residual <= 1e-6);
             assert!(
@@ -253,7 +254,14 @@ fn convergence_independent_of_resolution_warm_start_and_failure() {
         iters.push(sol.stats[0].iterations);
         if std::ptr::eq(scene, &half) {
             // Warm start from the solution of a slightly brighter sky converges in fewer iterations.
-            let warm = solve_diffusion(&scene.medium, &inc, Some(&sol), &DiffusionSettings::default()).unwrap();
+            let warm = solve_diffusion(
+                &scene.medium,
+                &inc,
+                &boundary_light(scene),
+                Some(&sol),
+                &DiffusionSettings::default(),
+            )
+            .unwrap();
             assert!(
                 warm.stats[0].iterations < sol.stats[0].iterations / 2,
                 "{} vs {}",
@@ -270,7 +278,14 @@ fn convergence_independent_of_resolution_warm_start_and_failure() {
                 &IncidentSettings::default(),
                 None,
             );
-            let warm2 = solve_diffusion(&scene.medium, &inc2, Some(&sol), &DiffusionSettings::default()).unwrap();
+            let warm2 = solve_diffusion(
+                &scene.medium,
+                &inc2,
+                &boundary_light(scene),
+                Some(&sol),
+                &DiffusionSettings::default(),
+            )
+            .unwrap();
             assert!(
                 warm2.stats[0].iterations < sol.stats[0].iterations,
                 "{} vs {}",
@@ -281,6 +296,7 @@ fn convergence_independent_of_resolution_warm_start_and_failure() {
             let err = solve_diffusion(
                 &scene.medium,
                 &inc,
+                &boundary_light(scene),
                 None,
                 &DiffusionSettings {
                     max_iterations: 2,
@@ -302,7 +318,7 @@ fn deterministic_at_any_thread_count_and_hook_replaces_radiance() {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         pool.install(|| {
             let inc = compute_incident(&scene, None);
-            let sol = solve_diffusion(&scene.medium, &inc, None, &DiffusionSettings::default()).unwrap();
+            let sol = solve_diffusion(&scene.medium, &inc, &boundary_light(&scene), None, &DiffusionSettings::default()).unwrap();
             (inc.q0.clone(), sol.i0.clone())
         })
     };

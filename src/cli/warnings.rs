@@ -134,10 +134,22 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
         "render.solver_tolerance",
         "render.solver_max_iterations",
         "render.diffuse_anisotropy",
-        "render.sky_single_scattering",
+        "render.sky_boundary",
         "render.forward_fraction",
     ] {
         rule(key, solved, &only_solved);
+    }
+    // The sky's single scattering is the reduced sky of stage 1, which carries no sky when the
+    // sky enters through the boundary condition (its light is then in I0 itself).
+    if solved && scene.render.solver.sky_boundary {
+        rule(
+            "render.sky_single_scattering",
+            false,
+            "with render.sky_boundary = true (the sky enters through the diffusion's boundary and is in I0 itself; \
+             set render.sky_boundary = false for the paper's stage-1 sky)",
+        );
+    } else {
+        rule("render.sky_single_scattering", solved, &only_solved);
     }
     let only_transport = format!("to method {name} (only transport uses it)");
     for key in [

@@ -13,13 +13,15 @@
 //!
 //! **I1 from the solver's own fluxes.** The scheme of [`super`] computes the outward flux
 //! φ_f = I1·n/3 through every face of a full voxel: −D_f (I_N − I_P)/h + F_f·n on an interior face
-//! (with the τ_min floor in D_f), the Marshak flux (β I_P + f)/(1 + 2β) on a boundary face. The
+//! (with the τ_min floor in D_f), the Marshak flux (β (I_P − L_face) + f)/(1 + 2β) on a boundary face
+//! (L_face the incoming light of [`super::boundary`], zero in the paper's eq. 7). The
 //! voxel-centre I1 on axis a is the mean of its two faces: I1_a = 3 (φ_+ − φ_−)/2. Away from
 //! boundaries and the floor this is the central difference of Fick's law,
 //! I1 = (−∇I0 + 3 Q1)/(ρσtr), with ∇I0 ≈ (I_{+1} − I_{−1})/(2h) and Q1 the mean of the
 //! neighbours' F = Q1/(ρσtr); at a boundary face it uses the same ghost value as the solve. I1 is
 //! zero where ρ = 0, and is interpolated density-weighted like I0: trilinear(ρ I1)/trilinear(ρ).
 
+use super::boundary::face_index;
 use super::{boundary_terms, interior_coupling, DiffusionSolution};
 use crate::incident::IncidentLight;
 use crate::math::{Rgb, Vec3};
@@ -63,7 +65,8 @@ pub fn diffuse_flux(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, ta
                             }
                             _ => {
                                 let (dt, ft) = boundary_terms(rp, s, h[ax], tau_min);
-                                h[ax] * (dt * ip + ft * fp * side as f64)
+                                let l_in = sol.boundary.at(nidx, face_index(ax, side), c);
+                                h[ax] * (dt * (ip - l_in) + ft * fp * side as f64)
                             }
                         };
                     }

@@ -75,6 +75,7 @@
 //! The outgoing diffuse flux through a boundary face (W/m² per band) is 4π φ_f = 2π I0_face: the
 //! energy-balance test sums it.
 
+pub mod boundary;
 pub mod flux;
 pub(crate) mod multigrid;
 pub mod slab;
@@ -83,6 +84,8 @@ use crate::error::{Error, Result};
 use crate::incident::IncidentLight;
 use crate::math::Rgb;
 use crate::medium::Medium;
+use boundary::face_index;
+pub use boundary::BoundaryLight;
 use multigrid::{Hierarchy, Stencil};
 use rayon::prelude::*;
 
@@ -97,6 +100,10 @@ pub struct DiffusionSettings {
     /// boundary's β (a flux limiter for optically thin voxels, where diffusion overestimates the
     /// flux without bound); 0 gives the paper's scheme exactly. See the module docs.
     pub min_optical_depth: f64,
+    /// The sky and ground light enter through the boundary condition (eq. 7 with the incoming
+    /// radiance of every boundary face, [`boundary`]) instead of as stage 1's reduced sky bins
+    /// (`render.sky_boundary`, default on); false: the paper's scheme.
+    pub sky_boundary: bool,
 }
 
 impl Default for DiffusionSettings {
@@ -105,6 +112,7 @@ impl Default for DiffusionSettings {
             tolerance: 1e-6,
             max_iterations: 200,
             min_optical_depth: DEFAULT_MIN_OPTICAL_DEPTH,
+            sky_boundary: true,
         }
     }
 }
@@ -170,6 +178,8 @@ pub struct DiffusionSolution {
     pub i0: [Vec<f32>; 3],
     /// Per band.
     pub stats: [SolveStats; 3],
+    /// The light that entered through the boundary faces (eq. 7's incoming radiance).
+    pub boundary: BoundaryLight,
 }
 
 impl DiffusionSolution {
@@ -241,8 +251,9 @@ impl Domain {
     }
 }
 
-/// Assemble band `c`'s operator and right-hand side on `dom` (see the module docs).
-pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, c: usize, tau_min: f64, dom: &Domain) -> (Stencil, Vec<f64>) {
+/// Assemble band `c`'s operator and right-hand side on `dom` (see the module docs), with the light
+/// `bl` entering through the boundary faces.
+pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_min: f64, dom: &Domain) -> (Stencil, Vec<f64>) {
     let gd = m.dims();
     let d = dom.dims;
     let n = d[0] * d[1] * d[2];
@@ -296,7 +307,8 @@ pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, c: usize, tau_min: f64, 
                             } else {
                                 let (dterm, fterm) = boundary_terms(rp, sigma_tr, h[ax], tau_min);
                                 diag += dterm;
-                                rhs -= fterm * fp * side as f64;
+                                // eq. 7 with incoming light: φ = (β(I_P − L_face) + f)/(1 + 2β).
+                                rhs += dterm * bl.at(nidx, face_index(ax, side), c) - fterm * fp * side as f64;
                             }
                         }
                     }
@@ -308,8 +320,10 @@ pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, c: usize, tau_min: f64, 
     (st_out, b)
 }
 
-/// Outgoing diffuse power (W per band) through every boundary face of the cloud: Σ A·2π I0_face.
+/// Net outgoing diffuse power (W per band) through every boundary face of the cloud: Σ A·4π φ_f,
+/// which is Σ A·2π I0_face without incoming light (`sol.boundary`).
 pub fn boundary_outflow(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, tau_min: f64) -> Rgb {
+    let bl = &sol.boundary;
     let d = m.dims();
     let rho = m.density.data();
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
@@ -330,11 +344,12 @@ pub fn boundary_outflow(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution
                     for ax in 0..3 {
                         for side in [-1i64, 1] {
                             let nc = cell[ax] as i64 + side;
-                            let full = nc >= 0 && nc < d[ax] as i64 && rho[(idx as i64 + side * stride[ax] as i64) as usize] > 0.0;
-                            if !full {
+                            let nidx = (nc >= 0 && nc < d[ax] as i64).then(|| (idx as i64 + side * stride[ax] as i64) as usize);
+                            if nidx.map_or(true, |q| rho[q] <= 0.0) {
                                 let (dt, ft) = boundary_terms(rp, sigma_tr, h[ax], tau_min);
                                 let f = inc.q1[ax][idx][c] as f64 / (rp * sigma_tr) * side as f64;
-                                let phi_over_h = dt * sol.i0[c][idx] as f64 + ft * f;
+                                let l_in = bl.at(nidx, face_index(ax, side), c);
+                                let phi_over_h = dt * (sol.i0[c][idx] as f64 - l_in) + ft * f;
                                 *o += 4.0 * std::f64::consts::PI * phi_over_h * vol;
                             }
                         }
@@ -346,11 +361,13 @@ pub fn boundary_outflow(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution
     Rgb::new(out[0] as f32, out[1] as f32, out[2] as f32)
 }
 
-/// Solve eq. 4 with eq. 7 for all three bands. `previous` warm-starts each band. Fails with
+/// Solve eq. 4 with eq. 7 for all three bands, `boundary` the light entering through the boundary
+/// faces ([`BoundaryLight::none`] for the paper's eq. 7). `previous` warm-starts each band. Fails with
 /// [`Error::Numerical`] when a band does not reach `settings.tolerance` within `max_iterations`.
 pub fn solve_diffusion(
     medium: &Medium,
     incident: &IncidentLight,
+    boundary: &BoundaryLight,
     previous: Option<&DiffusionSolution>,
     settings: &DiffusionSettings,
 ) -> Result<DiffusionSolution> {
@@ -375,6 +392,7 @@ pub fn solve_diffusion(
             dims,
             i0: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
             stats: Default::default(),
+            boundary: boundary.clone(),
         });
     };
     let dd = dom.dims;
@@ -403,7 +421,7 @@ pub fn solve_diffusion(
     // Bands with identical coefficients share one hierarchy.
     let systems: Vec<(Stencil, Vec<f64>)> = (0..3)
         .into_par_iter()
-        .map(|c| assemble(medium, incident, c, settings.min_optical_depth, &dom))
+        .map(|c| assemble(medium, incident, boundary, c, settings.min_optical_depth, &dom))
         .collect();
     let mut hier: Vec<(f32, Hierarchy)> = Vec::new();
     let mut groups: Vec<Vec<usize>> = Vec::new();
@@ -462,6 +480,7 @@ pub fn solve_diffusion(
         dims,
         i0: [x0, x1, x2],
         stats: [s0, s1, s2],
+        boundary: boundary.clone(),
     })
 }
 

@@ -895,7 +895,7 @@ impl Hierarchy {
 #[cfg(test)]
 mod operator_tests {
     use super::{Hierarchy, Stencil};
-    use crate::diffusion::{assemble, Domain};
+    use crate::diffusion::{assemble, BoundaryLight, Domain};
     use crate::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
     use crate::lighting::DirectionBins;
     use crate::math::{Rgb, Rng, Vec3};
@@ -984,7 +984,7 @@ mod operator_tests {
         let inc = lit(&m, 0.5, Some((Vec3::new(0.3, 1.0, 0.2), 3.0)));
         let dom = Domain::of(&m).unwrap();
         for tau_min in [0.0, 1e-3] {
-            let (s, _) = assemble(&m, &inc, 0, tau_min, &dom);
+            let (s, _) = assemble(&m, &inc, &BoundaryLight::none(), 0, tau_min, &dom);
             let (cells, a) = dense(&s);
             let n = cells.len();
             assert!(n > 100);
@@ -1007,7 +1007,7 @@ mod operator_tests {
             let m = random_cloud(d, seed, 0.99, 0.85);
             let inc = lit(&m, 1.0, Some((Vec3::new(-0.2, 1.0, 0.4), 2.0)));
             let dom = Domain::of(&m).unwrap();
-            let (s, b) = assemble(&m, &inc, 1, 0.0, &dom);
+            let (s, b) = assemble(&m, &inc, &BoundaryLight::none(), 1, 0.0, &dom);
             let h = Hierarchy::build_with(s.clone(), 16);
             assert!(h.levels() >= 4, "levels {}", h.levels());
             let (x, st) = h.solve(&b, None, 1e-12, 500);
@@ -1026,7 +1026,7 @@ mod operator_tests {
         let m = random_cloud([12, 10, 9], 5, 0.97, 0.8);
         let inc = lit(&m, 1.0, Some((Vec3::new(0.3, 1.0, -0.2), 2.0)));
         let dom = Domain::of(&m).unwrap();
-        let (s, b) = assemble(&m, &inc, 0, 1e-3, &dom);
+        let (s, b) = assemble(&m, &inc, &BoundaryLight::none(), 0, 1e-3, &dom);
         let h = Hierarchy::build_with(s, 16);
         // A second right-hand side that converges at another iteration, and a zero one.
         let b2: Vec<f64> = b.iter().enumerate().map(|(c, v)| if c % 3 == 0 { -2.0 * v } else { *v }).collect();

@@ -6,7 +6,7 @@
 use super::single::{background, pixel_sample};
 use super::{render_rows, Progress, Timings};
 use crate::diffusion::flux::{diffuse_flux, FluxField};
-use crate::diffusion::{solve_diffusion, DiffusionSolution};
+use crate::diffusion::{solve_diffusion, BoundaryLight, DiffusionSolution};
 use crate::error::Result;
 use crate::image::Image;
 use crate::incident::{compute_with_sun, EntryRadiance, IncidentLight, IncidentSources};
@@ -24,12 +24,35 @@ pub fn compute_incident(scene: &Scene, entry: Option<&EntryRadiance<'_>>) -> Inc
     compute_incident_with(scene, entry, SunTransmittance::compute(&scene.medium, scene.sun.dir))
 }
 
-/// [`compute_incident`] with the sun transmittance of the scene's medium already computed.
+/// [`compute_incident`] with the sun transmittance of the scene's medium already computed. With
+/// `render.sky_boundary` stage 1 propagates the sun only: the sky and ground enter through the
+/// diffusion's boundary condition instead ([`boundary_light`]).
 pub fn compute_incident_with(scene: &Scene, entry: Option<&EntryRadiance<'_>>, sun_t: SunTransmittance) -> IncidentLight {
-    let settings = &scene.render.incident;
+    let mut settings = scene.render.incident.clone();
     let bins = DirectionBins::new();
-    let sources = IncidentSources::from_lighting(&scene.sun, &scene.sky, scene.ground.as_ref(), &bins, settings.sky_subdivisions);
-    compute_with_sun(&scene.medium, &bins, &sources, settings, entry, sun_t)
+    let mut sources = IncidentSources::from_lighting(&scene.sun, &scene.sky, scene.ground.as_ref(), &bins, settings.sky_subdivisions);
+    if scene.render.solver.sky_boundary {
+        sources.bin_radiance.fill(Rgb::ZERO);
+        settings.sky_single = false;
+    }
+    compute_with_sun(&scene.medium, &bins, &sources, &settings, entry, sun_t)
+}
+
+/// The light entering the diffusion through its boundary faces: with `render.sky_boundary`, the
+/// unoccluded sky and ground over each face's outer hemisphere; else none (the paper's eq. 7).
+pub fn boundary_light(scene: &Scene) -> BoundaryLight {
+    if !scene.render.solver.sky_boundary {
+        return BoundaryLight::none();
+    }
+    let bins = DirectionBins::new();
+    let sources = IncidentSources::from_lighting(
+        &scene.sun,
+        &scene.sky,
+        scene.ground.as_ref(),
+        &bins,
+        scene.render.incident.sky_subdivisions,
+    );
+    BoundaryLight::uniform(&bins.bins, &sources.bin_radiance)
 }
 
 /// The lit volume of a scene from I0 per voxel and the sun transmittance at voxel centres, the
@@ -75,7 +98,7 @@ pub fn solved_lit_volume(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolu
 pub fn lit_volume(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<LitVolume> {
     let inc = timings.time("incident light", || compute_incident(scene, None));
     let sol = timings.time("diffusion solve", || {
-        solve_diffusion(&scene.medium, &inc, None, &scene.render.solver)
+        solve_diffusion(&scene.medium, &inc, &boundary_light(scene), None, &scene.render.solver)
     })?;
     progress.log(&sol.summary());
     Ok(solved_lit_volume(scene, &inc, &sol))

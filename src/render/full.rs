@@ -16,16 +16,19 @@
 //! With `iterations = 0` this is the paper's Figure 6 (diffusion plus the low-density edges, the
 //! ground still lit by its hemicubes).
 
-use super::diffusion::{compute_incident, compute_incident_with, i0_rgb, scene_lit_volume, solved_lit_volume};
+use super::diffusion::{boundary_light, compute_incident, compute_incident_with, i0_rgb, scene_lit_volume, solved_lit_volume};
 use super::single::pixel_sample;
 use super::{Progress, Timings};
+use crate::cube::border::BorderCubes;
 use crate::cube::{clear_air, CubeImage, CubeRenderer};
-use crate::diffusion::{solve_diffusion, DiffusionSolution};
+use crate::diffusion::boundary::hemisphere_radiance;
+use crate::diffusion::{solve_diffusion, BoundaryLight, DiffusionSolution};
 use crate::edges::gather::{CubeRequest, CubeSource, EdgeGather, SunInput};
 use crate::edges::sparse::{gather_image, PixelRay, SparseSettings};
 use crate::error::Result;
 use crate::image::Image;
 use crate::incident::IncidentLight;
+use crate::lighting::bins::{DirectionBins, CUBE_FACES};
 use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
 use crate::scene::Scene;
@@ -60,13 +63,34 @@ pub fn relative_change(old: &DiffusionSolution, new: &DiffusionSolution) -> f64 
     }
 }
 
+/// The light entering the cloud through the faces next to each border voxel: its cube's radiance
+/// over the face's outer hemisphere (src/diffusion/boundary.rs); `base` elsewhere.
+pub fn cube_boundary(base: &BoundaryLight, cubes: &BorderCubes) -> BoundaryLight {
+    let bins = DirectionBins::new();
+    let d = cubes.dims;
+    let ghosts = cubes.voxels.iter().enumerate().map(|(n, v)| {
+        let mut light = base.uniform;
+        for f in (0..6).filter(|f| cubes.faces[n] & (1 << f) != 0) {
+            // The full neighbour lies along FACE_OFFSETS[f]; its face towards this voxel has the
+            // opposite normal, the other index of the pair (+a, −a).
+            let face = f ^ 1;
+            light[face] = hemisphere_radiance(&bins.bins, cubes.bins(n), CUBE_FACES[face].n);
+        }
+        (v[0] + d[0] * (v[1] + d[1] * v[2]), light)
+    });
+    base.clone().with_ghosts(ghosts)
+}
+
 /// Stages 1–2 and the clear-air iterations.
 pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Propagation> {
     let settings = &scene.render.solver;
     // The sun transmittance depends only on the medium and the sun: once per run.
     let mut inc = timings.time("incident light", || compute_incident(scene, None));
     let sun_t = inc.sun_transmittance.clone();
-    let mut sol = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &inc, None, settings))?;
+    let unoccluded = boundary_light(scene);
+    let mut sol = timings.time("diffusion solve", || {
+        solve_diffusion(&scene.medium, &inc, &unoccluded, None, settings)
+    })?;
     progress.log(&sol.summary());
     let mut changes = Vec::new();
     let opts = &scene.render.cubes;
@@ -79,10 +103,18 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         }
         // Stage 1 asks with bin b = the direction the light comes from (its rays flow along −ω_b),
         // which is the cube's own bin b ("radiance arriving from ω_b").
-        let hook = ca.cubes.hook();
-        let new_inc = timings.time("incident light", || compute_incident_with(scene, Some(&hook), sun_t.clone()));
-        let new = timings.time("diffusion solve", || solve_diffusion(&scene.medium, &new_inc, Some(&sol), settings))?;
-        inc = new_inc;
+        // With `render.sky_boundary` the cubes' light enters through the boundary condition and
+        // stage 1 (the sun only) does not change; else stage 1 is re-run with the cubes' light.
+        let boundary = if settings.sky_boundary {
+            cube_boundary(&unoccluded, &ca.cubes)
+        } else {
+            let hook = ca.cubes.hook();
+            inc = timings.time("incident light", || compute_incident_with(scene, Some(&hook), sun_t.clone()));
+            BoundaryLight::none()
+        };
+        let new = timings.time("diffusion solve", || {
+            solve_diffusion(&scene.medium, &inc, &boundary, Some(&sol), settings)
+        })?;
         let change = relative_change(&sol, &new);
         // A change near or above 100 % is not noise: on grids whose voxels are optically very
         // thick (τ ≫ 1 per voxel) stage 1 deposits all light in the first voxel, and the P1 dipole

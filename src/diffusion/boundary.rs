@@ -1,0 +1,174 @@
+//! The light entering the cloud through the diffusion's boundary (`render.sky_boundary`).
+//!
+//! # Why
+//!
+//! The paper splits the sky's light into the reduced part I_ri, propagated by stage 1 and left out
+//! of I0, and the diffuse part I0 + I1·ω, which starts with no inward flux at the boundary (eq. 7).
+//! Near the surface — the layer the eye sees — that split is poor: for a half-space of albedo 1
+//! under a uniform sky of radiance 1 (the exact radiance is 1 everywhere), the P1 field of the
+//! split gives I0(τ) = 1 − (3/2)E₄(τ) and Ī_ri = E₂(τ)/2, so the mean radiance I0 + Ī_ri is 1 at the
+//! surface and deep inside but 0.87 at τ = 0.5 and 0.94 at τ = 1 (Eₙ the exponential integrals),
+//! and the gather's images were 12–14 % too dark in the furnace (docs/budget.md).
+//!
+//! # What
+//!
+//! With the switch on, stage 1 propagates the sun only, and the sky and ground light enter as the
+//! incoming radiance of eq. 7's Marshak condition on every boundary face of the cloud:
+//!
+//! ```text
+//!   ∫_{ω·n_in > 0} I (ω·n_in) dω = ∫_{ω·n_in > 0} L_in (ω·n_in) dω = π L_face
+//!   ⇒ I0 − (2/(3ρσtr)) n_in·∇I0 + (2/(ρσtr)) n_in·Q1 = L_face
+//! ```
+//!
+//! L_face is the cosine-weighted mean radiance arriving at the face from its outer hemisphere.
+//! The solver's ghost value then gives the face's outward flux (β(I_P − L_face) + f)/(1 + 2β),
+//! the eq. 7 flux of [`super`] with I_P − L_face in place of I_P. A uniform sky over an albedo-1
+//! cloud gives I0 = L exactly (every term vanishes), which is the furnace's exact answer.
+//!
+//! Without clear-air cubes, L_face is the unoccluded sky and ground ([`BoundaryLight::uniform`],
+//! one value per face orientation). `full`'s clear-air iteration replaces it, on every face whose
+//! empty neighbour has a viewing cube, by that cube's hemisphere ([`BoundaryLight::with_ghosts`]):
+//! the sky seen through the rest of the cloud plus the light the other cloud parts and the lit
+//! ground send — the paper's section 3, entering through the boundary condition instead of stage 1.
+
+use crate::lighting::bins::{Bin, CUBE_FACES};
+use crate::math::Rgb;
+
+/// Incoming radiance L_face (W·m⁻²·sr⁻¹ per band) on the boundary faces of the diffusion's cloud.
+/// Faces are indexed by their outward normal (from the full voxel towards its empty neighbour) in
+/// [`CUBE_FACES`] order: +x, −x, +y, −y, +z, −z.
+#[derive(Clone, Debug, Default)]
+pub struct BoundaryLight {
+    /// L_face per face orientation where no ghost value is known; zero: the paper's eq. 7.
+    pub uniform: [Rgb; 6],
+    /// Per empty voxel (grid index, ascending) that has its own light: L_face for each of the six
+    /// faces of the full voxels around it, by the full voxel's outward normal.
+    ghosts: Vec<(usize, [Rgb; 6])>,
+}
+
+/// The cosine-weighted mean radiance (1/π)∫_{ω·n > 0} L(ω) (ω·n) dω (W·m⁻²·sr⁻¹) over the
+/// hemisphere of arrival directions around `n`, for radiance constant over each bin (`radiance[b]`
+/// arriving from the directions of `bins[b]`). The hemisphere is a union of whole bins (their
+/// edges lie on the cube's axis planes), and each bin contributes its exact first moment.
+pub fn hemisphere_radiance(bins: &[Bin], radiance: &[Rgb], n: crate::math::Vec3) -> Rgb {
+    let mut sum = [0f64; 3];
+    for (b, r) in bins.iter().zip(radiance) {
+        let cos_weight = b.mean_dir.dot(n) as f64 * b.solid_angle;
+        if cos_weight > 0.0 {
+            for (s, v) in sum.iter_mut().zip([r.x, r.y, r.z]) {
+                *s += cos_weight * v as f64;
+            }
+        }
+    }
+    let k = 1.0 / std::f64::consts::PI;
+    Rgb::new((sum[0] * k) as f32, (sum[1] * k) as f32, (sum[2] * k) as f32)
+}
+
+impl BoundaryLight {
+    /// No incoming light: eq. 7 as the paper writes it (the sky enters through stage 1).
+    pub fn none() -> Self {
+        Self::default()
+    }
+
+    /// The same incoming light on every face of one orientation: the bins' radiance (sky and
+    /// ground as seen unoccluded) over each face's outer hemisphere.
+    pub fn uniform(bins: &[Bin], radiance: &[Rgb]) -> Self {
+        BoundaryLight {
+            uniform: std::array::from_fn(|f| hemisphere_radiance(bins, radiance, CUBE_FACES[f].n)),
+            ghosts: Vec::new(),
+        }
+    }
+
+    /// `self` with its own light for the faces next to some empty voxels: `ghosts` yields
+    /// (grid index of the empty voxel, L_face by the full voxel's outward normal). A face whose
+    /// empty voxel is not listed keeps the uniform value.
+    pub fn with_ghosts(mut self, ghosts: impl IntoIterator<Item = (usize, [Rgb; 6])>) -> Self {
+        self.ghosts = ghosts.into_iter().collect();
+        self.ghosts.sort_by_key(|g| g.0);
+        self
+    }
+
+    /// L_face of band `c` on the face of a full voxel with outward normal `face` (index into
+    /// [`CUBE_FACES`]) whose empty neighbour is grid voxel `ghost` (None outside the grid).
+    #[inline]
+    pub fn at(&self, ghost: Option<usize>, face: usize, c: usize) -> f64 {
+        let own = ghost.and_then(|g| self.ghosts.binary_search_by_key(&g, |e| e.0).ok());
+        let v = match own {
+            Some(p) => self.ghosts[p].1[face],
+            None => self.uniform[face],
+        };
+        v[c] as f64
+    }
+
+    /// True when no face receives light (the paper's eq. 7).
+    pub fn is_dark(&self) -> bool {
+        self.uniform.iter().all(|v| *v == Rgb::ZERO) && self.ghosts.is_empty()
+    }
+}
+
+/// Index into [`CUBE_FACES`] of the face on `axis` with outward sign `side` (±1).
+#[inline]
+pub fn face_index(axis: usize, side: i64) -> usize {
+    2 * axis + usize::from(side < 0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lighting::bins::DirectionBins;
+
+    #[test]
+    fn a_uniform_sky_gives_its_radiance_on_every_face() {
+        let bins = DirectionBins::new();
+        let l = vec![Rgb::new(1.0, 2.0, 0.5); bins.bins.len()];
+        let b = BoundaryLight::uniform(&bins.bins, &l);
+        for f in 0..6 {
+            for (c, want) in [1.0, 2.0, 0.5].into_iter().enumerate() {
+                assert!((b.at(None, f, c) - want).abs() < 1e-6, "face {f} band {c}: {}", b.at(None, f, c));
+            }
+        }
+    }
+
+    #[test]
+    fn sky_above_ground_below_splits_the_side_faces_evenly() {
+        // Radiance 1 from above the horizon, 0 below: the top face (+y) sees 1, the bottom face
+        // none, a side face half (its hemisphere is cut in two by the horizon, symmetrically).
+        let bins = DirectionBins::new();
+        let l: Vec<Rgb> = bins
+            .bins
+            .iter()
+            .map(|b| if b.mean_dir.y > 0.0 { Rgb::splat(1.0) } else { Rgb::ZERO })
+            .collect();
+        let b = BoundaryLight::uniform(&bins.bins, &l);
+        assert!((b.at(None, 2, 0) - 1.0).abs() < 1e-6);
+        assert!(b.at(None, 3, 0).abs() < 1e-6);
+        for f in [0, 1, 4, 5] {
+            assert!((b.at(None, f, 0) - 0.5).abs() < 1e-6, "face {f}: {}", b.at(None, f, 0));
+        }
+        // A single bin: its exact first moment over π.
+        let one: Vec<Rgb> = (0..bins.bins.len())
+            .map(|i| if i == 0 { Rgb::splat(1.0) } else { Rgb::ZERO })
+            .collect();
+        let n = CUBE_FACES[bins.bins[0].face].n;
+        let want = bins.bins[0].mean_dir.dot(n) as f64 * bins.bins[0].solid_angle / std::f64::consts::PI;
+        assert!((hemisphere_radiance(&bins.bins, &one, n).x as f64 - want).abs() < 1e-7);
+        assert_eq!(hemisphere_radiance(&bins.bins, &one, -n), Rgb::ZERO);
+    }
+
+    #[test]
+    fn ghost_light_overrides_the_uniform_value_on_its_faces_only() {
+        let b = BoundaryLight {
+            uniform: [Rgb::splat(1.0); 6],
+            ghosts: Vec::new(),
+        }
+        .with_ghosts([(42, [Rgb::splat(3.0); 6]), (7, [Rgb::splat(2.0); 6])]);
+        assert_eq!(b.at(Some(42), 1, 0), 3.0);
+        assert_eq!(b.at(Some(7), 5, 2), 2.0);
+        assert_eq!(b.at(Some(8), 5, 2), 1.0);
+        assert_eq!(b.at(None, 0, 0), 1.0);
+        assert!(!b.is_dark());
+        assert!(BoundaryLight::none().is_dark());
+        assert_eq!(face_index(1, -1), 3);
+        assert_eq!(face_index(2, 1), 4);
+    }
+}
