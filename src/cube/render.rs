@@ -297,6 +297,8 @@ impl<'a> CubeRenderer<'a> {
         let albedo = m.optics.albedo;
         let sigma_t = m.optics.sigma_t;
         let cut = self.opts.t_cutoff;
+        // Without the first moment or the sky's single scattering the gather adds nothing to I0.
+        let gather = self.gather_source && (lit.flux.is_some() || lit.sky_single.is_some());
         let inv_cone = 1.0 / (cone.max(1e-6) * self.opts.lod_bias.exp2());
         let levels = &self.pyramid.levels[..self.levels.min(self.pyramid.levels.len())];
         let nlev = levels.len();
@@ -367,18 +369,22 @@ impl<'a> CubeRenderer<'a> {
                             // T(1 − e)·J with J = (a ρI0 + a p E_sun ρT_sun)/ρ from the pre-multiplied cell.
                             let w = tr * (1.0 - e) / rho;
                             let mut src = albedo * Rgb::new(c[1], c[2], c[3]) + sun_e * c[4];
-                            if self.gather_source {
+                            if gather {
                                 // The fine field at the sample (at coarser levels a point sample
                                 // of it, scaled by the level's ρ like its I0).
-                                let (v0, r0) = if li == 0 {
-                                    (v, rho)
+                                let beyond = if li == 0 {
+                                    // Level 0's cell is the fine field's ρ·I0: I0 without a second lookup.
+                                    beyond_i0(lit, v, rho, Rgb::new(c[1], c[2], c[3]) / rho, -d)
                                 } else {
                                     let v0 = m.to_voxel(o + d * ts);
-                                    (v0, m.density.trilinear(v0.to_array()))
+                                    let r0 = m.density.trilinear(v0.to_array());
+                                    if r0 > 0.0 {
+                                        beyond_i0(lit, v0, r0, lit.i0(v0, r0), -d)
+                                    } else {
+                                        Rgb::ZERO
+                                    }
                                 };
-                                if r0 > 0.0 {
-                                    src += albedo * lit.diffuse_beyond_i0(v0, r0, -d) * rho;
-                                }
+                                src += albedo * beyond * rho;
                             }
                             l += src * w;
                             tr *= e;
@@ -433,6 +439,22 @@ impl<'a> CubeRenderer<'a> {
         }
         out
     }
+}
+
+/// [`LitVolume::diffuse_beyond_i0`] at voxel coordinates `v` (density `rho` > 0) given I0 there
+/// (`i0` = [`LitVolume::i0`]`(v, rho)`), so I0 is looked up once, not twice; the same operations
+/// in the same order, so the same bits.
+#[inline]
+fn beyond_i0(lit: &LitVolume, v: Vec3, rho: f32, i0: Rgb, to_eye: Vec3) -> Rgb {
+    let d = match &lit.flux {
+        Some(f) => (i0 + f.anisotropic_at_voxel(v, rho, to_eye)).max(Rgb::ZERO),
+        None => i0,
+    };
+    let d = match &lit.sky_single {
+        Some(s) => d + s.at_voxel(v, rho, to_eye),
+        None => d,
+    };
+    d - i0
 }
 
 #[inline]
