@@ -127,9 +127,14 @@ impl BorderCubes {
 }
 
 /// Render a cube at every border voxel of `lit`'s density grid (its needed bins only), in
-/// parallel; the result does not depend on the thread count.
+/// parallel, marching with `opts.border_step_level_voxels`; the result does not depend on the
+/// thread count.
 pub fn render_border_cubes(lit: &LitVolume, opts: &CubeOptions, progress: &dyn Progress) -> BorderCubes {
-    let renderer = CubeRenderer::new(lit, opts);
+    let opts = CubeOptions {
+        step_level_voxels: opts.border_step_level_voxels,
+        ..opts.clone()
+    };
+    let renderer = CubeRenderer::new(lit, &opts);
     render_border_cubes_with(&renderer, progress)
 }
 

@@ -12,6 +12,7 @@
 //! pixels stay black and their bins are reported as absent.
 
 use super::image::CubeImage;
+use super::skip::DualMask;
 use crate::error::{Error, Result};
 use crate::lighting::bins::{DirectionBins, BINS_PER_EDGE, NUM_BINS};
 use crate::lit::pyramid::{LitPyramid, BLOCK};
@@ -27,6 +28,11 @@ pub struct CubeOptions {
     pub res: usize,
     /// March step in voxels of the current pyramid level (a fraction of its smallest voxel edge).
     pub step_level_voxels: f32,
+    /// The march step of the border cubes ([`super::border`]), likewise. Coarser than the other
+    /// cubes': their light reaches the image only through stage 1 and the clear-air change of I0
+    /// (1.4 % on the default scene); measured there, 2 against 1 moves the image by 7·10⁻⁶ (mean
+    /// relative difference) and takes a fifth off the clear-air stage.
+    pub border_step_level_voxels: f32,
     /// A ray stops when its transmittance falls below this (the dropped rest is at most this
     /// fraction of the brightest radiance behind).
     pub t_cutoff: f32,
@@ -52,6 +58,7 @@ impl Default for CubeOptions {
         CubeOptions {
             res: DEFAULT_CUBE_RESOLUTION,
             step_level_voxels: 1.0,
+            border_step_level_voxels: 2.0,
             t_cutoff: 1e-3,
             lod_bias: 0.0,
             max_levels: 8,
@@ -88,12 +95,10 @@ impl CubeOptions {
                 ),
             ));
         }
-        if !(self.step_level_voxels.is_finite() && self.step_level_voxels > 0.0 && self.step_level_voxels <= 4.0) {
-            return Err(Error::invalid(
-                file,
-                "cube step",
-                format!("{} is not in (0, 4]", self.step_level_voxels),
-            ));
+        for step in [self.step_level_voxels, self.border_step_level_voxels] {
+            if !(step.is_finite() && step > 0.0 && step <= 4.0) {
+                return Err(Error::invalid(file, "cube step", format!("{step} is not in (0, 4]")));
+            }
         }
         if !(self.t_cutoff.is_finite() && (0.0..1.0).contains(&self.t_cutoff)) {
             return Err(Error::invalid(file, "cube cut-off", format!("{} is not in [0, 1)", self.t_cutoff)));
@@ -248,6 +253,8 @@ pub struct CubeRenderer<'a> {
     pub pyramid: Arc<LitPyramid>,
     /// Levels used: the first `opts.max_levels` of the pyramid.
     levels: usize,
+    /// The empty dual cells of each level used.
+    masks: Arc<Vec<DualMask>>,
     /// The options.
     pub opts: CubeOptions,
     /// Pixel tables at `opts.res`.
@@ -268,10 +275,14 @@ pub struct CubeRenderer<'a> {
 impl<'a> CubeRenderer<'a> {
     /// Build the pyramid and tables.
     pub fn new(lit: &'a LitVolume, opts: &CubeOptions) -> CubeRenderer<'a> {
+        let pyramid = lit.pyramid();
+        let levels = opts.max_levels.max(1).min(pyramid.levels.len());
+        let masks = Arc::new(pyramid.levels[..levels].iter().map(DualMask::new).collect());
         CubeRenderer {
             lit,
-            pyramid: lit.pyramid(),
-            levels: opts.max_levels.max(1),
+            pyramid,
+            levels,
+            masks,
             opts: opts.clone(),
             pixels: PixelTable::new(opts.res),
             h_min: lit.medium.min_voxel(),
@@ -302,6 +313,7 @@ impl<'a> CubeRenderer<'a> {
         let inv_cone = 1.0 / (cone.max(1e-6) * self.opts.lod_bias.exp2());
         let levels = &self.pyramid.levels[..self.levels.min(self.pyramid.levels.len())];
         let nlev = levels.len();
+        let masks = &self.masks[..nlev];
         let origin = self.pyramid.origin;
         // Components of d below 1e-20 are nudged so the slab and block arithmetic stay finite.
         let dn = Vec3::select(d.abs().cmplt(Vec3::splat(1e-20)), Vec3::splat(1e-20), d);
@@ -359,6 +371,10 @@ impl<'a> CubeRenderer<'a> {
                             let ts = t + (k as f32 + 0.5) * len;
                             let v = ((o + d * ts) - origin) * inv_vs;
                             if v.min_element() < 0.0 || v.cmpgt(dims).any() {
+                                continue;
+                            }
+                            // An empty dual cell samples to ρ = 0: skip the blend.
+                            if !masks[li].occupied(v) {
                                 continue;
                             }
                             let Some(c) = lev.sample(v) else {

@@ -39,8 +39,10 @@ pub struct PixelRay {
 pub struct SparseSettings {
     /// Initial square size in pixels (a power of two; the paper's 8).
     pub block: u32,
-    /// Largest difference of cube-centre distance (m) between a pixel and a corner for interpolation
-    /// (40 m: half the cubes of 10 m on the default scene, images within 2e-4 mean relative difference).
+    /// Largest difference of cube-centre distance (m) between a pixel and a corner for interpolation.
+    /// 150 m: on the default scene (480×360) 1919 cubes instead of 4323 at 40 m, image within
+    /// 8·10⁻⁶ mean relative difference over the cloud; the five evaluation scenes within 6·10⁻⁴
+    /// (closeup; the rest ≤ 1.1·10⁻⁴), none changing between 100 and 200 m.
     pub depth_tolerance: f32,
 }
 
@@ -48,7 +50,7 @@ impl Default for SparseSettings {
     fn default() -> Self {
         SparseSettings {
             block: 8,
-            depth_tolerance: 40.0,
+            depth_tolerance: 150.0,
         }
     }
 }
