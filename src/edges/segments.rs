@@ -65,7 +65,7 @@ impl LowSegment {
 /// Width (m) at which a bisection in t stops: 10⁻⁹ of the distance (and at least 1 nm), 60×
 /// finer than an f32 position resolves there (the cube centres and the gather's points are f32).
 #[inline]
-fn bisection_tolerance(t: f64) -> f64 {
+pub(crate) fn bisection_tolerance(t: f64) -> f64 {
     1e-9 * (1.0 + t.abs())
 }
 
