@@ -36,6 +36,9 @@ pub struct CubeOptions {
     /// A ray stops when its transmittance falls below this (the dropped rest is at most this
     /// fraction of the brightest radiance behind).
     pub t_cutoff: f32,
+    /// The cut-off of the border cubes, likewise coarser (1e-2 against 1e-3: the image within
+    /// 8·10⁻⁷ mean relative difference over the cloud on the default scene).
+    pub border_t_cutoff: f32,
     /// Level-of-detail bias in octaves: the footprint is taken as α·t·2^bias (0 = matched,
     /// negative = sharper and slower).
     pub lod_bias: f32,
@@ -60,6 +63,7 @@ impl Default for CubeOptions {
             step_level_voxels: 1.0,
             border_step_level_voxels: 2.0,
             t_cutoff: 1e-3,
+            border_t_cutoff: 1e-2,
             lod_bias: 0.0,
             max_levels: 8,
             ground_samples: DEFAULT_GROUND_SAMPLES,
@@ -100,8 +104,10 @@ impl CubeOptions {
                 return Err(Error::invalid(file, "cube step", format!("{step} is not in (0, 4]")));
             }
         }
-        if !(self.t_cutoff.is_finite() && (0.0..1.0).contains(&self.t_cutoff)) {
-            return Err(Error::invalid(file, "cube cut-off", format!("{} is not in [0, 1)", self.t_cutoff)));
+        for cut in [self.t_cutoff, self.border_t_cutoff] {
+            if !(cut.is_finite() && (0.0..1.0).contains(&cut)) {
+                return Err(Error::invalid(file, "cube cut-off", format!("{cut} is not in [0, 1)")));
+            }
         }
         if !self.lod_bias.is_finite() || self.max_levels == 0 {
             return Err(Error::invalid(file, "cube level of detail", "bias must be finite and levels ≥ 1"));
