@@ -4,8 +4,9 @@
 //! None; the cube renderer tests the bit first and skips the trilinear blend (near the cloud's
 //! surface most samples of the border cubes fall in such cells: 64 % on the default scene).
 
-use crate::lit::pyramid::Level;
-use crate::math::{fast_floor, Vec3};
+use crate::lit::pyramid::{Cell, Level};
+use crate::math::{fast_floor, Trilinear, Vec3};
+use glam::Vec4;
 
 /// Occupied dual cells of one level (bit set: some corner has ρ > 0).
 #[derive(Clone, Debug)]
@@ -45,14 +46,51 @@ impl DualMask {
         DualMask { dims, bits }
     }
 
-    /// Does the trilinear field at level-voxel coordinates `v` (inside the level's box, so each
-    /// component in [0, dims]) blend any full voxel? False means ρ(v) = 0 exactly.
+    /// Does the dual cell whose lower corner voxel is `fl` (floor of v − ½ per axis, v inside the
+    /// level's box) blend any full voxel? False means ρ = 0 exactly there.
     #[inline]
-    pub fn occupied(&self, v: Vec3) -> bool {
-        // The same floor of v − ½ as the trilinear rule, shifted by one so −1 maps to cell 0.
-        let cell = |x: f32, n: usize| ((fast_floor(x - 0.5) as isize + 1).clamp(0, n as isize - 1)) as usize;
-        let q = cell(v.x, self.dims[0]) + self.dims[0] * (cell(v.y, self.dims[1]) + self.dims[1] * cell(v.z, self.dims[2]));
+    fn bit(&self, fl: [isize; 3]) -> bool {
+        // Shifted by one so the half voxel below the first centre (−1) is cell 0.
+        let cell = |a: usize| (fl[a] + 1).clamp(0, self.dims[a] as isize - 1) as usize;
+        let q = cell(0) + self.dims[0] * (cell(1) + self.dims[1] * cell(2));
         (self.bits[q / 64] >> (q % 64)) & 1 == 1
+    }
+
+    /// [`Level::sample`] of `level` (the level this mask was made from) at `v` inside its box,
+    /// with the floors taken once for the mask and the blend: None at once in an empty dual cell,
+    /// else the very same operations as [`crate::math::Trilinear`], so the same bits.
+    #[inline]
+    pub fn sample(&self, level: &Level, v: Vec3) -> Option<Cell> {
+        let p = v.to_array();
+        let mut fl = [0isize; 3];
+        let mut f = [0f32; 3];
+        for a in 0..3 {
+            let x = p[a] - 0.5;
+            let x0 = fast_floor(x);
+            fl[a] = x0 as isize;
+            f[a] = x - x0;
+        }
+        if !self.bit(fl) {
+            return None;
+        }
+        let n = level.dims;
+        let lo = |a: usize| fl[a].clamp(0, n[a] as isize - 1) as usize;
+        let hi = |a: usize| (fl[a] + 1).clamp(0, n[a] as isize - 1) as usize;
+        let (x, y, z) = ([lo(0), hi(0)], [lo(1), hi(1)], [lo(2), hi(2)]);
+        let ix = |c: usize| x[c & 1] + n[0] * (y[(c >> 1) & 1] + n[1] * z[c >> 2]);
+        let t = Trilinear {
+            idx: std::array::from_fn(ix),
+            f,
+        };
+        let rho = t.blend(|q| level.cells[q][0]);
+        if rho <= 1e-12 {
+            return None;
+        }
+        let c = t.blend(|q| {
+            let c = &level.cells[q];
+            Vec4::new(c[1], c[2], c[3], c[4])
+        });
+        Some([rho, c.x, c.y, c.z, c.w])
     }
 }
 
@@ -64,8 +102,9 @@ mod tests {
     use crate::math::Rgb;
     use crate::medium::{Grid3, Medium};
 
-    /// Wherever the mask says empty, every level's sample is None; and it says occupied at a
-    /// sample with density (checked on a sparse random cloud at random points, edges included).
+    /// Wherever the mask says empty, every level's sample is None; it says occupied at a sample
+    /// with density; and its own sample is the level's, bit for bit (a sparse random cloud at
+    /// random points, the box's faces included).
     #[test]
     fn empty_cells_sample_to_none_and_full_ones_are_marked() {
         let dims = [9, 7, 8];
@@ -94,12 +133,14 @@ mod tests {
                 if s % 10 == 0 {
                     v = Vec3::select(v.cmplt(d * 0.5), Vec3::ZERO, d);
                 }
+                assert_eq!(mask.sample(lev, v), lev.sample(v), "level {:?} at {v}", lev.dims);
+                let occupied = mask.bit(v.to_array().map(|x| fast_floor(x - 0.5) as isize));
                 match lev.sample(v) {
                     Some(_) => {
                         full += 1;
-                        assert!(mask.occupied(v), "level {:?} at {v}: density but marked empty", lev.dims);
+                        assert!(occupied, "level {:?} at {v}: density but marked empty", lev.dims);
                     }
-                    None if !mask.occupied(v) => empty += 1,
+                    None if !occupied => empty += 1,
                     None => {}
                 }
             }
