@@ -127,9 +127,15 @@ impl BorderCubes {
 }
 
 /// Render a cube at every border voxel of `lit`'s density grid (its needed bins only), in
-/// parallel; the result does not depend on the thread count.
+/// parallel, marching with `opts.border_step_level_voxels` and `opts.border_t_cutoff`; the result does not depend on the
+/// thread count.
 pub fn render_border_cubes(lit: &LitVolume, opts: &CubeOptions, progress: &dyn Progress) -> BorderCubes {
-    let renderer = CubeRenderer::new(lit, opts);
+    let opts = CubeOptions {
+        step_level_voxels: opts.border_step_level_voxels,
+        t_cutoff: opts.border_t_cutoff,
+        ..opts.clone()
+    };
+    let renderer = CubeRenderer::new(lit, &opts);
     render_border_cubes_with(&renderer, progress)
 }
 

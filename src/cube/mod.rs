@@ -8,6 +8,7 @@ pub mod border;
 pub mod ground;
 pub mod image;
 pub mod render;
+pub mod skip;
 
 pub use border::{find_border_voxels, render_border_cubes, BorderCubes};
 pub use ground::{render_ground, LitGround};

@@ -12,6 +12,7 @@
 //! pixels stay black and their bins are reported as absent.
 
 use super::image::CubeImage;
+use super::skip::DualMask;
 use crate::error::{Error, Result};
 use crate::lighting::bins::{DirectionBins, BINS_PER_EDGE, NUM_BINS};
 use crate::lit::pyramid::{LitPyramid, BLOCK};
@@ -27,9 +28,17 @@ pub struct CubeOptions {
     pub res: usize,
     /// March step in voxels of the current pyramid level (a fraction of its smallest voxel edge).
     pub step_level_voxels: f32,
+    /// The march step of the border cubes ([`super::border`]), likewise. Coarser than the other
+    /// cubes': their light reaches the image only through stage 1 and the clear-air change of I0
+    /// (1.4 % on the default scene); measured there, 2 against 1 moves the image by 7·10⁻⁶ (mean
+    /// relative difference) and halves the samples in occupied blocks.
+    pub border_step_level_voxels: f32,
     /// A ray stops when its transmittance falls below this (the dropped rest is at most this
     /// fraction of the brightest radiance behind).
     pub t_cutoff: f32,
+    /// The cut-off of the border cubes, likewise coarser (1e-2 against 1e-3: the image within
+    /// 8·10⁻⁷ mean relative difference over the cloud on the default scene).
+    pub border_t_cutoff: f32,
     /// Level-of-detail bias in octaves: the footprint is taken as α·t·2^bias (0 = matched,
     /// negative = sharper and slower).
     pub lod_bias: f32,
@@ -52,7 +61,9 @@ impl Default for CubeOptions {
         CubeOptions {
             res: DEFAULT_CUBE_RESOLUTION,
             step_level_voxels: 1.0,
+            border_step_level_voxels: 2.0,
             t_cutoff: 1e-3,
+            border_t_cutoff: 1e-2,
             lod_bias: 0.0,
             max_levels: 8,
             ground_samples: DEFAULT_GROUND_SAMPLES,
@@ -88,15 +99,15 @@ impl CubeOptions {
                 ),
             ));
         }
-        if !(self.step_level_voxels.is_finite() && self.step_level_voxels > 0.0 && self.step_level_voxels <= 4.0) {
-            return Err(Error::invalid(
-                file,
-                "cube step",
-                format!("{} is not in (0, 4]", self.step_level_voxels),
-            ));
+        for step in [self.step_level_voxels, self.border_step_level_voxels] {
+            if !(step.is_finite() && step > 0.0 && step <= 4.0) {
+                return Err(Error::invalid(file, "cube step", format!("{step} is not in (0, 4]")));
+            }
         }
-        if !(self.t_cutoff.is_finite() && (0.0..1.0).contains(&self.t_cutoff)) {
-            return Err(Error::invalid(file, "cube cut-off", format!("{} is not in [0, 1)", self.t_cutoff)));
+        for cut in [self.t_cutoff, self.border_t_cutoff] {
+            if !(cut.is_finite() && (0.0..1.0).contains(&cut)) {
+                return Err(Error::invalid(file, "cube cut-off", format!("{cut} is not in [0, 1)")));
+            }
         }
         if !self.lod_bias.is_finite() || self.max_levels == 0 {
             return Err(Error::invalid(file, "cube level of detail", "bias must be finite and levels ≥ 1"));
@@ -248,6 +259,8 @@ pub struct CubeRenderer<'a> {
     pub pyramid: Arc<LitPyramid>,
     /// Levels used: the first `opts.max_levels` of the pyramid.
     levels: usize,
+    /// The empty dual cells of each level used.
+    masks: Arc<Vec<DualMask>>,
     /// The options.
     pub opts: CubeOptions,
     /// Pixel tables at `opts.res`.
@@ -268,10 +281,14 @@ pub struct CubeRenderer<'a> {
 impl<'a> CubeRenderer<'a> {
     /// Build the pyramid and tables.
     pub fn new(lit: &'a LitVolume, opts: &CubeOptions) -> CubeRenderer<'a> {
+        let pyramid = lit.pyramid();
+        let levels = opts.max_levels.max(1).min(pyramid.levels.len());
+        let masks = Arc::new(pyramid.levels[..levels].iter().map(DualMask::new).collect());
         CubeRenderer {
             lit,
-            pyramid: lit.pyramid(),
-            levels: opts.max_levels.max(1),
+            pyramid,
+            levels,
+            masks,
             opts: opts.clone(),
             pixels: PixelTable::new(opts.res),
             h_min: lit.medium.min_voxel(),
@@ -297,9 +314,12 @@ impl<'a> CubeRenderer<'a> {
         let albedo = m.optics.albedo;
         let sigma_t = m.optics.sigma_t;
         let cut = self.opts.t_cutoff;
+        // Without the first moment or the sky's single scattering the gather adds nothing to I0.
+        let gather = self.gather_source && (lit.flux.is_some() || lit.sky_single.is_some());
         let inv_cone = 1.0 / (cone.max(1e-6) * self.opts.lod_bias.exp2());
         let levels = &self.pyramid.levels[..self.levels.min(self.pyramid.levels.len())];
         let nlev = levels.len();
+        let masks = &self.masks[..nlev];
         let origin = self.pyramid.origin;
         // Components of d below 1e-20 are nudged so the slab and block arithmetic stay finite.
         let dn = Vec3::select(d.abs().cmplt(Vec3::splat(1e-20)), Vec3::splat(1e-20), d);
@@ -359,7 +379,8 @@ impl<'a> CubeRenderer<'a> {
                             if v.min_element() < 0.0 || v.cmpgt(dims).any() {
                                 continue;
                             }
-                            let Some(c) = lev.sample(v) else {
+                            // An empty dual cell samples to ρ = 0: no blend there.
+                            let Some(c) = masks[li].sample(lev, v) else {
                                 continue;
                             };
                             let rho = c[0];
@@ -367,18 +388,22 @@ impl<'a> CubeRenderer<'a> {
                             // T(1 − e)·J with J = (a ρI0 + a p E_sun ρT_sun)/ρ from the pre-multiplied cell.
                             let w = tr * (1.0 - e) / rho;
                             let mut src = albedo * Rgb::new(c[1], c[2], c[3]) + sun_e * c[4];
-                            if self.gather_source {
+                            if gather {
                                 // The fine field at the sample (at coarser levels a point sample
                                 // of it, scaled by the level's ρ like its I0).
-                                let (v0, r0) = if li == 0 {
-                                    (v, rho)
+                                let beyond = if li == 0 {
+                                    // Level 0's cell is the fine field's ρ·I0: I0 without a second lookup.
+                                    beyond_i0(lit, v, rho, Rgb::new(c[1], c[2], c[3]) / rho, -d)
                                 } else {
                                     let v0 = m.to_voxel(o + d * ts);
-                                    (v0, m.density.trilinear(v0.to_array()))
+                                    let r0 = m.density.trilinear(v0.to_array());
+                                    if r0 > 0.0 {
+                                        beyond_i0(lit, v0, r0, lit.i0(v0, r0), -d)
+                                    } else {
+                                        Rgb::ZERO
+                                    }
                                 };
-                                if r0 > 0.0 {
-                                    src += albedo * lit.diffuse_beyond_i0(v0, r0, -d) * rho;
-                                }
+                                src += albedo * beyond * rho;
                             }
                             l += src * w;
                             tr *= e;
@@ -433,6 +458,22 @@ impl<'a> CubeRenderer<'a> {
         }
         out
     }
+}
+
+/// [`LitVolume::diffuse_beyond_i0`] at voxel coordinates `v` (density `rho` > 0) given I0 there
+/// (`i0` = [`LitVolume::i0`]`(v, rho)`), so I0 is looked up once, not twice; the same operations
+/// in the same order, so the same bits.
+#[inline]
+fn beyond_i0(lit: &LitVolume, v: Vec3, rho: f32, i0: Rgb, to_eye: Vec3) -> Rgb {
+    let d = match &lit.flux {
+        Some(f) => (i0 + f.anisotropic_at_voxel(v, rho, to_eye)).max(Rgb::ZERO),
+        None => i0,
+    };
+    let d = match &lit.sky_single {
+        Some(s) => d + s.at_voxel(v, rho, to_eye),
+        None => d,
+    };
+    d - i0
 }
 
 #[inline]

@@ -344,18 +344,10 @@ impl<'a> EdgeGather<'a> {
         self.segment_radiance_from_k(o, d, seg, &k)
     }
 
-    /// Edge jobs of pieces `first..end` with weight `weight`, resolving bridges recursively.
-    fn plan_edge(
-        &self,
-        prof: &RayProfile,
-        first: usize,
-        end: usize,
-        weight: f32,
-        depth: usize,
-        top: Option<usize>,
-        jobs: &mut Vec<EdgeJob>,
-    ) {
-        let seg = prof.segment(self.medium, first, end);
+    /// Edge jobs of `seg` (pieces `seg.first..seg.end`, from [`RayProfile::segment`]) with weight
+    /// `weight`, resolving bridges recursively.
+    fn plan_edge(&self, prof: &RayProfile, seg: LowSegment, weight: f32, depth: usize, top: Option<usize>, jobs: &mut Vec<EdgeJob>) {
+        let (first, end) = (seg.first, seg.end);
         if seg.depth <= 1e-12 {
             return;
         }
@@ -371,8 +363,9 @@ impl<'a> EdgeGather<'a> {
             top: if bridge.is_none() { top } else { None },
         });
         if let Some((split, wb)) = bridge {
-            self.plan_edge(prof, first, split, weight * wb, depth + 1, None, jobs);
-            self.plan_edge(prof, split, end, weight * wb, depth + 1, None, jobs);
+            let m = self.medium;
+            self.plan_edge(prof, prof.segment(m, first, split), weight * wb, depth + 1, None, jobs);
+            self.plan_edge(prof, prof.segment(m, split, end), weight * wb, depth + 1, None, jobs);
         }
     }
 
@@ -455,7 +448,7 @@ impl<'a> EdgeGather<'a> {
             // A segment in the surface layer is one Poisson segment: no bridge splits it (its
             // dense stretches are what it is for).
             let depth = if seg.first < surface_end { MAX_BRIDGE_DEPTH } else { 0 };
-            self.plan_edge(&profile, seg.first, seg.end, 1.0, depth, Some(j), &mut jobs);
+            self.plan_edge(&profile, seg, 1.0, depth, Some(j), &mut jobs);
         }
         PixelPlan {
             o,
@@ -583,7 +576,7 @@ fn refine_extrema(prof: &mut RayProfile, m: &Medium, gap: f32, lo: f32, hi: f32)
         let sign = if max { 1.0 } else { -1.0 };
         let (mut a, mut b) = (p.t0, p.t1);
         let gr = 0.5 * (5f64.sqrt() - 1.0);
-        for _ in 0..40 {
+        while b - a > super::segments::bisection_tolerance(b) {
             let c = b - gr * (b - a);
             let e = a + gr * (b - a);
             if sign * prof.rho(m, c) > sign * prof.rho(m, e) {

@@ -62,6 +62,13 @@ impl LowSegment {
     }
 }
 
+/// Width (m) at which a bisection in t stops: 10⁻⁹ of the distance (and at least 1 nm), 60×
+/// finer than an f32 position resolves there (the cube centres and the gather's points are f32).
+#[inline]
+pub(crate) fn bisection_tolerance(t: f64) -> f64 {
+    1e-9 * (1.0 + t.abs())
+}
+
 /// ρ at distance t along the ray (inside the box).
 #[inline]
 fn rho_at(m: &Medium, o: DVec3, d: DVec3, t: f64) -> f32 {
@@ -109,7 +116,7 @@ impl RayProfile {
                         if (ra < l) != (rb < l) {
                             // Bisection on the cubic: keep the invariant ρ(lo) on ra's side.
                             let (mut lo, mut hi) = (ta, tb);
-                            for _ in 0..32 {
+                            while hi - lo > bisection_tolerance(hi) {
                                 let mid = 0.5 * (lo + hi);
                                 if (rho(mid) < l) == (ra < l) {
                                     lo = mid;
@@ -255,7 +262,7 @@ impl RayProfile {
                 let sigma_t = m.optics.sigma_t as f64;
                 let r0 = p.rho[0] as f64;
                 let (mut lo, mut hi) = (p.t0, p.t1);
-                for _ in 0..50 {
+                while hi - lo > bisection_tolerance(hi) {
                     let mid = 0.5 * (lo + hi);
                     // Simpson on [t0, mid] is exact: the piece lies in one dual cell.
                     let rm = rho_at(m, self.o, self.d, 0.5 * (p.t0 + mid)) as f64;
