@@ -1,7 +1,10 @@
 //! Method `diffusion` (the paper's Figure 5): stage 1 (incident light), stage 2 (diffusion solve)
 //! and a final gather that composites, front to back, the diffusion radiance I0 as the volume's
 //! colour with opacity from ρσt plus the exact single scattering of the reduced sun, over the sky
-//! or ground. See [`crate::lit::LitVolume`] for the source term.
+//! or ground. See [`crate::lit::LitVolume`] for the source term; the gather evaluates it from
+//! [`source_field`], one packed record per voxel.
+
+pub mod source_field;
 
 use super::single::{background, pixel_sample};
 use super::{render_rows, Progress, Timings};
@@ -15,8 +18,10 @@ use crate::lit::ground::LitGround;
 use crate::lit::sky_single::SkySingle;
 use crate::lit::LitVolume;
 use crate::math::Rgb;
+use crate::medium::march::march;
 use crate::scene::Scene;
 use crate::sunlight::SunTransmittance;
+use source_field::SourceField;
 
 /// Stage 1 for a scene with default sampling (seed from `render.seed`), the clear-air hook
 /// `entry` if any; the sun transmittance computed here unless given.
@@ -94,19 +99,32 @@ pub fn solved_lit_volume(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolu
     lit
 }
 
-/// Stages 1 and 2: the lit volume of a scene (no clear-air iterations).
-pub fn lit_volume(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<LitVolume> {
-    let inc = timings.time("incident light", || compute_incident(scene, None));
-    let sol = timings.time("diffusion solve", || {
-        solve_diffusion(&scene.medium, &inc, &boundary_light(scene), None, &scene.render.solver)
-    })?;
-    progress.log(&sol.summary());
-    Ok(solved_lit_volume(scene, &inc, &sol))
+/// The gather's source of a solved scene: [`solved_lit_volume`]'s terms packed per voxel.
+fn source_field(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution) -> SourceField {
+    let i1 = scene
+        .render
+        .diffuse_anisotropy
+        .then(|| diffuse_flux(&scene.medium, inc, sol, scene.render.solver.min_optical_depth));
+    SourceField::new(
+        &scene.medium,
+        &sol.i0,
+        i1.as_deref(),
+        inc.sky_sh.as_deref(),
+        &inc.sun_transmittance.grid,
+        &scene.sun,
+    )
 }
 
 /// Render the image.
 pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
-    let lit = lit_volume(scene, progress, timings)?;
+    let sun_t = timings.time("sun transmittance", || SunTransmittance::compute(&scene.medium, scene.sun.dir));
+    let inc = timings.time("incident light", || compute_incident_with(scene, None, sun_t));
+    let sol = timings.time("diffusion solve", || {
+        solve_diffusion(&scene.medium, &inc, &boundary_light(scene), None, &scene.render.solver)
+    })?;
+    progress.log(&sol.summary());
+    let field = timings.time("source field", || source_field(scene, &inc, &sol));
+    drop(inc);
     let cam = &scene.camera;
     let spp = scene.render.aa_samples;
     let step = scene.render.step_voxels * scene.medium.min_voxel();
@@ -121,7 +139,8 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
                     .as_ref()
                     .and_then(|g| g.intersect(ray.origin, ray.dir))
                     .unwrap_or(f32::INFINITY);
-                let r = lit.march(ray.origin, ray.dir, 0.0, t_max, step, xi);
+                let src = field.along(-ray.dir);
+                let r = march(&scene.medium, ray.origin, ray.dir, 0.0, t_max, step, xi, |v, rho| src.at(v, rho));
                 sum += r.radiance;
                 if r.transmittance > 0.0 {
                     sum += r.transmittance * background(scene, ray.origin, ray.dir);
