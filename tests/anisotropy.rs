@@ -7,6 +7,7 @@ use cloudgi::incident::{compute, IncidentLight, IncidentSettings, IncidentSource
 use cloudgi::lighting::{DirectionBins, Sky, Sun};
 use cloudgi::lit::LitVolume;
 use cloudgi::math::{Rgb, Vec3};
+use cloudgi::medium::sparse::VoxelField;
 use cloudgi::medium::{Grid3, Medium};
 use cloudgi::render::diffusion::i0_rgb;
 use cloudgi::{render, Method, NoProgress, Scene};
@@ -58,7 +59,7 @@ fn flux_is_ficks_law_in_the_interior() {
     let lin = diffuse_flux(&m, &inc, &linear, TAU_MIN);
     let q1 = Vec3::new(0.02, -0.01, 0.03);
     for ax in 0..3 {
-        inc.q1[ax] = vec![Rgb::splat(q1[ax]); n * n * n];
+        inc.q1[ax] = VoxelField::filled(m.density.full_index(), Rgb::splat(q1[ax]));
     }
     let with_q1 = diffuse_flux(&m, &inc, &linear, TAU_MIN);
     let want_lin = -grad / sigma_tr;
