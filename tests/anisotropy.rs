@@ -27,16 +27,9 @@ fn unlit(m: &Medium) -> IncidentLight {
     compute(m, &DirectionBins::new(), &src, &IncidentSettings::default(), None)
 }
 
-fn solution_of(m: &Medium, f: impl Fn(usize, usize, usize) -> f32) -> DiffusionSolution {
+fn solution_of(m: &Medium, f: impl Fn(usize, usize, usize) -> f32 + Sync) -> DiffusionSolution {
     let d = m.dims();
-    let mut v = vec![0f32; d[0] * d[1] * d[2]];
-    for k in 0..d[2] {
-        for j in 0..d[1] {
-            for i in 0..d[0] {
-                v[i + d[0] * (j + d[1] * k)] = f(i, j, k);
-            }
-        }
-    }
+    let v = VoxelField::from_fn(m.density.full_index(), 0.0, |g| f(g % d[0], (g / d[0]) % d[1], g / (d[0] * d[1])));
     DiffusionSolution {
         dims: d,
         i0: [v.clone(), v.clone(), v],

@@ -82,6 +82,7 @@ pub mod slab;
 use crate::error::{Error, Result};
 use crate::incident::IncidentLight;
 use crate::math::Rgb;
+use crate::medium::sparse::VoxelField;
 use crate::medium::Medium;
 use multigrid::{Hierarchy, Stencil};
 use rayon::prelude::*;
@@ -166,8 +167,8 @@ impl SolveStats {
 pub struct DiffusionSolution {
     /// Grid resolution.
     pub dims: [usize; 3],
-    /// I0 per band, per voxel (W·m⁻²·sr⁻¹); zero where ρ = 0.
-    pub i0: [Vec<f32>; 3],
+    /// I0 per band, per voxel (W·m⁻²·sr⁻¹); zero where ρ = 0 (stored per full voxel).
+    pub i0: [VoxelField<f32>; 3],
     /// Per band.
     pub stats: [SolveStats; 3],
 }
@@ -369,27 +370,31 @@ pub fn solve_diffusion(
             });
         }
     }
-    let n = dims[0] * dims[1] * dims[2];
+    let index = medium.density.full_index();
     let Some(dom) = Domain::of(medium) else {
+        let zero = VoxelField::filled(index, 0.0);
         return Ok(DiffusionSolution {
             dims,
-            i0: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+            i0: [zero.clone(), zero.clone(), zero],
             stats: Default::default(),
         });
     };
     let dd = dom.dims;
-    let to_global = |x: &[f64]| -> Vec<f32> {
-        let mut out = vec![0f32; n];
+    // The full voxels in domain order are the full voxels in grid order.
+    let to_global = |x: &[f64]| -> VoxelField<f32> {
+        let mut out = Vec::with_capacity(index.count());
         for k in 0..dd[2] {
             for j in 0..dd[1] {
                 for i in 0..dd[0] {
-                    out[dom.global(dims, i, j, k)] = x[i + dd[0] * (j + dd[1] * k)] as f32;
+                    if index.slot(dom.global(dims, i, j, k)) != 0 {
+                        out.push(x[i + dd[0] * (j + dd[1] * k)] as f32);
+                    }
                 }
             }
         }
-        out
+        VoxelField::new(index.clone(), 0.0, out)
     };
-    let to_local = |x: &[f32]| -> Vec<f64> {
+    let to_local = |x: &VoxelField<f32>| -> Vec<f64> {
         let mut out = vec![0f64; dd[0] * dd[1] * dd[2]];
         for k in 0..dd[2] {
             for j in 0..dd[1] {
@@ -455,9 +460,10 @@ pub fn solve_diffusion(
         }
     }
     let mut it = results.into_iter().map(|(x, s)| (to_global(&x), s));
-    let (x0, s0) = it.next().unwrap_or_default();
-    let (x1, s1) = it.next().unwrap_or_default();
-    let (x2, s2) = it.next().unwrap_or_default();
+    let mut band = || it.next().expect("three bands");
+    let (x0, s0) = band();
+    let (x1, s1) = band();
+    let (x2, s2) = band();
     Ok(DiffusionSolution {
         dims,
         i0: [x0, x1, x2],

@@ -172,8 +172,11 @@ impl<T: Copy + Send + Sync> VoxelField<T> {
     }
 
     /// Every grid voxel's value in grid order (empty voxels read the empty value).
-    pub fn iter(&self) -> impl Iterator<Item = &T> + '_ {
-        self.index.slot.iter().map(move |&s| &self.data[s as usize])
+    pub fn iter(&self) -> Iter<'_, T> {
+        Iter {
+            slots: self.index.slot.iter(),
+            data: &self.data,
+        }
     }
 
     /// A field of the same voxels with `f` of each value (the empty value too).
@@ -187,6 +190,32 @@ impl<T: Copy + Send + Sync> VoxelField<T> {
     /// Bytes held by the values (the index is shared and counted apart).
     pub fn bytes(&self) -> usize {
         std::mem::size_of::<T>() * self.data.len()
+    }
+}
+
+/// Every grid voxel's value of a [`VoxelField`], in grid order.
+pub struct Iter<'a, T> {
+    slots: std::slice::Iter<'a, u32>,
+    data: &'a [T],
+}
+
+impl<'a, T> Iterator for Iter<'a, T> {
+    type Item = &'a T;
+    #[inline]
+    fn next(&mut self) -> Option<&'a T> {
+        self.slots.next().map(|&s| &self.data[s as usize])
+    }
+    #[inline]
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        self.slots.size_hint()
+    }
+}
+
+impl<'a, T: Copy + Send + Sync> IntoIterator for &'a VoxelField<T> {
+    type Item = &'a T;
+    type IntoIter = Iter<'a, T>;
+    fn into_iter(self) -> Iter<'a, T> {
+        self.iter()
     }
 }
 

@@ -15,6 +15,7 @@ use crate::lit::ground::LitGround;
 use crate::lit::sky_single::SkySingle;
 use crate::lit::LitVolume;
 use crate::math::Rgb;
+use crate::medium::sparse::VoxelField;
 use crate::scene::Scene;
 use crate::sunlight::SunTransmittance;
 
@@ -34,7 +35,7 @@ pub fn compute_incident_with(scene: &Scene, entry: Option<&EntryRadiance<'_>>, s
 
 /// The lit volume of a scene from I0 per voxel and the sun transmittance at voxel centres, the
 /// ground (if any) lit by the unoccluded sun and sky.
-pub fn scene_lit_volume(scene: &Scene, i0: Vec<Rgb>, sun_t: &SunTransmittance) -> LitVolume {
+pub fn scene_lit_volume(scene: &Scene, i0: impl std::ops::Index<usize, Output = Rgb> + Sync, sun_t: &SunTransmittance) -> LitVolume {
     let ground = scene
         .ground
         .as_ref()
@@ -49,11 +50,10 @@ pub fn scene_lit_volume(scene: &Scene, i0: Vec<Rgb>, sun_t: &SunTransmittance) -
     )
 }
 
-/// I0 per voxel as RGB.
-pub fn i0_rgb(sol: &DiffusionSolution) -> Vec<Rgb> {
-    (0..sol.i0[0].len())
-        .map(|k| Rgb::new(sol.i0[0][k], sol.i0[1][k], sol.i0[2][k]))
-        .collect()
+/// I0 per voxel as RGB (stored per full voxel, like the solution).
+pub fn i0_rgb(sol: &DiffusionSolution) -> VoxelField<Rgb> {
+    let i0 = &sol.i0;
+    VoxelField::from_fn(i0[0].index().clone(), Rgb::ZERO, |k| Rgb::new(i0[0][k], i0[1][k], i0[2][k]))
 }
 
 /// The lit volume of a solved scene, with the first moment attached when
