@@ -406,18 +406,19 @@ pub fn solve_diffusion(
         out
     };
     // Bands with identical coefficients share one hierarchy.
-    let systems: Vec<(Stencil, Vec<f64>)> = (0..3)
+    let (stencils, rhs): (Vec<Stencil>, Vec<Vec<f64>>) = (0..3)
         .into_par_iter()
         .map(|c| assemble(medium, incident, c, settings.min_optical_depth, &dom))
-        .collect();
+        .unzip();
     let mut hier: Vec<(f32, Hierarchy)> = Vec::new();
     let mut groups: Vec<Vec<usize>> = Vec::new();
-    for (c, (a, _)) in systems.iter().enumerate() {
+    // Memory: each stencil becomes its hierarchy's finest level or is dropped (a shared one).
+    for (c, a) in stencils.into_iter().enumerate() {
         let alb = medium.optics.albedo[c];
         match hier.iter().position(|(x, _)| *x == alb) {
             Some(p) => groups[p].push(c),
             None => {
-                hier.push((alb, Hierarchy::build(a.clone())));
+                hier.push((alb, Hierarchy::build(a)));
                 groups.push(vec![c]);
             }
         }
@@ -429,7 +430,7 @@ pub fn solve_diffusion(
         .zip(&hier)
         .map(|(g, (_, h))| {
             let (tol, max) = (settings.tolerance, settings.max_iterations);
-            let b = |k: usize| systems[g[k]].1.as_slice();
+            let b = |k: usize| rhs[g[k]].as_slice();
             let x = |k: usize| x0[g[k]].as_deref();
             match g.len() {
                 1 => h.solve_many([b(0)], x(0).map(|a| [a]), tol, max).into(),
