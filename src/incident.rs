@@ -60,6 +60,7 @@ use crate::lighting::bins::{DirectionBins, NUM_BINS};
 use crate::lighting::{Ground, Sky, Sun};
 use crate::math::{mix64, Rgb, Rng, Vec3};
 use crate::math::{sh9, SH_COEFFS};
+use crate::medium::sparse::VoxelField;
 use crate::medium::Medium;
 use crate::sunlight::SunTransmittance;
 use rayon::prelude::*;
@@ -132,12 +133,14 @@ impl IncidentSources {
 pub struct IncidentLight {
     /// Grid resolution (same as the medium's).
     pub dims: [usize; 3],
-    /// Q0 per voxel (eq. 5, W·m⁻³·sr⁻¹ per band); zero where ρ = 0.
-    pub q0: Vec<Rgb>,
+    /// Q0 per voxel (eq. 5, W·m⁻³·sr⁻¹ per band); zero where ρ = 0. Like every field here,
+    /// stored per full voxel and read by grid index ([`crate::medium::sparse`]).
+    pub q0: VoxelField<Rgb>,
     /// Q1 per voxel (eq. 6), `q1[axis][voxel]` is the axis component per band (W·m⁻³·sr⁻¹).
-    pub q1: [Vec<Rgb>; 3],
-    /// Voxel-mean transmittance of the direct sun (piecewise-constant ρ), used for Q0/Q1.
-    pub sun_mean_transmittance: Vec<f32>,
+    pub q1: [VoxelField<Rgb>; 3],
+    /// Voxel-mean transmittance of the direct sun (piecewise-constant ρ), used for Q0/Q1; 1
+    /// where ρ = 0.
+    pub sun_mean_transmittance: VoxelField<f32>,
     /// Sun transmittance at voxel centres (exact), for the gather's single scattering.
     pub sun_transmittance: SunTransmittance,
     /// Sun irradiance (W/m² per band); zero without a sun.
@@ -147,7 +150,7 @@ pub struct IncidentLight {
     /// With [`IncidentSettings::sky_single`]: per voxel, the reduced sky and ground radiance (all
     /// bins, not the sun) projected onto the real spherical harmonics of degree ≤ 2 of the flow
     /// direction, L_lm = Σ_b Δω_b Ī_b Y_lm(ω_b), `[band * 9 + lm]` (W·m⁻²·sr⁻¹); zero where ρ = 0.
-    pub sky_sh: Option<Vec<[f32; 3 * SH_COEFFS]>>,
+    pub sky_sh: Option<VoxelField<[f32; 3 * SH_COEFFS]>>,
     /// Rays that crossed the medium's active box (all bins and the sun).
     pub rays: u64,
 }
@@ -677,13 +680,15 @@ pub fn compute_with_sun(
     sun_transmittance: SunTransmittance,
 ) -> IncidentLight {
     let dims = m.dims();
-    let n = dims[0] * dims[1] * dims[2];
     let sun_e = sources.sun.map_or(Rgb::ZERO, |s| s.1);
+    // Stored per full voxel; the empty medium's fields (no full voxel) until the sweeps fill them.
+    let index = m.density.full_index();
+    let zero = VoxelField::filled(index.clone(), Rgb::ZERO);
     let mut out = IncidentLight {
         dims,
-        q0: vec![Rgb::ZERO; n],
-        q1: [vec![Rgb::ZERO; n], vec![Rgb::ZERO; n], vec![Rgb::ZERO; n]],
-        sun_mean_transmittance: vec![1.0; n],
+        q0: zero.clone(),
+        q1: [zero.clone(), zero.clone(), zero],
+        sun_mean_transmittance: VoxelField::filled(index.clone(), 1.0),
         sun_transmittance,
         sun_irradiance: sun_e,
         bin_radiance: sources.bin_radiance.clone(),
@@ -799,43 +804,34 @@ pub fn compute_with_sun(
         }
     }
     out.rays = rays;
-    let mut sky_sh = settings.sky_single.then(|| vec![[0f32; 3 * SH_COEFFS]; n]);
-    // Scatter into the full grid with ρσs/(4π) and ρσs·g/(4π).
+    // The full voxels in box order are the full voxels in grid order: `acc` is packed storage.
+    assert_eq!(acc.len(), index.count(), "stage 1 accumulates every full voxel once");
+    // Scatter with ρσs/(4π) and ρσs·g/(4π).
     // With δ-scaling (f = g) the scattering that changes direction is σs(1 − g), isotropic (g' = 0).
     let (sigma_s, g) = (optics.sigma_s, optics.phase.mean_cosine());
-    let mut next = 0;
-    for k in 0..bd[2] {
-        for j in 0..bd[1] {
-            for i in 0..bd[0] {
-                let bi = i + bd[0] * (j + bd[1] * k);
-                let rho = rho[bi] as f64;
-                if rho <= 0.0 {
-                    continue;
-                }
-                let v = &acc[next];
-                next += 1;
-                let gi = (i + lo[0]) + dims[0] * ((j + lo[1]) + dims[1] * (k + lo[2]));
-                let f = [
-                    rho * sigma_s.x as f64 / (4.0 * PI),
-                    rho * sigma_s.y as f64 / (4.0 * PI),
-                    rho * sigma_s.z as f64 / (4.0 * PI),
-                ];
-                out.q0[gi] = Rgb::new((f[0] * v.m[0]) as f32, (f[1] * v.m[1]) as f32, (f[2] * v.m[2]) as f32);
-                for ax in 0..3 {
-                    out.q1[ax][gi] = Rgb::new(
-                        (f[0] * g * v.m[3 + 3 * ax]) as f32,
-                        (f[1] * g * v.m[4 + 3 * ax]) as f32,
-                        (f[2] * g * v.m[5 + 3 * ax]) as f32,
-                    );
-                }
-                out.sun_mean_transmittance[gi] = v.sun_t;
-                if let Some(full) = sky_sh.as_mut() {
-                    full[gi] = v.sh;
-                }
-            }
+    let full_rho = rho.iter().filter(|r| **r > 0.0).map(|r| *r as f64);
+    let (mut q0, mut q1) = (Vec::with_capacity(full), [(); 3].map(|_| Vec::with_capacity(full)));
+    for (v, rho) in acc.iter().zip(full_rho) {
+        let f = [
+            rho * sigma_s.x as f64 / (4.0 * PI),
+            rho * sigma_s.y as f64 / (4.0 * PI),
+            rho * sigma_s.z as f64 / (4.0 * PI),
+        ];
+        q0.push(Rgb::new((f[0] * v.m[0]) as f32, (f[1] * v.m[1]) as f32, (f[2] * v.m[2]) as f32));
+        for (ax, q) in q1.iter_mut().enumerate() {
+            q.push(Rgb::new(
+                (f[0] * g * v.m[3 + 3 * ax]) as f32,
+                (f[1] * g * v.m[4 + 3 * ax]) as f32,
+                (f[2] * g * v.m[5 + 3 * ax]) as f32,
+            ));
         }
     }
-    out.sky_sh = sky_sh;
+    out.q0 = VoxelField::new(index.clone(), Rgb::ZERO, q0);
+    out.q1 = q1.map(|q| VoxelField::new(index.clone(), Rgb::ZERO, q));
+    out.sun_mean_transmittance = VoxelField::new(index.clone(), 1.0, acc.iter().map(|v| v.sun_t));
+    out.sky_sh = settings
+        .sky_single
+        .then(|| VoxelField::new(index, [0f32; 3 * SH_COEFFS], acc.iter().map(|v| v.sh)));
     out
 }
 

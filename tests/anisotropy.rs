@@ -7,6 +7,7 @@ use cloudgi::incident::{compute, IncidentLight, IncidentSettings, IncidentSource
 use cloudgi::lighting::{DirectionBins, Sky, Sun};
 use cloudgi::lit::LitVolume;
 use cloudgi::math::{Rgb, Vec3};
+use cloudgi::medium::sparse::VoxelField;
 use cloudgi::medium::{Grid3, Medium};
 use cloudgi::render::diffusion::i0_rgb;
 use cloudgi::{render, Method, NoProgress, Scene};
@@ -26,16 +27,9 @@ fn unlit(m: &Medium) -> IncidentLight {
     compute(m, &DirectionBins::new(), &src, &IncidentSettings::default(), None)
 }
 
-fn solution_of(m: &Medium, f: impl Fn(usize, usize, usize) -> f32) -> DiffusionSolution {
+fn solution_of(m: &Medium, f: impl Fn(usize, usize, usize) -> f32 + Sync) -> DiffusionSolution {
     let d = m.dims();
-    let mut v = vec![0f32; d[0] * d[1] * d[2]];
-    for k in 0..d[2] {
-        for j in 0..d[1] {
-            for i in 0..d[0] {
-                v[i + d[0] * (j + d[1] * k)] = f(i, j, k);
-            }
-        }
-    }
+    let v = VoxelField::from_fn(m.density.full_index(), 0.0, |g| f(g % d[0], (g / d[0]) % d[1], g / (d[0] * d[1])));
     DiffusionSolution {
         dims: d,
         i0: [v.clone(), v.clone(), v],
@@ -59,7 +53,7 @@ fn flux_is_ficks_law_in_the_interior() {
     let lin = diffuse_flux(&m, &inc, &linear, TAU_MIN);
     let q1 = Vec3::new(0.02, -0.01, 0.03);
     for ax in 0..3 {
-        inc.q1[ax] = vec![Rgb::splat(q1[ax]); n * n * n];
+        inc.q1[ax] = VoxelField::filled(m.density.full_index(), Rgb::splat(q1[ax]));
     }
     let with_q1 = diffuse_flux(&m, &inc, &linear, TAU_MIN);
     let want_lin = -grad / sigma_tr;

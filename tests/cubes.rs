@@ -530,6 +530,7 @@ fn gather_source_cubes_see_the_gathers_own_diffuse_term() {
     // `gather_source` (one level, so no level of detail) matches the brute-force march of the
     // gather's own source J = a·diffuse + sun; the paper's cube (I0 only) does not.
     use cloudgi::lit::sky_single::SkySingle;
+    use cloudgi::medium::sparse::VoxelField;
     let dims = [14, 10, 12];
     let v = lit(
         blob(dims, 3.0),
@@ -549,7 +550,7 @@ fn gather_source_cubes_see_the_gathers_own_diffuse_term() {
         sh[b * 9 + 1] = 0.3;
         sh[b * 9 + 3] = -0.2;
     }
-    let sky = SkySingle::new(&v.medium, &vec![sh; v.medium.density.len()]);
+    let sky = SkySingle::new(&v.medium, &VoxelField::filled(v.medium.density.full_index(), sh));
     let v = v.with_sky_single(sky);
     let opts = CubeOptions {
         res: 8,
@@ -583,7 +584,7 @@ fn gather_source_cubes_see_the_gathers_own_diffuse_term() {
         Rgb::ZERO,
         None,
     );
-    let sky = SkySingle::new(&u.medium, &vec![sh; u.medium.density.len()]);
+    let sky = SkySingle::new(&u.medium, &VoxelField::filled(u.medium.density.full_index(), sh));
     let u = u.with_sky_single(sky);
     let lod = CubeOptions {
         res: 8,

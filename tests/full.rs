@@ -117,13 +117,14 @@ fn the_sky_through_the_boundary_keeps_a_furnace_exact() {
         .filter(|(_, r)| **r > 0.0)
         .map(|(v, _)| (v - l).abs() / l)
         .fold(0.0f32, f32::max);
-    // Measured 1e-6: f32 storage of the bins' radiance and the solver's 1e-6 residual. The
-    // paper's split is 10–40 % low at the surface here.
-    assert!(worst < 1e-4, "I0 off the furnace radiance by {worst}");
+    // Measured 2.8e-4: the border cubes stop marching at transmittance 1e-2 (CubeOptions), which
+    // drops at most 1 % of the light behind; before the iteration it is 1e-6 (f32, the solver's
+    // 1e-6 residual). The paper's split is 10–40 % low at the surface here.
+    assert!(worst < 1e-3, "I0 off the furnace radiance by {worst}");
     let out = boundary_outflow(&s.medium, &p.incident, &p.solution, cloudgi::diffusion::DEFAULT_MIN_OPTICAL_DEPTH);
     let scale = std::f64::consts::PI * l as f64 * boundary_area(&s.medium);
-    assert!((out.x as f64).abs() < 1e-4 * scale, "net outflow {} against π·L·A = {scale}", out.x);
-    assert!(p.changes.iter().all(|c| *c < 1e-4), "changes {:?}", p.changes);
+    assert!((out.x as f64).abs() < 1e-3 * scale, "net outflow {} against π·L·A = {scale}", out.x);
+    assert!(p.changes.iter().all(|c| *c < 1e-3), "changes {:?}", p.changes);
 }
 
 #[test]

@@ -2,6 +2,7 @@
 //! allocator abort mid-render.
 
 use cloudgi::error::{Error, Result};
+use cloudgi::medium::Grid3;
 use cloudgi::scene::{Method, Scene, SceneDesc};
 use cloudgi::transport::TransportMemory;
 
@@ -62,25 +63,103 @@ pub fn check_image(desc: &SceneDesc, source: &str) -> Result<()> {
     check_image_fits(desc, source, available_bytes())
 }
 
-/// Bytes per voxel of the grid the per-voxel stages hold at their peak, by method. Peak resident
-/// memory of 8×8 renders of the noon evaluation cloud at 100×80×60 and at 200×160×120 voxels on
-/// the development sandbox (`/usr/bin/time -f %M`) over the grid's voxels: `diffusion` 388 and
-/// 352 B (stage 1's Q0/Q1, sun transmittances and sky harmonics per band, the solver's box),
-/// `full` 482 and 443 B (plus the mip pyramid of the lit volume and the clear-air re-solve),
-/// `single` and `reference` 16 and 6 B (the grid, a majorant or transmittance grid). Rounded up.
-/// `transport` is estimated per full voxel instead ([`TransportMemory`]).
-pub fn bytes_per_grid_voxel(method: Method) -> u64 {
+/// The sizes of a cloud a grid method's memory follows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CloudSize {
+    /// Voxels of the grid.
+    pub grid: u64,
+    /// Voxels of the tight box of the full voxels (the diffusion solver's domain).
+    pub boxed: u64,
+    /// Full voxels (ρ > 0).
+    pub full: u64,
+}
+
+impl CloudSize {
+    /// Count them in a density grid (one pass; no allocation).
+    pub fn of(density: &Grid3) -> CloudSize {
+        let d = density.dims();
+        let (mut lo, mut hi, mut full) = (d, [0usize; 3], 0u64);
+        for (n, _) in density.data().iter().enumerate().filter(|(_, r)| **r > 0.0) {
+            let ijk = [n % d[0], (n / d[0]) % d[1], n / (d[0] * d[1])];
+            for a in 0..3 {
+                lo[a] = lo[a].min(ijk[a]);
+                hi[a] = hi[a].max(ijk[a] + 1);
+            }
+            full += 1;
+        }
+        let boxed = if full == 0 {
+            0
+        } else {
+            (0..3).map(|a| (hi[a] - lo[a]) as u64).product()
+        };
+        CloudSize {
+            grid: density.len() as u64,
+            boxed,
+            full,
+        }
+    }
+}
+
+/// Peak bytes of a grid method: a fixed part plus bytes per grid voxel, per voxel of the full
+/// voxels' box and per full voxel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GridMemory {
+    /// Fixed bytes (program, thread stacks, tables).
+    pub fixed: u64,
+    /// Per grid voxel: the density, the sun transmittance, the full-voxel index (4 B each).
+    pub per_grid: u64,
+    /// Per voxel of the box of the full voxels: the diffusion solver's box arrays.
+    pub per_box: u64,
+    /// Per full voxel: stage 1's Q0/Q1 and sky harmonics, I0, I1, the lit volume, its pyramid.
+    pub per_full: u64,
+}
+
+impl GridMemory {
+    /// Bytes for a cloud of `size`.
+    pub fn bytes(&self, size: CloudSize) -> u64 {
+        self.fixed
+            .saturating_add(size.grid.saturating_mul(self.per_grid))
+            .saturating_add(size.boxed.saturating_mul(self.per_box))
+            .saturating_add(size.full.saturating_mul(self.per_full))
+    }
+}
+
+/// The memory model of each grid method (docs/performance.md, "Memory"). Fitted to the peak
+/// resident memory of 8×6-pixel renders on the development sandbox (`/usr/bin/time -f %M`) of
+/// three clouds — the procedural cumulus at 100×80×60 and 200×160×120 (44 k and 356 k full
+/// voxels, 9 % of the grid, 47 % of their box) and two spheres in opposite corners of a
+/// 200×160×120 grid (89 k full voxels, 3 % of their box) — which gave `full` 460 B per full voxel,
+/// 84 B per box voxel and 22 MB fixed beyond 12 B per grid voxel, `diffusion` 356 B, 33 B and
+/// 15 MB; the figures here are those rounded up by about a fifth. `single` and `reference` hold
+/// the grid and a majorant or transmittance grid (16 B per grid voxel).
+pub fn grid_memory(method: Method) -> GridMemory {
+    const MB: u64 = 1 << 20;
     match method {
-        Method::Single | Method::Reference => 16,
-        Method::Diffusion => 400,
+        Method::Single | Method::Reference => GridMemory {
+            fixed: 0,
+            per_grid: 16,
+            per_box: 0,
+            per_full: 0,
+        },
+        Method::Diffusion => GridMemory {
+            fixed: 32 * MB,
+            per_grid: 16,
+            per_box: 50,
+            per_full: 440,
+        },
         // full, and any method added later: the largest estimate.
-        _ => 500,
+        _ => GridMemory {
+            fixed: 32 * MB,
+            per_grid: 16,
+            per_box: 100,
+            per_full: 560,
+        },
     }
 }
 
 /// The solver's arrays, estimated from the loaded medium for the scene's method, must fit in
 /// `available` bytes beside the image: `transport` per full voxel ([`TransportMemory`]), the other
-/// methods per grid voxel ([`bytes_per_grid_voxel`]).
+/// methods from the grid's, the cloud's box's and the full voxels' counts ([`grid_memory`]).
 pub fn check_solver_fits(scene: &Scene, available: Option<u64>) -> Result<()> {
     let Some(avail) = available else {
         return Ok(());
@@ -91,25 +170,38 @@ pub fn check_solver_fits(scene: &Scene, available: Option<u64>) -> Result<()> {
     if r.method == Method::Transport {
         return TransportMemory::of(&scene.medium, &r.transport).check(&scene.source, beside, "the memory available beside the image");
     }
-    let voxels = scene.medium.density.len() as u64;
-    let per = bytes_per_grid_voxel(r.method);
-    let need = voxels.saturating_mul(per);
+    let size = CloudSize::of(&scene.medium.density);
+    let model = grid_memory(r.method);
+    let need = model.bytes(size);
     if need <= beside {
         return Ok(());
     }
     let other = match r.method {
         Method::Single | Method::Reference => "",
-        _ => ", or use --method transport (memory per full voxel, not per grid voxel: sparse clouds need far less)",
+        _ => ", or use --method transport",
+    };
+    let per_cloud = match r.method {
+        Method::Single | Method::Reference => String::new(),
+        _ => format!(
+            " + {} voxels of the cloud's box × {} B + {} full voxels × {} B + {} MB",
+            size.boxed,
+            model.per_box,
+            size.full,
+            model.per_full,
+            model.fixed >> 20
+        ),
     };
     Err(Error::invalid(
         &scene.source,
         "medium",
         format!(
-            "method {} needs about {} ({voxels} grid voxels × {per} B) but the memory available beside \
+            "method {} needs about {} ({} grid voxels × {} B{per_cloud}) but the memory available beside \
              the image is {}; coarsen the cloud (medium.downsample, medium.resolution or \
              medium.max_voxels){other}",
             r.method.name(),
             gib(need),
+            size.grid,
+            model.per_grid,
             gib(beside)
         ),
     ))
@@ -154,17 +246,50 @@ mod tests {
         let mut scene = Scene::default_scene().unwrap();
         scene.camera.width = 8;
         scene.camera.height = 8;
-        let voxels = scene.medium.density.len() as u64;
-        for (method, per) in [(Method::Full, 500), (Method::Diffusion, 400), (Method::Single, 16)] {
+        let size = CloudSize::of(&scene.medium.density);
+        for method in [Method::Full, Method::Diffusion, Method::Single] {
             scene.render.method = method;
             let image = 64 * bytes_per_pixel(method, false, false);
-            let e = check_solver_fits(&scene, Some(image + voxels * per - 1)).unwrap_err().to_string();
+            let need = grid_memory(method).bytes(size);
+            let e = check_solver_fits(&scene, Some(image + need - 1)).unwrap_err().to_string();
             assert!(
                 e.contains(&format!("method {}", method.name())) && e.contains("medium.downsample"),
                 "{e}"
             );
-            assert_eq!(e.contains("--method transport"), method != Method::Single, "{e}");
-            assert!(check_solver_fits(&scene, Some(image + voxels * per)).is_ok());
+            let sparse = method != Method::Single;
+            assert_eq!(e.contains("--method transport"), sparse, "{e}");
+            assert_eq!(e.contains(&format!("{} full voxels", size.full)), sparse, "{e}");
+            assert!(check_solver_fits(&scene, Some(image + need)).is_ok());
         }
+    }
+
+    #[test]
+    fn the_cloud_is_counted_by_its_full_voxels_and_their_box() {
+        let mut g = Grid3::filled([6, 5, 4], 0.0);
+        assert_eq!(
+            CloudSize::of(&g),
+            CloudSize {
+                grid: 120,
+                boxed: 0,
+                full: 0
+            }
+        );
+        g.set(1, 1, 1, 0.5);
+        g.set(3, 4, 2, 1.0);
+        assert_eq!(
+            CloudSize::of(&g),
+            CloudSize {
+                grid: 120,
+                boxed: 3 * 4 * 2,
+                full: 2
+            }
+        );
+        // The default cloud at 100×80×60: 9 % of the grid is full and the estimate is near the
+        // 56 MB measured (docs/performance.md).
+        let scene = Scene::default_scene().unwrap();
+        let size = CloudSize::of(&scene.medium.density);
+        assert!((40_000..50_000).contains(&size.full), "{size:?}");
+        let mb = grid_memory(Method::Full).bytes(size) >> 20;
+        assert!((56..100).contains(&mb), "{mb} MB");
     }
 }

@@ -25,79 +25,73 @@ use super::boundary::face_index;
 use super::{boundary_terms, interior_coupling, DiffusionSolution};
 use crate::incident::IncidentLight;
 use crate::math::{Rgb, Vec3};
+use crate::medium::sparse::VoxelField;
 use crate::medium::Medium;
-use rayon::prelude::*;
 
-/// I1 per voxel per band (`[band]` a vector, W·m⁻²·sr⁻¹); zero where ρ = 0. See the module docs.
-pub fn diffuse_flux(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, tau_min: f64) -> Vec<[Vec3; 3]> {
+/// I1 per voxel per band (`[band]` a vector, W·m⁻²·sr⁻¹), stored per full voxel; zero where
+/// ρ = 0. See the module docs.
+pub fn diffuse_flux(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, tau_min: f64) -> VoxelField<[Vec3; 3]> {
     let d = m.dims();
     let rho = m.density.data();
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
     let stride = [1usize, d[0], d[0] * d[1]];
-    let n = d[0] * d[1] * d[2];
     let sigma_tr: [f64; 3] = std::array::from_fn(|c| m.optics.sigma_tr(c));
-    (0..n)
-        .into_par_iter()
-        .map(|idx| {
-            let rp = rho[idx] as f64;
-            let mut out = [Vec3::ZERO; 3];
-            if rp <= 0.0 {
-                return out;
-            }
-            let cell = [idx % d[0], (idx / d[0]) % d[1], idx / (d[0] * d[1])];
-            for (c, o) in out.iter_mut().enumerate() {
-                let s = sigma_tr[c];
-                let ip = sol.i0[c][idx] as f64;
-                let f_at = |q: usize, ax: usize| inc.q1[ax][q][c] as f64 / (rho[q] as f64 * s);
-                let mut v = [0f64; 3];
-                for ax in 0..3 {
-                    let fp = f_at(idx, ax);
-                    let mut phi = [0f64; 2];
-                    for (t, side) in [-1i64, 1].into_iter().enumerate() {
-                        let nc = cell[ax] as i64 + side;
-                        let nidx = (nc >= 0 && nc < d[ax] as i64).then(|| (idx as i64 + side * stride[ax] as i64) as usize);
-                        let rn = nidx.map_or(0.0, |q| rho[q] as f64);
-                        phi[t] = match nidx {
-                            Some(q) if rn > 0.0 => {
-                                let cf = interior_coupling(rp, rn, s, h[ax], tau_min);
-                                let ff = 0.5 * (fp + f_at(q, ax));
-                                -cf * h[ax] * (sol.i0[c][q] as f64 - ip) + ff * side as f64
-                            }
-                            _ => {
-                                let (dt, ft) = boundary_terms(rp, s, h[ax], tau_min);
-                                let l_in = sol.boundary.at(nidx, face_index(ax, side), c);
-                                h[ax] * (dt * (ip - l_in) + ft * fp * side as f64)
-                            }
-                        };
-                    }
-                    // φ_+ = I1_a/3 through the + face, φ_− = −I1_a/3 through the − face.
-                    v[ax] = 1.5 * (phi[1] - phi[0]);
+    VoxelField::from_fn(m.density.full_index(), [Vec3::ZERO; 3], |idx| {
+        let rp = rho[idx] as f64;
+        let mut out = [Vec3::ZERO; 3];
+        let cell = [idx % d[0], (idx / d[0]) % d[1], idx / (d[0] * d[1])];
+        for (c, o) in out.iter_mut().enumerate() {
+            let s = sigma_tr[c];
+            let ip = sol.i0[c][idx] as f64;
+            let f_at = |q: usize, ax: usize| inc.q1[ax][q][c] as f64 / (rho[q] as f64 * s);
+            let mut v = [0f64; 3];
+            for ax in 0..3 {
+                let fp = f_at(idx, ax);
+                let mut phi = [0f64; 2];
+                for (t, side) in [-1i64, 1].into_iter().enumerate() {
+                    let nc = cell[ax] as i64 + side;
+                    let nidx = (nc >= 0 && nc < d[ax] as i64).then(|| (idx as i64 + side * stride[ax] as i64) as usize);
+                    let rn = nidx.map_or(0.0, |q| rho[q] as f64);
+                    phi[t] = match nidx {
+                        Some(q) if rn > 0.0 => {
+                            let cf = interior_coupling(rp, rn, s, h[ax], tau_min);
+                            let ff = 0.5 * (fp + f_at(q, ax));
+                            -cf * h[ax] * (sol.i0[c][q] as f64 - ip) + ff * side as f64
+                        }
+                        _ => {
+                            let (dt, ft) = boundary_terms(rp, s, h[ax], tau_min);
+                            let l_in = sol.boundary.at(nidx, face_index(ax, side), c);
+                            h[ax] * (dt * (ip - l_in) + ft * fp * side as f64)
+                        }
+                    };
                 }
-                *o = Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32);
+                // φ_+ = I1_a/3 through the + face, φ_− = −I1_a/3 through the − face.
+                v[ax] = 1.5 * (phi[1] - phi[0]);
             }
-            out
-        })
-        .collect()
+            *o = Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32);
+        }
+        out
+    })
 }
 
-/// ρ·I1 per voxel, interpolated density-weighted; answers g·I1·ω at any point.
+/// ρ·I1 per full voxel, interpolated density-weighted; answers g·I1·ω at any point.
 #[derive(Clone, Debug)]
 pub struct FluxField {
     dims: [usize; 3],
-    /// ρ·I1 per voxel, `[band]`.
-    rho_i1: Vec<[Vec3; 3]>,
+    /// ρ·I1 per voxel, `[band]` (zero, and not stored, where ρ = 0).
+    rho_i1: VoxelField<[Vec3; 3]>,
     /// HG mean cosine of the medium.
     g: f32,
 }
 
 impl FluxField {
     /// From I1 per voxel ([`diffuse_flux`]) and the medium it was computed on.
-    pub fn new(m: &Medium, i1: &[[Vec3; 3]]) -> FluxField {
-        let rho_i1 = i1
-            .iter()
-            .zip(m.density.data())
-            .map(|(v, r)| [v[0] * *r, v[1] * *r, v[2] * *r])
-            .collect();
+    pub fn new(m: &Medium, i1: &VoxelField<[Vec3; 3]>) -> FluxField {
+        let rho = m.density.data();
+        let rho_i1 = VoxelField::from_fn(m.density.full_index(), [Vec3::ZERO; 3], |n| {
+            let (v, r) = (i1[n], rho[n]);
+            [v[0] * r, v[1] * r, v[2] * r]
+        });
         FluxField {
             dims: m.dims(),
             rho_i1,
@@ -111,8 +105,9 @@ impl FluxField {
         if rho <= 0.0 {
             return [Vec3::ZERO; 3];
         }
-        let t = crate::math::Trilinear::new(self.dims, v.to_array());
-        let s: [Vec3; 3] = std::array::from_fn(|c| t.blend(|n| self.rho_i1[n][c]));
+        let f = &self.rho_i1;
+        let t = f.slots(&crate::math::Trilinear::new(self.dims, v.to_array()));
+        let s: [Vec3; 3] = std::array::from_fn(|c| t.blend(|q| f.at_slot(q)[c]));
         [s[0] / rho, s[1] / rho, s[2] / rho]
     }
 

@@ -83,6 +83,7 @@ pub mod slab;
 use crate::error::{Error, Result};
 use crate::incident::IncidentLight;
 use crate::math::Rgb;
+use crate::medium::sparse::VoxelField;
 use crate::medium::Medium;
 use boundary::face_index;
 pub use boundary::BoundaryLight;
@@ -174,8 +175,8 @@ impl SolveStats {
 pub struct DiffusionSolution {
     /// Grid resolution.
     pub dims: [usize; 3],
-    /// I0 per band, per voxel (W·m⁻²·sr⁻¹); zero where ρ = 0.
-    pub i0: [Vec<f32>; 3],
+    /// I0 per band, per voxel (W·m⁻²·sr⁻¹); zero where ρ = 0 (stored per full voxel).
+    pub i0: [VoxelField<f32>; 3],
     /// Per band.
     pub stats: [SolveStats; 3],
     /// The light that entered through the boundary faces (eq. 7's incoming radiance).
@@ -386,28 +387,32 @@ pub fn solve_diffusion(
             });
         }
     }
-    let n = dims[0] * dims[1] * dims[2];
+    let index = medium.density.full_index();
     let Some(dom) = Domain::of(medium) else {
+        let zero = VoxelField::filled(index, 0.0);
         return Ok(DiffusionSolution {
             dims,
-            i0: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+            i0: [zero.clone(), zero.clone(), zero],
             stats: Default::default(),
             boundary: boundary.clone(),
         });
     };
     let dd = dom.dims;
-    let to_global = |x: &[f64]| -> Vec<f32> {
-        let mut out = vec![0f32; n];
+    // The full voxels in domain order are the full voxels in grid order.
+    let to_global = |x: &[f64]| -> VoxelField<f32> {
+        let mut out = Vec::with_capacity(index.count());
         for k in 0..dd[2] {
             for j in 0..dd[1] {
                 for i in 0..dd[0] {
-                    out[dom.global(dims, i, j, k)] = x[i + dd[0] * (j + dd[1] * k)] as f32;
+                    if index.slot(dom.global(dims, i, j, k)) != 0 {
+                        out.push(x[i + dd[0] * (j + dd[1] * k)] as f32);
+                    }
                 }
             }
         }
-        out
+        VoxelField::new(index.clone(), 0.0, out)
     };
-    let to_local = |x: &[f32]| -> Vec<f64> {
+    let to_local = |x: &VoxelField<f32>| -> Vec<f64> {
         let mut out = vec![0f64; dd[0] * dd[1] * dd[2]];
         for k in 0..dd[2] {
             for j in 0..dd[1] {
@@ -419,18 +424,19 @@ pub fn solve_diffusion(
         out
     };
     // Bands with identical coefficients share one hierarchy.
-    let systems: Vec<(Stencil, Vec<f64>)> = (0..3)
+    let (stencils, rhs): (Vec<Stencil>, Vec<Vec<f64>>) = (0..3)
         .into_par_iter()
         .map(|c| assemble(medium, incident, boundary, c, settings.min_optical_depth, &dom))
-        .collect();
+        .unzip();
     let mut hier: Vec<(f32, Hierarchy)> = Vec::new();
     let mut groups: Vec<Vec<usize>> = Vec::new();
-    for (c, (a, _)) in systems.iter().enumerate() {
+    // Memory: each stencil becomes its hierarchy's finest level or is dropped (a shared one).
+    for (c, a) in stencils.into_iter().enumerate() {
         let alb = medium.optics.albedo[c];
         match hier.iter().position(|(x, _)| *x == alb) {
             Some(p) => groups[p].push(c),
             None => {
-                hier.push((alb, Hierarchy::build(a.clone())));
+                hier.push((alb, Hierarchy::build(a)));
                 groups.push(vec![c]);
             }
         }
@@ -442,7 +448,7 @@ pub fn solve_diffusion(
         .zip(&hier)
         .map(|(g, (_, h))| {
             let (tol, max) = (settings.tolerance, settings.max_iterations);
-            let b = |k: usize| systems[g[k]].1.as_slice();
+            let b = |k: usize| rhs[g[k]].as_slice();
             let x = |k: usize| x0[g[k]].as_deref();
             match g.len() {
                 1 => h.solve_many([b(0)], x(0).map(|a| [a]), tol, max).into(),
@@ -473,9 +479,10 @@ pub fn solve_diffusion(
         }
     }
     let mut it = results.into_iter().map(|(x, s)| (to_global(&x), s));
-    let (x0, s0) = it.next().unwrap_or_default();
-    let (x1, s1) = it.next().unwrap_or_default();
-    let (x2, s2) = it.next().unwrap_or_default();
+    let mut band = || it.next().expect("three bands");
+    let (x0, s0) = band();
+    let (x1, s1) = band();
+    let (x2, s2) = band();
     Ok(DiffusionSolution {
         dims,
         i0: [x0, x1, x2],

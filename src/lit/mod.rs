@@ -25,6 +25,11 @@
 //! interpolated density-weighted, I0(p) = trilinear(ρ·I0)/trilinear(ρ): empty voxels (I0 = 0)
 //! do not darken the cloud's edge, and it is the rule a mip pyramid of pre-multiplied ρ·I0 obeys
 //! at every level, so the gathers and the cubes see one field.
+//!
+//! **Storage.** Every per-voxel field here (ρ·I0, ρ·I1, the sky harmonics, the pyramid's cells)
+//! is zero where ρ = 0 and is stored only at the full voxels ([`crate::medium::sparse`]), so a
+//! lit volume costs bytes per voxel of the cloud, not of its box; only the density and the sun
+//! transmittance (sampled beside the cloud too) are dense.
 
 pub mod ground;
 pub mod pyramid;
@@ -32,8 +37,9 @@ pub mod sky_single;
 
 use crate::diffusion::flux::FluxField;
 use crate::lighting::{Sky, Sun};
-use crate::math::{Rgb, Vec3};
+use crate::math::{Rgb, Trilinear, Vec3};
 use crate::medium::march::{march, March};
+use crate::medium::sparse::VoxelField;
 use crate::medium::{Grid3, Medium};
 use ground::LitGround;
 use pyramid::LitPyramid;
@@ -46,8 +52,9 @@ use std::sync::{Arc, OnceLock};
 pub struct LitVolume {
     /// The medium (density, optics, box). Its pyramid is built from it once: do not replace it.
     pub medium: Medium,
-    /// ρ·max(I0, 0) per band at voxel centres (W·m⁻²·sr⁻¹), for the density-weighted rule.
-    rho_i0: Arc<[Grid3; 3]>,
+    /// ρ·max(I0, 0) per band at voxel centres (W·m⁻²·sr⁻¹), for the density-weighted rule;
+    /// stored per full voxel.
+    rho_i0: Arc<VoxelField<Rgb>>,
     /// Transmittance towards the sun at voxel centres (unitless), the density grid's dims.
     pub sun_t: Arc<Grid3>,
     /// The sun (its light enters only through `sun_t` and the phase function, never as a disc).
@@ -68,21 +75,24 @@ pub struct LitVolume {
 }
 
 impl LitVolume {
-    /// Assemble a lit volume from I0 per voxel (index i + nx(j + ny k), W·m⁻²·sr⁻¹ per band;
-    /// clamped at 0 here) and the sun transmittance at voxel centres. Both must have the density
-    /// grid's dimensions (an internal invariant: the caller builds them from the same medium).
-    pub fn new(medium: Medium, i0: Vec<Rgb>, sun_t: impl Into<Arc<Grid3>>, sun: Sun, sky: Sky, ground: Option<LitGround>) -> LitVolume {
+    /// Assemble a lit volume from I0 per voxel (indexed by grid index i + nx(j + ny k): a dense
+    /// `Vec<Rgb>` or a [`VoxelField`]; W·m⁻²·sr⁻¹ per band; clamped at 0 here, read only at full
+    /// voxels) and the sun transmittance at voxel centres. Both must have the density grid's
+    /// dimensions (an internal invariant: the caller builds them from the same medium).
+    pub fn new(
+        medium: Medium,
+        i0: impl std::ops::Index<usize, Output = Rgb> + Sync,
+        sun_t: impl Into<Arc<Grid3>>,
+        sun: Sun,
+        sky: Sky,
+        ground: Option<LitGround>,
+    ) -> LitVolume {
         let sun_t = sun_t.into();
-        let d = medium.dims();
-        assert_eq!(i0.len(), medium.density.len(), "I0 must have one value per voxel");
-        assert_eq!(sun_t.dims(), d, "sun transmittance must have the density grid's dims");
+        assert_eq!(sun_t.dims(), medium.dims(), "sun transmittance must have the density grid's dims");
         let rho = medium.density.data();
-        let band = |c: usize| {
-            let data: Vec<f32> = i0.iter().zip(rho).map(|(v, r)| v[c].max(0.0) * r).collect();
-            Grid3::from_vec(d, data, "lit volume").expect("I0 has one value per voxel")
-        };
+        let rho_i0 = VoxelField::from_fn(medium.density.full_index(), Rgb::ZERO, |n| i0[n].max(Rgb::ZERO) * rho[n]);
         LitVolume {
-            rho_i0: Arc::new([band(0), band(1), band(2)]),
+            rho_i0: Arc::new(rho_i0),
             medium,
             sun_t,
             sun,
@@ -118,10 +128,10 @@ impl LitVolume {
         self.medium.dims()
     }
 
-    /// ρ·I0 of band `c` at voxel centres (W·m⁻²·sr⁻¹).
+    /// ρ·I0 (RGB) at voxel centres (W·m⁻²·sr⁻¹), stored per full voxel.
     #[inline]
-    pub fn rho_i0(&self, c: usize) -> &Grid3 {
-        &self.rho_i0[c]
+    pub fn rho_i0_field(&self) -> &VoxelField<Rgb> {
+        &self.rho_i0
     }
 
     /// The mip pyramid (all levels down to [`pyramid::BLOCK`] cells), built on first use.
@@ -136,12 +146,8 @@ impl LitVolume {
         if rho <= 0.0 {
             return Rgb::ZERO;
         }
-        let a = v.to_array();
-        Rgb::new(
-            self.rho_i0[0].trilinear(a),
-            self.rho_i0[1].trilinear(a),
-            self.rho_i0[2].trilinear(a),
-        ) / rho
+        let f = &*self.rho_i0;
+        f.slots(&Trilinear::new(self.dims(), v.to_array())).blend(|s| *f.at_slot(s)) / rho
     }
 
     /// The diffuse radiance scattered towards `to_eye` per unit albedo (W·m⁻²·sr⁻¹): I0, or

@@ -5,12 +5,15 @@
 //! averages 2×2×2 blocks of level l, counting cells beyond the grid as empty, so every level keeps
 //! the cloud's total mass and the mass-weighted mean colour. A sample at level l interpolates
 //! trilinearly and divides by ρ to recover the colour, so empty space never darkens the colour.
-//! Each level has a block occupancy grid for empty-space skipping.
+//! Each level has a block occupancy grid for empty-space skipping. Every level stores its cells
+//! only where ρ > 0 ([`crate::medium::sparse`]; level 0 shares the density grid's index).
 
 use super::LitVolume;
 use crate::math::{Trilinear, Vec3};
+use crate::medium::sparse::{FullIndex, VoxelField};
 use crate::medium::{Grid3, MajorantGrid};
 use glam::Vec4;
+use std::sync::Arc;
 
 /// Block edge (in the level's voxels) of each level's occupancy grid.
 pub const BLOCK: usize = 4;
@@ -25,8 +28,8 @@ pub struct Level {
     pub dims: [usize; 3],
     /// Voxel edge lengths at this level (m).
     pub voxel_size: Vec3,
-    /// Pre-multiplied cells, x fastest.
-    pub cells: Vec<Cell>,
+    /// Pre-multiplied cells, x fastest, stored where ρ > 0 (zero elsewhere).
+    pub cells: VoxelField<Cell>,
     /// Upper bounds of ρ per block of [`BLOCK`]³ cells (with a one-cell apron).
     pub occupancy: MajorantGrid,
 }
@@ -36,13 +39,13 @@ impl Level {
     /// None where the interpolated density is zero (the colour channels are then not gathered).
     #[inline]
     pub fn sample(&self, v: Vec3) -> Option<Cell> {
-        let t = Trilinear::new(self.dims, v.to_array());
-        let rho = t.blend(|n| self.cells[n][0]);
+        let t = self.cells.slots(&Trilinear::new(self.dims, v.to_array()));
+        let rho = t.blend(|s| self.cells.at_slot(s)[0]);
         if rho <= 1e-12 {
             return None;
         }
-        let c = t.blend(|n| {
-            let c = &self.cells[n];
+        let c = t.blend(|s| {
+            let c = self.cells.at_slot(s);
             Vec4::new(c[1], c[2], c[3], c[4])
         });
         Some([rho, c.x, c.y, c.z, c.w])
@@ -63,17 +66,25 @@ impl LitPyramid {
     /// `max_levels` levels in all (at least 1).
     pub fn build(lit: &LitVolume, max_levels: usize) -> LitPyramid {
         let m = &lit.medium;
-        let dims = m.dims();
         let rho = m.density.data();
         let t = lit.sun_t.data();
-        let ri0 = [lit.rho_i0(0).data(), lit.rho_i0(1).data(), lit.rho_i0(2).data()];
-        let cells: Vec<Cell> = (0..rho.len())
-            .map(|n| {
-                let r = rho[n];
-                [r, ri0[0][n], ri0[1][n], ri0[2][n], r * t[n]]
-            })
-            .collect();
-        let mut levels = vec![make_level(dims, m.voxel_size, cells)];
+        let ri0 = lit.rho_i0_field();
+        let cells = VoxelField::from_fn(m.density.full_index(), [0.0; 5], |n| {
+            let (r, c) = (rho[n], ri0[n]);
+            [r, c.x, c.y, c.z, r * t[n]]
+        });
+        // Level 0's occupancy is the medium's majorant grid where its blocks are the same.
+        let occupancy = match m.majorant.block {
+            BLOCK => (*m.majorant).clone(),
+            _ => MajorantGrid::build(&m.density, BLOCK),
+        };
+        let level0 = Level {
+            dims: m.dims(),
+            voxel_size: m.voxel_size,
+            cells,
+            occupancy,
+        };
+        let mut levels = vec![level0];
         while levels.len() < max_levels.max(1) {
             let last = levels.last().expect("at least one level");
             if last.dims.iter().all(|&d| d <= BLOCK) {
@@ -86,9 +97,12 @@ impl LitPyramid {
     }
 }
 
+/// A coarse level from its cells (all of them, x fastest), stored where ρ > 0.
 fn make_level(dims: [usize; 3], voxel_size: Vec3, cells: Vec<Cell>) -> Level {
     let rho = Grid3::from_vec(dims, cells.iter().map(|c| c[0]).collect(), "pyramid level").expect("level dims are positive");
     let occupancy = MajorantGrid::build(&rho, BLOCK);
+    let index = Arc::new(FullIndex::build(dims, rho.data(), |r| r > 0.0));
+    let cells = VoxelField::new(index, [0.0; 5], cells.into_iter().filter(|c| c[0] > 0.0));
     Level {
         dims,
         voxel_size,
@@ -150,7 +164,7 @@ mod tests {
         let total = |l: &Level| {
             let vol = l.voxel_size.x * l.voxel_size.y * l.voxel_size.z;
             let mut s = [0f64; 5];
-            for c in &l.cells {
+            for c in l.cells.packed() {
                 for a in 0..5 {
                     s[a] += (c[a] * vol) as f64;
                 }

@@ -16,12 +16,14 @@
 //! **Storage.** Stage 1 knows the bin-mean reduced radiance Ī_b per voxel; it projects
 //! Σ_b Δω_b Ī_b δ(ω′ − ω_b) onto the 9 real spherical harmonics of degree ≤ 2 (ω_b the bin's mean
 //! flow direction), L_lm = Σ_b Δω_b Ī_b Y_lm(ω_b). Funk–Hecke with HG's Legendre coefficients g^l
-//! gives J_ss(ω)/a = Σ_l g^l Σ_m L_lm Y_lm(ω): 27 floats per voxel (9 per band, 108 bytes).
+//! gives J_ss(ω)/a = Σ_l g^l Σ_m L_lm Y_lm(ω): 27 floats per full voxel (9 per band, 108 bytes;
+//! empty voxels hold nothing, [`crate::medium::sparse`]).
 //! The truncation at l = 2 is exact for g = 0 and smooths the forward lobe of a strongly
 //! forward-scattering phase function to degree 2; the sum is clamped at 0 per band. The field is
 //! interpolated density-weighted like I0 (trilinear(ρ·L)/trilinear(ρ)).
 
 use crate::math::{sh9, Rgb, Vec3, SH_COEFFS};
+use crate::medium::sparse::VoxelField;
 use crate::medium::Medium;
 
 /// Degree of each coefficient of [`sh9`].
@@ -31,22 +33,22 @@ const DEGREE: [i32; SH_COEFFS] = [0, 1, 1, 1, 2, 2, 2, 2, 2];
 #[derive(Clone, Debug)]
 pub struct SkySingle {
     dims: [usize; 3],
-    /// `[voxel][band * 9 + lm]`: ρ·g^l·L_lm (W·m⁻²·sr⁻¹ per unit density).
-    rho_coef: Vec<[f32; 3 * SH_COEFFS]>,
+    /// `[voxel][band * 9 + lm]`: ρ·g^l·L_lm (W·m⁻²·sr⁻¹ per unit density), per full voxel.
+    rho_coef: VoxelField<[f32; 3 * SH_COEFFS]>,
 }
 
 impl SkySingle {
     /// From L_lm per voxel (`[band * 9 + lm]`, W·m⁻²·sr⁻¹, the projection of the reduced sky and
     /// ground radiance; stage 1's [`crate::incident::IncidentLight::sky_sh`]) and the medium
-    /// (density and HG g).
-    pub fn new(m: &Medium, sh: &[[f32; 3 * SH_COEFFS]]) -> SkySingle {
+    /// (density and HG g); only the full voxels' values are read.
+    pub fn new(m: &Medium, sh: &VoxelField<[f32; 3 * SH_COEFFS]>) -> SkySingle {
         let g = m.optics.phase.mean_cosine() as f32;
         let gl: [f32; SH_COEFFS] = std::array::from_fn(|k| g.powi(DEGREE[k]));
-        let rho_coef = sh
-            .iter()
-            .zip(m.density.data())
-            .map(|(c, r)| std::array::from_fn(|k| c[k] * gl[k % SH_COEFFS] * *r))
-            .collect();
+        let rho = m.density.data();
+        let rho_coef = VoxelField::from_fn(m.density.full_index(), [0.0; 3 * SH_COEFFS], |n| {
+            let c = &sh[n];
+            std::array::from_fn(|k| c[k] * gl[k % SH_COEFFS] * rho[n])
+        });
         SkySingle { dims: m.dims(), rho_coef }
     }
 
@@ -65,10 +67,10 @@ impl SkySingle {
             let w = (if corner & 1 == 1 { fx } else { 1.0 - fx })
                 * (if corner & 2 == 2 { fy } else { 1.0 - fy })
                 * (if corner & 4 == 4 { fz } else { 1.0 - fz });
-            if w == 0.0 {
+            // An empty corner holds ρ·L = 0.
+            let Some(c) = self.rho_coef.get_full(idx).filter(|_| w != 0.0) else {
                 continue;
-            }
-            let c = &self.rho_coef[idx];
+            };
             for (b, o) in out.iter_mut().enumerate() {
                 let s: f32 = (0..SH_COEFFS).map(|k| c[b * SH_COEFFS + k] * y[k]).sum();
                 *o += w * s;

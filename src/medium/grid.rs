@@ -1,12 +1,22 @@
 //! Dense 3-D scalar grid: the storage every density source is converted to.
 
+use super::sparse::FullIndex;
 use crate::error::{Error, Result};
+use std::sync::{Arc, OnceLock};
 
 /// A dense grid of `f32` values, index (i, j, k) = (x, y, z), x fastest in memory.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct Grid3 {
     dims: [usize; 3],
     data: Vec<f32>,
+    /// The index of its voxels > 0, built on first use and dropped by every write.
+    full: OnceLock<Arc<FullIndex>>,
+}
+
+impl PartialEq for Grid3 {
+    fn eq(&self, other: &Grid3) -> bool {
+        self.dims == other.dims && self.data == other.data
+    }
 }
 
 impl Grid3 {
@@ -15,6 +25,7 @@ impl Grid3 {
         Grid3 {
             dims,
             data: vec![value; dims[0] * dims[1] * dims[2]],
+            full: OnceLock::new(),
         }
     }
 
@@ -22,7 +33,11 @@ impl Grid3 {
     pub fn from_vec(dims: [usize; 3], data: Vec<f32>, what: &str) -> Result<Self> {
         let n = dims[0].checked_mul(dims[1]).and_then(|v| v.checked_mul(dims[2]));
         match n {
-            Some(n) if n == data.len() && n > 0 => Ok(Grid3 { dims, data }),
+            Some(n) if n == data.len() && n > 0 => Ok(Grid3 {
+                dims,
+                data,
+                full: OnceLock::new(),
+            }),
             Some(0) => Err(Error::format(
                 what,
                 format!("grid has zero size {dims:?}: every dimension must be at least 1"),
@@ -82,6 +97,7 @@ impl Grid3 {
     #[inline]
     pub fn set(&mut self, i: usize, j: usize, k: usize, v: f32) {
         let idx = self.index(i, j, k);
+        self.full.take();
         self.data[idx] = v;
     }
 
@@ -94,7 +110,16 @@ impl Grid3 {
     /// Mutable raw values, x fastest.
     #[inline]
     pub fn data_mut(&mut self) -> &mut [f32] {
+        self.full.take();
         &mut self.data
+    }
+
+    /// The index of the voxels with a value > 0 (of a density grid: the full voxels), built on
+    /// first use and shared by every field stored per full voxel ([`super::sparse`]).
+    pub fn full_index(&self) -> Arc<FullIndex> {
+        self.full
+            .get_or_init(|| Arc::new(FullIndex::build(self.dims, &self.data, |v| v > 0.0)))
+            .clone()
     }
 
     /// Trilinear interpolation at continuous voxel coordinates `p`, where voxel (i, j, k) has its

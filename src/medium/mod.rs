@@ -15,6 +15,7 @@ pub mod loaders;
 pub mod majorant;
 pub mod march;
 pub mod procedural;
+pub mod sparse;
 pub mod vdb;
 
 use crate::error::{check, finite3, rgb_in_unit};

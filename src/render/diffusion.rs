@@ -19,6 +19,7 @@ use crate::lit::sky_single::SkySingle;
 use crate::lit::LitVolume;
 use crate::math::Rgb;
 use crate::medium::march::march;
+use crate::medium::sparse::VoxelField;
 use crate::scene::Scene;
 use crate::sunlight::SunTransmittance;
 use source_field::SourceField;
@@ -62,7 +63,7 @@ pub fn boundary_light(scene: &Scene) -> BoundaryLight {
 
 /// The lit volume of a scene from I0 per voxel and the sun transmittance at voxel centres, the
 /// ground (if any) lit by the unoccluded sun and sky.
-pub fn scene_lit_volume(scene: &Scene, i0: Vec<Rgb>, sun_t: &SunTransmittance) -> LitVolume {
+pub fn scene_lit_volume(scene: &Scene, i0: impl std::ops::Index<usize, Output = Rgb> + Sync, sun_t: &SunTransmittance) -> LitVolume {
     let ground = scene
         .ground
         .as_ref()
@@ -77,11 +78,10 @@ pub fn scene_lit_volume(scene: &Scene, i0: Vec<Rgb>, sun_t: &SunTransmittance) -
     )
 }
 
-/// I0 per voxel as RGB.
-pub fn i0_rgb(sol: &DiffusionSolution) -> Vec<Rgb> {
-    (0..sol.i0[0].len())
-        .map(|k| Rgb::new(sol.i0[0][k], sol.i0[1][k], sol.i0[2][k]))
-        .collect()
+/// I0 per voxel as RGB (stored per full voxel, like the solution).
+pub fn i0_rgb(sol: &DiffusionSolution) -> VoxelField<Rgb> {
+    let i0 = &sol.i0;
+    VoxelField::from_fn(i0[0].index().clone(), Rgb::ZERO, |k| Rgb::new(i0[0][k], i0[1][k], i0[2][k]))
 }
 
 /// The lit volume of a solved scene, with the first moment attached when
@@ -108,8 +108,8 @@ fn source_field(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution) -> 
     SourceField::new(
         &scene.medium,
         &sol.i0,
-        i1.as_deref(),
-        inc.sky_sh.as_deref(),
+        i1.as_ref(),
+        inc.sky_sh.as_ref(),
         &inc.sun_transmittance.grid,
         &scene.sun,
     )

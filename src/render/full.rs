@@ -95,21 +95,32 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
     let mut changes = Vec::new();
     let opts = &scene.render.cubes;
     let cubes = |sol: &DiffusionSolution| clear_air(scene_lit_volume(scene, i0_rgb(sol), &sun_t), scene.ground.as_ref(), opts, progress);
-    let mut ca = timings.time("clear-air cubes", || cubes(&sol));
+    // Memory: each iteration's cubes, and the old stage-1 light, are dropped once the new stage-1
+    // light no longer needs them; only the cubes' lit ground is kept.
+    let mut ca = Some(timings.time("clear-air cubes", || cubes(&sol)));
+    let mut ground = ca.as_ref().and_then(|c| c.lit.ground.clone());
     let iterations = scene.render.clear_air.iterations;
     for it in 0..iterations {
-        if it > 0 {
-            ca = timings.time("clear-air cubes", || cubes(&sol));
-        }
+        let c = match ca.take() {
+            Some(c) => c,
+            None => timings.time("clear-air cubes", || cubes(&sol)),
+        };
+        ground = c.lit.ground.clone();
+        let n_cubes = c.cubes.len();
         // Stage 1 asks with bin b = the direction the light comes from (its rays flow along −ω_b),
         // which is the cube's own bin b ("radiance arriving from ω_b").
         // With `render.sky_boundary` the cubes' light enters through the boundary condition and
         // stage 1 (the sun only) does not change; else stage 1 is re-run with the cubes' light.
         let boundary = if settings.sky_boundary {
-            cube_boundary(&unoccluded, &ca.cubes)
+            let b = cube_boundary(&unoccluded, &c.cubes);
+            drop(c);
+            b
         } else {
-            let hook = ca.cubes.hook();
+            drop(inc);
+            let hook = c.cubes.hook();
             inc = timings.time("incident light", || compute_incident_with(scene, Some(&hook), sun_t.clone()));
+            drop(hook);
+            drop(c);
             BoundaryLight::none()
         };
         let new = timings.time("diffusion solve", || {
@@ -132,7 +143,7 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
             "clear-air iteration {}/{}: {} border cubes, I0 changed by {:.3} % ({} warm-start iterations){hint}",
             it + 1,
             iterations,
-            ca.cubes.len(),
+            n_cubes,
             100.0 * change,
             new.stats[1].iterations
         ));
@@ -142,7 +153,7 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
             break;
         }
     }
-    let lit = solved_lit_volume(scene, &inc, &sol).with_ground(ca.lit.ground.clone());
+    let lit = solved_lit_volume(scene, &inc, &sol).with_ground(ground);
     Ok(Propagation {
         lit,
         solution: sol,
@@ -329,6 +340,7 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
 
 /// Render the image.
 pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
-    let prop = propagate(scene, progress, timings)?;
-    Ok(timings.time("final gather", || gather(scene, &prop.lit, progress)))
+    // The solution and stage-1 light are dead once the lit volume holds what the gather needs.
+    let Propagation { lit, .. } = propagate(scene, progress, timings)?;
+    Ok(timings.time("final gather", || gather(scene, &lit, progress)))
 }

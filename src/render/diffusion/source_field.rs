@@ -12,6 +12,7 @@
 use crate::incident::active_box;
 use crate::lighting::Sun;
 use crate::math::{Rgb, Trilinear, Vec3, SH_COEFFS};
+use crate::medium::sparse::VoxelField;
 use crate::medium::{Grid3, Medium};
 use crate::optics::Optics;
 use rayon::prelude::*;
@@ -56,9 +57,9 @@ impl SourceField {
     /// the sun transmittance at voxel centres, all on `m`'s grid.
     pub fn new(
         m: &Medium,
-        i0: &[Vec<f32>; 3],
-        i1: Option<&[[Vec3; 3]]>,
-        sky_sh: Option<&[[f32; 3 * SH_COEFFS]]>,
+        i0: &[VoxelField<f32>; 3],
+        i1: Option<&VoxelField<[Vec3; 3]>>,
+        sky_sh: Option<&VoxelField<[f32; 3 * SH_COEFFS]>>,
         sun_t: &Grid3,
         sun: &Sun,
     ) -> SourceField {
@@ -188,10 +189,14 @@ mod tests {
             irradiance: Rgb::new(3.0, 2.5, 2.0),
         };
         let i0_rgb: Vec<Rgb> = (0..n).map(|k| Rgb::new(i0[0][k], i0[1][k], i0[2][k])).collect();
+        let idx = m.density.full_index();
+        let i0f: [VoxelField<f32>; 3] = std::array::from_fn(|b| VoxelField::from_fn(idx.clone(), 0.0, |g| i0[b][g]));
+        let i1 = VoxelField::from_fn(idx.clone(), [Vec3::ZERO; 3], |g| i1[g]);
+        let sh = VoxelField::from_fn(idx.clone(), [0.0; 3 * SH_COEFFS], |g| sh[g]);
         let lit = LitVolume::new(m.clone(), i0_rgb, sun_t.clone(), sun.clone(), Sky::constant(Rgb::ONE), None)
             .with_flux(FluxField::new(&m, &i1))
             .with_sky_single(SkySingle::new(&m, &sh));
-        let field = SourceField::new(&m, &i0, Some(&i1), Some(&sh), &sun_t, &sun);
+        let field = SourceField::new(&m, &i0f, Some(&i1), Some(&sh), &sun_t, &sun);
         let mut checked = 0;
         for _ in 0..2000 {
             let v = Vec3::new(rng.uniform() * 9.0, rng.uniform() * 7.0, rng.uniform() * 8.0);
