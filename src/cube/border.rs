@@ -133,6 +133,7 @@ pub fn render_border_cubes(lit: &LitVolume, opts: &CubeOptions, progress: &dyn P
     let opts = CubeOptions {
         step_level_voxels: opts.border_step_level_voxels,
         t_cutoff: opts.border_t_cutoff,
+        res: opts.border_res,
         ..opts.clone()
     };
     let renderer = CubeRenderer::new(lit, &opts);

@@ -44,6 +44,12 @@ pub struct CubeOptions {
     pub lod_bias: f32,
     /// Pyramid levels used (1 = always the finest grid, no level of detail).
     pub max_levels: usize,
+    /// Pixels per face edge of the clear-air border cubes ([`super::border`]; a multiple of 4):
+    /// one pixel per bin by default. Their light enters the diffusion only as bin means (stage 1's
+    /// hook) or as each face's cosine-weighted hemisphere (`render.sky_boundary`); measured 4
+    /// against 8 on the default scene: 1.5·10⁻⁴ block MRE, the evaluation scenes within ±0.003,
+    /// the clear-air stage 2.6× faster.
+    pub border_res: usize,
     /// Ground sample grid edge (N×N hemicubes).
     pub ground_samples: usize,
     /// Pixels per face edge of the ground's hemicubes (a multiple of 4). Finer than the border
@@ -68,6 +74,7 @@ impl Default for CubeOptions {
             max_levels: 8,
             ground_samples: DEFAULT_GROUND_SAMPLES,
             ground_res: 16,
+            border_res: 4,
         }
     }
 }
