@@ -36,7 +36,7 @@ pub fn compute_incident(scene: &Scene, entry: Option<&EntryRadiance<'_>>) -> Inc
 pub fn compute_incident_with(scene: &Scene, entry: Option<&EntryRadiance<'_>>, sun_t: SunTransmittance) -> IncidentLight {
     let mut settings = scene.render.incident.clone();
     let bins = DirectionBins::new();
-    let mut sources = IncidentSources::from_lighting(&scene.sun, &scene.sky, scene.ground.as_ref(), &bins, settings.sky_subdivisions);
+    let mut sources = scene_sources(scene, &bins);
     if scene.render.solver.sky_boundary {
         sources.bin_radiance.fill(Rgb::ZERO);
         settings.sky_single = false;
@@ -51,14 +51,13 @@ pub fn boundary_light(scene: &Scene) -> BoundaryLight {
         return BoundaryLight::none();
     }
     let bins = DirectionBins::new();
-    let sources = IncidentSources::from_lighting(
-        &scene.sun,
-        &scene.sky,
-        scene.ground.as_ref(),
-        &bins,
-        scene.render.incident.sky_subdivisions,
-    );
-    BoundaryLight::uniform(&bins.bins, &sources.bin_radiance)
+    BoundaryLight::uniform(&bins.bins, &scene_sources(scene, &bins).bin_radiance)
+}
+
+/// The scene's sun, and its sky and unshadowed ground averaged over each of `bins`.
+fn scene_sources(scene: &Scene, bins: &DirectionBins) -> IncidentSources {
+    let subdivisions = scene.render.incident.sky_subdivisions;
+    IncidentSources::from_lighting(&scene.sun, &scene.sky, scene.ground.as_ref(), bins, subdivisions)
 }
 
 /// The lit volume of a scene from I0 per voxel and the sun transmittance at voxel centres, the
