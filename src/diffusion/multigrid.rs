@@ -468,6 +468,7 @@ fn cg_step<const K: usize>(
 struct Dense {
     /// The level's entries that are unknowns.
     cells: Vec<usize>,
+    /// The factor L (row-major) below the diagonal and on it, Lᵀ above it.
     l: Vec<f64>,
 }
 
@@ -518,32 +519,45 @@ impl Dense {
             }
         }
         cholesky_in_place(&mut a, n);
+        // Lᵀ into the upper triangle: the backward substitution then reads rows too.
+        for i in 0..n {
+            for j in 0..i {
+                a[j * n + i] = a[i * n + j];
+            }
+        }
         Dense { cells, l: a }
     }
 
-    #[allow(clippy::needless_range_loop)]
+    /// x = A⁻¹ b on the level's unknowns, all systems in one pass over the factor (each row read
+    /// once per substitution, forward along L's rows, backward along Lᵀ's).
     fn solve<const K: usize>(&self, b: &[[Mg; K]], x: &mut [[Mg; K]]) {
         let n = self.cells.len();
         x.fill([0.0; K]);
-        for lane in 0..K {
-            let mut y: Vec<f64> = self.cells.iter().map(|c| b[*c][lane].get()).collect();
-            for i in 0..n {
-                let mut v = y[i];
-                for k in 0..i {
-                    v -= self.l[i * n + k] * y[k];
+        let mut y: Vec<[f64; K]> = self.cells.iter().map(|c| b[*c].map(Real::get)).collect();
+        for i in 0..n {
+            let (done, rest) = y.split_at_mut(i);
+            let row = &self.l[i * n..i * n + i];
+            let v = &mut rest[0];
+            for (lk, yk) in row.iter().zip(done.iter()) {
+                for k in 0..K {
+                    v[k] -= lk * yk[k];
                 }
-                y[i] = v / self.l[i * n + i];
             }
-            for i in (0..n).rev() {
-                let mut v = y[i];
-                for k in i + 1..n {
-                    v -= self.l[k * n + i] * y[k];
+            *v = v.map(|v| v / self.l[i * n + i]);
+        }
+        for i in (0..n).rev() {
+            let (head, done) = y.split_at_mut(i + 1);
+            let row = &self.l[i * n + i + 1..(i + 1) * n];
+            let v = &mut head[i];
+            for (lk, yk) in row.iter().zip(done.iter()) {
+                for k in 0..K {
+                    v[k] -= lk * yk[k];
                 }
-                y[i] = v / self.l[i * n + i];
             }
-            for (q, c) in self.cells.iter().enumerate() {
-                x[*c][lane] = Mg::of(y[q]);
-            }
+            *v = v.map(|v| v / self.l[i * n + i]);
+        }
+        for (c, v) in self.cells.iter().zip(&y) {
+            x[*c] = v.map(Mg::of);
         }
     }
 }
