@@ -269,9 +269,12 @@ pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: u
     let gstride = [1, gd[0], gd[0] * gd[1]];
     // F = Q1/(ρσtr) per axis at voxel centres.
     let f_at = |idx: usize, ax: usize| -> f64 { inc.q1[ax][idx][c] as f64 / (rho[idx] as f64 * sigma_tr) };
-    let (nodes, b): (Vec<Node>, Vec<f64>) = full
+    // Written in place (an unzip would hold a second copy while it gathers its pieces).
+    let mut b = vec![0f64; full.len()];
+    let nodes: Vec<Node> = full
         .par_iter()
-        .map(|&idx| {
+        .zip(b.par_iter_mut())
+        .map(|(&idx, bv)| {
             let rp = rho[idx] as f64;
             let cell = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])];
             let mut node = Node::at(dom.cell(cell));
@@ -302,9 +305,10 @@ pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: u
                 }
             }
             node.diag = diag;
-            (node, rhs)
+            *bv = rhs;
+            node
         })
-        .unzip();
+        .collect();
     (Operator { dims: d, nodes }, b)
 }
 

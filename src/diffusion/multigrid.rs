@@ -231,43 +231,45 @@ impl Level {
             }
         }
         let pads = [(n + 1) as u32, red as u32];
-        let (rows, plus): (Vec<Row>, Vec<[f64; 3]>) = unk
-            .par_iter()
-            .enumerate()
-            .map(|(e, &u)| {
-                if u == PAD {
-                    return (
-                        Row {
-                            cpl: [0.0; 6],
-                            diag: 0.0,
-                            nbr: [e as u32; 6],
-                        },
-                        [0.0; 3],
-                    );
-                }
-                let nd = &a.nodes[u as usize];
-                let mut row = Row {
+        let mut plus = vec![[0.0; 3]; if want_plus { n + 2 } else { 0 }];
+        let row = |e: usize, u: u32, up: &mut [f64; 3]| {
+            if u == PAD {
+                return Row {
                     cpl: [0.0; 6],
-                    diag: Mg::of(nd.diag),
-                    nbr: [pads[usize::from(e > red)]; 6],
+                    diag: 0.0,
+                    nbr: [e as u32; 6],
                 };
-                let mut up = [0.0; 3];
-                for ax in 0..3 {
-                    let d = down[u as usize][ax];
-                    if d != NONE && a.nodes[d as usize].up[ax] != 0.0 {
-                        row.nbr[2 * ax] = entry[d as usize];
-                        row.cpl[2 * ax] = Mg::of(a.nodes[d as usize].up[ax]);
-                    }
-                    if nd.up_nbr[ax] != NONE && nd.up[ax] != 0.0 {
-                        row.nbr[2 * ax + 1] = entry[nd.up_nbr[ax] as usize];
-                        row.cpl[2 * ax + 1] = Mg::of(nd.up[ax]);
-                        up[ax] = nd.up[ax];
-                    }
+            }
+            let nd = &a.nodes[u as usize];
+            let mut row = Row {
+                cpl: [0.0; 6],
+                diag: Mg::of(nd.diag),
+                nbr: [pads[usize::from(e > red)]; 6],
+            };
+            for ax in 0..3 {
+                let d = down[u as usize][ax];
+                if d != NONE && a.nodes[d as usize].up[ax] != 0.0 {
+                    row.nbr[2 * ax] = entry[d as usize];
+                    row.cpl[2 * ax] = Mg::of(a.nodes[d as usize].up[ax]);
                 }
-                (row, up)
-            })
-            .unzip();
-        let plus = if want_plus { plus } else { Vec::new() };
+                if nd.up_nbr[ax] != NONE && nd.up[ax] != 0.0 {
+                    row.nbr[2 * ax + 1] = entry[nd.up_nbr[ax] as usize];
+                    row.cpl[2 * ax + 1] = Mg::of(nd.up[ax]);
+                    up[ax] = nd.up[ax];
+                }
+            }
+            row
+        };
+        // Written in place (an unzip would hold a second copy while it gathers its pieces).
+        let rows: Vec<Row> = if want_plus {
+            unk.par_iter()
+                .zip(plus.par_iter_mut())
+                .enumerate()
+                .map(|(e, (u, p))| row(e, *u, p))
+                .collect()
+        } else {
+            unk.par_iter().enumerate().map(|(e, u)| row(e, *u, &mut [0.0; 3])).collect()
+        };
         let level = Level {
             red,
             rows,
