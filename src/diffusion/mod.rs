@@ -87,7 +87,7 @@ use crate::medium::sparse::VoxelField;
 use crate::medium::Medium;
 use boundary::face_index;
 pub use boundary::BoundaryLight;
-use multigrid::{Hierarchy, Stencil};
+use multigrid::{Hierarchy, Node, Operator};
 use rayon::prelude::*;
 
 /// Solver settings.
@@ -227,7 +227,8 @@ pub fn boundary_terms(rho_p: f64, sigma_tr: f64, h: f64, tau_min: f64) -> (f64, 
     (beta / den, 1.0 / den)
 }
 
-/// The box of voxels the solver works on: every full voxel, `lo` its minimum corner in the grid.
+/// The tight box of the full voxels, `lo` its minimum corner in the grid: the multigrid
+/// aggregates its cells.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct Domain {
     /// Minimum corner (voxel index).
@@ -245,80 +246,70 @@ impl Domain {
         })
     }
 
-    /// Grid index of domain cell (i, j, k).
+    /// Box index (x fastest) of the voxel at grid cell `g`, which lies in the box.
     #[inline]
-    pub fn global(&self, gd: [usize; 3], i: usize, j: usize, k: usize) -> usize {
-        (i + self.lo[0]) + gd[0] * ((j + self.lo[1]) + gd[1] * (k + self.lo[2]))
+    pub fn cell(&self, g: [usize; 3]) -> u32 {
+        let l = [0, 1, 2].map(|a| g[a] - self.lo[a]);
+        (l[0] + self.dims[0] * (l[1] + self.dims[1] * l[2])) as u32
     }
 }
 
-/// Assemble band `c`'s operator and right-hand side on `dom` (see the module docs), with the light
-/// `bl` entering through the boundary faces.
-pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_min: f64, dom: &Domain) -> (Stencil, Vec<f64>) {
+/// Assemble band `c`'s operator and right-hand side (see the module docs) on the full voxels
+/// (in grid order, their cells indexing `dom`), with the light `bl` entering through the
+/// boundary faces.
+pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_min: f64, dom: &Domain) -> (Operator, Vec<f64>) {
     let gd = m.dims();
     let d = dom.dims;
-    let n = d[0] * d[1] * d[2];
     let rho = m.density.data();
+    let index = m.density.full_index();
+    let full: Vec<usize> = index.full_voxels().collect();
     let sigma_a = m.optics.sigma_a(c);
     let sigma_tr = m.optics.sigma_tr(c);
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
     let gstride = [1, gd[0], gd[0] * gd[1]];
-    let mut st_out = Stencil::zeros(d);
-    let mut b = vec![0f64; n];
     // F = Q1/(ρσtr) per axis at voxel centres.
     let f_at = |idx: usize, ax: usize| -> f64 { inc.q1[ax][idx][c] as f64 / (rho[idx] as f64 * sigma_tr) };
-    let plane = d[0] * d[1];
-    let [o0v, o1v, o2v] = &mut st_out.off;
-    st_out
-        .diag
-        .par_chunks_mut(plane)
-        .zip(o0v.par_chunks_mut(plane))
-        .zip(o1v.par_chunks_mut(plane))
-        .zip(o2v.par_chunks_mut(plane))
-        .zip(b.par_chunks_mut(plane))
-        .enumerate()
-        .for_each(|(k, ((((dg, o0), o1), o2), bb))| {
-            let offs: [&mut [f64]; 3] = [o0, o1, o2];
-            for j in 0..d[1] {
-                for i in 0..d[0] {
-                    let l = i + d[0] * j;
-                    let idx = dom.global(gd, i, j, k);
-                    let rp = rho[idx] as f64;
-                    if rp <= 0.0 {
-                        continue;
-                    }
-                    let mut diag = rp * sigma_a;
-                    let mut rhs = inc.q0[idx][c] as f64;
-                    let cell = [i + dom.lo[0], j + dom.lo[1], k + dom.lo[2]];
-                    for ax in 0..3 {
-                        let fp = f_at(idx, ax);
-                        for side in [-1i64, 1] {
-                            let nc = cell[ax] as i64 + side;
-                            let nidx = (nc >= 0 && nc < gd[ax] as i64).then(|| (idx as i64 + side * gstride[ax] as i64) as usize);
-                            let rn = nidx.map_or(0.0, |q| rho[q] as f64);
-                            if rn > 0.0 {
-                                let q = nidx.unwrap_or(0);
-                                let cf = interior_coupling(rp, rn, sigma_tr, h[ax], tau_min);
-                                diag += cf;
-                                if side > 0 {
-                                    offs[ax][l] = -cf;
-                                }
-                                let ff = 0.5 * (fp + f_at(q, ax));
-                                rhs -= ff * side as f64 / h[ax];
-                            } else {
-                                let (dterm, fterm) = boundary_terms(rp, sigma_tr, h[ax], tau_min);
-                                diag += dterm;
-                                // eq. 7 with incoming light: φ = (β(I_P − L_face) + f)/(1 + 2β).
-                                rhs += dterm * bl.at(nidx, face_index(ax, side), c) - fterm * fp * side as f64;
-                            }
+    // Written in place (an unzip would hold a second copy while it gathers its pieces).
+    let mut b = vec![0f64; full.len()];
+    let nodes: Vec<Node> = full
+        .par_iter()
+        .zip(b.par_iter_mut())
+        .map(|(&idx, bv)| {
+            let rp = rho[idx] as f64;
+            let cell = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])];
+            let mut node = Node::at(dom.cell(cell));
+            let mut diag = rp * sigma_a;
+            let mut rhs = inc.q0[idx][c] as f64;
+            for ax in 0..3 {
+                let fp = f_at(idx, ax);
+                for side in [-1i64, 1] {
+                    let nc = cell[ax] as i64 + side;
+                    let nidx = (nc >= 0 && nc < gd[ax] as i64).then(|| (idx as i64 + side * gstride[ax] as i64) as usize);
+                    let rn = nidx.map_or(0.0, |q| rho[q] as f64);
+                    if rn > 0.0 {
+                        let q = nidx.unwrap_or(0);
+                        let cf = interior_coupling(rp, rn, sigma_tr, h[ax], tau_min);
+                        diag += cf;
+                        if side > 0 {
+                            node.up[ax] = -cf;
+                            node.up_nbr[ax] = (index.slot(q) - 1) as u32;
                         }
+                        let ff = 0.5 * (fp + f_at(q, ax));
+                        rhs -= ff * side as f64 / h[ax];
+                    } else {
+                        let (dterm, fterm) = boundary_terms(rp, sigma_tr, h[ax], tau_min);
+                        diag += dterm;
+                        // eq. 7 with incoming light: φ = (β(I_P − L_face) + f)/(1 + 2β).
+                        rhs += dterm * bl.at(nidx, face_index(ax, side), c) - fterm * fp * side as f64;
                     }
-                    dg[l] = diag;
-                    bb[l] = rhs;
                 }
             }
-        });
-    (st_out, b)
+            node.diag = diag;
+            *bv = rhs;
+            node
+        })
+        .collect();
+    (Operator { dims: d, nodes }, b)
 }
 
 /// Net outgoing diffuse power (W per band) through every boundary face of the cloud: Σ A·4π φ_f,
@@ -397,41 +388,14 @@ pub fn solve_diffusion(
             boundary: boundary.clone(),
         });
     };
-    let dd = dom.dims;
-    // The full voxels in domain order are the full voxels in grid order.
-    let to_global = |x: &[f64]| -> VoxelField<f32> {
-        let mut out = Vec::with_capacity(index.count());
-        for k in 0..dd[2] {
-            for j in 0..dd[1] {
-                for i in 0..dd[0] {
-                    if index.slot(dom.global(dims, i, j, k)) != 0 {
-                        out.push(x[i + dd[0] * (j + dd[1] * k)] as f32);
-                    }
-                }
-            }
-        }
-        VoxelField::new(index.clone(), 0.0, out)
-    };
-    let to_local = |x: &VoxelField<f32>| -> Vec<f64> {
-        let mut out = vec![0f64; dd[0] * dd[1] * dd[2]];
-        for k in 0..dd[2] {
-            for j in 0..dd[1] {
-                for i in 0..dd[0] {
-                    out[i + dd[0] * (j + dd[1] * k)] = x[dom.global(dims, i, j, k)] as f64;
-                }
-            }
-        }
-        out
-    };
-    // Bands with identical coefficients share one hierarchy.
-    let (stencils, rhs): (Vec<Stencil>, Vec<Vec<f64>>) = (0..3)
-        .into_par_iter()
-        .map(|c| assemble(medium, incident, boundary, c, settings.min_optical_depth, &dom))
-        .unzip();
+    // Bands with identical coefficients share one hierarchy; each band's operator becomes its
+    // hierarchy's finest level or is dropped (a shared one), so one is alive at a time.
+    let mut rhs: Vec<Vec<f64>> = Vec::new();
     let mut hier: Vec<(f32, Hierarchy)> = Vec::new();
     let mut groups: Vec<Vec<usize>> = Vec::new();
-    // Memory: each stencil becomes its hierarchy's finest level or is dropped (a shared one).
-    for (c, a) in stencils.into_iter().enumerate() {
+    for c in 0..3 {
+        let (a, b) = assemble(medium, incident, boundary, c, settings.min_optical_depth, &dom);
+        rhs.push(b);
         let alb = medium.optics.albedo[c];
         match hier.iter().position(|(x, _)| *x == alb) {
             Some(p) => groups[p].push(c),
@@ -442,7 +406,9 @@ pub fn solve_diffusion(
         }
     }
     // The bands of a group share the operator and are solved together (its rows read once).
-    let x0: Vec<Option<Vec<f64>>> = (0..3).map(|c| previous.map(|p| to_local(&p.i0[c]))).collect();
+    let x0: Vec<Option<Vec<f64>>> = (0..3)
+        .map(|c| previous.map(|p| p.i0[c].packed().iter().map(|v| *v as f64).collect()))
+        .collect();
     let solved: Vec<Vec<(Vec<f64>, SolveStats)>> = groups
         .par_iter()
         .zip(&hier)
@@ -478,7 +444,9 @@ pub fn solve_diffusion(
             });
         }
     }
-    let mut it = results.into_iter().map(|(x, s)| (to_global(&x), s));
+    let mut it = results
+        .into_iter()
+        .map(|(x, s)| (VoxelField::new(index.clone(), 0.0, x.iter().map(|v| *v as f32)), s));
     let mut band = || it.next().expect("three bands");
     let (x0, s0) = band();
     let (x1, s1) = band();

@@ -1,11 +1,11 @@
 //! Matrix-free geometric multigrid on the voxel lattice, used as the preconditioner of conjugate
 //! gradients (MGPCG, McAdams et al. 2010).
 //!
-//! * **Operator.** A symmetric 7-point stencil. Callers assemble it as a [`Stencil`] on the box of
-//!   the domain (a cell with zero diagonal is not an unknown); [`Hierarchy::build`] turns every
-//!   level into a [`Level`] that stores only the unknowns, with their six neighbours' indices and
-//!   couplings, so the memory and the work of an iteration scale with the cloud, not its box (the
-//!   cloud fills ~10 % of its tight box).
+//! * **Operator.** A symmetric 7-point stencil. Callers assemble it straight onto its unknowns as
+//!   an [`Operator`] (each unknown's box cell, diagonal and +x, +y, +z couplings and neighbours);
+//!   [`Hierarchy::build`] turns every level into a [`Level`] that stores its unknowns with their
+//!   six neighbours' indices and couplings. Nothing is stored per cell of the box (the cloud fills
+//!   about half of its tight box), so the memory and the work scale with the unknowns.
 //! * **Coarsening** by 2×2×2 aggregation with the Galerkin product Aᶜ = PᵀAP, P the piecewise-
 //!   constant prolongation: the coarse operator is again a 7-point stencil (an aggregate's diagonal
 //!   sums its children's diagonals and the couplings inside it; a coarse coupling sums the fine
@@ -38,82 +38,94 @@ pub const OVER_CORRECTION: f64 = 1.5;
 /// on the thread count).
 const CHUNK: usize = 4096;
 
-/// Marks a pad entry in [`Level::pos`].
+/// Marks a pad entry in [`Level::unk`].
 const PAD: u32 = u32::MAX;
 
-/// A symmetric 7-point stencil on a box of cells, x fastest: the form the callers assemble.
-#[derive(Clone, Debug)]
-pub struct Stencil {
-    /// Cells per axis.
-    pub dims: [usize; 3],
-    /// Diagonal; 0 marks a cell that is not an unknown.
-    pub diag: Vec<f64>,
-    /// `off[a][c]`: matrix entry between cell c and its +a neighbour (0 at the box edge).
-    pub off: [Vec<f64>; 3],
+/// Marks a missing neighbour in [`Node::up_nbr`].
+pub const NONE: u32 = u32::MAX;
+
+/// One unknown of an [`Operator`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Node {
+    /// Its cell in the operator's box (x fastest).
+    pub cell: u32,
+    /// The unknowns of its +x, +y, +z neighbours ([`NONE`]: not an unknown).
+    pub up_nbr: [u32; 3],
+    /// Diagonal (> 0).
+    pub diag: f64,
+    /// Matrix entries to its +x, +y, +z neighbours (0 where there is none).
+    pub up: [f64; 3],
 }
 
-impl Stencil {
-    /// All-zero stencil.
-    pub fn zeros(dims: [usize; 3]) -> Stencil {
-        let n = dims[0] * dims[1] * dims[2];
-        Stencil {
-            dims,
-            diag: vec![0.0; n],
-            off: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+impl Node {
+    /// An unknown at `cell` with no couplings yet.
+    pub fn at(cell: u32) -> Node {
+        Node {
+            cell,
+            up_nbr: [NONE; 3],
+            diag: 0.0,
+            up: [0.0; 3],
         }
     }
+}
 
-    /// Galerkin coarse operator PᵀAP for 2×2×2 piecewise-constant aggregation.
-    fn coarsen(&self) -> Stencil {
+/// A symmetric 7-point operator stored on its unknowns only: the form the callers assemble
+/// (48 B per unknown, nothing per cell of the box). The unknowns are in box order (increasing
+/// `cell`); each −a coupling is its −a neighbour's +a one.
+#[derive(Clone, Debug)]
+pub struct Operator {
+    /// Cells per axis of the box the unknowns' cells index.
+    pub dims: [usize; 3],
+    pub nodes: Vec<Node>,
+}
+
+impl Operator {
+    /// Cell (i, j, k) of unknown `u`.
+    fn ijk(&self, u: usize) -> [usize; 3] {
+        let [nx, ny, _] = self.dims;
+        let c = self.nodes[u].cell as usize;
+        [c % nx, (c / nx) % ny, c / (nx * ny)]
+    }
+
+    /// Galerkin coarse operator PᵀAP for 2×2×2 piecewise-constant aggregation, and each unknown's
+    /// aggregate. A coarse unknown exists where any child is one; its diagonal sums its children's
+    /// diagonals and the couplings inside it (twice: both directions), a coarse coupling the fine
+    /// ones across the shared face. Children add in box order, as the box-array form did.
+    fn coarsen(&self) -> (Operator, Vec<u32>) {
         let [nx, ny, nz] = self.dims;
         let cd = [nx.div_ceil(2), ny.div_ceil(2), nz.div_ceil(2)];
-        let mut out = Stencil::zeros(cd);
-        let cp = cd[0] * cd[1];
-        let fp = nx * ny;
-        let [o0v, o1v, o2v] = &mut out.off;
-        out.diag
-            .par_chunks_mut(cp)
-            .zip(o0v.par_chunks_mut(cp))
-            .zip(o1v.par_chunks_mut(cp))
-            .zip(o2v.par_chunks_mut(cp))
-            .enumerate()
-            .for_each(|(kc, (((dg, o0), o1), o2))| {
-                for k in 2 * kc..(2 * kc + 2).min(nz) {
-                    for j in 0..ny {
-                        for i in 0..nx {
-                            let c = i + nx * j + fp * k;
-                            if self.diag[c] <= 0.0 {
-                                continue;
-                            }
-                            let l = i / 2 + cd[0] * (j / 2);
-                            dg[l] += self.diag[c];
-                            // +x coupling: inside the aggregate (counts twice) or across to the next.
-                            if i + 1 < nx {
-                                if i % 2 == 0 {
-                                    dg[l] += 2.0 * self.off[0][c];
-                                } else {
-                                    o0[l] += self.off[0][c];
-                                }
-                            }
-                            if j + 1 < ny {
-                                if j % 2 == 0 {
-                                    dg[l] += 2.0 * self.off[1][c];
-                                } else {
-                                    o1[l] += self.off[1][c];
-                                }
-                            }
-                            if k + 1 < nz {
-                                if k % 2 == 0 {
-                                    dg[l] += 2.0 * self.off[2][c];
-                                } else {
-                                    o2[l] += self.off[2][c];
-                                }
-                            }
-                        }
-                    }
+        let key = |u: usize| {
+            let [i, j, k] = self.ijk(u);
+            (i / 2 + cd[0] * (j / 2 + cd[1] * (k / 2))) as u32
+        };
+        let keys: Vec<u32> = (0..self.nodes.len()).into_par_iter().map(key).collect();
+        let mut cells = keys.clone();
+        cells.par_sort_unstable();
+        cells.dedup();
+        let parent: Vec<u32> = keys
+            .par_iter()
+            .map(|k| cells.binary_search(k).expect("every aggregate is a coarse unknown") as u32)
+            .collect();
+        drop(keys);
+        let mut nodes: Vec<Node> = cells.into_iter().map(Node::at).collect();
+        for (u, n) in self.nodes.iter().enumerate() {
+            let ijk = self.ijk(u);
+            let p = &mut nodes[parent[u] as usize];
+            p.diag += n.diag;
+            for (ax, at) in ijk.iter().enumerate() {
+                let v = n.up_nbr[ax];
+                if v == NONE {
+                    continue;
                 }
-            });
-        out
+                if at % 2 == 0 {
+                    p.diag += 2.0 * n.up[ax];
+                } else {
+                    p.up[ax] += n.up[ax];
+                    p.up_nbr[ax] = parent[v as usize];
+                }
+            }
+        }
+        (Operator { dims: cd, nodes }, parent)
     }
 }
 
@@ -171,8 +183,8 @@ struct Row {
 struct Level {
     red: usize,
     rows: Vec<Row>,
-    /// Box index (x fastest, on the level's box) per entry; [`PAD`] on the pads.
-    pos: Vec<u32>,
+    /// The [`Operator`]'s unknown per entry; [`PAD`] on the pads.
+    unk: Vec<u32>,
     /// Entry of the next coarser level holding each entry (a pad of it for the pads); empty on
     /// the coarsest level.
     parent: Vec<u32>,
@@ -194,86 +206,79 @@ fn couple<const K: usize>(row: &Row, x: &[[Mg; K]], off: usize) -> [Mg; K] {
 }
 
 impl Level {
-    /// The unknowns of `s` and the map from its box cells to their entries ([`PAD`] elsewhere).
-    /// `plus` also returns each entry's +x, +y, +z couplings in f64 (the finest level's operator
-    /// for CG).
-    fn from_stencil(s: &Stencil, want_plus: bool) -> (Level, Vec<u32>, Vec<[f64; 3]>) {
-        let [nx, ny, nz] = s.dims;
-        let (mut reds, mut blacks) = (Vec::new(), Vec::new());
-        for k in 0..nz {
-            for j in 0..ny {
-                for i in 0..nx {
-                    let c = i + nx * (j + ny * k);
-                    if s.diag[c] > 0.0 {
-                        if (i + j + k) % 2 == 0 { &mut reds } else { &mut blacks }.push(c as u32);
-                    }
+    /// The level of operator `a` and each unknown's entry. `want_plus` also returns each entry's
+    /// +x, +y, +z couplings in f64 (the finest level's operator for CG).
+    fn from_operator(a: &Operator, want_plus: bool) -> (Level, Vec<u32>, Vec<[f64; 3]>) {
+        let n = a.nodes.len();
+        let colour = |u: usize| a.ijk(u).iter().sum::<usize>() % 2;
+        let red = (0..n).filter(|u| colour(*u) == 0).count();
+        let mut entry = vec![0u32; n];
+        let mut unk = vec![PAD; n + 2];
+        let mut next = [0, red + 1];
+        for (u, e) in entry.iter_mut().enumerate() {
+            let c = colour(u);
+            *e = next[c] as u32;
+            unk[next[c]] = u as u32;
+            next[c] += 1;
+        }
+        // Each unknown's −x, −y, −z neighbours: the unknowns whose +a neighbour it is.
+        let mut down = vec![[NONE; 3]; n];
+        for (u, nd) in a.nodes.iter().enumerate() {
+            for ax in 0..3 {
+                if nd.up_nbr[ax] != NONE {
+                    down[nd.up_nbr[ax] as usize][ax] = u as u32;
                 }
             }
         }
-        let red = reds.len();
-        let mut pos = reds;
-        pos.push(PAD);
-        pos.append(&mut blacks);
-        pos.push(PAD);
-        let mut index = vec![PAD; s.diag.len()];
-        for (e, c) in pos.iter().enumerate() {
-            if *c != PAD {
-                index[*c as usize] = e as u32;
-            }
-        }
-        let pads = [(pos.len() - 1) as u32, red as u32];
-        let strides = [1, nx, nx * ny];
-        let (rows, plus): (Vec<Row>, Vec<[f64; 3]>) = pos
-            .par_iter()
-            .enumerate()
-            .map(|(e, &c)| {
-                if c == PAD {
-                    return (
-                        Row {
-                            cpl: [0.0; 6],
-                            diag: 0.0,
-                            nbr: [e as u32; 6],
-                        },
-                        [0.0; 3],
-                    );
-                }
-                let c = c as usize;
-                let ijk = [c % nx, (c / nx) % ny, c / (nx * ny)];
-                let mut row = Row {
+        let pads = [(n + 1) as u32, red as u32];
+        let mut plus = vec![[0.0; 3]; if want_plus { n + 2 } else { 0 }];
+        let row = |e: usize, u: u32, up: &mut [f64; 3]| {
+            if u == PAD {
+                return Row {
                     cpl: [0.0; 6],
-                    diag: Mg::of(s.diag[c]),
-                    nbr: [pads[usize::from(e > red)]; 6],
+                    diag: 0.0,
+                    nbr: [e as u32; 6],
                 };
-                let mut up = [0.0; 3];
-                for ax in 0..3 {
-                    let mut link = |q: usize, nb: usize, v: f64| {
-                        let linked = v != 0.0 && index[nb] != PAD;
-                        if linked {
-                            row.nbr[q] = index[nb];
-                            row.cpl[q] = Mg::of(v);
-                        }
-                        linked
-                    };
-                    if ijk[ax] > 0 {
-                        link(2 * ax, c - strides[ax], s.off[ax][c - strides[ax]]);
-                    }
-                    if ijk[ax] + 1 < s.dims[ax] && link(2 * ax + 1, c + strides[ax], s.off[ax][c]) {
-                        up[ax] = s.off[ax][c];
-                    }
+            }
+            let nd = &a.nodes[u as usize];
+            let mut row = Row {
+                cpl: [0.0; 6],
+                diag: Mg::of(nd.diag),
+                nbr: [pads[usize::from(e > red)]; 6],
+            };
+            for ax in 0..3 {
+                let d = down[u as usize][ax];
+                if d != NONE && a.nodes[d as usize].up[ax] != 0.0 {
+                    row.nbr[2 * ax] = entry[d as usize];
+                    row.cpl[2 * ax] = Mg::of(a.nodes[d as usize].up[ax]);
                 }
-                (row, up)
-            })
-            .unzip();
-        let plus = if want_plus { plus } else { Vec::new() };
+                if nd.up_nbr[ax] != NONE && nd.up[ax] != 0.0 {
+                    row.nbr[2 * ax + 1] = entry[nd.up_nbr[ax] as usize];
+                    row.cpl[2 * ax + 1] = Mg::of(nd.up[ax]);
+                    up[ax] = nd.up[ax];
+                }
+            }
+            row
+        };
+        // Written in place (an unzip would hold a second copy while it gathers its pieces).
+        let rows: Vec<Row> = if want_plus {
+            unk.par_iter()
+                .zip(plus.par_iter_mut())
+                .enumerate()
+                .map(|(e, (u, p))| row(e, *u, p))
+                .collect()
+        } else {
+            unk.par_iter().enumerate().map(|(e, u)| row(e, *u, &mut [0.0; 3])).collect()
+        };
         let level = Level {
             red,
             rows,
-            pos,
+            unk,
             parent: Vec::new(),
             child_start: Vec::new(),
             children: Vec::new(),
         };
-        (level, index, plus)
+        (level, entry, plus)
     }
 
     /// Entries, pads included (the length of the level's vectors).
@@ -285,32 +290,18 @@ impl Level {
         self.len() - 2
     }
 
-    /// Record that `coarse` (with box-to-entry map `index`) aggregates this level, whose box has
-    /// `dims` cells: each entry's parent and each coarse entry's children.
-    fn link(&mut self, dims: [usize; 3], coarse: &mut Level, index: &[u32]) {
-        let [nx, ny, _] = dims;
-        let cd = [nx.div_ceil(2), ny.div_ceil(2)];
+    /// Record that `coarse` aggregates this level: each entry's parent (from each unknown's
+    /// aggregate `parent` and the coarse unknowns' entries `coarse_entry`) and each coarse
+    /// entry's children.
+    fn link(&mut self, parent: &[u32], coarse: &mut Level, coarse_entry: &[u32]) {
         let pad = coarse.red as u32;
         self.parent = self
-            .pos
+            .unk
             .par_iter()
-            .map(|&c| {
-                if c == PAD {
-                    return pad;
-                }
-                let c = c as usize;
-                let (i, j, k) = (c % nx, (c / nx) % ny, c / (nx * ny));
-                // A coarse cell exists wherever a child is full (its diagonal sums theirs).
-                let p = index[i / 2 + cd[0] * (j / 2 + cd[1] * (k / 2))];
-                if p == PAD {
-                    pad
-                } else {
-                    p
-                }
-            })
+            .map(|&u| if u == PAD { pad } else { coarse_entry[parent[u as usize] as usize] })
             .collect();
         let mut start = vec![0u32; coarse.len() + 1];
-        for (p, c) in self.parent.iter().zip(&self.pos) {
+        for (p, c) in self.parent.iter().zip(&self.unk) {
             if *c != PAD {
                 start[*p as usize + 1] += 1;
             }
@@ -320,7 +311,7 @@ impl Level {
         }
         let mut fill = start.clone();
         let mut children = vec![0u32; start[coarse.len()] as usize];
-        for (f, (p, c)) in self.parent.iter().zip(&self.pos).enumerate() {
+        for (f, (p, c)) in self.parent.iter().zip(&self.unk).enumerate() {
             if *c != PAD {
                 children[fill[*p as usize] as usize] = f as u32;
                 fill[*p as usize] += 1;
@@ -479,6 +470,7 @@ fn cg_step<const K: usize>(
 struct Dense {
     /// The level's entries that are unknowns.
     cells: Vec<usize>,
+    /// The factor L (row-major) below the diagonal and on it, Lᵀ above it.
     l: Vec<f64>,
 }
 
@@ -507,58 +499,67 @@ fn cholesky_in_place(a: &mut [f64], n: usize) -> f64 {
 }
 
 impl Dense {
-    /// The factor of box operator `s`, whose unknowns are the entries of `level` (`index` maps
-    /// its cells to them).
-    fn build(s: &Stencil, level: &Level, index: &[u32]) -> Dense {
-        let cells: Vec<usize> = (0..level.len()).filter(|e| level.pos[*e] != PAD).collect();
+    /// The factor of operator `s`, whose unknowns are the entries `entry` of `level`.
+    fn build(s: &Operator, level: &Level, entry: &[u32]) -> Dense {
+        let cells: Vec<usize> = (0..level.len()).filter(|e| level.unk[*e] != PAD).collect();
         let n = cells.len();
         let mut q_of = vec![usize::MAX; level.len()];
         for (q, e) in cells.iter().enumerate() {
             q_of[*e] = q;
         }
         let mut a = vec![0f64; n * n];
-        let [nx, ny, _] = s.dims;
-        let strides = [1, nx, nx * ny];
         for (q, &e) in cells.iter().enumerate() {
-            let c = level.pos[e] as usize;
-            a[q * n + q] = s.diag[c];
-            let ijk = [c % nx, (c / nx) % ny, c / (nx * ny)];
+            let nd = &s.nodes[level.unk[e] as usize];
+            a[q * n + q] = nd.diag;
             for ax in 0..3 {
-                let v = s.off[ax][c];
-                if v != 0.0 && ijk[ax] + 1 < s.dims[ax] && index[c + strides[ax]] != PAD {
-                    let r = q_of[index[c + strides[ax]] as usize];
+                let v = nd.up[ax];
+                if v != 0.0 && nd.up_nbr[ax] != NONE {
+                    let r = q_of[entry[nd.up_nbr[ax] as usize] as usize];
                     a[q * n + r] += v;
                     a[r * n + q] += v;
                 }
             }
         }
         cholesky_in_place(&mut a, n);
+        // Lᵀ into the upper triangle: the backward substitution then reads rows too.
+        for i in 0..n {
+            for j in 0..i {
+                a[j * n + i] = a[i * n + j];
+            }
+        }
         Dense { cells, l: a }
     }
 
-    #[allow(clippy::needless_range_loop)]
+    /// x = A⁻¹ b on the level's unknowns, all systems in one pass over the factor (each row read
+    /// once per substitution, forward along L's rows, backward along Lᵀ's).
     fn solve<const K: usize>(&self, b: &[[Mg; K]], x: &mut [[Mg; K]]) {
         let n = self.cells.len();
         x.fill([0.0; K]);
-        for lane in 0..K {
-            let mut y: Vec<f64> = self.cells.iter().map(|c| b[*c][lane].get()).collect();
-            for i in 0..n {
-                let mut v = y[i];
-                for k in 0..i {
-                    v -= self.l[i * n + k] * y[k];
+        let mut y: Vec<[f64; K]> = self.cells.iter().map(|c| b[*c].map(Real::get)).collect();
+        for i in 0..n {
+            let (done, rest) = y.split_at_mut(i);
+            let row = &self.l[i * n..i * n + i];
+            let v = &mut rest[0];
+            for (lk, yk) in row.iter().zip(done.iter()) {
+                for k in 0..K {
+                    v[k] -= lk * yk[k];
                 }
-                y[i] = v / self.l[i * n + i];
             }
-            for i in (0..n).rev() {
-                let mut v = y[i];
-                for k in i + 1..n {
-                    v -= self.l[k * n + i] * y[k];
+            *v = v.map(|v| v / self.l[i * n + i]);
+        }
+        for i in (0..n).rev() {
+            let (head, done) = y.split_at_mut(i + 1);
+            let row = &self.l[i * n + i + 1..(i + 1) * n];
+            let v = &mut head[i];
+            for (lk, yk) in row.iter().zip(done.iter()) {
+                for k in 0..K {
+                    v[k] -= lk * yk[k];
                 }
-                y[i] = v / self.l[i * n + i];
             }
-            for (q, c) in self.cells.iter().enumerate() {
-                x[*c][lane] = Mg::of(y[q]);
-            }
+            *v = v.map(|v| v / self.l[i * n + i]);
+        }
+        for (c, v) in self.cells.iter().zip(&y) {
+            x[*c] = v.map(Mg::of);
         }
     }
 }
@@ -592,51 +593,39 @@ pub struct Hierarchy {
 
 impl Hierarchy {
     /// Scale `a` to unit diagonal and build the levels down to [`COARSE_CELLS`] unknowns.
-    pub fn build(a: Stencil) -> Hierarchy {
+    pub fn build(a: Operator) -> Hierarchy {
         Self::build_with(a, COARSE_CELLS)
     }
 
     /// As [`Hierarchy::build`], coarsening until a level has at most `coarse_cells` unknowns.
-    pub fn build_with(mut a: Stencil, coarse_cells: usize) -> Hierarchy {
-        let box_scale: Vec<f64> = a.diag.iter().map(|d| if *d > 0.0 { 1.0 / d.sqrt() } else { 0.0 }).collect();
-        let [nx, ny, _] = a.dims;
-        let strides = [1, nx, nx * ny];
-        let dims = a.dims;
-        for (ax, off) in a.off.iter_mut().enumerate() {
-            off.par_iter_mut().enumerate().for_each(|(c, v)| {
-                if *v != 0.0 {
-                    let ijk = [c % nx, (c / nx) % ny, c / (nx * ny)];
-                    if ijk[ax] + 1 < dims[ax] {
-                        *v *= box_scale[c] * box_scale[c + strides[ax]];
-                    } else {
-                        *v = 0.0;
-                    }
+    pub fn build_with(mut a: Operator, coarse_cells: usize) -> Hierarchy {
+        let scale_of: Vec<f64> = a.nodes.iter().map(|n| 1.0 / n.diag.sqrt()).collect();
+        a.nodes.par_iter_mut().enumerate().for_each(|(u, n)| {
+            for ax in 0..3 {
+                if n.up_nbr[ax] != NONE {
+                    n.up[ax] *= scale_of[u] * scale_of[n.up_nbr[ax] as usize];
                 }
-            });
-        }
-        a.diag.iter_mut().for_each(|d| {
-            if *d > 0.0 {
-                *d = 1.0;
             }
+            n.diag = 1.0;
         });
-        // Each level is built from its box form, which is dropped once the next one exists.
-        let (mut level, mut index, plus) = Level::from_stencil(&a, true);
+        // Each level is built from its operator, which is dropped once the next one exists.
+        let (mut level, mut entry, plus) = Level::from_operator(&a, true);
         let scale = level
-            .pos
+            .unk
             .iter()
-            .map(|c| if *c == PAD { 0.0 } else { box_scale[*c as usize] })
+            .map(|u| if *u == PAD { 0.0 } else { scale_of[*u as usize] })
             .collect();
-        drop(box_scale);
+        drop(scale_of);
         let mut levels = Vec::new();
         let mut fine = a;
         while level.unknowns() > coarse_cells && fine.dims.iter().any(|d| *d > 1) {
-            let c = fine.coarsen();
-            let (mut next, next_index, _) = Level::from_stencil(&c, false);
-            level.link(fine.dims, &mut next, &next_index);
+            let (c, parent) = fine.coarsen();
+            let (mut next, next_entry, _) = Level::from_operator(&c, false);
+            level.link(&parent, &mut next, &next_entry);
             levels.push(std::mem::replace(&mut level, next));
-            (fine, index) = (c, next_index);
+            (fine, entry) = (c, next_entry);
         }
-        let coarse = Dense::build(&fine, &level, &index);
+        let coarse = Dense::build(&fine, &level, &entry);
         levels.push(level);
         Hierarchy {
             scale,
@@ -658,7 +647,7 @@ impl Hierarchy {
     /// Bytes the hierarchy holds.
     fn bytes(&self) -> usize {
         let level = |l: &Level| {
-            l.rows.len() * std::mem::size_of::<Row>() + 4 * (l.pos.len() + l.parent.len() + l.child_start.len() + l.children.len())
+            l.rows.len() * std::mem::size_of::<Row>() + 4 * (l.unk.len() + l.parent.len() + l.child_start.len() + l.children.len())
         };
         self.levels.iter().map(level).sum::<usize>()
             + 8 * self.scale.len()
@@ -731,7 +720,7 @@ impl Hierarchy {
         sum_parts(&parts)
     }
 
-    /// Solve A x = b (unscaled A, as assembled; `b`, `x0` and the result on its box) by MGPCG
+    /// Solve A x = b (unscaled A, as assembled; `b`, `x0` and the result per unknown) by MGPCG
     /// from `x0` (or zero) to relative residual `tol` of the scaled system, at most `max_iter`
     /// iterations.
     pub fn solve(&self, b: &[f64], x0: Option<&[f64]>, tol: f64, max_iter: usize) -> (Vec<f64>, SolveStats) {
@@ -751,10 +740,11 @@ impl Hierarchy {
     ) -> [(Vec<f64>, SolveStats); K] {
         let a = &self.levels[0];
         let gather = |v: [&[f64]; K], f: fn(f64, f64) -> f64| -> Vec<[f64; K]> {
-            a.pos
+            assert!(v.iter().all(|v| v.len() == a.unknowns()), "one value per unknown");
+            a.unk
                 .par_iter()
                 .zip(&self.scale)
-                .map(|(c, s)| if *c == PAD { [0.0; K] } else { v.map(|v| f(v[*c as usize], *s)) })
+                .map(|(u, s)| if *u == PAD { [0.0; K] } else { v.map(|v| f(v[*u as usize], *s)) })
                 .collect()
         };
         let bs = gather(b, |v, s| v * s);
@@ -765,10 +755,10 @@ impl Hierarchy {
         let stats = self.solve_scaled(&bs, &mut y, tol, max_iter);
         let mut lane = 0;
         stats.map(|st| {
-            let mut out = vec![0.0; b[lane].len()];
-            for ((c, v), s) in a.pos.iter().zip(&y).zip(&self.scale) {
-                if *c != PAD {
-                    out[*c as usize] = v[lane] * s;
+            let mut out = vec![0.0; a.unknowns()];
+            for ((u, v), s) in a.unk.iter().zip(&y).zip(&self.scale) {
+                if *u != PAD {
+                    out[*u as usize] = v[lane] * s;
                 }
             }
             lane += 1;
@@ -802,7 +792,7 @@ impl Hierarchy {
         let (mut r, mut ap, mut p) = (vec![[0f64; K]; n], vec![[0f64; K]; n], vec![[0f64; K]; n]);
         let (mut rm, mut z) = (vec![[0.0; K]; n], vec![[0.0; K]; n]);
         // The hierarchy; bs, y, r, p and A p in f64; r and z in the multigrid's precision, and
-        // three vectors per level in `work` (the caller's box-shaped b and x not counted).
+        // three vectors per level in `work` (the caller's b and x, per unknown, not counted).
         let lanes = |v: usize, bytes: usize| v * bytes * K;
         let held = self.bytes()
             + lanes(5 * n, 8)
@@ -894,7 +884,7 @@ impl Hierarchy {
 /// (moved here from tests/ so the solver's internals need not be public).
 #[cfg(test)]
 mod operator_tests {
-    use super::{Hierarchy, Stencil};
+    use super::{Hierarchy, Operator, NONE};
     use crate::diffusion::{assemble, BoundaryLight, Domain};
     use crate::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
     use crate::lighting::DirectionBins;
@@ -930,27 +920,23 @@ mod operator_tests {
         compute(m, &DirectionBins::new(), &sky_and_sun(l, sun), &IncidentSettings::default(), None)
     }
 
-    fn dense(s: &Stencil) -> (Vec<usize>, Vec<f64>) {
-        let cells: Vec<usize> = (0..s.diag.len()).filter(|c| s.diag[*c] > 0.0).collect();
-        let n = cells.len();
-        let mut idx = vec![usize::MAX; s.diag.len()];
-        for (q, c) in cells.iter().enumerate() {
-            idx[*c] = q;
-        }
-        let st = [1, s.dims[0], s.dims[0] * s.dims[1]];
+    /// The operator as a dense matrix (row-major, one row per unknown).
+    fn dense(s: &Operator) -> Vec<f64> {
+        let n = s.nodes.len();
         let mut a = vec![0.0; n * n];
-        for (q, &c) in cells.iter().enumerate() {
-            a[q * n + q] = s.diag[c];
+        for (q, nd) in s.nodes.iter().enumerate() {
+            a[q * n + q] = nd.diag;
             for ax in 0..3 {
-                if s.off[ax][c] != 0.0 {
-                    let r = idx[c + st[ax]];
-                    assert_ne!(r, usize::MAX, "coupling to a non-unknown");
-                    a[q * n + r] = s.off[ax][c];
-                    a[r * n + q] = s.off[ax][c];
+                if nd.up_nbr[ax] != NONE {
+                    let r = nd.up_nbr[ax] as usize;
+                    let [c, d] = [nd.cell, s.nodes[r].cell].map(|c| c as usize);
+                    assert_eq!(d - c, [1, s.dims[0], s.dims[0] * s.dims[1]][ax], "+a neighbour's cell");
+                    a[q * n + r] = nd.up[ax];
+                    a[r * n + q] = nd.up[ax];
                 }
             }
         }
-        (cells, a)
+        a
     }
 
     /// Gaussian elimination with partial pivoting.
@@ -985,8 +971,8 @@ mod operator_tests {
         let dom = Domain::of(&m).unwrap();
         for tau_min in [0.0, 1e-3] {
             let (s, _) = assemble(&m, &inc, &BoundaryLight::none(), 0, tau_min, &dom);
-            let (cells, a) = dense(&s);
-            let n = cells.len();
+            let a = dense(&s);
+            let n = s.nodes.len();
             assert!(n > 100);
             for q in 0..n {
                 for r in 0..n {
@@ -1012,10 +998,8 @@ mod operator_tests {
             assert!(h.levels() >= 4, "levels {}", h.levels());
             let (x, st) = h.solve(&b, None, 1e-12, 500);
             assert!(st.relative_residual <= 1e-12, "{st:?}");
-            let (cells, a) = dense(&s);
-            let bd: Vec<f64> = cells.iter().map(|c| b[*c]).collect();
-            let xd = dense_solve(a, bd);
-            let num: f64 = cells.iter().zip(&xd).map(|(c, v)| (x[*c] - v).powi(2)).sum::<f64>().sqrt();
+            let xd = dense_solve(dense(&s), b.clone());
+            let num: f64 = x.iter().zip(&xd).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
             let den: f64 = xd.iter().map(|v| v * v).sum::<f64>().sqrt();
             assert!(num / den < 1e-8, "relative difference {}", num / den);
         }
@@ -1040,5 +1024,35 @@ mod operator_tests {
         }
         assert!(together[0].1.iterations > 5 && together[0].1.relative_residual <= 1e-9);
         assert_eq!(together[2].0, zero);
+    }
+
+    #[test]
+    fn coarse_operator_is_the_galerkin_product() {
+        // Odd box sides: the last aggregates of each axis are one cell thick.
+        let m = random_cloud([11, 9, 8], 4, 0.9, 0.8);
+        let inc = lit(&m, 1.0, Some((Vec3::new(0.2, 1.0, 0.3), 2.0)));
+        let dom = Domain::of(&m).unwrap();
+        let (s, _) = assemble(&m, &inc, &BoundaryLight::none(), 0, 1e-3, &dom);
+        let (c, parent) = s.coarsen();
+        let (n, nc) = (s.nodes.len(), c.nodes.len());
+        assert!(nc > 10 && nc < n, "{nc} of {n}");
+        assert_eq!(c.dims, [s.dims[0].div_ceil(2), s.dims[1].div_ceil(2), s.dims[2].div_ceil(2)]);
+        // PᵀAP with P[u][parent u] = 1, densely.
+        let a = dense(&s);
+        let mut g = vec![0.0; nc * nc];
+        for u in 0..n {
+            for v in 0..n {
+                g[parent[u] as usize * nc + parent[v] as usize] += a[u * n + v];
+            }
+        }
+        for (x, y) in g.iter().zip(&dense(&c)) {
+            assert!((x - y).abs() <= 1e-12 * x.abs().max(1.0), "{x} vs {y}");
+        }
+        for (u, p) in parent.iter().enumerate() {
+            let [i, j, k] = s.ijk(u);
+            let cell = i / 2 + c.dims[0] * (j / 2 + c.dims[1] * (k / 2));
+            assert_eq!(c.nodes[*p as usize].cell as usize, cell);
+        }
+        assert!(c.nodes.windows(2).all(|w| w[0].cell < w[1].cell), "coarse unknowns in box order");
     }
 }
