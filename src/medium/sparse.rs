@@ -4,69 +4,21 @@
 //! fills ~9 % of its box).
 //!
 //! [`FullIndex`] maps each grid voxel to its slot: 0 for an empty voxel, 1 + its rank among the
-//! full voxels in grid order (x fastest) otherwise; stored per grid row over the span of its full
-//! voxels (about 4 bytes per voxel of the cloud's box), built once per density grid and shared
-//! ([`crate::medium::Grid3::full_index`]). A [`VoxelField`] stores slot 0 (the value every empty
-//! voxel reads, e.g. zero) and one value per full voxel; reading it by grid index costs the row
-//! (one multiplication), its span and slot (two loads) and the value.
+//! full voxels in grid order (x fastest) otherwise; 4 bytes per grid voxel, built once per density
+//! grid and shared ([`crate::medium::Grid3::full_index`]). A [`VoxelField`] stores slot 0 (the
+//! value every empty voxel reads, e.g. zero) and one value per full voxel; reading it by grid
+//! index is one extra load and no branch.
 
 use crate::math::Trilinear;
 use rayon::prelude::*;
 use std::sync::Arc;
 
-/// Slot of every grid voxel: 0 where ρ = 0, 1 + rank in grid order where ρ > 0. Stored per row
-/// (j, k) of the grid, over the span from the row's first to its last full voxel only: 12 B per
-/// row and 4 B per voxel of the spans (about the cloud's box), instead of 4 B per grid voxel.
+/// Slot of every grid voxel: 0 where ρ = 0, 1 + rank in grid order where ρ > 0.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FullIndex {
     dims: [usize; 3],
-    /// Per row: its span's first x, length, and where its slots start in `slot`.
-    rows: Vec<Span>,
-    /// The spans' slots, row after row.
     slot: Vec<u32>,
     count: usize,
-    /// Grid index → row, without a division.
-    row_of: Divider,
-}
-
-/// One row's span of the index.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Span {
-    lo: u32,
-    len: u32,
-    start: u32,
-}
-
-/// Exact n / d for n < 2³² by one multiplication (Lemire, Kaser & Kurz 2019, "Faster remainder
-/// by direct computation": with M = ⌊(2⁶⁴ − 1)/d⌋ + 1, n/d = ⌊M·n / 2⁶⁴⌋ for all 32-bit n and d);
-/// larger n (grids beyond 2³² voxels) divide.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Divider {
-    d: u64,
-    m: u64,
-    /// Whether every index to divide is below 2³² (and d > 1).
-    fast: bool,
-}
-
-impl Divider {
-    fn new(d: usize, n_max: usize) -> Divider {
-        let d = d.max(1) as u64;
-        let fast = d > 1 && d < 1 << 32 && (n_max as u64) < 1 << 32;
-        Divider {
-            d,
-            m: if d > 1 { u64::MAX / d + 1 } else { 0 },
-            fast,
-        }
-    }
-
-    #[inline]
-    fn div(&self, n: usize) -> usize {
-        if self.fast {
-            ((self.m as u128 * n as u128) >> 64) as usize
-        } else {
-            n / self.d as usize
-        }
-    }
 }
 
 impl FullIndex {
@@ -74,41 +26,19 @@ impl FullIndex {
     /// (x fastest). Panics beyond 2³² − 1 full voxels (the medium's voxel limit is far below).
     pub fn build(dims: [usize; 3], values: &[f32], full: impl Fn(f32) -> bool) -> FullIndex {
         assert_eq!(values.len(), dims[0] * dims[1] * dims[2], "one value per voxel");
-        let nx = dims[0].max(1);
         let mut count = 0usize;
-        let mut rows = Vec::with_capacity(values.len() / nx);
-        let mut slot = Vec::new();
-        for row in values.chunks_exact(nx) {
-            let first = row.iter().position(|v| full(*v));
-            let span = match first {
-                None => Span { lo: 0, len: 0, start: 0 },
-                Some(lo) => {
-                    let hi = row.iter().rposition(|v| full(*v)).expect("a first implies a last") + 1;
-                    let start = u32::try_from(slot.len()).expect("fewer than 2^32 span voxels");
-                    for v in &row[lo..hi] {
-                        slot.push(if full(*v) {
-                            count += 1;
-                            u32::try_from(count).expect("fewer than 2^32 full voxels")
-                        } else {
-                            0
-                        });
-                    }
-                    Span {
-                        lo: lo as u32,
-                        len: (hi - lo) as u32,
-                        start,
-                    }
+        let slot = values
+            .iter()
+            .map(|&v| {
+                if full(v) {
+                    count += 1;
+                    u32::try_from(count).expect("fewer than 2^32 full voxels")
+                } else {
+                    0
                 }
-            };
-            rows.push(span);
-        }
-        FullIndex {
-            dims,
-            rows,
-            slot,
-            count,
-            row_of: Divider::new(nx, values.len()),
-        }
+            })
+            .collect();
+        FullIndex { dims, slot, count }
     }
 
     /// Grid resolution.
@@ -120,13 +50,13 @@ impl FullIndex {
     /// Grid voxels.
     #[inline]
     pub fn len(&self) -> usize {
-        self.dims[0] * self.dims[1] * self.dims[2]
+        self.slot.len()
     }
 
     /// True for a grid without voxels.
     #[inline]
     pub fn is_empty(&self) -> bool {
-        self.len() == 0
+        self.slot.is_empty()
     }
 
     /// Full voxels.
@@ -138,29 +68,17 @@ impl FullIndex {
     /// Slot of grid voxel `g` (0: empty).
     #[inline]
     pub fn slot(&self, g: usize) -> usize {
-        let r = self.row_of.div(g);
-        let span = self.rows[r];
-        let dx = ((g - r * self.dims[0]) as u32).wrapping_sub(span.lo);
-        if dx < span.len {
-            self.slot[(span.start + dx) as usize] as usize
-        } else {
-            0
-        }
+        self.slot[g] as usize
     }
 
     /// Grid indices of the full voxels, in grid order (the order of a field's packed values).
     pub fn full_voxels(&self) -> impl Iterator<Item = usize> + '_ {
-        let nx = self.dims[0];
-        self.rows.iter().enumerate().flat_map(move |(r, span)| {
-            let slots = &self.slot[span.start as usize..(span.start + span.len) as usize];
-            let g0 = r * nx + span.lo as usize;
-            slots.iter().enumerate().filter(|(_, s)| **s != 0).map(move |(dx, _)| g0 + dx)
-        })
+        self.slot.iter().enumerate().filter(|(_, s)| **s != 0).map(|(g, _)| g)
     }
 
     /// Bytes held.
     pub fn bytes(&self) -> usize {
-        std::mem::size_of::<Span>() * self.rows.len() + 4 * self.slot.len()
+        4 * self.slot.len()
     }
 }
 
@@ -263,8 +181,7 @@ impl<T: Copy + Send + Sync> VoxelField<T> {
     /// Every grid voxel's value in grid order (empty voxels read the empty value).
     pub fn iter(&self) -> Iter<'_, T> {
         Iter {
-            index: &self.index,
-            g: 0,
+            slots: self.index.slot.iter(),
             data: &self.data,
         }
     }
@@ -285,8 +202,7 @@ impl<T: Copy + Send + Sync> VoxelField<T> {
 
 /// Every grid voxel's value of a [`VoxelField`], in grid order.
 pub struct Iter<'a, T> {
-    index: &'a FullIndex,
-    g: usize,
+    slots: std::slice::Iter<'a, u32>,
     data: &'a [T],
 }
 
@@ -294,15 +210,11 @@ impl<'a, T> Iterator for Iter<'a, T> {
     type Item = &'a T;
     #[inline]
     fn next(&mut self) -> Option<&'a T> {
-        (self.g < self.index.len()).then(|| {
-            self.g += 1;
-            &self.data[self.index.slot(self.g - 1)]
-        })
+        self.slots.next().map(|&s| &self.data[s as usize])
     }
     #[inline]
     fn size_hint(&self) -> (usize, Option<usize>) {
-        let n = self.index.len() - self.g;
-        (n, Some(n))
+        self.slots.size_hint()
     }
 }
 
@@ -341,59 +253,5 @@ mod tests {
         assert_eq!(f, VoxelField::from_slots(idx.clone(), vec![-1.0, 10.0, 30.0, 40.0]));
         assert_eq!(f.map(|v| *v as i32 + 1).get(0), 0);
         assert_eq!(VoxelField::filled(idx, 7u8).iter().filter(|v| **v == 7).count(), 6);
-    }
-
-    /// The row-span index against the dense slot array it replaces, on a random grid with empty
-    /// rows, gaps inside spans and full rows.
-    #[test]
-    fn the_index_equals_the_dense_slots() {
-        let dims = [13, 7, 5];
-        let mut rng = crate::math::Rng::new(9, 4);
-        let values: Vec<f32> = (0..13 * 7 * 5)
-            .map(|g| match (g / 13) % 4 {
-                0 => 0.0,
-                1 => 1.0,
-                _ if rng.uniform() < 0.4 => rng.uniform() + 0.1,
-                _ => 0.0,
-            })
-            .collect();
-        let idx = FullIndex::build(dims, &values, |v| v > 0.0);
-        let mut rank = 0;
-        for (g, v) in values.iter().enumerate() {
-            let want = if *v > 0.0 {
-                rank += 1;
-                rank
-            } else {
-                0
-            };
-            assert_eq!(idx.slot(g), want, "voxel {g}");
-        }
-        assert_eq!(idx.count(), rank);
-        let want: Vec<usize> = (0..values.len()).filter(|g| values[*g] > 0.0).collect();
-        assert_eq!(idx.full_voxels().collect::<Vec<_>>(), want);
-        assert!(idx.bytes() < 4 * values.len());
-    }
-
-    /// The multiplication gives the quotient at the edges of the 32-bit range.
-    #[test]
-    fn the_divider_is_exact() {
-        for d in [1usize, 2, 3, 7, 100, 400, 641, 65_537, (1 << 31) + 11] {
-            let div = Divider::new(d, u32::MAX as usize);
-            for n in [
-                0usize,
-                1,
-                d - 1,
-                d,
-                d + 1,
-                12_345_677,
-                (1 << 31) - 1,
-                1 << 31,
-                u32::MAX as usize - 1,
-                u32::MAX as usize,
-            ] {
-                assert_eq!(div.div(n), n / d, "{n} / {d}");
-            }
-        }
-        assert_eq!(Divider::new(400, 1 << 40).div((1 << 40) - 1), ((1usize << 40) - 1) / 400);
     }
 }
