@@ -87,7 +87,7 @@ impl SubGrid {
             lo[a] = fi.clamp(0, n - 1) as usize;
             hi[a] = (fi + 1).clamp(0, n - 1) as usize;
         }
-        let pick = |c: usize, a: usize| if c >> a & 1 == 0 { lo[a] } else { hi[a] };
+        let pick = |c: usize, a: usize| if (c >> a) & 1 == 0 { lo[a] } else { hi[a] };
         let s = Trilinear {
             idx: std::array::from_fn(|c| self.slot([pick(c, 0), pick(c, 1), pick(c, 2)])),
             f,
