@@ -17,9 +17,8 @@ fn cubes(c: &mut Criterion) {
     let l_sky = scene.sky.radiance(Vec3::Y);
     let i0: Vec<Rgb> = sun_t
         .grid
-        .data()
-        .iter()
-        .map(|&t| l_sky * 0.8 + scene.sun.irradiance * (t * 0.5 / std::f32::consts::PI))
+        .values()
+        .map(|t| l_sky * 0.8 + scene.sun.irradiance * (t * 0.5 / std::f32::consts::PI))
         .collect();
     let lit = scene_lit_volume(&scene, i0, &sun_t);
     let opts = scene.render.cubes.clone();

@@ -24,9 +24,8 @@ fn main() {
     let l_sky = scene.sky.radiance(cloudgi::math::Vec3::Y);
     let i0: Vec<Rgb> = sun_t
         .grid
-        .data()
-        .iter()
-        .map(|&t| l_sky * 0.8 + scene.sun.irradiance * (t * 0.5 / std::f32::consts::PI))
+        .values()
+        .map(|t| l_sky * 0.8 + scene.sun.irradiance * (t * 0.5 / std::f32::consts::PI))
         .collect();
     let lit = scene_lit_volume(&scene, i0, &sun_t);
     println!("lit volume {:.2} s", t.elapsed().as_secs_f64());

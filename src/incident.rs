@@ -493,13 +493,30 @@ impl Family {
     }
 }
 
-/// Per full voxel: Σ0 (3 bands) then Σ1 (3 axes × 3 bands) in f64, the sky SH (3 bands × 9) and the
-/// sun's mean transmittance.
+/// Per full voxel: Σ0 (3 bands) then Σ1 (3 axes × 3 bands) in f64 and the sun's mean
+/// transmittance (the sky SH, when asked for, lives in its own array: 108 B per voxel saved
+/// without it).
 #[derive(Clone)]
 struct Acc {
     m: [f64; 12],
-    sh: [f32; 3 * SH_COEFFS],
     sun_t: f32,
+}
+
+/// The accumulators of one box row (y, z) of full voxels, in x order, and the row's cursor: the
+/// rank of the next voxel an x-axis sweep reaches (its planes cross the row one voxel at a time).
+struct Row<'a> {
+    acc: &'a mut [Acc],
+    /// Empty without the sky SH.
+    sh: &'a mut [[f32; 3 * SH_COEFFS]],
+    cursor: usize,
+}
+
+impl Row<'_> {
+    /// Reduce into the row's voxel of rank `r`.
+    #[inline]
+    fn reduce(&mut self, fams: &[Family], coef: &[Coef], lay: &Layout, c: [usize; 3], r: usize) {
+        reduce_voxel(fams, coef, lay, c, &mut self.acc[r], self.sh.get_mut(r));
+    }
 }
 
 /// What every family's sweep reads.
@@ -544,7 +561,7 @@ impl Coef {
 /// Add the current plane's sums of `fams` (coefficients `coef`) into voxel `c`'s accumulators,
 /// in family order.
 #[inline]
-fn reduce_voxel(fams: &[Family], coef: &[Coef], lay: &Layout, c: [usize; 3], acc: &mut Acc) {
+fn reduce_voxel(fams: &[Family], coef: &[Coef], lay: &Layout, c: [usize; 3], acc: &mut Acc, mut sh: Option<&mut [f32; 3 * SH_COEFFS]>) {
     let pi = c[lay.v] * lay.nu + c[lay.u];
     for (f, k) in fams.iter().zip(coef) {
         let s = f.sums[pi];
@@ -557,8 +574,8 @@ fn reduce_voxel(fams: &[Family], coef: &[Coef], lay: &Layout, c: [usize; 3], acc
                 a[c] += sd[c] * km[c];
             }
         }
-        if let Some(ksh) = &k.sh {
-            for ((a, kc), sc) in acc.sh.chunks_exact_mut(SH_COEFFS).zip(ksh.chunks_exact(SH_COEFFS)).zip(s) {
+        if let (Some(ksh), Some(sh)) = (&k.sh, sh.as_deref_mut()) {
+            for ((a, kc), sc) in sh.chunks_exact_mut(SH_COEFFS).zip(ksh.chunks_exact(SH_COEFFS)).zip(s) {
                 for (a, kj) in a.iter_mut().zip(kc) {
                     *a += sc * kj;
                 }
@@ -683,20 +700,19 @@ pub fn compute_with_sun(
     let sun_e = sources.sun.map_or(Rgb::ZERO, |s| s.1);
     // Stored per full voxel; the empty medium's fields (no full voxel) until the sweeps fill them.
     let index = m.density.full_index();
-    let zero = VoxelField::filled(index.clone(), Rgb::ZERO);
-    let mut out = IncidentLight {
-        dims,
-        q0: zero.clone(),
-        q1: [zero.clone(), zero.clone(), zero],
-        sun_mean_transmittance: VoxelField::filled(index.clone(), 1.0),
-        sun_transmittance,
-        sun_irradiance: sun_e,
-        bin_radiance: sources.bin_radiance.clone(),
-        sky_sh: None,
-        rays: 0,
-    };
     let Some((lo, hi)) = active_box(m, 1) else {
-        return out;
+        let zero = VoxelField::filled(index.clone(), Rgb::ZERO);
+        return IncidentLight {
+            dims,
+            q0: zero.clone(),
+            q1: [zero.clone(), zero.clone(), zero],
+            sun_mean_transmittance: VoxelField::filled(index, 1.0),
+            sun_transmittance,
+            sun_irradiance: sun_e,
+            bin_radiance: sources.bin_radiance.clone(),
+            sky_sh: None,
+            rays: 0,
+        };
     };
     let bd = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
     let nb = bd[0] * bd[1] * bd[2];
@@ -715,7 +731,6 @@ pub fn compute_with_sun(
     let mut srcs = source_list(bins, sources, settings, entry.is_some());
     let h = m.voxel_size;
     let plan = plan_families(&srcs, bins, settings);
-    let layouts: [Option<Layout>; 3] = std::array::from_fn(|a| plan.iter().any(|f| f.axis == a).then(|| Layout::new(a, bd, &rho)));
     // Σ w·l per voxel and source: every voxel of a plane is crossed by one ray per pattern
     // segment, so it receives one slab's ray length, w·T, from each family.
     for f in &plan {
@@ -727,112 +742,123 @@ pub fn compute_with_sun(
         lo,
         atten: optics.sigma_t,
     };
-    // Accumulators per full voxel in box order, split into rows (y, z) for the parallel reduction.
-    let mut rank = vec![0u32; nb];
-    let mut row_len = vec![0usize; bd[1] * bd[2]];
-    for (r, len) in row_len.iter_mut().enumerate() {
-        for i in 0..bd[0] {
-            if rho[r * bd[0] + i] > 0.0 {
-                rank[r * bd[0] + i] = *len as u32;
-                *len += 1;
-            }
-        }
-    }
+    // Accumulators per full voxel in box order (= grid order: they are the fields' packed
+    // storage), split into rows (y, z) for the parallel reduction.
+    let row_len: Vec<usize> = rho.chunks_exact(bd[0]).map(|r| r.iter().filter(|v| **v > 0.0).count()).collect();
     let full: usize = row_len.iter().sum();
-    let zero = Acc {
-        m: [0.0; 12],
-        sh: [0.0; 3 * SH_COEFFS],
-        sun_t: 1.0,
-    };
-    let mut acc = vec![zero; full];
+    assert_eq!(full, index.count(), "stage 1 accumulates every full voxel once");
+    let mut acc = vec![Acc { m: [0.0; 12], sun_t: 1.0 }; full];
+    // The sky SH in its field's slots (slot 0 the empty voxels' zero), filled in place.
+    let mut sh = vec![[0f32; 3 * SH_COEFFS]; if settings.sky_single { full + 1 } else { 0 }];
     let mut rays = 0u64;
     {
-        let mut rows: Vec<&mut [Acc]> = Vec::with_capacity(row_len.len());
-        let mut rest = &mut acc[..];
+        let mut rows: Vec<Row> = Vec::with_capacity(row_len.len());
+        let (mut rest, mut rest_sh) = (&mut acc[..], sh.get_mut(1..).unwrap_or_default());
         for &len in &row_len {
             let (row, r) = rest.split_at_mut(len);
-            rows.push(row);
-            rest = r;
+            let (row_sh, r_sh) = rest_sh.split_at_mut(if settings.sky_single { len } else { 0 });
+            rows.push(Row {
+                acc: row,
+                sh: row_sh,
+                cursor: 0,
+            });
+            (rest, rest_sh) = (r, r_sh);
         }
         // Sweep the families in groups of one axis and direction, in a fixed order: within a
         // group every family crosses the same plane at the same step, so its voxels are reduced
-        // into the accumulators while that plane is in cache.
-        for (a, forward) in [(0, true), (0, false), (1, true), (1, false), (2, true), (2, false)] {
-            let group: Vec<_> = plan.iter().filter(|f| f.axis == a && (f.d[a] > 0.0) == forward).collect();
-            if group.is_empty() {
+        // into the accumulators while that plane is in cache. One axis's layout at a time.
+        for a in 0..3 {
+            if !plan.iter().any(|f| f.axis == a) {
                 continue;
             }
-            let lay = layouts[a].as_ref().expect("layout of a planned axis");
-            let mut fams: Vec<Family> = group.iter().map(|f| Family::new(f, lay, h, sw.sources[f.src].radiance)).collect();
-            let coef: Vec<Coef> = fams.iter().map(|f| Coef::new(&sw.sources[f.src])).collect();
-            for p in 0..lay.na {
-                fams.par_iter_mut().for_each(|f| f.step(&sw, lay, p));
-                let ca = fams[0].plane(lay, p);
-                let by = bd[1];
-                let (fams, coef) = (&fams[..], &coef[..]);
-                match a {
-                    2 => rows[ca * by..(ca + 1) * by].par_iter_mut().enumerate().for_each(|(y, row)| {
-                        let mut r = 0;
-                        for x in 0..bd[0] {
-                            if rho[x + bd[0] * (y + by * ca)] > 0.0 {
-                                reduce_voxel(fams, coef, lay, [x, y, ca], &mut row[r]);
-                                r += 1;
-                            }
-                        }
-                    }),
-                    _ => rows.par_chunks_mut(by).enumerate().for_each(|(z, rz)| {
-                        if a == 0 {
-                            for (y, row) in rz.iter_mut().enumerate() {
-                                let idx = ca + bd[0] * (y + by * z);
-                                if rho[idx] > 0.0 {
-                                    reduce_voxel(fams, coef, lay, [ca, y, z], &mut row[rank[idx] as usize]);
-                                }
-                            }
-                        } else {
+            let lay = Layout::new(a, bd, &rho);
+            for forward in [true, false] {
+                let group: Vec<_> = plan.iter().filter(|f| f.axis == a && (f.d[a] > 0.0) == forward).collect();
+                if group.is_empty() {
+                    continue;
+                }
+                let mut fams: Vec<Family> = group.iter().map(|f| Family::new(f, &lay, h, sw.sources[f.src].radiance)).collect();
+                let coef: Vec<Coef> = fams.iter().map(|f| Coef::new(&sw.sources[f.src])).collect();
+                // An x sweep meets each row's voxels in x order (backwards: from its end).
+                for (row, &len) in rows.iter_mut().zip(&row_len) {
+                    row.cursor = if forward { 0 } else { len };
+                }
+                for p in 0..lay.na {
+                    fams.par_iter_mut().for_each(|f| f.step(&sw, &lay, p));
+                    let ca = fams[0].plane(&lay, p);
+                    let by = bd[1];
+                    let (fams, coef, lay) = (&fams[..], &coef[..], &lay);
+                    match a {
+                        2 => rows[ca * by..(ca + 1) * by].par_iter_mut().enumerate().for_each(|(y, row)| {
                             let mut r = 0;
                             for x in 0..bd[0] {
-                                if rho[x + bd[0] * (ca + by * z)] > 0.0 {
-                                    reduce_voxel(fams, coef, lay, [x, ca, z], &mut rz[ca][r]);
+                                if rho[x + bd[0] * (y + by * ca)] > 0.0 {
+                                    row.reduce(fams, coef, lay, [x, y, ca], r);
                                     r += 1;
                                 }
                             }
-                        }
-                    }),
+                        }),
+                        _ => rows.par_chunks_mut(by).enumerate().for_each(|(z, rz)| {
+                            if a == 0 {
+                                for (y, row) in rz.iter_mut().enumerate() {
+                                    if rho[ca + bd[0] * (y + by * z)] > 0.0 {
+                                        if !forward {
+                                            row.cursor -= 1;
+                                        }
+                                        let r = row.cursor;
+                                        row.reduce(fams, coef, lay, [ca, y, z], r);
+                                        if forward {
+                                            row.cursor += 1;
+                                        }
+                                    }
+                                }
+                            } else {
+                                let mut r = 0;
+                                for x in 0..bd[0] {
+                                    if rho[x + bd[0] * (ca + by * z)] > 0.0 {
+                                        rz[ca].reduce(fams, coef, lay, [x, ca, z], r);
+                                        r += 1;
+                                    }
+                                }
+                            }
+                        }),
+                    }
                 }
+                rays += fams.iter().map(|f| f.hit.iter().filter(|h| **h).count() as u64).sum::<u64>();
             }
-            rays += fams.iter().map(|f| f.hit.iter().filter(|h| **h).count() as u64).sum::<u64>();
         }
     }
-    out.rays = rays;
-    // The full voxels in box order are the full voxels in grid order: `acc` is packed storage.
-    assert_eq!(acc.len(), index.count(), "stage 1 accumulates every full voxel once");
-    // Scatter with ρσs/(4π) and ρσs·g/(4π).
+    drop(rho);
+    // Scatter with ρσs/(4π) and ρσs·g/(4π), one output at a time beside the accumulators.
     // With δ-scaling (f = g) the scattering that changes direction is σs(1 − g), isotropic (g' = 0).
     let (sigma_s, g) = (optics.sigma_s, optics.phase.mean_cosine());
-    let full_rho = rho.iter().filter(|r| **r > 0.0).map(|r| *r as f64);
-    let (mut q0, mut q1) = (Vec::with_capacity(full), [(); 3].map(|_| Vec::with_capacity(full)));
-    for (v, rho) in acc.iter().zip(full_rho) {
-        let f = [
-            rho * sigma_s.x as f64 / (4.0 * PI),
-            rho * sigma_s.y as f64 / (4.0 * PI),
-            rho * sigma_s.z as f64 / (4.0 * PI),
-        ];
-        q0.push(Rgb::new((f[0] * v.m[0]) as f32, (f[1] * v.m[1]) as f32, (f[2] * v.m[2]) as f32));
-        for (ax, q) in q1.iter_mut().enumerate() {
-            q.push(Rgb::new(
-                (f[0] * g * v.m[3 + 3 * ax]) as f32,
-                (f[1] * g * v.m[4 + 3 * ax]) as f32,
-                (f[2] * g * v.m[5 + 3 * ax]) as f32,
-            ));
-        }
+    let packed_rho: Vec<f64> = index.full_voxels().map(|n| m.density.data()[n] as f64).collect();
+    let scale = |rho: f64, c: usize| rho * sigma_s[c] as f64 / (4.0 * PI);
+    let field = |term: usize, k: f64| {
+        let v = acc.iter().zip(&packed_rho).map(|(v, &rho)| {
+            Rgb::new(
+                (scale(rho, 0) * k * v.m[term]) as f32,
+                (scale(rho, 1) * k * v.m[term + 1]) as f32,
+                (scale(rho, 2) * k * v.m[term + 2]) as f32,
+            )
+        });
+        VoxelField::new(index.clone(), Rgb::ZERO, v)
+    };
+    let q0 = field(0, 1.0);
+    let q1 = [field(3, g), field(6, g), field(9, g)];
+    let sun_mean_transmittance = VoxelField::new(index.clone(), 1.0, acc.iter().map(|v| v.sun_t));
+    drop(acc);
+    IncidentLight {
+        dims,
+        q0,
+        q1,
+        sun_mean_transmittance,
+        sun_transmittance,
+        sun_irradiance: sun_e,
+        bin_radiance: sources.bin_radiance.clone(),
+        sky_sh: settings.sky_single.then(|| VoxelField::from_slots(index, sh)),
+        rays,
     }
-    out.q0 = VoxelField::new(index.clone(), Rgb::ZERO, q0);
-    out.q1 = q1.map(|q| VoxelField::new(index.clone(), Rgb::ZERO, q));
-    out.sun_mean_transmittance = VoxelField::new(index.clone(), 1.0, acc.iter().map(|v| v.sun_t));
-    out.sky_sh = settings
-        .sky_single
-        .then(|| VoxelField::new(index, [0f32; 3 * SH_COEFFS], acc.iter().map(|v| v.sh)));
-    out
 }
 
 #[cfg(test)]

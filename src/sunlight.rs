@@ -3,18 +3,28 @@
 //! The paper keeps the reduced sun radiance I_risun per voxel; here each voxel centre near the
 //! cloud gets the exact optical depth towards the sun (Simpson on the trilinear field), and the
 //! gather interpolates it trilinearly. Voxels whose 3×3×3 neighbourhood is empty are never
-//! sampled by a scattering point and are skipped.
+//! sampled by a scattering point and are skipped (they read 1); they include every voxel beyond
+//! one voxel of the full voxels' box, so only that box is stored ([`SubGrid`]).
+//!
+//! **The march** is [`Medium::density_integral`]'s (Simpson per dual cell, exact for the
+//! trilinear field) with the cell's 8 corner densities loaded once for its midpoint and exit
+//! point, the entry value carried over from the previous cell, and positions kept in f64: the
+//! same integral up to rounding (~1e-7 relative), at about half the loads. It stops once
+//! exp(−τ) is 0 in f32.
 
+use crate::incident::active_box;
 use crate::math::Vec3;
-use crate::medium::{Grid3, Medium};
+use crate::medium::{Dda, Medium, SubGrid};
+use glam::DVec3;
 use rayon::prelude::*;
 use std::sync::Arc;
 
 /// exp(−τ_sun) at voxel centres.
 #[derive(Clone, Debug)]
 pub struct SunTransmittance {
-    /// Transmittance towards the sun at each voxel centre (unitless).
-    pub grid: Arc<Grid3>,
+    /// Transmittance towards the sun at each voxel centre (unitless), stored on the full voxels'
+    /// box grown by one voxel; 1 elsewhere.
+    pub grid: Arc<SubGrid>,
     /// Unit direction towards the sun.
     pub dir: Vec3,
 }
@@ -24,29 +34,34 @@ impl SunTransmittance {
     pub fn compute(m: &Medium, sun_dir: Vec3) -> Self {
         let d = m.dims();
         let rho = &m.density;
-        let mut grid = Grid3::filled(d, 1.0);
-        let (nx, ny) = (d[0], d[1]);
-        grid.data_mut().par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
-            for j in 0..ny {
-                for i in 0..nx {
-                    let mut near = false;
-                    'n: for dk in -1..=1isize {
-                        for dj in -1..=1isize {
-                            for di in -1..=1isize {
-                                if rho.get_or_zero(i as isize + di, j as isize + dj, k as isize + dk) > 0.0 {
-                                    near = true;
-                                    break 'n;
+        let (lo, hi) = active_box(m, 1).unwrap_or(([0; 3], [0; 3]));
+        let mut grid = SubGrid::filled(d, lo, hi, 1.0, 1.0);
+        let (_, [nx, ny, _]) = grid.bounds();
+        if nx * ny > 0 {
+            grid.box_values_mut().par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
+                let k = k + lo[2];
+                for j in 0..ny {
+                    for i in 0..nx {
+                        let (i, j) = (i + lo[0], j + lo[1]);
+                        let mut near = false;
+                        'n: for dk in -1..=1isize {
+                            for dj in -1..=1isize {
+                                for di in -1..=1isize {
+                                    if rho.get_or_zero(i as isize + di, j as isize + dj, k as isize + dk) > 0.0 {
+                                        near = true;
+                                        break 'n;
+                                    }
                                 }
                             }
                         }
-                    }
-                    if near {
-                        let p = m.voxel_center(i, j, k);
-                        slab[i + nx * j] = m.transmittance(p, sun_dir, 0.0, f32::INFINITY);
+                        if near {
+                            let p = m.voxel_center(i, j, k);
+                            slab[i - lo[0] + nx * (j - lo[1])] = transmittance(m, p, sun_dir);
+                        }
                     }
                 }
-            }
-        });
+            });
+        }
         SunTransmittance {
             grid: Arc::new(grid),
             dir: sun_dir,
@@ -57,5 +72,128 @@ impl SunTransmittance {
     #[inline]
     pub fn at_voxel(&self, v: Vec3) -> f32 {
         self.grid.trilinear(v.to_array())
+    }
+}
+
+/// Optical depth beyond which exp(−τ) is 0 in f32 (its smallest subnormal is e^{−103.3}).
+const TAU_ZERO: f64 = 110.0;
+
+/// exp(−τ) from `o` along unit `d` to the medium's box (all of it), as [`Medium::transmittance`].
+fn transmittance(m: &Medium, o: Vec3, d: Vec3) -> f32 {
+    let sigma_t = m.optics.sigma_t as f64;
+    let Some((t0, t1)) = m.intersect(o, d, 0.0, f32::INFINITY) else {
+        return 1.0;
+    };
+    let (od, dd) = (o.as_dvec3(), d.as_dvec3());
+    let h = m.voxel_size.as_dvec3();
+    let orig = m.origin.as_dvec3();
+    let dims = m.dims();
+    let rho = m.density.data();
+    let (nx, nxy) = (dims[0], dims[0] * dims[1]);
+    let limit = TAU_ZERO / sigma_t;
+    let mut sum = 0.0;
+    // Simpson over the dual cells crossed in [ta, tb]; false once exp(−τ) is 0.
+    let mut walk = |ta: f64, tb: f64| {
+        let mut r0 = None;
+        // Dual cell c spans the voxel centres c − 1 and c (clamped to the grid, as the trilinear
+        // field is), voxel coordinates [c − ½, c + ½].
+        for s in Dda::new(orig - 0.5 * h, h, [dims[0] + 1, dims[1] + 1, dims[2] + 1], od, dd, ta, tb) {
+            let c = s.cell;
+            let lo: [usize; 3] = std::array::from_fn(|a| c[a].saturating_sub(1).min(dims[a] - 1));
+            let hi: [usize; 3] = std::array::from_fn(|a| c[a].min(dims[a] - 1));
+            let at = |i: usize, j: usize, k: usize| rho[i + nx * j + nxy * k] as f64;
+            let v = [
+                at(lo[0], lo[1], lo[2]),
+                at(hi[0], lo[1], lo[2]),
+                at(lo[0], hi[1], lo[2]),
+                at(hi[0], hi[1], lo[2]),
+                at(lo[0], lo[1], hi[2]),
+                at(hi[0], lo[1], hi[2]),
+                at(lo[0], hi[1], hi[2]),
+                at(hi[0], hi[1], hi[2]),
+            ];
+            let corner = DVec3::new(c[0] as f64 - 0.5, c[1] as f64 - 0.5, c[2] as f64 - 0.5);
+            let rho_at = |t: f64| {
+                let f = (((od + dd * t) - orig) / h - corner).clamp(DVec3::ZERO, DVec3::ONE);
+                let x0 = v[0] + (v[1] - v[0]) * f.x;
+                let x1 = v[2] + (v[3] - v[2]) * f.x;
+                let x2 = v[4] + (v[5] - v[4]) * f.x;
+                let x3 = v[6] + (v[7] - v[6]) * f.x;
+                let y0 = x0 + (x1 - x0) * f.y;
+                let y1 = x2 + (x3 - x2) * f.y;
+                y0 + (y1 - y0) * f.z
+            };
+            let ra = r0.unwrap_or_else(|| rho_at(s.t0));
+            let rm = rho_at(0.5 * (s.t0 + s.t1));
+            let rb = rho_at(s.t1);
+            sum += (s.t1 - s.t0) / 6.0 * (ra + 4.0 * rm + rb);
+            if sum >= limit {
+                return false;
+            }
+            r0 = Some(rb);
+        }
+        true
+    };
+    // Runs of consecutive non-empty majorant blocks, each walked with one DDA.
+    let mut run: Option<(f64, f64)> = None;
+    let mut going = true;
+    m.majorant.for_each_block(m, o, d, t0, t1, |ta, tb, maj| {
+        let (ta, tb) = (ta as f64, tb as f64);
+        if maj > 0.0 {
+            run = Some(run.map_or((ta, tb), |r| (r.0, tb)));
+            return true;
+        }
+        if let Some((a, b)) = run.take() {
+            going = walk(a, b);
+        }
+        going
+    });
+    if let (true, Some((a, b))) = (going, run) {
+        walk(a, b);
+    }
+    (-((sigma_t * sum) as f32)).exp()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::{Rgb, Rng};
+    use crate::medium::Grid3;
+
+    /// The march against the medium's exact transmittance, on an irregular cloud of non-cubic
+    /// voxels with empty gaps, from points inside, on the faces and outside, in many directions.
+    #[test]
+    fn transmittance_matches_the_medium_s() {
+        let dims = [9, 7, 8];
+        let mut g = Grid3::filled(dims, 0.0);
+        let mut rng = Rng::new(7, 2);
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    if rng.uniform() < 0.6 {
+                        g.set(i, j, k, 3.0 * rng.uniform());
+                    }
+                }
+            }
+        }
+        let m = Medium::new(g, Vec3::new(-2.0, 1.0, 0.5), Vec3::new(1.0, 0.7, 1.3), 0.4, Rgb::ONE, 0.0);
+        for n in 0..3000 {
+            let p = m.origin + m.voxel_size * Vec3::new(rng.uniform() * 11.0 - 1.0, rng.uniform() * 9.0 - 1.0, rng.uniform() * 10.0 - 1.0);
+            let d = crate::math::uniform_sphere(rng.uniform(), rng.uniform());
+            let (got, want) = (transmittance(&m, p, d), m.transmittance(p, d, 0.0, f32::INFINITY));
+            assert!((got - want).abs() <= 2e-6 * want + 1e-30, "{n}: {got} vs {want}");
+        }
+    }
+
+    /// Optically deep rays stop early and read 0, as exp(−τ) does in f32.
+    #[test]
+    fn deep_rays_read_zero() {
+        let m = Medium::new(Grid3::filled([4, 4, 40], 1.0), Vec3::ZERO, Vec3::ONE, 5.0, Rgb::ONE, 0.0);
+        let p = Vec3::new(2.0, 2.0, 0.5);
+        assert_eq!(transmittance(&m, p, Vec3::Z), 0.0);
+        assert_eq!(m.transmittance(p, Vec3::Z, 0.0, f32::INFINITY), 0.0);
+        let q = Vec3::new(2.0, 2.0, 39.0);
+        let exact = (-5.0f32).exp();
+        assert!((transmittance(&m, q, Vec3::Z) - exact).abs() < 1e-6 * exact);
     }
 }

@@ -106,9 +106,10 @@ impl CloudSize {
 pub struct GridMemory {
     /// Fixed bytes (program, thread stacks, tables).
     pub fixed: u64,
-    /// Per grid voxel: the density, the sun transmittance, the full-voxel index (4 B each).
+    /// Per grid voxel: the density and the full-voxel index (4 B each).
     pub per_grid: u64,
-    /// Per voxel of the box of the full voxels: the diffusion solver's box arrays.
+    /// Per voxel of the box of the full voxels: the diffusion solver's box arrays and the sun
+    /// transmittance (4 B, on the box grown by one voxel).
     pub per_box: u64,
     /// Per full voxel: stage 1's Q0/Q1 and sky harmonics, I0, I1, the lit volume, its pyramid.
     pub per_full: u64,
@@ -130,8 +131,12 @@ impl GridMemory {
 /// voxels, 9 % of the grid, 47 % of their box) and two spheres in opposite corners of a
 /// 200×160×120 grid (89 k full voxels, 3 % of their box) — which gave `full` 460 B per full voxel,
 /// 84 B per box voxel and 22 MB fixed beyond 12 B per grid voxel, `diffusion` 356 B, 33 B and
-/// 15 MB; the figures here are those rounded up by about a fifth. `single` and `reference` hold
-/// the grid and a majorant or transmittance grid (16 B per grid voxel).
+/// 15 MB; the figures here are those rounded up by about a fifth. Since, the sun transmittance is
+/// stored on the cloud's box grown by one voxel, not the grid: 4 B moved from per grid voxel (8 B
+/// left: the density and the index, 10 B here) to per box voxel (+5 B here); the per-full-voxel
+/// and solver figures are unchanged (stage 1's smaller accumulators are not at either peak).
+/// `single` and `reference` hold the grid and a majorant or transmittance grid (16 B per grid
+/// voxel, an upper bound).
 pub fn grid_memory(method: Method) -> GridMemory {
     const MB: u64 = 1 << 20;
     match method {
@@ -143,15 +148,15 @@ pub fn grid_memory(method: Method) -> GridMemory {
         },
         Method::Diffusion => GridMemory {
             fixed: 32 * MB,
-            per_grid: 16,
-            per_box: 50,
+            per_grid: 10,
+            per_box: 55,
             per_full: 440,
         },
         // full, and any method added later: the largest estimate.
         _ => GridMemory {
             fixed: 32 * MB,
-            per_grid: 16,
-            per_box: 100,
+            per_grid: 10,
+            per_box: 105,
             per_full: 560,
         },
     }

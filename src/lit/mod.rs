@@ -40,7 +40,7 @@ use crate::lighting::{Sky, Sun};
 use crate::math::{Rgb, Trilinear, Vec3};
 use crate::medium::march::{march, March};
 use crate::medium::sparse::VoxelField;
-use crate::medium::{Grid3, Medium};
+use crate::medium::{Medium, SubGrid};
 use ground::LitGround;
 use pyramid::LitPyramid;
 use sky_single::SkySingle;
@@ -56,7 +56,7 @@ pub struct LitVolume {
     /// stored per full voxel.
     rho_i0: Arc<VoxelField<Rgb>>,
     /// Transmittance towards the sun at voxel centres (unitless), the density grid's dims.
-    pub sun_t: Arc<Grid3>,
+    pub sun_t: Arc<SubGrid>,
     /// The sun (its light enters only through `sun_t` and the phase function, never as a disc).
     pub sun: Sun,
     /// The sky behind everything.
@@ -82,7 +82,7 @@ impl LitVolume {
     pub fn new(
         medium: Medium,
         i0: impl std::ops::Index<usize, Output = Rgb> + Sync,
-        sun_t: impl Into<Arc<Grid3>>,
+        sun_t: impl Into<Arc<SubGrid>>,
         sun: Sun,
         sky: Sky,
         ground: Option<LitGround>,

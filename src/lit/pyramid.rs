@@ -67,11 +67,11 @@ impl LitPyramid {
     pub fn build(lit: &LitVolume, max_levels: usize) -> LitPyramid {
         let m = &lit.medium;
         let rho = m.density.data();
-        let t = lit.sun_t.data();
+        let t = &lit.sun_t;
         let ri0 = lit.rho_i0_field();
         let cells = VoxelField::from_fn(m.density.full_index(), [0.0; 5], |n| {
             let (r, c) = (rho[n], ri0[n]);
-            [r, c.x, c.y, c.z, r * t[n]]
+            [r, c.x, c.y, c.z, r * t.at_index(n)]
         });
         // Level 0's occupancy is the medium's majorant grid where its blocks are the same.
         let occupancy = match m.majorant.block {

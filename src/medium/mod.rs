@@ -16,6 +16,7 @@ pub mod majorant;
 pub mod march;
 pub mod procedural;
 pub mod sparse;
+pub mod subgrid;
 pub mod vdb;
 
 use crate::error::{check, finite3, rgb_in_unit};
@@ -30,10 +31,14 @@ use std::sync::Arc;
 pub use dda::{ray_box, Dda, Segment};
 pub use grid::Grid3;
 pub use majorant::MajorantGrid;
+pub use subgrid::SubGrid;
 
 /// Largest voxel edge accepted (m): beyond about 1e15 m the diffusion solve's squared voxel
 /// sizes overflow f32; no cloud has voxels of 1000 km.
 pub const MAX_VOXEL_SIZE: f32 = 1.0e6;
+
+/// Optical depth beyond which exp(−τ) rounds to 0 in f32 (its smallest subnormal is e^{−103.3}).
+const TAU_ZERO: f64 = 110.0;
 
 /// `[medium]`: the cloud's density grid and its optical properties.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -240,6 +245,12 @@ impl Medium {
     /// Exact ∫ ρ ds (m, density × length) along `o + t·d`, t ∈ [t_min, t_max], `d` unit.
     /// Skips empty majorant blocks; inside the others walks the dual lattice with Simpson's rule.
     pub fn density_integral(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> f64 {
+        self.density_integral_until(o, d, t_min, t_max, f64::INFINITY)
+    }
+
+    /// [`Self::density_integral`], stopped once the sum reaches `limit` (then some value
+    /// ≥ `limit`: every dual cell adds a non-negative Simpson term); below it, the same bits.
+    pub fn density_integral_until(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32, limit: f64) -> f64 {
         let Some((t0, t1)) = self.intersect(o, d, t_min, t_max) else {
             return 0.0;
         };
@@ -251,15 +262,25 @@ impl Medium {
             let v = ((od + dd * t) - orig) * inv_h;
             self.density.trilinear([v.x as f32, v.y as f32, v.z as f32]) as f64
         };
+        let dual_origin = orig - 0.5 * h;
+        let dims = self.dims();
+        let dual_dims = [dims[0] + 1, dims[1] + 1, dims[2] + 1];
         let mut sum = 0.0;
-        self.for_each_dual_block(o, d, t0, t1, |ta, cells| {
+        self.majorant.for_each_block(self, o, d, t0, t1, |ta, tb, maj| {
+            if maj <= 0.0 {
+                return true;
+            }
             let mut r0 = rho(ta as f64);
-            for s in cells {
+            for s in Dda::new(dual_origin, h, dual_dims, od, dd, ta as f64, tb as f64) {
                 let rm = rho(0.5 * (s.t0 + s.t1));
                 let r1 = rho(s.t1);
                 sum += (s.t1 - s.t0) / 6.0 * (r0 + 4.0 * rm + r1);
+                if sum >= limit {
+                    return false;
+                }
                 r0 = r1;
             }
+            true
         });
         sum
     }
@@ -291,7 +312,10 @@ impl Medium {
     /// Transmittance exp(−optical depth) along a ray segment; exact.
     #[inline]
     pub fn transmittance(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> f32 {
-        (-self.optical_depth(o, d, t_min, t_max)).exp()
+        // Beyond TAU_ZERO the rest of the ray cannot change the result (0): it is not walked.
+        let sigma_t = self.optics.sigma_t as f64;
+        let sum = self.density_integral_until(o, d, t_min, t_max, TAU_ZERO / sigma_t);
+        (-((sigma_t * sum) as f32)).exp()
     }
 
     /// Smallest voxel edge (m).

@@ -101,6 +101,13 @@ impl<T: Copy + Send + Sync> VoxelField<T> {
         VoxelField { index, data }
     }
 
+    /// From its slots: `slots[0]` the empty value, then the full voxels' values in grid order
+    /// (`slots.len()` = `index.count() + 1`); takes the vector without a copy.
+    pub fn from_slots(index: Arc<FullIndex>, slots: Vec<T>) -> VoxelField<T> {
+        assert_eq!(slots.len(), index.count() + 1, "the empty value and one value per full voxel");
+        VoxelField { index, data: slots }
+    }
+
     /// Every voxel, full or empty, reads `empty`.
     pub fn filled(index: Arc<FullIndex>, empty: T) -> VoxelField<T> {
         let n = index.count();
@@ -243,6 +250,7 @@ mod tests {
         assert_eq!((f[3], f.get(2), f.get_full(0), f.get_full(4)), (30.0, -1.0, None, Some(&40.0)));
         assert_eq!(f.packed(), &[10.0, 30.0, 40.0]);
         assert_eq!(f, VoxelField::new(idx.clone(), -1.0, [10.0, 30.0, 40.0]));
+        assert_eq!(f, VoxelField::from_slots(idx.clone(), vec![-1.0, 10.0, 30.0, 40.0]));
         assert_eq!(f.map(|v| *v as i32 + 1).get(0), 0);
         assert_eq!(VoxelField::filled(idx, 7u8).iter().filter(|v| **v == 7).count(), 6);
     }

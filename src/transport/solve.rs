@@ -606,8 +606,7 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
     let exact_t = crate::sunlight::SunTransmittance::compute(m, sun.dir);
     let sun_t: Vec<[f32; 3]> = exact_t
         .grid
-        .data()
-        .iter()
+        .values()
         .map(|t| [0, 1, 2].map(|b| t.powf((bands[b].sigma_t / optics.sigma_t) as f32)))
         .collect();
     let e_sun = [sun.irradiance.x as f64, sun.irradiance.y as f64, sun.irradiance.z as f64];

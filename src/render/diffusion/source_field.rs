@@ -13,7 +13,7 @@ use crate::incident::active_box;
 use crate::lighting::Sun;
 use crate::math::{Rgb, Trilinear, Vec3, SH_COEFFS};
 use crate::medium::sparse::VoxelField;
-use crate::medium::{Grid3, Medium};
+use crate::medium::{Medium, SubGrid};
 use crate::optics::Optics;
 use rayon::prelude::*;
 
@@ -60,7 +60,7 @@ impl SourceField {
         i0: &[VoxelField<f32>; 3],
         i1: Option<&VoxelField<[Vec3; 3]>>,
         sky_sh: Option<&VoxelField<[f32; 3 * SH_COEFFS]>>,
-        sun_t: &Grid3,
+        sun_t: &SubGrid,
         sun: &Sun,
     ) -> SourceField {
         let d = m.dims();
@@ -89,7 +89,7 @@ impl SourceField {
                         }
                     }
                 }
-                r[REC - 1] = sun_t.data()[gi];
+                r[REC - 1] = sun_t.at_index(gi);
             }
         });
         SourceField {
@@ -152,6 +152,7 @@ mod tests {
     use crate::lit::sky_single::SkySingle;
     use crate::lit::LitVolume;
     use crate::math::Rng;
+    use crate::medium::Grid3;
 
     /// The packed source against the lit volume's, at random points and view directions of an
     /// irregular cloud whose I0, I1, sky SH and sun transmittance are random (I0 and the SH
@@ -196,7 +197,7 @@ mod tests {
         let lit = LitVolume::new(m.clone(), i0_rgb, sun_t.clone(), sun.clone(), Sky::constant(Rgb::ONE), None)
             .with_flux(FluxField::new(&m, &i1))
             .with_sky_single(SkySingle::new(&m, &sh));
-        let field = SourceField::new(&m, &i0f, Some(&i1), Some(&sh), &sun_t, &sun);
+        let field = SourceField::new(&m, &i0f, Some(&i1), Some(&sh), &sun_t.clone().into(), &sun);
         let mut checked = 0;
         for _ in 0..2000 {
             let v = Vec3::new(rng.uniform() * 9.0, rng.uniform() * 7.0, rng.uniform() * 8.0);

@@ -1,0 +1,152 @@
+//! A grid's values stored on a sub-box only, with one constant everywhere outside it: for a
+//! field that is constant away from the cloud (the sun transmittance is 1 beyond one voxel of it),
+//! so memory follows the cloud's box, not the whole grid. Reads give the same bits as the dense
+//! grid holding that constant outside the box (same corners, same weights, same blend).
+
+use super::Grid3;
+use crate::math::{fast_floor, Trilinear};
+
+/// Values on the box [lo, lo + box_dims) of a grid of `dims`, `outside` elsewhere.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SubGrid {
+    dims: [usize; 3],
+    lo: [usize; 3],
+    box_dims: [usize; 3],
+    /// The box's values (x fastest), then `outside` (the slot every corner outside the box reads).
+    data: Vec<f32>,
+}
+
+impl SubGrid {
+    /// The box [lo, hi) of a grid of `dims`, every value `fill`, `outside` beyond the box.
+    pub fn filled(dims: [usize; 3], lo: [usize; 3], hi: [usize; 3], fill: f32, outside: f32) -> SubGrid {
+        assert!((0..3).all(|a| lo[a] <= hi[a] && hi[a] <= dims[a]), "the box lies in the grid");
+        let box_dims = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
+        let mut data = vec![fill; box_dims.iter().product::<usize>() + 1];
+        *data.last_mut().expect("the outside slot") = outside;
+        SubGrid { dims, lo, box_dims, data }
+    }
+
+    /// Resolution of the whole grid.
+    #[inline]
+    pub fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+
+    /// The box's minimum corner and size (voxels).
+    pub fn bounds(&self) -> ([usize; 3], [usize; 3]) {
+        (self.lo, self.box_dims)
+    }
+
+    /// The box's values, x fastest (without the outside slot), to fill in place.
+    pub fn box_values_mut(&mut self) -> &mut [f32] {
+        let n = self.data.len() - 1;
+        &mut self.data[..n]
+    }
+
+    /// Slot of grid voxel (i, j, k): its box index, or the outside slot.
+    #[inline]
+    fn slot(&self, c: [usize; 3]) -> usize {
+        let [x, y, z] = [0, 1, 2].map(|a| c[a].wrapping_sub(self.lo[a]));
+        if x < self.box_dims[0] && y < self.box_dims[1] && z < self.box_dims[2] {
+            x + self.box_dims[0] * (y + self.box_dims[1] * z)
+        } else {
+            self.data.len() - 1
+        }
+    }
+
+    /// Value of grid voxel (i, j, k).
+    #[inline]
+    pub fn get(&self, i: usize, j: usize, k: usize) -> f32 {
+        self.data[self.slot([i, j, k])]
+    }
+
+    /// Value of the grid voxel with linear index `g` = i + nx(j + ny k).
+    #[inline]
+    pub fn at_index(&self, g: usize) -> f32 {
+        let (nx, ny) = (self.dims[0], self.dims[1]);
+        self.get(g % nx, (g / nx) % ny, g / (nx * ny))
+    }
+
+    /// Every grid voxel's value in grid order.
+    pub fn values(&self) -> impl Iterator<Item = f32> + '_ {
+        let [nx, ny, nz] = self.dims;
+        (0..nz).flat_map(move |k| (0..ny).flat_map(move |j| (0..nx).map(move |i| self.get(i, j, k))))
+    }
+
+    /// Trilinear interpolation at continuous voxel coordinates `p`, as [`Grid3::trilinear`].
+    #[inline]
+    pub fn trilinear(&self, p: [f32; 3]) -> f32 {
+        // Trilinear::new's corners and fractions, as grid coordinates.
+        let (mut lo, mut hi, mut f) = ([0usize; 3], [0usize; 3], [0f32; 3]);
+        for a in 0..3 {
+            let n = self.dims[a] as isize;
+            let x = p[a] - 0.5;
+            let fl = fast_floor(x);
+            let fi = fl as isize;
+            f[a] = x - fl;
+            lo[a] = fi.clamp(0, n - 1) as usize;
+            hi[a] = (fi + 1).clamp(0, n - 1) as usize;
+        }
+        let pick = |c: usize, a: usize| if (c >> a) & 1 == 0 { lo[a] } else { hi[a] };
+        let s = Trilinear {
+            idx: std::array::from_fn(|c| self.slot([pick(c, 0), pick(c, 1), pick(c, 2)])),
+            f,
+        };
+        s.blend(|n| self.data[n])
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        4 * self.data.len()
+    }
+}
+
+/// The whole grid as its own box (nothing outside).
+impl From<Grid3> for SubGrid {
+    fn from(g: Grid3) -> SubGrid {
+        let dims = g.dims();
+        let mut s = SubGrid::filled(dims, [0; 3], dims, 0.0, 0.0);
+        s.box_values_mut().copy_from_slice(g.data());
+        s
+    }
+}
+
+impl From<Grid3> for std::sync::Arc<SubGrid> {
+    fn from(g: Grid3) -> std::sync::Arc<SubGrid> {
+        std::sync::Arc::new(g.into())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::Rng;
+
+    /// Against the dense grid with the box's values inside and the constant outside: the same
+    /// bits everywhere, corners clamped at the grid's faces included.
+    #[test]
+    fn reads_equal_the_dense_grid_with_the_constant_outside() {
+        let dims = [7, 5, 6];
+        let (lo, hi) = ([2, 1, 0], [6, 5, 3]);
+        let mut rng = Rng::new(3, 1);
+        let mut sub = SubGrid::filled(dims, lo, hi, 0.0, 0.75);
+        let mut dense = Grid3::filled(dims, 0.75);
+        let bd = [4, 4, 3];
+        for (n, v) in sub.box_values_mut().iter_mut().enumerate() {
+            *v = rng.uniform();
+            let (i, j, k) = (n % bd[0], (n / bd[0]) % bd[1], n / (bd[0] * bd[1]));
+            dense.set(i + lo[0], j + lo[1], k + lo[2], *v);
+        }
+        assert_eq!(sub.values().collect::<Vec<_>>(), dense.data());
+        for g in 0..dense.len() {
+            assert_eq!(sub.at_index(g), dense.data()[g]);
+        }
+        for _ in 0..2000 {
+            let p = [0, 1, 2].map(|a| (rng.uniform() * 1.2 - 0.1) * dims[a] as f32);
+            assert_eq!(sub.trilinear(p).to_bits(), dense.trilinear(p).to_bits(), "at {p:?}");
+        }
+        let whole: SubGrid = dense.clone().into();
+        assert_eq!(whole.values().collect::<Vec<_>>(), dense.data());
+        assert_eq!(whole.bytes(), 4 * (dense.len() + 1));
+    }
+}
