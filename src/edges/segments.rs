@@ -118,6 +118,55 @@ fn rho_at(m: &Medium, o: DVec3, d: DVec3, t: f64) -> f32 {
     m.density.trilinear([v.x as f32, v.y as f32, v.z as f32])
 }
 
+/// The trilinear ρ inside one dual cell: its 8 corner voxels read once, then each look-up is
+/// the blend of [`crate::math::Trilinear`] with fractions from the cell's own lower corner (the
+/// same bits as [`rho_at`] inside the cell; on its faces, where [`rho_at`] may take the
+/// neighbour's corners, within rounding of the same value).
+struct CellDensity {
+    corners: [f32; 8],
+    /// The cell's lower corner in the voxel-centre lattice (voxel coordinates − ½).
+    lo: [f32; 3],
+}
+
+impl CellDensity {
+    /// Dual cell `cell` (between voxel centres `cell − 1` and `cell`, clamped to the grid).
+    fn new(m: &Medium, cell: [usize; 3]) -> CellDensity {
+        let dims = m.density.dims();
+        let lo: [usize; 3] = std::array::from_fn(|a| cell[a].saturating_sub(1).min(dims[a] - 1));
+        let hi: [usize; 3] = std::array::from_fn(|a| cell[a].min(dims[a] - 1));
+        let g = &m.density;
+        let corners = std::array::from_fn(|c| {
+            let pick = |a: usize| if c >> a & 1 == 1 { hi[a] } else { lo[a] };
+            g.get(pick(0), pick(1), pick(2))
+        });
+        CellDensity {
+            corners,
+            lo: std::array::from_fn(|a| cell[a] as f32 - 1.0),
+        }
+    }
+
+    /// No density anywhere in the cell (a trilinear blend of zeros).
+    fn is_empty(&self) -> bool {
+        self.corners.iter().all(|c| *c == 0.0)
+    }
+
+    /// ρ at distance t along the ray.
+    #[inline]
+    fn at(&self, m: &Medium, o: DVec3, d: DVec3, t: f64) -> f32 {
+        let v = ((o + d * t) - m.origin.as_dvec3()) / m.voxel_size.as_dvec3();
+        let f = [
+            (v.x as f32 - 0.5) - self.lo[0],
+            (v.y as f32 - 0.5) - self.lo[1],
+            (v.z as f32 - 0.5) - self.lo[2],
+        ];
+        let t = crate::math::Trilinear {
+            idx: [0, 1, 2, 3, 4, 5, 6, 7],
+            f,
+        };
+        t.blend(|n| self.corners[n])
+    }
+}
+
 impl RayProfile {
     /// Profile `o + t·d` (`d` unit), t ∈ [t_min, t_max], split wherever ρ crosses one of `levels`
     /// (density units; non-positive levels are ignored).
@@ -133,14 +182,18 @@ impl RayProfile {
         };
         let levels: Vec<f32> = levels.iter().copied().filter(|l| *l > 0.0).collect();
         let sigma_t = m.optics.sigma_t as f64;
-        let rho = |t: f64| rho_at(m, od, dd, t);
-        let simpson = |a: f64, b: f64| -> (f64, [f32; 3]) {
-            let r = [rho(a), rho(0.5 * (a + b)), rho(b)];
-            (sigma_t * (b - a) / 6.0 * (r[0] as f64 + 4.0 * r[1] as f64 + r[2] as f64), r)
-        };
         let mut cuts: Vec<f64> = Vec::with_capacity(8);
         m.for_each_dual_block(o, d, t0, t1, |_, cells| {
             for s in cells {
+                let cell = CellDensity::new(m, s.cell);
+                if cell.is_empty() {
+                    continue;
+                }
+                let rho = |t: f64| cell.at(m, od, dd, t);
+                let simpson = |a: f64, b: f64| -> (f64, [f32; 3]) {
+                    let r = [rho(a), rho(0.5 * (a + b)), rho(b)];
+                    (sigma_t * (b - a) / 6.0 * (r[0] as f64 + 4.0 * r[1] as f64 + r[2] as f64), r)
+                };
                 let mut samples = [(0f64, 0f32); CELL_SAMPLES + 1];
                 for (k, sm) in samples.iter_mut().enumerate() {
                     let t = s.t0 + (s.t1 - s.t0) * k as f64 / CELL_SAMPLES as f64;
