@@ -178,6 +178,7 @@ fn main() {
         let sp = SparseSettings {
             block,
             depth_tolerance: tol,
+            ..SparseSettings::default()
         };
         let t = Instant::now();
         let (img, st) = gather_image(&gather, w, h, &ray, Some(sp));

@@ -461,6 +461,7 @@ fn sparse_gather_matches_per_pixel_cubes_on_a_smooth_scene() {
     let sp = SparseSettings {
         block: 8,
         depth_tolerance: 15.0,
+        ..SparseSettings::default()
     };
     let (img, st) = gather_image(&g, w, h, &ray, Some(sp));
     assert!(st.interpolated > 0 && st.cubes < st_ref.cubes, "{st:?} vs {st_ref:?}");
@@ -477,6 +478,7 @@ fn sparse_gather_matches_per_pixel_cubes_on_a_smooth_scene() {
     let strict = SparseSettings {
         block: 8,
         depth_tolerance: 0.0,
+        partial_size: 0,
     };
     // With 0 m only exact matches interpolate (a pixel on the image's last column or row is a
     // corner of its own clamped square), so the image equals the reference.

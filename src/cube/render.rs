@@ -28,6 +28,11 @@ pub struct CubeOptions {
     pub res: usize,
     /// March step in voxels of the current pyramid level (a fraction of its smallest voxel edge).
     pub step_level_voxels: f32,
+    /// The march step of the final gather's view-aligned cubes (the edge and surface layer's,
+    /// `crate::render::full::GatherCubes`), likewise. Measured 1.5 against 1 on the default
+    /// scene and the five evaluation scenes: block MRE ≤ 1.8·10⁻⁴, a third fewer samples in
+    /// the gather's most expensive loop.
+    pub gather_step_level_voxels: f32,
     /// The march step of the border cubes ([`super::border`]), likewise. Coarser than the other
     /// cubes': their light reaches the image only through stage 1 and the clear-air change of I0
     /// (1.4 % on the default scene); measured there, 2 against 1 moves the image by 7·10⁻⁶ (mean
@@ -67,6 +72,7 @@ impl Default for CubeOptions {
         CubeOptions {
             res: DEFAULT_CUBE_RESOLUTION,
             step_level_voxels: 1.0,
+            gather_step_level_voxels: 1.5,
             border_step_level_voxels: 2.0,
             t_cutoff: 1e-3,
             border_t_cutoff: 1e-2,
@@ -106,7 +112,7 @@ impl CubeOptions {
                 ),
             ));
         }
-        for step in [self.step_level_voxels, self.border_step_level_voxels] {
+        for step in [self.step_level_voxels, self.gather_step_level_voxels, self.border_step_level_voxels] {
             if !(step.is_finite() && step > 0.0 && step <= 4.0) {
                 return Err(Error::invalid(file, "cube step", format!("{step} is not in (0, 4]")));
             }

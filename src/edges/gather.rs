@@ -34,7 +34,7 @@
 //! segment instead of switching abruptly when the gap closes.
 
 use super::orders_kernel::{edge_radiance, segment_orders, OrderKernel, DEFAULT_TAIL};
-use super::segments::{LowSegment, RayProfile};
+use super::segments::{depth_from_samples, LowSegment, RayProfile};
 use crate::cube::CubeImage;
 use crate::math::{Rgb, Vec3};
 use crate::medium::Medium;
@@ -524,16 +524,26 @@ impl<'a> EdgeGather<'a> {
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
         'pieces: for (k, p) in prof.pieces.iter().enumerate() {
             let n = ((p.t1 - p.t0) / self.settings.step_m.max(1e-6) as f64).ceil().max(1.0) as usize;
+            // ρ at the step's start: the previous step's end (the same t, so the same bits).
+            let mut r_start = None;
             for s in 0..n {
                 let ta = p.t0 + (p.t1 - p.t0) * s as f64 / n as f64;
                 let tb = p.t0 + (p.t1 - p.t0) * (s + 1) as f64 / n as f64;
-                let delta = if n == 1 { p.tau } else { prof.depth_within(m, ta, tb) };
+                let tm = 0.5 * (ta + tb);
+                // ρ at the midpoint serves both the step's depth and its weights.
+                let rho = prof.rho(m, tm);
+                let delta = if n == 1 {
+                    p.tau
+                } else {
+                    let ra = r_start.unwrap_or_else(|| prof.rho(m, ta));
+                    let rb = prof.rho(m, tb);
+                    r_start = Some(rb);
+                    depth_from_samples(m, ta, tb, [ra, rho, rb])
+                };
                 if delta <= 0.0 {
                     continue;
                 }
-                let tm = 0.5 * (ta + tb);
                 let pos = (od + dd * tm).as_vec3();
-                let rho = prof.rho(m, tm);
                 let mut w = self.dense_weight(rho);
                 if k < plan.surface_end {
                     w = w.min(1.0 - self.surface_weight(tau + 0.5 * delta));

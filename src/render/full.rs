@@ -20,7 +20,7 @@ use super::diffusion::{boundary_light, compute_incident, compute_incident_with, 
 use super::single::pixel_sample;
 use super::{Progress, Timings};
 use crate::cube::border::BorderCubes;
-use crate::cube::{clear_air, CubeImage, CubeRenderer};
+use crate::cube::{clear_air, CubeImage, CubeOptions, CubeRenderer};
 use crate::diffusion::boundary::hemisphere_radiance;
 use crate::diffusion::{solve_diffusion, BoundaryLight, DiffusionSolution};
 use crate::edges::gather::{CubeRequest, CubeSource, EdgeGather, SunInput};
@@ -176,7 +176,11 @@ pub struct GatherCubes<'a> {
 impl<'a> GatherCubes<'a> {
     /// Cubes over `lit` with the scene's cube settings.
     pub fn new(lit: &'a LitVolume, scene: &Scene) -> Self {
-        let mut renderer = CubeRenderer::new(lit, &scene.render.cubes);
+        let opts = CubeOptions {
+            step_level_voxels: scene.render.cubes.gather_step_level_voxels,
+            ..scene.render.cubes.clone()
+        };
+        let mut renderer = CubeRenderer::new(lit, &opts);
         // With the surface layer (`render.surface_depth` > 0) the cubes see the dense cloud around
         // them, and what they see is scattered again by the orders: the cloud emits the gather's
         // own diffuse source, and the sun's single scattering uses the δ-M medium's (a′, g′) —
