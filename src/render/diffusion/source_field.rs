@@ -5,36 +5,47 @@
 //!
 //! The lit volume keeps each field in its own grid, so a sample locates its eight corners once per
 //! field and evaluates the phase function and the SH basis of the (per-ray constant) view
-//! direction again. Here a sample locates the corners once and blends one 40-float record per
-//! corner (contiguous, vectorisable); what depends on the direction only is computed once per ray
-//! ([`SourceField::along`]). Same values up to float rounding (the blend order differs).
+//! direction again. Here a sample locates the corners once and blends one record per corner
+//! (12 floats, 39 with the sky's harmonics; contiguous, vectorisable); what depends on the
+//! direction only is computed once per ray ([`SourceField::along`]). Same values up to float
+//! rounding (the blend order differs). The records are density-weighted, so they are stored only
+//! at the full voxels (an empty corner reads the zero record): the field costs 48 B per full
+//! voxel, not the 160 B per voxel of the cloud's box it took when every box voxel had a record.
 
-use crate::incident::active_box;
 use crate::lighting::Sun;
 use crate::math::{Rgb, Trilinear, Vec3, SH_COEFFS};
 use crate::medium::sparse::VoxelField;
 use crate::medium::{Medium, SubGrid};
 use crate::optics::Optics;
-use rayon::prelude::*;
+use std::sync::Arc;
 
-/// Floats per band in a record: ρ·I0, ρ·g·I1 (x, y, z), ρ·g^l·L_lm (9).
-const BAND: usize = 4 + SH_COEFFS;
-/// Floats per record: three bands, then the sun transmittance.
-const REC: usize = 3 * BAND + 1;
+/// Floats per band in a record without the sky's single scattering: ρ·I0, ρ·g·I1 (x, y, z).
+const ANISO: usize = 4;
+/// Floats per band with it: then ρ·g^l·L_lm (9).
+const BAND: usize = ANISO + SH_COEFFS;
 /// Degree of each SH coefficient ([`crate::math::sh9`] order).
 const DEGREE: [i32; SH_COEFFS] = [0, 1, 1, 1, 2, 2, 2, 2, 2];
 
-/// One record per voxel of the active box (every voxel within one voxel of density): whatever the
-/// source at a point with non-zero density interpolates from.
+/// The density-weighted records, one per full voxel (zero at empty voxels, as ρ·X is): three
+/// bands of `B` floats each, `B` = [`ANISO`] or [`BAND`] (the sky's harmonics only when they
+/// exist, so the default record is 48 B).
+#[derive(Clone, Debug)]
+enum Records {
+    Aniso(VoxelField<[f32; 3 * ANISO]>),
+    WithSky(VoxelField<[f32; 3 * BAND]>),
+}
+
+/// One density-weighted record per full voxel (whatever the source at a point with non-zero
+/// density interpolates from; an empty corner's record is zero) and the sun transmittance at
+/// voxel centres (shared with stage 1, stored on the cloud's box).
 #[derive(Clone, Debug)]
 pub struct SourceField {
-    /// The box [lo, lo + dims) in grid voxels.
-    lo: Vec3,
+    /// Per band: ρ·max(I0, 0), ρ·g·I1 (W·m⁻²·sr⁻¹ per unit density), with the sky's single
+    /// scattering ρ·g^l·L_lm of the reduced sky and ground radiance (W·m⁻²·sr⁻¹ per unit density).
+    rec: Records,
+    /// The sun's transmittance at voxel centres (unitless).
+    sun_t: Arc<SubGrid>,
     dims: [usize; 3],
-    /// Per band: ρ·max(I0, 0), ρ·g·I1 (W·m⁻²·sr⁻¹ per unit density), ρ·g^l·L_lm of the reduced
-    /// sky and ground radiance (W·m⁻²·sr⁻¹ per unit density); then the sun's transmittance at the
-    /// voxel centre (unitless).
-    rec: Vec<[f32; REC]>,
     optics: Optics,
     sun: Sun,
 }
@@ -60,42 +71,48 @@ impl SourceField {
         i0: &[VoxelField<f32>; 3],
         i1: Option<&VoxelField<[Vec3; 3]>>,
         sky_sh: Option<&VoxelField<[f32; 3 * SH_COEFFS]>>,
-        sun_t: &SubGrid,
+        sun_t: &Arc<SubGrid>,
         sun: &Sun,
     ) -> SourceField {
-        let d = m.dims();
-        let (lo, hi) = active_box(m, 1).unwrap_or(([0; 3], [0; 3]));
-        let bd = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
         let g = m.optics.phase.mean_cosine() as f32;
-        let gl: [f32; SH_COEFFS] = std::array::from_fn(|k| g.powi(DEGREE[k]));
         let rho = m.density.data();
-        let mut rec = vec![[0f32; REC]; bd[0] * bd[1] * bd[2]];
-        rec.par_chunks_mut(bd[0].max(1)).enumerate().for_each(|(row, out)| {
-            let (j, k) = (row % bd[1], row / bd[1]);
-            for (i, r) in out.iter_mut().enumerate() {
-                let gi = (i + lo[0]) + d[0] * ((j + lo[1]) + d[1] * (k + lo[2]));
-                let p = rho[gi];
-                for b in 0..3 {
-                    let o = &mut r[b * BAND..(b + 1) * BAND];
-                    o[0] = i0[b][gi].max(0.0) * p;
-                    if let Some(i1) = i1 {
-                        for ax in 0..3 {
-                            o[1 + ax] = i1[gi][b][ax] * p * g;
-                        }
-                    }
-                    if let Some(sh) = sky_sh {
-                        for k in 0..SH_COEFFS {
-                            o[4 + k] = sh[gi][b * SH_COEFFS + k] * gl[k] * p;
-                        }
-                    }
+        let index = m.density.full_index();
+        // Bands of `b` floats: ρ·max(I0, 0), ρ·g·I1, then (if `b` = BAND) ρ·g^l·L_lm.
+        let fill = |gi: usize, b: usize, o: &mut [f32]| {
+            let p = rho[gi];
+            o[0] = i0[b][gi].max(0.0) * p;
+            if let Some(i1) = i1 {
+                for ax in 0..3 {
+                    o[1 + ax] = i1[gi][b][ax] * p * g;
                 }
-                r[REC - 1] = sun_t.at_index(gi);
             }
-        });
+        };
+        let rec = match sky_sh {
+            None => Records::Aniso(VoxelField::from_fn(index, [0.0; 3 * ANISO], |gi| {
+                let mut r = [0f32; 3 * ANISO];
+                for (b, o) in r.chunks_exact_mut(ANISO).enumerate() {
+                    fill(gi, b, o);
+                }
+                r
+            })),
+            Some(sh) => {
+                let gl: [f32; SH_COEFFS] = std::array::from_fn(|k| g.powi(DEGREE[k]));
+                Records::WithSky(VoxelField::from_fn(index, [0.0; 3 * BAND], |gi| {
+                    let mut r = [0f32; 3 * BAND];
+                    for (b, o) in r.chunks_exact_mut(BAND).enumerate() {
+                        fill(gi, b, o);
+                        for k in 0..SH_COEFFS {
+                            o[ANISO + k] = sh[gi][b * SH_COEFFS + k] * gl[k] * rho[gi];
+                        }
+                    }
+                    r
+                }))
+            }
+        };
         SourceField {
-            lo: Vec3::new(lo[0] as f32, lo[1] as f32, lo[2] as f32),
-            dims: bd,
             rec,
+            sun_t: sun_t.clone(),
+            dims: m.dims(),
             optics: m.optics,
             sun: sun.clone(),
         }
@@ -113,6 +130,24 @@ impl SourceField {
     }
 }
 
+/// The records of `field` blended at the 8 corners of `t` (grid indices), one slot look-up each.
+#[inline]
+fn blend<const N: usize>(field: &VoxelField<[f32; N]>, t: &Trilinear) -> [f32; N] {
+    let t = field.slots(t);
+    let [fx, fy, fz] = t.f;
+    let wx = [1.0 - fx, fx];
+    let wy = [1.0 - fy, fy];
+    let wz = [1.0 - fz, fz];
+    let mut acc = [0f32; N];
+    for (c, &s) in t.idx.iter().enumerate() {
+        let w = wx[c & 1] * wy[(c >> 1) & 1] * wz[c >> 2];
+        for (a, x) in acc.iter_mut().zip(field.at_slot(s)) {
+            *a += w * x;
+        }
+    }
+    acc
+}
+
 impl RaySource<'_> {
     /// The source J per unit extinction (W·m⁻²·sr⁻¹) at continuous grid voxel coordinates `v`
     /// where the trilinear density is `rho` > 0: a·(max(0, I0 + g·I1·ω) + max(0, Σ g^l L_lm Y_lm(ω)))
@@ -120,27 +155,24 @@ impl RaySource<'_> {
     #[inline]
     pub fn at(&self, v: Vec3, rho: f32) -> Rgb {
         let f = self.field;
-        let t = Trilinear::new(f.dims, (v - f.lo).to_array());
-        let [fx, fy, fz] = t.f;
-        let wx = [1.0 - fx, fx];
-        let wy = [1.0 - fy, fy];
-        let wz = [1.0 - fz, fz];
-        let mut acc = [0f32; REC];
-        for (c, &idx) in t.idx.iter().enumerate() {
-            let w = wx[c & 1] * wy[(c >> 1) & 1] * wz[c >> 2];
-            let r = &f.rec[idx];
-            for (a, x) in acc.iter_mut().zip(r) {
-                *a += w * x;
-            }
-        }
+        let t = Trilinear::new(f.dims, v.to_array());
         let e = self.to_eye;
-        let diffuse: [f32; 3] = std::array::from_fn(|b| {
-            let o = &acc[b * BAND..(b + 1) * BAND];
-            let aniso = o[0] + o[1] * e.x + o[2] * e.y + o[3] * e.z;
-            let sky: f32 = o[4..].iter().zip(&self.y).map(|(c, y)| c * y).sum();
-            (aniso.max(0.0) + sky.max(0.0)) / rho
-        });
-        f.optics.albedo * Rgb::from_array(diffuse) + self.sun * acc[REC - 1]
+        let aniso = |o: &[f32]| o[0] + o[1] * e.x + o[2] * e.y + o[3] * e.z;
+        let diffuse: [f32; 3] = match &f.rec {
+            Records::Aniso(field) => {
+                let acc = blend(field, &t);
+                std::array::from_fn(|b| aniso(&acc[b * ANISO..]).max(0.0) / rho)
+            }
+            Records::WithSky(field) => {
+                let acc = blend(field, &t);
+                std::array::from_fn(|b| {
+                    let o = &acc[b * BAND..(b + 1) * BAND];
+                    let sky: f32 = o[ANISO..].iter().zip(&self.y).map(|(c, y)| c * y).sum();
+                    (aniso(o).max(0.0) + sky.max(0.0)) / rho
+                })
+            }
+        };
+        f.optics.albedo * Rgb::from_array(diffuse) + self.sun * f.sun_t.trilinear(v.to_array())
     }
 }
 
@@ -197,7 +229,7 @@ mod tests {
         let lit = LitVolume::new(m.clone(), i0_rgb, sun_t.clone(), sun.clone(), Sky::constant(Rgb::ONE), None)
             .with_flux(FluxField::new(&m, &i1))
             .with_sky_single(SkySingle::new(&m, &sh));
-        let field = SourceField::new(&m, &i0f, Some(&i1), Some(&sh), &sun_t.clone().into(), &sun);
+        let field = SourceField::new(&m, &i0f, Some(&i1), Some(&sh), &Arc::new(sun_t.clone().into()), &sun);
         let mut checked = 0;
         for _ in 0..2000 {
             let v = Vec3::new(rng.uniform() * 9.0, rng.uniform() * 7.0, rng.uniform() * 8.0);
