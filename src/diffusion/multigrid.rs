@@ -6,15 +6,16 @@
 //!   [`Hierarchy::build`] turns every level into a [`Level`] that stores its unknowns with their
 //!   six neighbours' indices and couplings. Nothing is stored per cell of the box (the cloud fills
 //!   about half of its tight box), so the memory and the work scale with the unknowns.
-//! * **Coarsening** by 2×2×2 aggregation with Galerkin coarse operators Aᶜ = PᵀAP: the first
-//!   with the smoothed prolongation P = (I − ω D⁻¹A) P₀ (P₀ piecewise constant), whose
-//!   iterations barely grow with the size; the next ones piecewise constant, their correction
-//!   scaled by [`OVER_CORRECTION`]. The coarse operators are general sparse rows ([`Coarse`]).
-//!   A coarse cell exists where any child is full.
-//! * **Smoother:** red-black Gauss–Seidel on the finest level (red then black before the coarse
-//!   correction, black then red after it), multicolour Gauss–Seidel on the coarse ones (colours
-//!   in order before, in reverse after), so the cycle is a symmetric preconditioner.
-//! * **Cycle:** W on the finest level, V below it.
+//! * **Coarsening** by 2×2×2 aggregation with the Galerkin product Aᶜ = PᵀAP, P the piecewise-
+//!   constant prolongation: the coarse operator is again a 7-point stencil (an aggregate's diagonal
+//!   sums its children's diagonals and the couplings inside it; a coarse coupling sums the fine
+//!   couplings across the aggregates' shared face). Galerkin coarse operators follow coefficient
+//!   jumps and the domain's shape exactly, keep symmetry and definiteness, and need no
+//!   re-discretisation. A coarse cell exists where any child is full.
+//! * **Smoother:** red-black Gauss–Seidel, red then black before the coarse correction and black
+//!   then red after it, so the cycle is a symmetric preconditioner. A level stores its red
+//!   unknowns first, then its black ones, so a colour's pass streams through its own rows.
+//! * **Cycle:** a W-cycle whose coarse correction is scaled by [`OVER_CORRECTION`].
 //! * **Coarsest level** (≤ [`COARSE_CELLS`] unknowns): dense Cholesky, exact.
 //! * **Determinism:** updates within a colour are independent; reductions sum fixed-size chunks'
 //!   partial sums in order. Bit-identical at any thread count.
@@ -85,6 +86,47 @@ impl Operator {
         let c = self.nodes[u].cell as usize;
         [c % nx, (c / nx) % ny, c / (nx * ny)]
     }
+
+    /// Galerkin coarse operator PᵀAP for 2×2×2 piecewise-constant aggregation, and each unknown's
+    /// aggregate. A coarse unknown exists where any child is one; its diagonal sums its children's
+    /// diagonals and the couplings inside it (twice: both directions), a coarse coupling the fine
+    /// ones across the shared face. Children add in box order, as the box-array form did.
+    fn coarsen(&self) -> (Operator, Vec<u32>) {
+        let [nx, ny, nz] = self.dims;
+        let cd = [nx.div_ceil(2), ny.div_ceil(2), nz.div_ceil(2)];
+        let key = |u: usize| {
+            let [i, j, k] = self.ijk(u);
+            (i / 2 + cd[0] * (j / 2 + cd[1] * (k / 2))) as u32
+        };
+        let keys: Vec<u32> = (0..self.nodes.len()).into_par_iter().map(key).collect();
+        let mut cells = keys.clone();
+        cells.par_sort_unstable();
+        cells.dedup();
+        let parent: Vec<u32> = keys
+            .par_iter()
+            .map(|k| cells.binary_search(k).expect("every aggregate is a coarse unknown") as u32)
+            .collect();
+        drop(keys);
+        let mut nodes: Vec<Node> = cells.into_iter().map(Node::at).collect();
+        for (u, n) in self.nodes.iter().enumerate() {
+            let ijk = self.ijk(u);
+            let p = &mut nodes[parent[u] as usize];
+            p.diag += n.diag;
+            for (ax, at) in ijk.iter().enumerate() {
+                let v = n.up_nbr[ax];
+                if v == NONE {
+                    continue;
+                }
+                if at % 2 == 0 {
+                    p.diag += 2.0 * n.up[ax];
+                } else {
+                    p.up[ax] += n.up[ax];
+                    p.up_nbr[ax] = parent[v as usize];
+                }
+            }
+        }
+        (Operator { dims: cd, nodes }, parent)
+    }
 }
 
 /// The scalar of the multigrid levels ([`Level`]) and of the CG vectors.
@@ -143,6 +185,13 @@ struct Level {
     rows: Vec<Row>,
     /// The [`Operator`]'s unknown per entry; [`PAD`] on the pads.
     unk: Vec<u32>,
+    /// Entry of the next coarser level holding each entry (a pad of it for the pads); empty on
+    /// the coarsest level.
+    parent: Vec<u32>,
+    /// The finer level's entries aggregated into entry e: `children[child_start[e]..child_start[e + 1]]`;
+    /// empty on the finest level.
+    child_start: Vec<u32>,
+    children: Vec<u32>,
 }
 
 /// Σ_q cpl_q · x[nbr_q − off] per system: a row's off-diagonal part, `x` the slice of entries
@@ -221,7 +270,14 @@ impl Level {
         } else {
             unk.par_iter().enumerate().map(|(e, u)| row(e, *u, &mut [0.0; 3])).collect()
         };
-        let level = Level { red, rows, unk };
+        let level = Level {
+            red,
+            rows,
+            unk,
+            parent: Vec::new(),
+            child_start: Vec::new(),
+            children: Vec::new(),
+        };
         (level, entry, plus)
     }
 
@@ -232,6 +288,37 @@ impl Level {
 
     fn unknowns(&self) -> usize {
         self.len() - 2
+    }
+
+    /// Record that `coarse` aggregates this level: each entry's parent (from each unknown's
+    /// aggregate `parent` and the coarse unknowns' entries `coarse_entry`) and each coarse
+    /// entry's children.
+    fn link(&mut self, parent: &[u32], coarse: &mut Level, coarse_entry: &[u32]) {
+        let pad = coarse.red as u32;
+        self.parent = self
+            .unk
+            .par_iter()
+            .map(|&u| if u == PAD { pad } else { coarse_entry[parent[u as usize] as usize] })
+            .collect();
+        let mut start = vec![0u32; coarse.len() + 1];
+        for (p, c) in self.parent.iter().zip(&self.unk) {
+            if *c != PAD {
+                start[*p as usize + 1] += 1;
+            }
+        }
+        for e in 0..coarse.len() {
+            start[e + 1] += start[e];
+        }
+        let mut fill = start.clone();
+        let mut children = vec![0u32; start[coarse.len()] as usize];
+        for (f, (p, c)) in self.parent.iter().zip(&self.unk).enumerate() {
+            if *c != PAD {
+                children[fill[*p as usize] as usize] = f as u32;
+                fill[*p as usize] += 1;
+            }
+        }
+        coarse.child_start = start;
+        coarse.children = children;
     }
 
     /// r = b − A x on the red unknowns. Called right after a black pass, which leaves the black
@@ -283,430 +370,39 @@ impl Level {
             }
         });
     }
-}
 
-/// A sparse matrix by rows in f64: the setup's form of the operators and the transfers.
-#[derive(Clone, Debug)]
-struct Csr {
-    start: Vec<u32>,
-    col: Vec<u32>,
-    val: Vec<f64>,
-}
-
-impl Csr {
-    fn from_rows<R: AsRef<[(u32, f64)]>>(rows: &[R]) -> Csr {
-        let nnz = rows.iter().map(|r| r.as_ref().len()).sum();
-        let (mut start, mut col, mut val) = (Vec::with_capacity(rows.len() + 1), Vec::with_capacity(nnz), Vec::with_capacity(nnz));
-        start.push(0);
-        for r in rows {
-            for (c, v) in r.as_ref() {
-                col.push(*c);
-                val.push(*v);
-            }
-            start.push(col.len() as u32);
-        }
-        Csr { start, col, val }
-    }
-
-    /// The operator's matrix, one row per unknown (diagonal first, then the couplings).
-    fn of_operator(a: &Operator) -> Csr {
-        let n = a.nodes.len();
-        // Each unknown's −x, −y, −z neighbours: the unknowns whose +a neighbour it is.
-        let mut down = vec![[NONE; 3]; n];
-        for (u, nd) in a.nodes.iter().enumerate() {
-            for ax in 0..3 {
-                if nd.up_nbr[ax] != NONE {
-                    down[nd.up_nbr[ax] as usize][ax] = u as u32;
-                }
-            }
-        }
-        let rows: Vec<Small> = (0..n)
-            .into_par_iter()
-            .map(|u| {
-                let nd = &a.nodes[u];
-                let mut r = Small::default();
-                r.push(u as u32, nd.diag);
-                for (ax, &d) in down[u].iter().enumerate() {
-                    if d != NONE && a.nodes[d as usize].up[ax] != 0.0 {
-                        r.push(d, a.nodes[d as usize].up[ax]);
-                    }
-                    if nd.up_nbr[ax] != NONE && nd.up[ax] != 0.0 {
-                        r.push(nd.up_nbr[ax], nd.up[ax]);
-                    }
-                }
-                r
-            })
-            .collect();
-        Csr::from_rows(&rows)
-    }
-
-    fn rows(&self) -> usize {
-        self.start.len() - 1
-    }
-
-    fn row(&self, r: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
-        let s = self.start[r] as usize..self.start[r + 1] as usize;
-        self.col[s.clone()].iter().map(|c| *c as usize).zip(self.val[s].iter().copied())
-    }
-
-    /// The transpose (`cols` rows), each row's entries in increasing column.
-    fn transpose(&self, cols: usize) -> Csr {
-        let mut start = vec![0u32; cols + 1];
-        for c in &self.col {
-            start[*c as usize + 1] += 1;
-        }
-        for i in 0..cols {
-            start[i + 1] += start[i];
-        }
-        let mut fill = start.clone();
-        let (mut col, mut val) = (vec![0; self.col.len()], vec![0.0; self.col.len()]);
-        for r in 0..self.rows() {
-            for (c, v) in self.row(r) {
-                let f = &mut fill[c];
-                col[*f as usize] = r as u32;
-                val[*f as usize] = v;
-                *f += 1;
-            }
-        }
-        Csr { start, col, val }
-    }
-}
-
-/// Colours of the coarse levels' Gauss–Seidel: (i mod 3, j mod 3, k mod 3) of the cell. Their rows
-/// reach at most 2 cells along an axis (smoothed aggregation's first coarse level; 1 below it),
-/// so the unknowns of a colour never couple and update in parallel.
-const COLOURS: usize = 27;
-
-/// Colour of `cell` in a box of `dims`.
-fn colour(cell: u32, dims: [usize; 3]) -> usize {
-    let c = cell as usize;
-    let [i, j, k] = [c % dims[0], (c / dims[0]) % dims[1], c / (dims[0] * dims[1])];
-    i % 3 + 3 * (j % 3) + 9 * (k % 3)
-}
-
-/// 2×2×2 aggregation of the unknowns at `cells` of a box of `dims`: the coarse box, its
-/// unknowns' cells (one where any child is an unknown; by colour, then in box order) and each
-/// unknown's aggregate.
-fn aggregate(cells: &[u32], dims: [usize; 3], f: usize) -> ([usize; 3], Vec<u32>, Vec<u32>) {
-    let [nx, ny, _] = dims;
-    let cd = dims.map(|d| d.div_ceil(f));
-    let keys: Vec<u32> = cells
-        .par_iter()
-        .map(|c| {
-            let c = *c as usize;
-            let [i, j, k] = [c % nx, (c / nx) % ny, c / (nx * ny)];
-            (i / f + cd[0] * (j / f + cd[1] * (k / f))) as u32
-        })
-        .collect();
-    let mut sorted = keys.clone();
-    sorted.par_sort_unstable();
-    sorted.dedup();
-    let mut coarse = sorted.clone();
-    coarse.par_sort_unstable_by_key(|c| (colour(*c, cd), *c));
-    let mut rank = vec![0u32; coarse.len()];
-    for (r, c) in coarse.iter().enumerate() {
-        rank[sorted.binary_search(c).expect("a coarse cell")] = r as u32;
-    }
-    let parent = keys
-        .par_iter()
-        .map(|k| rank[sorted.binary_search(k).expect("every aggregate is a coarse unknown")])
-        .collect();
-    (cd, coarse, parent)
-}
-
-/// The prolongation of aggregation `parent`: piecewise constant (`omega` 0), or smoothed,
-/// P = (I − ω D⁻¹A) P₀. Smoothing makes the coarse functions overlap, so a smooth error is
-/// interpolated without the jumps at the aggregates' faces that slow piecewise-constant
-/// aggregation on finer (optically thinner) grids.
-fn prolongation(a: &Csr, parent: &[u32], omega: f64) -> Csr {
-    let rows: Vec<Small> = (0..a.rows())
-        .into_par_iter()
-        .map(|u| {
-            let mut r = Small::default();
-            r.push(parent[u], 1.0);
-            if omega == 0.0 {
-                return r;
-            }
-            let d = a.row(u).find(|(j, _)| *j == u).map_or(1.0, |(_, v)| v);
-            for (j, v) in a.row(u) {
-                // Equal columns add in the row's order, the same at any thread count.
-                let (c, w) = (parent[j], -omega * v / d);
-                match r.e[..r.n].iter_mut().find(|e| e.0 == c) {
-                    Some(e) => e.1 += w,
-                    None => r.push(c, w),
-                }
-            }
-            r.e[..r.n].sort_unstable_by_key(|e| e.0);
-            r
-        })
-        .collect();
-    Csr::from_rows(&rows)
-}
-
-/// A row of at most 8 entries (the 7-point operator's, the smoothed prolongation's).
-#[derive(Clone, Copy, Default)]
-struct Small {
-    n: usize,
-    e: [(u32, f64); 8],
-}
-
-impl Small {
-    fn push(&mut self, c: u32, v: f64) {
-        self.e[self.n] = (c, v);
-        self.n += 1;
-    }
-}
-
-impl AsRef<[(u32, f64)]> for Small {
-    fn as_ref(&self) -> &[(u32, f64)] {
-        &self.e[..self.n]
-    }
-}
-
-/// The product of `a` and `b` (`b.rows()` = `a`'s columns, `cols` its own), row by row; each
-/// entry's terms add in a fixed order, the same at any thread count.
-fn product(a: &Csr, b: &Csr, cols: usize) -> Csr {
-    let n = a.rows();
-    let chunks: Vec<Csr> = (0..n.div_ceil(CHUNK))
-        .into_par_iter()
-        .map(|ci| {
-            let (mut acc, mut seen, mut cs) = (vec![0.0f64; cols], vec![false; cols], Vec::<u32>::new());
-            let mut out = Csr {
-                start: vec![0],
-                col: Vec::new(),
-                val: Vec::new(),
-            };
-            for i in ci * CHUNK..n.min((ci + 1) * CHUNK) {
-                for (e, w) in a.row(i) {
-                    for (c, q) in b.row(e) {
-                        if !seen[c] {
-                            seen[c] = true;
-                            cs.push(c as u32);
-                        }
-                        acc[c] += w * q;
-                    }
-                }
-                cs.sort_unstable();
-                for c in &cs {
-                    let c = *c as usize;
-                    seen[c] = false;
-                    out.col.push(c as u32);
-                    out.val.push(std::mem::take(&mut acc[c]));
-                }
-                out.start.push(out.col.len() as u32);
-                cs.clear();
-            }
-            out
-        })
-        .collect();
-    let mut out = Csr {
-        start: vec![0],
-        col: Vec::new(),
-        val: Vec::new(),
-    };
-    for c in chunks {
-        let off = out.col.len() as u32;
-        out.start.extend(c.start[1..].iter().map(|s| s + off));
-        out.col.extend(c.col);
-        out.val.extend(c.val);
-    }
-    out
-}
-
-/// The Galerkin product PᵀAP (`pt` = Pᵀ): Pᵀ(AP).
-fn galerkin(a: &Csr, p: &Csr, pt: &Csr) -> Csr {
-    let nc = pt.rows();
-    product(pt, &product(a, p, nc), nc)
-}
-
-/// A sparse matrix by rows in the multigrid's precision.
-#[derive(Clone, Debug)]
-struct Rows {
-    start: Vec<u32>,
-    col: Vec<u32>,
-    val: Vec<Mg>,
-}
-
-impl Rows {
-    /// `a`'s entries, columns renumbered by `col_of`, rows placed by `row_at` (rows not placed
-    /// are empty) in `n` rows; the diagonal apart when `diag` is given.
-    fn of(a: &Csr, n: usize, row_at: &[u32], col_of: impl Fn(usize) -> u32, mut diag: Option<&mut Vec<Mg>>) -> Rows {
-        let mut src = vec![usize::MAX; n];
-        for (r, at) in row_at.iter().enumerate() {
-            src[*at as usize] = r;
-        }
-        let (mut start, mut col, mut val) = (vec![0], Vec::new(), Vec::new());
-        for (at, r) in src.iter().enumerate() {
-            if *r != usize::MAX {
-                for (c, v) in a.row(*r) {
-                    match diag.as_deref_mut() {
-                        Some(d) if c == *r => d[at] = Mg::of(v),
-                        _ => {
-                            col.push(col_of(c));
-                            val.push(Mg::of(v));
-                        }
-                    }
-                }
-            }
-            start.push(col.len() as u32);
-        }
-        Rows { start, col, val }
-    }
-
-    #[inline]
-    fn row(&self, r: usize) -> (&[u32], &[Mg]) {
-        let s = self.start[r] as usize..self.start[r + 1] as usize;
-        (&self.col[s.clone()], &self.val[s])
-    }
-
-    /// Σ_c a_rc x_c per system.
-    #[inline]
-    fn dot_row<const K: usize>(&self, r: usize, x: &[[Mg; K]]) -> [Mg; K] {
-        let (c, v) = self.row(r);
-        let mut s = [0.0; K];
-        for (c, v) in c.iter().zip(v) {
-            let xc = &x[*c as usize];
-            for k in 0..K {
-                s[k] += v * xc[k];
-            }
-        }
-        s
-    }
-
-    fn bytes(&self) -> usize {
-        4 * (self.start.len() + self.col.len()) + std::mem::size_of::<Mg>() * self.val.len()
-    }
-}
-
-/// The transfer between a level and the next coarser one: P by the finer level's vector entries,
-/// Pᵀ by the coarser one's, and the scale of the coarse correction.
-#[derive(Clone, Debug)]
-struct Transfer {
-    p: Rows,
-    pt: Rows,
-    weight: Mg,
-}
-
-impl Transfer {
-    /// b = Pᵀ r.
+    /// b = Pᵀ r: each entry sums its children's residuals `r` (of the finer level).
     fn restrict<const K: usize>(&self, r: &[[Mg; K]], b: &mut [[Mg; K]]) {
         b.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, bs)| {
+            let first = ci * CHUNK;
             for (t, v) in bs.iter_mut().enumerate() {
-                *v = self.pt.dot_row(ci * CHUNK + t, r);
-            }
-        });
-    }
-
-    /// x += w P xc on the entries `0..n`.
-    fn prolong<const K: usize>(&self, x: &mut [[Mg; K]], xc: &[[Mg; K]], n: usize) {
-        x[..n].par_chunks_mut(CHUNK).enumerate().for_each(|(ci, xs)| {
-            for (t, v) in xs.iter_mut().enumerate() {
-                let c = self.p.dot_row(ci * CHUNK + t, xc);
-                for k in 0..K {
-                    v[k] += self.weight * c[k];
-                }
-            }
-        });
-    }
-
-    fn bytes(&self) -> usize {
-        self.p.bytes() + self.pt.bytes()
-    }
-}
-
-/// A coarse level: its Galerkin operator in general rows (smoothed aggregation couples an
-/// aggregate to more than its six face neighbours), smoothed by multicolour Gauss–Seidel
-/// ([`COLOURS`]), colours in order before the coarse correction and in reverse order after it
-/// (a symmetric cycle). The unknowns are stored by colour.
-#[derive(Clone, Debug)]
-struct Coarse {
-    diag: Vec<Mg>,
-    off: Rows,
-    /// The unknowns of colour c: `colour_start[c]..colour_start[c + 1]`.
-    colour_start: Vec<usize>,
-}
-
-/// Rows per parallel task of a coarse level's colour pass (a colour of the first coarse level
-/// has a few thousand).
-const COARSE_CHUNK: usize = 256;
-
-impl Coarse {
-    /// The level of matrix `a`, whose unknowns are at `cells` (by colour) of a box of `dims`.
-    fn of(a: &Csr, cells: &[u32], dims: [usize; 3]) -> Coarse {
-        let n = a.rows();
-        let col: Vec<usize> = cells.iter().map(|c| colour(*c, dims)).collect();
-        let mut colour_start = vec![0; COLOURS + 1];
-        for c in &col {
-            colour_start[c + 1] += 1;
-        }
-        for c in 0..COLOURS {
-            colour_start[c + 1] += colour_start[c];
-        }
-        assert!(col.windows(2).all(|w| w[0] <= w[1]), "unknowns stored by colour");
-        for r in 0..n {
-            assert!(
-                a.row(r).all(|(c, _)| c == r || col[c] != col[r]),
-                "a colour's unknowns do not couple"
-            );
-        }
-        let mut diag = vec![0.0; n];
-        let at: Vec<u32> = (0..n as u32).collect();
-        let off = Rows::of(a, n, &at, |c| c as u32, Some(&mut diag));
-        Coarse { diag, off, colour_start }
-    }
-
-    fn len(&self) -> usize {
-        self.diag.len()
-    }
-
-    /// One Gauss–Seidel pass over the unknowns of colour `c`: each reads only the others.
-    fn pass<const K: usize>(&self, x: &mut [[Mg; K]], b: &[[Mg; K]], c: usize) {
-        let (s, e) = (self.colour_start[c], self.colour_start[c + 1]);
-        let (head, rest) = x.split_at_mut(s);
-        let (mine, tail) = rest.split_at_mut(e - s);
-        let (head, tail) = (&*head, &*tail);
-        mine.par_chunks_mut(COARSE_CHUNK).enumerate().for_each(|(ci, xs)| {
-            for (t, xv) in xs.iter_mut().enumerate() {
-                let i = s + ci * COARSE_CHUNK + t;
-                let (cols, vals) = self.off.row(i);
-                let mut sum = [0.0; K];
-                for (j, v) in cols.iter().zip(vals) {
-                    let j = *j as usize;
-                    let xj = if j < s { &head[j] } else { &tail[j - e] };
+                let e = first + t;
+                let mut s = [0.0; K];
+                for f in &self.children[self.child_start[e] as usize..self.child_start[e + 1] as usize] {
+                    let rf = &r[*f as usize];
                     for k in 0..K {
-                        sum[k] += v * xj[k];
+                        s[k] += rf[k];
                     }
                 }
-                *xv = std::array::from_fn(|k| (b[i][k] - sum[k]) / self.diag[i]);
+                *v = s;
             }
         });
     }
 
-    fn forward<const K: usize>(&self, x: &mut [[Mg; K]], b: &[[Mg; K]]) {
-        for c in 0..COLOURS {
-            self.pass(x, b, c);
-        }
-    }
-
-    fn backward<const K: usize>(&self, x: &mut [[Mg; K]], b: &[[Mg; K]]) {
-        for c in (0..COLOURS).rev() {
-            self.pass(x, b, c);
-        }
-    }
-
-    /// r = b − A x.
-    fn residual<const K: usize>(&self, x: &[[Mg; K]], b: &[[Mg; K]], r: &mut [[Mg; K]]) {
-        r.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, rs)| {
-            for (t, rv) in rs.iter_mut().enumerate() {
-                let i = ci * CHUNK + t;
-                let s = self.off.dot_row(i, x);
-                *rv = std::array::from_fn(|k| b[i][k] - (self.diag[i] * x[i][k] + s[k]));
-            }
-        });
-    }
-
-    fn bytes(&self) -> usize {
-        self.off.bytes() + std::mem::size_of::<Mg>() * self.diag.len()
+    /// x += w P xc on the red unknowns, each adding its parent's correction: a black pass
+    /// follows, which overwrites the black ones whatever they hold.
+    fn prolong_red<const K: usize>(&self, x: &mut [[Mg; K]], xc: &[[Mg; K]], w: Mg) {
+        x[..self.red]
+            .par_chunks_mut(CHUNK)
+            .zip(self.parent[..self.red].par_chunks(CHUNK))
+            .for_each(|(xs, ps)| {
+                for (v, p) in xs.iter_mut().zip(ps) {
+                    let c = &xc[*p as usize];
+                    for k in 0..K {
+                        v[k] += w * c[k];
+                    }
+                }
+            });
     }
 }
 
@@ -803,23 +499,35 @@ fn cholesky_in_place(a: &mut [f64], n: usize) -> f64 {
 }
 
 impl Dense {
-    /// The factor of matrix `a`, whose row q is the level's vector entry `cells[q]`.
-    fn build(a: &Csr, cells: Vec<usize>) -> Dense {
+    /// The factor of operator `s`, whose unknowns are the entries `entry` of `level`.
+    fn build(s: &Operator, level: &Level, entry: &[u32]) -> Dense {
+        let cells: Vec<usize> = (0..level.len()).filter(|e| level.unk[*e] != PAD).collect();
         let n = cells.len();
-        let mut l = vec![0f64; n * n];
-        for q in 0..n {
-            for (r, v) in a.row(q) {
-                l[q * n + r] += v;
+        let mut q_of = vec![usize::MAX; level.len()];
+        for (q, e) in cells.iter().enumerate() {
+            q_of[*e] = q;
+        }
+        let mut a = vec![0f64; n * n];
+        for (q, &e) in cells.iter().enumerate() {
+            let nd = &s.nodes[level.unk[e] as usize];
+            a[q * n + q] = nd.diag;
+            for ax in 0..3 {
+                let v = nd.up[ax];
+                if v != 0.0 && nd.up_nbr[ax] != NONE {
+                    let r = q_of[entry[nd.up_nbr[ax] as usize] as usize];
+                    a[q * n + r] += v;
+                    a[r * n + q] += v;
+                }
             }
         }
-        cholesky_in_place(&mut l, n);
+        cholesky_in_place(&mut a, n);
         // Lᵀ into the upper triangle: the backward substitution then reads rows too.
         for i in 0..n {
             for j in 0..i {
-                l[j * n + i] = l[i * n + j];
+                a[j * n + i] = a[i * n + j];
             }
         }
-        Dense { cells, l }
+        Dense { cells, l: a }
     }
 
     /// x = A⁻¹ b on the level's unknowns, all systems in one pass over the factor (each row read
@@ -872,26 +580,16 @@ pub struct Hierarchy {
     /// The scaled finest operator's +x, +y, +z couplings per entry in f64 (its diagonal is 1):
     /// the operator CG solves.
     plus: Vec<[f64; 3]>,
-    /// The finest level (scaled).
-    fine: Level,
-    /// Levels 1, 2, …; the last one (or the finest, if there is none) is solved directly.
-    coarse_levels: Vec<Coarse>,
-    /// The transfers between level l and l + 1.
-    transfers: Vec<Transfer>,
+    /// Levels, finest first (scaled).
+    levels: Vec<Level>,
     coarse: Dense,
-    /// Coarse-grid visits from the finest level (1: V-cycle, 2: W-cycle).
+    /// Coarse-grid visits per level (1: V-cycle, 2: W-cycle).
     pub cycle: usize,
-    /// Red-black sweeps before and after the coarse correction on the finest level.
+    /// Scale of the coarse-grid correction (over-correction of piecewise-constant aggregation).
+    pub over_correction: f64,
+    /// Red-black sweeps before and after the coarse correction.
     pub sweeps: usize,
 }
-
-/// Damping ω of the prolongation's smoothing. 4 / (3 ρ(D⁻¹A)) = 2/3 (ρ ≤ 2) gave 29/34/39
-/// iterations per band at the three bench sizes, 0.8 24/27/29, 0.9 21/23/24 (with
-/// [`SMOOTHED_OVER_CORRECTION`]); 1 makes an isolated cell's interpolation weight 1 − ω vanish.
-const SMOOTHING: f64 = 0.9;
-
-/// Scale of the correction from the smoothed-aggregation level.
-const SMOOTHED_OVER_CORRECTION: f64 = 1.4;
 
 impl Hierarchy {
     /// Scale `a` to unit diagonal and build the levels down to [`COARSE_CELLS`] unknowns.
@@ -900,9 +598,6 @@ impl Hierarchy {
     }
 
     /// As [`Hierarchy::build`], coarsening until a level has at most `coarse_cells` unknowns.
-    /// The first coarsening is smoothed aggregation, the next ones piecewise-constant
-    /// aggregation of the coarse levels (smoothing there too would widen their rows at every
-    /// level: 125 neighbours, then 343).
     pub fn build_with(mut a: Operator, coarse_cells: usize) -> Hierarchy {
         let scale_of: Vec<f64> = a.nodes.iter().map(|n| 1.0 / n.diag.sqrt()).collect();
         a.nodes.par_iter_mut().enumerate().for_each(|(u, n)| {
@@ -913,52 +608,32 @@ impl Hierarchy {
             }
             n.diag = 1.0;
         });
-        let (fine, entry, plus) = Level::from_operator(&a, true);
-        let scale = fine
+        // Each level is built from its operator, which is dropped once the next one exists.
+        let (mut level, mut entry, plus) = Level::from_operator(&a, true);
+        let scale = level
             .unk
             .iter()
             .map(|u| if *u == PAD { 0.0 } else { scale_of[*u as usize] })
             .collect();
         drop(scale_of);
-        let mut dims = a.dims;
-        let mut cells: Vec<u32> = a.nodes.iter().map(|n| n.cell).collect();
-        let mut op = Csr::of_operator(&a);
-        drop(a);
-        let (mut coarse_levels, mut transfers) = (Vec::new(), Vec::new());
-        while op.rows() > coarse_cells && dims.iter().any(|d| *d > 1) {
-            let first = transfers.is_empty();
-            let (cd, cc, parent) = aggregate(&cells, dims, 2);
-            let p = prolongation(&op, &parent, if first { SMOOTHING } else { 0.0 });
-            let pt = p.transpose(cc.len());
-            let next = galerkin(&op, &p, &pt);
-            // On the finest level P's rows and Pᵀ's columns are its vector entries.
-            let (fine_len, at): (usize, Vec<u32>) = if first {
-                (fine.len(), entry.clone())
-            } else {
-                (op.rows(), (0..op.rows() as u32).collect())
-            };
-            let all: Vec<u32> = (0..cc.len() as u32).collect();
-            transfers.push(Transfer {
-                p: Rows::of(&p, fine_len, &at, |c| c as u32, None),
-                pt: Rows::of(&pt, cc.len(), &all, |f| at[f], None),
-                weight: Mg::of(if first { SMOOTHED_OVER_CORRECTION } else { OVER_CORRECTION }),
-            });
-            coarse_levels.push(Coarse::of(&next, &cc, cd));
-            (op, dims, cells) = (next, cd, cc);
+        let mut levels = Vec::new();
+        let mut fine = a;
+        while level.unknowns() > coarse_cells && fine.dims.iter().any(|d| *d > 1) {
+            let (c, parent) = fine.coarsen();
+            let (mut next, next_entry, _) = Level::from_operator(&c, false);
+            level.link(&parent, &mut next, &next_entry);
+            levels.push(std::mem::replace(&mut level, next));
+            (fine, entry) = (c, next_entry);
         }
-        let coarse = if coarse_levels.is_empty() {
-            Dense::build(&op, entry.iter().map(|e| *e as usize).collect())
-        } else {
-            Dense::build(&op, (0..op.rows()).collect())
-        };
+        let coarse = Dense::build(&fine, &level, &entry);
+        levels.push(level);
         Hierarchy {
             scale,
             plus,
-            fine,
-            coarse_levels,
-            transfers,
+            levels,
             coarse,
             cycle: 2,
+            over_correction: OVER_CORRECTION,
             sweeps: 1,
         }
     }
@@ -966,24 +641,15 @@ impl Hierarchy {
     /// Number of levels (including the direct one).
     #[cfg(test)]
     pub fn levels(&self) -> usize {
-        1 + self.coarse_levels.len()
-    }
-
-    /// Length of level l's vectors.
-    fn len(&self, l: usize) -> usize {
-        if l == 0 {
-            self.fine.len()
-        } else {
-            self.coarse_levels[l - 1].len()
-        }
+        self.levels.len()
     }
 
     /// Bytes the hierarchy holds.
     fn bytes(&self) -> usize {
-        self.fine.rows.len() * std::mem::size_of::<Row>()
-            + 4 * self.fine.unk.len()
-            + self.coarse_levels.iter().map(Coarse::bytes).sum::<usize>()
-            + self.transfers.iter().map(Transfer::bytes).sum::<usize>()
+        let level = |l: &Level| {
+            l.rows.len() * std::mem::size_of::<Row>() + 4 * (l.unk.len() + l.parent.len() + l.child_start.len() + l.children.len())
+        };
+        self.levels.iter().map(level).sum::<usize>()
             + 8 * self.scale.len()
             + 24 * self.plus.len()
             + 8 * (self.coarse.l.len() + self.coarse.cells.len())
@@ -992,63 +658,44 @@ impl Hierarchy {
     /// One cycle on level `l` for A_l x = b, x starting at zero; `work` holds the vectors of
     /// levels l and below.
     fn cycle<const K: usize>(&self, l: usize, b: &[[Mg; K]], x: &mut [[Mg; K]], work: &mut [Work<K>]) {
-        if l == self.coarse_levels.len() {
+        if l + 1 == self.levels.len() {
             self.coarse.solve(b, x);
             return;
         }
-        let (w, rest) = work.split_first_mut().expect("a work entry per level above the coarsest");
-        let t = &self.transfers[l];
-        // The finest level visits the next one `cycle` times (unless it is the direct one); the
-        // coarse levels once (a V-cycle below the smoothed-aggregation level: more visits cost
-        // more than they save).
-        let visits = if l == 0 && self.coarse_levels.len() > 1 {
-            self.cycle.max(1)
-        } else {
-            1
-        };
-        if l == 0 {
-            // Red, black before the corrections; black, red after; a symmetric black-red-black
-            // between the two corrections of a W-cycle (its red-red pair in the middle is one
-            // pass: a second red pass recomputes the same values).
-            let s = &self.fine;
-            s.smooth_red_from_zero(x, b);
+        let s = &self.levels[l];
+        // Red, black before the corrections; black, red after; a symmetric black-red-black
+        // between the two corrections of a W-cycle (its red-red pair in the middle is one pass:
+        // a second red pass recomputes the same values).
+        s.smooth_red_from_zero(x, b);
+        s.smooth(x, b, 1);
+        for _ in 1..self.sweeps {
+            s.smooth(x, b, 0);
             s.smooth(x, b, 1);
-            for _ in 1..self.sweeps {
-                s.smooth(x, b, 0);
-                s.smooth(x, b, 1);
-            }
-            for visit in 0..visits {
-                s.residual_red(x, b, &mut w.r);
-                t.restrict(&w.r, &mut w.bc);
-                self.cycle(l + 1, &w.bc, &mut w.xc, rest);
-                // The red entries only: the black pass that follows overwrites the black ones.
-                t.prolong(x, &w.xc, s.red);
-                if visit + 1 < visits {
-                    s.smooth(x, b, 1);
-                    s.smooth(x, b, 0);
-                    s.smooth(x, b, 1);
-                }
-            }
-            for _ in 0..self.sweeps {
-                s.smooth(x, b, 1);
-                s.smooth(x, b, 0);
-            }
-        } else {
-            let s = &self.coarse_levels[l - 1];
-            x.fill([0.0; K]);
-            s.forward(x, b);
-            s.residual(x, b, &mut w.r);
-            t.restrict(&w.r, &mut w.bc);
+        }
+        let (w, rest) = work.split_first_mut().expect("a work entry per level above the coarsest");
+        let coarse_is_direct = l + 2 == self.levels.len();
+        let visits = if coarse_is_direct { 1 } else { self.cycle.max(1) };
+        for visit in 0..visits {
+            s.residual_red(x, b, &mut w.r);
+            self.levels[l + 1].restrict(&w.r, &mut w.bc);
             self.cycle(l + 1, &w.bc, &mut w.xc, rest);
-            t.prolong(x, &w.xc, s.len());
-            s.backward(x, b);
+            s.prolong_red(x, &w.xc, Mg::of(self.over_correction));
+            if visit + 1 < visits {
+                s.smooth(x, b, 1);
+                s.smooth(x, b, 0);
+                s.smooth(x, b, 1);
+            }
+        }
+        for _ in 0..self.sweeps {
+            s.smooth(x, b, 1);
+            s.smooth(x, b, 0);
         }
     }
 
     /// y = A x with the scaled finest operator in f64 (unit diagonal, couplings `plus`, each
     /// −a coupling read from the −a neighbour's +a one); returns x·y (summed as [`dot`] does).
     fn apply<const K: usize>(&self, x: &[[f64; K]], y: &mut [[f64; K]]) -> [f64; K] {
-        let rows = &self.fine.rows;
+        let rows = &self.levels[0].rows;
         let parts: Vec<[f64; K]> = y
             .par_chunks_mut(CHUNK)
             .enumerate()
@@ -1091,7 +738,7 @@ impl Hierarchy {
         tol: f64,
         max_iter: usize,
     ) -> [(Vec<f64>, SolveStats); K] {
-        let a = &self.fine;
+        let a = &self.levels[0];
         let gather = |v: [&[f64]; K], f: fn(f64, f64) -> f64| -> Vec<[f64; K]> {
             assert!(v.iter().all(|v| v.len() == a.unknowns()), "one value per unknown");
             a.unk
@@ -1122,7 +769,7 @@ impl Hierarchy {
     /// MGPCG on the scaled systems A y = bs (vectors on the finest level's entries), each system
     /// stopping on its own.
     fn solve_scaled<const K: usize>(&self, bs: &[[f64; K]], y: &mut [[f64; K]], tol: f64, max_iter: usize) -> [SolveStats; K] {
-        let a = &self.fine;
+        let a = &self.levels[0];
         let n = a.len();
         let bnorm = dot(bs, bs).map(f64::sqrt);
         let mut stats: [SolveStats; K] = std::array::from_fn(|_| SolveStats {
@@ -1130,14 +777,16 @@ impl Hierarchy {
             relative_residual: 0.0,
             history: Vec::new(),
             unknowns: a.unknowns(),
-            levels: 1 + self.coarse_levels.len(),
+            levels: self.levels.len(),
             bytes_per_unknown: 0.0,
         });
-        let mut work: Vec<Work<K>> = (0..self.coarse_levels.len())
-            .map(|l| Work {
-                r: vec![[0.0; K]; self.len(l)],
-                bc: vec![[0.0; K]; self.len(l + 1)],
-                xc: vec![[0.0; K]; self.len(l + 1)],
+        let mut work: Vec<Work<K>> = self
+            .levels
+            .windows(2)
+            .map(|w| Work {
+                r: vec![[0.0; K]; w[0].len()],
+                bc: vec![[0.0; K]; w[1].len()],
+                xc: vec![[0.0; K]; w[1].len()],
             })
             .collect();
         let (mut r, mut ap, mut p) = (vec![[0f64; K]; n], vec![[0f64; K]; n], vec![[0f64; K]; n]);
@@ -1148,8 +797,10 @@ impl Hierarchy {
         let held = self.bytes()
             + lanes(5 * n, 8)
             + lanes(2 * n, std::mem::size_of::<Mg>())
-            + (0..self.coarse_levels.len())
-                .map(|l| lanes(self.len(l) + 2 * self.len(l + 1), std::mem::size_of::<Mg>()))
+            + self
+                .levels
+                .windows(2)
+                .map(|w| lanes(w[0].len() + 2 * w[1].len(), std::mem::size_of::<Mg>()))
                 .sum::<usize>();
         for st in &mut stats {
             st.bytes_per_unknown = held as f64 / (K * a.unknowns().max(1)) as f64;
@@ -1233,7 +884,7 @@ impl Hierarchy {
 /// (moved here from tests/ so the solver's internals need not be public).
 #[cfg(test)]
 mod operator_tests {
-    use super::{aggregate, galerkin, prolongation, Coarse, Csr, Hierarchy, Operator, NONE};
+    use super::{Hierarchy, Operator, NONE};
     use crate::diffusion::{assemble, BoundaryLight, Domain};
     use crate::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
     use crate::lighting::DirectionBins;
@@ -1382,61 +1033,26 @@ mod operator_tests {
         let inc = lit(&m, 1.0, Some((Vec3::new(0.2, 1.0, 0.3), 2.0)));
         let dom = Domain::of(&m).unwrap();
         let (s, _) = assemble(&m, &inc, &BoundaryLight::none(), 0, 1e-3, &dom);
-        let a = Csr::of_operator(&s);
-        let cells: Vec<u32> = s.nodes.iter().map(|n| n.cell).collect();
-        let (cd, cc, parent) = aggregate(&cells, s.dims, 2);
-        let (n, nc) = (s.nodes.len(), cc.len());
+        let (c, parent) = s.coarsen();
+        let (n, nc) = (s.nodes.len(), c.nodes.len());
         assert!(nc > 10 && nc < n, "{nc} of {n}");
-        assert_eq!(cd, [s.dims[0].div_ceil(2), s.dims[1].div_ceil(2), s.dims[2].div_ceil(2)]);
+        assert_eq!(c.dims, [s.dims[0].div_ceil(2), s.dims[1].div_ceil(2), s.dims[2].div_ceil(2)]);
+        // PᵀAP with P[u][parent u] = 1, densely.
+        let a = dense(&s);
+        let mut g = vec![0.0; nc * nc];
+        for u in 0..n {
+            for v in 0..n {
+                g[parent[u] as usize * nc + parent[v] as usize] += a[u * n + v];
+            }
+        }
+        for (x, y) in g.iter().zip(&dense(&c)) {
+            assert!((x - y).abs() <= 1e-12 * x.abs().max(1.0), "{x} vs {y}");
+        }
         for (u, p) in parent.iter().enumerate() {
             let [i, j, k] = s.ijk(u);
-            assert_eq!(cc[*p as usize] as usize, i / 2 + cd[0] * (j / 2 + cd[1] * (k / 2)));
+            let cell = i / 2 + c.dims[0] * (j / 2 + c.dims[1] * (k / 2));
+            assert_eq!(c.nodes[*p as usize].cell as usize, cell);
         }
-        let ad = dense(&s);
-        for omega in [0.0, 2.0 / 3.0, 0.9] {
-            let p = prolongation(&a, &parent, omega);
-            // P = (I − ω D⁻¹A) P₀ densely, then PᵀAP.
-            let mut pd = vec![0.0; n * nc];
-            for u in 0..n {
-                pd[u * nc + parent[u] as usize] += 1.0;
-                for v in 0..n {
-                    pd[u * nc + parent[v] as usize] -= omega * ad[u * n + v] / ad[u * n + u];
-                }
-            }
-            for u in 0..n {
-                let mut row = vec![0.0; nc];
-                for (c, v) in p.row(u) {
-                    row[c] += v;
-                }
-                for c in 0..nc {
-                    assert!((row[c] - pd[u * nc + c]).abs() <= 1e-12, "P[{u}][{c}]");
-                }
-            }
-            let mut ap = vec![0.0; n * nc];
-            for u in 0..n {
-                for v in 0..n {
-                    if ad[u * n + v] != 0.0 {
-                        for c in 0..nc {
-                            ap[u * nc + c] += ad[u * n + v] * pd[v * nc + c];
-                        }
-                    }
-                }
-            }
-            let g = galerkin(&a, &p, &p.transpose(nc));
-            for i in 0..nc {
-                let mut row = vec![0.0; nc];
-                for (c, v) in g.row(i) {
-                    row[c] += v;
-                }
-                for j in 0..nc {
-                    let x: f64 = (0..n).map(|u| pd[u * nc + i] * ap[u * nc + j]).sum();
-                    assert!((x - row[j]).abs() <= 1e-12 * x.abs().max(1.0), "ω {omega}: {x} vs {}", row[j]);
-                    let t = g.row(j).find(|e| e.0 == i).map_or(0.0, |e| e.1);
-                    assert!((t - row[j]).abs() <= 1e-12 * t.abs().max(1.0), "symmetric: {t} vs {}", row[j]);
-                }
-            }
-            // The coarse level's colours never couple.
-            let _ = Coarse::of(&g, &cc, cd);
-        }
+        assert!(c.nodes.windows(2).all(|w| w[0].cell < w[1].cell), "coarse unknowns in box order");
     }
 }
