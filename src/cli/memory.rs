@@ -108,10 +108,11 @@ pub struct GridMemory {
     pub fixed: u64,
     /// Per grid voxel: the density and the full-voxel index (4 B each).
     pub per_grid: u64,
-    /// Per voxel of the box of the full voxels: the diffusion solver's box arrays and the sun
-    /// transmittance (4 B, on the box grown by one voxel).
+    /// Per voxel of the box of the full voxels: the sun transmittance (4 B, on the box grown by
+    /// one voxel) and the solver's box-shaped bookkeeping.
     pub per_box: u64,
-    /// Per full voxel: stage 1's Q0/Q1 and sky harmonics, I0, I1, the lit volume, its pyramid.
+    /// Per full voxel: the solver's hierarchy and vectors, stage 1's Q0/Q1, I0, I1, the lit
+    /// volume and its pyramid, the gather's source records.
     pub per_full: u64,
 }
 
@@ -125,18 +126,17 @@ impl GridMemory {
     }
 }
 
-/// The memory model of each grid method (docs/performance.md, "Memory"). Fitted to the peak
-/// resident memory of 8×6-pixel renders on the development sandbox (`/usr/bin/time -f %M`) of
-/// three clouds — the procedural cumulus at 100×80×60 and 200×160×120 (44 k and 356 k full
-/// voxels, 9 % of the grid, 47 % of their box) and two spheres in opposite corners of a
-/// 200×160×120 grid (89 k full voxels, 3 % of their box) — which gave `full` 460 B per full voxel,
-/// 84 B per box voxel and 22 MB fixed beyond 12 B per grid voxel, `diffusion` 356 B, 33 B and
-/// 15 MB; the figures here are those rounded up by about a fifth. Since, the sun transmittance is
-/// stored on the cloud's box grown by one voxel, not the grid: 4 B moved from per grid voxel (8 B
-/// left: the density and the index, 10 B here) to per box voxel (+5 B here); the per-full-voxel
-/// and solver figures are unchanged (stage 1's smaller accumulators are not at either peak).
-/// `single` and `reference` hold the grid and a majorant or transmittance grid (16 B per grid
-/// voxel, an upper bound).
+/// The memory model of each grid method (docs/performance.md, "The memory guard"). Fitted to the
+/// peak resident memory of 8×6-pixel renders on the development sandbox (`/usr/bin/time -f %M`) of
+/// four clouds — the procedural cumulus at 50×40×30, 100×80×60 and 200×160×120 (5.5 k, 44 k and
+/// 356 k full voxels, 9 % of the grid, 47 % of their box) and two spheres in opposite corners of a
+/// 200×160×120 grid (89 k full voxels, 3 % of their box of 2.6 M) — with 8 B per grid voxel (the
+/// density and the full-voxel index): `full` 6.4 MB fixed, 9.9 B per box voxel (the sun
+/// transmittance and the solver's box-shaped bookkeeping) and 349 B per full voxel (the solver's
+/// hierarchy and vectors, stage 1's light, I0, I1, the lit volume and its pyramid), `diffusion`
+/// 7.3 MB, 6.1 B and 297 B. The figures here are those rounded up by a fifth or more (the estimates
+/// are 27–35 % above the measured peaks of the two 200×160×120 clouds). `single` and `reference`
+/// hold the grid and a majorant or transmittance grid (16 B per grid voxel, an upper bound).
 pub fn grid_memory(method: Method) -> GridMemory {
     const MB: u64 = 1 << 20;
     match method {
@@ -147,17 +147,17 @@ pub fn grid_memory(method: Method) -> GridMemory {
             per_full: 0,
         },
         Method::Diffusion => GridMemory {
-            fixed: 32 * MB,
+            fixed: 16 * MB,
             per_grid: 10,
-            per_box: 55,
-            per_full: 440,
+            per_box: 8,
+            per_full: 360,
         },
         // full, and any method added later: the largest estimate.
         _ => GridMemory {
-            fixed: 32 * MB,
+            fixed: 16 * MB,
             per_grid: 10,
-            per_box: 105,
-            per_full: 560,
+            per_box: 12,
+            per_full: 420,
         },
     }
 }
@@ -289,12 +289,12 @@ mod tests {
                 full: 2
             }
         );
-        // The default cloud at 100×80×60: 9 % of the grid is full and the estimate is near the
-        // 56 MB measured (docs/performance.md).
+        // The default cloud at 100×80×60: 9 % of the grid is full and the estimate is above the
+        // 26.5 MB measured at 8×6 pixels, by less than half again (docs/performance.md).
         let scene = Scene::default_scene().unwrap();
         let size = CloudSize::of(&scene.medium.density);
         assert!((40_000..50_000).contains(&size.full), "{size:?}");
         let mb = grid_memory(Method::Full).bytes(size) >> 20;
-        assert!((56..100).contains(&mb), "{mb} MB");
+        assert!((27..40).contains(&mb), "{mb} MB");
     }
 }
