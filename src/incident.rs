@@ -155,35 +155,6 @@ pub struct IncidentLight {
     pub rays: u64,
 }
 
-/// Index box [lo, hi) of every non-empty voxel grown by `margin` voxels, clipped to the grid.
-pub(crate) fn active_box(m: &Medium, margin: usize) -> Option<([usize; 3], [usize; 3])> {
-    let d = m.dims();
-    let mut lo = d;
-    let mut hi = [0usize; 3];
-    let data = m.density.data();
-    for k in 0..d[2] {
-        for j in 0..d[1] {
-            for i in 0..d[0] {
-                if data[i + d[0] * (j + d[1] * k)] > 0.0 {
-                    let c = [i, j, k];
-                    for a in 0..3 {
-                        lo[a] = lo[a].min(c[a]);
-                        hi[a] = hi[a].max(c[a] + 1);
-                    }
-                }
-            }
-        }
-    }
-    if hi[0] == 0 {
-        return None;
-    }
-    for a in 0..3 {
-        lo[a] = lo[a].saturating_sub(margin);
-        hi[a] = (hi[a] + margin).min(d[a]);
-    }
-    Some((lo, hi))
-}
-
 /// One propagated direction: a sky bin or the sun.
 struct Source {
     /// The bin's index; `None` for the sun.
@@ -700,7 +671,7 @@ pub fn compute_with_sun(
     let sun_e = sources.sun.map_or(Rgb::ZERO, |s| s.1);
     // Stored per full voxel; the empty medium's fields (no full voxel) until the sweeps fill them.
     let index = m.density.full_index();
-    let Some((lo, hi)) = active_box(m, 1) else {
+    let Some((lo, hi)) = m.active_box(1) else {
         let zero = VoxelField::filled(index.clone(), Rgb::ZERO);
         return IncidentLight {
             dims,
@@ -886,16 +857,6 @@ mod tests {
         }
     }
 
-    #[test]
-    fn active_box_is_the_occupied_box_grown_and_clipped() {
-        let m = thin_block();
-        assert_eq!(active_box(&m, 0), Some(([1, 1, 1], [5, 5, 5])));
-        assert_eq!(active_box(&m, 1), Some(([0, 0, 0], [6, 6, 6])));
-        assert_eq!(active_box(&m, 3), Some(([0, 0, 0], [6, 6, 6])));
-        let empty = Medium::new(Grid3::filled([3, 3, 3], 0.0), Vec3::ZERO, Vec3::ONE, 1.0, Rgb::ONE, 0.0);
-        assert_eq!(active_box(&empty, 1), None);
-    }
-
     /// Optically thin, uniform sky L: every voxel sees L from all 4π, so Q0 = ρσs·L (eq. 5 with
     /// ΣΔω = 4π) and Q1 = 0 (the bins' mean directions cancel), up to the attenuation ~τ.
     #[test]
@@ -1022,7 +983,7 @@ mod tests {
             }
         }
         let m = Medium::new(g, Vec3::ZERO, Vec3::new(1.0, 0.45, 1.3), 0.8, Rgb::new(0.9, 0.8, 0.7), 0.0);
-        assert_eq!(active_box(&m, 1), Some(([0; 3], dims)), "the oracle walks the whole grid");
+        assert_eq!(m.active_box(1), Some(([0; 3], dims)), "the oracle walks the whole grid");
         let bins = DirectionBins::new();
         let hook = |c: [usize; 3], _: usize| ((c[0] + c[1] + c[2]) % 2 == 0).then(|| Rgb::new(5.0, 4.0, 3.0));
         for (ss, with_hook) in [(1, false), (2, true)] {

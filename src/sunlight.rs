@@ -12,7 +12,6 @@
 //! same integral up to rounding (~1e-7 relative), at about half the loads. It stops once
 //! exp(−τ) is 0 in f32.
 
-use crate::incident::active_box;
 use crate::math::Vec3;
 use crate::medium::{Dda, Medium, SubGrid};
 use glam::DVec3;
@@ -34,7 +33,7 @@ impl SunTransmittance {
     pub fn compute(m: &Medium, sun_dir: Vec3) -> Self {
         let d = m.dims();
         let rho = &m.density;
-        let (lo, hi) = active_box(m, 1).unwrap_or(([0; 3], [0; 3]));
+        let (lo, hi) = m.active_box(1).unwrap_or(([0; 3], [0; 3]));
         let mut grid = SubGrid::filled(d, lo, hi, 1.0, 1.0);
         let (_, [nx, ny, _]) = grid.bounds();
         if nx * ny > 0 {

@@ -240,7 +240,7 @@ pub(crate) struct Domain {
 impl Domain {
     /// The tight box of the medium's full voxels (None for an empty medium).
     pub fn of(m: &Medium) -> Option<Domain> {
-        crate::incident::active_box(m, 0).map(|(lo, hi)| Domain {
+        m.active_box(0).map(|(lo, hi)| Domain {
             lo,
             dims: [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]],
         })

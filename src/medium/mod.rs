@@ -323,6 +323,35 @@ impl Medium {
     pub fn min_voxel(&self) -> f32 {
         self.voxel_size.min_element()
     }
+
+    /// Index box [lo, hi) of every non-empty voxel grown by `margin` voxels, clipped to the grid.
+    pub fn active_box(&self, margin: usize) -> Option<([usize; 3], [usize; 3])> {
+        let d = self.dims();
+        let mut lo = d;
+        let mut hi = [0usize; 3];
+        let data = self.density.data();
+        for k in 0..d[2] {
+            for j in 0..d[1] {
+                for i in 0..d[0] {
+                    if data[i + d[0] * (j + d[1] * k)] > 0.0 {
+                        let c = [i, j, k];
+                        for a in 0..3 {
+                            lo[a] = lo[a].min(c[a]);
+                            hi[a] = hi[a].max(c[a] + 1);
+                        }
+                    }
+                }
+            }
+        }
+        if hi[0] == 0 {
+            return None;
+        }
+        for a in 0..3 {
+            lo[a] = lo[a].saturating_sub(margin);
+            hi[a] = (hi[a] + margin).min(d[a]);
+        }
+        Some((lo, hi))
+    }
 }
 
 #[cfg(test)]
@@ -338,6 +367,19 @@ mod tests {
             Rgb::ONE,
             0.0,
         )
+    }
+
+    #[test]
+    fn active_box_is_the_occupied_box_grown_and_clipped() {
+        let mut g = Grid3::filled([6, 6, 6], 0.0);
+        g.set(1, 2, 1, 0.5);
+        g.set(4, 4, 3, 1.0);
+        let m = Medium::new(g, Vec3::ZERO, Vec3::ONE, 1.0, Rgb::ONE, 0.0);
+        assert_eq!(m.active_box(0), Some(([1, 2, 1], [5, 5, 4])));
+        assert_eq!(m.active_box(1), Some(([0, 1, 0], [6, 6, 5])));
+        assert_eq!(m.active_box(3), Some(([0, 0, 0], [6, 6, 6])));
+        let empty = Medium::new(Grid3::filled([3, 3, 3], 0.0), Vec3::ZERO, Vec3::ONE, 1.0, Rgb::ONE, 0.0);
+        assert_eq!(empty.active_box(1), None);
     }
 
     #[test]

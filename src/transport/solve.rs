@@ -630,7 +630,7 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         });
         out
     };
-    let (lo, hi) = crate::incident::active_box(m, 1).unwrap_or(([0; 3], dims));
+    let (lo, hi) = m.active_box(1).unwrap_or(([0; 3], dims));
     // Ground: ρ_g/π (E_sun μ_s T′ + E_down) per column, over the footprint grown as far as the
     // cloud's shadow reaches; E_down is the clear sky's plus the cloud's change to it in the last
     // sweep (light leaving the box downwards minus the sky it hides).
