@@ -174,18 +174,7 @@ impl Trilinear {
     /// loop, where LLVM otherwise keeps it out of line (a call per look-up, 10 % of `full`).
     #[inline(always)]
     pub fn new(dims: [usize; 3], p: [f32; 3]) -> Trilinear {
-        let mut lo = [0usize; 3];
-        let mut hi = [0usize; 3];
-        let mut f = [0f32; 3];
-        for a in 0..3 {
-            let n = dims[a] as isize;
-            let x = p[a] - 0.5;
-            let fl = fast_floor(x);
-            let fi = fl as isize;
-            f[a] = x - fl;
-            lo[a] = fi.clamp(0, n - 1) as usize;
-            hi[a] = (fi + 1).clamp(0, n - 1) as usize;
-        }
+        let (lo, hi, f) = Self::corners(dims, p);
         let nx = dims[0];
         let nxy = nx * dims[1];
         let ix = |i: usize, j: usize, k: usize| i + nx * j + nxy * k;
@@ -202,6 +191,25 @@ impl Trilinear {
             ],
             f,
         }
+    }
+
+    /// The lower and upper corner per axis (clamped to the grid) and the fractions of `p`
+    /// (continuous voxel coordinates, centres at +0.5) between them.
+    #[inline(always)]
+    pub fn corners(dims: [usize; 3], p: [f32; 3]) -> ([usize; 3], [usize; 3], [f32; 3]) {
+        let mut lo = [0usize; 3];
+        let mut hi = [0usize; 3];
+        let mut f = [0f32; 3];
+        for a in 0..3 {
+            let n = dims[a] as isize;
+            let x = p[a] - 0.5;
+            let fl = fast_floor(x);
+            let fi = fl as isize;
+            f[a] = x - fl;
+            lo[a] = fi.clamp(0, n - 1) as usize;
+            hi[a] = (fi + 1).clamp(0, n - 1) as usize;
+        }
+        (lo, hi, f)
     }
 
     /// Blend the corner values `at(index)` by successive linear interpolation along x, y, z.

@@ -4,7 +4,7 @@
 //! grid holding that constant outside the box (same corners, same weights, same blend).
 
 use super::Grid3;
-use crate::math::{fast_floor, Trilinear};
+use crate::math::Trilinear;
 
 /// Values on the box [lo, lo + box_dims) of a grid of `dims`, `outside` elsewhere.
 #[derive(Clone, Debug, PartialEq)]
@@ -77,16 +77,7 @@ impl SubGrid {
     #[inline]
     pub fn trilinear(&self, p: [f32; 3]) -> f32 {
         // Trilinear::new's corners and fractions, as grid coordinates.
-        let (mut lo, mut hi, mut f) = ([0usize; 3], [0usize; 3], [0f32; 3]);
-        for a in 0..3 {
-            let n = self.dims[a] as isize;
-            let x = p[a] - 0.5;
-            let fl = fast_floor(x);
-            let fi = fl as isize;
-            f[a] = x - fl;
-            lo[a] = fi.clamp(0, n - 1) as usize;
-            hi[a] = (fi + 1).clamp(0, n - 1) as usize;
-        }
+        let (lo, hi, f) = Trilinear::corners(self.dims, p);
         let pick = |c: usize, a: usize| if (c >> a) & 1 == 0 { lo[a] } else { hi[a] };
         let s = Trilinear {
             idx: std::array::from_fn(|c| self.slot([pick(c, 0), pick(c, 1), pick(c, 2)])),
