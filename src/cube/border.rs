@@ -53,7 +53,10 @@ pub fn find_border_voxels(density: &Grid3) -> Vec<([usize; 3], u8)> {
     out
 }
 
-/// The rendered border cubes: per border voxel, the mean radiance in each needed bin.
+/// The rendered border cubes: per border voxel, the mean radiance in each needed bin. Only the
+/// needed bins are stored (packed in bin order), and a voxel is found by binary search in
+/// [`Self::voxels`] (memory order), so the cubes cost memory in proportion to the cloud's
+/// surface, not the grid.
 #[derive(Clone, Debug)]
 pub struct BorderCubes {
     /// Grid dims the voxel indices refer to.
@@ -64,11 +67,11 @@ pub struct BorderCubes {
     pub faces: Vec<u8>,
     /// Bins rendered, per voxel.
     pub needed: Vec<BinMask>,
-    /// Mean radiance arriving from each bin's directions (W·m⁻²·sr⁻¹), 96 per voxel
-    /// (voxel-major); zero for bins not rendered.
+    /// Mean radiance arriving from each needed bin's directions (W·m⁻²·sr⁻¹): cube n's needed
+    /// bins in bin order, from `offsets[n]`.
     pub radiance: Vec<Rgb>,
-    /// Dense map voxel → position in `voxels` (u32::MAX for none).
-    index: Vec<u32>,
+    /// Start of each cube's bins in `radiance` (one more entry than cubes).
+    offsets: Vec<usize>,
 }
 
 impl BorderCubes {
@@ -87,18 +90,17 @@ impl BorderCubes {
     /// Position of `voxel` in [`Self::voxels`], if it is a border voxel.
     #[inline]
     pub fn find(&self, voxel: [usize; 3]) -> Option<usize> {
-        let d = self.dims;
-        if voxel[0] >= d[0] || voxel[1] >= d[1] || voxel[2] >= d[2] {
-            return None;
-        }
-        let n = self.index[voxel[0] + d[0] * (voxel[1] + d[1] * voxel[2])];
-        (n != u32::MAX).then_some(n as usize)
+        let key = |v: &[usize; 3]| (v[2], v[1], v[0]);
+        self.voxels.binary_search_by_key(&key(&voxel), key).ok()
     }
 
     /// The 96 bin radiances of cube `n` (zero where not rendered).
-    #[inline]
-    pub fn bins(&self, n: usize) -> &[Rgb] {
-        &self.radiance[n * NUM_BINS..(n + 1) * NUM_BINS]
+    pub fn bins(&self, n: usize) -> [Rgb; NUM_BINS] {
+        let mut out = [Rgb::ZERO; NUM_BINS];
+        for (b, l) in self.needed[n].iter().zip(&self.radiance[self.offsets[n]..self.offsets[n + 1]]) {
+            out[b] = *l;
+        }
+        out
     }
 
     /// Mean radiance arriving at `voxel`'s centre from the directions of bin `bin` (looking
@@ -106,7 +108,10 @@ impl BorderCubes {
     #[inline]
     pub fn lookup(&self, voxel: [usize; 3], bin: usize) -> Option<Rgb> {
         let n = self.find(voxel)?;
-        self.needed[n].contains(bin).then(|| self.radiance[n * NUM_BINS + bin])
+        let mask = self.needed[n];
+        // The bin's rank among the needed bins: how many needed bins come before it.
+        let rank = (mask.0 & ((1u128 << bin) - 1)).count_ones() as usize;
+        mask.contains(bin).then(|| self.radiance[self.offsets[n] + rank])
     }
 
     /// Radiance carried by a stage-1 ray that *travels* in bin `travel_bin` out of border voxel
@@ -143,33 +148,45 @@ pub fn render_border_cubes(lit: &LitVolume, opts: &CubeOptions, progress: &dyn P
 /// [`render_border_cubes`] with a renderer already built (pyramid and tables reused).
 pub fn render_border_cubes_with(renderer: &CubeRenderer<'_>, progress: &dyn Progress) -> BorderCubes {
     let lit = renderer.lit;
-    let dims = lit.dims();
     let found = find_border_voxels(&lit.medium.density);
-    let mut index = vec![u32::MAX; dims[0] * dims[1] * dims[2]];
-    for (n, (v, _)) in found.iter().enumerate() {
-        index[v[0] + dims[0] * (v[1] + dims[1] * v[2])] = n as u32;
-    }
     let needed: Vec<BinMask> = found.iter().map(|(_, f)| BinMask::for_faces(*f)).collect();
+    let mut offsets = Vec::with_capacity(found.len() + 1);
+    offsets.push(0);
+    for m in &needed {
+        offsets.push(offsets.last().copied().unwrap_or(0) + m.count() as usize);
+    }
     progress.begin("border cubes", found.len() as u64);
-    let mut radiance = vec![Rgb::ZERO; found.len() * NUM_BINS];
+    // Chunks of cubes in parallel, each writing its needed bins into its own part of the packed
+    // array: the result does not depend on the thread count.
     const CHUNK: usize = 64;
-    radiance.par_chunks_mut(NUM_BINS * CHUNK).enumerate().for_each(|(c, out)| {
-        let lo = c * CHUNK;
-        for (q, bins) in out.chunks_mut(NUM_BINS).enumerate() {
-            let n = lo + q;
+    let mut radiance = vec![Rgb::ZERO; offsets[found.len()]];
+    let mut parts = Vec::with_capacity(found.len().div_ceil(CHUNK));
+    let mut rest = radiance.as_mut_slice();
+    for lo in (0..found.len()).step_by(CHUNK) {
+        let hi = (lo + CHUNK).min(found.len());
+        let (part, tail) = rest.split_at_mut(offsets[hi] - offsets[lo]);
+        parts.push((lo..hi, part));
+        rest = tail;
+    }
+    parts.into_par_iter().for_each(|(cubes, out)| {
+        let mut at = 0;
+        for n in cubes.clone() {
             let [i, j, k] = found[n].0;
-            let p = lit.medium.voxel_center(i, j, k);
-            bins.copy_from_slice(&renderer.bin_radiance(p, needed[n]));
+            let all = renderer.bin_radiance(lit.medium.voxel_center(i, j, k), needed[n]);
+            for b in needed[n].iter() {
+                out[at] = all[b];
+                at += 1;
+            }
         }
-        progress.advance((out.len() / NUM_BINS) as u64);
+        progress.advance(cubes.len() as u64);
     });
     progress.end();
     BorderCubes {
-        dims,
+        dims: lit.dims(),
         voxels: found.iter().map(|(v, _)| *v).collect(),
         faces: found.iter().map(|(_, f)| *f).collect(),
         needed,
         radiance,
-        index,
+        offsets,
     }
 }

@@ -70,11 +70,12 @@ pub fn cube_boundary(base: &BoundaryLight, cubes: &BorderCubes) -> BoundaryLight
     let d = cubes.dims;
     let ghosts = cubes.voxels.iter().enumerate().map(|(n, v)| {
         let mut light = base.uniform;
+        let radiance = cubes.bins(n);
         for f in (0..6).filter(|f| cubes.faces[n] & (1 << f) != 0) {
             // The full neighbour lies along FACE_OFFSETS[f]; its face towards this voxel has the
             // opposite normal, the other index of the pair (+a, −a).
             let face = f ^ 1;
-            light[face] = hemisphere_radiance(&bins.bins, cubes.bins(n), CUBE_FACES[face].n);
+            light[face] = hemisphere_radiance(&bins.bins, &radiance, CUBE_FACES[face].n);
         }
         (v[0] + d[0] * (v[1] + d[1] * v[2]), light)
     });
