@@ -78,16 +78,16 @@ impl DualMask {
         let hi = |a: usize| (fl[a] + 1).clamp(0, n[a] as isize - 1) as usize;
         let (x, y, z) = ([lo(0), hi(0)], [lo(1), hi(1)], [lo(2), hi(2)]);
         let ix = |c: usize| x[c & 1] + n[0] * (y[(c >> 1) & 1] + n[1] * z[c >> 2]);
-        let t = Trilinear {
+        let t = level.cells.slots(&Trilinear {
             idx: std::array::from_fn(ix),
             f,
-        };
-        let rho = t.blend(|q| level.cells[q][0]);
+        });
+        let rho = t.blend(|s| level.cells.at_slot(s)[0]);
         if rho <= 1e-12 {
             return None;
         }
-        let c = t.blend(|q| {
-            let c = &level.cells[q];
+        let c = t.blend(|s| {
+            let c = level.cells.at_slot(s);
             Vec4::new(c[1], c[2], c[3], c[4])
         });
         Some([rho, c.x, c.y, c.z, c.w])
