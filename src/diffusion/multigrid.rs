@@ -747,12 +747,11 @@ impl Hierarchy {
                 .map(|(u, s)| if *u == PAD { [0.0; K] } else { v.map(|v| f(v[*u as usize], *s)) })
                 .collect()
         };
-        let bs = gather(b, |v, s| v * s);
         let mut y = match x0 {
             Some(x) => gather(x, |v, s| v / s),
             None => vec![[0.0; K]; a.len()],
         };
-        let stats = self.solve_scaled(&bs, &mut y, tol, max_iter);
+        let stats = self.solve_scaled(|| gather(b, |v, s| v * s), &mut y, tol, max_iter);
         let mut lane = 0;
         stats.map(|st| {
             let mut out = vec![0.0; a.unknowns()];
@@ -767,11 +766,19 @@ impl Hierarchy {
     }
 
     /// MGPCG on the scaled systems A y = bs (vectors on the finest level's entries), each system
-    /// stopping on its own.
-    fn solve_scaled<const K: usize>(&self, bs: &[[f64; K]], y: &mut [[f64; K]], tol: f64, max_iter: usize) -> [SolveStats; K] {
+    /// stopping on its own. `rhs` makes bs: it is needed for the first and the last residual only,
+    /// so it is not held during the iterations.
+    fn solve_scaled<const K: usize>(
+        &self,
+        rhs: impl Fn() -> Vec<[f64; K]>,
+        y: &mut [[f64; K]],
+        tol: f64,
+        max_iter: usize,
+    ) -> [SolveStats; K] {
         let a = &self.levels[0];
         let n = a.len();
-        let bnorm = dot(bs, bs).map(f64::sqrt);
+        let bs = rhs();
+        let bnorm = dot(&bs, &bs).map(f64::sqrt);
         let mut stats: [SolveStats; K] = std::array::from_fn(|_| SolveStats {
             iterations: 0,
             relative_residual: 0.0,
@@ -780,22 +787,12 @@ impl Hierarchy {
             levels: self.levels.len(),
             bytes_per_unknown: 0.0,
         });
-        let mut work: Vec<Work<K>> = self
-            .levels
-            .windows(2)
-            .map(|w| Work {
-                r: vec![[0.0; K]; w[0].len()],
-                bc: vec![[0.0; K]; w[1].len()],
-                xc: vec![[0.0; K]; w[1].len()],
-            })
-            .collect();
-        let (mut r, mut ap, mut p) = (vec![[0f64; K]; n], vec![[0f64; K]; n], vec![[0f64; K]; n]);
-        let (mut rm, mut z) = (vec![[0.0; K]; n], vec![[0.0; K]; n]);
-        // The hierarchy; bs, y, r, p and A p in f64; r and z in the multigrid's precision, and
-        // three vectors per level in `work` (the caller's b and x, per unknown, not counted).
+        // The hierarchy; y, r, p and A p in f64; r and z in the multigrid's precision, and
+        // three vectors per level in `work` (the caller's b and x, per unknown, not counted; bs
+        // lives only before and after the iterations, when p, z and `work` do not).
         let lanes = |v: usize, bytes: usize| v * bytes * K;
         let held = self.bytes()
-            + lanes(5 * n, 8)
+            + lanes(4 * n, 8)
             + lanes(2 * n, std::mem::size_of::<Mg>())
             + self
                 .levels
@@ -806,13 +803,25 @@ impl Hierarchy {
             st.bytes_per_unknown = held as f64 / (K * a.unknowns().max(1)) as f64;
         }
         // r = bs − A y.
-        let residual = |y: &[[f64; K]], r: &mut Vec<[f64; K]>, ap: &mut Vec<[f64; K]>| {
+        let residual = |bs: Vec<[f64; K]>, y: &[[f64; K]], r: &mut Vec<[f64; K]>, ap: &mut Vec<[f64; K]>| {
             self.apply(y, ap);
             r.par_iter_mut()
                 .zip(bs.par_iter().zip(&*ap))
                 .for_each(|(r, (b, q))| *r = std::array::from_fn(|k| b[k] - q[k]));
         };
-        residual(y, &mut r, &mut ap);
+        let (mut r, mut ap) = (vec![[0f64; K]; n], vec![[0f64; K]; n]);
+        residual(bs, y, &mut r, &mut ap);
+        let mut p = vec![[0f64; K]; n];
+        let (mut rm, mut z) = (vec![[0.0; K]; n], vec![[0.0; K]; n]);
+        let mut work: Vec<Work<K>> = self
+            .levels
+            .windows(2)
+            .map(|w| Work {
+                r: vec![[0.0; K]; w[0].len()],
+                bc: vec![[0.0; K]; w[1].len()],
+                xc: vec![[0.0; K]; w[1].len()],
+            })
+            .collect();
         rm.par_iter_mut().zip(&r).for_each(|(m, v)| *m = v.map(Mg::of));
         let rr = dot(&r, &r);
         let mut active = [false; K];
@@ -869,7 +878,8 @@ impl Hierarchy {
             }
         }
         // Report the true residuals.
-        residual(y, &mut r, &mut ap);
+        drop((p, rm, z, work));
+        residual(rhs(), y, &mut r, &mut ap);
         let rr = dot(&r, &r);
         for k in 0..K {
             if bnorm[k] > 0.0 {
