@@ -440,7 +440,7 @@ fn cg_step<const K: usize>(
     y: &mut [[f64; K]],
     r: &mut [[f64; K]],
     rm: &mut [[Mg; K]],
-    p: &[[f64; K]],
+    p: &[[Mg; K]],
     q: &[[f64; K]],
     alpha: [f64; K],
 ) -> [f64; K] {
@@ -453,7 +453,7 @@ fn cg_step<const K: usize>(
             let mut s = [0.0; K];
             for ((((yv, rv), rmv), pv), qv) in ys.iter_mut().zip(rs.iter_mut()).zip(rms.iter_mut()).zip(ps).zip(qs) {
                 for k in 0..K {
-                    yv[k] += alpha[k] * pv[k];
+                    yv[k] += alpha[k] * pv[k].get();
                     rv[k] -= alpha[k] * qv[k];
                     rmv[k] = Mg::of(rv[k]);
                     s[k] += rv[k] * rv[k];
@@ -694,7 +694,7 @@ impl Hierarchy {
 
     /// y = A x with the scaled finest operator in f64 (unit diagonal, couplings `plus`, each
     /// −a coupling read from the −a neighbour's +a one); returns x·y (summed as [`dot`] does).
-    fn apply<const K: usize>(&self, x: &[[f64; K]], y: &mut [[f64; K]]) -> [f64; K] {
+    fn apply<X: Real, const K: usize>(&self, x: &[[X; K]], y: &mut [[f64; K]]) -> [f64; K] {
         let rows = &self.levels[0].rows;
         let parts: Vec<[f64; K]> = y
             .par_chunks_mut(CHUNK)
@@ -705,13 +705,13 @@ impl Hierarchy {
                 for (t, yv) in ys.iter_mut().enumerate() {
                     let e = first + t;
                     let (nb, up) = (&rows[e].nbr, &self.plus[e]);
-                    let v = |q: usize, c: f64, k: usize| c * x[nb[q] as usize][k];
+                    let v = |q: usize, c: f64, k: usize| c * x[nb[q] as usize][k].get();
                     for k in 0..K {
                         let s = (v(0, self.plus[nb[0] as usize][0], k) + v(1, up[0], k))
                             + (v(2, self.plus[nb[2] as usize][1], k) + v(3, up[1], k))
                             + (v(4, self.plus[nb[4] as usize][2], k) + v(5, up[2], k));
-                        yv[k] = x[e][k] + s;
-                        xy[k] += x[e][k] * yv[k];
+                        yv[k] = x[e][k].get() + s;
+                        xy[k] += x[e][k].get() * yv[k];
                     }
                 }
                 xy
@@ -787,13 +787,13 @@ impl Hierarchy {
             levels: self.levels.len(),
             bytes_per_unknown: 0.0,
         });
-        // The hierarchy; y, r, p and A p in f64; r and z in the multigrid's precision, and
+        // The hierarchy; y, r and A p in f64; r, z and p in the multigrid's precision, and
         // three vectors per level in `work` (the caller's b and x, per unknown, not counted; bs
         // lives only before and after the iterations, when p, z and `work` do not).
         let lanes = |v: usize, bytes: usize| v * bytes * K;
         let held = self.bytes()
-            + lanes(4 * n, 8)
-            + lanes(2 * n, std::mem::size_of::<Mg>())
+            + lanes(3 * n, 8)
+            + lanes(3 * n, std::mem::size_of::<Mg>())
             + self
                 .levels
                 .windows(2)
@@ -811,7 +811,7 @@ impl Hierarchy {
         };
         let (mut r, mut ap) = (vec![[0f64; K]; n], vec![[0f64; K]; n]);
         residual(bs, y, &mut r, &mut ap);
-        let mut p = vec![[0f64; K]; n];
+        let mut p = vec![[0.0; K]; n];
         let (mut rm, mut z) = (vec![[0.0; K]; n], vec![[0.0; K]; n]);
         let mut work: Vec<Work<K>> = self
             .levels
@@ -837,7 +837,7 @@ impl Hierarchy {
         }
         if active.iter().any(|a| *a) {
             self.cycle(0, &rm, &mut z, &mut work);
-            p.par_iter_mut().zip(&z).for_each(|(p, z)| *p = z.map(Real::get));
+            p.copy_from_slice(&z);
             let mut rz = dot(&r, &z);
             let mut iterations = 0;
             while iterations < max_iter {
@@ -874,7 +874,7 @@ impl Hierarchy {
                 rz = rz_new;
                 p.par_iter_mut()
                     .zip(&z)
-                    .for_each(|(q, zz)| *q = std::array::from_fn(|k| zz[k].get() + beta[k] * q[k]));
+                    .for_each(|(q, zz)| *q = std::array::from_fn(|k| Mg::of(zz[k].get() + beta[k] * q[k].get())));
             }
         }
         // Report the true residuals.
