@@ -182,6 +182,9 @@ struct Row {
 #[derive(Clone, Debug)]
 struct Level {
     red: usize,
+    /// Every diagonal is 1 (the finest level, scaled): the first red pass is a copy and reads
+    /// no rows.
+    unit_diag: bool,
     rows: Vec<Row>,
     /// The [`Operator`]'s unknown per entry; [`PAD`] on the pads.
     unk: Vec<u32>,
@@ -272,6 +275,7 @@ impl Level {
         };
         let level = Level {
             red,
+            unit_diag: a.nodes.iter().all(|n| n.diag == 1.0),
             rows,
             unk,
             parent: Vec::new(),
@@ -342,10 +346,12 @@ impl Level {
             let first = ci * CHUNK;
             for (t, xv) in xs.iter_mut().enumerate() {
                 let e = first + t;
-                *xv = if e < self.red {
-                    b[e].map(|v| v / self.rows[e].diag)
-                } else {
+                *xv = if e >= self.red {
                     [0.0; K]
+                } else if self.unit_diag {
+                    b[e]
+                } else {
+                    b[e].map(|v| v / self.rows[e].diag)
                 };
             }
         });
