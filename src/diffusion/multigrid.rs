@@ -30,8 +30,9 @@ pub const COARSE_CELLS: usize = 800;
 /// errors (the interpolant jumps at every aggregate face, so PᵀAP overestimates a smooth error's
 /// energy and the correction comes out too small), so the correction is scaled up (Braess 1995). Measured on the procedural cloud at tolerance
 /// 1e-6 (iterations per band at 50×40×30, 100×80×60, 200×160×120): 1.0 → 31/36/46, 1.3 → 29/33/40,
-/// 1.5 → 28/32/38, 1.6 → 28/32/38, at no cost per iteration. A K-cycle (a Krylov step on every
-/// level) and two smoothing sweeps were tried and did not do better per unit of work.
+/// 1.5 → 28/32/38, 1.6 → 28/32/38, at no cost per iteration. A K-cycle (two flexible-CG steps on
+/// every coarse level, which choose the correction's length themselves) needs more iterations
+/// (docs/diffusion.md, "Solver cost"); two smoothing sweeps did not do better per unit of work.
 pub const OVER_CORRECTION: f64 = 1.5;
 
 /// Rows per parallel task (and per partial sum of the reductions: fixed, so sums do not depend
@@ -159,7 +160,8 @@ impl Real for f64 {
 
 /// The multigrid's scalar: the cycle is only a preconditioner of the f64 CG, and single
 /// precision halves its memory traffic (iterations unchanged at tolerance 1e-6, and 1e-12 is
-/// still reached).
+/// still reached). Also the CG's search direction p: A p, the iterate and the residual stay f64
+/// (r remains the iterate's residual; only the conjugacy is rounded).
 type Mg = f32;
 
 /// One row of a [`Level`]: the couplings to the six neighbours (−x, +x, −y, +y, −z, +z), the
