@@ -30,8 +30,9 @@ pub const COARSE_CELLS: usize = 800;
 /// errors (the interpolant jumps at every aggregate face, so PᵀAP overestimates a smooth error's
 /// energy and the correction comes out too small), so the correction is scaled up (Braess 1995). Measured on the procedural cloud at tolerance
 /// 1e-6 (iterations per band at 50×40×30, 100×80×60, 200×160×120): 1.0 → 31/36/46, 1.3 → 29/33/40,
-/// 1.5 → 28/32/38, 1.6 → 28/32/38, at no cost per iteration. A K-cycle (a Krylov step on every
-/// level) and two smoothing sweeps were tried and did not do better per unit of work.
+/// 1.5 → 28/32/38, 1.6 → 28/32/38, at no cost per iteration. A K-cycle (two flexible-CG steps on
+/// every coarse level, which choose the correction's length themselves) needs more iterations
+/// (docs/diffusion.md, "Solver cost"); two smoothing sweeps did not do better per unit of work.
 pub const OVER_CORRECTION: f64 = 1.5;
 
 /// Rows per parallel task (and per partial sum of the reductions: fixed, so sums do not depend
@@ -159,7 +160,8 @@ impl Real for f64 {
 
 /// The multigrid's scalar: the cycle is only a preconditioner of the f64 CG, and single
 /// precision halves its memory traffic (iterations unchanged at tolerance 1e-6, and 1e-12 is
-/// still reached).
+/// still reached). Also the CG's search direction p: A p, the iterate and the residual stay f64
+/// (r remains the iterate's residual; only the conjugacy is rounded).
 type Mg = f32;
 
 /// One row of a [`Level`]: the couplings to the six neighbours (−x, +x, −y, +y, −z, +z), the
@@ -182,6 +184,9 @@ struct Row {
 #[derive(Clone, Debug)]
 struct Level {
     red: usize,
+    /// Every diagonal is 1 (the finest level, scaled): the first red pass is a copy and reads
+    /// no rows.
+    unit_diag: bool,
     rows: Vec<Row>,
     /// The [`Operator`]'s unknown per entry; [`PAD`] on the pads.
     unk: Vec<u32>,
@@ -272,6 +277,7 @@ impl Level {
         };
         let level = Level {
             red,
+            unit_diag: a.nodes.iter().all(|n| n.diag == 1.0),
             rows,
             unk,
             parent: Vec::new(),
@@ -342,10 +348,12 @@ impl Level {
             let first = ci * CHUNK;
             for (t, xv) in xs.iter_mut().enumerate() {
                 let e = first + t;
-                *xv = if e < self.red {
-                    b[e].map(|v| v / self.rows[e].diag)
-                } else {
+                *xv = if e >= self.red {
                     [0.0; K]
+                } else if self.unit_diag {
+                    b[e]
+                } else {
+                    b[e].map(|v| v / self.rows[e].diag)
                 };
             }
         });
@@ -440,7 +448,7 @@ fn cg_step<const K: usize>(
     y: &mut [[f64; K]],
     r: &mut [[f64; K]],
     rm: &mut [[Mg; K]],
-    p: &[[f64; K]],
+    p: &[[Mg; K]],
     q: &[[f64; K]],
     alpha: [f64; K],
 ) -> [f64; K] {
@@ -453,7 +461,7 @@ fn cg_step<const K: usize>(
             let mut s = [0.0; K];
             for ((((yv, rv), rmv), pv), qv) in ys.iter_mut().zip(rs.iter_mut()).zip(rms.iter_mut()).zip(ps).zip(qs) {
                 for k in 0..K {
-                    yv[k] += alpha[k] * pv[k];
+                    yv[k] += alpha[k] * pv[k].get();
                     rv[k] -= alpha[k] * qv[k];
                     rmv[k] = Mg::of(rv[k]);
                     s[k] += rv[k] * rv[k];
@@ -694,7 +702,7 @@ impl Hierarchy {
 
     /// y = A x with the scaled finest operator in f64 (unit diagonal, couplings `plus`, each
     /// −a coupling read from the −a neighbour's +a one); returns x·y (summed as [`dot`] does).
-    fn apply<const K: usize>(&self, x: &[[f64; K]], y: &mut [[f64; K]]) -> [f64; K] {
+    fn apply<X: Real, const K: usize>(&self, x: &[[X; K]], y: &mut [[f64; K]]) -> [f64; K] {
         let rows = &self.levels[0].rows;
         let parts: Vec<[f64; K]> = y
             .par_chunks_mut(CHUNK)
@@ -705,13 +713,13 @@ impl Hierarchy {
                 for (t, yv) in ys.iter_mut().enumerate() {
                     let e = first + t;
                     let (nb, up) = (&rows[e].nbr, &self.plus[e]);
-                    let v = |q: usize, c: f64, k: usize| c * x[nb[q] as usize][k];
+                    let v = |q: usize, c: f64, k: usize| c * x[nb[q] as usize][k].get();
                     for k in 0..K {
                         let s = (v(0, self.plus[nb[0] as usize][0], k) + v(1, up[0], k))
                             + (v(2, self.plus[nb[2] as usize][1], k) + v(3, up[1], k))
                             + (v(4, self.plus[nb[4] as usize][2], k) + v(5, up[2], k));
-                        yv[k] = x[e][k] + s;
-                        xy[k] += x[e][k] * yv[k];
+                        yv[k] = x[e][k].get() + s;
+                        xy[k] += x[e][k].get() * yv[k];
                     }
                 }
                 xy
@@ -747,12 +755,11 @@ impl Hierarchy {
                 .map(|(u, s)| if *u == PAD { [0.0; K] } else { v.map(|v| f(v[*u as usize], *s)) })
                 .collect()
         };
-        let bs = gather(b, |v, s| v * s);
         let mut y = match x0 {
             Some(x) => gather(x, |v, s| v / s),
             None => vec![[0.0; K]; a.len()],
         };
-        let stats = self.solve_scaled(&bs, &mut y, tol, max_iter);
+        let stats = self.solve_scaled(|| gather(b, |v, s| v * s), &mut y, tol, max_iter);
         let mut lane = 0;
         stats.map(|st| {
             let mut out = vec![0.0; a.unknowns()];
@@ -767,11 +774,19 @@ impl Hierarchy {
     }
 
     /// MGPCG on the scaled systems A y = bs (vectors on the finest level's entries), each system
-    /// stopping on its own.
-    fn solve_scaled<const K: usize>(&self, bs: &[[f64; K]], y: &mut [[f64; K]], tol: f64, max_iter: usize) -> [SolveStats; K] {
+    /// stopping on its own. `rhs` makes bs: it is needed for the first and the last residual only,
+    /// so it is not held during the iterations.
+    fn solve_scaled<const K: usize>(
+        &self,
+        rhs: impl Fn() -> Vec<[f64; K]>,
+        y: &mut [[f64; K]],
+        tol: f64,
+        max_iter: usize,
+    ) -> [SolveStats; K] {
         let a = &self.levels[0];
         let n = a.len();
-        let bnorm = dot(bs, bs).map(f64::sqrt);
+        let bs = rhs();
+        let bnorm = dot(&bs, &bs).map(f64::sqrt);
         let mut stats: [SolveStats; K] = std::array::from_fn(|_| SolveStats {
             iterations: 0,
             relative_residual: 0.0,
@@ -780,23 +795,13 @@ impl Hierarchy {
             levels: self.levels.len(),
             bytes_per_unknown: 0.0,
         });
-        let mut work: Vec<Work<K>> = self
-            .levels
-            .windows(2)
-            .map(|w| Work {
-                r: vec![[0.0; K]; w[0].len()],
-                bc: vec![[0.0; K]; w[1].len()],
-                xc: vec![[0.0; K]; w[1].len()],
-            })
-            .collect();
-        let (mut r, mut ap, mut p) = (vec![[0f64; K]; n], vec![[0f64; K]; n], vec![[0f64; K]; n]);
-        let (mut rm, mut z) = (vec![[0.0; K]; n], vec![[0.0; K]; n]);
-        // The hierarchy; bs, y, r, p and A p in f64; r and z in the multigrid's precision, and
-        // three vectors per level in `work` (the caller's b and x, per unknown, not counted).
+        // The hierarchy; y, r and A p in f64; r, z and p in the multigrid's precision, and
+        // three vectors per level in `work` (the caller's b and x, per unknown, not counted; bs
+        // lives only before and after the iterations, when p, z and `work` do not).
         let lanes = |v: usize, bytes: usize| v * bytes * K;
         let held = self.bytes()
-            + lanes(5 * n, 8)
-            + lanes(2 * n, std::mem::size_of::<Mg>())
+            + lanes(3 * n, 8)
+            + lanes(3 * n, std::mem::size_of::<Mg>())
             + self
                 .levels
                 .windows(2)
@@ -806,13 +811,25 @@ impl Hierarchy {
             st.bytes_per_unknown = held as f64 / (K * a.unknowns().max(1)) as f64;
         }
         // r = bs − A y.
-        let residual = |y: &[[f64; K]], r: &mut Vec<[f64; K]>, ap: &mut Vec<[f64; K]>| {
+        let residual = |bs: Vec<[f64; K]>, y: &[[f64; K]], r: &mut Vec<[f64; K]>, ap: &mut Vec<[f64; K]>| {
             self.apply(y, ap);
             r.par_iter_mut()
                 .zip(bs.par_iter().zip(&*ap))
                 .for_each(|(r, (b, q))| *r = std::array::from_fn(|k| b[k] - q[k]));
         };
-        residual(y, &mut r, &mut ap);
+        let (mut r, mut ap) = (vec![[0f64; K]; n], vec![[0f64; K]; n]);
+        residual(bs, y, &mut r, &mut ap);
+        let mut p = vec![[0.0; K]; n];
+        let (mut rm, mut z) = (vec![[0.0; K]; n], vec![[0.0; K]; n]);
+        let mut work: Vec<Work<K>> = self
+            .levels
+            .windows(2)
+            .map(|w| Work {
+                r: vec![[0.0; K]; w[0].len()],
+                bc: vec![[0.0; K]; w[1].len()],
+                xc: vec![[0.0; K]; w[1].len()],
+            })
+            .collect();
         rm.par_iter_mut().zip(&r).for_each(|(m, v)| *m = v.map(Mg::of));
         let rr = dot(&r, &r);
         let mut active = [false; K];
@@ -828,7 +845,7 @@ impl Hierarchy {
         }
         if active.iter().any(|a| *a) {
             self.cycle(0, &rm, &mut z, &mut work);
-            p.par_iter_mut().zip(&z).for_each(|(p, z)| *p = z.map(Real::get));
+            p.copy_from_slice(&z);
             let mut rz = dot(&r, &z);
             let mut iterations = 0;
             while iterations < max_iter {
@@ -865,11 +882,12 @@ impl Hierarchy {
                 rz = rz_new;
                 p.par_iter_mut()
                     .zip(&z)
-                    .for_each(|(q, zz)| *q = std::array::from_fn(|k| zz[k].get() + beta[k] * q[k]));
+                    .for_each(|(q, zz)| *q = std::array::from_fn(|k| Mg::of(zz[k].get() + beta[k] * q[k].get())));
             }
         }
         // Report the true residuals.
-        residual(y, &mut r, &mut ap);
+        drop((p, rm, z, work));
+        residual(rhs(), y, &mut r, &mut ap);
         let rr = dot(&r, &r);
         for k in 0..K {
             if bnorm[k] > 0.0 {
