@@ -274,6 +274,10 @@ pub struct CubeRenderer<'a> {
     levels: usize,
     /// The empty dual cells of each level used.
     masks: Arc<Vec<DualMask>>,
+    /// Per level used, the world box (m) of its occupied blocks (None: none occupied); a ray
+    /// walks a level's blocks only inside it, and misses every level outside their union.
+    occupied: Arc<Vec<Option<(Vec3, Vec3)>>>,
+    occupied_union: Option<(Vec3, Vec3)>,
     /// The options.
     pub opts: CubeOptions,
     /// Pixel tables at `opts.res`.
@@ -297,11 +301,21 @@ impl<'a> CubeRenderer<'a> {
         let pyramid = lit.pyramid();
         let levels = opts.max_levels.max(1).min(pyramid.levels.len());
         let masks = Arc::new(pyramid.levels[..levels].iter().map(DualMask::new).collect());
+        // Cut at the coarsest level's box, which contains every level's cells.
+        let top = pyramid.levels[levels - 1].voxel_size * dims_f(pyramid.levels[levels - 1].dims);
+        let occupied: Vec<Option<(Vec3, Vec3)>> = pyramid.levels[..levels]
+            .iter()
+            .map(|lev| occupied_box(lev).map(|(lo, hi)| (pyramid.origin + lo, pyramid.origin + hi.min(top))))
+            .collect();
+        let occupied_union = occupied.iter().flatten().copied().reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)));
+        let occupied = Arc::new(occupied);
         CubeRenderer {
             lit,
             pyramid,
             levels,
             masks,
+            occupied,
+            occupied_union,
             opts: opts.clone(),
             pixels: PixelTable::new(opts.res),
             h_min: lit.medium.min_voxel(),
@@ -338,12 +352,14 @@ impl<'a> CubeRenderer<'a> {
         let dn = Vec3::select(d.abs().cmplt(Vec3::splat(1e-20)), Vec3::splat(1e-20), d);
         let inv_d = Vec3::ONE / dn;
         let positive = d.cmpgt(Vec3::ZERO);
-        // The coarsest level's box contains every level's box.
-        let (t_box0, t_box1) = {
-            let top = levels.last().expect("pyramid has a level");
-            let hi = origin + top.voxel_size * dims_f(top.dims);
-            let (ta, tb) = ((origin - o) * inv_d, (hi - o) * inv_d);
+        let slab = |lo: Vec3, hi: Vec3| {
+            let (ta, tb) = ((lo - o) * inv_d, (hi - o) * inv_d);
             (ta.min(tb).max_element().max(0.0), ta.max(tb).min_element().min(t_end))
+        };
+        // Only the occupied blocks hold density: the union of the levels' occupied boxes bounds it.
+        let (t_box0, t_box1) = match self.occupied_union {
+            Some((lo, hi)) => slab(lo, hi),
+            None => (0.0, 0.0),
         };
         let mut tr = 1.0f32;
         let mut l = Rgb::ZERO;
@@ -359,7 +375,11 @@ impl<'a> CubeRenderer<'a> {
                 } else {
                     self.h_min * (1u32 << (li + 1)) as f32 * inv_cone
                 };
-                let (ta, tb) = (ts.max(t_box0), te.min(t_box1));
+                let Some((lo, hi)) = self.occupied[li] else {
+                    continue;
+                };
+                let (oa, ob) = slab(lo, hi);
+                let (ta, tb) = (ts.max(oa), te.min(ob));
                 if ta >= tb {
                     continue;
                 }
@@ -377,14 +397,15 @@ impl<'a> CubeRenderer<'a> {
                     let bi = Vec3::new(fast_floor(f.x), fast_floor(f.y), fast_floor(f.z));
                     let next = origin + (bi + Vec3::select(positive, Vec3::ONE, Vec3::ZERO)) * cell;
                     let t_exit = ((next - o) * inv_d).min_element().min(tb).max(t + nudge);
-                    let inside = bi.x >= 0.0
-                        && bi.y >= 0.0
-                        && bi.z >= 0.0
-                        && (bi.x as usize) < bd[0]
-                        && (bi.y as usize) < bd[1]
-                        && (bi.z as usize) < bd[2];
-                    if inside && lev.occupancy.get([bi.x as usize, bi.y as usize, bi.z as usize]) > 0.0 {
-                        let n = ((t_exit - t) / step).ceil().max(1.0);
+                    // Block indices as integers once; a negative one wraps above the bound.
+                    let (bx, by, bz) = (
+                        bi.x as i32 as u32 as usize,
+                        bi.y as i32 as u32 as usize,
+                        bi.z as i32 as u32 as usize,
+                    );
+                    let inside = bx < bd[0] && by < bd[1] && bz < bd[2];
+                    if inside && lev.occupancy.max_density[bx + bd[0] * (by + bd[1] * bz)] > 0.0 {
+                        let n = fast_ceil((t_exit - t) / step).max(1.0);
                         let len = (t_exit - t) / n;
                         for k in 0..n as u32 {
                             let ts = t + (k as f32 + 0.5) * len;
@@ -487,6 +508,37 @@ fn beyond_i0(lit: &LitVolume, v: Vec3, rho: f32, i0: Rgb, to_eye: Vec3) -> Rgb {
         None => d,
     };
     d - i0
+}
+
+/// The box (m, from the pyramid's origin) of `lev`'s occupied blocks (ρ bound > 0), None when
+/// none is.
+fn occupied_box(lev: &crate::lit::pyramid::Level) -> Option<(Vec3, Vec3)> {
+    let occ = &lev.occupancy;
+    let d = occ.dims;
+    let (mut lo, mut hi) = ([usize::MAX; 3], [0usize; 3]);
+    for k in 0..d[2] {
+        for j in 0..d[1] {
+            for i in 0..d[0] {
+                if occ.get([i, j, k]) > 0.0 {
+                    for (a, x) in [i, j, k].into_iter().enumerate() {
+                        lo[a] = lo[a].min(x);
+                        hi[a] = hi[a].max(x + 1);
+                    }
+                }
+            }
+        }
+    }
+    if lo[0] == usize::MAX {
+        return None;
+    }
+    let cell = lev.voxel_size * BLOCK as f32;
+    Some((cell * dims_f(lo), cell * dims_f(hi)))
+}
+
+/// ceil for 0 ≤ x < 2³¹ without a libm call (no SSE4.1 round on the default target).
+#[inline(always)]
+fn fast_ceil(x: f32) -> f32 {
+    -fast_floor(-x)
 }
 
 #[inline]
