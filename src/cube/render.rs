@@ -327,9 +327,44 @@ impl<'a> CubeRenderer<'a> {
     /// Radiance (W·m⁻²·sr⁻¹) arriving at `o` from direction `d` (unit), for a cone of angular
     /// width `cone` (rad).
     pub fn trace(&self, o: Vec3, d: Vec3, cone: f32) -> Rgb {
+        let t_ground = self.lit.ground_hit(o, d);
+        let (l, tr) = self.march(o, d, cone, t_ground, 0..usize::MAX);
+        self.finish(o, d, t_ground, l, tr)
+    }
+
+    /// [`Self::trace`] with the march through the pyramid's coarser levels (from level 1, where
+    /// the cone's footprint reaches two finest voxels) taken from `far`, a ray from a point
+    /// near `o` in the same direction: (radiance and transmittance of the finest level from `o`,
+    /// whether `far` is needed). The border cubes of neighbouring voxels share their far rays.
+    pub fn trace_near(&self, o: Vec3, d: Vec3, cone: f32) -> (Rgb, f32) {
+        self.march(o, d, cone, self.lit.ground_hit(o, d), 0..1)
+    }
+
+    /// The far part of a ray for [`Self::trace_near`]: from `q`, levels 1 and coarser, with
+    /// what lies behind (its transmittance starts at 1).
+    pub fn trace_far(&self, q: Vec3, d: Vec3, cone: f32) -> Rgb {
+        let t_ground = self.lit.ground_hit(q, d);
+        let (l, tr) = self.march(q, d, cone, t_ground, 1..usize::MAX);
+        self.finish(q, d, t_ground, l, tr)
+    }
+
+    /// `l` plus the background behind, seen with transmittance `tr`.
+    #[inline]
+    fn finish(&self, o: Vec3, d: Vec3, t_ground: Option<f32>, l: Rgb, tr: f32) -> Rgb {
+        let mut l = l;
+        if tr > 0.0 {
+            l += self.lit.background(o, d, t_ground) * tr;
+        }
+        l
+    }
+
+    /// Radiance gathered and transmittance left along `o + t·d` through the pyramid levels in
+    /// `range` (each level at the distances where the cone's footprint matches it), stopping at
+    /// the ground (`t_ground`); transmittance 0 once cut off.
+    #[inline]
+    fn march(&self, o: Vec3, d: Vec3, cone: f32, t_ground: Option<f32>, range: std::ops::Range<usize>) -> (Rgb, f32) {
         let lit = self.lit;
         let m = &lit.medium;
-        let t_ground = lit.ground_hit(o, d);
         let t_end = t_ground.unwrap_or(f32::INFINITY);
         // Sunlight travels along −sun.dir; the scattered light travels towards the eye, −d.
         // The sun's exact single scattering per unit extinction (albedo included; TMS under δ-M).
@@ -364,7 +399,7 @@ impl<'a> CubeRenderer<'a> {
         let mut tr = 1.0f32;
         let mut l = Rgb::ZERO;
         if t_box0 < t_box1 {
-            'levels: for (li, lev) in levels.iter().enumerate() {
+            'levels: for (li, lev) in levels.iter().enumerate().take(range.end).skip(range.start) {
                 let ts = if li == 0 {
                     0.0
                 } else {
@@ -451,10 +486,7 @@ impl<'a> CubeRenderer<'a> {
                 }
             }
         }
-        if tr > 0.0 {
-            l += lit.background(o, d, t_ground) * tr;
-        }
-        l
+        (l, tr)
     }
 
     /// Render the bins in `needed` of a world-aligned cube at `p` (m); other pixels stay black.
@@ -474,23 +506,28 @@ impl<'a> CubeRenderer<'a> {
     /// bins not in `needed` are zero. Same numbers as `render_cube(p, needed).bin_averages()`
     /// without storing the image.
     pub fn bin_radiance(&self, p: Vec3, needed: BinMask) -> [Rgb; NUM_BINS] {
-        let res = self.opts.res;
         let mut out = [Rgb::ZERO; NUM_BINS];
         for b in needed.iter() {
-            let mut acc = [0f64; 3];
-            let mut area = 0f64;
-            for (face, i, j) in self.pixels.bin_pixels(b) {
-                let k = (face * res + j) * res + i;
-                let sa = self.pixels.solid_angle[j * res + i];
-                let l = self.trace(p, self.pixels.dirs[k], self.pixels.cone[j * res + i]);
-                acc[0] += l.x as f64 * sa;
-                acc[1] += l.y as f64 * sa;
-                acc[2] += l.z as f64 * sa;
-                area += sa;
-            }
-            out[b] = Rgb::new((acc[0] / area) as f32, (acc[1] / area) as f32, (acc[2] / area) as f32);
+            out[b] = self.bin_mean(b, |k, cone| self.trace(p, self.pixels.dirs[k], cone));
         }
         out
+    }
+
+    /// Solid-angle weighted mean over bin `b`'s pixels of `radiance(pixel index, cone width)`.
+    pub fn bin_mean(&self, b: usize, radiance: impl Fn(usize, f32) -> Rgb) -> Rgb {
+        let res = self.opts.res;
+        let mut acc = [0f64; 3];
+        let mut area = 0f64;
+        for (face, i, j) in self.pixels.bin_pixels(b) {
+            let k = (face * res + j) * res + i;
+            let sa = self.pixels.solid_angle[j * res + i];
+            let l = radiance(k, self.pixels.cone[j * res + i]);
+            acc[0] += l.x as f64 * sa;
+            acc[1] += l.y as f64 * sa;
+            acc[2] += l.z as f64 * sa;
+            area += sa;
+        }
+        Rgb::new((acc[0] / area) as f32, (acc[1] / area) as f32, (acc[2] / area) as f32)
     }
 }
 
