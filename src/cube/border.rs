@@ -145,14 +145,28 @@ pub fn render_border_cubes(lit: &LitVolume, opts: &CubeOptions, progress: &dyn P
     render_border_cubes_with(&renderer, progress)
 }
 
+/// Blocks of 2^[`SHARED_SCALES`] voxels per edge are the largest whose border voxels share rays.
+pub const SHARED_SCALES: usize = 3;
+
+/// Where a block of 2^`scale` voxels per edge takes over a pixel's ray (m), given the distance
+/// `unit` at which the cone is one finest voxel wide: 2^(scale − 1)·[`SHARED_FOOTPRINTS`]·unit
+/// (scale ≥ 1), where the cone is that many times the block's edge wide.
+fn piece_start(unit: f32, scale: usize) -> f32 {
+    SHARED_FOOTPRINTS * unit * (1u32 << scale) as f32 * 0.5
+}
+
+/// Cone widths per block edge at which a block's shared piece begins (see [`piece_start`]).
+pub const SHARED_FOOTPRINTS: f32 = 2.0;
+
 /// [`render_border_cubes`] with a renderer already built (pyramid and tables reused).
 ///
-/// **Shared far rays.** Beyond the distance where a pixel's cone is two finest voxels wide (the
-/// pyramid's level 1 on), the rays of border voxels in the same 2×2×2 block of voxels differ by
-/// less than the cone's footprint: each block traces that far part once per pixel of the union
-/// of its voxels' needed bins, from the mean of their centres, and each voxel traces only its
-/// own finest level in front of it (radiance = near + near transmittance × far). Measured on the
-/// default scene: the border rays' samples halve (docs/performance.md).
+/// **Shared rays.** A pixel's ray marches pyramid level l where its cone is 2^l finest voxels
+/// wide, so there the rays of the border voxels in one block of 2^l voxels per edge differ by
+/// less than the cone's footprint. Each such block traces that level's piece once per pixel of
+/// the union of its voxels' needed bins, from the mean of their centres (level
+/// [`SHARED_SCALES`] and coarser from the largest block, with what lies behind); each voxel
+/// marches only the finest level itself. A pixel's radiance is the pieces composited front to
+/// back: L₀ + T₀·(L₁ + T₁·(…)). Measured in docs/performance.md.
 pub fn render_border_cubes_with(renderer: &CubeRenderer<'_>, progress: &dyn Progress) -> BorderCubes {
     let lit = renderer.lit;
     let found = find_border_voxels(&lit.medium.density);
@@ -162,53 +176,88 @@ pub fn render_border_cubes_with(renderer: &CubeRenderer<'_>, progress: &dyn Prog
     for m in &needed {
         offsets.push(offsets.last().copied().unwrap_or(0) + m.count() as usize);
     }
-    // The voxels of each 2×2×2 block, blocks in memory order of their first voxel.
-    let key = |v: [usize; 3]| (v[2] / 2, v[1] / 2, v[0] / 2);
+    let top = SHARED_SCALES.min(renderer.levels().saturating_sub(1));
+    // The voxels of each largest block, blocks in memory order of their first voxel.
+    let key = |n: usize, scale: usize| {
+        let v = found[n].0;
+        (v[2] >> scale, v[1] >> scale, v[0] >> scale)
+    };
     let mut order: Vec<usize> = (0..found.len()).collect();
-    order.sort_by_key(|&n| (key(found[n].0), n));
-    let groups: Vec<&[usize]> = order.chunk_by(|&a, &b| key(found[a].0) == key(found[b].0)).collect();
+    order.sort_by_key(|&n| (key(n, top), n));
+    let groups: Vec<&[usize]> = order.chunk_by(|&a, &b| key(a, top) == key(b, top)).collect();
     progress.begin("border cubes", found.len() as u64);
     // Groups in parallel, each returning its voxels' packed bins; scattered in order after, so
     // the result does not depend on the thread count.
     let res = renderer.opts.res;
     let px = &renderer.pixels;
+    let centre = |n: usize| {
+        let [i, j, k] = found[n].0;
+        lit.medium.voxel_center(i, j, k)
+    };
+    // The radiance behind level `scale`'s piece, per cube pixel, for the members of one block.
+    let shared = |members: &[usize], scale: usize, behind: Option<&[Rgb]>| -> Vec<Rgb> {
+        let q = members.iter().fold(Vec3::ZERO, |acc, &n| acc + centre(n)) / members.len() as f32;
+        let union = members.iter().fold(BinMask::NONE, |m, &n| m.union(needed[n]));
+        let mut out = vec![Rgb::ZERO; 6 * res * res];
+        for b in union.iter() {
+            for (face, i, j) in px.bin_pixels(b) {
+                let k = (face * res + j) * res + i;
+                let (d, cone) = (px.dirs[k], px.cone[j * res + i]);
+                let start = piece_start(renderer.footprint_distance(cone), scale);
+                out[k] = match behind {
+                    None => renderer.trace_from(q, d, cone, start),
+                    Some(far) => {
+                        let end = piece_start(renderer.footprint_distance(cone), scale + 1);
+                        let (l, tr) = renderer.trace_span(q, d, cone, start, end);
+                        if tr > 0.0 {
+                            l + far[k] * tr
+                        } else {
+                            l
+                        }
+                    }
+                };
+            }
+        }
+        out
+    };
     let per_group: Vec<Vec<(usize, Vec<Rgb>)>> = groups
         .par_iter()
         .map(|members| {
-            let centre = |n: usize| {
-                let [i, j, k] = found[n].0;
-                lit.medium.voxel_center(i, j, k)
-            };
-            let q = members.iter().fold(Vec3::ZERO, |acc, &n| acc + centre(n)) / members.len() as f32;
-            let union = members.iter().fold(BinMask::NONE, |m, &n| m.union(needed[n]));
-            // The far radiance of each pixel of the union's bins, by cube pixel index.
-            let mut far = vec![Rgb::ZERO; 6 * res * res];
-            for b in union.iter() {
-                for (face, i, j) in px.bin_pixels(b) {
-                    let k = (face * res + j) * res + i;
-                    far[k] = renderer.trace_far(q, px.dirs[k], px.cone[j * res + i]);
+            let mut out = Vec::with_capacity(members.len());
+            // Blocks from the largest down to single voxels, each with the radiance behind it.
+            let mut stack: Vec<(Vec<usize>, usize, Option<Vec<Rgb>>)> = vec![(members.to_vec(), top, None)];
+            while let Some((mut ms, scale, behind)) = stack.pop() {
+                if scale == 0 {
+                    let far = behind.as_deref();
+                    for &n in &ms {
+                        let p = centre(n);
+                        let bins = needed[n]
+                            .iter()
+                            .map(|b| {
+                                renderer.bin_mean(b, |k, cone| match far {
+                                    None => renderer.trace(p, px.dirs[k], cone),
+                                    Some(far) => {
+                                        let end = piece_start(renderer.footprint_distance(cone), 1);
+                                        let (l, tr) = renderer.trace_span(p, px.dirs[k], cone, 0.0, end);
+                                        if tr > 0.0 {
+                                            l + far[k] * tr
+                                        } else {
+                                            l
+                                        }
+                                    }
+                                })
+                            })
+                            .collect();
+                        out.push((n, bins));
+                    }
+                    continue;
+                }
+                let here = shared(&ms, scale, behind.as_deref());
+                ms.sort_by_key(|&n| (key(n, scale - 1), n));
+                for sub in ms.chunk_by(|&a, &b| key(a, scale - 1) == key(b, scale - 1)) {
+                    stack.push((sub.to_vec(), scale - 1, Some(here.clone())));
                 }
             }
-            let out = members
-                .iter()
-                .map(|&n| {
-                    let p = centre(n);
-                    let bins = needed[n]
-                        .iter()
-                        .map(|b| {
-                            renderer.bin_mean(b, |k, cone| {
-                                let (l, tr) = renderer.trace_near(p, px.dirs[k], cone);
-                                if tr > 0.0 {
-                                    l + far[k] * tr
-                                } else {
-                                    l
-                                }
-                            })
-                        })
-                        .collect();
-                    (n, bins)
-                })
-                .collect();
             progress.advance(members.len() as u64);
             out
         })

@@ -324,28 +324,37 @@ impl<'a> CubeRenderer<'a> {
         }
     }
 
+    /// Pyramid levels used.
+    pub fn levels(&self) -> usize {
+        self.levels.min(self.pyramid.levels.len())
+    }
+
     /// Radiance (W·m⁻²·sr⁻¹) arriving at `o` from direction `d` (unit), for a cone of angular
     /// width `cone` (rad).
     pub fn trace(&self, o: Vec3, d: Vec3, cone: f32) -> Rgb {
         let t_ground = self.lit.ground_hit(o, d);
-        let (l, tr) = self.march(o, d, cone, t_ground, 0..usize::MAX);
+        let (l, tr) = self.march(o, d, cone, t_ground, 0.0..f32::INFINITY);
         self.finish(o, d, t_ground, l, tr)
     }
 
-    /// [`Self::trace`] with the march through the pyramid's coarser levels (from level 1, where
-    /// the cone's footprint reaches two finest voxels) taken from `far`, a ray from a point
-    /// near `o` in the same direction: (radiance and transmittance of the finest level from `o`,
-    /// whether `far` is needed). The border cubes of neighbouring voxels share their far rays.
-    pub fn trace_near(&self, o: Vec3, d: Vec3, cone: f32) -> (Rgb, f32) {
-        self.march(o, d, cone, self.lit.ground_hit(o, d), 0..1)
+    /// Distance (m) at which a cone of width `cone` is one finest voxel wide: where
+    /// [`Self::trace`] leaves the finest level for the next it is twice that.
+    pub fn footprint_distance(&self, cone: f32) -> f32 {
+        self.h_min / (cone.max(1e-6) * self.opts.lod_bias.exp2())
     }
 
-    /// The far part of a ray for [`Self::trace_near`]: from `q`, levels 1 and coarser, with
-    /// what lies behind (its transmittance starts at 1).
-    pub fn trace_far(&self, q: Vec3, d: Vec3, cone: f32) -> Rgb {
-        let t_ground = self.lit.ground_hit(q, d);
-        let (l, tr) = self.march(q, d, cone, t_ground, 1..usize::MAX);
-        self.finish(q, d, t_ground, l, tr)
+    /// Radiance gathered and transmittance left along `o + t·d` (cone width `cone`) for
+    /// t ∈ [t0, t1) only (each level where [`Self::trace`] marches it): a piece of the ray, whose
+    /// far pieces nearby points can share (the border cubes).
+    pub fn trace_span(&self, o: Vec3, d: Vec3, cone: f32, t0: f32, t1: f32) -> (Rgb, f32) {
+        self.march(o, d, cone, self.lit.ground_hit(o, d), t0..t1)
+    }
+
+    /// The last piece of a ray for [`Self::trace_span`]: t ≥ `t0`, with what lies behind.
+    pub fn trace_from(&self, o: Vec3, d: Vec3, cone: f32, t0: f32) -> Rgb {
+        let t_ground = self.lit.ground_hit(o, d);
+        let (l, tr) = self.march(o, d, cone, t_ground, t0..f32::INFINITY);
+        self.finish(o, d, t_ground, l, tr)
     }
 
     /// `l` plus the background behind, seen with transmittance `tr`.
@@ -358,11 +367,11 @@ impl<'a> CubeRenderer<'a> {
         l
     }
 
-    /// Radiance gathered and transmittance left along `o + t·d` through the pyramid levels in
-    /// `range` (each level at the distances where the cone's footprint matches it), stopping at
-    /// the ground (`t_ground`); transmittance 0 once cut off.
+    /// Radiance gathered and transmittance left along `o + t·d` through the pyramid (each level
+    /// at the distances where the cone's footprint matches it), for t in `span` only, stopping
+    /// at the ground (`t_ground`); transmittance 0 once cut off.
     #[inline]
-    fn march(&self, o: Vec3, d: Vec3, cone: f32, t_ground: Option<f32>, range: std::ops::Range<usize>) -> (Rgb, f32) {
+    fn march(&self, o: Vec3, d: Vec3, cone: f32, t_ground: Option<f32>, span: std::ops::Range<f32>) -> (Rgb, f32) {
         let lit = self.lit;
         let m = &lit.medium;
         let t_end = t_ground.unwrap_or(f32::INFINITY);
@@ -399,22 +408,29 @@ impl<'a> CubeRenderer<'a> {
         let mut tr = 1.0f32;
         let mut l = Rgb::ZERO;
         if t_box0 < t_box1 {
-            'levels: for (li, lev) in levels.iter().enumerate().take(range.end).skip(range.start) {
+            'levels: for (li, lev) in levels.iter().enumerate() {
                 let ts = if li == 0 {
                     0.0
                 } else {
                     self.h_min * (1u32 << li) as f32 * inv_cone
                 };
+                // Levels lie in order of distance: none after one starting beyond the ray's end.
+                if ts >= t_box1.min(span.end) {
+                    break;
+                }
                 let te = if li + 1 == nlev {
                     f32::INFINITY
                 } else {
                     self.h_min * (1u32 << (li + 1)) as f32 * inv_cone
                 };
+                if te <= span.start {
+                    continue;
+                }
                 let Some((lo, hi)) = self.occupied[li] else {
                     continue;
                 };
                 let (oa, ob) = slab(lo, hi);
-                let (ta, tb) = (ts.max(oa), te.min(ob));
+                let (ta, tb) = (ts.max(oa).max(span.start), te.min(ob).min(span.end));
                 if ta >= tb {
                     continue;
                 }
