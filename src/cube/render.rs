@@ -208,9 +208,15 @@ impl BinMask {
 
     /// Union of [`Self::looking_away_from`] over the faces set in `faces` (bit f = face f).
     pub fn for_faces(faces: u8) -> BinMask {
-        (0..6)
-            .filter(|f| faces >> f & 1 == 1)
-            .fold(BinMask::NONE, |m, f| m.union(BinMask::looking_away_from(f)))
+        // Tabulated once for the 64 face sets (every border voxel asks).
+        static T: OnceLock<[BinMask; 64]> = OnceLock::new();
+        T.get_or_init(|| {
+            std::array::from_fn(|set| {
+                (0..6)
+                    .filter(|f| set >> f & 1 == 1)
+                    .fold(BinMask::NONE, |m, f| m.union(BinMask::looking_away_from(f)))
+            })
+        })[faces as usize & 63]
     }
 
     /// Bins of the upper hemisphere (ω·y > 0): a ground point's hemicube.
