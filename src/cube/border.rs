@@ -18,7 +18,7 @@
 use super::render::{opposite_bin, BinMask, CubeOptions, CubeRenderer};
 use crate::lighting::bins::NUM_BINS;
 use crate::lit::LitVolume;
-use crate::math::Rgb;
+use crate::math::{Rgb, Vec3};
 use crate::medium::Grid3;
 use crate::pipeline::Progress;
 use rayon::prelude::*;
@@ -145,7 +145,32 @@ pub fn render_border_cubes(lit: &LitVolume, opts: &CubeOptions, progress: &dyn P
     render_border_cubes_with(&renderer, progress)
 }
 
+/// Blocks of 2^[`SHARED_SCALES`] voxels per edge are the largest whose border voxels share rays.
+pub const SHARED_SCALES: usize = 3;
+
+/// Where a block of 2^`scale` voxels per edge takes over a pixel's ray (m), given the distance
+/// `unit` at which the cone is one finest voxel wide: 2^(scale − 1)·[`SHARED_FOOTPRINTS`]·unit
+/// (scale ≥ 1), where the cone is [`SHARED_FOOTPRINTS`]/2 times the block's edge wide.
+fn piece_start(unit: f32, scale: usize) -> f32 {
+    SHARED_FOOTPRINTS * unit * (1u32 << scale) as f32 * 0.5
+}
+
+/// Twice the cone widths per block edge at which a block's shared piece begins ([`piece_start`]).
+/// Measured on two lobes against 16 rays per bin: at 4 the shared one-ray bins err 3 % more
+/// than each voxel's own rays, at 3 10 %, at 2 (each block from its level's first distance) 60 %.
+pub const SHARED_FOOTPRINTS: f32 = 4.0;
+
 /// [`render_border_cubes`] with a renderer already built (pyramid and tables reused).
+///
+/// **Shared rays.** Where a pixel's cone is twice as wide as a block of 2^s voxels per edge
+/// ([`piece_start`]), the rays of the border voxels in that block lie less than half the cone's
+/// footprint apart: each block traces that piece of the ray (up to where the next
+/// larger block takes over) once per pixel of the union of its voxels' needed bins, from the
+/// mean of their centres, the largest blocks (2^[`SHARED_SCALES`]) to the end with what lies
+/// behind; each voxel marches only the piece in front of the first block's. A pixel's radiance
+/// is the pieces composited front to back: L₀ + T₀·(L₁ + T₁·(…)). The bins are as good
+/// estimates of the bins' means as each voxel's own rays (unit test below); the clear-air stage
+/// runs ~40 % fewer instructions (docs/performance.md).
 pub fn render_border_cubes_with(renderer: &CubeRenderer<'_>, progress: &dyn Progress) -> BorderCubes {
     let lit = renderer.lit;
     let found = find_border_voxels(&lit.medium.density);
@@ -155,31 +180,96 @@ pub fn render_border_cubes_with(renderer: &CubeRenderer<'_>, progress: &dyn Prog
     for m in &needed {
         offsets.push(offsets.last().copied().unwrap_or(0) + m.count() as usize);
     }
+    let top = SHARED_SCALES.min(renderer.levels().saturating_sub(1));
+    // The voxels of each largest block, blocks in memory order of their first voxel.
+    let key = |n: usize, scale: usize| {
+        let v = found[n].0;
+        (v[2] >> scale, v[1] >> scale, v[0] >> scale)
+    };
+    let mut order: Vec<usize> = (0..found.len()).collect();
+    order.sort_by_key(|&n| (key(n, top), n));
+    let groups: Vec<&[usize]> = order.chunk_by(|&a, &b| key(a, top) == key(b, top)).collect();
     progress.begin("border cubes", found.len() as u64);
-    // Chunks of cubes in parallel, each writing its needed bins into its own part of the packed
-    // array: the result does not depend on the thread count.
-    const CHUNK: usize = 64;
-    let mut radiance = vec![Rgb::ZERO; offsets[found.len()]];
-    let mut parts = Vec::with_capacity(found.len().div_ceil(CHUNK));
-    let mut rest = radiance.as_mut_slice();
-    for lo in (0..found.len()).step_by(CHUNK) {
-        let hi = (lo + CHUNK).min(found.len());
-        let (part, tail) = rest.split_at_mut(offsets[hi] - offsets[lo]);
-        parts.push((lo..hi, part));
-        rest = tail;
-    }
-    parts.into_par_iter().for_each(|(cubes, out)| {
-        let mut at = 0;
-        for n in cubes.clone() {
-            let [i, j, k] = found[n].0;
-            let all = renderer.bin_radiance(lit.medium.voxel_center(i, j, k), needed[n]);
-            for b in needed[n].iter() {
-                out[at] = all[b];
-                at += 1;
+    // Groups in parallel, each returning its voxels' packed bins; scattered in order after, so
+    // the result does not depend on the thread count.
+    let res = renderer.opts.res;
+    let px = &renderer.pixels;
+    let centre = |n: usize| {
+        let [i, j, k] = found[n].0;
+        lit.medium.voxel_center(i, j, k)
+    };
+    // The radiance behind level `scale`'s piece, per cube pixel, for the members of one block.
+    let shared = |members: &[usize], scale: usize, behind: Option<&[Rgb]>| -> Vec<Rgb> {
+        let q = members.iter().fold(Vec3::ZERO, |acc, &n| acc + centre(n)) / members.len() as f32;
+        let union = members.iter().fold(BinMask::NONE, |m, &n| m.union(needed[n]));
+        let mut out = vec![Rgb::ZERO; 6 * res * res];
+        for b in union.iter() {
+            for (face, i, j) in px.bin_pixels(b) {
+                let k = (face * res + j) * res + i;
+                let (d, cone) = (px.dirs[k], px.cone[j * res + i]);
+                let start = piece_start(renderer.footprint_distance(cone), scale);
+                out[k] = match behind {
+                    None => renderer.trace_from(q, d, cone, start),
+                    Some(far) => {
+                        let end = piece_start(renderer.footprint_distance(cone), scale + 1);
+                        let (l, tr) = renderer.trace_span(q, d, cone, start, end);
+                        if tr > 0.0 {
+                            l + far[k] * tr
+                        } else {
+                            l
+                        }
+                    }
+                };
             }
         }
-        progress.advance(cubes.len() as u64);
-    });
+        out
+    };
+    let per_group: Vec<Vec<(usize, Vec<Rgb>)>> = groups
+        .par_iter()
+        .map(|members| {
+            let mut out = Vec::with_capacity(members.len());
+            // Blocks from the largest down to single voxels, each with the radiance behind it.
+            let mut stack: Vec<(Vec<usize>, usize, Option<Vec<Rgb>>)> = vec![(members.to_vec(), top, None)];
+            while let Some((mut ms, scale, behind)) = stack.pop() {
+                if scale == 0 {
+                    let far = behind.as_deref();
+                    for &n in &ms {
+                        let p = centre(n);
+                        let bins = needed[n]
+                            .iter()
+                            .map(|b| {
+                                renderer.bin_mean(b, |k, cone| match far {
+                                    None => renderer.trace(p, px.dirs[k], cone),
+                                    Some(far) => {
+                                        let end = piece_start(renderer.footprint_distance(cone), 1);
+                                        let (l, tr) = renderer.trace_span(p, px.dirs[k], cone, 0.0, end);
+                                        if tr > 0.0 {
+                                            l + far[k] * tr
+                                        } else {
+                                            l
+                                        }
+                                    }
+                                })
+                            })
+                            .collect();
+                        out.push((n, bins));
+                    }
+                    continue;
+                }
+                let here = shared(&ms, scale, behind.as_deref());
+                ms.sort_by_key(|&n| (key(n, scale - 1), n));
+                for sub in ms.chunk_by(|&a, &b| key(a, scale - 1) == key(b, scale - 1)) {
+                    stack.push((sub.to_vec(), scale - 1, Some(here.clone())));
+                }
+            }
+            progress.advance(members.len() as u64);
+            out
+        })
+        .collect();
+    let mut radiance = vec![Rgb::ZERO; offsets[found.len()]];
+    for (n, bins) in per_group.into_iter().flatten() {
+        radiance[offsets[n]..offsets[n + 1]].copy_from_slice(&bins);
+    }
     progress.end();
     BorderCubes {
         dims: lit.dims(),
@@ -188,5 +278,103 @@ pub fn render_border_cubes_with(renderer: &CubeRenderer<'_>, progress: &dyn Prog
         needed,
         radiance,
         offsets,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lighting::{Sky, Sun};
+    use crate::pipeline::NoProgress;
+
+    /// Two smooth lobes (peak 1) in a `dims` grid with a clear-air gap between them, lit with a
+    /// constant I0, half sun transmittance and a grey sky.
+    fn two_lobes(dims: [usize; 3], radius: f32) -> LitVolume {
+        let mut g = Grid3::filled(dims, 0.0);
+        let c = Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32) * 0.5;
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    let p = Vec3::new(i as f32 + 0.5, j as f32 + 0.5, k as f32 + 0.5);
+                    let a = (p - c - Vec3::new(radius, 0.0, 0.0)).length() / radius;
+                    let b = (p - c + Vec3::new(radius * 1.2, 0.0, 0.0)).length() / (0.8 * radius);
+                    g.set(i, j, k, (1.0 - a * a).max(0.0) + (1.0 - b * b).max(0.0));
+                }
+            }
+        }
+        let n = g.len();
+        let m = crate::medium::Medium::new(g, Vec3::ZERO, Vec3::ONE, 1.0, Rgb::splat(0.9), 0.8);
+        let sun = Sun {
+            dir: Vec3::new(0.2, 1.0, 0.1).normalize(),
+            irradiance: Rgb::splat(2.0),
+        };
+        LitVolume::new(
+            m,
+            vec![Rgb::ONE; n],
+            Grid3::filled(dims, 0.5),
+            sun,
+            Sky::constant(Rgb::splat(0.3)),
+            None,
+        )
+    }
+
+    /// Without the cut-off, a ray's pieces composited front to back are the whole ray: the near
+    /// piece from the same point plus its transmittance times the rest (to rounding).
+    #[test]
+    fn ray_pieces_composite_to_the_whole_ray() {
+        let v = two_lobes([24, 16, 16], 4.0);
+        let opts = CubeOptions {
+            res: 4,
+            t_cutoff: 0.0,
+            ..Default::default()
+        };
+        let r = CubeRenderer::new(&v, &opts);
+        let mut rng = crate::math::Rng::new(5, 0);
+        for _ in 0..300 {
+            let o = Vec3::new(24.0 * rng.uniform(), 16.0 * rng.uniform(), 16.0 * rng.uniform());
+            let d = Vec3::new(rng.uniform() - 0.5, rng.uniform() - 0.5, rng.uniform() - 0.5).normalize();
+            let cone = 0.05 + 0.4 * rng.uniform();
+            let whole = r.trace(o, d, cone);
+            let s = piece_start(r.footprint_distance(cone), 1);
+            let (l, tr) = r.trace_span(o, d, cone, 0.0, s);
+            let split = l + r.trace_from(o, d, cone, s) * tr;
+            let err = ((split - whole).abs() / whole.abs().max(Rgb::splat(1e-6))).max_element();
+            assert!(err < 1e-4, "{o} {d} {cone}: {split} vs {whole}");
+        }
+    }
+
+    /// Sharing the far pieces does not make the bins worse estimates of the bins' true means: against
+    /// each voxel's own cube at 16 pixels per face edge (16 rays per bin), the shared one-ray
+    /// bins err about as much as each voxel's own one-ray bins.
+    #[test]
+    fn shared_rays_estimate_the_bins_as_well_as_own_rays() {
+        let v = two_lobes([24, 16, 16], 4.0);
+        let opts = CubeOptions::default();
+        let border = |res: usize| CubeOptions {
+            step_level_voxels: opts.border_step_level_voxels,
+            t_cutoff: opts.border_t_cutoff,
+            res,
+            ..opts.clone()
+        };
+        let r = CubeRenderer::new(&v, &border(opts.border_res));
+        let fine = CubeRenderer::new(&v, &border(16));
+        let shared = render_border_cubes_with(&r, &NoProgress);
+        assert!(shared.len() > 100, "{} border voxels", shared.len());
+        // Errors relative to each cube's brightest needed bin, so that dim bins do not dominate.
+        let (mut e_shared, mut e_own) = (0f64, 0f64);
+        for (n, v) in shared.voxels.iter().enumerate() {
+            let p = r.lit.medium.voxel_center(v[0], v[1], v[2]);
+            let own = r.bin_radiance(p, shared.needed[n]);
+            let truth = fine.bin_radiance(p, shared.needed[n]);
+            let scale = shared.needed[n].iter().map(|b| truth[b].max_element()).fold(1e-6, f32::max);
+            for (b, l) in shared.needed[n]
+                .iter()
+                .zip(&shared.radiance[shared.offsets[n]..shared.offsets[n + 1]])
+            {
+                e_shared += ((*l - truth[b]).abs().max_element() / scale) as f64;
+                e_own += ((own[b] - truth[b]).abs().max_element() / scale) as f64;
+            }
+        }
+        assert!(e_shared < 1.1 * e_own, "shared {e_shared} against own {e_own}");
     }
 }

@@ -208,9 +208,15 @@ impl BinMask {
 
     /// Union of [`Self::looking_away_from`] over the faces set in `faces` (bit f = face f).
     pub fn for_faces(faces: u8) -> BinMask {
-        (0..6)
-            .filter(|f| faces >> f & 1 == 1)
-            .fold(BinMask::NONE, |m, f| m.union(BinMask::looking_away_from(f)))
+        // Tabulated once for the 64 face sets (every border voxel asks).
+        static T: OnceLock<[BinMask; 64]> = OnceLock::new();
+        T.get_or_init(|| {
+            std::array::from_fn(|set| {
+                (0..6)
+                    .filter(|f| set >> f & 1 == 1)
+                    .fold(BinMask::NONE, |m, f| m.union(BinMask::looking_away_from(f)))
+            })
+        })[faces as usize & 63]
     }
 
     /// Bins of the upper hemisphere (ω·y > 0): a ground point's hemicube.
@@ -274,6 +280,10 @@ pub struct CubeRenderer<'a> {
     levels: usize,
     /// The empty dual cells of each level used.
     masks: Arc<Vec<DualMask>>,
+    /// Per level used, the world box (m) of its occupied blocks (None: none occupied); a ray
+    /// walks a level's blocks only inside it, and misses every level outside their union.
+    occupied: Arc<Vec<Option<(Vec3, Vec3)>>>,
+    occupied_union: Option<(Vec3, Vec3)>,
     /// The options.
     pub opts: CubeOptions,
     /// Pixel tables at `opts.res`.
@@ -297,11 +307,21 @@ impl<'a> CubeRenderer<'a> {
         let pyramid = lit.pyramid();
         let levels = opts.max_levels.max(1).min(pyramid.levels.len());
         let masks = Arc::new(pyramid.levels[..levels].iter().map(DualMask::new).collect());
+        // Cut at the coarsest level's box, which contains every level's cells.
+        let top = pyramid.levels[levels - 1].voxel_size * dims_f(pyramid.levels[levels - 1].dims);
+        let occupied: Vec<Option<(Vec3, Vec3)>> = pyramid.levels[..levels]
+            .iter()
+            .map(|lev| occupied_box(lev).map(|(lo, hi)| (pyramid.origin + lo, pyramid.origin + hi.min(top))))
+            .collect();
+        let occupied_union = occupied.iter().flatten().copied().reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)));
+        let occupied = Arc::new(occupied);
         CubeRenderer {
             lit,
             pyramid,
             levels,
             masks,
+            occupied,
+            occupied_union,
             opts: opts.clone(),
             pixels: PixelTable::new(opts.res),
             h_min: lit.medium.min_voxel(),
@@ -310,12 +330,56 @@ impl<'a> CubeRenderer<'a> {
         }
     }
 
+    /// Pyramid levels used.
+    pub fn levels(&self) -> usize {
+        self.levels.min(self.pyramid.levels.len())
+    }
+
     /// Radiance (W·m⁻²·sr⁻¹) arriving at `o` from direction `d` (unit), for a cone of angular
     /// width `cone` (rad).
     pub fn trace(&self, o: Vec3, d: Vec3, cone: f32) -> Rgb {
+        let t_ground = self.lit.ground_hit(o, d);
+        let (l, tr) = self.march(o, d, cone, t_ground, 0.0..f32::INFINITY);
+        self.finish(o, d, t_ground, l, tr)
+    }
+
+    /// Distance (m) at which a cone of width `cone` is one finest voxel wide: where
+    /// [`Self::trace`] leaves the finest level for the next it is twice that.
+    pub fn footprint_distance(&self, cone: f32) -> f32 {
+        self.h_min / (cone.max(1e-6) * self.opts.lod_bias.exp2())
+    }
+
+    /// Radiance gathered and transmittance left along `o + t·d` (cone width `cone`) for
+    /// t ∈ [t0, t1) only (each level where [`Self::trace`] marches it): a piece of the ray, whose
+    /// far pieces nearby points can share (the border cubes).
+    pub fn trace_span(&self, o: Vec3, d: Vec3, cone: f32, t0: f32, t1: f32) -> (Rgb, f32) {
+        self.march(o, d, cone, self.lit.ground_hit(o, d), t0..t1)
+    }
+
+    /// The last piece of a ray for [`Self::trace_span`]: t ≥ `t0`, with what lies behind.
+    pub fn trace_from(&self, o: Vec3, d: Vec3, cone: f32, t0: f32) -> Rgb {
+        let t_ground = self.lit.ground_hit(o, d);
+        let (l, tr) = self.march(o, d, cone, t_ground, t0..f32::INFINITY);
+        self.finish(o, d, t_ground, l, tr)
+    }
+
+    /// `l` plus the background behind, seen with transmittance `tr`.
+    #[inline]
+    fn finish(&self, o: Vec3, d: Vec3, t_ground: Option<f32>, l: Rgb, tr: f32) -> Rgb {
+        let mut l = l;
+        if tr > 0.0 {
+            l += self.lit.background(o, d, t_ground) * tr;
+        }
+        l
+    }
+
+    /// Radiance gathered and transmittance left along `o + t·d` through the pyramid (each level
+    /// at the distances where the cone's footprint matches it), for t in `span` only, stopping
+    /// at the ground (`t_ground`); transmittance 0 once cut off.
+    #[inline]
+    fn march(&self, o: Vec3, d: Vec3, cone: f32, t_ground: Option<f32>, span: std::ops::Range<f32>) -> (Rgb, f32) {
         let lit = self.lit;
         let m = &lit.medium;
-        let t_ground = lit.ground_hit(o, d);
         let t_end = t_ground.unwrap_or(f32::INFINITY);
         // Sunlight travels along −sun.dir; the scattered light travels towards the eye, −d.
         // The sun's exact single scattering per unit extinction (albedo included; TMS under δ-M).
@@ -338,12 +402,14 @@ impl<'a> CubeRenderer<'a> {
         let dn = Vec3::select(d.abs().cmplt(Vec3::splat(1e-20)), Vec3::splat(1e-20), d);
         let inv_d = Vec3::ONE / dn;
         let positive = d.cmpgt(Vec3::ZERO);
-        // The coarsest level's box contains every level's box.
-        let (t_box0, t_box1) = {
-            let top = levels.last().expect("pyramid has a level");
-            let hi = origin + top.voxel_size * dims_f(top.dims);
-            let (ta, tb) = ((origin - o) * inv_d, (hi - o) * inv_d);
+        let slab = |lo: Vec3, hi: Vec3| {
+            let (ta, tb) = ((lo - o) * inv_d, (hi - o) * inv_d);
             (ta.min(tb).max_element().max(0.0), ta.max(tb).min_element().min(t_end))
+        };
+        // Only the occupied blocks hold density: the union of the levels' occupied boxes bounds it.
+        let (t_box0, t_box1) = match self.occupied_union {
+            Some((lo, hi)) => slab(lo, hi),
+            None => (0.0, 0.0),
         };
         let mut tr = 1.0f32;
         let mut l = Rgb::ZERO;
@@ -354,12 +420,23 @@ impl<'a> CubeRenderer<'a> {
                 } else {
                     self.h_min * (1u32 << li) as f32 * inv_cone
                 };
+                // Levels lie in order of distance: none after one starting beyond the ray's end.
+                if ts >= t_box1.min(span.end) {
+                    break;
+                }
                 let te = if li + 1 == nlev {
                     f32::INFINITY
                 } else {
                     self.h_min * (1u32 << (li + 1)) as f32 * inv_cone
                 };
-                let (ta, tb) = (ts.max(t_box0), te.min(t_box1));
+                if te <= span.start {
+                    continue;
+                }
+                let Some((lo, hi)) = self.occupied[li] else {
+                    continue;
+                };
+                let (oa, ob) = slab(lo, hi);
+                let (ta, tb) = (ts.max(oa).max(span.start), te.min(ob).min(span.end));
                 if ta >= tb {
                     continue;
                 }
@@ -377,14 +454,15 @@ impl<'a> CubeRenderer<'a> {
                     let bi = Vec3::new(fast_floor(f.x), fast_floor(f.y), fast_floor(f.z));
                     let next = origin + (bi + Vec3::select(positive, Vec3::ONE, Vec3::ZERO)) * cell;
                     let t_exit = ((next - o) * inv_d).min_element().min(tb).max(t + nudge);
-                    let inside = bi.x >= 0.0
-                        && bi.y >= 0.0
-                        && bi.z >= 0.0
-                        && (bi.x as usize) < bd[0]
-                        && (bi.y as usize) < bd[1]
-                        && (bi.z as usize) < bd[2];
-                    if inside && lev.occupancy.get([bi.x as usize, bi.y as usize, bi.z as usize]) > 0.0 {
-                        let n = ((t_exit - t) / step).ceil().max(1.0);
+                    // Block indices as integers once; a negative one wraps above the bound.
+                    let (bx, by, bz) = (
+                        bi.x as i32 as u32 as usize,
+                        bi.y as i32 as u32 as usize,
+                        bi.z as i32 as u32 as usize,
+                    );
+                    let inside = bx < bd[0] && by < bd[1] && bz < bd[2];
+                    if inside && lev.occupancy.max_density[bx + bd[0] * (by + bd[1] * bz)] > 0.0 {
+                        let n = fast_ceil((t_exit - t) / step).max(1.0);
                         let len = (t_exit - t) / n;
                         for k in 0..n as u32 {
                             let ts = t + (k as f32 + 0.5) * len;
@@ -430,10 +508,7 @@ impl<'a> CubeRenderer<'a> {
                 }
             }
         }
-        if tr > 0.0 {
-            l += lit.background(o, d, t_ground) * tr;
-        }
-        l
+        (l, tr)
     }
 
     /// Render the bins in `needed` of a world-aligned cube at `p` (m); other pixels stay black.
@@ -453,23 +528,28 @@ impl<'a> CubeRenderer<'a> {
     /// bins not in `needed` are zero. Same numbers as `render_cube(p, needed).bin_averages()`
     /// without storing the image.
     pub fn bin_radiance(&self, p: Vec3, needed: BinMask) -> [Rgb; NUM_BINS] {
-        let res = self.opts.res;
         let mut out = [Rgb::ZERO; NUM_BINS];
         for b in needed.iter() {
-            let mut acc = [0f64; 3];
-            let mut area = 0f64;
-            for (face, i, j) in self.pixels.bin_pixels(b) {
-                let k = (face * res + j) * res + i;
-                let sa = self.pixels.solid_angle[j * res + i];
-                let l = self.trace(p, self.pixels.dirs[k], self.pixels.cone[j * res + i]);
-                acc[0] += l.x as f64 * sa;
-                acc[1] += l.y as f64 * sa;
-                acc[2] += l.z as f64 * sa;
-                area += sa;
-            }
-            out[b] = Rgb::new((acc[0] / area) as f32, (acc[1] / area) as f32, (acc[2] / area) as f32);
+            out[b] = self.bin_mean(b, |k, cone| self.trace(p, self.pixels.dirs[k], cone));
         }
         out
+    }
+
+    /// Solid-angle weighted mean over bin `b`'s pixels of `radiance(pixel index, cone width)`.
+    pub fn bin_mean(&self, b: usize, radiance: impl Fn(usize, f32) -> Rgb) -> Rgb {
+        let res = self.opts.res;
+        let mut acc = [0f64; 3];
+        let mut area = 0f64;
+        for (face, i, j) in self.pixels.bin_pixels(b) {
+            let k = (face * res + j) * res + i;
+            let sa = self.pixels.solid_angle[j * res + i];
+            let l = radiance(k, self.pixels.cone[j * res + i]);
+            acc[0] += l.x as f64 * sa;
+            acc[1] += l.y as f64 * sa;
+            acc[2] += l.z as f64 * sa;
+            area += sa;
+        }
+        Rgb::new((acc[0] / area) as f32, (acc[1] / area) as f32, (acc[2] / area) as f32)
     }
 }
 
@@ -487,6 +567,37 @@ fn beyond_i0(lit: &LitVolume, v: Vec3, rho: f32, i0: Rgb, to_eye: Vec3) -> Rgb {
         None => d,
     };
     d - i0
+}
+
+/// The box (m, from the pyramid's origin) of `lev`'s occupied blocks (ρ bound > 0), None when
+/// none is.
+fn occupied_box(lev: &crate::lit::pyramid::Level) -> Option<(Vec3, Vec3)> {
+    let occ = &lev.occupancy;
+    let d = occ.dims;
+    let (mut lo, mut hi) = ([usize::MAX; 3], [0usize; 3]);
+    for k in 0..d[2] {
+        for j in 0..d[1] {
+            for i in 0..d[0] {
+                if occ.get([i, j, k]) > 0.0 {
+                    for (a, x) in [i, j, k].into_iter().enumerate() {
+                        lo[a] = lo[a].min(x);
+                        hi[a] = hi[a].max(x + 1);
+                    }
+                }
+            }
+        }
+    }
+    if lo[0] == usize::MAX {
+        return None;
+    }
+    let cell = lev.voxel_size * BLOCK as f32;
+    Some((cell * dims_f(lo), cell * dims_f(hi)))
+}
+
+/// ceil for 0 ≤ x < 2³¹ without a libm call (no SSE4.1 round on the default target).
+#[inline(always)]
+fn fast_ceil(x: f32) -> f32 {
+    -fast_floor(-x)
 }
 
 #[inline]

@@ -34,9 +34,6 @@ const PIXEL_TOL: f64 = 1e-4;
 /// Deepest subdivision of a pixel (each level splits it 2×2).
 const MAX_LEVEL: usize = 7;
 
-/// A pixel's coarse (SUB²) and fine ((2·SUB)²) midpoints: (cos θ, dΩ).
-type PixelPoints = ([(f64, f64); SUB * SUB], [(f64, f64); 4 * SUB * SUB]);
-
 /// The k² midpoints of a cube-face rectangle split k×k: (cos θ from local +x, solid angle).
 fn rect_points(face: usize, u0: f64, u1: f64, v0: f64, v1: f64, k: usize, out: &mut [(f64, f64)]) {
     let f = &CUBE_FACES[face];
@@ -50,36 +47,54 @@ fn rect_points(face: usize, u0: f64, u1: f64, v0: f64, v1: f64, k: usize, out: &
     }
 }
 
-/// Midpoint rule with SUB² points on the cube-face rectangle [u0,u1]×[v0,v1] of `face`: Σ HG(g, ω_x)·dΩ.
-fn midpoint_rect(face: usize, u0: f64, u1: f64, v0: f64, v1: f64, g: Hg) -> f64 {
-    let f = &CUBE_FACES[face];
-    let mut s = 0.0;
-    for b in 0..SUB {
-        let (va, vb) = (v0 + (v1 - v0) * b as f64 / SUB as f64, v0 + (v1 - v0) * (b + 1) as f64 / SUB as f64);
-        for a in 0..SUB {
-            let (ua, ub) = (u0 + (u1 - u0) * a as f64 / SUB as f64, u0 + (u1 - u0) * (a + 1) as f64 / SUB as f64);
-            let (u, v) = (0.5 * (ua + ub), 0.5 * (va + vb));
-            let dir = f.n.as_dvec3() + f.tu.as_dvec3() * u + f.tv.as_dvec3() * v;
-            let c = dir.x / dir.length();
-            s += g.eval_cos_f64(c) * rect_solid_angle(ua, ub, va, vb);
-        }
-    }
-    s
+/// One rectangle of a pixel's adaptive rule: its SUB² midpoints (cos θ, dΩ) and, once a rule
+/// has needed them, its four quadrants'. The geometry (four atans per point) is what the rule
+/// costs; the tree keeps it for every order of the same pixel, which then only re-weights it.
+struct RectNode {
+    pts: [(f64, f64); SUB * SUB],
+    kids: Option<Box<[RectNode; 4]>>,
 }
 
-/// ∫ HG(g, ω_x) dΩ over a cube-face rectangle, adaptively: a rectangle whose SUB² midpoint
-/// estimate disagrees with the sum over its four quadrants by more than PIXEL_TOL (relative) is
-/// split. The forward peak of g = 0.9
-/// needs a few levels; the rest of the sphere none.
-fn integrate_rect(face: usize, u0: f64, u1: f64, v0: f64, v1: f64, g: Hg, level: usize) -> f64 {
-    let coarse = midpoint_rect(face, u0, u1, v0, v1, g);
-    let (um, vm) = (0.5 * (u0 + u1), 0.5 * (v0 + v1));
-    let quads = [(u0, um, v0, vm), (um, u1, v0, vm), (u0, um, vm, v1), (um, u1, vm, v1)];
-    let fine: f64 = quads.iter().map(|q| midpoint_rect(face, q.0, q.1, q.2, q.3, g)).sum();
-    if level >= MAX_LEVEL || (fine - coarse).abs() <= PIXEL_TOL * fine + 1e-12 {
-        return fine;
+impl RectNode {
+    fn new(face: usize, r: Rect) -> RectNode {
+        let mut pts = [(0.0, 0.0); SUB * SUB];
+        rect_points(face, r.0, r.1, r.2, r.3, SUB, &mut pts);
+        RectNode { pts, kids: None }
     }
-    quads.iter().map(|q| integrate_rect(face, q.0, q.1, q.2, q.3, g, level + 1)).sum()
+
+    /// Midpoint rule: Σ HG(g, ω_x)·dΩ over the SUB² points.
+    fn midpoint(&self, g: Hg) -> f64 {
+        let mut s = 0.0;
+        for (c, w) in &self.pts {
+            s += g.eval_cos_f64(*c) * w;
+        }
+        s
+    }
+
+    /// ∫ HG(g, ω_x) dΩ over the rectangle `r` of `face`, adaptively: a rectangle whose SUB²
+    /// midpoint estimate disagrees with the sum over its four quadrants by more than PIXEL_TOL
+    /// (relative) is split. The forward peak of g = 0.9 needs a few levels; the rest of the
+    /// sphere none.
+    fn integrate(&mut self, face: usize, r: Rect, g: Hg, level: usize) -> f64 {
+        let coarse = self.midpoint(g);
+        let quads = quadrants(r);
+        let kids = self.kids.get_or_insert_with(|| Box::new(quads.map(|q| RectNode::new(face, q))));
+        let fine: f64 = kids.iter().map(|k| k.midpoint(g)).sum();
+        if level >= MAX_LEVEL || (fine - coarse).abs() <= PIXEL_TOL * fine + 1e-12 {
+            return fine;
+        }
+        kids.iter_mut().zip(quads).map(|(k, q)| k.integrate(face, q, g, level + 1)).sum()
+    }
+}
+
+/// A cube-face rectangle (u0, u1, v0, v1).
+type Rect = (f64, f64, f64, f64);
+
+/// The four quadrants of `r`, (u, v) = (lo, lo), (hi, lo), (lo, hi), (hi, hi).
+fn quadrants(r: Rect) -> [Rect; 4] {
+    let (u0, u1, v0, v1) = r;
+    let (um, vm) = (0.5 * (u0 + u1), 0.5 * (v0 + v1));
+    [(u0, um, v0, vm), (um, u1, v0, vm), (u0, um, vm, v1), (um, u1, vm, v1)]
 }
 
 /// Largest optical depth the Poisson weights are evaluated at (see [`segment_orders`]).
@@ -107,9 +122,11 @@ impl OrderKernel {
         assert!(res > 0, "cube resolution must be positive");
         let max_order = max_order.max(1);
         let n = 6 * res * res;
-        // The first two levels of every pixel's adaptive rule, shared by all orders:
-        // (cos θ, dΩ) at the SUB² coarse and (2·SUB)² fine midpoints.
-        let pts: Vec<PixelPoints> = (0..n)
+        // Per pixel, every order: the first two levels of the adaptive rule are the SUB² coarse
+        // and (2·SUB)² fine midpoints; a pixel where they disagree is integrated adaptively on
+        // a tree of rectangles built once for all its orders.
+        let orders: Vec<Hg> = (1..=max_order).map(|i| phase.order(i)).collect();
+        let raw: Vec<Vec<f64>> = (0..n)
             .into_par_iter()
             .map(|p| {
                 let (face, j, i) = (p / (res * res), (p / res) % res, p % res);
@@ -119,32 +136,27 @@ impl OrderKernel {
                 let mut fine = [(0.0, 0.0); 4 * SUB * SUB];
                 rect_points(face, u0, u1, v0, v1, SUB, &mut coarse);
                 rect_points(face, u0, u1, v0, v1, 2 * SUB, &mut fine);
-                (coarse, fine)
-            })
-            .collect();
-        let weights: Vec<f32> = (1..=max_order)
-            .into_par_iter()
-            .flat_map_iter(|i| {
-                let gi = phase.order(i);
-                let acc: Vec<f64> = (0..n)
-                    .map(|p| {
-                        let (coarse, fine) = &pts[p];
+                let mut tree: Option<RectNode> = None;
+                orders
+                    .iter()
+                    .map(|gi| {
                         let c: f64 = coarse.iter().map(|(x, w)| gi.eval_cos_f64(*x) * w).sum();
                         let f: f64 = fine.iter().map(|(x, w)| gi.eval_cos_f64(*x) * w).sum();
-                        let (face, j, ii) = (p / (res * res), (p / res) % res, p % res);
-                        let (u0, u1) = CubeImage::pixel_range(res, ii);
-                        let (v0, v1) = CubeImage::pixel_range(res, j);
                         if (f - c).abs() <= PIXEL_TOL * f + 1e-12 {
                             f
                         } else {
-                            integrate_rect(face, u0, u1, v0, v1, gi, 0)
+                            let r = (u0, u1, v0, v1);
+                            tree.get_or_insert_with(|| RectNode::new(face, r)).integrate(face, r, *gi, 0)
                         }
                     })
-                    .collect();
-                let total: f64 = acc.iter().sum();
-                acc.into_iter().map(move |a| (a / total) as f32)
+                    .collect()
             })
             .collect();
+        let mut weights = Vec::with_capacity(max_order * n);
+        for i in 0..max_order {
+            let total: f64 = raw.iter().map(|r| r[i]).sum();
+            weights.extend(raw.iter().map(|r| (r[i] / total) as f32));
+        }
         OrderKernel {
             res,
             phase,
