@@ -224,51 +224,55 @@ pub fn render_border_cubes_with(renderer: &CubeRenderer<'_>, progress: &dyn Prog
         }
         out
     };
-    let per_group: Vec<Vec<(usize, Vec<Rgb>)>> = groups
-        .par_iter()
-        .map(|members| {
-            let mut out = Vec::with_capacity(members.len());
-            // Blocks from the largest down to single voxels, each with the radiance behind it.
-            let mut stack: Vec<(Vec<usize>, usize, Option<Vec<Rgb>>)> = vec![(members.to_vec(), top, None)];
-            while let Some((mut ms, scale, behind)) = stack.pop() {
-                if scale == 0 {
-                    let far = behind.as_deref();
-                    for &n in &ms {
-                        let p = centre(n);
-                        let bins = needed[n]
-                            .iter()
-                            .map(|b| {
-                                renderer.bin_mean(b, |k, cone| match far {
-                                    None => renderer.trace(p, px.dirs[k], cone),
-                                    Some(far) => {
-                                        let end = piece_start(renderer.footprint_distance(cone), 1);
-                                        let (l, tr) = renderer.trace_span(p, px.dirs[k], cone, 0.0, end);
-                                        if tr > 0.0 {
-                                            l + far[k] * tr
-                                        } else {
-                                            l
-                                        }
+    let render_group = |members: &&[usize]| {
+        let mut out = Vec::with_capacity(members.len());
+        // Blocks from the largest down to single voxels, each with the radiance behind it.
+        let mut stack: Vec<(Vec<usize>, usize, Option<Vec<Rgb>>)> = vec![(members.to_vec(), top, None)];
+        while let Some((mut ms, scale, behind)) = stack.pop() {
+            if scale == 0 {
+                let far = behind.as_deref();
+                for &n in &ms {
+                    let p = centre(n);
+                    let bins = needed[n]
+                        .iter()
+                        .map(|b| {
+                            renderer.bin_mean(b, |k, cone| match far {
+                                None => renderer.trace(p, px.dirs[k], cone),
+                                Some(far) => {
+                                    let end = piece_start(renderer.footprint_distance(cone), 1);
+                                    let (l, tr) = renderer.trace_span(p, px.dirs[k], cone, 0.0, end);
+                                    if tr > 0.0 {
+                                        l + far[k] * tr
+                                    } else {
+                                        l
                                     }
-                                })
+                                }
                             })
-                            .collect();
-                        out.push((n, bins));
-                    }
-                    continue;
+                        })
+                        .collect();
+                    out.push((n, bins));
                 }
-                let here = shared(&ms, scale, behind.as_deref());
-                ms.sort_by_key(|&n| (key(n, scale - 1), n));
-                for sub in ms.chunk_by(|&a, &b| key(a, scale - 1) == key(b, scale - 1)) {
-                    stack.push((sub.to_vec(), scale - 1, Some(here.clone())));
-                }
+                continue;
             }
-            progress.advance(members.len() as u64);
-            out
-        })
-        .collect();
+            let here = shared(&ms, scale, behind.as_deref());
+            ms.sort_by_key(|&n| (key(n, scale - 1), n));
+            for sub in ms.chunk_by(|&a, &b| key(a, scale - 1) == key(b, scale - 1)) {
+                stack.push((sub.to_vec(), scale - 1, Some(here.clone())));
+            }
+        }
+        progress.advance(members.len() as u64);
+        out
+    };
+    // Groups in batches, each batch's bins scattered into the packed array before the next is
+    // rendered: the per-voxel vectors of only one batch are alive at a time (all of them at once
+    // were 2× the packed bins, 41 MB at 200×160×120).
+    const BATCH: usize = 64;
     let mut radiance = vec![Rgb::ZERO; offsets[found.len()]];
-    for (n, bins) in per_group.into_iter().flatten() {
-        radiance[offsets[n]..offsets[n + 1]].copy_from_slice(&bins);
+    for batch in groups.chunks(BATCH) {
+        let per_group: Vec<Vec<(usize, Vec<Rgb>)>> = batch.par_iter().map(render_group).collect();
+        for (n, bins) in per_group.into_iter().flatten() {
+            radiance[offsets[n]..offsets[n + 1]].copy_from_slice(&bins);
+        }
     }
     progress.end();
     BorderCubes {
