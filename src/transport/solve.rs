@@ -181,6 +181,12 @@ struct Ctx<'a> {
     rho: &'a [f32],
     full: &'a [u32],
     nsh: usize,
+    /// Even-l harmonics (the first of the inner order, [`parity_order`]).
+    even: usize,
+    /// Grid index of every full voxel, in grid order.
+    voxels: &'a [usize],
+    /// δ-M sun transmittance T′ per grid voxel and band.
+    sun_t: &'a [[f32; 3]],
     sigma_t: [f32; 3],
     /// All bands share σt′ (one set of step weights serves them).
     grey: bool,
@@ -221,41 +227,154 @@ type Swept = (Vec<[f32; 3]>, Vec<(usize, [f64; 3])>);
 /// (2 × 12 B per full voxel each). Fixed, so the sums are the same for any thread count.
 pub(crate) const ORDINATE_BATCH: usize = 16;
 
-/// One sweep of every ordinate: the diffuse radiance moments I_lm per full voxel, and how much the
-/// cloud changes the ground's downward diffuse irradiance, per ground map column.
+/// The order of the harmonics inside the solver: every even-l one first, then the odd-l ones
+/// (each l's block in `real_sh`'s order). Y_lm(−Ω) = (−1)^l Y_lm(Ω), so one pass over a voxel's
+/// coefficients gives the even and odd sums E, O and with them the source in both ordinates of an
+/// opposite pair (E ± O); likewise one pass accumulates both ordinates' moments. `perm[i]` is
+/// the `real_sh` index of inner index i; the second value, the count of even ones.
+fn parity_order(order: usize) -> (Vec<usize>, usize) {
+    let block = |l: usize| l * l..(l + 1) * (l + 1);
+    let even: Vec<usize> = (0..=order).step_by(2).flat_map(block).collect();
+    let ne = even.len();
+    (even.into_iter().chain((1..=order).step_by(2).flat_map(block)).collect(), ne)
+}
+
+/// The ordinates in opposite pairs (d, d′) with Ω_d′ = −Ω_d (the product quadrature is symmetric).
+fn opposite_pairs(q: &Quadrature) -> Vec<[usize; 2]> {
+    let pairs: Vec<[usize; 2]> = (0..q.dirs.len())
+        .filter_map(|d| {
+            let o = (0..q.dirs.len()).min_by(|a, b| (q.dirs[*a] + q.dirs[d]).length().total_cmp(&(q.dirs[*b] + q.dirs[d]).length()))?;
+            (d < o).then_some([d, o])
+        })
+        .collect();
+    assert!(
+        2 * pairs.len() == q.dirs.len() && pairs.iter().all(|[d, o]| (q.dirs[*d] + q.dirs[*o]).length() < 1e-9),
+        "the quadrature is symmetric"
+    );
+    pairs
+}
+
+/// Per ordinate pair, what the sweeps' per-voxel steps read (inner harmonic order, f32).
+struct PairTables {
+    /// The ordinates (d, d′ = opposite).
+    pairs: Vec<[usize; 2]>,
+    /// Weights (sr) of d and d′.
+    weights: Vec<[f32; 2]>,
+    /// Y_lm(Ω_d), per pair.
+    y: Vec<f32>,
+    /// a′χ′_l Y_lm(Ω_d) per pair and band: the source in Ω_d is Σ I_lm times this.
+    y_src: Vec<f32>,
+    /// The reduced sun's first scattering per unit T′ in Ω_d and Ω_d′ per pair and band,
+    /// Σ_lm a′χ′_l E Y_lm(Ω_sun) Y_lm(±Ω_d) (W·m⁻²·sr⁻¹).
+    sun: Vec<[[f32; 2]; 3]>,
+}
+
+impl PairTables {
+    fn new(q: &Quadrature, order: usize, perm: &[usize], bands: &[BandOptics], e_sun: [f64; 3], y_sun: &[f64]) -> PairTables {
+        let nsh = perm.len();
+        let pairs = opposite_pairs(q);
+        let l_of = |k: usize| (k as f64).sqrt().floor() as usize;
+        let (mut y, mut y_src, mut sun) = (Vec::new(), Vec::new(), Vec::new());
+        let mut yd = vec![0.0; nsh];
+        for [d, _] in &pairs {
+            real_sh(order, q.dirs[*d], &mut yd);
+            y.extend(perm.iter().map(|k| yd[*k] as f32));
+            let mut s = [[0f32; 2]; 3];
+            for (b, bo) in bands.iter().enumerate() {
+                y_src.extend(perm.iter().map(|k| (bo.albedo * bo.chi[l_of(*k)] * yd[*k]) as f32));
+                let term = |k: usize| bo.albedo * bo.chi[l_of(k)] * e_sun[b] * y_sun[k] * yd[k];
+                let (e, o) = (0..nsh).fold(
+                    (0.0, 0.0),
+                    |(e, o), k| if l_of(k) % 2 == 0 { (e + term(k), o) } else { (e, o + term(k)) },
+                );
+                s[b] = [(e + o) as f32, (e - o) as f32];
+            }
+            sun.push(s);
+        }
+        let weights = pairs.iter().map(|[d, o]| [q.weights[*d] as f32, q.weights[*o] as f32]).collect();
+        PairTables {
+            pairs,
+            weights,
+            y,
+            y_src,
+            sun,
+        }
+    }
+}
+
+/// acc[k] += Σ_p s[p] ys[p][k] (every ys[p] as long as acc), eight k at a time with the sum
+/// over p in registers; the same order for any thread count.
+#[inline]
+fn accumulate(acc: &mut [f32], s: &[f32], ys: &[&[f32]]) {
+    let n8 = acc.len() / 8 * 8;
+    for k0 in (0..n8).step_by(8) {
+        let mut r = [0f32; 8];
+        for (sp, y) in s.iter().zip(ys) {
+            for (rl, yl) in r.iter_mut().zip(&y[k0..k0 + 8]) {
+                *rl += sp * yl;
+            }
+        }
+        for (a, rl) in acc[k0..k0 + 8].iter_mut().zip(r) {
+            *a += rl;
+        }
+    }
+    for k in n8..acc.len() {
+        acc[k] += s.iter().zip(ys).map(|(sp, y)| sp * y[k]).sum::<f32>();
+    }
+}
+
+/// One sweep of every ordinate: the diffuse radiance moments I_lm per full voxel (inner harmonic
+/// order), and how much the cloud changes the ground's downward irradiance, per ground map column.
 ///
-/// Ordinates go in batches: (1) the source in each ordinate of the batch, per full voxel (one read
-/// of the voxel's coefficients serves the whole batch); (2) the batch's sweeps, one ordinate per
-/// task; (3) the moments I_lm += w I Y_lm, per full voxel, the ordinates in their fixed order.
-fn sweep(c: &Ctx, q: &Quadrature, ylm: &[Vec<f32>], source: &[f32], ground: &GroundMap) -> (Vec<f32>, Vec<[f64; 3]>) {
-    let nsh = c.nsh;
-    let nfull = source.len() / (3 * nsh);
-    let mut moments = vec![0f32; nfull * 3 * nsh];
+/// `moments` are the last iterate's; the source J(Ω) = Σ a′χ′_l (I_lm + E T′ Y_lm(Ω_sun)) Y_lm(Ω)
+/// is evaluated from them directly (no array of source coefficients is stored). Ordinates go in
+/// batches of opposite pairs: (1) per full voxel, the source in both ordinates of each pair of the
+/// batch from one pass over its coefficients; (2) the batch's sweeps, one ordinate per task;
+/// (3) per full voxel, the moments of both ordinates of each pair in one pass, the pairs in
+/// their fixed order.
+fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], ground: &GroundMap) -> (Vec<f32>, Vec<[f64; 3]>) {
+    let (nsh, ne) = (c.nsh, c.even);
+    let nfull = moments.len() / (3 * nsh);
+    let mut next = vec![0f32; nfull * 3 * nsh];
     // Change of the ground's downward irradiance by the cloud, per ground map column (W/m²).
     let mut e_down = vec![[0f64; 3]; ground.radiance.len()];
     // Full voxels per task in the per-voxel steps (1) and (3).
     let chunk = 256;
+    let per_batch = ORDINATE_BATCH / 2;
     let mut src = vec![[0f32; 3]; ORDINATE_BATCH * nfull];
-    for first in (0..q.dirs.len()).step_by(ORDINATE_BATCH) {
-        let batch = first..(first + ORDINATE_BATCH).min(q.dirs.len());
-        // (1) Source in each ordinate, clamped at 0 (the truncated expansion may dip).
+    for first in (0..t.pairs.len()).step_by(per_batch) {
+        let batch = first..(first + per_batch).min(t.pairs.len());
+        // (1) Source in each ordinate, clamped at 0 (the truncated expansion may dip); slot 2p
+        // holds pair p's ordinate d, 2p + 1 its opposite.
         let sp = Shared(src.as_mut_ptr());
-        source.par_chunks(chunk * 3 * nsh).enumerate().for_each(|(ci, block)| {
-            for (k, coef) in block.chunks_exact(3 * nsh).enumerate() {
+        moments.par_chunks(chunk * 3 * nsh).enumerate().for_each(|(ci, block)| {
+            for (k, mom) in block.chunks_exact(3 * nsh).enumerate() {
                 let f = ci * chunk + k;
-                for (d, y) in ylm[batch.clone()].iter().enumerate() {
-                    let sc = [0, 1, 2].map(|band| dot(&coef[band * nsh..(band + 1) * nsh], y).max(0.0));
-                    // SAFETY: entry (d, f) is written by the task owning voxel f only.
-                    unsafe { *sp.at(d * nfull + f) = sc };
+                let tf = c.sun_t[c.voxels[f]];
+                for (slot, p) in batch.clone().enumerate() {
+                    let (mut plus, mut minus) = ([0f32; 3], [0f32; 3]);
+                    for b in 0..3 {
+                        let (m, y) = (&mom[b * nsh..(b + 1) * nsh], &t.y_src[(p * 3 + b) * nsh..(p * 3 + b + 1) * nsh]);
+                        let (e, o) = (dot(&m[..ne], &y[..ne]), dot(&m[ne..], &y[ne..]));
+                        let [sp_, sm_] = t.sun[p][b];
+                        plus[b] = (e + o + tf[b] * sp_).max(0.0);
+                        minus[b] = (e - o + tf[b] * sm_).max(0.0);
+                    }
+                    // SAFETY: entries (slot, f) are written by the task owning voxel f only.
+                    unsafe {
+                        *sp.at(2 * slot * nfull + f) = plus;
+                        *sp.at((2 * slot + 1) * nfull + f) = minus;
+                    }
                 }
             }
         });
         // (2) The sweeps.
-        let swept: Vec<Swept> = batch
-            .clone()
-            .into_par_iter()
+        let dirs: Vec<usize> = batch.clone().flat_map(|p| t.pairs[p]).collect();
+        let wts: Vec<f32> = batch.clone().flat_map(|p| t.weights[p]).collect();
+        let swept: Vec<Swept> = dirs
+            .par_iter()
             .zip(src.par_chunks(nfull.max(1)))
-            .map(|(d, sd)| sweep_ordinate(c, q.dirs[d], q.weights[d], sd, ground, nfull))
+            .map(|(d, sd)| sweep_ordinate(c, q.dirs[*d], q.weights[*d], sd, ground, nfull))
             .collect();
         for (_, splats) in &swept {
             for (col, e) in splats {
@@ -264,24 +383,30 @@ fn sweep(c: &Ctx, q: &Quadrature, ylm: &[Vec<f32>], source: &[f32], ground: &Gro
                 }
             }
         }
-        // (3) Moments.
-        moments.par_chunks_mut(chunk * 3 * nsh).enumerate().for_each(|(ci, block)| {
+        // (3) Moments: I_lm += w I(Ω) Y_lm(Ω) + w′ I(−Ω) (−1)^l Y_lm(Ω).
+        let ys: Vec<&[f32]> = batch.clone().map(|p| &t.y[p * nsh..(p + 1) * nsh]).collect();
+        let ye: Vec<&[f32]> = ys.iter().map(|y| &y[..ne]).collect();
+        let yo: Vec<&[f32]> = ys.iter().map(|y| &y[ne..]).collect();
+        next.par_chunks_mut(chunk * 3 * nsh).enumerate().for_each(|(ci, block)| {
+            let (mut se, mut so) = (vec![0f32; ye.len()], vec![0f32; ye.len()]);
             for (k, acc) in block.chunks_exact_mut(3 * nsh).enumerate() {
                 let f = ci * chunk + k;
-                for (d, (radiance, _)) in swept.iter().enumerate() {
-                    let w = q.weights[first + d] as f32;
-                    let y = &ylm[first + d];
-                    for (band, ob) in radiance[f].iter().enumerate() {
-                        let wo = w * ob;
-                        for (m, yk) in acc[band * nsh..(band + 1) * nsh].iter_mut().zip(y) {
-                            *m += wo * yk;
-                        }
+                for band in 0..3 {
+                    for (slot, (e, o)) in se.iter_mut().zip(&mut so).enumerate() {
+                        let (ip, im) = (
+                            wts[2 * slot] * swept[2 * slot].0[f][band],
+                            wts[2 * slot + 1] * swept[2 * slot + 1].0[f][band],
+                        );
+                        (*e, *o) = (ip + im, ip - im);
                     }
+                    let a = &mut acc[band * nsh..(band + 1) * nsh];
+                    accumulate(&mut a[..ne], &se, &ye);
+                    accumulate(&mut a[ne..], &so, &yo);
                 }
             }
         });
     }
-    (moments, e_down)
+    (next, e_down)
 }
 
 /// Sweep one ordinate `om` (weight `w`, sr) through the box upwind plane by plane: the radiance at
@@ -552,8 +677,8 @@ fn dsa_apply(c: &Ctx, voxels: &[usize], bo: &BandOptics, b: usize, delta: &[f64]
                 faces += 1.0;
             }
             if faces > 0.0 {
-                // real_sh's l = 1 functions are √(3/4π) (z, y, x) at indices 1, 2, 3.
-                next[fo + [3, 2, 1][ax]] -= ((4.0 * PI / 3.0).sqrt() * sum / faces) as f32;
+                // real_sh's l = 1 functions are √(3/4π) (z, y, x), the first odd ones.
+                next[fo + c.even + [2, 1, 0][ax]] -= ((4.0 * PI / 3.0).sqrt() * sum / faces) as f32;
             }
         }
     }
@@ -591,16 +716,8 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         }
     }
     let nsh = sh_count(s.order);
+    let (perm, even) = parity_order(s.order);
     let q = Quadrature::product(s.n_mu, 2 * s.n_mu);
-    let ylm: Vec<Vec<f32>> = q
-        .dirs
-        .iter()
-        .map(|d| {
-            let mut y = vec![0.0; nsh];
-            real_sh(s.order, *d, &mut y);
-            y.iter().map(|v| *v as f32).collect()
-        })
-        .collect();
     let bands = &optics.bands;
     // δ-M sun transmittance T′ = T^{1 − a f} at the voxel centres.
     let exact_t = crate::sunlight::SunTransmittance::compute(m, sun.dir);
@@ -609,27 +726,14 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         .values()
         .map(|t| [0, 1, 2].map(|b| t.powf((bands[b].sigma_t / optics.sigma_t) as f32)))
         .collect();
+    drop(exact_t);
     let e_sun = [sun.irradiance.x as f64, sun.irradiance.y as f64, sun.irradiance.z as f64];
     let mut y_sun = vec![0.0; nsh];
     let beam = -DVec3::new(sun.dir.x as f64, sun.dir.y as f64, sun.dir.z as f64);
     real_sh(s.order, beam, &mut y_sun);
-    let lidx: Vec<usize> = (0..nsh).map(|k| (k as f64).sqrt().floor() as usize).collect();
-    // J_lm = a′χ′_l (I_lm + E T′ Y_lm(Ω_sun)) per full voxel.
-    let full_vox: Vec<usize> = (0..rho.len()).filter(|v| full[*v] != u32::MAX).collect();
-    let make_source = |moments: &[f32], with_sun: bool| -> Vec<f32> {
-        let mut out = vec![0f32; nfull * 3 * nsh];
-        out.par_chunks_mut(3 * nsh).zip(&full_vox).enumerate().for_each(|(f, (o, v))| {
-            for band in 0..3 {
-                let bo = &bands[band];
-                let sun = if with_sun { e_sun[band] * sun_t[*v][band] as f64 } else { 0.0 };
-                for k in 0..nsh {
-                    let i = moments[(f * 3 + band) * nsh + k] as f64 + sun * y_sun[k];
-                    o[band * nsh + k] = (bo.albedo * bo.chi[lidx[k]] * i) as f32;
-                }
-            }
-        });
-        out
-    };
+    let tables = PairTables::new(&q, s.order, &perm, bands, e_sun, &y_sun);
+    let full_vox: Vec<usize> = m.density.full_index().full_voxels().collect();
+    debug_assert_eq!(full_vox.len(), nfull);
     let (lo, hi) = m.active_box(1).unwrap_or(([0; 3], dims));
     // Ground: ρ_g/π (E_sun μ_s T′ + E_down) per column, over the footprint grown as far as the
     // cloud's shadow reaches; E_down is the clear sky's plus the cloud's change to it in the last
@@ -692,6 +796,9 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         rho,
         full: &full,
         nsh,
+        even,
+        voxels: &full_vox,
+        sun_t: &sun_t,
         sigma_t: [0, 1, 2].map(|b| bands[b].sigma_t as f32),
         grey: bands[0].sigma_t == bands[1].sigma_t && bands[1].sigma_t == bands[2].sigma_t,
         sky,
@@ -710,21 +817,15 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
             .collect(),
         _ => Vec::new(),
     };
-    let voxels: Vec<usize> = if hier.is_empty() {
-        Vec::new()
-    } else {
-        m.density.full_index().full_voxels().collect()
-    };
     let mut moments = vec![0f32; nfull * 3 * nsh];
-    let mut source = make_source(&moments, true);
     let mut history = Vec::new();
     let mut extrapolated = 0;
     progress.begin("transport iterations", s.max_iterations as u64);
     // An empty medium has nothing to iterate: the sky and ground pass unchanged.
     for _ in 0..if nfull == 0 { 0 } else { s.max_iterations } {
-        let (mut next, e_down) = sweep(&ctx, &q, &ylm, &source, &ground_map);
+        let (mut next, e_down) = sweep(&ctx, &q, &tables, &moments, &ground_map);
         if !hier.is_empty() {
-            accelerate(&ctx, &voxels, &hier, bands, &moments, &mut next);
+            accelerate(&ctx, &full_vox, &hier, bands, &moments, &mut next);
         }
         let scale = next.iter().step_by(nsh).fold(1e-30f64, |a, x| a.max(x.abs() as f64));
         let change = next
@@ -739,7 +840,6 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
             extrapolated = history.len();
         }
         moments = next;
-        source = make_source(&moments, true);
         ground_map = ground_of(Some(&e_down));
         progress.advance(1);
         progress.log(&format!(
@@ -751,7 +851,20 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         }
     }
     progress.end();
-    let diffuse_source = make_source(&moments, false);
+    // The diffuse source a′χ′_l I_lm in real_sh's order for the gather.
+    let mut diffuse_source = vec![0f32; moments.len()];
+    diffuse_source
+        .par_chunks_mut(3 * nsh)
+        .zip(moments.par_chunks(3 * nsh))
+        .for_each(|(o, mf)| {
+            for (band, bo) in bands.iter().enumerate() {
+                for (i, k) in perm.iter().enumerate() {
+                    let l = (*k as f64).sqrt().floor() as usize;
+                    o[band * nsh + k] = (bo.albedo * bo.chi[l] * mf[band * nsh + i] as f64) as f32;
+                }
+            }
+        });
+    drop(moments);
     TransportField {
         optics: optics.clone(),
         order: s.order,
