@@ -187,6 +187,8 @@ struct Ctx<'a> {
     voxels: &'a [usize],
     /// δ-M sun transmittance T′ per grid voxel and band.
     sun_t: &'a [[f32; 3]],
+    /// The box's cells in each major axis' sweep order ([`box_cells`]).
+    cells: [Vec<(f32, u32)>; 3],
     sigma_t: [f32; 3],
     /// All bands share σt′ (one set of step weights serves them).
     grey: bool,
@@ -409,11 +411,50 @@ fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], ground: &Grou
     (next, e_down)
 }
 
+/// The two axes across major axis `a`, the faster-varying first.
+fn cross_axes(a: usize) -> (usize, usize) {
+    match a {
+        0 => (1, 2),
+        1 => (0, 2),
+        _ => (0, 1),
+    }
+}
+
+/// The swept box's cells (density, full-voxel index or `u32::MAX`) in the order a sweep along
+/// major axis `a` visits them: planes of a, rows of the second cross axis, cells of the first;
+/// so the sweeps read them contiguously whichever axis they run along.
+fn box_cells(dims: [usize; 3], lo: [usize; 3], n: [usize; 3], rho: &[f32], full: &[u32], a: usize) -> Vec<(f32, u32)> {
+    let (b, cc) = cross_axes(a);
+    let mut out = Vec::with_capacity(n[0] * n[1] * n[2]);
+    for pa in 0..n[a] {
+        for ic in 0..n[cc] {
+            for ib in 0..n[b] {
+                let mut v = lo;
+                v[a] += pa;
+                v[b] += ib;
+                v[cc] += ic;
+                let vi = v[0] + dims[0] * (v[1] + dims[1] * v[2]);
+                out.push((rho[vi], full[vi]));
+            }
+        }
+    }
+    out
+}
+
+/// A cell of a sweep's plane buffer: radiance, density and density × source per band (the
+/// upwind interpolation reads one such record per neighbour).
+#[derive(Clone, Copy, Default)]
+#[repr(C, align(32))]
+struct PlaneCell {
+    i: [f32; 3],
+    rho: f32,
+    rs: [f32; 3],
+}
+
 /// Sweep one ordinate `om` (weight `w`, sr) through the box upwind plane by plane: the radiance at
 /// every full voxel's centre, and the ground splats (column, change of downward irradiance, W/m²)
 /// of the light leaving the box downwards. `src` is the source in this ordinate per full voxel.
 fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, nfull: usize) -> Swept {
-    let [nx, ny, _] = c.dims;
     let mut radiance = vec![[0f32; 3]; nfull];
     let mut splats = Vec::new();
     let skyr = c.sky.radiance(Vec3::new(-om.x as f32, -om.y as f32, -om.z as f32));
@@ -421,12 +462,9 @@ fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundM
     // Major axis and the two others.
     let r = [om.x.abs() / c.h[0], om.y.abs() / c.h[1], om.z.abs() / c.h[2]];
     let a = (0..3).max_by(|p, q| r[*p].total_cmp(&r[*q])).unwrap_or(0);
-    let (b, cc) = match a {
-        0 => (1, 2),
-        1 => (0, 2),
-        _ => (0, 1),
-    };
+    let (b, cc) = cross_axes(a);
     let (na, nb, nc) = (c.n[a], c.n[b], c.n[cc]);
+    let cells = &c.cells[a];
     let oa = om[a];
     let s = (c.h[a] / oa.abs()) as f32;
     // Back point offsets in the previous plane (voxels), split into floor and fraction.
@@ -438,16 +476,10 @@ fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundM
     let (tb, tc) = ((ob - fb) as f32, (oc - fc) as f32);
     let (fb, fc) = (fb as isize, fc as isize);
     let wts = [(1.0 - tb) * (1.0 - tc), tb * (1.0 - tc), (1.0 - tb) * tc, tb * tc];
-    let offs = [(0isize, 0isize), (1, 0), (0, 1), (1, 1)];
     let stride = nb + 2;
-    let plane_len = stride * (nc + 2);
-    // Plane buffers (radiance, source per band; density) with a one-cell ghost ring.
-    let mut prev_i = vec![[0f32; 3]; plane_len];
-    let mut prev_s = vec![[0f32; 3]; plane_len];
-    let mut prev_r = vec![0f32; plane_len];
-    let mut cur_i = prev_i.clone();
-    let mut cur_s = prev_s.clone();
-    let mut cur_r = prev_r.clone();
+    // Plane buffers with a one-cell ghost ring.
+    let mut prev = vec![PlaneCell::default(); stride * (nc + 2)];
+    let mut cur = prev.clone();
     // Grid coordinates of box cell (pa, pb, pc) in the (a, b, c) frame.
     let coord = |pa: isize, pb: isize, pc: isize| {
         let mut v = [0isize; 3];
@@ -456,49 +488,46 @@ fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundM
         v[cc] = pc + c.lo[cc] as isize;
         v
     };
-    let fill_ghosts = |pa: isize, whole: bool, bi: &mut [[f32; 3]], bs: &mut [[f32; 3]], br: &mut [f32]| {
+    // The ghost cells of plane pa (all of it when `whole`, the ring otherwise): what enters the
+    // box there.
+    let fill_ghosts = |pa: isize, whole: bool, buf: &mut [PlaneCell]| {
         for ic in -1..=nc as isize {
-            for ib in -1..=nb as isize {
-                let inside = ib >= 0 && ic >= 0 && ib < nb as isize && ic < nc as isize;
-                if inside && !whole {
-                    continue;
-                }
+            let ring = ic < 0 || ic == nc as isize;
+            let step = if ring || whole { 1 } else { nb + 1 };
+            for ib in (-1..=nb as isize).step_by(step) {
                 let v = coord(pa, ib, ic);
-                let l = (ib + 1) as usize + stride * (ic + 1) as usize;
-                bi[l] = c.boundary(om, v[0], v[1], v[2], ground, skyr);
-                bs[l] = [0.0; 3];
-                br[l] = 0.0;
+                buf[(ib + 1) as usize + stride * (ic + 1) as usize] = PlaneCell {
+                    i: c.boundary(om, v[0], v[1], v[2], ground, skyr),
+                    ..PlaneCell::default()
+                };
             }
         }
     };
     let first = if oa > 0.0 { -1 } else { na as isize };
-    fill_ghosts(first, true, &mut prev_i, &mut prev_s, &mut prev_r);
+    fill_ghosts(first, true, &mut prev);
+    // Offset of the upwind (0, 0) neighbour from a cell in the plane buffer.
+    let up = fb + fc * stride as isize;
     for step in 0..na {
-        let pa = if oa > 0.0 { step as isize } else { (na - 1 - step) as isize };
-        for ic in 0..nc as isize {
-            let row = stride * (ic + 1) as usize;
-            for ib in 0..nb as isize {
-                let v = coord(pa, ib, ic);
-                let vi = v[0] as usize + nx * (v[1] as usize + ny * v[2] as usize);
-                let rho = c.rho[vi];
-                let fi = c.full[vi];
-                let sc = if fi != u32::MAX { src[fi as usize] } else { [0f32; 3] };
-                // Radiance and density bilinear; the source (per unit extinction, defined
-                // only where ρ > 0) density-weighted, so that empty neighbours do not
-                // pull it towards 0 (a uniform source stays uniform: the furnace holds).
+        let pa = if oa > 0.0 { step } else { na - 1 - step };
+        let plane = &cells[pa * nb * nc..(pa + 1) * nb * nc];
+        for (ic, row) in plane.chunks_exact(nb).enumerate() {
+            let l0 = stride * (ic + 1) + 1;
+            for (ib, &(rho, fi)) in row.iter().enumerate() {
+                let l = l0 + ib;
+                let u = (l as isize + up) as usize;
+                let n = [prev[u], prev[u + 1], prev[u + stride], prev[u + stride + 1]];
+                // Radiance and density bilinear; the source (per unit extinction, defined only
+                // where ρ > 0) density-weighted, so that empty neighbours do not pull it
+                // towards 0 (a uniform source stays uniform: the furnace holds).
                 let (mut ib_, mut sbw, mut rb) = ([0f32; 3], [0f32; 3], 0f32);
-                for (wk, (db, dc)) in wts.iter().zip(offs) {
-                    if *wk == 0.0 {
-                        continue;
-                    }
-                    let l = (ib + fb + db + 1) as usize + stride * (ic + fc + dc + 1) as usize;
-                    let wr = wk * prev_r[l];
+                for (wk, nk) in wts.iter().zip(&n) {
                     for band in 0..3 {
-                        ib_[band] += wk * prev_i[l][band];
-                        sbw[band] += wr * prev_s[l][band];
+                        ib_[band] += wk * nk.i[band];
+                        sbw[band] += wk * nk.rs[band];
                     }
-                    rb += wr;
+                    rb += wk * nk.rho;
                 }
+                let sc = if fi != u32::MAX { src[fi as usize] } else { [0f32; 3] };
                 let mut out = ib_;
                 let rm = 0.5 * (rb + rho) * s;
                 if rm > 0.0 {
@@ -513,15 +542,17 @@ fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundM
                         out[band] = ib_[band] * e + wi * sb[band] + wo * se[band];
                     }
                 }
-                let l = row + (ib + 1) as usize;
-                cur_i[l] = out;
-                cur_s[l] = sc;
-                cur_r[l] = rho;
+                cur[l] = PlaneCell {
+                    i: out,
+                    rho,
+                    rs: sc.map(|x| rho * x),
+                };
                 if fi != u32::MAX {
                     radiance[fi as usize] = out;
                 }
             }
         }
+        let pa = pa as isize;
         if splat {
             // Light leaving the box downwards lands on the ground along Ω: splat its flux
             // change against the sky it hides, (I − L_sky) w |Ω·n| A_face, per column area.
@@ -546,15 +577,13 @@ fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundM
                 if let Some(col) = ground.column(q.x, q.z) {
                     let area = c.h[0] * c.h[1] * c.h[2] / c.h[ax];
                     let f = w as f32 as f64 * om[ax].abs() * area / (c.h[0] * c.h[2]);
-                    let i = cur_i[ib + 1 + stride * (ic + 1)];
+                    let i = cur[ib + 1 + stride * (ic + 1)].i;
                     splats.push((col, [0, 1, 2].map(|band| f * (i[band] as f64 - skyr[band] as f64))));
                 }
             }
         }
-        std::mem::swap(&mut prev_i, &mut cur_i);
-        std::mem::swap(&mut prev_s, &mut cur_s);
-        std::mem::swap(&mut prev_r, &mut cur_r);
-        fill_ghosts(pa, false, &mut prev_i, &mut prev_s, &mut prev_r);
+        std::mem::swap(&mut prev, &mut cur);
+        fill_ghosts(pa, false, &mut prev);
     }
     (radiance, splats)
 }
@@ -788,10 +817,11 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         }
     };
     let mut ground_map = ground_of(None);
+    let n = [0, 1, 2].map(|a| hi[a] - lo[a]);
     let ctx = Ctx {
         dims,
         lo,
-        n: [0, 1, 2].map(|a| hi[a] - lo[a]),
+        n,
         h: [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64],
         rho,
         full: &full,
@@ -799,6 +829,7 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         even,
         voxels: &full_vox,
         sun_t: &sun_t,
+        cells: [0, 1, 2].map(|a| box_cells(dims, lo, n, rho, &full, a)),
         sigma_t: [0, 1, 2].map(|b| bands[b].sigma_t as f32),
         grey: bands[0].sigma_t == bands[1].sigma_t && bands[1].sigma_t == bands[2].sigma_t,
         sky,
