@@ -141,19 +141,6 @@ impl<T> Shared<T> {
     }
 }
 
-/// Σ a_i b_i in eight fixed lanes (vectorises; the same order for any thread count).
-#[inline]
-fn dot(a: &[f32], b: &[f32]) -> f32 {
-    let n = a.len() / 8 * 8;
-    let mut acc = [0f32; 8];
-    for (ca, cb) in a[..n].chunks_exact(8).zip(b[..n].chunks_exact(8)) {
-        for l in 0..8 {
-            acc[l] += ca[l] * cb[l];
-        }
-    }
-    acc.iter().sum::<f32>() + a[n..].iter().zip(&b[n..]).map(|(x, y)| x * y).sum::<f32>()
-}
-
 /// (e^{−x}, w_in, w_out) of a step of optical length x with a source linear in optical path
 /// (as the slab solver's, whose f64 form the test checks it against), in f32 with a series below x = 0.2 (the closed form cancels there).
 #[inline]
@@ -256,6 +243,9 @@ fn opposite_pairs(q: &Quadrature) -> Vec<[usize; 2]> {
     pairs
 }
 
+/// Opposite pairs per batch: the lanes of the source evaluation.
+const PAIRS: usize = ORDINATE_BATCH / 2;
+
 /// Per ordinate pair, what the sweeps' per-voxel steps read (inner harmonic order, f32).
 struct PairTables {
     /// The ordinates (d, d′ = opposite).
@@ -264,11 +254,12 @@ struct PairTables {
     weights: Vec<[f32; 2]>,
     /// Y_lm(Ω_d), per pair.
     y: Vec<f32>,
-    /// a′χ′_l Y_lm(Ω_d) per pair and band: the source in Ω_d is Σ I_lm times this.
-    y_src: Vec<f32>,
-    /// The reduced sun's first scattering per unit T′ in Ω_d and Ω_d′ per pair and band,
-    /// Σ_lm a′χ′_l E Y_lm(Ω_sun) Y_lm(±Ω_d) (W·m⁻²·sr⁻¹).
-    sun: Vec<[[f32; 2]; 3]>,
+    /// a′χ′_l Y_lm(Ω_d) per batch of pairs, band and lm, the batch's pairs in lanes (0 past the
+    /// last pair): the source in Ω_d is Σ I_lm times this.
+    y_src: Vec<[f32; PAIRS]>,
+    /// The reduced sun's first scattering per unit T′ in Ω_d and in −Ω_d per batch and band, in
+    /// lanes: Σ_lm a′χ′_l E Y_lm(Ω_sun) Y_lm(±Ω_d) (W·m⁻²·sr⁻¹).
+    sun: Vec<[[f32; PAIRS]; 2]>,
 }
 
 impl PairTables {
@@ -276,22 +267,27 @@ impl PairTables {
         let nsh = perm.len();
         let pairs = opposite_pairs(q);
         let l_of = |k: usize| (k as f64).sqrt().floor() as usize;
-        let (mut y, mut y_src, mut sun) = (Vec::new(), Vec::new(), Vec::new());
+        let batches = pairs.len().div_ceil(PAIRS);
+        let mut y = Vec::new();
+        let mut y_src = vec![[0f32; PAIRS]; batches * 3 * nsh];
+        let mut sun = vec![[[0f32; PAIRS]; 2]; batches * 3];
         let mut yd = vec![0.0; nsh];
-        for [d, _] in &pairs {
+        for (p, [d, _]) in pairs.iter().enumerate() {
             real_sh(order, q.dirs[*d], &mut yd);
             y.extend(perm.iter().map(|k| yd[*k] as f32));
-            let mut s = [[0f32; 2]; 3];
+            let (bi, lane) = (p / PAIRS, p % PAIRS);
             for (b, bo) in bands.iter().enumerate() {
-                y_src.extend(perm.iter().map(|k| (bo.albedo * bo.chi[l_of(*k)] * yd[*k]) as f32));
+                for (i, k) in perm.iter().enumerate() {
+                    y_src[(bi * 3 + b) * nsh + i][lane] = (bo.albedo * bo.chi[l_of(*k)] * yd[*k]) as f32;
+                }
                 let term = |k: usize| bo.albedo * bo.chi[l_of(k)] * e_sun[b] * y_sun[k] * yd[k];
                 let (e, o) = (0..nsh).fold(
                     (0.0, 0.0),
                     |(e, o), k| if l_of(k) % 2 == 0 { (e + term(k), o) } else { (e, o + term(k)) },
                 );
-                s[b] = [(e + o) as f32, (e - o) as f32];
+                sun[bi * 3 + b][0][lane] = (e + o) as f32;
+                sun[bi * 3 + b][1][lane] = (e - o) as f32;
             }
-            sun.push(s);
         }
         let weights = pairs.iter().map(|[d, o]| [q.weights[*d] as f32, q.weights[*o] as f32]).collect();
         PairTables {
@@ -304,24 +300,55 @@ impl PairTables {
     }
 }
 
-/// acc[k] += Σ_p s[p] ys[p][k] (every ys[p] as long as acc), eight k at a time with the sum
-/// over p in registers; the same order for any thread count.
-#[inline]
-fn accumulate(acc: &mut [f32], s: &[f32], ys: &[&[f32]]) {
-    let n8 = acc.len() / 8 * 8;
-    for k0 in (0..n8).step_by(8) {
-        let mut r = [0f32; 8];
-        for (sp, y) in s.iter().zip(ys) {
-            for (rl, yl) in r.iter_mut().zip(&y[k0..k0 + 8]) {
-                *rl += sp * yl;
+/// Σ_k m[k] y[k] for every lane (a batch's pairs), two k at a time in independent sums.
+#[inline(always)]
+fn lanes_dot(m: &[f32], y: &[[f32; PAIRS]]) -> [f32; PAIRS] {
+    let (mut a0, mut a1) = ([0f32; PAIRS], [0f32; PAIRS]);
+    for (mk, yk) in m.chunks_exact(2).zip(y.chunks_exact(2)) {
+        for p in 0..PAIRS {
+            a0[p] += mk[0] * yk[0][p];
+            a1[p] += mk[1] * yk[1][p];
+        }
+    }
+    if m.len() % 2 == 1 {
+        let (mk, yk) = (m[m.len() - 1], y[m.len() - 1]);
+        for p in 0..PAIRS {
+            a0[p] += mk * yk[p];
+        }
+    }
+    std::array::from_fn(|p| a0[p] + a1[p])
+}
+
+/// acc[k] += Σ_p s[p] y[p·stride + k] (acc no longer than stride), eight then four k at a time
+/// with the sum over p in registers; the same order for any thread count.
+#[inline(always)]
+fn accumulate(acc: &mut [f32], s: &[f32], y: &[f32], stride: usize) {
+    #[inline(always)]
+    fn lanes<const N: usize>(acc: &mut [f32], s: &[f32], y: &[f32], stride: usize, k0: usize) {
+        let mut r = [0f32; N];
+        for (p, sp) in s.iter().enumerate() {
+            let yk = &y[p * stride + k0..p * stride + k0 + N];
+            for l in 0..N {
+                r[l] += sp * yk[l];
             }
         }
-        for (a, rl) in acc[k0..k0 + 8].iter_mut().zip(r) {
+        for (a, rl) in acc[k0..k0 + N].iter_mut().zip(r) {
             *a += rl;
         }
     }
-    for k in n8..acc.len() {
-        acc[k] += s.iter().zip(ys).map(|(sp, y)| sp * y[k]).sum::<f32>();
+    let n = acc.len();
+    let mut k = 0;
+    while k + 8 <= n {
+        lanes::<8>(acc, s, y, stride, k);
+        k += 8;
+    }
+    while k + 4 <= n {
+        lanes::<4>(acc, s, y, stride, k);
+        k += 4;
+    }
+    while k < n {
+        lanes::<1>(acc, s, y, stride, k);
+        k += 1;
     }
 }
 
@@ -342,10 +369,9 @@ fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], ground: &Grou
     let mut e_down = vec![[0f64; 3]; ground.radiance.len()];
     // Full voxels per task in the per-voxel steps (1) and (3).
     let chunk = 256;
-    let per_batch = ORDINATE_BATCH / 2;
     let mut src = vec![[0f32; 3]; ORDINATE_BATCH * nfull];
-    for first in (0..t.pairs.len()).step_by(per_batch) {
-        let batch = first..(first + per_batch).min(t.pairs.len());
+    for (bi, first) in (0..t.pairs.len()).step_by(PAIRS).enumerate() {
+        let batch = first..(first + PAIRS).min(t.pairs.len());
         // (1) Source in each ordinate, clamped at 0 (the truncated expansion may dip); slot 2p
         // holds pair p's ordinate d, 2p + 1 its opposite.
         let sp = Shared(src.as_mut_ptr());
@@ -353,19 +379,21 @@ fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], ground: &Grou
             for (k, mom) in block.chunks_exact(3 * nsh).enumerate() {
                 let f = ci * chunk + k;
                 let tf = c.sun_t[c.voxels[f]];
-                for (slot, p) in batch.clone().enumerate() {
-                    let (mut plus, mut minus) = ([0f32; 3], [0f32; 3]);
-                    for b in 0..3 {
-                        let (m, y) = (&mom[b * nsh..(b + 1) * nsh], &t.y_src[(p * 3 + b) * nsh..(p * 3 + b + 1) * nsh]);
-                        let (e, o) = (dot(&m[..ne], &y[..ne]), dot(&m[ne..], &y[ne..]));
-                        let [sp_, sm_] = t.sun[p][b];
-                        plus[b] = (e + o + tf[b] * sp_).max(0.0);
-                        minus[b] = (e - o + tf[b] * sm_).max(0.0);
+                let (mut plus, mut minus) = ([[0f32; 3]; PAIRS], [[0f32; 3]; PAIRS]);
+                for b in 0..3 {
+                    let (m, y) = (&mom[b * nsh..(b + 1) * nsh], &t.y_src[(bi * 3 + b) * nsh..(bi * 3 + b + 1) * nsh]);
+                    let (e, o) = (lanes_dot(&m[..ne], &y[..ne]), lanes_dot(&m[ne..], &y[ne..]));
+                    let [sp_, sm_] = t.sun[bi * 3 + b];
+                    for p in 0..PAIRS {
+                        plus[p][b] = (e[p] + o[p] + tf[b] * sp_[p]).max(0.0);
+                        minus[p][b] = (e[p] - o[p] + tf[b] * sm_[p]).max(0.0);
                     }
+                }
+                for slot in 0..batch.len() {
                     // SAFETY: entries (slot, f) are written by the task owning voxel f only.
                     unsafe {
-                        *sp.at(2 * slot * nfull + f) = plus;
-                        *sp.at((2 * slot + 1) * nfull + f) = minus;
+                        *sp.at(2 * slot * nfull + f) = plus[slot];
+                        *sp.at((2 * slot + 1) * nfull + f) = minus[slot];
                     }
                 }
             }
@@ -386,11 +414,9 @@ fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], ground: &Grou
             }
         }
         // (3) Moments: I_lm += w I(Ω) Y_lm(Ω) + w′ I(−Ω) (−1)^l Y_lm(Ω).
-        let ys: Vec<&[f32]> = batch.clone().map(|p| &t.y[p * nsh..(p + 1) * nsh]).collect();
-        let ye: Vec<&[f32]> = ys.iter().map(|y| &y[..ne]).collect();
-        let yo: Vec<&[f32]> = ys.iter().map(|y| &y[ne..]).collect();
+        let yb = &t.y[first * nsh..batch.end * nsh];
         next.par_chunks_mut(chunk * 3 * nsh).enumerate().for_each(|(ci, block)| {
-            let (mut se, mut so) = (vec![0f32; ye.len()], vec![0f32; ye.len()]);
+            let (mut se, mut so) = (vec![0f32; batch.len()], vec![0f32; batch.len()]);
             for (k, acc) in block.chunks_exact_mut(3 * nsh).enumerate() {
                 let f = ci * chunk + k;
                 for band in 0..3 {
@@ -402,8 +428,8 @@ fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], ground: &Grou
                         (*e, *o) = (ip + im, ip - im);
                     }
                     let a = &mut acc[band * nsh..(band + 1) * nsh];
-                    accumulate(&mut a[..ne], &se, &ye);
-                    accumulate(&mut a[ne..], &so, &yo);
+                    accumulate(&mut a[..ne], &se, yb, nsh);
+                    accumulate(&mut a[ne..], &so, &yb[ne..], nsh);
                 }
             }
         });
@@ -531,7 +557,7 @@ fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundM
                 let mut out = ib_;
                 let rm = 0.5 * (rb + rho) * s;
                 if rm > 0.0 {
-                    let sb = if rb > 0.0 { sbw.map(|x| x / rb) } else { sc };
+                    let sb = if rb > 0.0 { sbw.map(|x| x * (1.0 / rb)) } else { sc };
                     let se = if fi == u32::MAX { sb } else { sc };
                     let mut wgt = step_weights(c.sigma_t[0] * rm);
                     for band in 0..3 {
@@ -943,10 +969,98 @@ mod tests {
     }
 
     #[test]
-    fn dot_matches_the_plain_sum() {
-        let a: Vec<f32> = (0..67).map(|i| (i as f32 * 0.37).sin()).collect();
-        let b: Vec<f32> = (0..67).map(|i| (i as f32 * 0.11).cos()).collect();
-        let plain: f64 = a.iter().zip(&b).map(|(x, y)| (*x as f64) * (*y as f64)).sum();
-        assert!((dot(&a, &b) as f64 - plain).abs() < 1e-5);
+    fn parity_order_puts_even_l_first_and_pairs_are_opposite() {
+        let (perm, ne) = parity_order(7);
+        assert_eq!((perm.len(), ne), (64, 28));
+        let l_of = |k: usize| (k as f64).sqrt().floor() as usize;
+        assert!(perm[..ne].iter().all(|k| l_of(*k) % 2 == 0) && perm[ne..].iter().all(|k| l_of(*k) % 2 == 1));
+        assert_eq!(&perm[ne..ne + 3], &[1, 2, 3], "the l = 1 block leads the odd ones (DSA's current)");
+        let mut sorted = perm.clone();
+        sorted.sort();
+        assert_eq!(sorted, (0..64).collect::<Vec<_>>());
+        let q = Quadrature::product(8, 16);
+        let pairs = opposite_pairs(&q);
+        assert_eq!(pairs.len(), 64);
+        for [d, o] in pairs {
+            assert!((q.dirs[d] + q.dirs[o]).length() < 1e-12 && q.weights[d] == q.weights[o]);
+        }
+    }
+
+    #[test]
+    fn pair_source_and_moments_match_the_direct_sums() {
+        // Random coefficients I_lm: the source from the pair tables (E ± O plus the sun) against
+        // Σ a′χ′_l (I_lm + E T′ Y_lm(Ω_sun)) Y_lm(Ω) in each ordinate, and the moments
+        // accumulated per pair against Σ_Ω w I(Ω) Y_lm(Ω) in f64.
+        let order = 5;
+        let nsh = sh_count(order);
+        let (perm, ne) = parity_order(order);
+        let q = Quadrature::product(6, 12);
+        let bands: Vec<BandOptics> = [0.99, 0.9, 0.6]
+            .iter()
+            .map(|a| BandOptics {
+                sigma_t: 1.0,
+                albedo: *a,
+                chi: (0..=order).map(|l| 0.8f64.powi(l as i32)).collect(),
+                f: 0.0,
+            })
+            .collect();
+        let e_sun = [2.0, 1.5, 1.0];
+        let beam = DVec3::new(0.3, -0.8, 0.2).normalize();
+        let mut y_sun = vec![0.0; nsh];
+        real_sh(order, beam, &mut y_sun);
+        let t = PairTables::new(&q, order, &perm, &bands, e_sun, &y_sun);
+        let mom: Vec<f64> = (0..3 * nsh).map(|i| ((i as f64) * 0.731).sin() / (1.0 + i as f64 * 0.1)).collect();
+        let mom_inner: Vec<f32> = (0..3)
+            .flat_map(|b| perm.iter().map(move |k| (b, *k)))
+            .map(|(b, k)| mom[b * nsh + k] as f32)
+            .collect();
+        let tf = [0.7f32, 0.5, 0.3];
+        let l_of = |k: usize| (k as f64).sqrt().floor() as usize;
+        let mut y = vec![0.0; nsh];
+        for (p, [d, o]) in t.pairs.iter().enumerate() {
+            let (bi, lane) = (p / PAIRS, p % PAIRS);
+            for (b, bo) in bands.iter().enumerate() {
+                let m = &mom_inner[b * nsh..(b + 1) * nsh];
+                let ys = &t.y_src[(bi * 3 + b) * nsh..(bi * 3 + b + 1) * nsh];
+                let (e, od) = (lanes_dot(&m[..ne], &ys[..ne])[lane], lanes_dot(&m[ne..], &ys[ne..])[lane]);
+                let got = [
+                    e + od + tf[b] * t.sun[bi * 3 + b][0][lane],
+                    e - od + tf[b] * t.sun[bi * 3 + b][1][lane],
+                ];
+                for (dir, g) in [*d, *o].iter().zip(got) {
+                    real_sh(order, q.dirs[*dir], &mut y);
+                    let want: f64 = (0..nsh)
+                        .map(|k| bo.albedo * bo.chi[l_of(k)] * (mom[b * nsh + k] + e_sun[b] * tf[b] as f64 * y_sun[k]) * y[k])
+                        .sum();
+                    assert!((g as f64 - want).abs() < 1e-5, "pair {p} band {b}: {g} vs {want}");
+                }
+            }
+        }
+        // Moments of a radiance field I(Ω) = 1 + Ω_x + Ω_y Ω_z over the pairs of batch 0.
+        let radiance = |v: DVec3| 1.0 + v.x + v.y * v.z;
+        let np = PAIRS.min(t.pairs.len());
+        let (mut se, mut so) = (vec![0f32; np], vec![0f32; np]);
+        for p in 0..np {
+            let [d, o] = t.pairs[p];
+            let (ip, im) = (
+                t.weights[p][0] * radiance(q.dirs[d]) as f32,
+                t.weights[p][1] * radiance(q.dirs[o]) as f32,
+            );
+            (se[p], so[p]) = (ip + im, ip - im);
+        }
+        let mut acc = vec![0f32; nsh];
+        accumulate(&mut acc[..ne], &se, &t.y[..np * nsh], nsh);
+        accumulate(&mut acc[ne..], &so, &t.y[ne..np * nsh], nsh);
+        for (i, k) in perm.iter().enumerate() {
+            let want: f64 = t.pairs[..np]
+                .iter()
+                .flatten()
+                .map(|dir| {
+                    real_sh(order, q.dirs[*dir], &mut y);
+                    q.weights[*dir] * radiance(q.dirs[*dir]) * y[*k]
+                })
+                .sum();
+            assert!((acc[i] as f64 - want).abs() < 1e-5, "lm {k}: {} vs {want}", acc[i]);
+        }
     }
 }
