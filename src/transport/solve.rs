@@ -208,9 +208,8 @@ impl Ctx<'_> {
     }
 }
 
-/// One ordinate's sweep: the radiance at every full voxel's centre (W·m⁻²·sr⁻¹, per band), and
-/// its ground splats (map column, change of the downward irradiance in W/m² per band).
-type Swept = (Vec<[f32; 3]>, Vec<(usize, [f64; 3])>);
+/// One ordinate's ground splats (map column, change of the downward irradiance in W/m² per band).
+type Splats = Vec<(usize, [f64; 3])>;
 
 /// Ordinates swept side by side: their per-voxel sources and radiances are held at once
 /// (2 × 12 B per full voxel each). Fixed, so the sums are the same for any thread count.
@@ -352,6 +351,91 @@ fn accumulate(acc: &mut [f32], s: &[f32], y: &[f32], stride: usize) {
     }
 }
 
+/// Define `$name`, which runs `$body` compiled for AVX where the processor has it, else as
+/// built. The kernels' lanes and sums are explicit and Rust never fuses a multiply with an add,
+/// so both give the same bits; AVX does eight lanes per instruction instead of four.
+macro_rules! with_avx {
+    ($name:ident, $avx:ident, $body:ident, ($($a:ident: $t:ty),*) $(-> $r:ty)?) => {
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx")]
+        unsafe fn $avx($($a: $t),*) $(-> $r)? {
+            $body($($a),*)
+        }
+        fn $name($($a: $t),*) $(-> $r)? {
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx") {
+                // SAFETY: the processor has AVX.
+                return unsafe { $avx($($a),*) };
+            }
+            $body($($a),*)
+        }
+    };
+}
+
+/// Step (1) of [`sweep`] for the full voxels from `f0` whose moments are `block`: the source in
+/// both ordinates of each of the batch's `pairs` pairs (batch `bi`), into slots 2p and 2p + 1.
+#[inline(always)]
+fn source_kernel(c: &Ctx, t: &PairTables, bi: usize, pairs: usize, block: &[f32], f0: usize, sp: Shared<[f32; 3]>) {
+    let (nsh, ne) = (c.nsh, c.even);
+    let nfull = c.voxels.len();
+    for (k, mom) in block.chunks_exact(3 * nsh).enumerate() {
+        let f = f0 + k;
+        let tf = c.sun_t[c.voxels[f]];
+        let (mut plus, mut minus) = ([[0f32; 3]; PAIRS], [[0f32; 3]; PAIRS]);
+        for b in 0..3 {
+            let (m, y) = (&mom[b * nsh..(b + 1) * nsh], &t.y_src[(bi * 3 + b) * nsh..(bi * 3 + b + 1) * nsh]);
+            let (e, o) = (lanes_dot(&m[..ne], &y[..ne]), lanes_dot(&m[ne..], &y[ne..]));
+            let [sp_, sm_] = t.sun[bi * 3 + b];
+            for p in 0..PAIRS {
+                plus[p][b] = (e[p] + o[p] + tf[b] * sp_[p]).max(0.0);
+                minus[p][b] = (e[p] - o[p] + tf[b] * sm_[p]).max(0.0);
+            }
+        }
+        for slot in 0..pairs {
+            // SAFETY: entries (slot, f) are written by the task owning voxel f only.
+            unsafe {
+                *sp.at(2 * slot * nfull + f) = plus[slot];
+                *sp.at((2 * slot + 1) * nfull + f) = minus[slot];
+            }
+        }
+    }
+}
+with_avx!(source_block, source_block_avx, source_kernel, (c: &Ctx, t: &PairTables, bi: usize, pairs: usize, block: &[f32], f0: usize, sp: Shared<[f32; 3]>));
+
+/// What step (3) of [`sweep`] reads: the batch's radiances per ordinate slot and full voxel, the
+/// slots' weights (sr) and the pairs' Y_lm (inner order, one row of (L+1)² per pair).
+struct Lanes<'a> {
+    nfull: usize,
+    wts: &'a [f32],
+    radiance: &'a [[f32; 3]],
+    y: &'a [f32],
+}
+
+/// Step (3) of [`sweep`] for the full voxels from `f0` whose new moments are `block`: I_lm +=
+/// w I(Ω) Y_lm(Ω) + w′ I(−Ω) (−1)^l Y_lm(Ω) over the batch's pairs.
+#[inline(always)]
+fn moments_kernel(c: &Ctx, l: &Lanes, block: &mut [f32], f0: usize) {
+    let (nsh, ne, nfull) = (c.nsh, c.even, l.nfull);
+    let pairs = l.wts.len() / 2;
+    let (mut se, mut so) = ([0f32; PAIRS], [0f32; PAIRS]);
+    for (k, acc) in block.chunks_exact_mut(3 * nsh).enumerate() {
+        let f = f0 + k;
+        for band in 0..3 {
+            for (slot, (e, o)) in se[..pairs].iter_mut().zip(&mut so[..pairs]).enumerate() {
+                let (ip, im) = (
+                    l.wts[2 * slot] * l.radiance[2 * slot * nfull + f][band],
+                    l.wts[2 * slot + 1] * l.radiance[(2 * slot + 1) * nfull + f][band],
+                );
+                (*e, *o) = (ip + im, ip - im);
+            }
+            let a = &mut acc[band * nsh..(band + 1) * nsh];
+            accumulate(&mut a[..ne], &se[..pairs], l.y, nsh);
+            accumulate(&mut a[ne..], &so[..pairs], &l.y[ne..], nsh);
+        }
+    }
+}
+with_avx!(moments_block, moments_block_avx, moments_kernel, (c: &Ctx, l: &Lanes, block: &mut [f32], f0: usize));
+
 /// One sweep of every ordinate: the diffuse radiance moments I_lm per full voxel (inner harmonic
 /// order), and how much the cloud changes the ground's downward irradiance, per ground map column.
 ///
@@ -361,52 +445,38 @@ fn accumulate(acc: &mut [f32], s: &[f32], y: &[f32], stride: usize) {
 /// batch from one pass over its coefficients; (2) the batch's sweeps, one ordinate per task;
 /// (3) per full voxel, the moments of both ordinates of each pair in one pass, the pairs in
 /// their fixed order.
-fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], ground: &GroundMap) -> (Vec<f32>, Vec<[f64; 3]>) {
-    let (nsh, ne) = (c.nsh, c.even);
+fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], next: &mut [f32], ground: &GroundMap) -> Vec<[f64; 3]> {
+    let nsh = c.nsh;
     let nfull = moments.len() / (3 * nsh);
-    let mut next = vec![0f32; nfull * 3 * nsh];
+    // `next` is the last iteration's array, kept (reused, no new pages); the batch's sources
+    // and radiances are freed before the acceleration's solve.
+    next.fill(0.0);
+    let mut src = vec![[0f32; 3]; ORDINATE_BATCH * nfull];
+    let mut radiance = vec![[0f32; 3]; ORDINATE_BATCH * nfull];
     // Change of the ground's downward irradiance by the cloud, per ground map column (W/m²).
     let mut e_down = vec![[0f64; 3]; ground.radiance.len()];
     // Full voxels per task in the per-voxel steps (1) and (3).
     let chunk = 256;
-    let mut src = vec![[0f32; 3]; ORDINATE_BATCH * nfull];
     for (bi, first) in (0..t.pairs.len()).step_by(PAIRS).enumerate() {
         let batch = first..(first + PAIRS).min(t.pairs.len());
         // (1) Source in each ordinate, clamped at 0 (the truncated expansion may dip); slot 2p
         // holds pair p's ordinate d, 2p + 1 its opposite.
         let sp = Shared(src.as_mut_ptr());
-        moments.par_chunks(chunk * 3 * nsh).enumerate().for_each(|(ci, block)| {
-            for (k, mom) in block.chunks_exact(3 * nsh).enumerate() {
-                let f = ci * chunk + k;
-                let tf = c.sun_t[c.voxels[f]];
-                let (mut plus, mut minus) = ([[0f32; 3]; PAIRS], [[0f32; 3]; PAIRS]);
-                for b in 0..3 {
-                    let (m, y) = (&mom[b * nsh..(b + 1) * nsh], &t.y_src[(bi * 3 + b) * nsh..(bi * 3 + b + 1) * nsh]);
-                    let (e, o) = (lanes_dot(&m[..ne], &y[..ne]), lanes_dot(&m[ne..], &y[ne..]));
-                    let [sp_, sm_] = t.sun[bi * 3 + b];
-                    for p in 0..PAIRS {
-                        plus[p][b] = (e[p] + o[p] + tf[b] * sp_[p]).max(0.0);
-                        minus[p][b] = (e[p] - o[p] + tf[b] * sm_[p]).max(0.0);
-                    }
-                }
-                for slot in 0..batch.len() {
-                    // SAFETY: entries (slot, f) are written by the task owning voxel f only.
-                    unsafe {
-                        *sp.at(2 * slot * nfull + f) = plus[slot];
-                        *sp.at((2 * slot + 1) * nfull + f) = minus[slot];
-                    }
-                }
-            }
-        });
+        moments
+            .par_chunks(chunk * 3 * nsh)
+            .enumerate()
+            .for_each(|(ci, block)| source_block(c, t, bi, batch.len(), block, ci * chunk, sp));
         // (2) The sweeps.
         let dirs: Vec<usize> = batch.clone().flat_map(|p| t.pairs[p]).collect();
         let wts: Vec<f32> = batch.clone().flat_map(|p| t.weights[p]).collect();
-        let swept: Vec<Swept> = dirs
+        let splats: Vec<Splats> = dirs
             .par_iter()
             .zip(src.par_chunks(nfull.max(1)))
-            .map(|(d, sd)| sweep_ordinate(c, q.dirs[*d], q.weights[*d], sd, ground, nfull))
+            .zip(radiance.par_chunks_mut(nfull.max(1)))
+            .map(|((d, sd), rd)| sweep_ordinate(c, q.dirs[*d], q.weights[*d], sd, ground, rd))
             .collect();
-        for (_, splats) in &swept {
+        let radiance = &radiance;
+        for splats in &splats {
             for (col, e) in splats {
                 for band in 0..3 {
                     e_down[*col][band] += e[band];
@@ -415,26 +485,17 @@ fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], ground: &Grou
         }
         // (3) Moments: I_lm += w I(Ω) Y_lm(Ω) + w′ I(−Ω) (−1)^l Y_lm(Ω).
         let yb = &t.y[first * nsh..batch.end * nsh];
-        next.par_chunks_mut(chunk * 3 * nsh).enumerate().for_each(|(ci, block)| {
-            let (mut se, mut so) = (vec![0f32; batch.len()], vec![0f32; batch.len()]);
-            for (k, acc) in block.chunks_exact_mut(3 * nsh).enumerate() {
-                let f = ci * chunk + k;
-                for band in 0..3 {
-                    for (slot, (e, o)) in se.iter_mut().zip(&mut so).enumerate() {
-                        let (ip, im) = (
-                            wts[2 * slot] * swept[2 * slot].0[f][band],
-                            wts[2 * slot + 1] * swept[2 * slot + 1].0[f][band],
-                        );
-                        (*e, *o) = (ip + im, ip - im);
-                    }
-                    let a = &mut acc[band * nsh..(band + 1) * nsh];
-                    accumulate(&mut a[..ne], &se, yb, nsh);
-                    accumulate(&mut a[ne..], &so, &yb[ne..], nsh);
-                }
-            }
-        });
+        let lanes = Lanes {
+            nfull,
+            wts: &wts,
+            radiance,
+            y: yb,
+        };
+        next.par_chunks_mut(chunk * 3 * nsh)
+            .enumerate()
+            .for_each(|(ci, block)| moments_block(c, &lanes, block, ci * chunk));
     }
-    (next, e_down)
+    e_down
 }
 
 /// The two axes across major axis `a`, the faster-varying first.
@@ -467,21 +528,30 @@ fn box_cells(dims: [usize; 3], lo: [usize; 3], n: [usize; 3], rho: &[f32], full:
     out
 }
 
-/// A cell of a sweep's plane buffer: radiance, density and density × source per band (the
-/// upwind interpolation reads one such record per neighbour).
+/// A cell of a sweep's plane buffer: radiance per band, density, density × source per band
+/// (lanes [`I`], [`RHO`], [`RS`]) and a spare lane, so that the upwind interpolation is eight-lane
+/// arithmetic on one 32-byte record per neighbour.
 #[derive(Clone, Copy, Default)]
 #[repr(C, align(32))]
-struct PlaneCell {
-    i: [f32; 3],
-    rho: f32,
-    rs: [f32; 3],
+struct PlaneCell([f32; 8]);
+
+/// Lanes of a [`PlaneCell`].
+const I: usize = 0;
+const RHO: usize = 3;
+const RS: usize = 4;
+
+impl PlaneCell {
+    fn new(i: [f32; 3], rho: f32, rs: [f32; 3]) -> PlaneCell {
+        PlaneCell([i[0], i[1], i[2], rho, rs[0], rs[1], rs[2], 0.0])
+    }
 }
 
 /// Sweep one ordinate `om` (weight `w`, sr) through the box upwind plane by plane: the radiance at
 /// every full voxel's centre, and the ground splats (column, change of downward irradiance, W/m²)
-/// of the light leaving the box downwards. `src` is the source in this ordinate per full voxel.
-fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, nfull: usize) -> Swept {
-    let mut radiance = vec![[0f32; 3]; nfull];
+/// of the light leaving the box downwards. `src` is the source in this ordinate per full voxel;
+/// `radiance` receives the radiance at every full voxel (all lie in the box).
+#[inline(always)]
+fn sweep_kernel(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, radiance: &mut [[f32; 3]]) -> Splats {
     let mut splats = Vec::new();
     let skyr = c.sky.radiance(Vec3::new(-om.x as f32, -om.y as f32, -om.z as f32));
     let splat = om.y < 0.0 && c.ground_height.is_some();
@@ -522,10 +592,8 @@ fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundM
             let step = if ring || whole { 1 } else { nb + 1 };
             for ib in (-1..=nb as isize).step_by(step) {
                 let v = coord(pa, ib, ic);
-                buf[(ib + 1) as usize + stride * (ic + 1) as usize] = PlaneCell {
-                    i: c.boundary(om, v[0], v[1], v[2], ground, skyr),
-                    ..PlaneCell::default()
-                };
+                buf[(ib + 1) as usize + stride * (ic + 1) as usize] =
+                    PlaneCell::new(c.boundary(om, v[0], v[1], v[2], ground, skyr), 0.0, [0.0; 3]);
             }
         }
     };
@@ -545,14 +613,14 @@ fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundM
                 // Radiance and density bilinear; the source (per unit extinction, defined only
                 // where ρ > 0) density-weighted, so that empty neighbours do not pull it
                 // towards 0 (a uniform source stays uniform: the furnace holds).
-                let (mut ib_, mut sbw, mut rb) = ([0f32; 3], [0f32; 3], 0f32);
+                let mut acc = [0f32; 8];
                 for (wk, nk) in wts.iter().zip(&n) {
-                    for band in 0..3 {
-                        ib_[band] += wk * nk.i[band];
-                        sbw[band] += wk * nk.rs[band];
+                    for (al, nl) in acc.iter_mut().zip(nk.0) {
+                        *al += wk * nl;
                     }
-                    rb += wk * nk.rho;
                 }
+                let ib_ = [acc[I], acc[I + 1], acc[I + 2]];
+                let (rb, sbw) = (acc[RHO], [acc[RS], acc[RS + 1], acc[RS + 2]]);
                 let sc = if fi != u32::MAX { src[fi as usize] } else { [0f32; 3] };
                 let mut out = ib_;
                 let rm = 0.5 * (rb + rho) * s;
@@ -568,11 +636,7 @@ fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundM
                         out[band] = ib_[band] * e + wi * sb[band] + wo * se[band];
                     }
                 }
-                cur[l] = PlaneCell {
-                    i: out,
-                    rho,
-                    rs: sc.map(|x| rho * x),
-                };
+                cur[l] = PlaneCell::new(out, rho, sc.map(|x| rho * x));
                 if fi != u32::MAX {
                     radiance[fi as usize] = out;
                 }
@@ -603,7 +667,7 @@ fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundM
                 if let Some(col) = ground.column(q.x, q.z) {
                     let area = c.h[0] * c.h[1] * c.h[2] / c.h[ax];
                     let f = w as f32 as f64 * om[ax].abs() * area / (c.h[0] * c.h[2]);
-                    let i = cur[ib + 1 + stride * (ic + 1)].i;
+                    let i = &cur[ib + 1 + stride * (ic + 1)].0[I..I + 3];
                     splats.push((col, [0, 1, 2].map(|band| f * (i[band] as f64 - skyr[band] as f64))));
                 }
             }
@@ -611,8 +675,9 @@ fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundM
         std::mem::swap(&mut prev, &mut cur);
         fill_ghosts(pa, false, &mut prev);
     }
-    (radiance, splats)
+    splats
 }
+with_avx!(sweep_ordinate, sweep_ordinate_avx, sweep_kernel, (c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, radiance: &mut [[f32; 3]]) -> Splats);
 
 /// The DSA operator of one band on the full voxels (δ-M coefficients), in grid order.
 fn dsa_operator(m: &Medium, dom: &Domain, sigma_t: f64, albedo: f64, chi1: f64) -> Operator {
@@ -875,12 +940,13 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         _ => Vec::new(),
     };
     let mut moments = vec![0f32; nfull * 3 * nsh];
+    let mut next = vec![0f32; moments.len()];
     let mut history = Vec::new();
     let mut extrapolated = 0;
     progress.begin("transport iterations", s.max_iterations as u64);
     // An empty medium has nothing to iterate: the sky and ground pass unchanged.
     for _ in 0..if nfull == 0 { 0 } else { s.max_iterations } {
-        let (mut next, e_down) = sweep(&ctx, &q, &tables, &moments, &ground_map);
+        let e_down = sweep(&ctx, &q, &tables, &moments, &mut next, &ground_map);
         if !hier.is_empty() {
             accelerate(&ctx, &full_vox, &hier, bands, &moments, &mut next);
         }
@@ -896,7 +962,7 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
             next.par_iter_mut().zip(moments.par_iter()).for_each(|(x, o)| *x += k * (*x - o));
             extrapolated = history.len();
         }
-        moments = next;
+        std::mem::swap(&mut moments, &mut next);
         ground_map = ground_of(Some(&e_down));
         progress.advance(1);
         progress.log(&format!(
@@ -908,6 +974,7 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         }
     }
     progress.end();
+    drop(next);
     // The diffuse source a′χ′_l I_lm in real_sh's order for the gather.
     let mut diffuse_source = vec![0f32; moments.len()];
     diffuse_source
