@@ -260,7 +260,7 @@ fn empty_medium_shows_the_sky() {
 #[test]
 fn a_cloud_too_large_for_memory_is_refused_with_the_fix() {
     let mut s = scene(ball(0.1, 0.9), Method::Transport);
-    // 11 M full voxels × 2.3 kB of source arrays > 16 GiB.
+    // 11 M full voxels × 1.9 kB of harmonic arrays > 16 GiB.
     s.medium = Medium::new(
         Grid3::filled([230, 230, 210], 1.0),
         Vec3::ZERO,

@@ -141,19 +141,6 @@ impl<T> Shared<T> {
     }
 }
 
-/// Σ a_i b_i in eight fixed lanes (vectorises; the same order for any thread count).
-#[inline]
-fn dot(a: &[f32], b: &[f32]) -> f32 {
-    let n = a.len() / 8 * 8;
-    let mut acc = [0f32; 8];
-    for (ca, cb) in a[..n].chunks_exact(8).zip(b[..n].chunks_exact(8)) {
-        for l in 0..8 {
-            acc[l] += ca[l] * cb[l];
-        }
-    }
-    acc.iter().sum::<f32>() + a[n..].iter().zip(&b[n..]).map(|(x, y)| x * y).sum::<f32>()
-}
-
 /// (e^{−x}, w_in, w_out) of a step of optical length x with a source linear in optical path
 /// (as the slab solver's, whose f64 form the test checks it against), in f32 with a series below x = 0.2 (the closed form cancels there).
 #[inline]
@@ -181,6 +168,14 @@ struct Ctx<'a> {
     rho: &'a [f32],
     full: &'a [u32],
     nsh: usize,
+    /// Even-l harmonics (the first of the inner order, [`parity_order`]).
+    even: usize,
+    /// Grid index of every full voxel, in grid order.
+    voxels: &'a [usize],
+    /// δ-M sun transmittance T′ per grid voxel and band.
+    sun_t: &'a [[f32; 3]],
+    /// The box's cells in each major axis' sweep order ([`box_cells`]).
+    cells: [Vec<(f32, u32)>; 3],
     sigma_t: [f32; 3],
     /// All bands share σt′ (one set of step weights serves them).
     grey: bool,
@@ -213,95 +208,359 @@ impl Ctx<'_> {
     }
 }
 
-/// One ordinate's sweep: the radiance at every full voxel's centre (W·m⁻²·sr⁻¹, per band), and
-/// its ground splats (map column, change of the downward irradiance in W/m² per band).
-type Swept = (Vec<[f32; 3]>, Vec<(usize, [f64; 3])>);
+/// One ordinate's ground splats (map column, change of the downward irradiance in W/m² per band).
+type Splats = Vec<(usize, [f64; 3])>;
 
 /// Ordinates swept side by side: their per-voxel sources and radiances are held at once
 /// (2 × 12 B per full voxel each). Fixed, so the sums are the same for any thread count.
 pub(crate) const ORDINATE_BATCH: usize = 16;
 
-/// One sweep of every ordinate: the diffuse radiance moments I_lm per full voxel, and how much the
-/// cloud changes the ground's downward diffuse irradiance, per ground map column.
+/// The order of the harmonics inside the solver: every even-l one first, then the odd-l ones
+/// (each l's block in `real_sh`'s order). Y_lm(−Ω) = (−1)^l Y_lm(Ω), so one pass over a voxel's
+/// coefficients gives the even and odd sums E, O and with them the source in both ordinates of an
+/// opposite pair (E ± O); likewise one pass accumulates both ordinates' moments. `perm[i]` is
+/// the `real_sh` index of inner index i; the second value, the count of even ones.
+fn parity_order(order: usize) -> (Vec<usize>, usize) {
+    let block = |l: usize| l * l..(l + 1) * (l + 1);
+    let even: Vec<usize> = (0..=order).step_by(2).flat_map(block).collect();
+    let ne = even.len();
+    (even.into_iter().chain((1..=order).step_by(2).flat_map(block)).collect(), ne)
+}
+
+/// The ordinates in opposite pairs (d, d′) with Ω_d′ = −Ω_d (the product quadrature is symmetric).
+fn opposite_pairs(q: &Quadrature) -> Vec<[usize; 2]> {
+    let pairs: Vec<[usize; 2]> = (0..q.dirs.len())
+        .filter_map(|d| {
+            let o = (0..q.dirs.len()).min_by(|a, b| (q.dirs[*a] + q.dirs[d]).length().total_cmp(&(q.dirs[*b] + q.dirs[d]).length()))?;
+            (d < o).then_some([d, o])
+        })
+        .collect();
+    assert!(
+        2 * pairs.len() == q.dirs.len() && pairs.iter().all(|[d, o]| (q.dirs[*d] + q.dirs[*o]).length() < 1e-9),
+        "the quadrature is symmetric"
+    );
+    pairs
+}
+
+/// Opposite pairs per batch: the lanes of the source evaluation.
+const PAIRS: usize = ORDINATE_BATCH / 2;
+
+/// Per ordinate pair, what the sweeps' per-voxel steps read (inner harmonic order, f32).
+struct PairTables {
+    /// The ordinates (d, d′ = opposite).
+    pairs: Vec<[usize; 2]>,
+    /// Weights (sr) of d and d′.
+    weights: Vec<[f32; 2]>,
+    /// Y_lm(Ω_d), per pair.
+    y: Vec<f32>,
+    /// a′χ′_l Y_lm(Ω_d) per batch of pairs, band and lm, the batch's pairs in lanes (0 past the
+    /// last pair): the source in Ω_d is Σ I_lm times this.
+    y_src: Vec<[f32; PAIRS]>,
+    /// The reduced sun's first scattering per unit T′ in Ω_d and in −Ω_d per batch and band, in
+    /// lanes: Σ_lm a′χ′_l E Y_lm(Ω_sun) Y_lm(±Ω_d) (W·m⁻²·sr⁻¹).
+    sun: Vec<[[f32; PAIRS]; 2]>,
+}
+
+impl PairTables {
+    fn new(q: &Quadrature, order: usize, perm: &[usize], bands: &[BandOptics], e_sun: [f64; 3], y_sun: &[f64]) -> PairTables {
+        let nsh = perm.len();
+        let pairs = opposite_pairs(q);
+        let l_of = |k: usize| (k as f64).sqrt().floor() as usize;
+        let batches = pairs.len().div_ceil(PAIRS);
+        let mut y = Vec::new();
+        let mut y_src = vec![[0f32; PAIRS]; batches * 3 * nsh];
+        let mut sun = vec![[[0f32; PAIRS]; 2]; batches * 3];
+        let mut yd = vec![0.0; nsh];
+        for (p, [d, _]) in pairs.iter().enumerate() {
+            real_sh(order, q.dirs[*d], &mut yd);
+            y.extend(perm.iter().map(|k| yd[*k] as f32));
+            let (bi, lane) = (p / PAIRS, p % PAIRS);
+            for (b, bo) in bands.iter().enumerate() {
+                for (i, k) in perm.iter().enumerate() {
+                    y_src[(bi * 3 + b) * nsh + i][lane] = (bo.albedo * bo.chi[l_of(*k)] * yd[*k]) as f32;
+                }
+                let term = |k: usize| bo.albedo * bo.chi[l_of(k)] * e_sun[b] * y_sun[k] * yd[k];
+                let (e, o) = (0..nsh).fold(
+                    (0.0, 0.0),
+                    |(e, o), k| if l_of(k) % 2 == 0 { (e + term(k), o) } else { (e, o + term(k)) },
+                );
+                sun[bi * 3 + b][0][lane] = (e + o) as f32;
+                sun[bi * 3 + b][1][lane] = (e - o) as f32;
+            }
+        }
+        let weights = pairs.iter().map(|[d, o]| [q.weights[*d] as f32, q.weights[*o] as f32]).collect();
+        PairTables {
+            pairs,
+            weights,
+            y,
+            y_src,
+            sun,
+        }
+    }
+}
+
+/// Σ_k m[k] y[k] for every lane (a batch's pairs), two k at a time in independent sums.
+#[inline(always)]
+fn lanes_dot(m: &[f32], y: &[[f32; PAIRS]]) -> [f32; PAIRS] {
+    let (mut a0, mut a1) = ([0f32; PAIRS], [0f32; PAIRS]);
+    for (mk, yk) in m.chunks_exact(2).zip(y.chunks_exact(2)) {
+        for p in 0..PAIRS {
+            a0[p] += mk[0] * yk[0][p];
+            a1[p] += mk[1] * yk[1][p];
+        }
+    }
+    if m.len() % 2 == 1 {
+        let (mk, yk) = (m[m.len() - 1], y[m.len() - 1]);
+        for p in 0..PAIRS {
+            a0[p] += mk * yk[p];
+        }
+    }
+    std::array::from_fn(|p| a0[p] + a1[p])
+}
+
+/// acc[k] += Σ_p s[p] y[p·stride + k] (acc no longer than stride), eight then four k at a time
+/// with the sum over p in registers; the same order for any thread count.
+#[inline(always)]
+fn accumulate(acc: &mut [f32], s: &[f32], y: &[f32], stride: usize) {
+    #[inline(always)]
+    fn lanes<const N: usize>(acc: &mut [f32], s: &[f32], y: &[f32], stride: usize, k0: usize) {
+        let mut r = [0f32; N];
+        for (p, sp) in s.iter().enumerate() {
+            let yk = &y[p * stride + k0..p * stride + k0 + N];
+            for l in 0..N {
+                r[l] += sp * yk[l];
+            }
+        }
+        for (a, rl) in acc[k0..k0 + N].iter_mut().zip(r) {
+            *a += rl;
+        }
+    }
+    let n = acc.len();
+    let mut k = 0;
+    while k + 8 <= n {
+        lanes::<8>(acc, s, y, stride, k);
+        k += 8;
+    }
+    while k + 4 <= n {
+        lanes::<4>(acc, s, y, stride, k);
+        k += 4;
+    }
+    while k < n {
+        lanes::<1>(acc, s, y, stride, k);
+        k += 1;
+    }
+}
+
+/// Define `$name`, which runs `$body` compiled for AVX where the processor has it, else as
+/// built. The kernels' lanes and sums are explicit and Rust never fuses a multiply with an add,
+/// so both give the same bits; AVX does eight lanes per instruction instead of four.
+macro_rules! with_avx {
+    ($name:ident, $avx:ident, $body:ident, ($($a:ident: $t:ty),*) $(-> $r:ty)?) => {
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx")]
+        unsafe fn $avx($($a: $t),*) $(-> $r)? {
+            $body($($a),*)
+        }
+        fn $name($($a: $t),*) $(-> $r)? {
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx") {
+                // SAFETY: the processor has AVX.
+                return unsafe { $avx($($a),*) };
+            }
+            $body($($a),*)
+        }
+    };
+}
+
+/// Step (1) of [`sweep`] for the full voxels from `f0` whose moments are `block`: the source in
+/// both ordinates of each of the batch's `pairs` pairs (batch `bi`), into slots 2p and 2p + 1.
+#[inline(always)]
+fn source_kernel(c: &Ctx, t: &PairTables, bi: usize, pairs: usize, block: &[f32], f0: usize, sp: Shared<[f32; 3]>) {
+    let (nsh, ne) = (c.nsh, c.even);
+    let nfull = c.voxels.len();
+    for (k, mom) in block.chunks_exact(3 * nsh).enumerate() {
+        let f = f0 + k;
+        let tf = c.sun_t[c.voxels[f]];
+        let (mut plus, mut minus) = ([[0f32; 3]; PAIRS], [[0f32; 3]; PAIRS]);
+        for b in 0..3 {
+            let (m, y) = (&mom[b * nsh..(b + 1) * nsh], &t.y_src[(bi * 3 + b) * nsh..(bi * 3 + b + 1) * nsh]);
+            let (e, o) = (lanes_dot(&m[..ne], &y[..ne]), lanes_dot(&m[ne..], &y[ne..]));
+            let [sp_, sm_] = t.sun[bi * 3 + b];
+            for p in 0..PAIRS {
+                plus[p][b] = (e[p] + o[p] + tf[b] * sp_[p]).max(0.0);
+                minus[p][b] = (e[p] - o[p] + tf[b] * sm_[p]).max(0.0);
+            }
+        }
+        for slot in 0..pairs {
+            // SAFETY: entries (slot, f) are written by the task owning voxel f only.
+            unsafe {
+                *sp.at(2 * slot * nfull + f) = plus[slot];
+                *sp.at((2 * slot + 1) * nfull + f) = minus[slot];
+            }
+        }
+    }
+}
+with_avx!(source_block, source_block_avx, source_kernel, (c: &Ctx, t: &PairTables, bi: usize, pairs: usize, block: &[f32], f0: usize, sp: Shared<[f32; 3]>));
+
+/// What step (3) of [`sweep`] reads: the batch's radiances per ordinate slot and full voxel, the
+/// slots' weights (sr) and the pairs' Y_lm (inner order, one row of (L+1)² per pair).
+struct Lanes<'a> {
+    nfull: usize,
+    wts: &'a [f32],
+    radiance: &'a [[f32; 3]],
+    y: &'a [f32],
+}
+
+/// Step (3) of [`sweep`] for the full voxels from `f0` whose new moments are `block`: I_lm +=
+/// w I(Ω) Y_lm(Ω) + w′ I(−Ω) (−1)^l Y_lm(Ω) over the batch's pairs.
+#[inline(always)]
+fn moments_kernel(c: &Ctx, l: &Lanes, block: &mut [f32], f0: usize) {
+    let (nsh, ne, nfull) = (c.nsh, c.even, l.nfull);
+    let pairs = l.wts.len() / 2;
+    let (mut se, mut so) = ([0f32; PAIRS], [0f32; PAIRS]);
+    for (k, acc) in block.chunks_exact_mut(3 * nsh).enumerate() {
+        let f = f0 + k;
+        for band in 0..3 {
+            for (slot, (e, o)) in se[..pairs].iter_mut().zip(&mut so[..pairs]).enumerate() {
+                let (ip, im) = (
+                    l.wts[2 * slot] * l.radiance[2 * slot * nfull + f][band],
+                    l.wts[2 * slot + 1] * l.radiance[(2 * slot + 1) * nfull + f][band],
+                );
+                (*e, *o) = (ip + im, ip - im);
+            }
+            let a = &mut acc[band * nsh..(band + 1) * nsh];
+            accumulate(&mut a[..ne], &se[..pairs], l.y, nsh);
+            accumulate(&mut a[ne..], &so[..pairs], &l.y[ne..], nsh);
+        }
+    }
+}
+with_avx!(moments_block, moments_block_avx, moments_kernel, (c: &Ctx, l: &Lanes, block: &mut [f32], f0: usize));
+
+/// One sweep of every ordinate: the diffuse radiance moments I_lm per full voxel (inner harmonic
+/// order), and how much the cloud changes the ground's downward irradiance, per ground map column.
 ///
-/// Ordinates go in batches: (1) the source in each ordinate of the batch, per full voxel (one read
-/// of the voxel's coefficients serves the whole batch); (2) the batch's sweeps, one ordinate per
-/// task; (3) the moments I_lm += w I Y_lm, per full voxel, the ordinates in their fixed order.
-fn sweep(c: &Ctx, q: &Quadrature, ylm: &[Vec<f32>], source: &[f32], ground: &GroundMap) -> (Vec<f32>, Vec<[f64; 3]>) {
+/// `moments` are the last iterate's; the source J(Ω) = Σ a′χ′_l (I_lm + E T′ Y_lm(Ω_sun)) Y_lm(Ω)
+/// is evaluated from them directly (no array of source coefficients is stored). Ordinates go in
+/// batches of opposite pairs: (1) per full voxel, the source in both ordinates of each pair of the
+/// batch from one pass over its coefficients; (2) the batch's sweeps, one ordinate per task;
+/// (3) per full voxel, the moments of both ordinates of each pair in one pass, the pairs in
+/// their fixed order.
+fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], next: &mut [f32], ground: &GroundMap) -> Vec<[f64; 3]> {
     let nsh = c.nsh;
-    let nfull = source.len() / (3 * nsh);
-    let mut moments = vec![0f32; nfull * 3 * nsh];
+    let nfull = moments.len() / (3 * nsh);
+    // `next` is the last iteration's array, kept (reused, no new pages); the batch's sources
+    // and radiances are freed before the acceleration's solve.
+    next.fill(0.0);
+    let mut src = vec![[0f32; 3]; ORDINATE_BATCH * nfull];
+    let mut radiance = vec![[0f32; 3]; ORDINATE_BATCH * nfull];
     // Change of the ground's downward irradiance by the cloud, per ground map column (W/m²).
     let mut e_down = vec![[0f64; 3]; ground.radiance.len()];
     // Full voxels per task in the per-voxel steps (1) and (3).
     let chunk = 256;
-    let mut src = vec![[0f32; 3]; ORDINATE_BATCH * nfull];
-    for first in (0..q.dirs.len()).step_by(ORDINATE_BATCH) {
-        let batch = first..(first + ORDINATE_BATCH).min(q.dirs.len());
-        // (1) Source in each ordinate, clamped at 0 (the truncated expansion may dip).
+    for (bi, first) in (0..t.pairs.len()).step_by(PAIRS).enumerate() {
+        let batch = first..(first + PAIRS).min(t.pairs.len());
+        // (1) Source in each ordinate, clamped at 0 (the truncated expansion may dip); slot 2p
+        // holds pair p's ordinate d, 2p + 1 its opposite.
         let sp = Shared(src.as_mut_ptr());
-        source.par_chunks(chunk * 3 * nsh).enumerate().for_each(|(ci, block)| {
-            for (k, coef) in block.chunks_exact(3 * nsh).enumerate() {
-                let f = ci * chunk + k;
-                for (d, y) in ylm[batch.clone()].iter().enumerate() {
-                    let sc = [0, 1, 2].map(|band| dot(&coef[band * nsh..(band + 1) * nsh], y).max(0.0));
-                    // SAFETY: entry (d, f) is written by the task owning voxel f only.
-                    unsafe { *sp.at(d * nfull + f) = sc };
-                }
-            }
-        });
+        moments
+            .par_chunks(chunk * 3 * nsh)
+            .enumerate()
+            .for_each(|(ci, block)| source_block(c, t, bi, batch.len(), block, ci * chunk, sp));
         // (2) The sweeps.
-        let swept: Vec<Swept> = batch
-            .clone()
-            .into_par_iter()
+        let dirs: Vec<usize> = batch.clone().flat_map(|p| t.pairs[p]).collect();
+        let wts: Vec<f32> = batch.clone().flat_map(|p| t.weights[p]).collect();
+        let splats: Vec<Splats> = dirs
+            .par_iter()
             .zip(src.par_chunks(nfull.max(1)))
-            .map(|(d, sd)| sweep_ordinate(c, q.dirs[d], q.weights[d], sd, ground, nfull))
+            .zip(radiance.par_chunks_mut(nfull.max(1)))
+            .map(|((d, sd), rd)| sweep_ordinate(c, q.dirs[*d], q.weights[*d], sd, ground, rd))
             .collect();
-        for (_, splats) in &swept {
+        let radiance = &radiance;
+        for splats in &splats {
             for (col, e) in splats {
                 for band in 0..3 {
                     e_down[*col][band] += e[band];
                 }
             }
         }
-        // (3) Moments.
-        moments.par_chunks_mut(chunk * 3 * nsh).enumerate().for_each(|(ci, block)| {
-            for (k, acc) in block.chunks_exact_mut(3 * nsh).enumerate() {
-                let f = ci * chunk + k;
-                for (d, (radiance, _)) in swept.iter().enumerate() {
-                    let w = q.weights[first + d] as f32;
-                    let y = &ylm[first + d];
-                    for (band, ob) in radiance[f].iter().enumerate() {
-                        let wo = w * ob;
-                        for (m, yk) in acc[band * nsh..(band + 1) * nsh].iter_mut().zip(y) {
-                            *m += wo * yk;
-                        }
-                    }
-                }
-            }
-        });
+        // (3) Moments: I_lm += w I(Ω) Y_lm(Ω) + w′ I(−Ω) (−1)^l Y_lm(Ω).
+        let yb = &t.y[first * nsh..batch.end * nsh];
+        let lanes = Lanes {
+            nfull,
+            wts: &wts,
+            radiance,
+            y: yb,
+        };
+        next.par_chunks_mut(chunk * 3 * nsh)
+            .enumerate()
+            .for_each(|(ci, block)| moments_block(c, &lanes, block, ci * chunk));
     }
-    (moments, e_down)
+    e_down
+}
+
+/// The two axes across major axis `a`, the faster-varying first.
+fn cross_axes(a: usize) -> (usize, usize) {
+    match a {
+        0 => (1, 2),
+        1 => (0, 2),
+        _ => (0, 1),
+    }
+}
+
+/// The swept box's cells (density, full-voxel index or `u32::MAX`) in the order a sweep along
+/// major axis `a` visits them: planes of a, rows of the second cross axis, cells of the first;
+/// so the sweeps read them contiguously whichever axis they run along.
+fn box_cells(dims: [usize; 3], lo: [usize; 3], n: [usize; 3], rho: &[f32], full: &[u32], a: usize) -> Vec<(f32, u32)> {
+    let (b, cc) = cross_axes(a);
+    let mut out = Vec::with_capacity(n[0] * n[1] * n[2]);
+    for pa in 0..n[a] {
+        for ic in 0..n[cc] {
+            for ib in 0..n[b] {
+                let mut v = lo;
+                v[a] += pa;
+                v[b] += ib;
+                v[cc] += ic;
+                let vi = v[0] + dims[0] * (v[1] + dims[1] * v[2]);
+                out.push((rho[vi], full[vi]));
+            }
+        }
+    }
+    out
+}
+
+/// A cell of a sweep's plane buffer: radiance per band, density, density × source per band
+/// (lanes [`I`], [`RHO`], [`RS`]) and a spare lane, so that the upwind interpolation is eight-lane
+/// arithmetic on one 32-byte record per neighbour.
+#[derive(Clone, Copy, Default)]
+#[repr(C, align(32))]
+struct PlaneCell([f32; 8]);
+
+/// Lanes of a [`PlaneCell`].
+const I: usize = 0;
+const RHO: usize = 3;
+const RS: usize = 4;
+
+impl PlaneCell {
+    fn new(i: [f32; 3], rho: f32, rs: [f32; 3]) -> PlaneCell {
+        PlaneCell([i[0], i[1], i[2], rho, rs[0], rs[1], rs[2], 0.0])
+    }
 }
 
 /// Sweep one ordinate `om` (weight `w`, sr) through the box upwind plane by plane: the radiance at
 /// every full voxel's centre, and the ground splats (column, change of downward irradiance, W/m²)
-/// of the light leaving the box downwards. `src` is the source in this ordinate per full voxel.
-fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, nfull: usize) -> Swept {
-    let [nx, ny, _] = c.dims;
-    let mut radiance = vec![[0f32; 3]; nfull];
+/// of the light leaving the box downwards. `src` is the source in this ordinate per full voxel;
+/// `radiance` receives the radiance at every full voxel (all lie in the box).
+#[inline(always)]
+fn sweep_kernel(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, radiance: &mut [[f32; 3]]) -> Splats {
     let mut splats = Vec::new();
     let skyr = c.sky.radiance(Vec3::new(-om.x as f32, -om.y as f32, -om.z as f32));
     let splat = om.y < 0.0 && c.ground_height.is_some();
     // Major axis and the two others.
     let r = [om.x.abs() / c.h[0], om.y.abs() / c.h[1], om.z.abs() / c.h[2]];
     let a = (0..3).max_by(|p, q| r[*p].total_cmp(&r[*q])).unwrap_or(0);
-    let (b, cc) = match a {
-        0 => (1, 2),
-        1 => (0, 2),
-        _ => (0, 1),
-    };
+    let (b, cc) = cross_axes(a);
     let (na, nb, nc) = (c.n[a], c.n[b], c.n[cc]);
+    let cells = &c.cells[a];
     let oa = om[a];
     let s = (c.h[a] / oa.abs()) as f32;
     // Back point offsets in the previous plane (voxels), split into floor and fraction.
@@ -313,16 +572,10 @@ fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundM
     let (tb, tc) = ((ob - fb) as f32, (oc - fc) as f32);
     let (fb, fc) = (fb as isize, fc as isize);
     let wts = [(1.0 - tb) * (1.0 - tc), tb * (1.0 - tc), (1.0 - tb) * tc, tb * tc];
-    let offs = [(0isize, 0isize), (1, 0), (0, 1), (1, 1)];
     let stride = nb + 2;
-    let plane_len = stride * (nc + 2);
-    // Plane buffers (radiance, source per band; density) with a one-cell ghost ring.
-    let mut prev_i = vec![[0f32; 3]; plane_len];
-    let mut prev_s = vec![[0f32; 3]; plane_len];
-    let mut prev_r = vec![0f32; plane_len];
-    let mut cur_i = prev_i.clone();
-    let mut cur_s = prev_s.clone();
-    let mut cur_r = prev_r.clone();
+    // Plane buffers with a one-cell ghost ring.
+    let mut prev = vec![PlaneCell::default(); stride * (nc + 2)];
+    let mut cur = prev.clone();
     // Grid coordinates of box cell (pa, pb, pc) in the (a, b, c) frame.
     let coord = |pa: isize, pb: isize, pc: isize| {
         let mut v = [0isize; 3];
@@ -331,53 +584,48 @@ fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundM
         v[cc] = pc + c.lo[cc] as isize;
         v
     };
-    let fill_ghosts = |pa: isize, whole: bool, bi: &mut [[f32; 3]], bs: &mut [[f32; 3]], br: &mut [f32]| {
+    // The ghost cells of plane pa (all of it when `whole`, the ring otherwise): what enters the
+    // box there.
+    let fill_ghosts = |pa: isize, whole: bool, buf: &mut [PlaneCell]| {
         for ic in -1..=nc as isize {
-            for ib in -1..=nb as isize {
-                let inside = ib >= 0 && ic >= 0 && ib < nb as isize && ic < nc as isize;
-                if inside && !whole {
-                    continue;
-                }
+            let ring = ic < 0 || ic == nc as isize;
+            let step = if ring || whole { 1 } else { nb + 1 };
+            for ib in (-1..=nb as isize).step_by(step) {
                 let v = coord(pa, ib, ic);
-                let l = (ib + 1) as usize + stride * (ic + 1) as usize;
-                bi[l] = c.boundary(om, v[0], v[1], v[2], ground, skyr);
-                bs[l] = [0.0; 3];
-                br[l] = 0.0;
+                buf[(ib + 1) as usize + stride * (ic + 1) as usize] =
+                    PlaneCell::new(c.boundary(om, v[0], v[1], v[2], ground, skyr), 0.0, [0.0; 3]);
             }
         }
     };
     let first = if oa > 0.0 { -1 } else { na as isize };
-    fill_ghosts(first, true, &mut prev_i, &mut prev_s, &mut prev_r);
+    fill_ghosts(first, true, &mut prev);
+    // Offset of the upwind (0, 0) neighbour from a cell in the plane buffer.
+    let up = fb + fc * stride as isize;
     for step in 0..na {
-        let pa = if oa > 0.0 { step as isize } else { (na - 1 - step) as isize };
-        for ic in 0..nc as isize {
-            let row = stride * (ic + 1) as usize;
-            for ib in 0..nb as isize {
-                let v = coord(pa, ib, ic);
-                let vi = v[0] as usize + nx * (v[1] as usize + ny * v[2] as usize);
-                let rho = c.rho[vi];
-                let fi = c.full[vi];
-                let sc = if fi != u32::MAX { src[fi as usize] } else { [0f32; 3] };
-                // Radiance and density bilinear; the source (per unit extinction, defined
-                // only where ρ > 0) density-weighted, so that empty neighbours do not
-                // pull it towards 0 (a uniform source stays uniform: the furnace holds).
-                let (mut ib_, mut sbw, mut rb) = ([0f32; 3], [0f32; 3], 0f32);
-                for (wk, (db, dc)) in wts.iter().zip(offs) {
-                    if *wk == 0.0 {
-                        continue;
+        let pa = if oa > 0.0 { step } else { na - 1 - step };
+        let plane = &cells[pa * nb * nc..(pa + 1) * nb * nc];
+        for (ic, row) in plane.chunks_exact(nb).enumerate() {
+            let l0 = stride * (ic + 1) + 1;
+            for (ib, &(rho, fi)) in row.iter().enumerate() {
+                let l = l0 + ib;
+                let u = (l as isize + up) as usize;
+                let n = [prev[u], prev[u + 1], prev[u + stride], prev[u + stride + 1]];
+                // Radiance and density bilinear; the source (per unit extinction, defined only
+                // where ρ > 0) density-weighted, so that empty neighbours do not pull it
+                // towards 0 (a uniform source stays uniform: the furnace holds).
+                let mut acc = [0f32; 8];
+                for (wk, nk) in wts.iter().zip(&n) {
+                    for (al, nl) in acc.iter_mut().zip(nk.0) {
+                        *al += wk * nl;
                     }
-                    let l = (ib + fb + db + 1) as usize + stride * (ic + fc + dc + 1) as usize;
-                    let wr = wk * prev_r[l];
-                    for band in 0..3 {
-                        ib_[band] += wk * prev_i[l][band];
-                        sbw[band] += wr * prev_s[l][band];
-                    }
-                    rb += wr;
                 }
+                let ib_ = [acc[I], acc[I + 1], acc[I + 2]];
+                let (rb, sbw) = (acc[RHO], [acc[RS], acc[RS + 1], acc[RS + 2]]);
+                let sc = if fi != u32::MAX { src[fi as usize] } else { [0f32; 3] };
                 let mut out = ib_;
                 let rm = 0.5 * (rb + rho) * s;
                 if rm > 0.0 {
-                    let sb = if rb > 0.0 { sbw.map(|x| x / rb) } else { sc };
+                    let sb = if rb > 0.0 { sbw.map(|x| x * (1.0 / rb)) } else { sc };
                     let se = if fi == u32::MAX { sb } else { sc };
                     let mut wgt = step_weights(c.sigma_t[0] * rm);
                     for band in 0..3 {
@@ -388,15 +636,13 @@ fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundM
                         out[band] = ib_[band] * e + wi * sb[band] + wo * se[band];
                     }
                 }
-                let l = row + (ib + 1) as usize;
-                cur_i[l] = out;
-                cur_s[l] = sc;
-                cur_r[l] = rho;
+                cur[l] = PlaneCell::new(out, rho, sc.map(|x| rho * x));
                 if fi != u32::MAX {
                     radiance[fi as usize] = out;
                 }
             }
         }
+        let pa = pa as isize;
         if splat {
             // Light leaving the box downwards lands on the ground along Ω: splat its flux
             // change against the sky it hides, (I − L_sky) w |Ω·n| A_face, per column area.
@@ -421,18 +667,17 @@ fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundM
                 if let Some(col) = ground.column(q.x, q.z) {
                     let area = c.h[0] * c.h[1] * c.h[2] / c.h[ax];
                     let f = w as f32 as f64 * om[ax].abs() * area / (c.h[0] * c.h[2]);
-                    let i = cur_i[ib + 1 + stride * (ic + 1)];
+                    let i = &cur[ib + 1 + stride * (ic + 1)].0[I..I + 3];
                     splats.push((col, [0, 1, 2].map(|band| f * (i[band] as f64 - skyr[band] as f64))));
                 }
             }
         }
-        std::mem::swap(&mut prev_i, &mut cur_i);
-        std::mem::swap(&mut prev_s, &mut cur_s);
-        std::mem::swap(&mut prev_r, &mut cur_r);
-        fill_ghosts(pa, false, &mut prev_i, &mut prev_s, &mut prev_r);
+        std::mem::swap(&mut prev, &mut cur);
+        fill_ghosts(pa, false, &mut prev);
     }
-    (radiance, splats)
+    splats
 }
+with_avx!(sweep_ordinate, sweep_ordinate_avx, sweep_kernel, (c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, radiance: &mut [[f32; 3]]) -> Splats);
 
 /// The DSA operator of one band on the full voxels (δ-M coefficients), in grid order.
 fn dsa_operator(m: &Medium, dom: &Domain, sigma_t: f64, albedo: f64, chi1: f64) -> Operator {
@@ -552,8 +797,8 @@ fn dsa_apply(c: &Ctx, voxels: &[usize], bo: &BandOptics, b: usize, delta: &[f64]
                 faces += 1.0;
             }
             if faces > 0.0 {
-                // real_sh's l = 1 functions are √(3/4π) (z, y, x) at indices 1, 2, 3.
-                next[fo + [3, 2, 1][ax]] -= ((4.0 * PI / 3.0).sqrt() * sum / faces) as f32;
+                // real_sh's l = 1 functions are √(3/4π) (z, y, x), the first odd ones.
+                next[fo + c.even + [2, 1, 0][ax]] -= ((4.0 * PI / 3.0).sqrt() * sum / faces) as f32;
             }
         }
     }
@@ -591,16 +836,8 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         }
     }
     let nsh = sh_count(s.order);
+    let (perm, even) = parity_order(s.order);
     let q = Quadrature::product(s.n_mu, 2 * s.n_mu);
-    let ylm: Vec<Vec<f32>> = q
-        .dirs
-        .iter()
-        .map(|d| {
-            let mut y = vec![0.0; nsh];
-            real_sh(s.order, *d, &mut y);
-            y.iter().map(|v| *v as f32).collect()
-        })
-        .collect();
     let bands = &optics.bands;
     // δ-M sun transmittance T′ = T^{1 − a f} at the voxel centres.
     let exact_t = crate::sunlight::SunTransmittance::compute(m, sun.dir);
@@ -609,27 +846,14 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         .values()
         .map(|t| [0, 1, 2].map(|b| t.powf((bands[b].sigma_t / optics.sigma_t) as f32)))
         .collect();
+    drop(exact_t);
     let e_sun = [sun.irradiance.x as f64, sun.irradiance.y as f64, sun.irradiance.z as f64];
     let mut y_sun = vec![0.0; nsh];
     let beam = -DVec3::new(sun.dir.x as f64, sun.dir.y as f64, sun.dir.z as f64);
     real_sh(s.order, beam, &mut y_sun);
-    let lidx: Vec<usize> = (0..nsh).map(|k| (k as f64).sqrt().floor() as usize).collect();
-    // J_lm = a′χ′_l (I_lm + E T′ Y_lm(Ω_sun)) per full voxel.
-    let full_vox: Vec<usize> = (0..rho.len()).filter(|v| full[*v] != u32::MAX).collect();
-    let make_source = |moments: &[f32], with_sun: bool| -> Vec<f32> {
-        let mut out = vec![0f32; nfull * 3 * nsh];
-        out.par_chunks_mut(3 * nsh).zip(&full_vox).enumerate().for_each(|(f, (o, v))| {
-            for band in 0..3 {
-                let bo = &bands[band];
-                let sun = if with_sun { e_sun[band] * sun_t[*v][band] as f64 } else { 0.0 };
-                for k in 0..nsh {
-                    let i = moments[(f * 3 + band) * nsh + k] as f64 + sun * y_sun[k];
-                    o[band * nsh + k] = (bo.albedo * bo.chi[lidx[k]] * i) as f32;
-                }
-            }
-        });
-        out
-    };
+    let tables = PairTables::new(&q, s.order, &perm, bands, e_sun, &y_sun);
+    let full_vox: Vec<usize> = m.density.full_index().full_voxels().collect();
+    debug_assert_eq!(full_vox.len(), nfull);
     let (lo, hi) = m.active_box(1).unwrap_or(([0; 3], dims));
     // Ground: ρ_g/π (E_sun μ_s T′ + E_down) per column, over the footprint grown as far as the
     // cloud's shadow reaches; E_down is the clear sky's plus the cloud's change to it in the last
@@ -684,14 +908,19 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         }
     };
     let mut ground_map = ground_of(None);
+    let n = [0, 1, 2].map(|a| hi[a] - lo[a]);
     let ctx = Ctx {
         dims,
         lo,
-        n: [0, 1, 2].map(|a| hi[a] - lo[a]),
+        n,
         h: [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64],
         rho,
         full: &full,
         nsh,
+        even,
+        voxels: &full_vox,
+        sun_t: &sun_t,
+        cells: [0, 1, 2].map(|a| box_cells(dims, lo, n, rho, &full, a)),
         sigma_t: [0, 1, 2].map(|b| bands[b].sigma_t as f32),
         grey: bands[0].sigma_t == bands[1].sigma_t && bands[1].sigma_t == bands[2].sigma_t,
         sky,
@@ -710,21 +939,16 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
             .collect(),
         _ => Vec::new(),
     };
-    let voxels: Vec<usize> = if hier.is_empty() {
-        Vec::new()
-    } else {
-        m.density.full_index().full_voxels().collect()
-    };
     let mut moments = vec![0f32; nfull * 3 * nsh];
-    let mut source = make_source(&moments, true);
+    let mut next = vec![0f32; moments.len()];
     let mut history = Vec::new();
     let mut extrapolated = 0;
     progress.begin("transport iterations", s.max_iterations as u64);
     // An empty medium has nothing to iterate: the sky and ground pass unchanged.
     for _ in 0..if nfull == 0 { 0 } else { s.max_iterations } {
-        let (mut next, e_down) = sweep(&ctx, &q, &ylm, &source, &ground_map);
+        let e_down = sweep(&ctx, &q, &tables, &moments, &mut next, &ground_map);
         if !hier.is_empty() {
-            accelerate(&ctx, &voxels, &hier, bands, &moments, &mut next);
+            accelerate(&ctx, &full_vox, &hier, bands, &moments, &mut next);
         }
         let scale = next.iter().step_by(nsh).fold(1e-30f64, |a, x| a.max(x.abs() as f64));
         let change = next
@@ -738,8 +962,7 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
             next.par_iter_mut().zip(moments.par_iter()).for_each(|(x, o)| *x += k * (*x - o));
             extrapolated = history.len();
         }
-        moments = next;
-        source = make_source(&moments, true);
+        std::mem::swap(&mut moments, &mut next);
         ground_map = ground_of(Some(&e_down));
         progress.advance(1);
         progress.log(&format!(
@@ -751,7 +974,21 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         }
     }
     progress.end();
-    let diffuse_source = make_source(&moments, false);
+    drop(next);
+    // The diffuse source a′χ′_l I_lm in real_sh's order for the gather.
+    let mut diffuse_source = vec![0f32; moments.len()];
+    diffuse_source
+        .par_chunks_mut(3 * nsh)
+        .zip(moments.par_chunks(3 * nsh))
+        .for_each(|(o, mf)| {
+            for (band, bo) in bands.iter().enumerate() {
+                for (i, k) in perm.iter().enumerate() {
+                    let l = (*k as f64).sqrt().floor() as usize;
+                    o[band * nsh + k] = (bo.albedo * bo.chi[l] * mf[band * nsh + i] as f64) as f32;
+                }
+            }
+        });
+    drop(moments);
     TransportField {
         optics: optics.clone(),
         order: s.order,
@@ -799,10 +1036,186 @@ mod tests {
     }
 
     #[test]
-    fn dot_matches_the_plain_sum() {
-        let a: Vec<f32> = (0..67).map(|i| (i as f32 * 0.37).sin()).collect();
-        let b: Vec<f32> = (0..67).map(|i| (i as f32 * 0.11).cos()).collect();
-        let plain: f64 = a.iter().zip(&b).map(|(x, y)| (*x as f64) * (*y as f64)).sum();
-        assert!((dot(&a, &b) as f64 - plain).abs() < 1e-5);
+    fn the_avx_kernels_give_the_same_bits_as_the_plain_ones() {
+        // A 7×5×4 box with empty voxels inside, random moments: each kernel as built and through
+        // its dispatcher (AVX where the processor has it) must agree bit for bit.
+        let dims = [7, 5, 4];
+        let nv = dims[0] * dims[1] * dims[2];
+        let rho: Vec<f32> = (0..nv).map(|v| ((v as f32 * 0.618).fract() - 0.2).max(0.0) * 3.0).collect();
+        let mut full = vec![u32::MAX; nv];
+        let mut voxels = Vec::new();
+        for v in 0..nv {
+            if rho[v] > 0.0 {
+                full[v] = voxels.len() as u32;
+                voxels.push(v);
+            }
+        }
+        let nfull = voxels.len();
+        let order = 7;
+        let (perm, even) = parity_order(order);
+        let nsh = perm.len();
+        let sun_t: Vec<[f32; 3]> = (0..nv).map(|v| [0.3, 0.5, 0.7].map(|t| t + 0.01 * (v % 7) as f32)).collect();
+        let sky = Sky::constant(Rgb::new(0.2, 0.3, 0.5));
+        let c = Ctx {
+            dims,
+            lo: [0; 3],
+            n: dims,
+            h: [10.0, 8.0, 12.0],
+            rho: &rho,
+            full: &full,
+            nsh,
+            even,
+            voxels: &voxels,
+            sun_t: &sun_t,
+            cells: [0, 1, 2].map(|a| box_cells(dims, [0; 3], dims, &rho, &full, a)),
+            sigma_t: [0.05, 0.06, 0.07],
+            grey: false,
+            sky: &sky,
+            origin: DVec3::ZERO,
+            ground_height: None,
+        };
+        let ground = GroundMap {
+            margin: 0,
+            dims: [dims[0], dims[2]],
+            radiance: vec![Rgb::ZERO; dims[0] * dims[2]],
+            clear: Rgb::ZERO,
+            origin: [0.0; 2],
+            h: [10.0, 12.0],
+        };
+        let bands: Vec<BandOptics> = (0..3)
+            .map(|b| BandOptics::delta_m(0.05, 0.9 + 0.03 * b as f64, 0.85, order))
+            .collect();
+        let q = Quadrature::product(8, 16);
+        let mut y_sun = vec![0.0; nsh];
+        real_sh(order, DVec3::new(0.2, -0.9, 0.3).normalize(), &mut y_sun);
+        let t = PairTables::new(&q, order, &perm, &bands, [2.0, 1.8, 1.5], &y_sun);
+        let moments: Vec<f32> = (0..nfull * 3 * nsh)
+            .map(|i| ((i as f32 * 0.37).sin() * 0.5 + 0.6) / (1 + i % nsh) as f32)
+            .collect();
+        let bits = |v: &[[f32; 3]]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
+        // Step (1).
+        let (mut plain, mut disp) = (vec![[0f32; 3]; ORDINATE_BATCH * nfull], vec![[0f32; 3]; ORDINATE_BATCH * nfull]);
+        source_kernel(&c, &t, 1, PAIRS, &moments, 0, Shared(plain.as_mut_ptr()));
+        source_block(&c, &t, 1, PAIRS, &moments, 0, Shared(disp.as_mut_ptr()));
+        assert_eq!(bits(&plain), bits(&disp));
+        assert!(plain.iter().flatten().any(|x| *x > 0.0));
+        // Step (2), one ordinate per major axis and sign.
+        for d in [0, 5, 37, 64, 90, 127] {
+            let (mut ra, mut rb) = (vec![[0f32; 3]; nfull], vec![[0f32; 3]; nfull]);
+            sweep_kernel(&c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut ra);
+            sweep_ordinate(&c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut rb);
+            assert_eq!(bits(&ra), bits(&rb), "ordinate {d}");
+        }
+        // Step (3).
+        let wts: Vec<f32> = t.weights[PAIRS..2 * PAIRS].iter().flatten().copied().collect();
+        let l = Lanes {
+            nfull,
+            wts: &wts,
+            radiance: &plain,
+            y: &t.y[PAIRS * nsh..2 * PAIRS * nsh],
+        };
+        let (mut ma, mut mb) = (moments.clone(), moments.clone());
+        moments_kernel(&c, &l, &mut ma, 0);
+        moments_block(&c, &l, &mut mb, 0);
+        assert_eq!(
+            ma.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+            mb.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+        );
+    }
+
+    #[test]
+    fn parity_order_puts_even_l_first_and_pairs_are_opposite() {
+        let (perm, ne) = parity_order(7);
+        assert_eq!((perm.len(), ne), (64, 28));
+        let l_of = |k: usize| (k as f64).sqrt().floor() as usize;
+        assert!(perm[..ne].iter().all(|k| l_of(*k) % 2 == 0) && perm[ne..].iter().all(|k| l_of(*k) % 2 == 1));
+        assert_eq!(&perm[ne..ne + 3], &[1, 2, 3], "the l = 1 block leads the odd ones (DSA's current)");
+        let mut sorted = perm.clone();
+        sorted.sort();
+        assert_eq!(sorted, (0..64).collect::<Vec<_>>());
+        let q = Quadrature::product(8, 16);
+        let pairs = opposite_pairs(&q);
+        assert_eq!(pairs.len(), 64);
+        for [d, o] in pairs {
+            assert!((q.dirs[d] + q.dirs[o]).length() < 1e-12 && q.weights[d] == q.weights[o]);
+        }
+    }
+
+    #[test]
+    fn pair_source_and_moments_match_the_direct_sums() {
+        // Random coefficients I_lm: the source from the pair tables (E ± O plus the sun) against
+        // Σ a′χ′_l (I_lm + E T′ Y_lm(Ω_sun)) Y_lm(Ω) in each ordinate, and the moments
+        // accumulated per pair against Σ_Ω w I(Ω) Y_lm(Ω) in f64.
+        let order = 5;
+        let nsh = sh_count(order);
+        let (perm, ne) = parity_order(order);
+        let q = Quadrature::product(6, 12);
+        let bands: Vec<BandOptics> = [0.99, 0.9, 0.6]
+            .iter()
+            .map(|a| BandOptics {
+                sigma_t: 1.0,
+                albedo: *a,
+                chi: (0..=order).map(|l| 0.8f64.powi(l as i32)).collect(),
+                f: 0.0,
+            })
+            .collect();
+        let e_sun = [2.0, 1.5, 1.0];
+        let beam = DVec3::new(0.3, -0.8, 0.2).normalize();
+        let mut y_sun = vec![0.0; nsh];
+        real_sh(order, beam, &mut y_sun);
+        let t = PairTables::new(&q, order, &perm, &bands, e_sun, &y_sun);
+        let mom: Vec<f64> = (0..3 * nsh).map(|i| ((i as f64) * 0.731).sin() / (1.0 + i as f64 * 0.1)).collect();
+        let mom_inner: Vec<f32> = (0..3)
+            .flat_map(|b| perm.iter().map(move |k| (b, *k)))
+            .map(|(b, k)| mom[b * nsh + k] as f32)
+            .collect();
+        let tf = [0.7f32, 0.5, 0.3];
+        let l_of = |k: usize| (k as f64).sqrt().floor() as usize;
+        let mut y = vec![0.0; nsh];
+        for (p, [d, o]) in t.pairs.iter().enumerate() {
+            let (bi, lane) = (p / PAIRS, p % PAIRS);
+            for (b, bo) in bands.iter().enumerate() {
+                let m = &mom_inner[b * nsh..(b + 1) * nsh];
+                let ys = &t.y_src[(bi * 3 + b) * nsh..(bi * 3 + b + 1) * nsh];
+                let (e, od) = (lanes_dot(&m[..ne], &ys[..ne])[lane], lanes_dot(&m[ne..], &ys[ne..])[lane]);
+                let got = [
+                    e + od + tf[b] * t.sun[bi * 3 + b][0][lane],
+                    e - od + tf[b] * t.sun[bi * 3 + b][1][lane],
+                ];
+                for (dir, g) in [*d, *o].iter().zip(got) {
+                    real_sh(order, q.dirs[*dir], &mut y);
+                    let want: f64 = (0..nsh)
+                        .map(|k| bo.albedo * bo.chi[l_of(k)] * (mom[b * nsh + k] + e_sun[b] * tf[b] as f64 * y_sun[k]) * y[k])
+                        .sum();
+                    assert!((g as f64 - want).abs() < 1e-5, "pair {p} band {b}: {g} vs {want}");
+                }
+            }
+        }
+        // Moments of a radiance field I(Ω) = 1 + Ω_x + Ω_y Ω_z over the pairs of batch 0.
+        let radiance = |v: DVec3| 1.0 + v.x + v.y * v.z;
+        let np = PAIRS.min(t.pairs.len());
+        let (mut se, mut so) = (vec![0f32; np], vec![0f32; np]);
+        for p in 0..np {
+            let [d, o] = t.pairs[p];
+            let (ip, im) = (
+                t.weights[p][0] * radiance(q.dirs[d]) as f32,
+                t.weights[p][1] * radiance(q.dirs[o]) as f32,
+            );
+            (se[p], so[p]) = (ip + im, ip - im);
+        }
+        let mut acc = vec![0f32; nsh];
+        accumulate(&mut acc[..ne], &se, &t.y[..np * nsh], nsh);
+        accumulate(&mut acc[ne..], &so, &t.y[ne..np * nsh], nsh);
+        for (i, k) in perm.iter().enumerate() {
+            let want: f64 = t.pairs[..np]
+                .iter()
+                .flatten()
+                .map(|dir| {
+                    real_sh(order, q.dirs[*dir], &mut y);
+                    q.weights[*dir] * radiance(q.dirs[*dir]) * y[*k]
+                })
+                .sum();
+            assert!((acc[i] as f64 - want).abs() < 1e-5, "lm {k}: {} vs {want}", acc[i]);
+        }
     }
 }
