@@ -345,9 +345,10 @@ fn corrupt_vol_files() {
         &[("g.vol", vol([2, 2, 2], &ones, 0))],
         &["medium.max_voxels", "medium.downsample"],
     );
-    // Transport's memory is estimated from the loaded grid (4.1 M full voxels × 6.5 kB at order
-    // 15 is 27 GB) and refused, for that method, before the solve allocates it.
-    let n = 160;
+    // Transport's memory is estimated from the loaded grid (8 M full voxels × 6.5 kB at order 15
+    // is 52 GB, twice the CI machine's memory) and refused, for that method, before the solve
+    // allocates it.
+    let n = 200;
     let cube = vol([n; 3], &vec![1.0; (n * n * n) as usize], 0);
     render_fails(
         "[medium]\ngrid = \"g.vol\"\n[render]\ntransport_order = 15\ntransport_polar_ordinates = 16\n",
