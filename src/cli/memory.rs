@@ -106,7 +106,7 @@ impl CloudSize {
 pub struct GridMemory {
     /// Fixed bytes (program, thread stacks, tables).
     pub fixed: u64,
-    /// Per grid voxel: the density and the full-voxel index (4 B each).
+    /// Per grid voxel: the density (4 B) and the full-voxel index's occupancy words (0.25 B).
     pub per_grid: u64,
     /// Per voxel of the box of the full voxels: the sun transmittance (4 B, on the box grown by
     /// one voxel) and the solver's box-shaped bookkeeping.
@@ -130,13 +130,14 @@ impl GridMemory {
 /// peak resident memory of 8×6-pixel renders on the development sandbox (`/usr/bin/time -f %M`) of
 /// four clouds — the procedural cumulus at 50×40×30, 100×80×60 and 200×160×120 (5.5 k, 44 k and
 /// 356 k full voxels, 9 % of the grid, 47 % of their box) and two spheres in opposite corners of a
-/// 200×160×120 grid (89 k full voxels, 3 % of their box of 2.6 M) — with 8 B per grid voxel (the
-/// density and the full-voxel index): `full` 6.4 MB fixed, 9.9 B per box voxel (the sun
-/// transmittance and the solver's box-shaped bookkeeping) and 349 B per full voxel (the solver's
-/// hierarchy and vectors, stage 1's light, I0, I1, the lit volume and its pyramid), `diffusion`
-/// 7.3 MB, 6.1 B and 297 B. The figures here are those rounded up by a fifth or more (the estimates
-/// are 27–35 % above the measured peaks of the two 200×160×120 clouds). `single` and `reference`
-/// hold the grid and a majorant or transmittance grid (16 B per grid voxel, an upper bound).
+/// 200×160×120 grid (89 k full voxels, 3 % of their box of 2.6 M) — with 4.25 B per grid voxel (the
+/// density and the full-voxel index's occupancy words): `full` 11.9 MB fixed, 6.8 B per box voxel
+/// (the sun transmittance and the solver's box-shaped bookkeeping) and 321 B per full voxel (the
+/// solver's hierarchy and vectors, stage 1's light, I0, I1, the lit volume and its pyramid),
+/// `diffusion` 7.8 MB, 7.6 B and 268 B. The figures here are those rounded up by a fifth or more
+/// (the estimates are 23–35 % above the measured peaks of the three larger clouds). `single` and
+/// `reference` hold the grid and a majorant or transmittance grid (16 B per grid voxel, an upper
+/// bound).
 pub fn grid_memory(method: Method) -> GridMemory {
     const MB: u64 = 1 << 20;
     match method {
@@ -148,16 +149,16 @@ pub fn grid_memory(method: Method) -> GridMemory {
         },
         Method::Diffusion => GridMemory {
             fixed: 16 * MB,
-            per_grid: 10,
-            per_box: 8,
-            per_full: 360,
+            per_grid: 5,
+            per_box: 10,
+            per_full: 330,
         },
         // full, and any method added later: the largest estimate.
         _ => GridMemory {
             fixed: 16 * MB,
-            per_grid: 10,
-            per_box: 12,
-            per_full: 420,
+            per_grid: 5,
+            per_box: 10,
+            per_full: 390,
         },
     }
 }
