@@ -316,7 +316,7 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
     let albedo = m.optics.albedo;
     let dense = move |p: Vec3, to_eye: Vec3| {
         // a·I0, or a·max(0, I0 + g·I1·ω) with the first moment ([`LitVolume::diffuse`]).
-        albedo * lit.diffuse(m.to_voxel(p), m.density_at(p), to_eye)
+        albedo * lit.diffuse_at(p, to_eye)
     };
     let edge = EdgeGather::new(m, scene.render.edges, &cubes, sun, &dense);
     let cam = &scene.camera;
