@@ -13,9 +13,9 @@
 
 use super::image::CubeImage;
 use super::skip::DualMask;
+use crate::diffusion::flux::FluxField;
 use crate::error::{Error, Result};
 use crate::lighting::bins::{DirectionBins, BINS_PER_EDGE, NUM_BINS};
-use crate::diffusion::flux::FluxField;
 use crate::lit::pyramid::{Cell, LitPyramid, BLOCK};
 use crate::lit::LitVolume;
 use crate::math::{fast_floor, Rgb, Trilinear, Vec3};
@@ -412,7 +412,10 @@ impl<'a> CubeRenderer<'a> {
         let gather = self.gather_source && (lit.flux.is_some() || lit.sky_single.is_some());
         let coarse = if gather { self.coarse_flux() } else { None };
         // Level 0's cells share the flux's index: its slots serve ρ·I1 too.
-        let flux0 = lit.flux.as_deref().filter(|f| Arc::ptr_eq(f.rho_i1().index(), self.pyramid.levels[0].cells.index()));
+        let flux0 = lit
+            .flux
+            .as_deref()
+            .filter(|f| Arc::ptr_eq(f.rho_i1().index(), self.pyramid.levels[0].cells.index()));
         let inv_cone = 1.0 / (cone.max(1e-6) * self.opts.lod_bias.exp2());
         let levels = &self.pyramid.levels[..self.levels.min(self.pyramid.levels.len())];
         let nlev = levels.len();
