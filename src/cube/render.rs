@@ -706,3 +706,54 @@ pub fn render_cube_brute(lit: &LitVolume, p: Vec3, res: usize, needed: BinMask, 
     }
     cube
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lighting::{Sky, Sun};
+    use crate::medium::{Grid3, Medium};
+
+    /// With I0 and I1 uniform over the cloud, every level's mass-weighted means are those same
+    /// values, so the coarse levels' g·I1·ω term must equal the exact one at any sample.
+    #[test]
+    fn coarse_flux_of_a_uniform_field_is_exact() {
+        let dims = [13, 9, 11];
+        let mut g = Grid3::filled(dims, 0.0);
+        for (n, x) in g.data_mut().iter_mut().enumerate() {
+            *x = ((n * 7) % 5) as f32 * 0.3;
+        }
+        let m = Medium::new(g, Vec3::ZERO, Vec3::ONE, 1.0, Rgb::ONE, 0.6);
+        let i0 = Rgb::new(0.2, 1.0, 2.0);
+        let i1 = [Vec3::new(3.0, -1.0, 0.5), Vec3::new(-0.4, 0.2, 1.0), Vec3::new(0.0, 0.0, -2.5)];
+        let n = dims[0] * dims[1] * dims[2];
+        let field = VoxelField::from_fn(m.density.full_index(), [Vec3::ZERO; 3], |_| i1);
+        let flux = FluxField::new(&m, &field);
+        let sun = Sun {
+            dir: Vec3::Y,
+            irradiance: Rgb::ONE,
+        };
+        let lit = LitVolume::new(m, vec![i0; n], Grid3::filled(dims, 0.5), sun, Sky::constant(Rgb::ONE), None).with_flux(flux);
+        let r = CubeRenderer::new(&lit, &CubeOptions::default());
+        let cf = r.coarse_flux().expect("the first moment alone is attached");
+        let g = lit.flux.as_ref().unwrap().g();
+        let to_eye = Vec3::new(0.48, -0.6, 0.64);
+        let exact = (i0 + Rgb::new(i1[0].dot(to_eye), i1[1].dot(to_eye), i1[2].dot(to_eye)) * g).max(Rgb::ZERO) - i0;
+        let mut checked = 0;
+        for li in 1..r.levels() {
+            let lev = &r.pyramid.levels[li];
+            for k in 0..40 {
+                let v = Vec3::new(0.37 + 0.13 * k as f32, 0.61 + 0.07 * k as f32, 0.29 + 0.11 * k as f32) % dims_f(lev.dims);
+                let Some((c, slots)) = r.masks[li].sample_slots(lev, v) else {
+                    continue;
+                };
+                let got = cf.beyond_i0(li, &slots, &c, to_eye);
+                assert!(
+                    (got - exact).abs().max_element() < 1e-4 * exact.abs().max_element(),
+                    "level {li}: {got} vs {exact}"
+                );
+                checked += 1;
+            }
+        }
+        assert!(checked > 10, "{checked} samples");
+    }
+}
