@@ -33,7 +33,8 @@ pub struct CubeOptions {
     /// The march step of the final gather's view-aligned cubes (the edge and surface layer's,
     /// `crate::render::full::GatherCubes`), likewise. Measured 1.5 against 1 on the default
     /// scene and the five evaluation scenes: block MRE ≤ 1.8·10⁻⁴, a third fewer samples in
-    /// the gather's most expensive loop.
+    /// the gather's most expensive loop; 2 against 1.5: block MRE ≤ 1.2·10⁻⁴ (dense), the
+    /// gather's cubes 11 % fewer instructions.
     pub gather_step_level_voxels: f32,
     /// The march step of the border cubes ([`super::border`]), likewise. Coarser than the other
     /// cubes': their light reaches the image only through stage 1 and the clear-air change of I0
@@ -74,7 +75,7 @@ impl Default for CubeOptions {
         CubeOptions {
             res: DEFAULT_CUBE_RESOLUTION,
             step_level_voxels: 1.0,
-            gather_step_level_voxels: 1.5,
+            gather_step_level_voxels: 2.0,
             border_step_level_voxels: 2.0,
             t_cutoff: 1e-3,
             border_t_cutoff: 1e-2,
