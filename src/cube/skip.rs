@@ -61,6 +61,13 @@ impl DualMask {
     /// else the very same operations as [`crate::math::Trilinear`], so the same bits.
     #[inline]
     pub fn sample(&self, level: &Level, v: Vec3) -> Option<Cell> {
+        self.sample_slots(level, v).map(|(c, _)| c)
+    }
+
+    /// [`Self::sample`] with the trilinear corners as slots of the level's cells, so fields
+    /// stored on the same index (the gather source's ρ·I1 levels) blend at the same point.
+    #[inline]
+    pub fn sample_slots(&self, level: &Level, v: Vec3) -> Option<(Cell, Trilinear)> {
         let p = v.to_array();
         let mut fl = [0isize; 3];
         let mut f = [0f32; 3];
@@ -90,7 +97,7 @@ impl DualMask {
             let c = level.cells.at_slot(s);
             Vec4::new(c[1], c[2], c[3], c[4])
         });
-        Some([rho, c.x, c.y, c.z, c.w])
+        Some(([rho, c.x, c.y, c.z, c.w], t))
     }
 }
 

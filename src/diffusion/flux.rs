@@ -99,6 +99,16 @@ impl FluxField {
         }
     }
 
+    /// ρ·I1 per full voxel (`[band]`), for coarser copies (the viewing cubes' pyramid levels).
+    pub fn rho_i1(&self) -> &VoxelField<[Vec3; 3]> {
+        &self.rho_i1
+    }
+
+    /// The HG mean cosine g the in-scattering g·I1·ω uses.
+    pub fn g(&self) -> f32 {
+        self.g
+    }
+
     /// I1 per band at continuous voxel coordinates `v` where the trilinear density is `rho`.
     #[inline]
     pub fn i1_at_voxel(&self, v: Vec3, rho: f32) -> [Vec3; 3] {
@@ -109,6 +119,16 @@ impl FluxField {
         let t = f.slots(&crate::math::Trilinear::new(self.dims, v.to_array()));
         let s: [Vec3; 3] = std::array::from_fn(|c| t.blend(|q| f.at_slot(q)[c]));
         [s[0] / rho, s[1] / rho, s[2] / rho]
+    }
+
+    /// [`Self::anisotropic_at_voxel`] from the slots of the corners (density `rho` > 0 there):
+    /// the same bits, without locating them again.
+    #[inline]
+    pub fn anisotropic_at_slots(&self, slots: &crate::math::Trilinear, rho: f32, to_eye: Vec3) -> Rgb {
+        let f = &self.rho_i1;
+        let s: [Vec3; 3] = std::array::from_fn(|c| slots.blend(|q| f.at_slot(q)[c]));
+        let i1 = [s[0] / rho, s[1] / rho, s[2] / rho];
+        Rgb::new(i1[0].dot(to_eye), i1[1].dot(to_eye), i1[2].dot(to_eye)) * self.g
     }
 
     /// The anisotropic in-scattering g·I1·ω (per band, may be negative) at voxel coordinates `v`

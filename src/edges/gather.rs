@@ -530,8 +530,9 @@ impl<'a> EdgeGather<'a> {
                 let ta = p.t0 + (p.t1 - p.t0) * s as f64 / n as f64;
                 let tb = p.t0 + (p.t1 - p.t0) * (s + 1) as f64 / n as f64;
                 let tm = 0.5 * (ta + tb);
-                // ρ at the midpoint serves both the step's depth and its weights.
-                let rho = prof.rho(m, tm);
+                // ρ at the midpoint serves both the step's depth and its weights; a one-step
+                // piece's midpoint density is the profile's own.
+                let rho = if n == 1 { p.rho[1] } else { prof.rho(m, tm) };
                 let delta = if n == 1 {
                     p.tau
                 } else {

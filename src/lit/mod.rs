@@ -155,10 +155,50 @@ impl LitVolume {
     /// light's single scattering ∫p·I_ri,sky when attached.
     #[inline]
     pub fn diffuse(&self, v: Vec3, rho: f32, to_eye: Vec3) -> Rgb {
-        let i0 = self.i0(v, rho);
-        let d = match &self.flux {
-            Some(f) => (i0 + f.anisotropic_at_voxel(v, rho, to_eye)).max(Rgb::ZERO),
-            None => i0,
+        if rho <= 0.0 {
+            return self.diffuse_parts(v, rho, self.i0(v, rho), None, to_eye);
+        }
+        self.diffuse_corners(v, rho, &Trilinear::new(self.dims(), v.to_array()), to_eye)
+    }
+
+    /// [`Self::diffuse`] at `p` (m) with the density there ([`Medium::density_at`]), the
+    /// trilinear corners located once for ρ, ρ·I0 and ρ·I1 (the same bits as the separate
+    /// look-ups): the final gather's dense source, one call per compositing step.
+    #[inline]
+    pub fn diffuse_at(&self, p: Vec3, to_eye: Vec3) -> Rgb {
+        let m = &self.medium;
+        let v = m.to_voxel(p);
+        let d = m.dims();
+        if v.x < 0.0 || v.y < 0.0 || v.z < 0.0 || v.x > d[0] as f32 || v.y > d[1] as f32 || v.z > d[2] as f32 {
+            return self.diffuse(v, 0.0, to_eye);
+        }
+        let t = Trilinear::new(d, v.to_array());
+        let rho = t.blend(|n| m.density.data()[n]);
+        if rho <= 0.0 {
+            return self.diffuse(v, rho, to_eye);
+        }
+        self.diffuse_corners(v, rho, &t, to_eye)
+    }
+
+    /// [`Self::diffuse`] for `rho` > 0 given the grid corners `t` of `v`: ρ·I0 and ρ·I1 share
+    /// one slot look-up when they share the density's index.
+    #[inline]
+    fn diffuse_corners(&self, v: Vec3, rho: f32, t: &Trilinear, to_eye: Vec3) -> Rgb {
+        let f = &*self.rho_i0;
+        let slots = f.slots(t);
+        let i0 = slots.blend(|s| *f.at_slot(s)) / rho;
+        let shared = self.flux.as_ref().filter(|fl| Arc::ptr_eq(fl.rho_i1().index(), f.index()));
+        self.diffuse_parts(v, rho, i0, shared.map(|_| &slots), to_eye)
+    }
+
+    /// max(0, I0 + g·I1·ω) (or I0) plus the sky's single scattering, given I0 and, when the flux
+    /// shares ρ·I0's index, the slots of `v`'s corners.
+    #[inline(always)]
+    fn diffuse_parts(&self, v: Vec3, rho: f32, i0: Rgb, slots: Option<&Trilinear>, to_eye: Vec3) -> Rgb {
+        let d = match (&self.flux, slots) {
+            (Some(f), Some(t)) => (i0 + f.anisotropic_at_slots(t, rho, to_eye)).max(Rgb::ZERO),
+            (Some(f), None) => (i0 + f.anisotropic_at_voxel(v, rho, to_eye)).max(Rgb::ZERO),
+            (None, _) => i0,
         };
         match &self.sky_single {
             Some(s) => d + s.at_voxel(v, rho, to_eye),
