@@ -630,16 +630,13 @@ fn sweep_kernel(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap
                 }
                 let l = l0 + ib;
                 let u = (l as isize + up) as usize;
-                let n = [prev[u], prev[u + 1], prev[u + stride], prev[u + stride + 1]];
+                let (n0, n1, n2, n3) = (&prev[u].0, &prev[u + 1].0, &prev[u + stride].0, &prev[u + stride + 1].0);
                 // Radiance and density bilinear; the source (per unit extinction, defined only
                 // where ρ > 0) density-weighted, so that empty neighbours do not pull it
-                // towards 0 (a uniform source stays uniform: the furnace holds).
-                let mut acc = [0f32; 8];
-                for (wk, nk) in wts.iter().zip(&n) {
-                    for (al, nl) in acc.iter_mut().zip(nk.0) {
-                        *al += wk * nl;
-                    }
-                }
+                // towards 0 (a uniform source stays uniform: the furnace holds). One expression
+                // per lane (from 0, the neighbours in order) so it compiles to whole-record
+                // arithmetic without copies of the records.
+                let acc: [f32; 8] = std::array::from_fn(|k| 0.0 + wts[0] * n0[k] + wts[1] * n1[k] + wts[2] * n2[k] + wts[3] * n3[k]);
                 let ib_ = [acc[I], acc[I + 1], acc[I + 2]];
                 let (rb, sbw) = (acc[RHO], [acc[RS], acc[RS + 1], acc[RS + 2]]);
                 let sc = if fi != u32::MAX { src[fi as usize] } else { [0f32; 3] };
