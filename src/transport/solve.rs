@@ -354,12 +354,14 @@ fn accumulate(acc: &mut [f32], s: &[f32], y: &[f32], stride: usize) {
 /// Define `$name`, which runs `$body` compiled for AVX where the processor has it, else as
 /// built. The kernels' lanes and sums are explicit and Rust never fuses a multiply with an add,
 /// so both give the same bits; AVX does eight lanes per instruction instead of four.
+/// With `@ name, avx_name, plain, fast`, the AVX copy runs `fast` (a body with explicit AVX
+/// arithmetic that must give `plain`'s bits).
 macro_rules! with_avx {
-    ($name:ident, $avx:ident, $body:ident, ($($a:ident: $t:ty),*) $(-> $r:ty)?) => {
+    (@ $name:ident, $avx:ident, $plain:expr, $fast:expr, ($($a:ident: $t:ty),*) $(-> $r:ty)?) => {
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx")]
         unsafe fn $avx($($a: $t),*) $(-> $r)? {
-            $body($($a),*)
+            $fast($($a),*)
         }
         fn $name($($a: $t),*) $(-> $r)? {
             #[cfg(target_arch = "x86_64")]
@@ -367,8 +369,11 @@ macro_rules! with_avx {
                 // SAFETY: the processor has AVX.
                 return unsafe { $avx($($a),*) };
             }
-            $body($($a),*)
+            $plain($($a),*)
         }
+    };
+    ($name:ident, $avx:ident, $body:ident, $($sig:tt)*) => {
+        with_avx!(@ $name, $avx, $body, $body, $($sig)*);
     };
 }
 
@@ -546,6 +551,28 @@ impl PlaneCell {
     }
 }
 
+/// Σ_k w_k n_k per lane of four plane records, from 0 in the neighbours' order.
+#[inline(always)]
+fn bilinear(w: &[f32; 4], n: [&[f32; 8]; 4]) -> [f32; 8] {
+    std::array::from_fn(|k| 0.0 + w[0] * n[0][k] + w[1] * n[1][k] + w[2] * n[2][k] + w[3] * n[3][k])
+}
+
+/// [`bilinear`] in eight-lane AVX arithmetic (the compiler keeps it in four-lane halves): the
+/// same multiplies and adds in the same order, so the same bits.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn bilinear_avx(w: &[f32; 4], n: [&[f32; 8]; 4]) -> [f32; 8] {
+    use std::arch::x86_64::*;
+    let mut acc = _mm256_setzero_ps();
+    for (wk, nk) in w.iter().zip(n) {
+        acc = _mm256_add_ps(acc, _mm256_mul_ps(_mm256_set1_ps(*wk), _mm256_loadu_ps(nk.as_ptr())));
+    }
+    let mut out = [0f32; 8];
+    _mm256_storeu_ps(out.as_mut_ptr(), acc);
+    out
+}
+
 /// Cells ahead of the current one in a sweep's plane whose source and radiance are prefetched.
 const PREFETCH_AHEAD: usize = 16;
 
@@ -564,7 +591,7 @@ fn prefetch<T>(p: *const T) {
 /// of the light leaving the box downwards. `src` is the source in this ordinate per full voxel;
 /// `radiance` receives the radiance at every full voxel (all lie in the box).
 #[inline(always)]
-fn sweep_kernel(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, radiance: &mut [[f32; 3]]) -> Splats {
+fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, radiance: &mut [[f32; 3]]) -> Splats {
     let mut splats = Vec::new();
     let skyr = c.sky.radiance(Vec3::new(-om.x as f32, -om.y as f32, -om.z as f32));
     let splat = om.y < 0.0 && c.ground_height.is_some();
@@ -636,7 +663,17 @@ fn sweep_kernel(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap
                 // towards 0 (a uniform source stays uniform: the furnace holds). One expression
                 // per lane (from 0, the neighbours in order) so it compiles to whole-record
                 // arithmetic without copies of the records.
-                let acc: [f32; 8] = std::array::from_fn(|k| 0.0 + wts[0] * n0[k] + wts[1] * n1[k] + wts[2] * n2[k] + wts[3] * n3[k]);
+                let acc = if AVX {
+                    // SAFETY: `AVX` is true only in the copy compiled for (and run on) AVX.
+                    #[cfg(target_arch = "x86_64")]
+                    unsafe {
+                        bilinear_avx(&wts, [n0, n1, n2, n3])
+                    }
+                    #[cfg(not(target_arch = "x86_64"))]
+                    bilinear(&wts, [n0, n1, n2, n3])
+                } else {
+                    bilinear(&wts, [n0, n1, n2, n3])
+                };
                 let ib_ = [acc[I], acc[I + 1], acc[I + 2]];
                 let (rb, sbw) = (acc[RHO], [acc[RS], acc[RS + 1], acc[RS + 2]]);
                 let sc = if fi != u32::MAX { src[fi as usize] } else { [0f32; 3] };
@@ -695,7 +732,7 @@ fn sweep_kernel(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap
     }
     splats
 }
-with_avx!(sweep_ordinate, sweep_ordinate_avx, sweep_kernel, (c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, radiance: &mut [[f32; 3]]) -> Splats);
+with_avx!(@ sweep_ordinate, sweep_ordinate_avx, sweep_kernel::<false>, sweep_kernel::<true>, (c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, radiance: &mut [[f32; 3]]) -> Splats);
 
 /// The DSA operator of one band on the full voxels (δ-M coefficients), in grid order.
 fn dsa_operator(m: &Medium, dom: &Domain, sigma_t: f64, albedo: f64, chi1: f64) -> Operator {
@@ -1120,7 +1157,7 @@ mod tests {
         // Step (2), one ordinate per major axis and sign.
         for d in [0, 5, 37, 64, 90, 127] {
             let (mut ra, mut rb) = (vec![[0f32; 3]; nfull], vec![[0f32; 3]; nfull]);
-            sweep_kernel(&c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut ra);
+            sweep_kernel::<false>(&c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut ra);
             sweep_ordinate(&c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut rb);
             assert_eq!(bits(&ra), bits(&rb), "ordinate {d}");
         }
