@@ -251,8 +251,10 @@ struct PairTables {
     pairs: Vec<[usize; 2]>,
     /// Weights (sr) of d and d′.
     weights: Vec<[f32; 2]>,
-    /// Y_lm(Ω_d), per pair.
-    y: Vec<f32>,
+    /// Y_lm(Ω_d) for the moments, per batch in blocks of eight harmonics with the batch's pairs
+    /// side by side ([`accumulate`]): the even ones' blocks, then the odd ones' (zero past each
+    /// part's end).
+    y_acc: Vec<[[f32; 8]; PAIRS]>,
     /// a′χ′_l Y_lm(Ω_d) per batch of pairs, band and lm, the batch's pairs in lanes (0 past the
     /// last pair): the source in Ω_d is Σ I_lm times this.
     y_src: Vec<[f32; PAIRS]>,
@@ -267,14 +269,23 @@ impl PairTables {
         let pairs = opposite_pairs(q);
         let l_of = |k: usize| (k as f64).sqrt().floor() as usize;
         let batches = pairs.len().div_ceil(PAIRS);
-        let mut y = Vec::new();
+        let ne = perm.iter().filter(|k| l_of(**k) % 2 == 0).count();
+        let (nbe, nblk) = (ne.div_ceil(8), ne.div_ceil(8) + (nsh - ne).div_ceil(8));
+        let mut y_acc = vec![[[0f32; 8]; PAIRS]; batches * nblk];
         let mut y_src = vec![[0f32; PAIRS]; batches * 3 * nsh];
         let mut sun = vec![[[0f32; PAIRS]; 2]; batches * 3];
         let mut yd = vec![0.0; nsh];
         for (p, [d, _]) in pairs.iter().enumerate() {
             real_sh(order, q.dirs[*d], &mut yd);
-            y.extend(perm.iter().map(|k| yd[*k] as f32));
             let (bi, lane) = (p / PAIRS, p % PAIRS);
+            for (i, k) in perm.iter().enumerate() {
+                let (kb, l) = if i < ne {
+                    (i / 8, i % 8)
+                } else {
+                    (nbe + (i - ne) / 8, (i - ne) % 8)
+                };
+                y_acc[bi * nblk + kb][lane][l] = yd[*k] as f32;
+            }
             for (b, bo) in bands.iter().enumerate() {
                 for (i, k) in perm.iter().enumerate() {
                     y_src[(bi * 3 + b) * nsh + i][lane] = (bo.albedo * bo.chi[l_of(*k)] * yd[*k]) as f32;
@@ -292,7 +303,7 @@ impl PairTables {
         PairTables {
             pairs,
             weights,
-            y,
+            y_acc,
             y_src,
             sun,
         }
@@ -318,36 +329,21 @@ fn lanes_dot(m: &[f32], y: &[[f32; PAIRS]]) -> [f32; PAIRS] {
     std::array::from_fn(|p| a0[p] + a1[p])
 }
 
-/// acc[k] += Σ_p s[p] y[p·stride + k] (acc no longer than stride), eight then four k at a time
-/// with the sum over p in registers; the same order for any thread count.
+/// acc[k] += Σ_p s[p] y_p[k] (the pairs in order, in a sum from 0 per k, then added), eight k
+/// at a time: `blocks[kb][p]` holds y_p[8kb..8kb + 8]; the same order for any thread count.
+/// Lanes past a short batch's last pair hold s = y = 0 and add +0 (a sum from +0 never is −0).
 #[inline(always)]
-fn accumulate(acc: &mut [f32], s: &[f32], y: &[f32], stride: usize) {
-    #[inline(always)]
-    fn lanes<const N: usize>(acc: &mut [f32], s: &[f32], y: &[f32], stride: usize, k0: usize) {
-        let mut r = [0f32; N];
-        for (p, sp) in s.iter().enumerate() {
-            let yk = &y[p * stride + k0..p * stride + k0 + N];
-            for l in 0..N {
-                r[l] += sp * yk[l];
+fn accumulate(acc: &mut [f32], s: &[f32; PAIRS], blocks: &[[[f32; 8]; PAIRS]]) {
+    for (a, blk) in acc.chunks_mut(8).zip(blocks) {
+        let mut r = [0f32; 8];
+        for (sp, y) in s.iter().zip(blk) {
+            for (rl, yl) in r.iter_mut().zip(y) {
+                *rl += sp * yl;
             }
         }
-        for (a, rl) in acc[k0..k0 + N].iter_mut().zip(r) {
-            *a += rl;
+        for (al, rl) in a.iter_mut().zip(r) {
+            *al += rl;
         }
-    }
-    let n = acc.len();
-    let mut k = 0;
-    while k + 8 <= n {
-        lanes::<8>(acc, s, y, stride, k);
-        k += 8;
-    }
-    while k + 4 <= n {
-        lanes::<4>(acc, s, y, stride, k);
-        k += 4;
-    }
-    while k < n {
-        lanes::<1>(acc, s, y, stride, k);
-        k += 1;
     }
 }
 
@@ -408,12 +404,12 @@ fn source_kernel(c: &Ctx, t: &PairTables, bi: usize, pairs: usize, block: &[f32]
 with_avx!(source_block, source_block_avx, source_kernel, (c: &Ctx, t: &PairTables, bi: usize, pairs: usize, block: &[f32], f0: usize, sp: Shared<[f32; 3]>));
 
 /// What step (3) of [`sweep`] reads: the batch's radiances per ordinate slot and full voxel, the
-/// slots' weights (sr) and the pairs' Y_lm (inner order, one row of (L+1)² per pair).
+/// slots' weights (sr) and the pairs' Y_lm (the batch's blocks of [`PairTables::y_acc`]).
 struct Lanes<'a> {
     nfull: usize,
     wts: &'a [f32],
     radiance: &'a [[f32; 3]],
-    y: &'a [f32],
+    y: &'a [[[f32; 8]; PAIRS]],
 }
 
 /// Step (3) of [`sweep`] for the full voxels from `f0` whose new moments are `block`: I_lm +=
@@ -434,8 +430,9 @@ fn moments_kernel(c: &Ctx, l: &Lanes, block: &mut [f32], f0: usize) {
                 (*e, *o) = (ip + im, ip - im);
             }
             let a = &mut acc[band * nsh..(band + 1) * nsh];
-            accumulate(&mut a[..ne], &se[..pairs], l.y, nsh);
-            accumulate(&mut a[ne..], &so[..pairs], &l.y[ne..], nsh);
+            let nbe = ne.div_ceil(8);
+            accumulate(&mut a[..ne], &se, &l.y[..nbe]);
+            accumulate(&mut a[ne..], &so, &l.y[nbe..]);
         }
     }
 }
@@ -489,7 +486,8 @@ fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], next: &mut [f
             }
         }
         // (3) Moments: I_lm += w I(Ω) Y_lm(Ω) + w′ I(−Ω) (−1)^l Y_lm(Ω).
-        let yb = &t.y[first * nsh..batch.end * nsh];
+        let nblk = t.y_acc.len() / t.pairs.len().div_ceil(PAIRS);
+        let yb = &t.y_acc[bi * nblk..(bi + 1) * nblk];
         let lanes = Lanes {
             nfull,
             wts: &wts,
@@ -1163,11 +1161,12 @@ mod tests {
         }
         // Step (3).
         let wts: Vec<f32> = t.weights[PAIRS..2 * PAIRS].iter().flatten().copied().collect();
+        let nblk = t.y_acc.len() / t.pairs.len().div_ceil(PAIRS);
         let l = Lanes {
             nfull,
             wts: &wts,
             radiance: &plain,
-            y: &t.y[PAIRS * nsh..2 * PAIRS * nsh],
+            y: &t.y_acc[nblk..2 * nblk],
         };
         let (mut ma, mut mb) = (moments.clone(), moments.clone());
         moments_kernel(&c, &l, &mut ma, 0);
@@ -1249,7 +1248,7 @@ mod tests {
         // Moments of a radiance field I(Ω) = 1 + Ω_x + Ω_y Ω_z over the pairs of batch 0.
         let radiance = |v: DVec3| 1.0 + v.x + v.y * v.z;
         let np = PAIRS.min(t.pairs.len());
-        let (mut se, mut so) = (vec![0f32; np], vec![0f32; np]);
+        let (mut se, mut so) = ([0f32; PAIRS], [0f32; PAIRS]);
         for p in 0..np {
             let [d, o] = t.pairs[p];
             let (ip, im) = (
@@ -1259,8 +1258,10 @@ mod tests {
             (se[p], so[p]) = (ip + im, ip - im);
         }
         let mut acc = vec![0f32; nsh];
-        accumulate(&mut acc[..ne], &se, &t.y[..np * nsh], nsh);
-        accumulate(&mut acc[ne..], &so, &t.y[ne..np * nsh], nsh);
+        let nbe = ne.div_ceil(8);
+        let nblk = t.y_acc.len() / t.pairs.len().div_ceil(PAIRS);
+        accumulate(&mut acc[..ne], &se, &t.y_acc[..nbe]);
+        accumulate(&mut acc[ne..], &so, &t.y_acc[nbe..nblk]);
         for (i, k) in perm.iter().enumerate() {
             let want: f64 = t.pairs[..np]
                 .iter()
