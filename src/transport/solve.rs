@@ -571,6 +571,74 @@ unsafe fn bilinear_avx(w: &[f32; 4], n: [&[f32; 8]; 4]) -> [f32; 8] {
     out
 }
 
+/// One cell's step along a sweep (module docs) from its upwind record `acc` ([`bilinear`]),
+/// its density, its source `sc` (0 where empty; `full`: ρ > 0) and the step length `s` (m): its
+/// radiance and its record for the next plane.
+#[inline(always)]
+fn cell(c: &Ctx, acc: [f32; 8], rho: f32, sc: [f32; 3], full: bool, s: f32) -> ([f32; 3], PlaneCell) {
+    let ib_ = [acc[I], acc[I + 1], acc[I + 2]];
+    let (rb, sbw) = (acc[RHO], [acc[RS], acc[RS + 1], acc[RS + 2]]);
+    let mut out = ib_;
+    let rm = 0.5 * (rb + rho) * s;
+    if rm > 0.0 {
+        let sb = if rb > 0.0 { sbw.map(|x| x * (1.0 / rb)) } else { sc };
+        let se = if full { sc } else { sb };
+        let mut wgt = step_weights(c.sigma_t[0] * rm);
+        for band in 0..3 {
+            if band > 0 && !c.grey {
+                wgt = step_weights(c.sigma_t[band] * rm);
+            }
+            let (e, wi, wo) = wgt;
+            out[band] = ib_[band] * e + wi * sb[band] + wo * se[band];
+        }
+    }
+    (out, PlaneCell::new(out, rho, sc.map(|x| rho * x)))
+}
+
+/// [`bilinear`] and [`cell`] for grey optics (one σt′) in AVX registers: the three bands in the
+/// lanes of one four-lane operation, the same multiplies and adds in the same order, so the
+/// same bits.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn cell_grey_avx(
+    w: &[f32; 4],
+    n: [&[f32; 8]; 4],
+    rho: f32,
+    sc: [f32; 3],
+    full: bool,
+    s: f32,
+    sigma_t: f32,
+) -> ([f32; 3], PlaneCell) {
+    use std::arch::x86_64::*;
+    let mut acc = _mm256_setzero_ps();
+    for (wk, nk) in w.iter().zip(n) {
+        acc = _mm256_add_ps(acc, _mm256_mul_ps(_mm256_set1_ps(*wk), _mm256_loadu_ps(nk.as_ptr())));
+    }
+    // Lanes I, I + 1, I + 2, RHO and RS, RS + 1, RS + 2, spare.
+    let (lo, hi) = (_mm256_castps256_ps128(acc), _mm256_extractf128_ps::<1>(acc));
+    let sc4 = _mm_setr_ps(sc[0], sc[1], sc[2], 0.0);
+    let rb = _mm_cvtss_f32(_mm_shuffle_ps::<0xff>(lo, lo));
+    let rm = 0.5 * (rb + rho) * s;
+    let out = if rm > 0.0 {
+        let sb = if rb > 0.0 { _mm_mul_ps(hi, _mm_set1_ps(1.0 / rb)) } else { sc4 };
+        let se = if full { sc4 } else { sb };
+        let (e, wi, wo) = step_weights(sigma_t * rm);
+        let ie = _mm_mul_ps(lo, _mm_set1_ps(e));
+        _mm_add_ps(_mm_add_ps(ie, _mm_mul_ps(_mm_set1_ps(wi), sb)), _mm_mul_ps(_mm_set1_ps(wo), se))
+    } else {
+        lo
+    };
+    // The record: the radiance, ρ, ρ × source, and ρ × 0 = +0 in the spare lane.
+    let rec_lo = _mm_blend_ps::<0b1000>(out, _mm_set1_ps(rho));
+    let rec_hi = _mm_mul_ps(_mm_set1_ps(rho), sc4);
+    let mut rec = PlaneCell::default();
+    _mm256_storeu_ps(rec.0.as_mut_ptr(), _mm256_set_m128(rec_hi, rec_lo));
+    let mut o = [0f32; 4];
+    _mm_storeu_ps(o.as_mut_ptr(), out);
+    ([o[0], o[1], o[2]], rec)
+}
+
 /// Cells ahead of the current one in a sweep's plane whose source and radiance are prefetched.
 const PREFETCH_AHEAD: usize = 16;
 
@@ -661,36 +729,21 @@ fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], g
                 // towards 0 (a uniform source stays uniform: the furnace holds). One expression
                 // per lane (from 0, the neighbours in order) so it compiles to whole-record
                 // arithmetic without copies of the records.
-                let acc = if AVX {
-                    // SAFETY: `AVX` is true only in the copy compiled for (and run on) AVX.
-                    #[cfg(target_arch = "x86_64")]
-                    unsafe {
-                        bilinear_avx(&wts, [n0, n1, n2, n3])
-                    }
-                    #[cfg(not(target_arch = "x86_64"))]
-                    bilinear(&wts, [n0, n1, n2, n3])
+                let (n, full) = ([n0, n1, n2, n3], fi != u32::MAX);
+                let sc = if full { src[fi as usize] } else { [0f32; 3] };
+                #[cfg(not(target_arch = "x86_64"))]
+                let (out, rec) = cell(c, bilinear(&wts, n), rho, sc, full, s);
+                // SAFETY (both): `AVX` is true only in the copy compiled for (and run on) AVX.
+                #[cfg(target_arch = "x86_64")]
+                let (out, rec) = if AVX && c.grey {
+                    unsafe { cell_grey_avx(&wts, n, rho, sc, full, s, c.sigma_t[0]) }
+                } else if AVX {
+                    cell(c, unsafe { bilinear_avx(&wts, n) }, rho, sc, full, s)
                 } else {
-                    bilinear(&wts, [n0, n1, n2, n3])
+                    cell(c, bilinear(&wts, n), rho, sc, full, s)
                 };
-                let ib_ = [acc[I], acc[I + 1], acc[I + 2]];
-                let (rb, sbw) = (acc[RHO], [acc[RS], acc[RS + 1], acc[RS + 2]]);
-                let sc = if fi != u32::MAX { src[fi as usize] } else { [0f32; 3] };
-                let mut out = ib_;
-                let rm = 0.5 * (rb + rho) * s;
-                if rm > 0.0 {
-                    let sb = if rb > 0.0 { sbw.map(|x| x * (1.0 / rb)) } else { sc };
-                    let se = if fi == u32::MAX { sb } else { sc };
-                    let mut wgt = step_weights(c.sigma_t[0] * rm);
-                    for band in 0..3 {
-                        if band > 0 && !c.grey {
-                            wgt = step_weights(c.sigma_t[band] * rm);
-                        }
-                        let (e, wi, wo) = wgt;
-                        out[band] = ib_[band] * e + wi * sb[band] + wo * se[band];
-                    }
-                }
-                cur[l] = PlaneCell::new(out, rho, sc.map(|x| rho * x));
-                if fi != u32::MAX {
+                cur[l] = rec;
+                if full {
                     radiance[fi as usize] = out;
                 }
             }
@@ -1152,12 +1205,22 @@ mod tests {
         source_block(&c, &t, 1, PAIRS, &moments, 0, Shared(disp.as_mut_ptr()));
         assert_eq!(bits(&plain), bits(&disp));
         assert!(plain.iter().flatten().any(|x| *x > 0.0));
-        // Step (2), one ordinate per major axis and sign.
-        for d in [0, 5, 37, 64, 90, 127] {
-            let (mut ra, mut rb) = (vec![[0f32; 3]; nfull], vec![[0f32; 3]; nfull]);
-            sweep_kernel::<false>(&c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut ra);
-            sweep_ordinate(&c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut rb);
-            assert_eq!(bits(&ra), bits(&rb), "ordinate {d}");
+        // Step (2), one ordinate per major axis and sign, with coloured and with grey optics
+        // (the AVX copy's own cell step).
+        let grey = Ctx {
+            sigma_t: [0.05; 3],
+            grey: true,
+            cells: c.cells.clone(),
+            ..c
+        };
+        for c in [&c, &grey] {
+            for d in [0, 5, 37, 64, 90, 127] {
+                let (mut ra, mut rb) = (vec![[0f32; 3]; nfull], vec![[0f32; 3]; nfull]);
+                sweep_kernel::<false>(c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut ra);
+                sweep_ordinate(c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut rb);
+                assert_eq!(bits(&ra), bits(&rb), "ordinate {d}, grey {}", c.grey);
+                assert!(ra.iter().flatten().any(|x| *x > 0.0));
+            }
         }
         // Step (3).
         let wts: Vec<f32> = t.weights[PAIRS..2 * PAIRS].iter().flatten().copied().collect();
