@@ -251,8 +251,10 @@ struct PairTables {
     pairs: Vec<[usize; 2]>,
     /// Weights (sr) of d and d′.
     weights: Vec<[f32; 2]>,
-    /// Y_lm(Ω_d), per pair.
-    y: Vec<f32>,
+    /// Y_lm(Ω_d) for the moments, per batch in blocks of eight harmonics with the batch's pairs
+    /// side by side ([`accumulate`]): the even ones' blocks, then the odd ones' (zero past each
+    /// part's end).
+    y_acc: Vec<[[f32; 8]; PAIRS]>,
     /// a′χ′_l Y_lm(Ω_d) per batch of pairs, band and lm, the batch's pairs in lanes (0 past the
     /// last pair): the source in Ω_d is Σ I_lm times this.
     y_src: Vec<[f32; PAIRS]>,
@@ -267,14 +269,23 @@ impl PairTables {
         let pairs = opposite_pairs(q);
         let l_of = |k: usize| (k as f64).sqrt().floor() as usize;
         let batches = pairs.len().div_ceil(PAIRS);
-        let mut y = Vec::new();
+        let ne = perm.iter().filter(|k| l_of(**k) % 2 == 0).count();
+        let (nbe, nblk) = (ne.div_ceil(8), ne.div_ceil(8) + (nsh - ne).div_ceil(8));
+        let mut y_acc = vec![[[0f32; 8]; PAIRS]; batches * nblk];
         let mut y_src = vec![[0f32; PAIRS]; batches * 3 * nsh];
         let mut sun = vec![[[0f32; PAIRS]; 2]; batches * 3];
         let mut yd = vec![0.0; nsh];
         for (p, [d, _]) in pairs.iter().enumerate() {
             real_sh(order, q.dirs[*d], &mut yd);
-            y.extend(perm.iter().map(|k| yd[*k] as f32));
             let (bi, lane) = (p / PAIRS, p % PAIRS);
+            for (i, k) in perm.iter().enumerate() {
+                let (kb, l) = if i < ne {
+                    (i / 8, i % 8)
+                } else {
+                    (nbe + (i - ne) / 8, (i - ne) % 8)
+                };
+                y_acc[bi * nblk + kb][lane][l] = yd[*k] as f32;
+            }
             for (b, bo) in bands.iter().enumerate() {
                 for (i, k) in perm.iter().enumerate() {
                     y_src[(bi * 3 + b) * nsh + i][lane] = (bo.albedo * bo.chi[l_of(*k)] * yd[*k]) as f32;
@@ -292,7 +303,7 @@ impl PairTables {
         PairTables {
             pairs,
             weights,
-            y,
+            y_acc,
             y_src,
             sun,
         }
@@ -318,48 +329,35 @@ fn lanes_dot(m: &[f32], y: &[[f32; PAIRS]]) -> [f32; PAIRS] {
     std::array::from_fn(|p| a0[p] + a1[p])
 }
 
-/// acc[k] += Σ_p s[p] y[p·stride + k] (acc no longer than stride), eight then four k at a time
-/// with the sum over p in registers; the same order for any thread count.
+/// acc[k] += Σ_p s[p] y_p[k] (the pairs in order, in a sum from 0 per k, then added), eight k
+/// at a time: `blocks[kb][p]` holds y_p[8kb..8kb + 8]; the same order for any thread count.
+/// Lanes past a short batch's last pair hold s = y = 0 and add +0 (a sum from +0 never is −0).
 #[inline(always)]
-fn accumulate(acc: &mut [f32], s: &[f32], y: &[f32], stride: usize) {
-    #[inline(always)]
-    fn lanes<const N: usize>(acc: &mut [f32], s: &[f32], y: &[f32], stride: usize, k0: usize) {
-        let mut r = [0f32; N];
-        for (p, sp) in s.iter().enumerate() {
-            let yk = &y[p * stride + k0..p * stride + k0 + N];
-            for l in 0..N {
-                r[l] += sp * yk[l];
+fn accumulate(acc: &mut [f32], s: &[f32; PAIRS], blocks: &[[[f32; 8]; PAIRS]]) {
+    for (a, blk) in acc.chunks_mut(8).zip(blocks) {
+        let mut r = [0f32; 8];
+        for (sp, y) in s.iter().zip(blk) {
+            for (rl, yl) in r.iter_mut().zip(y) {
+                *rl += sp * yl;
             }
         }
-        for (a, rl) in acc[k0..k0 + N].iter_mut().zip(r) {
-            *a += rl;
+        for (al, rl) in a.iter_mut().zip(r) {
+            *al += rl;
         }
-    }
-    let n = acc.len();
-    let mut k = 0;
-    while k + 8 <= n {
-        lanes::<8>(acc, s, y, stride, k);
-        k += 8;
-    }
-    while k + 4 <= n {
-        lanes::<4>(acc, s, y, stride, k);
-        k += 4;
-    }
-    while k < n {
-        lanes::<1>(acc, s, y, stride, k);
-        k += 1;
     }
 }
 
 /// Define `$name`, which runs `$body` compiled for AVX where the processor has it, else as
 /// built. The kernels' lanes and sums are explicit and Rust never fuses a multiply with an add,
 /// so both give the same bits; AVX does eight lanes per instruction instead of four.
+/// With `@ name, avx_name, plain, fast`, the AVX copy runs `fast` (a body with explicit AVX
+/// arithmetic that must give `plain`'s bits).
 macro_rules! with_avx {
-    ($name:ident, $avx:ident, $body:ident, ($($a:ident: $t:ty),*) $(-> $r:ty)?) => {
+    (@ $name:ident, $avx:ident, $plain:expr, $fast:expr, ($($a:ident: $t:ty),*) $(-> $r:ty)?) => {
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx")]
         unsafe fn $avx($($a: $t),*) $(-> $r)? {
-            $body($($a),*)
+            $fast($($a),*)
         }
         fn $name($($a: $t),*) $(-> $r)? {
             #[cfg(target_arch = "x86_64")]
@@ -367,8 +365,11 @@ macro_rules! with_avx {
                 // SAFETY: the processor has AVX.
                 return unsafe { $avx($($a),*) };
             }
-            $body($($a),*)
+            $plain($($a),*)
         }
+    };
+    ($name:ident, $avx:ident, $body:ident, $($sig:tt)*) => {
+        with_avx!(@ $name, $avx, $body, $body, $($sig)*);
     };
 }
 
@@ -403,12 +404,12 @@ fn source_kernel(c: &Ctx, t: &PairTables, bi: usize, pairs: usize, block: &[f32]
 with_avx!(source_block, source_block_avx, source_kernel, (c: &Ctx, t: &PairTables, bi: usize, pairs: usize, block: &[f32], f0: usize, sp: Shared<[f32; 3]>));
 
 /// What step (3) of [`sweep`] reads: the batch's radiances per ordinate slot and full voxel, the
-/// slots' weights (sr) and the pairs' Y_lm (inner order, one row of (L+1)² per pair).
+/// slots' weights (sr) and the pairs' Y_lm (the batch's blocks of [`PairTables::y_acc`]).
 struct Lanes<'a> {
     nfull: usize,
     wts: &'a [f32],
     radiance: &'a [[f32; 3]],
-    y: &'a [f32],
+    y: &'a [[[f32; 8]; PAIRS]],
 }
 
 /// Step (3) of [`sweep`] for the full voxels from `f0` whose new moments are `block`: I_lm +=
@@ -429,8 +430,9 @@ fn moments_kernel(c: &Ctx, l: &Lanes, block: &mut [f32], f0: usize) {
                 (*e, *o) = (ip + im, ip - im);
             }
             let a = &mut acc[band * nsh..(band + 1) * nsh];
-            accumulate(&mut a[..ne], &se[..pairs], l.y, nsh);
-            accumulate(&mut a[ne..], &so[..pairs], &l.y[ne..], nsh);
+            let nbe = ne.div_ceil(8);
+            accumulate(&mut a[..ne], &se, &l.y[..nbe]);
+            accumulate(&mut a[ne..], &so, &l.y[nbe..]);
         }
     }
 }
@@ -484,7 +486,8 @@ fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], next: &mut [f
             }
         }
         // (3) Moments: I_lm += w I(Ω) Y_lm(Ω) + w′ I(−Ω) (−1)^l Y_lm(Ω).
-        let yb = &t.y[first * nsh..batch.end * nsh];
+        let nblk = t.y_acc.len() / t.pairs.len().div_ceil(PAIRS);
+        let yb = &t.y_acc[bi * nblk..(bi + 1) * nblk];
         let lanes = Lanes {
             nfull,
             wts: &wts,
@@ -546,12 +549,115 @@ impl PlaneCell {
     }
 }
 
+/// Σ_k w_k n_k per lane of four plane records, from 0 in the neighbours' order.
+#[inline(always)]
+fn bilinear(w: &[f32; 4], n: [&[f32; 8]; 4]) -> [f32; 8] {
+    std::array::from_fn(|k| 0.0 + w[0] * n[0][k] + w[1] * n[1][k] + w[2] * n[2][k] + w[3] * n[3][k])
+}
+
+/// [`bilinear`] in eight-lane AVX arithmetic (the compiler keeps it in four-lane halves): the
+/// same multiplies and adds in the same order, so the same bits.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn bilinear_avx(w: &[f32; 4], n: [&[f32; 8]; 4]) -> [f32; 8] {
+    use std::arch::x86_64::*;
+    let mut acc = _mm256_setzero_ps();
+    for (wk, nk) in w.iter().zip(n) {
+        acc = _mm256_add_ps(acc, _mm256_mul_ps(_mm256_set1_ps(*wk), _mm256_loadu_ps(nk.as_ptr())));
+    }
+    let mut out = [0f32; 8];
+    _mm256_storeu_ps(out.as_mut_ptr(), acc);
+    out
+}
+
+/// One cell's step along a sweep (module docs) from its upwind record `acc` ([`bilinear`]),
+/// its density, its source `sc` (0 where empty; `full`: ρ > 0) and the step length `s` (m): its
+/// radiance and its record for the next plane.
+#[inline(always)]
+fn cell(c: &Ctx, acc: [f32; 8], rho: f32, sc: [f32; 3], full: bool, s: f32) -> ([f32; 3], PlaneCell) {
+    let ib_ = [acc[I], acc[I + 1], acc[I + 2]];
+    let (rb, sbw) = (acc[RHO], [acc[RS], acc[RS + 1], acc[RS + 2]]);
+    let mut out = ib_;
+    let rm = 0.5 * (rb + rho) * s;
+    if rm > 0.0 {
+        let sb = if rb > 0.0 { sbw.map(|x| x * (1.0 / rb)) } else { sc };
+        let se = if full { sc } else { sb };
+        let mut wgt = step_weights(c.sigma_t[0] * rm);
+        for band in 0..3 {
+            if band > 0 && !c.grey {
+                wgt = step_weights(c.sigma_t[band] * rm);
+            }
+            let (e, wi, wo) = wgt;
+            out[band] = ib_[band] * e + wi * sb[band] + wo * se[band];
+        }
+    }
+    (out, PlaneCell::new(out, rho, sc.map(|x| rho * x)))
+}
+
+/// [`bilinear`] and [`cell`] for grey optics (one σt′) in AVX registers: the three bands in the
+/// lanes of one four-lane operation, the same multiplies and adds in the same order, so the
+/// same bits.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn cell_grey_avx(
+    w: &[f32; 4],
+    n: [&[f32; 8]; 4],
+    rho: f32,
+    sc: [f32; 3],
+    full: bool,
+    s: f32,
+    sigma_t: f32,
+) -> ([f32; 3], PlaneCell) {
+    use std::arch::x86_64::*;
+    let mut acc = _mm256_setzero_ps();
+    for (wk, nk) in w.iter().zip(n) {
+        acc = _mm256_add_ps(acc, _mm256_mul_ps(_mm256_set1_ps(*wk), _mm256_loadu_ps(nk.as_ptr())));
+    }
+    // Lanes I, I + 1, I + 2, RHO and RS, RS + 1, RS + 2, spare.
+    let (lo, hi) = (_mm256_castps256_ps128(acc), _mm256_extractf128_ps::<1>(acc));
+    let sc4 = _mm_setr_ps(sc[0], sc[1], sc[2], 0.0);
+    let rb = _mm_cvtss_f32(_mm_shuffle_ps::<0xff>(lo, lo));
+    let rm = 0.5 * (rb + rho) * s;
+    let out = if rm > 0.0 {
+        let sb = if rb > 0.0 { _mm_mul_ps(hi, _mm_set1_ps(1.0 / rb)) } else { sc4 };
+        let se = if full { sc4 } else { sb };
+        let (e, wi, wo) = step_weights(sigma_t * rm);
+        let ie = _mm_mul_ps(lo, _mm_set1_ps(e));
+        _mm_add_ps(_mm_add_ps(ie, _mm_mul_ps(_mm_set1_ps(wi), sb)), _mm_mul_ps(_mm_set1_ps(wo), se))
+    } else {
+        lo
+    };
+    // The record: the radiance, ρ, ρ × source, and ρ × 0 = +0 in the spare lane.
+    let rec_lo = _mm_blend_ps::<0b1000>(out, _mm_set1_ps(rho));
+    let rec_hi = _mm_mul_ps(_mm_set1_ps(rho), sc4);
+    let mut rec = PlaneCell::default();
+    _mm256_storeu_ps(rec.0.as_mut_ptr(), _mm256_set_m128(rec_hi, rec_lo));
+    let mut o = [0f32; 4];
+    _mm_storeu_ps(o.as_mut_ptr(), out);
+    ([o[0], o[1], o[2]], rec)
+}
+
+/// Cells ahead of the current one in a sweep's plane whose source and radiance are prefetched.
+const PREFETCH_AHEAD: usize = 16;
+
+/// Bring the cache line at `p` towards L1 ahead of use (a hint: no effect on results).
+#[inline(always)]
+fn prefetch<T>(p: *const T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: x86_64 always has SSE, and a prefetch never faults (any address may be named).
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p as *const i8)
+    };
+}
+
 /// Sweep one ordinate `om` (weight `w`, sr) through the box upwind plane by plane: the radiance at
 /// every full voxel's centre, and the ground splats (column, change of downward irradiance, W/m²)
 /// of the light leaving the box downwards. `src` is the source in this ordinate per full voxel;
 /// `radiance` receives the radiance at every full voxel (all lie in the box).
 #[inline(always)]
-fn sweep_kernel(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, radiance: &mut [[f32; 3]]) -> Splats {
+fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, radiance: &mut [[f32; 3]]) -> Splats {
     let mut splats = Vec::new();
     let skyr = c.sky.radiance(Vec3::new(-om.x as f32, -om.y as f32, -om.z as f32));
     let splat = om.y < 0.0 && c.ground_height.is_some();
@@ -607,37 +713,37 @@ fn sweep_kernel(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap
         for (ic, row) in plane.chunks_exact(nb).enumerate() {
             let l0 = stride * (ic + 1) + 1;
             for (ib, &(rho, fi)) in row.iter().enumerate() {
+                // The full voxels' sources and radiances lie a grid row apart in x-major sweeps
+                // (past the L2 cache on large boxes): ask for the lines a few cells ahead.
+                if let Some(&(_, fa)) = plane.get(ic * nb + ib + PREFETCH_AHEAD) {
+                    if fa != u32::MAX {
+                        prefetch(src.as_ptr().wrapping_add(fa as usize));
+                        prefetch(radiance.as_ptr().wrapping_add(fa as usize));
+                    }
+                }
                 let l = l0 + ib;
                 let u = (l as isize + up) as usize;
-                let n = [prev[u], prev[u + 1], prev[u + stride], prev[u + stride + 1]];
+                let (n0, n1, n2, n3) = (&prev[u].0, &prev[u + 1].0, &prev[u + stride].0, &prev[u + stride + 1].0);
                 // Radiance and density bilinear; the source (per unit extinction, defined only
                 // where ρ > 0) density-weighted, so that empty neighbours do not pull it
-                // towards 0 (a uniform source stays uniform: the furnace holds).
-                let mut acc = [0f32; 8];
-                for (wk, nk) in wts.iter().zip(&n) {
-                    for (al, nl) in acc.iter_mut().zip(nk.0) {
-                        *al += wk * nl;
-                    }
-                }
-                let ib_ = [acc[I], acc[I + 1], acc[I + 2]];
-                let (rb, sbw) = (acc[RHO], [acc[RS], acc[RS + 1], acc[RS + 2]]);
-                let sc = if fi != u32::MAX { src[fi as usize] } else { [0f32; 3] };
-                let mut out = ib_;
-                let rm = 0.5 * (rb + rho) * s;
-                if rm > 0.0 {
-                    let sb = if rb > 0.0 { sbw.map(|x| x * (1.0 / rb)) } else { sc };
-                    let se = if fi == u32::MAX { sb } else { sc };
-                    let mut wgt = step_weights(c.sigma_t[0] * rm);
-                    for band in 0..3 {
-                        if band > 0 && !c.grey {
-                            wgt = step_weights(c.sigma_t[band] * rm);
-                        }
-                        let (e, wi, wo) = wgt;
-                        out[band] = ib_[band] * e + wi * sb[band] + wo * se[band];
-                    }
-                }
-                cur[l] = PlaneCell::new(out, rho, sc.map(|x| rho * x));
-                if fi != u32::MAX {
+                // towards 0 (a uniform source stays uniform: the furnace holds). One expression
+                // per lane (from 0, the neighbours in order) so it compiles to whole-record
+                // arithmetic without copies of the records.
+                let (n, full) = ([n0, n1, n2, n3], fi != u32::MAX);
+                let sc = if full { src[fi as usize] } else { [0f32; 3] };
+                #[cfg(not(target_arch = "x86_64"))]
+                let (out, rec) = cell(c, bilinear(&wts, n), rho, sc, full, s);
+                // SAFETY (both): `AVX` is true only in the copy compiled for (and run on) AVX.
+                #[cfg(target_arch = "x86_64")]
+                let (out, rec) = if AVX && c.grey {
+                    unsafe { cell_grey_avx(&wts, n, rho, sc, full, s, c.sigma_t[0]) }
+                } else if AVX {
+                    cell(c, unsafe { bilinear_avx(&wts, n) }, rho, sc, full, s)
+                } else {
+                    cell(c, bilinear(&wts, n), rho, sc, full, s)
+                };
+                cur[l] = rec;
+                if full {
                     radiance[fi as usize] = out;
                 }
             }
@@ -677,7 +783,7 @@ fn sweep_kernel(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap
     }
     splats
 }
-with_avx!(sweep_ordinate, sweep_ordinate_avx, sweep_kernel, (c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, radiance: &mut [[f32; 3]]) -> Splats);
+with_avx!(@ sweep_ordinate, sweep_ordinate_avx, sweep_kernel::<false>, sweep_kernel::<true>, (c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, radiance: &mut [[f32; 3]]) -> Splats);
 
 /// The DSA operator of one band on the full voxels (δ-M coefficients), in grid order.
 fn dsa_operator(m: &Medium, dom: &Domain, sigma_t: f64, albedo: f64, chi1: f64) -> Operator {
@@ -1099,20 +1205,31 @@ mod tests {
         source_block(&c, &t, 1, PAIRS, &moments, 0, Shared(disp.as_mut_ptr()));
         assert_eq!(bits(&plain), bits(&disp));
         assert!(plain.iter().flatten().any(|x| *x > 0.0));
-        // Step (2), one ordinate per major axis and sign.
-        for d in [0, 5, 37, 64, 90, 127] {
-            let (mut ra, mut rb) = (vec![[0f32; 3]; nfull], vec![[0f32; 3]; nfull]);
-            sweep_kernel(&c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut ra);
-            sweep_ordinate(&c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut rb);
-            assert_eq!(bits(&ra), bits(&rb), "ordinate {d}");
+        // Step (2), one ordinate per major axis and sign, with coloured and with grey optics
+        // (the AVX copy's own cell step).
+        let grey = Ctx {
+            sigma_t: [0.05; 3],
+            grey: true,
+            cells: c.cells.clone(),
+            ..c
+        };
+        for c in [&c, &grey] {
+            for d in [0, 5, 37, 64, 90, 127] {
+                let (mut ra, mut rb) = (vec![[0f32; 3]; nfull], vec![[0f32; 3]; nfull]);
+                sweep_kernel::<false>(c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut ra);
+                sweep_ordinate(c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut rb);
+                assert_eq!(bits(&ra), bits(&rb), "ordinate {d}, grey {}", c.grey);
+                assert!(ra.iter().flatten().any(|x| *x > 0.0));
+            }
         }
         // Step (3).
         let wts: Vec<f32> = t.weights[PAIRS..2 * PAIRS].iter().flatten().copied().collect();
+        let nblk = t.y_acc.len() / t.pairs.len().div_ceil(PAIRS);
         let l = Lanes {
             nfull,
             wts: &wts,
             radiance: &plain,
-            y: &t.y[PAIRS * nsh..2 * PAIRS * nsh],
+            y: &t.y_acc[nblk..2 * nblk],
         };
         let (mut ma, mut mb) = (moments.clone(), moments.clone());
         moments_kernel(&c, &l, &mut ma, 0);
@@ -1194,7 +1311,7 @@ mod tests {
         // Moments of a radiance field I(Ω) = 1 + Ω_x + Ω_y Ω_z over the pairs of batch 0.
         let radiance = |v: DVec3| 1.0 + v.x + v.y * v.z;
         let np = PAIRS.min(t.pairs.len());
-        let (mut se, mut so) = (vec![0f32; np], vec![0f32; np]);
+        let (mut se, mut so) = ([0f32; PAIRS], [0f32; PAIRS]);
         for p in 0..np {
             let [d, o] = t.pairs[p];
             let (ip, im) = (
@@ -1204,8 +1321,10 @@ mod tests {
             (se[p], so[p]) = (ip + im, ip - im);
         }
         let mut acc = vec![0f32; nsh];
-        accumulate(&mut acc[..ne], &se, &t.y[..np * nsh], nsh);
-        accumulate(&mut acc[ne..], &so, &t.y[ne..np * nsh], nsh);
+        let nbe = ne.div_ceil(8);
+        let nblk = t.y_acc.len() / t.pairs.len().div_ceil(PAIRS);
+        accumulate(&mut acc[..ne], &se, &t.y_acc[..nbe]);
+        accumulate(&mut acc[ne..], &so, &t.y_acc[nbe..nblk]);
         for (i, k) in perm.iter().enumerate() {
             let want: f64 = t.pairs[..np]
                 .iter()
