@@ -620,14 +620,10 @@ impl CoarseFlux {
             let next = VoxelField::from_fn(w[1].cells.index().clone(), [Vec3::ZERO; 3], |n| {
                 let (i, j, k) = (n % nd[0], (n / nd[0]) % nd[1], n / (nd[0] * nd[1]));
                 let mut s = [Vec3::ZERO; 3];
-                for kk in 2 * k..(2 * k + 2).min(d[2]) {
-                    for jj in 2 * j..(2 * j + 2).min(d[1]) {
-                        for ii in 2 * i..(2 * i + 2).min(d[0]) {
-                            let c = parent[ii + d[0] * (jj + d[1] * kk)];
-                            for b in 0..3 {
-                                s[b] += c[b];
-                            }
-                        }
+                for q in crate::lit::pyramid::children(d, [i, j, k]) {
+                    let c = parent[q];
+                    for b in 0..3 {
+                        s[b] += c[b];
                     }
                 }
                 s.map(|x| x * 0.125)

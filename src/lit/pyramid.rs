@@ -112,6 +112,14 @@ fn make_level(dims: [usize; 3], voxel_size: Vec3, cells: Vec<Cell>) -> Level {
 }
 
 /// Average 2×2×2 blocks; cells beyond the grid count as empty (mass-preserving).
+/// Grid indices (x fastest, in that order) of the cells of a `d` grid that the coarser cell `c`
+/// averages: its 2×2×2 block, less the cells beyond the grid (they count as empty, so the mean
+/// still divides by 8).
+pub fn children(d: [usize; 3], c: [usize; 3]) -> impl Iterator<Item = usize> {
+    let span = move |a: usize| 2 * c[a]..(2 * c[a] + 2).min(d[a]);
+    span(2).flat_map(move |kk| span(1).flat_map(move |jj| span(0).map(move |ii| ii + d[0] * (jj + d[1] * kk))))
+}
+
 fn downsample(l: &Level) -> Level {
     let d = l.dims;
     let nd = [d[0].div_ceil(2), d[1].div_ceil(2), d[2].div_ceil(2)];
@@ -120,14 +128,10 @@ fn downsample(l: &Level) -> Level {
         for j in 0..nd[1] {
             for i in 0..nd[0] {
                 let mut s = [0f32; 5];
-                for kk in 2 * k..(2 * k + 2).min(d[2]) {
-                    for jj in 2 * j..(2 * j + 2).min(d[1]) {
-                        for ii in 2 * i..(2 * i + 2).min(d[0]) {
-                            let c = &l.cells[ii + d[0] * (jj + d[1] * kk)];
-                            for a in 0..5 {
-                                s[a] += c[a];
-                            }
-                        }
+                for n in children(d, [i, j, k]) {
+                    let c = &l.cells[n];
+                    for a in 0..5 {
+                        s[a] += c[a];
                     }
                 }
                 cells[i + nd[0] * (j + nd[1] * k)] = s.map(|x| x * 0.125);
