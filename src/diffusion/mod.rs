@@ -260,7 +260,23 @@ impl Domain {
 /// Assemble band `c`'s operator and right-hand side (see the module docs) on the full voxels
 /// (in grid order, their cells indexing `dom`), with the light `bl` entering through the
 /// boundary faces.
+#[cfg(test)]
 pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_min: f64, dom: &Domain) -> (Operator, Vec<f64>) {
+    let (a, b) = assemble_with(m, inc, bl, c, tau_min, dom, true);
+    (a.expect("asked for the operator"), b)
+}
+
+/// [`assemble`], the operator only when `operator` (a band sharing another's operator needs
+/// only its right-hand side: the rows are computed but not stored).
+fn assemble_with(
+    m: &Medium,
+    inc: &IncidentLight,
+    bl: &BoundaryLight,
+    c: usize,
+    tau_min: f64,
+    dom: &Domain,
+    operator: bool,
+) -> (Option<Operator>, Vec<f64>) {
     let gd = m.dims();
     let d = dom.dims;
     let rho = m.density.data();
@@ -274,45 +290,53 @@ pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: u
     let f_at = |idx: usize, ax: usize| -> f64 { inc.q1[ax][idx][c] as f64 / (rho[idx] as f64 * sigma_tr) };
     // Written in place (an unzip would hold a second copy while it gathers its pieces).
     let mut b = vec![0f64; full.len()];
-    let nodes: Vec<Node> = full
-        .par_iter()
-        .zip(b.par_iter_mut())
-        .map(|(&idx, bv)| {
-            let rp = rho[idx] as f64;
-            let cell = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])];
-            let mut node = Node::at(dom.cell(cell));
-            let mut diag = rp * sigma_a;
-            let mut rhs = inc.q0[idx][c] as f64;
-            for ax in 0..3 {
-                let fp = f_at(idx, ax);
-                for side in [-1i64, 1] {
-                    let nc = cell[ax] as i64 + side;
-                    let nidx = (nc >= 0 && nc < gd[ax] as i64).then(|| (idx as i64 + side * gstride[ax] as i64) as usize);
-                    let rn = nidx.map_or(0.0, |q| rho[q] as f64);
-                    if rn > 0.0 {
-                        let q = nidx.unwrap_or(0);
-                        let cf = interior_coupling(rp, rn, sigma_tr, h[ax], tau_min);
-                        diag += cf;
-                        if side > 0 {
-                            node.up[ax] = -cf;
-                            node.up_nbr[ax] = (index.slot(q) - 1) as u32;
-                        }
-                        let ff = 0.5 * (fp + f_at(q, ax));
-                        rhs -= ff * side as f64 / h[ax];
-                    } else {
-                        let (dterm, fterm) = boundary_terms(rp, sigma_tr, h[ax], tau_min);
-                        diag += dterm;
-                        // eq. 7 with incoming light: φ = (β(I_P − L_face) + f)/(1 + 2β).
-                        rhs += dterm * bl.at(nidx, face_index(ax, side), c) - fterm * fp * side as f64;
+    let row = |(&idx, bv): (&usize, &mut f64)| {
+        let rp = rho[idx] as f64;
+        let cell = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])];
+        let mut node = Node::at(dom.cell(cell));
+        let mut diag = rp * sigma_a;
+        let mut rhs = inc.q0[idx][c] as f64;
+        for ax in 0..3 {
+            let fp = f_at(idx, ax);
+            for side in [-1i64, 1] {
+                let nc = cell[ax] as i64 + side;
+                let nidx = (nc >= 0 && nc < gd[ax] as i64).then(|| (idx as i64 + side * gstride[ax] as i64) as usize);
+                let rn = nidx.map_or(0.0, |q| rho[q] as f64);
+                if rn > 0.0 {
+                    let q = nidx.unwrap_or(0);
+                    let cf = interior_coupling(rp, rn, sigma_tr, h[ax], tau_min);
+                    diag += cf;
+                    if side > 0 {
+                        node.up[ax] = -cf;
+                        node.up_nbr[ax] = (index.slot(q) - 1) as u32;
                     }
+                    let ff = 0.5 * (fp + f_at(q, ax));
+                    rhs -= ff * side as f64 / h[ax];
+                } else {
+                    let (dterm, fterm) = boundary_terms(rp, sigma_tr, h[ax], tau_min);
+                    diag += dterm;
+                    // eq. 7 with incoming light: φ = (β(I_P − L_face) + f)/(1 + 2β).
+                    rhs += dterm * bl.at(nidx, face_index(ax, side), c) - fterm * fp * side as f64;
                 }
             }
-            node.diag = diag;
-            *bv = rhs;
-            node
+        }
+        node.diag = diag;
+        *bv = rhs;
+        node
+    };
+    let rows = full.par_iter().zip(b.par_iter_mut());
+    let nodes = if operator {
+        Some(Operator {
+            dims: d,
+            nodes: rows.map(row).collect(),
         })
-        .collect();
-    (Operator { dims: d, nodes }, b)
+    } else {
+        rows.for_each(|r| {
+            row(r);
+        });
+        None
+    };
+    (nodes, b)
 }
 
 /// Net outgoing diffuse power (W per band) through every boundary face of the cloud: Σ A·4π φ_f,
@@ -393,32 +417,32 @@ pub fn solve_diffusion(
     };
     // Bands with identical coefficients share one hierarchy; each band's operator becomes its
     // hierarchy's finest level or is dropped (a shared one), so one is alive at a time.
-    let mut rhs: Vec<Vec<f64>> = Vec::new();
+    // Right-hand sides kept in f32 (rounding them is far below the solver's tolerance).
+    let mut rhs: Vec<Vec<f32>> = Vec::new();
     let mut hier: Vec<(f32, Hierarchy)> = Vec::new();
     let mut groups: Vec<Vec<usize>> = Vec::new();
     for c in 0..3 {
-        let (a, b) = assemble(medium, incident, boundary, c, settings.min_optical_depth, &dom);
-        rhs.push(b);
         let alb = medium.optics.albedo[c];
-        match hier.iter().position(|(x, _)| *x == alb) {
-            Some(p) => groups[p].push(c),
-            None => {
-                hier.push((alb, Hierarchy::build(a)));
+        let shared = hier.iter().position(|(x, _)| *x == alb);
+        let (a, b) = assemble_with(medium, incident, boundary, c, settings.min_optical_depth, &dom, shared.is_none());
+        rhs.push(b.iter().map(|v| *v as f32).collect());
+        match (shared, a) {
+            (Some(p), _) => groups[p].push(c),
+            (None, a) => {
+                hier.push((alb, Hierarchy::build(a.expect("assembled"))));
                 groups.push(vec![c]);
             }
         }
     }
     // The bands of a group share the operator and are solved together (its rows read once).
-    let x0: Vec<Option<Vec<f64>>> = (0..3)
-        .map(|c| previous.map(|p| p.i0[c].packed().iter().map(|v| *v as f64).collect()))
-        .collect();
+    let x0: Vec<Option<&[f32]>> = (0..3).map(|c| previous.map(|p| p.i0[c].packed())).collect();
     let solved: Vec<Vec<(Vec<f64>, SolveStats)>> = groups
         .par_iter()
         .zip(&hier)
         .map(|(g, (_, h))| {
             let (tol, max) = (settings.tolerance, settings.max_iterations);
             let b = |k: usize| rhs[g[k]].as_slice();
-            let x = |k: usize| x0[g[k]].as_deref();
+            let x = |k: usize| x0[g[k]];
             match g.len() {
                 1 => h.solve_many([b(0)], x(0).map(|a| [a]), tol, max).into(),
                 2 => h.solve_many([b(0), b(1)], x(0).zip(x(1)).map(|(a, b)| [a, b]), tol, max).into(),

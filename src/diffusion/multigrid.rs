@@ -17,6 +17,8 @@
 //!   unknowns first, then its black ones, so a colour's pass streams through its own rows.
 //! * **Cycle:** a W-cycle whose coarse correction is scaled by [`OVER_CORRECTION`].
 //! * **Coarsest level** (≤ [`COARSE_CELLS`] unknowns): dense Cholesky, exact.
+//! * **Krylov:** CG with the iterate in f64 and its other vectors in f32, stopped on the true
+//!   residual in f64 ([`Hierarchy::solve_many`]).
 //! * **Determinism:** updates within a colour are independent; reductions sum fixed-size chunks'
 //!   partial sums in order. Bit-identical at any thread count.
 
@@ -158,10 +160,10 @@ impl Real for f64 {
     }
 }
 
-/// The multigrid's scalar: the cycle is only a preconditioner of the f64 CG, and single
-/// precision halves its memory traffic (iterations unchanged at tolerance 1e-6, and 1e-12 is
-/// still reached). Also the CG's search direction p: A p, the iterate and the residual stay f64
-/// (r remains the iterate's residual; only the conjugacy is rounded).
+/// The multigrid's scalar: the cycle is only a preconditioner, and single precision halves its
+/// memory traffic (iterations unchanged at tolerance 1e-6). Also CG's residual, A p and search
+/// direction: the iterate stays f64, and a true residual in f64 decides the stop (restarting CG
+/// when the recursion's rounding left it above the tolerance; 1e-12 is still reached).
 type Mg = f32;
 
 /// One row of a [`Level`]: the couplings to the six neighbours (−x, +x, −y, +y, −z, +z), the
@@ -193,7 +195,7 @@ struct Level {
     /// Entry of the next coarser level holding each entry (a pad of it for the pads); empty on
     /// the coarsest level.
     parent: Vec<u32>,
-    /// The finer level's entries aggregated into entry e: `children[child_start[e]..child_start[e + 1]]`;
+    /// The finer level's red entries aggregated into entry e: `children[child_start[e]..child_start[e + 1]]`;
     /// empty on the finest level.
     child_start: Vec<u32>,
     children: Vec<u32>,
@@ -201,13 +203,18 @@ struct Level {
 
 /// Σ_q cpl_q · x[nbr_q − off] per system: a row's off-diagonal part, `x` the slice of entries
 /// from `off` on.
-#[inline]
+/// (Always inlined: it is the smoother's inner loop, and an outlined call costs ~10 % of the
+/// solve's instructions.)
+#[inline(always)]
 fn couple<const K: usize>(row: &Row, x: &[[Mg; K]], off: usize) -> [Mg; K] {
-    let n = row.nbr.map(|q| &x[q as usize - off]);
-    std::array::from_fn(|k| {
-        let v = |q: usize| row.cpl[q] * n[q][k];
-        (v(0) + v(1)) + (v(2) + v(3)) + (v(4) + v(5))
-    })
+    let n = |q: usize| &x[row.nbr[q] as usize - off];
+    let (n0, n1, n2, n3, n4, n5) = (n(0), n(1), n(2), n(3), n(4), n(5));
+    let c = &row.cpl;
+    let mut s = [0.0; K];
+    for k in 0..K {
+        s[k] = (c[0] * n0[k] + c[1] * n1[k]) + (c[2] * n2[k] + c[3] * n3[k]) + (c[4] * n4[k] + c[5] * n5[k]);
+    }
+    s
 }
 
 impl Level {
@@ -297,8 +304,9 @@ impl Level {
     }
 
     /// Record that `coarse` aggregates this level: each entry's parent (from each unknown's
-    /// aggregate `parent` and the coarse unknowns' entries `coarse_entry`) and each coarse
-    /// entry's children.
+    /// aggregate `parent` and the coarse unknowns' entries `coarse_entry`; a pad of it for the
+    /// pads) and each coarse entry's red children (a black pass before every restriction of the
+    /// cycle leaves the black residuals at zero: [`Level::residual_red`]).
     fn link(&mut self, parent: &[u32], coarse: &mut Level, coarse_entry: &[u32]) {
         let pad = coarse.red as u32;
         self.parent = self
@@ -306,22 +314,19 @@ impl Level {
             .par_iter()
             .map(|&u| if u == PAD { pad } else { coarse_entry[parent[u as usize] as usize] })
             .collect();
+        let red_parents = &self.parent[..self.red];
         let mut start = vec![0u32; coarse.len() + 1];
-        for (p, c) in self.parent.iter().zip(&self.unk) {
-            if *c != PAD {
-                start[*p as usize + 1] += 1;
-            }
+        for p in red_parents {
+            start[*p as usize + 1] += 1;
         }
         for e in 0..coarse.len() {
             start[e + 1] += start[e];
         }
         let mut fill = start.clone();
         let mut children = vec![0u32; start[coarse.len()] as usize];
-        for (f, (p, c)) in self.parent.iter().zip(&self.unk).enumerate() {
-            if *c != PAD {
-                children[fill[*p as usize] as usize] = f as u32;
-                fill[*p as usize] += 1;
-            }
+        for (f, p) in red_parents.iter().enumerate() {
+            children[fill[*p as usize] as usize] = f as u32;
+            fill[*p as usize] += 1;
         }
         coarse.child_start = start;
         coarse.children = children;
@@ -338,6 +343,25 @@ impl Level {
                 let row = &self.rows[e];
                 let s = couple(row, xb, self.red + 1);
                 *rv = std::array::from_fn(|k| b[e][k] - (row.diag * xr[e][k] + s[k]));
+            }
+        });
+    }
+
+    /// b = Pᵀ r: each entry sums its red children's residuals `r` (of the finer level; its
+    /// black residuals are zero).
+    fn restrict<const K: usize>(&self, r: &[[Mg; K]], b: &mut [[Mg; K]]) {
+        b.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, bs)| {
+            let first = ci * CHUNK;
+            for (t, v) in bs.iter_mut().enumerate() {
+                let e = first + t;
+                let mut s = [0.0; K];
+                for f in &self.children[self.child_start[e] as usize..self.child_start[e + 1] as usize] {
+                    let rf = &r[*f as usize];
+                    for k in 0..K {
+                        s[k] += rf[k];
+                    }
+                }
+                *v = s;
             }
         });
     }
@@ -375,24 +399,6 @@ impl Level {
                 let row = &self.rows[start + t];
                 let s = couple(row, other, off);
                 *xv = std::array::from_fn(|k| (b[start + t][k] - s[k]) / row.diag);
-            }
-        });
-    }
-
-    /// b = Pᵀ r: each entry sums its children's residuals `r` (of the finer level).
-    fn restrict<const K: usize>(&self, r: &[[Mg; K]], b: &mut [[Mg; K]]) {
-        b.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, bs)| {
-            let first = ci * CHUNK;
-            for (t, v) in bs.iter_mut().enumerate() {
-                let e = first + t;
-                let mut s = [0.0; K];
-                for f in &self.children[self.child_start[e] as usize..self.child_start[e + 1] as usize] {
-                    let rf = &r[*f as usize];
-                    for k in 0..K {
-                        s[k] += rf[k];
-                    }
-                }
-                *v = s;
             }
         });
     }
@@ -442,29 +448,19 @@ fn sum_parts<const K: usize>(parts: &[[f64; K]]) -> [f64; K] {
     s
 }
 
-/// The CG step y += α p, r −= α q per system, and r in the multigrid's precision into `rm`;
-/// returns r·r (summed as [`dot`] does).
-fn cg_step<const K: usize>(
-    y: &mut [[f64; K]],
-    r: &mut [[f64; K]],
-    rm: &mut [[Mg; K]],
-    p: &[[Mg; K]],
-    q: &[[f64; K]],
-    alpha: [f64; K],
-) -> [f64; K] {
+/// The CG step y += α p (in f64), r −= α q per system; returns r·r (summed as [`dot`] does).
+fn cg_step<const K: usize>(y: &mut [[f64; K]], r: &mut [[Mg; K]], p: &[[Mg; K]], q: &[[Mg; K]], alpha: [f64; K]) -> [f64; K] {
     let parts: Vec<[f64; K]> = y
         .par_chunks_mut(CHUNK)
         .zip(r.par_chunks_mut(CHUNK))
-        .zip(rm.par_chunks_mut(CHUNK))
         .zip(p.par_chunks(CHUNK).zip(q.par_chunks(CHUNK)))
-        .map(|(((ys, rs), rms), (ps, qs))| {
+        .map(|((ys, rs), (ps, qs))| {
             let mut s = [0.0; K];
-            for ((((yv, rv), rmv), pv), qv) in ys.iter_mut().zip(rs.iter_mut()).zip(rms.iter_mut()).zip(ps).zip(qs) {
+            for (((yv, rv), pv), qv) in ys.iter_mut().zip(rs.iter_mut()).zip(ps).zip(qs) {
                 for k in 0..K {
                     yv[k] += alpha[k] * pv[k].get();
-                    rv[k] -= alpha[k] * qv[k];
-                    rmv[k] = Mg::of(rv[k]);
-                    s[k] += rv[k] * rv[k];
+                    rv[k] = Mg::of(rv[k].get() - alpha[k] * qv[k].get());
+                    s[k] += rv[k].get() * rv[k].get();
                 }
             }
             s
@@ -572,8 +568,8 @@ impl Dense {
     }
 }
 
-/// Vectors of one multigrid level's cycle: its residual and the next level's right-hand side
-/// and correction.
+/// Vectors of one multigrid level's cycle: its residual (red entries) and the next level's
+/// right-hand side and correction.
 struct Work<const K: usize> {
     r: Vec<[Mg; K]>,
     bc: Vec<[Mg; K]>,
@@ -700,10 +696,23 @@ impl Hierarchy {
         }
     }
 
-    /// y = A x with the scaled finest operator in f64 (unit diagonal, couplings `plus`, each
-    /// −a coupling read from the −a neighbour's +a one); returns x·y (summed as [`dot`] does).
-    fn apply<X: Real, const K: usize>(&self, x: &[[X; K]], y: &mut [[f64; K]]) -> [f64; K] {
-        let rows = &self.levels[0].rows;
+    /// (A x)[e] per system with the scaled finest operator in f64 (unit diagonal, couplings
+    /// `plus`, each −a coupling read from the −a neighbour's +a one). 0 on the pads.
+    #[inline(always)]
+    fn apply_row<X: Real, const K: usize>(&self, e: usize, x: &[[X; K]]) -> [f64; K] {
+        let (nb, up) = (&self.levels[0].rows[e].nbr, &self.plus[e]);
+        let v = |q: usize, c: f64, k: usize| c * x[nb[q] as usize][k].get();
+        std::array::from_fn(|k| {
+            let s = (v(0, self.plus[nb[0] as usize][0], k) + v(1, up[0], k))
+                + (v(2, self.plus[nb[2] as usize][1], k) + v(3, up[1], k))
+                + (v(4, self.plus[nb[4] as usize][2], k) + v(5, up[2], k));
+            x[e][k].get() + s
+        })
+    }
+
+    /// y = A x (computed in f64, stored in the multigrid's precision); returns x·A x in f64
+    /// (summed as [`dot`] does).
+    fn apply<const K: usize>(&self, x: &[[Mg; K]], y: &mut [[Mg; K]]) -> [f64; K] {
         let parts: Vec<[f64; K]> = y
             .par_chunks_mut(CHUNK)
             .enumerate()
@@ -712,14 +721,10 @@ impl Hierarchy {
                 let mut xy = [0.0; K];
                 for (t, yv) in ys.iter_mut().enumerate() {
                     let e = first + t;
-                    let (nb, up) = (&rows[e].nbr, &self.plus[e]);
-                    let v = |q: usize, c: f64, k: usize| c * x[nb[q] as usize][k].get();
+                    let ax = self.apply_row(e, x);
                     for k in 0..K {
-                        let s = (v(0, self.plus[nb[0] as usize][0], k) + v(1, up[0], k))
-                            + (v(2, self.plus[nb[2] as usize][1], k) + v(3, up[1], k))
-                            + (v(4, self.plus[nb[4] as usize][2], k) + v(5, up[2], k));
-                        yv[k] = x[e][k].get() + s;
-                        xy[k] += x[e][k].get() * yv[k];
+                        yv[k] = Mg::of(ax[k]);
+                        xy[k] += x[e][k].get() * ax[k];
                     }
                 }
                 xy
@@ -728,38 +733,80 @@ impl Hierarchy {
         sum_parts(&parts)
     }
 
+    /// The true residual bs − A y in f64 (`bs(e)` the scaled right-hand sides at entry e, 0 on
+    /// the pads), stored into r for the systems in `which`; returns its r·r per system (summed
+    /// as [`dot`] does; 0 for the others).
+    fn true_residual<const K: usize>(
+        &self,
+        bs: &(impl Fn(usize) -> [f64; K] + Sync),
+        y: &[[f64; K]],
+        r: &mut [[Mg; K]],
+        which: [bool; K],
+    ) -> [f64; K] {
+        let parts: Vec<[f64; K]> = r
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .map(|(ci, rs)| {
+                let first = ci * CHUNK;
+                let mut rr = [0.0; K];
+                for (t, rv) in rs.iter_mut().enumerate() {
+                    let e = first + t;
+                    let (b, ay) = (bs(e), self.apply_row(e, y));
+                    for k in 0..K {
+                        if which[k] {
+                            let v = b[k] - ay[k];
+                            rv[k] = Mg::of(v);
+                            rr[k] += v * v;
+                        }
+                    }
+                }
+                rr
+            })
+            .collect();
+        sum_parts(&parts)
+    }
+
     /// Solve A x = b (unscaled A, as assembled; `b`, `x0` and the result per unknown) by MGPCG
     /// from `x0` (or zero) to relative residual `tol` of the scaled system, at most `max_iter`
     /// iterations.
-    pub fn solve(&self, b: &[f64], x0: Option<&[f64]>, tol: f64, max_iter: usize) -> (Vec<f64>, SolveStats) {
+    pub fn solve<B: Copy + Into<f64> + Sync>(&self, b: &[B], x0: Option<&[B]>, tol: f64, max_iter: usize) -> (Vec<f64>, SolveStats) {
         let [out] = self.solve_many([b], x0.map(|x| [x]), tol, max_iter);
         out
     }
 
     /// [`Hierarchy::solve`] for K right-hand sides at once (the bands that share the operator):
     /// each system's iterates are exactly those of its own solve, and the rows are read once per
-    /// pass for all of them.
-    pub fn solve_many<const K: usize>(
+    /// pass for all of them. `b` and `x0` in f64 or f32 (f32 halves the caller's copies).
+    pub fn solve_many<B: Copy + Into<f64> + Sync, const K: usize>(
         &self,
-        b: [&[f64]; K],
-        x0: Option<[&[f64]; K]>,
+        b: [&[B]; K],
+        x0: Option<[&[B]; K]>,
         tol: f64,
         max_iter: usize,
     ) -> [(Vec<f64>, SolveStats); K] {
         let a = &self.levels[0];
-        let gather = |v: [&[f64]; K], f: fn(f64, f64) -> f64| -> Vec<[f64; K]> {
-            assert!(v.iter().all(|v| v.len() == a.unknowns()), "one value per unknown");
-            a.unk
-                .par_iter()
-                .zip(&self.scale)
-                .map(|(u, s)| if *u == PAD { [0.0; K] } else { v.map(|v| f(v[*u as usize], *s)) })
-                .collect()
-        };
-        let mut y = match x0 {
-            Some(x) => gather(x, |v, s| v / s),
+        assert!(b.iter().all(|v| v.len() == a.unknowns()), "one value per unknown");
+        let mut y: Vec<[f64; K]> = match x0 {
+            Some(x) => {
+                assert!(x.iter().all(|v| v.len() == a.unknowns()), "one value per unknown");
+                a.unk
+                    .par_iter()
+                    .zip(&self.scale)
+                    .map(|(u, s)| if *u == PAD { [0.0; K] } else { x.map(|v| v[*u as usize].into() / s) })
+                    .collect()
+            }
             None => vec![[0.0; K]; a.len()],
         };
-        let stats = self.solve_scaled(|| gather(b, |v, s| v * s), &mut y, tol, max_iter);
+        // The scaled right-hand sides, made where they are read (not held).
+        let bs = |e: usize| {
+            let u = a.unk[e];
+            if u == PAD {
+                [0.0; K]
+            } else {
+                b.map(|v| v[u as usize].into() * self.scale[e])
+            }
+        };
+        let stats = self.solve_scaled(&bs, &mut y, tol, max_iter);
         let mut lane = 0;
         stats.map(|st| {
             let mut out = vec![0.0; a.unknowns()];
@@ -774,19 +821,34 @@ impl Hierarchy {
     }
 
     /// MGPCG on the scaled systems A y = bs (vectors on the finest level's entries), each system
-    /// stopping on its own. `rhs` makes bs: it is needed for the first and the last residual only,
-    /// so it is not held during the iterations.
+    /// stopping on its own. Mixed precision: the iterate y is f64, the residual, A p and the
+    /// search direction are in the multigrid's precision (their dots summed in f64). When a
+    /// system's recursive residual meets `tol`, its true residual is computed in f64; if that
+    /// does not meet `tol` (the rounding of the recursion), CG restarts from it.
     fn solve_scaled<const K: usize>(
         &self,
-        rhs: impl Fn() -> Vec<[f64; K]>,
+        bs: &(impl Fn(usize) -> [f64; K] + Sync),
         y: &mut [[f64; K]],
         tol: f64,
         max_iter: usize,
     ) -> [SolveStats; K] {
         let a = &self.levels[0];
         let n = a.len();
-        let bs = rhs();
-        let bnorm = dot(&bs, &bs).map(f64::sqrt);
+        let parts: Vec<[f64; K]> = (0..n)
+            .into_par_iter()
+            .chunks(CHUNK)
+            .map(|es| {
+                let mut s = [0.0; K];
+                for e in es {
+                    let v = bs(e);
+                    for k in 0..K {
+                        s[k] += v[k] * v[k];
+                    }
+                }
+                s
+            })
+            .collect();
+        let bnorm = sum_parts(&parts).map(f64::sqrt);
         let mut stats: [SolveStats; K] = std::array::from_fn(|_| SolveStats {
             iterations: 0,
             relative_residual: 0.0,
@@ -795,13 +857,12 @@ impl Hierarchy {
             levels: self.levels.len(),
             bytes_per_unknown: 0.0,
         });
-        // The hierarchy; y, r and A p in f64; r, z and p in the multigrid's precision, and
-        // three vectors per level in `work` (the caller's b and x, per unknown, not counted; bs
-        // lives only before and after the iterations, when p, z and `work` do not).
+        // The hierarchy; y in f64; r, A p, z and p in the multigrid's precision, and two
+        // three vectors per level in `work` (the caller's b and x, per unknown, not counted).
         let lanes = |v: usize, bytes: usize| v * bytes * K;
         let held = self.bytes()
-            + lanes(3 * n, 8)
-            + lanes(3 * n, std::mem::size_of::<Mg>())
+            + lanes(n, 8)
+            + lanes(4 * n, std::mem::size_of::<Mg>())
             + self
                 .levels
                 .windows(2)
@@ -810,17 +871,9 @@ impl Hierarchy {
         for st in &mut stats {
             st.bytes_per_unknown = held as f64 / (K * a.unknowns().max(1)) as f64;
         }
-        // r = bs − A y.
-        let residual = |bs: Vec<[f64; K]>, y: &[[f64; K]], r: &mut Vec<[f64; K]>, ap: &mut Vec<[f64; K]>| {
-            self.apply(y, ap);
-            r.par_iter_mut()
-                .zip(bs.par_iter().zip(&*ap))
-                .for_each(|(r, (b, q))| *r = std::array::from_fn(|k| b[k] - q[k]));
-        };
-        let (mut r, mut ap) = (vec![[0f64; K]; n], vec![[0f64; K]; n]);
-        residual(bs, y, &mut r, &mut ap);
-        let mut p = vec![[0.0; K]; n];
-        let (mut rm, mut z) = (vec![[0.0; K]; n], vec![[0.0; K]; n]);
+        let mut r = vec![[0.0; K]; n];
+        let rr = self.true_residual(bs, y, &mut r, [true; K]);
+        let (mut ap, mut p, mut z) = (vec![[0.0; K]; n], vec![[0.0; K]; n], vec![[0.0; K]; n]);
         let mut work: Vec<Work<K>> = self
             .levels
             .windows(2)
@@ -830,8 +883,6 @@ impl Hierarchy {
                 xc: vec![[0.0; K]; w[1].len()],
             })
             .collect();
-        rm.par_iter_mut().zip(&r).for_each(|(m, v)| *m = v.map(Mg::of));
-        let rr = dot(&r, &r);
         let mut active = [false; K];
         for k in 0..K {
             if bnorm[k] == 0.0 {
@@ -844,7 +895,7 @@ impl Hierarchy {
             }
         }
         if active.iter().any(|a| *a) {
-            self.cycle(0, &rm, &mut z, &mut work);
+            self.cycle(0, &r, &mut z, &mut work);
             p.copy_from_slice(&z);
             let mut rz = dot(&r, &z);
             let mut iterations = 0;
@@ -862,8 +913,9 @@ impl Hierarchy {
                 if !active.iter().any(|a| *a) {
                     break;
                 }
-                let rr = cg_step(y, &mut r, &mut rm, &p, &ap, alpha);
+                let rr = cg_step(y, &mut r, &p, &ap, alpha);
                 iterations += 1;
+                let mut check = [false; K];
                 for k in 0..K {
                     if !active[k] {
                         continue;
@@ -871,14 +923,26 @@ impl Hierarchy {
                     stats[k].iterations += 1;
                     let rel = rr[k].sqrt() / bnorm[k];
                     stats[k].history.push(rel);
-                    active[k] = rel > tol;
+                    check[k] = rel <= tol;
+                }
+                // Systems whose recursive residual meets the tolerance: stop on the true one,
+                // or restart CG from it (its direction dropped: β = 0).
+                let mut restart = [false; K];
+                if check.iter().any(|c| *c) {
+                    let rt = self.true_residual(bs, y, &mut r, check);
+                    for k in 0..K {
+                        if check[k] {
+                            restart[k] = rt[k].sqrt() / bnorm[k] > tol;
+                            active[k] = restart[k];
+                        }
+                    }
                 }
                 if !active.iter().any(|a| *a) {
                     break;
                 }
-                self.cycle(0, &rm, &mut z, &mut work);
+                self.cycle(0, &r, &mut z, &mut work);
                 let rz_new = dot(&r, &z);
-                let beta: [f64; K] = std::array::from_fn(|k| if active[k] { rz_new[k] / rz[k] } else { 0.0 });
+                let beta: [f64; K] = std::array::from_fn(|k| if active[k] && !restart[k] { rz_new[k] / rz[k] } else { 0.0 });
                 rz = rz_new;
                 p.par_iter_mut()
                     .zip(&z)
@@ -886,9 +950,8 @@ impl Hierarchy {
             }
         }
         // Report the true residuals.
-        drop((p, rm, z, work));
-        residual(rhs(), y, &mut r, &mut ap);
-        let rr = dot(&r, &r);
+        drop((ap, p, z, work));
+        let rr = self.true_residual(bs, y, &mut r, [true; K]);
         for k in 0..K {
             if bnorm[k] > 0.0 {
                 stats[k].relative_residual = rr[k].sqrt() / bnorm[k];
