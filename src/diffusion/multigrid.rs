@@ -792,7 +792,13 @@ impl Hierarchy {
                 a.unk
                     .par_iter()
                     .zip(&self.scale)
-                    .map(|(u, s)| if *u == PAD { [0.0; K] } else { x.map(|v| v[*u as usize].into() / s) })
+                    .map(|(u, s)| {
+                        if *u == PAD {
+                            [0.0; K]
+                        } else {
+                            x.map(|v| v[*u as usize].into() / s)
+                        }
+                    })
                     .collect()
             }
             None => vec![[0.0; K]; a.len()],
@@ -1105,6 +1111,42 @@ mod operator_tests {
         }
         assert!(together[0].1.iterations > 5 && together[0].1.relative_residual <= 1e-9);
         assert_eq!(together[2].0, zero);
+    }
+
+    #[test]
+    fn stops_on_the_true_residual_in_f64() {
+        // Far below what the f32 recursion can follow: the stop must come from the true residual
+        // (CG restarted from it), checked here densely on the scaled system D^-1/2 (b − A x).
+        let m = random_cloud([12, 10, 9], 6, 0.98, 0.8);
+        let inc = lit(&m, 1.0, Some((Vec3::new(0.2, 1.0, -0.3), 2.0)));
+        let dom = Domain::of(&m).unwrap();
+        let (s, b) = assemble(&m, &inc, &BoundaryLight::none(), 2, 1e-3, &dom);
+        let h = Hierarchy::build_with(s.clone(), 16);
+        let tol = 1e-10;
+        let (x, st) = h.solve(&b, None, tol, 500);
+        let (a, n) = (dense(&s), b.len());
+        let d: Vec<f64> = (0..n).map(|q| a[q * n + q].sqrt()).collect();
+        let res: f64 = (0..n)
+            .map(|q| {
+                let ax: f64 = (0..n).map(|r| a[q * n + r] * x[r]).sum();
+                ((b[q] - ax) / d[q]).powi(2)
+            })
+            .sum::<f64>()
+            .sqrt();
+        let bn: f64 = (0..n).map(|q| (b[q] / d[q]).powi(2)).sum::<f64>().sqrt();
+        assert!(res / bn <= tol, "true residual {} ({st:?})", res / bn);
+        assert!(
+            (st.relative_residual - res / bn).abs() <= 1e-3 * res / bn,
+            "reported {} vs {}",
+            st.relative_residual,
+            res / bn
+        );
+        // f32 right-hand sides are accepted too (the callers' copies): the same solve to rounding.
+        let b32: Vec<f32> = b.iter().map(|v| *v as f32).collect();
+        let (x32, _) = h.solve(&b32, None, 1e-6, 500);
+        let diff = x.iter().zip(&x32).map(|(p, q)| (p - q).powi(2)).sum::<f64>().sqrt();
+        let norm = x.iter().map(|p| p * p).sum::<f64>().sqrt();
+        assert!(diff / norm < 1e-4, "{}", diff / norm);
     }
 
     #[test]
