@@ -257,17 +257,17 @@ impl Domain {
     }
 }
 
-/// Assemble band `c`'s operator and right-hand side (see the module docs) on the full voxels
-/// (in grid order, their cells indexing `dom`), with the light `bl` entering through the
-/// boundary faces.
+/// Band `c`'s operator and right-hand side: [`assemble_with`] with the operator.
 #[cfg(test)]
 pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_min: f64, dom: &Domain) -> (Operator, Vec<f64>) {
     let (a, b) = assemble_with(m, inc, bl, c, tau_min, dom, true);
     (a.expect("asked for the operator"), b)
 }
 
-/// [`assemble`], the operator only when `operator` (a band sharing another's operator needs
-/// only its right-hand side: the rows are computed but not stored).
+/// Assemble band `c`'s right-hand side and, when `operator`, its operator (see the module docs)
+/// on the full voxels (in grid order, their cells indexing `dom`), with the light `bl` entering
+/// through the boundary faces. A band sharing another's operator needs only its right-hand side
+/// (the rows are computed but not stored).
 fn assemble_with(
     m: &Medium,
     inc: &IncidentLight,

@@ -696,7 +696,7 @@ impl Hierarchy {
         }
     }
 
-    /// (A x)[e] per system with the scaled finest operator in f64 (unit diagonal, couplings
+    /// Entry e of A x per system with the scaled finest operator in f64 (unit diagonal, couplings
     /// `plus`, each −a coupling read from the −a neighbour's +a one). 0 on the pads.
     #[inline(always)]
     fn apply_row<X: Real, const K: usize>(&self, e: usize, x: &[[X; K]]) -> [f64; K] {
