@@ -304,7 +304,7 @@ impl<'a> EdgeGather<'a> {
     pub fn segment_radiance_from_k(&self, plan: &PixelPlan, seg: &LowSegment, k: &[Rgb]) -> Rgb {
         let m = self.medium;
         let d = plan.d;
-        let q = segment_orders(seg.depth, self.settings.tail);
+        let q = self.orders(seg.depth);
         let mut e = self.cube_part(&q, k);
         let es = self.segment_sun(plan, seg);
         if es.max_element() > 0.0 && q.len() >= 2 {
@@ -317,15 +317,15 @@ impl<'a> EdgeGather<'a> {
         e
     }
 
-    /// The cube's part of E_j, Σ_{i≥1} q_i a^i K_i, for a segment of depth `depth`.
-    pub fn cube_radiance(&self, depth: f64, k: &[Rgb]) -> Rgb {
-        self.cube_part(&segment_orders(depth, self.settings.tail), k)
+    /// Poisson weights q_i (i ≥ 1) of a segment of optical depth `depth` (eq. 8).
+    pub fn orders(&self, depth: f64) -> Vec<f64> {
+        segment_orders(depth, self.settings.tail)
     }
 
-    /// Σ_{i≥1} q_i a^i K_i with the Poisson weights `q`; K's last order serves the orders beyond it.
-    fn cube_part(&self, q: &[f64], k: &[Rgb]) -> Rgb {
-        let kk: Vec<Rgb> = (0..q.len()).map(|i| k[i.min(k.len() - 1)]).collect();
-        edge_radiance(q, &kk, self.medium.optics.albedo, 1)
+    /// The cube's part of E_j, Σ_{i≥1} q_i a^i K_i, with the segment's Poisson weights `q`
+    /// ([`Self::orders`]); K's last order serves the orders beyond it.
+    pub fn cube_part(&self, q: &[f64], k: &[Rgb]) -> Rgb {
+        edge_radiance(q, k, self.medium.optics.albedo, 1)
     }
 
     /// The sun irradiance (W m⁻² per band) the segment's orders ≥ 2 start from. The paper's

@@ -170,6 +170,7 @@ pub fn gather_image(
                     // The plan's top segments are the same as `top(i).segs` (same threshold and surface
                     // layer) but its profile is also cut at T_lo: match by centre distance.
                     let tc = job.seg.t_center;
+                    let mut q = None;
                     let mut s = coarse;
                     while s > 1 {
                         let (x0, y0) = ((x / s) * s, (y / s) * s);
@@ -215,7 +216,7 @@ pub fn gather_image(
                             let es: Vec<Rgb> = picks
                                 .iter()
                                 .filter(|p| p.2 > 0.0)
-                                .map(|&(ci, j, _)| g.cube_radiance(job.seg.depth, own_k(ci, j)))
+                                .map(|&(ci, j, _)| g.cube_part(q.get_or_insert_with(|| g.orders(job.seg.depth)), own_k(ci, j)))
                                 .collect();
                             ok = agree(&es, sp.smooth_tolerance);
                         }
