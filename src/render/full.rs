@@ -191,6 +191,15 @@ pub struct GatherCubes<'a> {
     /// cubes; the ring 25 % fewer traces per cube, images within 6.4·10⁻⁴ block MRE
     /// (docs/performance.md, "Speed: the final gather, sixth round").
     pub rear_half_resolution: bool,
+    /// Cone width (rad) of each pixel of a face at `cone_res` pixels per edge (the scene's cube
+    /// resolution): the same for every cube, so computed once (four `atan` per pixel).
+    cones: Vec<f32>,
+    cone_res: usize,
+}
+
+/// Cone width (rad) of each pixel of a face at `res` pixels per edge: √(solid angle).
+fn face_cones(res: usize) -> Vec<f32> {
+    CubeImage::face_solid_angles(res).iter().map(|w| (*w as f32).sqrt()).collect()
 }
 
 impl<'a> GatherCubes<'a> {
@@ -209,10 +218,13 @@ impl<'a> GatherCubes<'a> {
         let surface = scene.render.edges.surface_depth > 0.0;
         renderer.gather_source = surface;
         renderer.sun_transformed = surface;
+        let cone_res = scene.render.edges.cube_res;
         GatherCubes {
             renderer,
             exclude_radius: lit.medium.min_voxel(),
             rear_half_resolution: true,
+            cones: face_cones(cone_res),
+            cone_res,
         }
     }
 
@@ -256,7 +268,13 @@ impl CubeSource for GatherCubes<'_> {
     fn render_cube(&self, req: &CubeRequest) -> CubeImage {
         let mut cube = CubeImage::along(req.res, req.x_axis);
         let res = req.res;
-        let cones: Vec<f32> = CubeImage::face_solid_angles(res).iter().map(|w| (*w as f32).sqrt()).collect();
+        let own;
+        let cones = if res == self.cone_res {
+            &self.cones
+        } else {
+            own = face_cones(res);
+            &own
+        };
         let trace = |d: Vec3, cone: f32| {
             let t0 = self.exclusion_start(req, d);
             self.renderer.trace(req.center + d * t0, d, cone)
