@@ -479,6 +479,8 @@ fn sparse_gather_matches_per_pixel_cubes_on_a_smooth_scene() {
         block: 8,
         depth_tolerance: 0.0,
         partial_size: 0,
+        coarse_block: 0,
+        smooth_tolerance: 0.0,
     };
     // With 0 m only exact matches interpolate (a pixel on the image's last column or row is a
     // corner of its own clamped square), so the image equals the reference.

@@ -210,10 +210,14 @@ pub struct PixelPlan {
     pub jobs: Vec<EdgeJob>,
     /// Pieces `0..surface_end` lie in the surface layer (the first D_s of optical depth).
     pub surface_end: usize,
+    /// The sun irradiance at each piece's midpoint (where the composite takes a one-step piece's
+    /// sources); the segments' sun for orders ≥ 2 is their depth-weighted mean.
+    pub sun: Vec<Rgb>,
 }
 
-/// Samples along a segment of the sun irradiance its orders ≥ 2 start from (with the surface layer).
-const SUN_SAMPLES: usize = 8;
+/// Sun samples per segment at least, for its orders ≥ 2 (with the surface layer): pieces longer
+/// than 1/8 of their segment are subdivided ([`EdgeGather::segment_sun`]).
+const SUN_SAMPLES: f64 = 8.0;
 
 /// Largest segment optical depth whose orders are tabulated separately (deeper ones reuse the last).
 const MAX_TABULATED_DEPTH: f64 = 40.0;
@@ -297,12 +301,12 @@ impl<'a> EdgeGather<'a> {
 
     /// E_j from the cube's K_i (eq. 9 with albedo) plus the sun's orders ≥ 2 as a delta. If `k`
     /// holds fewer orders than needed, the last one is reused (high orders are nearly isotropic).
-    pub fn segment_radiance_from_k(&self, o: Vec3, d: Vec3, seg: &LowSegment, k: &[Rgb]) -> Rgb {
+    pub fn segment_radiance_from_k(&self, plan: &PixelPlan, seg: &LowSegment, k: &[Rgb]) -> Rgb {
         let m = self.medium;
-        let q = segment_orders(seg.depth, self.settings.tail);
-        let kk: Vec<Rgb> = (0..q.len()).map(|i| k[i.min(k.len() - 1)]).collect();
-        let mut e = edge_radiance(&q, &kk, m.optics.albedo, 1);
-        let es = self.segment_sun(o, d, seg);
+        let d = plan.d;
+        let q = self.orders(seg.depth);
+        let mut e = self.cube_part(&q, k);
+        let es = self.segment_sun(plan, seg);
         if es.max_element() > 0.0 && q.len() >= 2 {
             // cos θ = (−ω_sun)·(−d): sunlight leaving towards the eye.
             let c = self.sun.dir.dot(d) as f64;
@@ -313,35 +317,58 @@ impl<'a> EdgeGather<'a> {
         e
     }
 
+    /// Poisson weights q_i (i ≥ 1) of a segment of optical depth `depth` (eq. 8).
+    pub fn orders(&self, depth: f64) -> Vec<f64> {
+        segment_orders(depth, self.settings.tail)
+    }
+
+    /// The cube's part of E_j, Σ_{i≥1} q_i a^i K_i, with the segment's Poisson weights `q`
+    /// ([`Self::orders`]); K's last order serves the orders beyond it.
+    pub fn cube_part(&self, q: &[f64], k: &[Rgb]) -> Rgb {
+        edge_radiance(q, k, self.medium.optics.albedo, 1)
+    }
+
     /// The sun irradiance (W m⁻² per band) the segment's orders ≥ 2 start from. The paper's
     /// segments are thin and take it at c_j; with the surface layer (`surface_depth` > 0) a
     /// segment spans optical depths of 1–3, across which the sun decays convexly, so it is the mean
     /// over the segment per unit optical depth (given i collisions, Poisson's first one is uniform
-    /// in optical depth): density-weighted over [`SUN_SAMPLES`] midpoints (8 and 16 score alike).
-    fn segment_sun(&self, o: Vec3, d: Vec3, seg: &LowSegment) -> Rgb {
-        let at_centre = || (self.sun.irradiance_at)(seg.center(o, d));
+    /// in optical depth): the pieces' midpoint irradiances (`plan.sun`, which the composite uses
+    /// too) weighted by their exact optical depths.
+    fn segment_sun(&self, plan: &PixelPlan, seg: &LowSegment) -> Rgb {
+        let at_centre = || (self.sun.irradiance_at)(seg.center(plan.o, plan.d));
         if self.settings.surface_depth <= 0.0 {
             return at_centre();
         }
-        let (mut acc, mut rho_sum) = (Rgb::ZERO, 0f32);
-        for k in 0..SUN_SAMPLES {
-            let t = seg.t0 + (seg.t1 - seg.t0) * (k as f64 + 0.5) / SUN_SAMPLES as f64;
-            let p = (o.as_dvec3() + d.as_dvec3() * t).as_vec3();
-            let rho = self.medium.density_at(p);
-            acc += (self.sun.irradiance_at)(p) * rho;
-            rho_sum += rho;
+        let (od, dd) = (plan.o.as_dvec3(), plan.d.as_dvec3());
+        let len = seg.t1 - seg.t0;
+        let (mut acc, mut tau) = (Rgb::ZERO, 0f64);
+        for (p, e) in plan.profile.pieces[seg.first..seg.end].iter().zip(&plan.sun[seg.first..seg.end]) {
+            // A piece longer than 1/SUN_SAMPLES of the segment (a coarse grid) is sampled at
+            // that spacing, its ρ taken as uniform: the sun decays convexly across it.
+            let n = (SUN_SAMPLES * (p.t1 - p.t0) / len).ceil().max(1.0);
+            if n <= 1.0 {
+                acc += *e * p.tau as f32;
+            } else {
+                let mut sum = Rgb::ZERO;
+                for s in 0..n as usize {
+                    let t = p.t0 + (p.t1 - p.t0) * (s as f64 + 0.5) / n;
+                    sum += (self.sun.irradiance_at)((od + dd * t).as_vec3());
+                }
+                acc += sum * (p.tau / n) as f32;
+            }
+            tau += p.tau;
         }
-        if rho_sum > 0.0 {
-            acc / rho_sum
+        if tau > 0.0 {
+            acc / tau as f32
         } else {
             at_centre()
         }
     }
 
-    /// E_j for a segment, rendering its cube.
-    pub fn segment_radiance(&self, o: Vec3, d: Vec3, seg: &LowSegment) -> Rgb {
-        let k = self.segment_k(o, d, seg, self.orders_for(seg));
-        self.segment_radiance_from_k(o, d, seg, &k)
+    /// E_j for a segment of `plan`, rendering its cube.
+    pub fn segment_radiance(&self, plan: &PixelPlan, seg: &LowSegment) -> Rgb {
+        let k = self.segment_k(plan.o, plan.d, seg, self.orders_for(seg));
+        self.segment_radiance_from_k(plan, seg, &k)
     }
 
     /// Edge jobs of `seg` (pieces `seg.first..seg.end`, from [`RayProfile::segment`]) with weight
@@ -450,12 +477,19 @@ impl<'a> EdgeGather<'a> {
             let depth = if seg.first < surface_end { MAX_BRIDGE_DEPTH } else { 0 };
             self.plan_edge(&profile, seg, 1.0, depth, Some(j), &mut jobs);
         }
+        let (od, dd) = (o.as_dvec3(), d.as_dvec3());
+        let sun = profile
+            .pieces
+            .iter()
+            .map(|p| (self.sun.irradiance_at)((od + dd * piece_midpoint(p)).as_vec3()))
+            .collect();
         PixelPlan {
             o,
             d,
             profile,
             jobs,
             surface_end,
+            sun,
         }
     }
 
@@ -498,7 +532,7 @@ impl<'a> EdgeGather<'a> {
     /// edge job.
     pub fn radiance(&self, o: Vec3, d: Vec3, t_max: f32, background: Rgb) -> EdgeAov {
         let plan = self.plan(o, d, t_max);
-        let e: Vec<Rgb> = plan.jobs.iter().map(|j| self.segment_radiance(o, d, &j.seg)).collect();
+        let e: Vec<Rgb> = plan.jobs.iter().map(|j| self.segment_radiance(&plan, &j.seg)).collect();
         let mut aov = self.composite(&plan, &e, background);
         aov.cubes = plan.jobs.len() as u32;
         aov
@@ -529,7 +563,7 @@ impl<'a> EdgeGather<'a> {
             for s in 0..n {
                 let ta = p.t0 + (p.t1 - p.t0) * s as f64 / n as f64;
                 let tb = p.t0 + (p.t1 - p.t0) * (s + 1) as f64 / n as f64;
-                let tm = 0.5 * (ta + tb);
+                let tm = if n == 1 { piece_midpoint(p) } else { 0.5 * (ta + tb) };
                 // ρ at the midpoint serves both the step's depth and its weights; a one-step
                 // piece's midpoint density is the profile's own.
                 let rho = if n == 1 { p.rho[1] } else { prof.rho(m, tm) };
@@ -557,7 +591,8 @@ impl<'a> EdgeGather<'a> {
                 if w < 1.0 {
                     aov.edge += f * (1.0 - w) * edge_src[k];
                 }
-                aov.sun_single += f * (self.sun.irradiance_at)(pos) * sun_scatter;
+                let sun = if n == 1 { plan.sun[k] } else { (self.sun.irradiance_at)(pos) };
+                aov.sun_single += f * sun * sun_scatter;
                 tr *= (-delta).exp();
                 if tr < crate::medium::march::T_CUTOFF as f64 {
                     tr = 0.0;
@@ -569,6 +604,12 @@ impl<'a> EdgeGather<'a> {
         aov.background = background * tr as f32;
         aov
     }
+}
+
+/// The midpoint of a piece as the composite's one-step rule computes it (the same bits).
+#[inline]
+fn piece_midpoint(p: &super::segments::Piece) -> f64 {
+    0.5 * (p.t0 + (p.t0 + (p.t1 - p.t0)))
 }
 
 /// Cut pieces at interior density maxima in the blend band and interior minima below the gap

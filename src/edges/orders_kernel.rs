@@ -245,13 +245,17 @@ pub fn segment_orders(d: f64, tail: f64) -> Vec<f64> {
     q
 }
 
-/// E = Σ_{i≥1} q_i a^i K_i (eq. 9 with albedo), `q[0]` and `k[0]` being order 1. Orders with
+/// E = Σ_{i≥1} q_i a^i K_i (eq. 9 with albedo), `q[0]` and `k[0]` being order 1; where `k` holds
+/// fewer orders than `q`, its last serves the rest (high orders are nearly isotropic). Orders with
 /// index ≥ `skip_below` only (1-based; pass 1 for all, 2 to leave out single scattering).
 pub fn edge_radiance(q: &[f64], k: &[Rgb], albedo: Rgb, skip_below: usize) -> Rgb {
     let mut e = [0f64; 3];
     let a = [albedo.x as f64, albedo.y as f64, albedo.z as f64];
     let mut ai = [1f64; 3];
-    for (idx, (qi, ki)) in q.iter().zip(k).enumerate() {
+    let Some(last) = k.last() else {
+        return Rgb::ZERO;
+    };
+    for (idx, (qi, ki)) in q.iter().zip(k.iter().chain(std::iter::repeat(last))).enumerate() {
         for b in 0..3 {
             ai[b] *= a[b];
         }
@@ -413,6 +417,8 @@ mod tests {
             // Leaving out order 1 removes exactly q_1 a L.
             let e2 = edge_radiance(&q, &kk, a, 2);
             assert!(((e - e2).x as f64 - q[0] * 2.0).abs() < 1e-5);
+            // K's last order serves the orders beyond it: the same E from the first two alone.
+            assert_eq!(edge_radiance(&q, &kk[..2], a, 1), e);
         }
     }
 }

@@ -8,7 +8,9 @@
 //! and cached per pixel and segment). Otherwise the square is halved, down to the pixel itself;
 //! on squares of at most `partial_size` pixels the corners that match suffice (renormalised
 //! weights), so a silhouette's pixels seldom need their own cube.
-//! Squares start at `block` pixels (the paper's 8; its 9×9 vertex blocks). Only whole, unbridged
+//! Squares start at `block` pixels (the paper's 8; its 9×9 vertex blocks), or at `coarse_block`
+//! (16) where the four corners match and the cube part of E_j they give the pixel agrees within
+//! `smooth_tolerance` (3 %): there the inner lattice's cubes are not needed. Only whole, unbridged
 //! segments are interpolated; bridge variants (rare) always get their own cube. The q_ij and the
 //! sun's orders are evaluated per pixel, as in the paper.
 //!
@@ -53,6 +55,14 @@ pub struct SparseSettings {
     /// (the gather's cubes ~40 % cheaper), image within 3·10⁻⁵ block MRE on it and the five
     /// evaluation scenes; 8 reaches 3·10⁻³ (backlit).
     pub partial_size: u32,
+    /// Squares larger than `block`, up to this size (a power of two; ≤ `block`: none), are tried
+    /// first where K is smooth: all four corners must match in depth and their K agree within
+    /// `smooth_tolerance`, else the square is halved as usual. Where the cloud's light changes
+    /// little across a square, its inner lattice cubes are never rendered.
+    pub coarse_block: u32,
+    /// Largest spread of the corners' K, per order and band, relative to the largest band of the
+    /// corners' mean K of that order, for interpolating over a coarse square.
+    pub smooth_tolerance: f32,
 }
 
 impl Default for SparseSettings {
@@ -61,6 +71,8 @@ impl Default for SparseSettings {
             block: 8,
             depth_tolerance: 150.0,
             partial_size: 4,
+            coarse_block: 16,
+            smooth_tolerance: 0.03,
         }
     }
 }
@@ -137,6 +149,7 @@ pub fn gather_image(
         })
     };
     let block = sp.block.max(1).next_power_of_two() as usize;
+    let coarse = (sp.coarse_block.max(1).next_power_of_two() as usize).max(block);
     let px: Vec<EdgeAov> = (0..w * h)
         .into_par_iter()
         .map(|i| {
@@ -152,12 +165,13 @@ pub fn gather_image(
                         n_cubes += 1;
                         cubes.fetch_add(1, Ordering::Relaxed);
                         direct.fetch_add(1, Ordering::Relaxed);
-                        return g.segment_radiance(r.o, r.d, &job.seg);
+                        return g.segment_radiance(&plan, &job.seg);
                     };
                     // The plan's top segments are the same as `top(i).segs` (same threshold and surface
                     // layer) but its profile is also cut at T_lo: match by centre distance.
                     let tc = job.seg.t_center;
-                    let mut s = block;
+                    let mut q = None;
+                    let mut s = coarse;
                     while s > 1 {
                         let (x0, y0) = ((x / s) * s, (y / s) * s);
                         if x0 == x && y0 == y {
@@ -177,6 +191,8 @@ pub fn gather_image(
                         // On small squares (corners at most `partial_size` pixels away) the
                         // corners that match are enough: their weights are renormalised.
                         let partial = s <= sp.partial_size as usize;
+                        // Above `block` only a whole square whose corners' K agree.
+                        let smooth_only = s > block;
                         let mut matched = 0f32;
                         for (c, &(cx, cy, wt)) in corners.iter().enumerate() {
                             if wt <= 0.0 {
@@ -195,6 +211,14 @@ pub fn gather_image(
                                     }
                                 }
                             }
+                        }
+                        if ok && smooth_only {
+                            let es: Vec<Rgb> = picks
+                                .iter()
+                                .filter(|p| p.2 > 0.0)
+                                .map(|&(ci, j, _)| g.cube_part(q.get_or_insert_with(|| g.orders(job.seg.depth)), own_k(ci, j)))
+                                .collect();
+                            ok = agree(&es, sp.smooth_tolerance);
                         }
                         if !ok && partial && matched > 0.0 {
                             for p in &mut picks {
@@ -215,17 +239,17 @@ pub fn gather_image(
                                 }
                             }
                             interp.fetch_add(1, Ordering::Relaxed);
-                            return g.segment_radiance_from_k(r.o, r.d, &job.seg, &k);
+                            return g.segment_radiance_from_k(&plan, &job.seg, &k);
                         }
                         s /= 2;
                     }
                     direct.fetch_add(1, Ordering::Relaxed);
                     match nearest(&top(i).segs, tc).map(|(j, _)| j) {
-                        Some(j) => g.segment_radiance_from_k(r.o, r.d, &job.seg, own_k(i, j)),
+                        Some(j) => g.segment_radiance_from_k(&plan, &job.seg, own_k(i, j)),
                         None => {
                             n_cubes += 1;
                             cubes.fetch_add(1, Ordering::Relaxed);
-                            g.segment_radiance(r.o, r.d, &job.seg)
+                            g.segment_radiance(&plan, &job.seg)
                         }
                     }
                 })
@@ -251,10 +275,32 @@ struct PixelTops {
     k: Vec<OnceLock<Vec<Rgb>>>,
 }
 
+/// Whether the corners' values agree: each band of each within `tol` times the largest band of
+/// their mean.
+fn agree(es: &[Rgb], tol: f32) -> bool {
+    let mean = es.iter().fold(Rgb::ZERO, |a, b| a + *b) / es.len().max(1) as f32;
+    let bound = tol * mean.max_element();
+    es.iter().all(|e| (*e - mean).abs().max_element() <= bound)
+}
+
 /// The segment whose centre distance is nearest `tc`, and that distance.
 fn nearest(segs: &[LowSegment], tc: f64) -> Option<(usize, f64)> {
     segs.iter()
         .enumerate()
         .map(|(j, s)| (j, (s.t_center - tc).abs()))
         .min_by(|a, b| a.1.total_cmp(&b.1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn corners_agree_within_the_tolerance_of_their_mean() {
+        let es = [Rgb::new(1.0, 2.0, 0.5), Rgb::new(1.25, 2.0, 0.5), Rgb::new(0.75, 2.0, 0.5)];
+        // The mean's largest band is 2; the spread is 0.25 (band 0): agree at 12.5 %, not at 12 %.
+        assert!(agree(&es, 0.125));
+        assert!(!agree(&es, 0.12));
+        assert!(agree(&[Rgb::ZERO; 4], 0.0));
+    }
 }

@@ -185,10 +185,21 @@ pub struct GatherCubes<'a> {
     renderer: CubeRenderer<'a>,
     /// Radius (m) of the tube around a segment whose cells are left out of its own cube.
     exclude_radius: f32,
-    /// Trace the five rear faces at half resolution (see [`CubeSource::render_cube`] below);
-    /// measured on the default scene: gather 31 % faster, image within 1.1·10⁻⁵ mean relative
-    /// difference of full-resolution cubes.
+    /// Trace the five rear faces, and the front face's outer ring, at half resolution (see
+    /// [`CubeSource::render_cube`] below); measured on the default scene: the rear faces made the
+    /// gather 31 % faster, image within 1.1·10⁻⁵ mean relative difference of full-resolution
+    /// cubes; the ring 25 % fewer traces per cube, images within 6.4·10⁻⁴ block MRE
+    /// (docs/performance.md, "Speed: the final gather, sixth round").
     pub rear_half_resolution: bool,
+    /// Cone width (rad) of each pixel of a face at `cone_res` pixels per edge (the scene's cube
+    /// resolution): the same for every cube, so computed once (four `atan` per pixel).
+    cones: Vec<f32>,
+    cone_res: usize,
+}
+
+/// Cone width (rad) of each pixel of a face at `res` pixels per edge: √(solid angle).
+fn face_cones(res: usize) -> Vec<f32> {
+    CubeImage::face_solid_angles(res).iter().map(|w| (*w as f32).sqrt()).collect()
 }
 
 impl<'a> GatherCubes<'a> {
@@ -207,10 +218,13 @@ impl<'a> GatherCubes<'a> {
         let surface = scene.render.edges.surface_depth > 0.0;
         renderer.gather_source = surface;
         renderer.sun_transformed = surface;
+        let cone_res = scene.render.edges.cube_res;
         GatherCubes {
             renderer,
             exclude_radius: lit.medium.min_voxel(),
             rear_half_resolution: true,
+            cones: face_cones(cone_res),
+            cone_res,
         }
     }
 
@@ -247,49 +261,55 @@ impl<'a> GatherCubes<'a> {
 
 impl CubeSource for GatherCubes<'_> {
     /// The front face (local +x, along the viewing ray, where the forward-peaked orders weigh
-    /// most) at full resolution; the five rear faces, whose HG weights are small and smooth, at half
-    /// resolution, each trace filling a 2×2 block (the paper's sampling patterns: rear faces at
-    /// half the front's density).
+    /// most): its central half (a quarter of its pixels) at full resolution, its outer ring at
+    /// half; the five rear faces, whose HG weights are small and smooth, at half resolution, each
+    /// trace filling a 2×2 block (the paper's sampling patterns: rear faces at half the front's
+    /// density, the front's centre densest).
     fn render_cube(&self, req: &CubeRequest) -> CubeImage {
         let mut cube = CubeImage::along(req.res, req.x_axis);
         let res = req.res;
-        let cones: Vec<f32> = CubeImage::face_solid_angles(res).iter().map(|w| (*w as f32).sqrt()).collect();
+        let own;
+        let cones = if res == self.cone_res {
+            &self.cones
+        } else {
+            own = face_cones(res);
+            &own
+        };
         let trace = |d: Vec3, cone: f32| {
             let t0 = self.exclusion_start(req, d);
             self.renderer.trace(req.center + d * t0, d, cone)
         };
-        for j in 0..res {
-            for i in 0..res {
-                let d = cube.direction(0, i, j);
-                let k = cube.index(0, i, j);
-                cube.pixels[k] = trace(d, cones[j * res + i]);
-            }
-        }
+        let pixel = |cube: &mut CubeImage, face: usize, i: usize, j: usize| {
+            let k = cube.index(face, i, j);
+            cube.pixels[k] = trace(cube.direction(face, i, j), cones[j * res + i]);
+        };
         if res < 2 || res % 2 != 0 || !self.rear_half_resolution {
-            for face in 1..6 {
+            for face in 0..6 {
                 for j in 0..res {
                     for i in 0..res {
-                        let d = cube.direction(face, i, j);
-                        let k = cube.index(face, i, j);
-                        cube.pixels[k] = trace(d, cones[j * res + i]);
+                        pixel(&mut cube, face, i, j);
                     }
                 }
             }
             return cube;
         }
         let half = res / 2;
-        for face in 1..6 {
+        // Blocks half/4..3·half/4 on both axes: the front face's central half (its pixels within
+        // about 27° of the ray for res 8).
+        let central = half / 4..half - half / 4;
+        for face in 0..6 {
             for bj in 0..half {
                 for bi in 0..half {
+                    if face == 0 && central.contains(&bi) && central.contains(&bj) {
+                        for (i, j) in block_pixels(bi, bj) {
+                            pixel(&mut cube, face, i, j);
+                        }
+                        continue;
+                    }
                     let local = CubeImage::local_direction(half, face, bi, bj);
                     let d = (cube.axes * local).normalize();
                     let l = trace(d, 2.0 * cones[(2 * bj) * res + 2 * bi]);
-                    for (i, j) in [
-                        (2 * bi, 2 * bj),
-                        (2 * bi + 1, 2 * bj),
-                        (2 * bi, 2 * bj + 1),
-                        (2 * bi + 1, 2 * bj + 1),
-                    ] {
+                    for (i, j) in block_pixels(bi, bj) {
                         let k = cube.index(face, i, j);
                         cube.pixels[k] = l;
                     }
@@ -298,6 +318,16 @@ impl CubeSource for GatherCubes<'_> {
         }
         cube
     }
+}
+
+/// The four pixels of 2×2 block (bi, bj) of a face.
+fn block_pixels(bi: usize, bj: usize) -> [(usize, usize); 4] {
+    [
+        (2 * bi, 2 * bj),
+        (2 * bi + 1, 2 * bj),
+        (2 * bi, 2 * bj + 1),
+        (2 * bi + 1, 2 * bj + 1),
+    ]
 }
 
 /// Shortest compositing step of the final gather (voxels): above a dual cell's diagonal (√3), so
