@@ -139,9 +139,11 @@ fn sun_irradiance(lit: &LitVolume, p: Vec3) -> Rgb {
 /// where the hemicube light of the pass before varies ([`super::refine`]).
 pub const GROUND_COARSE: usize = 4;
 
-/// Relative spread of the four hemicube sums around a ground sample below which the sample's own
-/// hemicube is interpolated from them ([`super::refine`]); the sun's shadow, the sharp part, is
-/// exact at every sample. Measured on the default and evaluation scenes (docs/performance.md).
+/// Spread of the hemicube sums around a ground sample, relative to the largest plus the sample's
+/// own sunlight, below which the sample's hemicube is interpolated from them
+/// ([`super::refine::refine_over`]); the sun's shadow, the sharp part, is exact at every sample.
+/// Measured on the default and evaluation scenes: block MRE ≤ 2.7·10⁻⁴ against every hemicube
+/// traced, 271 of the 1024 hemicubes traced on the default scene (docs/performance.md).
 pub const GROUND_TOLERANCE: f32 = 0.02;
 
 /// Render `opts.ground_samples`² hemicubes of `opts.ground_res` pixels per face edge over
@@ -176,13 +178,14 @@ pub fn render_ground_with(renderer: &CubeRenderer<'_>, ground: &Ground, progress
         Vec3::new(x, y, z)
     };
     progress.begin("ground hemicubes", (n * n) as u64);
-    // The hemicube light (smooth on the ground) adaptively, the sun's shadow at every sample.
-    let (sky, traced) = super::refine::refine(n, GROUND_COARSE, GROUND_TOLERANCE, |a, b| {
+    // The sun's shadow (the sharp part) at every sample, the hemicube light (smooth on the
+    // ground) adaptively, to a tolerance relative to the whole irradiance.
+    let sun: Vec<Rgb> = (0..n * n).into_par_iter().map(|k| sun_irradiance(lit, at(k % n, k / n))).collect();
+    let (sky, traced) = super::refine::refine_over(n, GROUND_COARSE, GROUND_TOLERANCE, &sun, |a, b| {
         progress.advance(1);
         hemicube_sky(renderer, &weights, at(a, b))
     });
     progress.advance((n * n - traced) as u64);
-    let sun: Vec<Rgb> = (0..n * n).into_par_iter().map(|k| sun_irradiance(lit, at(k % n, k / n))).collect();
     progress.end();
     grid.irradiance = sky.iter().zip(&sun).map(|(d, s)| *d + *s).collect();
     out.grid = Some(grid);

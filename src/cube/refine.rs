@@ -33,6 +33,14 @@ fn bracket(i: usize, s: usize, n: usize) -> (usize, usize, f32) {
 /// are interpolated. Returns the values and how many nodes were evaluated. Each pass evaluates
 /// in parallel; the result does not depend on the thread count.
 pub fn refine(n: usize, coarse: usize, tol: f32, f: impl Fn(usize, usize) -> Rgb + Sync) -> (Vec<Rgb>, usize) {
+    refine_over(n, coarse, tol, &vec![Rgb::ZERO; n * n], f)
+}
+
+/// [`refine`] with the spread measured against the brackets' largest value plus `base` at the
+/// node (index a + n·b, ≥ 0): for a field that is added to `base`, the tolerance is relative
+/// to the sum.
+pub fn refine_over(n: usize, coarse: usize, tol: f32, base: &[Rgb], f: impl Fn(usize, usize) -> Rgb + Sync) -> (Vec<Rgb>, usize) {
+    assert_eq!(base.len(), n * n, "one base value per node");
     assert!(coarse.is_power_of_two(), "coarse spacing {coarse} is not a power of two");
     let mut out = vec![Rgb::ZERO; n * n];
     let mut evaluated = 0;
@@ -52,7 +60,7 @@ pub fn refine(n: usize, coarse: usize, tol: f32, f: impl Fn(usize, usize) -> Rgb
                     let ((a0, a1, u), (b0, b1, v)) = (bracket(a, s, n), bracket(b, s, n));
                     let c = [out[a0 + n * b0], out[a1 + n * b0], out[a0 + n * b1], out[a1 + n * b1]];
                     let (lo, hi) = c.iter().fold((c[0], c[0]), |(lo, hi), x| (lo.min(*x), hi.max(*x)));
-                    if (hi - lo).cmple(hi * tol).all() {
+                    if (hi - lo).cmple((hi + base[a + n * b]) * tol).all() {
                         let l = (c[0] * (1.0 - u) + c[1] * u) * (1.0 - v) + (c[2] * (1.0 - u) + c[3] * u) * v;
                         return (l, false);
                     }
@@ -112,5 +120,22 @@ mod tests {
         let (all, evaluated) = refine(n, 1, 0.0, f);
         assert_eq!(evaluated, n * n);
         assert_eq!(all, got);
+    }
+
+    /// Over a large base the same step is within the tolerance: only the coarse nodes are
+    /// evaluated, and every node is within tol × (value + base) of the field.
+    #[test]
+    fn a_base_widens_the_tolerance() {
+        let n = 32;
+        let f = |a: usize, b: usize| Rgb::splat(if a + b < 19 { 1.0 } else { 2.0 });
+        let base = vec![Rgb::splat(100.0); n * n];
+        let (got, evaluated) = refine_over(n, 4, 0.02, &base, f);
+        assert_eq!(evaluated, 9 * 9);
+        for b in 0..n {
+            for a in 0..n {
+                assert!((got[a + n * b] - f(a, b)).abs().max_element() <= 0.02 * 102.0, "({a}, {b})");
+            }
+        }
+        assert!(refine_over(n, 4, 0.02, &vec![Rgb::ZERO; n * n], f).1 > 9 * 9);
     }
 }
