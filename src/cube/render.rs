@@ -18,7 +18,7 @@ use crate::error::{Error, Result};
 use crate::lighting::bins::{DirectionBins, BINS_PER_EDGE, NUM_BINS};
 use crate::lit::pyramid::{Cell, LitPyramid, BLOCK};
 use crate::lit::LitVolume;
-use crate::math::{fast_floor, Rgb, Trilinear, Vec3};
+use crate::math::{Rgb, Trilinear, Vec3};
 use crate::medium::sparse::VoxelField;
 use std::sync::Arc;
 use std::sync::OnceLock;
@@ -364,7 +364,17 @@ impl<'a> CubeRenderer<'a> {
     /// Distance (m) at which a cone of width `cone` is one finest voxel wide: where
     /// [`Self::trace`] leaves the finest level for the next it is twice that.
     pub fn footprint_distance(&self, cone: f32) -> f32 {
-        self.h_min / (cone.max(1e-6) * self.opts.lod_bias.exp2())
+        self.h_min / (cone.max(1e-6) * self.lod_scale())
+    }
+
+    /// 2^`lod_bias`: 1 exactly at the default bias, without a libm call per ray.
+    #[inline]
+    fn lod_scale(&self) -> f32 {
+        if self.opts.lod_bias == 0.0 {
+            1.0
+        } else {
+            self.opts.lod_bias.exp2()
+        }
     }
 
     /// Radiance gathered and transmittance left along `o + t·d` (cone width `cone`) for
@@ -417,7 +427,7 @@ impl<'a> CubeRenderer<'a> {
             .flux
             .as_deref()
             .filter(|f| Arc::ptr_eq(f.rho_i1().index(), self.pyramid.levels[0].cells.index()));
-        let inv_cone = 1.0 / (cone.max(1e-6) * self.opts.lod_bias.exp2());
+        let inv_cone = 1.0 / (cone.max(1e-6) * self.lod_scale());
         let levels = &self.pyramid.levels[..self.levels.min(self.pyramid.levels.len())];
         let nlev = levels.len();
         let masks = &self.masks[..nlev];
@@ -475,7 +485,7 @@ impl<'a> CubeRenderer<'a> {
                 let mut t = ta;
                 while t < tb {
                     let f = ((o + d * (t + nudge)) - origin) * inv_cell;
-                    let bi = Vec3::new(fast_floor(f.x), fast_floor(f.y), fast_floor(f.z));
+                    let bi = f.floor();
                     let next = origin + (bi + Vec3::select(positive, Vec3::ONE, Vec3::ZERO)) * cell;
                     let t_exit = ((next - o) * inv_d).min_element().min(tb).max(t + nudge);
                     // Block indices as integers once; a negative one wraps above the bound.
@@ -486,7 +496,7 @@ impl<'a> CubeRenderer<'a> {
                     );
                     let inside = bx < bd[0] && by < bd[1] && bz < bd[2];
                     if inside && lev.occupancy.max_density[bx + bd[0] * (by + bd[1] * bz)] > 0.0 {
-                        let n = fast_ceil((t_exit - t) / step).max(1.0);
+                        let n = ((t_exit - t) / step).ceil().max(1.0);
                         let len = (t_exit - t) / n;
                         for k in 0..n as u32 {
                             let ts = t + (k as f32 + 0.5) * len;
@@ -571,6 +581,16 @@ impl<'a> CubeRenderer<'a> {
     /// Solid-angle weighted mean over bin `b`'s pixels of `radiance(pixel index, cone width)`.
     pub fn bin_mean(&self, b: usize, radiance: impl Fn(usize, f32) -> Rgb) -> Rgb {
         let res = self.opts.res;
+        if res == BINS_PER_EDGE {
+            // One pixel per bin (the border cubes): its radiance is the mean, and the f64 sums
+            // below would give back the same f32.
+            let (face, i, j) = (
+                b / (BINS_PER_EDGE * BINS_PER_EDGE),
+                b % BINS_PER_EDGE,
+                (b / BINS_PER_EDGE) % BINS_PER_EDGE,
+            );
+            return radiance((face * res + j) * res + i, self.pixels.cone[j * res + i]);
+        }
         let mut acc = [0f64; 3];
         let mut area = 0f64;
         for (face, i, j) in self.pixels.bin_pixels(b) {
@@ -669,12 +689,6 @@ fn occupied_box(lev: &crate::lit::pyramid::Level) -> Option<(Vec3, Vec3)> {
     }
     let cell = lev.voxel_size * BLOCK as f32;
     Some((cell * dims_f(lo), cell * dims_f(hi)))
-}
-
-/// ceil for 0 ≤ x < 2³¹ without a libm call (no SSE4.1 round on the default target).
-#[inline(always)]
-fn fast_ceil(x: f32) -> f32 {
-    -fast_floor(-x)
 }
 
 #[inline]
