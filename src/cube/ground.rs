@@ -141,7 +141,7 @@ pub const GROUND_COARSE: usize = 4;
 
 /// Spread of the hemicube sums around a ground sample, relative to the largest plus the sample's
 /// own sunlight, below which the sample's hemicube is interpolated from them
-/// ([`super::refine::refine_over`]); the sun's shadow, the sharp part, is exact at every sample.
+/// ([`super::refine::refine`]); the sun's shadow, the sharp part, is exact at every sample.
 /// Measured on the default and evaluation scenes: block MRE ≤ 2.7·10⁻⁴ against every hemicube
 /// traced, 271 of the 1024 hemicubes traced on the default scene (docs/performance.md).
 pub const GROUND_TOLERANCE: f32 = 0.02;
@@ -181,7 +181,7 @@ pub fn render_ground_with(renderer: &CubeRenderer<'_>, ground: &Ground, progress
     // The sun's shadow (the sharp part) at every sample, the hemicube light (smooth on the
     // ground) adaptively, to a tolerance relative to the whole irradiance.
     let sun: Vec<Rgb> = (0..n * n).into_par_iter().map(|k| sun_irradiance(lit, at(k % n, k / n))).collect();
-    let (sky, traced) = super::refine::refine_over(n, GROUND_COARSE, GROUND_TOLERANCE, &sun, |a, b| {
+    let (sky, traced) = super::refine::refine(n, GROUND_COARSE, GROUND_TOLERANCE, &sun, |a, b| {
         progress.advance(1);
         hemicube_sky(renderer, &weights, at(a, b))
     });

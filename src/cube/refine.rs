@@ -29,17 +29,12 @@ fn bracket(i: usize, s: usize, n: usize) -> (usize, usize, f32) {
 
 /// `f(a, b)` on every node (a, b) of an n×n grid (index a + n·b), evaluating it on the nodes
 /// of spacing `coarse` (a power of two; 1: everywhere) and, pass by pass, on the finer nodes whose
-/// bracketing nodes differ by more than `tol` × their largest value in some channel; the others
-/// are interpolated. Returns the values and how many nodes were evaluated. Each pass evaluates
-/// in parallel; the result does not depend on the thread count.
-pub fn refine(n: usize, coarse: usize, tol: f32, f: impl Fn(usize, usize) -> Rgb + Sync) -> (Vec<Rgb>, usize) {
-    refine_over(n, coarse, tol, &vec![Rgb::ZERO; n * n], f)
-}
-
-/// [`refine`] with the spread measured against the brackets' largest value plus `base` at the
-/// node (index a + n·b, ≥ 0): for a field that is added to `base`, the tolerance is relative
-/// to the sum.
-pub fn refine_over(n: usize, coarse: usize, tol: f32, base: &[Rgb], f: impl Fn(usize, usize) -> Rgb + Sync) -> (Vec<Rgb>, usize) {
+/// bracketing nodes differ by more than `tol` × (their largest value + `base` at the node) in some
+/// channel; the others are interpolated. `base` (≥ 0, per node): for a field that is added to
+/// it, the tolerance is relative to the sum; zero: relative to the field. Returns the values and
+/// how many nodes were evaluated. Each pass evaluates in parallel; the result does not depend on
+/// the thread count.
+pub fn refine(n: usize, coarse: usize, tol: f32, base: &[Rgb], f: impl Fn(usize, usize) -> Rgb + Sync) -> (Vec<Rgb>, usize) {
     assert_eq!(base.len(), n * n, "one base value per node");
     assert!(coarse.is_power_of_two(), "coarse spacing {coarse} is not a power of two");
     let mut out = vec![Rgb::ZERO; n * n];
@@ -90,8 +85,12 @@ mod tests {
     fn a_gently_linear_field_costs_only_the_coarse_nodes() {
         let f = |a: usize, b: usize| Rgb::new(10.0 + 0.01 * a as f32, 20.0 + 0.02 * b as f32, 30.0 + 0.01 * (a + b) as f32);
         for (n, coarse, nodes) in [(32, 2, 17), (32, 4, 9), (7, 4, 3), (2, 2, 2)] {
-            assert_eq!(refine(n, coarse, 1e-6, f).1, n * n, "n {n} coarse {coarse}");
-            let (got, evaluated) = refine(n, coarse, 0.01, f);
+            assert_eq!(
+                refine(n, coarse, 1e-6, &vec![Rgb::ZERO; n * n], f).1,
+                n * n,
+                "n {n} coarse {coarse}"
+            );
+            let (got, evaluated) = refine(n, coarse, 0.01, &vec![Rgb::ZERO; n * n], f);
             assert_eq!(evaluated, nodes * nodes, "n {n} coarse {coarse}");
             for b in 0..n {
                 for a in 0..n {
@@ -108,16 +107,17 @@ mod tests {
     fn a_step_is_evaluated_where_it_is() {
         let n = 32;
         let f = |a: usize, b: usize| Rgb::splat(if a + b < 19 { 1.0 } else { 5.0 });
-        let (got, evaluated) = refine(n, 4, 0.0, f);
+        let zero = vec![Rgb::ZERO; n * n];
+        let (got, evaluated) = refine(n, 4, 0.0, &zero, f);
         for b in 0..n {
             for a in 0..n {
                 assert_eq!(got[a + n * b], f(a, b), "({a}, {b})");
             }
         }
         assert!(evaluated < n * n / 2, "{evaluated} evaluated");
-        let (_, evaluated) = refine(n, 4, 0.0, |_, _| Rgb::ONE);
+        let (_, evaluated) = refine(n, 4, 0.0, &zero, |_, _| Rgb::ONE);
         assert_eq!(evaluated, 9 * 9);
-        let (all, evaluated) = refine(n, 1, 0.0, f);
+        let (all, evaluated) = refine(n, 1, 0.0, &zero, f);
         assert_eq!(evaluated, n * n);
         assert_eq!(all, got);
     }
@@ -129,13 +129,13 @@ mod tests {
         let n = 32;
         let f = |a: usize, b: usize| Rgb::splat(if a + b < 19 { 1.0 } else { 2.0 });
         let base = vec![Rgb::splat(100.0); n * n];
-        let (got, evaluated) = refine_over(n, 4, 0.02, &base, f);
+        let (got, evaluated) = refine(n, 4, 0.02, &base, f);
         assert_eq!(evaluated, 9 * 9);
         for b in 0..n {
             for a in 0..n {
                 assert!((got[a + n * b] - f(a, b)).abs().max_element() <= 0.02 * 102.0, "({a}, {b})");
             }
         }
-        assert!(refine_over(n, 4, 0.02, &vec![Rgb::ZERO; n * n], f).1 > 9 * 9);
+        assert!(refine(n, 4, 0.02, &vec![Rgb::ZERO; n * n], f).1 > 9 * 9);
     }
 }
