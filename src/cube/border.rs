@@ -172,6 +172,9 @@ pub const SHARED_FOOTPRINTS: f32 = 4.0;
 /// estimates of the bins' means as each voxel's own rays (unit test below); the clear-air stage
 /// runs ~40 % fewer instructions (docs/performance.md).
 pub fn render_border_cubes_with(renderer: &CubeRenderer<'_>, progress: &dyn Progress) -> BorderCubes {
+    let mut uniform = renderer.clone();
+    uniform.uniform_short_levels = true;
+    let renderer = &uniform;
     let lit = renderer.lit;
     let found = find_border_voxels(&lit.medium.density);
     let needed: Vec<BinMask> = found.iter().map(|(_, f)| BinMask::for_faces(*f)).collect();

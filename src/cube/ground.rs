@@ -100,7 +100,12 @@ pub fn hemicube_weights(res: usize) -> Vec<f64> {
 /// Irradiance (W/m²) on an upward-facing ground point `p` from the hemicube plus the sun.
 /// `weights` are [`hemicube_weights`] at the renderer's `opts.res`.
 pub fn hemicube_irradiance(renderer: &CubeRenderer<'_>, weights: &[f64], p: Vec3) -> Rgb {
-    let lit = renderer.lit;
+    hemicube_sky(renderer, weights, p) + sun_irradiance(renderer.lit, p)
+}
+
+/// The hemicube's part of [`hemicube_irradiance`]: Σ L·w over the upper hemisphere's pixels
+/// (cloud and sky, W/m²).
+fn hemicube_sky(renderer: &CubeRenderer<'_>, weights: &[f64], p: Vec3) -> Rgb {
     let res = renderer.opts.res;
     assert_eq!(weights.len(), 6 * res * res, "hemicube weights are for another resolution");
     let mut acc = [0f64; 3];
@@ -117,14 +122,29 @@ pub fn hemicube_irradiance(renderer: &CubeRenderer<'_>, weights: &[f64], p: Vec3
             acc[2] += l.z as f64 * w;
         }
     }
+    Rgb::new(acc[0] as f32, acc[1] as f32, acc[2] as f32)
+}
+
+/// The sun's part of [`hemicube_irradiance`]: E_sun·cosθ_sun·T_sun with the exact transmittance.
+fn sun_irradiance(lit: &LitVolume, p: Vec3) -> Rgb {
     let sun = &lit.sun;
-    let sun_e = if sun.dir.y > 0.0 {
+    if sun.dir.y > 0.0 {
         sun.irradiance * (sun.dir.y * lit.medium.transmittance(p, sun.dir, 0.0, f32::INFINITY))
     } else {
         Rgb::ZERO
-    };
-    Rgb::new(acc[0] as f32, acc[1] as f32, acc[2] as f32) + sun_e
+    }
 }
+
+/// Spacing (samples) of the ground grid's first pass of hemicubes; the finer passes trace only
+/// where the hemicube light of the pass before varies ([`super::refine`]).
+pub const GROUND_COARSE: usize = 4;
+
+/// Spread of the hemicube sums around a ground sample, relative to the largest plus the sample's
+/// own sunlight, below which the sample's hemicube is interpolated from them
+/// ([`super::refine::refine`]); the sun's shadow, the sharp part, is exact at every sample.
+/// Measured on the default and evaluation scenes: block MRE ≤ 2.7·10⁻⁴ against every hemicube
+/// traced, 271 of the 1024 hemicubes traced on the default scene (docs/performance.md).
+pub const GROUND_TOLERANCE: f32 = 0.02;
 
 /// Render `opts.ground_samples`² hemicubes of `opts.ground_res` pixels per face edge over
 /// [`ground_area`] and return the lit ground.
@@ -153,22 +173,21 @@ pub fn render_ground_with(renderer: &CubeRenderer<'_>, ground: &Ground, progress
     };
     // Just above the plane, so upward rays start on the visible side.
     let y = ground.height + 1e-3 * lit.medium.min_voxel();
-    progress.begin("ground hemicubes", n as u64);
-    let rows: Vec<Vec<Rgb>> = (0..n)
-        .into_par_iter()
-        .map(|b| {
-            let row = (0..n)
-                .map(|a| {
-                    let [x, z] = grid.sample_xz(a, b);
-                    hemicube_irradiance(renderer, &weights, Vec3::new(x, y, z))
-                })
-                .collect();
-            progress.advance(1);
-            row
-        })
-        .collect();
+    let at = |a: usize, b: usize| {
+        let [x, z] = grid.sample_xz(a, b);
+        Vec3::new(x, y, z)
+    };
+    progress.begin("ground hemicubes", (n * n) as u64);
+    // The sun's shadow (the sharp part) at every sample, the hemicube light (smooth on the
+    // ground) adaptively, to a tolerance relative to the whole irradiance.
+    let sun: Vec<Rgb> = (0..n * n).into_par_iter().map(|k| sun_irradiance(lit, at(k % n, k / n))).collect();
+    let (sky, traced) = super::refine::refine(n, GROUND_COARSE, GROUND_TOLERANCE, &sun, |a, b| {
+        progress.advance(1);
+        hemicube_sky(renderer, &weights, at(a, b))
+    });
+    progress.advance((n * n - traced) as u64);
     progress.end();
-    grid.irradiance = rows.into_iter().flatten().collect();
+    grid.irradiance = sky.iter().zip(&sun).map(|(d, s)| *d + *s).collect();
     out.grid = Some(grid);
     out
 }

@@ -7,6 +7,7 @@
 pub mod border;
 pub mod ground;
 pub mod image;
+pub mod refine;
 pub mod render;
 pub mod skip;
 
