@@ -143,6 +143,15 @@ impl CellDensity {
         }
     }
 
+    /// The dual cell holding the point at distance `t` along the ray.
+    fn containing(m: &Medium, o: DVec3, d: DVec3, t: f64) -> CellDensity {
+        let v = ((o + d * t) - m.origin.as_dvec3()) / m.voxel_size.as_dvec3();
+        let dims = m.density.dims();
+        // Dual cell c spans voxel coordinates [c − ½, c + ½]; the grid has dims + 1 of them.
+        let cell = std::array::from_fn(|a| ((v[a] + 0.5).floor().max(0.0) as usize).min(dims[a]));
+        CellDensity::new(m, cell)
+    }
+
     /// No density anywhere in the cell (a trilinear blend of zeros).
     fn is_empty(&self) -> bool {
         self.corners.iter().all(|c| *c == 0.0)
@@ -390,10 +399,11 @@ impl RayProfile {
                 let want = target - acc;
                 let sigma_t = m.optics.sigma_t as f64;
                 let r0 = p.rho[0] as f64;
+                let cubic = CellDensity::containing(m, self.o, self.d, 0.5 * (p.t0 + p.t1)).cubic(m, self.o, self.d, p.t0);
                 let below = |t: f64| {
                     // Simpson on [t0, t] is exact: the piece lies in one dual cell.
-                    let rm = rho_at(m, self.o, self.d, 0.5 * (p.t0 + t)) as f64;
-                    let r1 = rho_at(m, self.o, self.d, t) as f64;
+                    let rm = cubic.at(0.5 * (p.t0 + t)) as f64;
+                    let r1 = cubic.at(t) as f64;
                     let tau = sigma_t * (t - p.t0) / 6.0 * (r0 + 4.0 * rm + r1);
                     (tau < want, tau - want)
                 };
