@@ -419,15 +419,21 @@ fn moments_kernel(c: &Ctx, l: &Lanes, block: &mut [f32], f0: usize) {
     let (nsh, ne, nfull) = (c.nsh, c.even, l.nfull);
     let pairs = l.wts.len() / 2;
     let (mut se, mut so) = ([0f32; PAIRS], [0f32; PAIRS]);
+    let (mut wp, mut wm) = ([0f32; PAIRS], [0f32; PAIRS]);
+    for slot in 0..pairs {
+        (wp[slot], wm[slot]) = (l.wts[2 * slot], l.wts[2 * slot + 1]);
+    }
     for (k, acc) in block.chunks_exact_mut(3 * nsh).enumerate() {
         let f = f0 + k;
+        // The voxel's radiances in the batch's ordinates, each read once for its three bands.
+        let (mut rp, mut rm) = ([[0f32; 3]; PAIRS], [[0f32; 3]; PAIRS]);
+        for slot in 0..pairs {
+            (rp[slot], rm[slot]) = (l.radiance[2 * slot * nfull + f], l.radiance[(2 * slot + 1) * nfull + f]);
+        }
         for band in 0..3 {
-            for (slot, (e, o)) in se[..pairs].iter_mut().zip(&mut so[..pairs]).enumerate() {
-                let (ip, im) = (
-                    l.wts[2 * slot] * l.radiance[2 * slot * nfull + f][band],
-                    l.wts[2 * slot + 1] * l.radiance[(2 * slot + 1) * nfull + f][band],
-                );
-                (*e, *o) = (ip + im, ip - im);
+            for slot in 0..pairs {
+                let (ip, im) = (wp[slot] * rp[slot][band], wm[slot] * rm[slot][band]);
+                (se[slot], so[slot]) = (ip + im, ip - im);
             }
             let a = &mut acc[band * nsh..(band + 1) * nsh];
             let nbe = ne.div_ceil(8);
@@ -690,13 +696,19 @@ fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], g
         v[cc] = pc + c.lo[cc] as isize;
         v
     };
-    // The ghost cells of plane pa (all of it when `whole`, the ring otherwise): what enters the
-    // box there.
+    // The ghost cells of plane pa (all of it when `whole`; otherwise the ring's row and column on
+    // the upwind side, the only ones the cells read: the upwind floor is −1 or 0 per cross
+    // axis): what enters the box there.
+    let (ring_b, ring_c) = (if fb < 0 { -1 } else { nb as isize }, if fc < 0 { -1 } else { nc as isize });
     let fill_ghosts = |pa: isize, whole: bool, buf: &mut [PlaneCell]| {
         for ic in -1..=nc as isize {
-            let ring = ic < 0 || ic == nc as isize;
-            let step = if ring || whole { 1 } else { nb + 1 };
-            for ib in (-1..=nb as isize).step_by(step) {
+            let row = whole || ic == ring_c;
+            let ibs: &mut dyn Iterator<Item = isize> = if row {
+                &mut (-1..=nb as isize)
+            } else {
+                &mut std::iter::once(ring_b)
+            };
+            for ib in ibs {
                 let v = coord(pa, ib, ic);
                 buf[(ib + 1) as usize + stride * (ic + 1) as usize] =
                     PlaneCell::new(c.boundary(om, v[0], v[1], v[2], ground, skyr), 0.0, [0.0; 3]);
@@ -704,12 +716,27 @@ fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], g
         }
     };
     let first = if oa > 0.0 { -1 } else { na as isize };
-    fill_ghosts(first, true, &mut prev);
+    let sky_only = !(c.ground_height.is_some() && om.y > 0.0);
+    if sky_only {
+        // Without a ground seen upwards every ghost cell holds the sky ([`Ctx::boundary`]): fill
+        // both buffers once (the cells write only the interior).
+        let ghost = PlaneCell::new([skyr.x, skyr.y, skyr.z], 0.0, [0.0; 3]);
+        prev.fill(ghost);
+        cur.fill(ghost);
+    } else {
+        fill_ghosts(first, true, &mut prev);
+    }
     // Offset of the upwind (0, 0) neighbour from a cell in the plane buffer.
     let up = fb + fc * stride as isize;
+    // The unchecked indexing below relies on these: the box's full voxels index `src` and
+    // `radiance` ([`box_cells`] takes them from `full`, which numbers the voxels of `voxels`),
+    // and a cell's four upwind records lie in the plane buffer (checked per plane below).
+    assert!(src.len() == c.voxels.len() && radiance.len() == c.voxels.len() && cells.len() == na * nb * nc);
+    assert!(prev.len() == stride * (nc + 2) && cur.len() == prev.len() && (-1..=0).contains(&fb) && (-1..=0).contains(&fc));
     for step in 0..na {
         let pa = if oa > 0.0 { step } else { na - 1 - step };
         let plane = &cells[pa * nb * nc..(pa + 1) * nb * nc];
+        debug_assert!(plane.iter().all(|&(_, f)| f == u32::MAX || (f as usize) < src.len()));
         for (ic, row) in plane.chunks_exact(nb).enumerate() {
             let l0 = stride * (ic + 1) + 1;
             for (ib, &(rho, fi)) in row.iter().enumerate() {
@@ -722,15 +749,30 @@ fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], g
                     }
                 }
                 let l = l0 + ib;
+                // l = stride (ic + 1) + ib + 1 with ib < nb, ic < nc and up = fb + fc stride with
+                // fb, fc in {−1, 0}: u ≥ stride ic + ib ≥ 0 and u + stride + 1 < stride (nc + 2).
                 let u = (l as isize + up) as usize;
-                let (n0, n1, n2, n3) = (&prev[u].0, &prev[u + 1].0, &prev[u + stride].0, &prev[u + stride + 1].0);
+                // SAFETY: the bounds above (asserted before the planes).
+                let (n0, n1, n2, n3) = unsafe {
+                    (
+                        &prev.get_unchecked(u).0,
+                        &prev.get_unchecked(u + 1).0,
+                        &prev.get_unchecked(u + stride).0,
+                        &prev.get_unchecked(u + stride + 1).0,
+                    )
+                };
                 // Radiance and density bilinear; the source (per unit extinction, defined only
                 // where ρ > 0) density-weighted, so that empty neighbours do not pull it
                 // towards 0 (a uniform source stays uniform: the furnace holds). One expression
                 // per lane (from 0, the neighbours in order) so it compiles to whole-record
                 // arithmetic without copies of the records.
                 let (n, full) = ([n0, n1, n2, n3], fi != u32::MAX);
-                let sc = if full { src[fi as usize] } else { [0f32; 3] };
+                // SAFETY: a full cell's index is below src.len() (asserted above).
+                let sc = if full {
+                    unsafe { *src.get_unchecked(fi as usize) }
+                } else {
+                    [0f32; 3]
+                };
                 #[cfg(not(target_arch = "x86_64"))]
                 let (out, rec) = cell(c, bilinear(&wts, n), rho, sc, full, s);
                 // SAFETY (both): `AVX` is true only in the copy compiled for (and run on) AVX.
@@ -742,9 +784,12 @@ fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], g
                 } else {
                     cell(c, bilinear(&wts, n), rho, sc, full, s)
                 };
-                cur[l] = rec;
-                if full {
-                    radiance[fi as usize] = out;
+                // SAFETY: l ≤ u + stride + 1 and radiance.len() == src.len() (asserted above).
+                unsafe {
+                    *cur.get_unchecked_mut(l) = rec;
+                    if full {
+                        *radiance.get_unchecked_mut(fi as usize) = out;
+                    }
                 }
             }
         }
@@ -779,7 +824,9 @@ fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], g
             }
         }
         std::mem::swap(&mut prev, &mut cur);
-        fill_ghosts(pa, false, &mut prev);
+        if !sky_only {
+            fill_ghosts(pa, false, &mut prev);
+        }
     }
     splats
 }
