@@ -419,21 +419,15 @@ fn moments_kernel(c: &Ctx, l: &Lanes, block: &mut [f32], f0: usize) {
     let (nsh, ne, nfull) = (c.nsh, c.even, l.nfull);
     let pairs = l.wts.len() / 2;
     let (mut se, mut so) = ([0f32; PAIRS], [0f32; PAIRS]);
-    let (mut wp, mut wm) = ([0f32; PAIRS], [0f32; PAIRS]);
-    for slot in 0..pairs {
-        (wp[slot], wm[slot]) = (l.wts[2 * slot], l.wts[2 * slot + 1]);
-    }
     for (k, acc) in block.chunks_exact_mut(3 * nsh).enumerate() {
         let f = f0 + k;
-        // The voxel's radiances in the batch's ordinates, each read once for its three bands.
-        let (mut rp, mut rm) = ([[0f32; 3]; PAIRS], [[0f32; 3]; PAIRS]);
-        for slot in 0..pairs {
-            (rp[slot], rm[slot]) = (l.radiance[2 * slot * nfull + f], l.radiance[(2 * slot + 1) * nfull + f]);
-        }
         for band in 0..3 {
-            for slot in 0..pairs {
-                let (ip, im) = (wp[slot] * rp[slot][band], wm[slot] * rm[slot][band]);
-                (se[slot], so[slot]) = (ip + im, ip - im);
+            for (slot, (e, o)) in se[..pairs].iter_mut().zip(&mut so[..pairs]).enumerate() {
+                let (ip, im) = (
+                    l.wts[2 * slot] * l.radiance[2 * slot * nfull + f][band],
+                    l.wts[2 * slot + 1] * l.radiance[(2 * slot + 1) * nfull + f][band],
+                );
+                (*e, *o) = (ip + im, ip - im);
             }
             let a = &mut acc[band * nsh..(band + 1) * nsh];
             let nbe = ne.div_ceil(8);
@@ -518,10 +512,11 @@ fn cross_axes(a: usize) -> (usize, usize) {
 
 /// The swept box's cells (density, full-voxel index or `u32::MAX`) in the order a sweep along
 /// major axis `a` visits them: planes of a, rows of the second cross axis, cells of the first;
-/// so the sweeps read them contiguously whichever axis they run along.
+/// so the sweeps read them contiguously whichever axis they run along. [`PREFETCH_AHEAD`] empty
+/// cells follow the last, so that the sweep's look-ahead never runs off the end.
 fn box_cells(dims: [usize; 3], lo: [usize; 3], n: [usize; 3], rho: &[f32], full: &[u32], a: usize) -> Vec<(f32, u32)> {
     let (b, cc) = cross_axes(a);
-    let mut out = Vec::with_capacity(n[0] * n[1] * n[2]);
+    let mut out = Vec::with_capacity(n[0] * n[1] * n[2] + PREFETCH_AHEAD);
     for pa in 0..n[a] {
         for ic in 0..n[cc] {
             for ib in 0..n[b] {
@@ -534,6 +529,7 @@ fn box_cells(dims: [usize; 3], lo: [usize; 3], n: [usize; 3], rho: &[f32], full:
             }
         }
     }
+    out.extend([(0.0, u32::MAX); PREFETCH_AHEAD]);
     out
 }
 
@@ -702,12 +698,7 @@ fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], g
     let (ring_b, ring_c) = (if fb < 0 { -1 } else { nb as isize }, if fc < 0 { -1 } else { nc as isize });
     let fill_ghosts = |pa: isize, whole: bool, buf: &mut [PlaneCell]| {
         for ic in -1..=nc as isize {
-            let row = whole || ic == ring_c;
-            let ibs: &mut dyn Iterator<Item = isize> = if row {
-                &mut (-1..=nb as isize)
-            } else {
-                &mut std::iter::once(ring_b)
-            };
+            let ibs = if whole || ic == ring_c { -1..=nb as isize } else { ring_b..=ring_b };
             for ib in ibs {
                 let v = coord(pa, ib, ic);
                 buf[(ib + 1) as usize + stride * (ic + 1) as usize] =
@@ -731,22 +722,23 @@ fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], g
     // The unchecked indexing below relies on these: the box's full voxels index `src` and
     // `radiance` ([`box_cells`] takes them from `full`, which numbers the voxels of `voxels`),
     // and a cell's four upwind records lie in the plane buffer (checked per plane below).
-    assert!(src.len() == c.voxels.len() && radiance.len() == c.voxels.len() && cells.len() == na * nb * nc);
+    assert!(src.len() == c.voxels.len() && radiance.len() == c.voxels.len() && cells.len() == na * nb * nc + PREFETCH_AHEAD);
     assert!(prev.len() == stride * (nc + 2) && cur.len() == prev.len() && (-1..=0).contains(&fb) && (-1..=0).contains(&fc));
     for step in 0..na {
         let pa = if oa > 0.0 { step } else { na - 1 - step };
         let plane = &cells[pa * nb * nc..(pa + 1) * nb * nc];
         debug_assert!(plane.iter().all(|&(_, f)| f == u32::MAX || (f as usize) < src.len()));
-        for (ic, row) in plane.chunks_exact(nb).enumerate() {
+        // The cells PREFETCH_AHEAD further on (past the plane's end: the next plane's, or the
+        // padding).
+        let ahead = &cells[pa * nb * nc + PREFETCH_AHEAD..][..nb * nc];
+        for (ic, (row, row_ahead)) in plane.chunks_exact(nb).zip(ahead.chunks_exact(nb)).enumerate() {
             let l0 = stride * (ic + 1) + 1;
-            for (ib, &(rho, fi)) in row.iter().enumerate() {
+            for (ib, (&(rho, fi), &(_, fa))) in row.iter().zip(row_ahead).enumerate() {
                 // The full voxels' sources and radiances lie a grid row apart in x-major sweeps
                 // (past the L2 cache on large boxes): ask for the lines a few cells ahead.
-                if let Some(&(_, fa)) = plane.get(ic * nb + ib + PREFETCH_AHEAD) {
-                    if fa != u32::MAX {
-                        prefetch(src.as_ptr().wrapping_add(fa as usize));
-                        prefetch(radiance.as_ptr().wrapping_add(fa as usize));
-                    }
+                if fa != u32::MAX {
+                    prefetch(src.as_ptr().wrapping_add(fa as usize));
+                    prefetch(radiance.as_ptr().wrapping_add(fa as usize));
                 }
                 let l = l0 + ib;
                 // l = stride (ic + 1) + ib + 1 with ib < nb, ic < nc and up = fb + fc stride with
