@@ -719,9 +719,10 @@ fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], g
     }
     // Offset of the upwind (0, 0) neighbour from a cell in the plane buffer.
     let up = fb + fc * stride as isize;
-    // The unchecked indexing below relies on these: the box's full voxels index `src` and
-    // `radiance` ([`box_cells`] takes them from `full`, which numbers the voxels of `voxels`),
-    // and a cell's four upwind records lie in the plane buffer (checked per plane below).
+    // The unchecked indexing below relies on these: a cell's four upwind records lie in the
+    // plane buffer (its size and the upwind floors asserted here), and the box's full voxels
+    // index `src` and `radiance` ([`box_cells`] takes them from `full`, which numbers the voxels
+    // of `voxels`; checked per plane in debug builds).
     assert!(src.len() == c.voxels.len() && radiance.len() == c.voxels.len() && cells.len() == na * nb * nc + PREFETCH_AHEAD);
     assert!(prev.len() == stride * (nc + 2) && cur.len() == prev.len() && (-1..=0).contains(&fb) && (-1..=0).contains(&fc));
     for step in 0..na {
