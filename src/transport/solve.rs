@@ -512,10 +512,11 @@ fn cross_axes(a: usize) -> (usize, usize) {
 
 /// The swept box's cells (density, full-voxel index or `u32::MAX`) in the order a sweep along
 /// major axis `a` visits them: planes of a, rows of the second cross axis, cells of the first;
-/// so the sweeps read them contiguously whichever axis they run along.
+/// so the sweeps read them contiguously whichever axis they run along. [`PREFETCH_AHEAD`] empty
+/// cells follow the last, so that the sweep's look-ahead never runs off the end.
 fn box_cells(dims: [usize; 3], lo: [usize; 3], n: [usize; 3], rho: &[f32], full: &[u32], a: usize) -> Vec<(f32, u32)> {
     let (b, cc) = cross_axes(a);
-    let mut out = Vec::with_capacity(n[0] * n[1] * n[2]);
+    let mut out = Vec::with_capacity(n[0] * n[1] * n[2] + PREFETCH_AHEAD);
     for pa in 0..n[a] {
         for ic in 0..n[cc] {
             for ib in 0..n[b] {
@@ -528,6 +529,7 @@ fn box_cells(dims: [usize; 3], lo: [usize; 3], n: [usize; 3], rho: &[f32], full:
             }
         }
     }
+    out.extend([(0.0, u32::MAX); PREFETCH_AHEAD]);
     out
 }
 
@@ -690,13 +692,14 @@ fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], g
         v[cc] = pc + c.lo[cc] as isize;
         v
     };
-    // The ghost cells of plane pa (all of it when `whole`, the ring otherwise): what enters the
-    // box there.
+    // The ghost cells of plane pa (all of it when `whole`; otherwise the ring's row and column on
+    // the upwind side, the only ones the cells read: the upwind floor is −1 or 0 per cross
+    // axis): what enters the box there.
+    let (ring_b, ring_c) = (if fb < 0 { -1 } else { nb as isize }, if fc < 0 { -1 } else { nc as isize });
     let fill_ghosts = |pa: isize, whole: bool, buf: &mut [PlaneCell]| {
         for ic in -1..=nc as isize {
-            let ring = ic < 0 || ic == nc as isize;
-            let step = if ring || whole { 1 } else { nb + 1 };
-            for ib in (-1..=nb as isize).step_by(step) {
+            let ibs = if whole || ic == ring_c { -1..=nb as isize } else { ring_b..=ring_b };
+            for ib in ibs {
                 let v = coord(pa, ib, ic);
                 buf[(ib + 1) as usize + stride * (ic + 1) as usize] =
                     PlaneCell::new(c.boundary(om, v[0], v[1], v[2], ground, skyr), 0.0, [0.0; 3]);
@@ -704,33 +707,65 @@ fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], g
         }
     };
     let first = if oa > 0.0 { -1 } else { na as isize };
-    fill_ghosts(first, true, &mut prev);
+    let sky_only = !(c.ground_height.is_some() && om.y > 0.0);
+    if sky_only {
+        // Without a ground seen upwards every ghost cell holds the sky ([`Ctx::boundary`]): fill
+        // both buffers once (the cells write only the interior).
+        let ghost = PlaneCell::new([skyr.x, skyr.y, skyr.z], 0.0, [0.0; 3]);
+        prev.fill(ghost);
+        cur.fill(ghost);
+    } else {
+        fill_ghosts(first, true, &mut prev);
+    }
     // Offset of the upwind (0, 0) neighbour from a cell in the plane buffer.
     let up = fb + fc * stride as isize;
+    // The unchecked indexing below relies on these: a cell's four upwind records lie in the
+    // plane buffer (its size and the upwind floors asserted here), and the box's full voxels
+    // index `src` and `radiance` ([`box_cells`] takes them from `full`, which numbers the voxels
+    // of `voxels`; checked per plane in debug builds).
+    assert!(src.len() == c.voxels.len() && radiance.len() == c.voxels.len() && cells.len() == na * nb * nc + PREFETCH_AHEAD);
+    assert!(prev.len() == stride * (nc + 2) && cur.len() == prev.len() && (-1..=0).contains(&fb) && (-1..=0).contains(&fc));
     for step in 0..na {
         let pa = if oa > 0.0 { step } else { na - 1 - step };
         let plane = &cells[pa * nb * nc..(pa + 1) * nb * nc];
-        for (ic, row) in plane.chunks_exact(nb).enumerate() {
+        debug_assert!(plane.iter().all(|&(_, f)| f == u32::MAX || (f as usize) < src.len()));
+        // The cells PREFETCH_AHEAD further on (past the plane's end: the next plane's, or the
+        // padding).
+        let ahead = &cells[pa * nb * nc + PREFETCH_AHEAD..][..nb * nc];
+        for (ic, (row, row_ahead)) in plane.chunks_exact(nb).zip(ahead.chunks_exact(nb)).enumerate() {
             let l0 = stride * (ic + 1) + 1;
-            for (ib, &(rho, fi)) in row.iter().enumerate() {
+            for (ib, (&(rho, fi), &(_, fa))) in row.iter().zip(row_ahead).enumerate() {
                 // The full voxels' sources and radiances lie a grid row apart in x-major sweeps
                 // (past the L2 cache on large boxes): ask for the lines a few cells ahead.
-                if let Some(&(_, fa)) = plane.get(ic * nb + ib + PREFETCH_AHEAD) {
-                    if fa != u32::MAX {
-                        prefetch(src.as_ptr().wrapping_add(fa as usize));
-                        prefetch(radiance.as_ptr().wrapping_add(fa as usize));
-                    }
+                if fa != u32::MAX {
+                    prefetch(src.as_ptr().wrapping_add(fa as usize));
+                    prefetch(radiance.as_ptr().wrapping_add(fa as usize));
                 }
                 let l = l0 + ib;
+                // l = stride (ic + 1) + ib + 1 with ib < nb, ic < nc and up = fb + fc stride with
+                // fb, fc in {−1, 0}: u ≥ stride ic + ib ≥ 0 and u + stride + 1 < stride (nc + 2).
                 let u = (l as isize + up) as usize;
-                let (n0, n1, n2, n3) = (&prev[u].0, &prev[u + 1].0, &prev[u + stride].0, &prev[u + stride + 1].0);
+                // SAFETY: the bounds above (asserted before the planes).
+                let (n0, n1, n2, n3) = unsafe {
+                    (
+                        &prev.get_unchecked(u).0,
+                        &prev.get_unchecked(u + 1).0,
+                        &prev.get_unchecked(u + stride).0,
+                        &prev.get_unchecked(u + stride + 1).0,
+                    )
+                };
                 // Radiance and density bilinear; the source (per unit extinction, defined only
                 // where ρ > 0) density-weighted, so that empty neighbours do not pull it
                 // towards 0 (a uniform source stays uniform: the furnace holds). One expression
                 // per lane (from 0, the neighbours in order) so it compiles to whole-record
                 // arithmetic without copies of the records.
                 let (n, full) = ([n0, n1, n2, n3], fi != u32::MAX);
-                let sc = if full { src[fi as usize] } else { [0f32; 3] };
+                // SAFETY: a full cell's index is below src.len() (asserted above).
+                let sc = if full {
+                    unsafe { *src.get_unchecked(fi as usize) }
+                } else {
+                    [0f32; 3]
+                };
                 #[cfg(not(target_arch = "x86_64"))]
                 let (out, rec) = cell(c, bilinear(&wts, n), rho, sc, full, s);
                 // SAFETY (both): `AVX` is true only in the copy compiled for (and run on) AVX.
@@ -742,9 +777,12 @@ fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], g
                 } else {
                     cell(c, bilinear(&wts, n), rho, sc, full, s)
                 };
-                cur[l] = rec;
-                if full {
-                    radiance[fi as usize] = out;
+                // SAFETY: l ≤ u + stride + 1 and radiance.len() == src.len() (asserted above).
+                unsafe {
+                    *cur.get_unchecked_mut(l) = rec;
+                    if full {
+                        *radiance.get_unchecked_mut(fi as usize) = out;
+                    }
                 }
             }
         }
@@ -779,7 +817,9 @@ fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], g
             }
         }
         std::mem::swap(&mut prev, &mut cur);
-        fill_ghosts(pa, false, &mut prev);
+        if !sky_only {
+            fill_ghosts(pa, false, &mut prev);
+        }
     }
     splats
 }
