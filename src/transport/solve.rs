@@ -513,8 +513,10 @@ fn cross_axes(a: usize) -> (usize, usize) {
 /// The swept box's cells (density, full-voxel index or `u32::MAX`) in the order a sweep along
 /// major axis `a` visits them: planes of a, rows of the second cross axis, cells of the first;
 /// so the sweeps read them contiguously whichever axis they run along. [`PREFETCH_AHEAD`] empty
-/// cells follow the last, so that the sweep's look-ahead never runs off the end.
-fn box_cells(dims: [usize; 3], lo: [usize; 3], n: [usize; 3], rho: &[f32], full: &[u32], a: usize) -> Vec<(f32, u32)> {
+/// cells follow the last, so that the sweep's look-ahead never runs off the end. Every index is
+/// checked below `voxels` (the number of full voxels) here, once per solve: the sweeps index the
+/// sources and radiances by it unchecked.
+fn box_cells(dims: [usize; 3], lo: [usize; 3], n: [usize; 3], rho: &[f32], full: &[u32], voxels: usize, a: usize) -> Vec<(f32, u32)> {
     let (b, cc) = cross_axes(a);
     let mut out = Vec::with_capacity(n[0] * n[1] * n[2] + PREFETCH_AHEAD);
     for pa in 0..n[a] {
@@ -525,6 +527,10 @@ fn box_cells(dims: [usize; 3], lo: [usize; 3], n: [usize; 3], rho: &[f32], full:
                 v[b] += ib;
                 v[cc] += ic;
                 let vi = v[0] + dims[0] * (v[1] + dims[1] * v[2]);
+                assert!(
+                    full[vi] == u32::MAX || (full[vi] as usize) < voxels,
+                    "full-voxel index out of range"
+                );
                 out.push((rho[vi], full[vi]));
             }
         }
@@ -721,14 +727,12 @@ fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], g
     let up = fb + fc * stride as isize;
     // The unchecked indexing below relies on these: a cell's four upwind records lie in the
     // plane buffer (its size and the upwind floors asserted here), and the box's full voxels
-    // index `src` and `radiance` ([`box_cells`] takes them from `full`, which numbers the voxels
-    // of `voxels`; checked per plane in debug builds).
+    // index `src` and `radiance` ([`box_cells`] checked each below `voxels.len()`).
     assert!(src.len() == c.voxels.len() && radiance.len() == c.voxels.len() && cells.len() == na * nb * nc + PREFETCH_AHEAD);
     assert!(prev.len() == stride * (nc + 2) && cur.len() == prev.len() && (-1..=0).contains(&fb) && (-1..=0).contains(&fc));
     for step in 0..na {
         let pa = if oa > 0.0 { step } else { na - 1 - step };
         let plane = &cells[pa * nb * nc..(pa + 1) * nb * nc];
-        debug_assert!(plane.iter().all(|&(_, f)| f == u32::MAX || (f as usize) < src.len()));
         // The cells PREFETCH_AHEAD further on (past the plane's end: the next plane's, or the
         // padding).
         let ahead = &cells[pa * nb * nc + PREFETCH_AHEAD..][..nb * nc];
@@ -760,7 +764,7 @@ fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], g
                 // per lane (from 0, the neighbours in order) so it compiles to whole-record
                 // arithmetic without copies of the records.
                 let (n, full) = ([n0, n1, n2, n3], fi != u32::MAX);
-                // SAFETY: a full cell's index is below src.len() (asserted above).
+                // SAFETY: a full cell's index is below voxels.len() = src.len() (asserted in box_cells and above).
                 let sc = if full {
                     unsafe { *src.get_unchecked(fi as usize) }
                 } else {
@@ -1066,7 +1070,7 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         even,
         voxels: &full_vox,
         sun_t: &sun_t,
-        cells: [0, 1, 2].map(|a| box_cells(dims, lo, n, rho, &full, a)),
+        cells: [0, 1, 2].map(|a| box_cells(dims, lo, n, rho, &full, full_vox.len(), a)),
         sigma_t: [0, 1, 2].map(|b| bands[b].sigma_t as f32),
         grey: bands[0].sigma_t == bands[1].sigma_t && bands[1].sigma_t == bands[2].sigma_t,
         sky,
@@ -1213,7 +1217,7 @@ mod tests {
             even,
             voxels: &voxels,
             sun_t: &sun_t,
-            cells: [0, 1, 2].map(|a| box_cells(dims, [0; 3], dims, &rho, &full, a)),
+            cells: [0, 1, 2].map(|a| box_cells(dims, [0; 3], dims, &rho, &full, voxels.len(), a)),
             sigma_t: [0.05, 0.06, 0.07],
             grey: false,
             sky: &sky,
