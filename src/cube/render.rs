@@ -18,7 +18,7 @@ use crate::error::{Error, Result};
 use crate::lighting::bins::{DirectionBins, BINS_PER_EDGE, NUM_BINS};
 use crate::lit::pyramid::{Cell, LitPyramid, BLOCK};
 use crate::lit::LitVolume;
-use crate::math::{Rgb, Trilinear, Vec3};
+use crate::math::{small_int, Rgb, Trilinear, Vec3};
 use crate::medium::sparse::VoxelField;
 use std::sync::Arc;
 use std::sync::OnceLock;
@@ -479,7 +479,6 @@ impl<'a> CubeRenderer<'a> {
                 if ta >= tb {
                     continue;
                 }
-                let dims = dims_f(lev.dims);
                 let step = self.opts.step_level_voxels * lev.voxel_size.min_element();
                 let inv_vs = Vec3::ONE / lev.voxel_size;
                 let cell = lev.voxel_size * BLOCK as f32;
@@ -503,10 +502,11 @@ impl<'a> CubeRenderer<'a> {
                         let next = origin + (bi + Vec3::select(positive, Vec3::ONE, Vec3::ZERO)) * cell;
                         let t_exit = ((next - o) * inv_d).min_element().min(tb).max(t + nudge);
                         // Block indices as integers once; a negative one wraps above the bound.
+                        // Within a nudge of the level's occupied box they are far below 2²².
                         let (bx, by, bz) = (
-                            bi.x as i32 as u32 as usize,
-                            bi.y as i32 as u32 as usize,
-                            bi.z as i32 as u32 as usize,
+                            small_int(bi.x) as u32 as usize,
+                            small_int(bi.y) as u32 as usize,
+                            small_int(bi.z) as u32 as usize,
                         );
                         let inside = bx < bd[0] && by < bd[1] && bz < bd[2];
                         (t_exit, inside && lev.occupancy.max_density[bx + bd[0] * (by + bd[1] * bz)] > 0.0)
@@ -517,10 +517,7 @@ impl<'a> CubeRenderer<'a> {
                         for k in 0..n as u32 {
                             let ts = t + (k as f32 + 0.5) * len;
                             let v = ((o + d * ts) - origin) * inv_vs;
-                            if v.min_element() < 0.0 || v.cmpgt(dims).any() {
-                                continue;
-                            }
-                            // An empty dual cell samples to ρ = 0: no blend there.
+                            // Outside the level's box or in an empty dual cell ρ = 0: no blend there.
                             let Some((c, slots)) = masks[li].sample_slots(lev, v) else {
                                 continue;
                             };
