@@ -18,7 +18,7 @@ use crate::error::{Error, Result};
 use crate::lighting::bins::{DirectionBins, BINS_PER_EDGE, NUM_BINS};
 use crate::lit::pyramid::{Cell, LitPyramid, BLOCK};
 use crate::lit::LitVolume;
-use crate::math::{Rgb, Trilinear, Vec3};
+use crate::math::{small_int, Rgb, Trilinear, Vec3};
 use crate::medium::sparse::VoxelField;
 use std::sync::Arc;
 use std::sync::OnceLock;
@@ -287,6 +287,8 @@ pub struct CubeRenderer<'a> {
     /// walks a level's blocks only inside it, and misses every level outside their union.
     occupied: Arc<Vec<Option<(Vec3, Vec3)>>>,
     occupied_union: Option<(Vec3, Vec3)>,
+    /// Per level used, its march constants, computed once instead of per ray and level.
+    walk: Arc<Vec<LevelWalk>>,
     /// The options.
     pub opts: CubeOptions,
     /// Pixel tables at `opts.res`.
@@ -326,6 +328,14 @@ impl<'a> CubeRenderer<'a> {
             .collect();
         let occupied_union = occupied.iter().flatten().copied().reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)));
         let occupied = Arc::new(occupied);
+        let h_min = lit.medium.min_voxel();
+        let walk = Arc::new(
+            pyramid.levels[..levels]
+                .iter()
+                .enumerate()
+                .map(|(li, lev)| LevelWalk::new(lev, li, h_min))
+                .collect(),
+        );
         CubeRenderer {
             lit,
             pyramid,
@@ -333,9 +343,10 @@ impl<'a> CubeRenderer<'a> {
             masks,
             occupied,
             occupied_union,
+            walk,
             opts: opts.clone(),
             pixels: PixelTable::new(opts.res),
-            h_min: lit.medium.min_voxel(),
+            h_min,
             gather_source: false,
             sun_transformed: false,
             uniform_short_levels: false,
@@ -436,6 +447,7 @@ impl<'a> CubeRenderer<'a> {
         let levels = &self.pyramid.levels[..self.levels.min(self.pyramid.levels.len())];
         let nlev = levels.len();
         let masks = &self.masks[..nlev];
+        let walk = &self.walk[..nlev];
         let origin = self.pyramid.origin;
         // Components of d below 1e-20 are nudged so the slab and block arithmetic stay finite.
         let dn = Vec3::select(d.abs().cmplt(Vec3::splat(1e-20)), Vec3::splat(1e-20), d);
@@ -454,11 +466,8 @@ impl<'a> CubeRenderer<'a> {
         let mut l = Rgb::ZERO;
         if t_box0 < t_box1 {
             'levels: for (li, lev) in levels.iter().enumerate() {
-                let ts = if li == 0 {
-                    0.0
-                } else {
-                    self.h_min * (1u32 << li) as f32 * inv_cone
-                };
+                let lw = &walk[li];
+                let ts = if li == 0 { 0.0 } else { lw.reach * inv_cone };
                 // Levels lie in order of distance: none after one starting beyond the ray's end.
                 if ts >= t_box1.min(span.end) {
                     break;
@@ -466,7 +475,7 @@ impl<'a> CubeRenderer<'a> {
                 let te = if li + 1 == nlev {
                     f32::INFINITY
                 } else {
-                    self.h_min * (1u32 << (li + 1)) as f32 * inv_cone
+                    walk[li + 1].reach * inv_cone
                 };
                 if te <= span.start {
                     continue;
@@ -479,19 +488,15 @@ impl<'a> CubeRenderer<'a> {
                 if ta >= tb {
                     continue;
                 }
-                let dims = dims_f(lev.dims);
-                let step = self.opts.step_level_voxels * lev.voxel_size.min_element();
-                let inv_vs = Vec3::ONE / lev.voxel_size;
-                let cell = lev.voxel_size * BLOCK as f32;
-                let inv_cell = Vec3::ONE / cell;
-                let nudge = 1e-3 * cell.min_element();
+                let step = self.opts.step_level_voxels * lw.voxel_min;
+                let (inv_vs, cell, inv_cell, nudge) = (lw.inv_voxel, lw.cell, lw.inv_cell, lw.nudge);
                 let bd = lev.occupancy.dims;
                 // A coarse level's span of at most two blocks in one go (the dual-cell bits still
                 // skip empty samples): no block walk, and no extra samples where blocks cut it
                 // short. Level 0 keeps the walk: there those extra samples near the cube's centre
                 // matter (uniform there, the border bins err 13 % more than own rays against 16
                 // rays per bin, unit test in border.rs; 4 % with level 0 walked).
-                let whole = self.uniform_short_levels && li > 0 && tb - ta <= 2.0 * cell.min_element();
+                let whole = self.uniform_short_levels && li > 0 && tb - ta <= lw.two_cells;
                 // Walk the occupancy blocks (f32 Amanatides–Woo, each block located afresh).
                 let mut t = ta;
                 while t < tb {
@@ -503,10 +508,11 @@ impl<'a> CubeRenderer<'a> {
                         let next = origin + (bi + Vec3::select(positive, Vec3::ONE, Vec3::ZERO)) * cell;
                         let t_exit = ((next - o) * inv_d).min_element().min(tb).max(t + nudge);
                         // Block indices as integers once; a negative one wraps above the bound.
+                        // Within a nudge of the level's occupied box they are far below 2²².
                         let (bx, by, bz) = (
-                            bi.x as i32 as u32 as usize,
-                            bi.y as i32 as u32 as usize,
-                            bi.z as i32 as u32 as usize,
+                            small_int(bi.x) as u32 as usize,
+                            small_int(bi.y) as u32 as usize,
+                            small_int(bi.z) as u32 as usize,
                         );
                         let inside = bx < bd[0] && by < bd[1] && bz < bd[2];
                         (t_exit, inside && lev.occupancy.max_density[bx + bd[0] * (by + bd[1] * bz)] > 0.0)
@@ -517,10 +523,7 @@ impl<'a> CubeRenderer<'a> {
                         for k in 0..n as u32 {
                             let ts = t + (k as f32 + 0.5) * len;
                             let v = ((o + d * ts) - origin) * inv_vs;
-                            if v.min_element() < 0.0 || v.cmpgt(dims).any() {
-                                continue;
-                            }
-                            // An empty dual cell samples to ρ = 0: no blend there.
+                            // Outside the level's box or in an empty dual cell ρ = 0: no blend there.
                             let Some((c, slots)) = masks[li].sample_slots(lev, v) else {
                                 continue;
                             };
@@ -619,6 +622,40 @@ impl<'a> CubeRenderer<'a> {
             area += sa;
         }
         Rgb::new((acc[0] / area) as f32, (acc[1] / area) as f32, (acc[2] / area) as f32)
+    }
+}
+
+/// One level's constants for [`CubeRenderer::march`] (the same expressions it evaluated per ray
+/// and level before, so the same bits).
+#[derive(Clone, Debug)]
+struct LevelWalk {
+    /// h_min·2^level (m): the level begins where the cone is this wide, at reach / cone.
+    reach: f32,
+    /// The smallest voxel edge (m).
+    voxel_min: f32,
+    /// 1 / voxel edge (m⁻¹).
+    inv_voxel: Vec3,
+    /// The occupancy block's edges (m) and their inverses.
+    cell: Vec3,
+    inv_cell: Vec3,
+    /// Step past a block face (m): 10⁻³ of the smallest block edge.
+    nudge: f32,
+    /// Twice the smallest block edge (m): the longest stretch marched in one go.
+    two_cells: f32,
+}
+
+impl LevelWalk {
+    fn new(lev: &crate::lit::pyramid::Level, li: usize, h_min: f32) -> LevelWalk {
+        let cell = lev.voxel_size * BLOCK as f32;
+        LevelWalk {
+            reach: h_min * (1u32 << li) as f32,
+            voxel_min: lev.voxel_size.min_element(),
+            inv_voxel: Vec3::ONE / lev.voxel_size,
+            cell,
+            inv_cell: Vec3::ONE / cell,
+            nudge: 1e-3 * cell.min_element(),
+            two_cells: 2.0 * cell.min_element(),
+        }
     }
 }
 

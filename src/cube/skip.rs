@@ -5,7 +5,7 @@
 //! surface most samples of the border cubes fall in such cells: 64 % on the default scene).
 
 use crate::lit::pyramid::{Cell, Level};
-use crate::math::{Trilinear, Vec3};
+use crate::math::{fast_floor, small_int, Trilinear, Vec3};
 use glam::Vec4;
 
 /// Occupied dual cells of one level (bit set: some corner has ρ > 0).
@@ -14,6 +14,8 @@ pub struct DualMask {
     /// Dual cells per axis: the level's dims + 1 (half a voxel beyond each face, where the
     /// trilinear rule clamps to the edge voxels).
     dims: [usize; 3],
+    /// The level's box in its voxel coordinates: (n_x, n_y, n_z).
+    size: Vec3,
     bits: Vec<u64>,
 }
 
@@ -43,22 +45,29 @@ impl DualMask {
                 }
             }
         }
-        DualMask { dims, bits }
+        assert!(
+            n.iter().all(|&a| a < 1 << 22),
+            "level {n:?} too large for the float index arithmetic"
+        );
+        let size = Vec3::new(n[0] as f32, n[1] as f32, n[2] as f32);
+        DualMask { dims, size, bits }
     }
 
     /// Does the dual cell whose lower corner voxel is `fl` (floor of v − ½ per axis, v inside the
-    /// level's box) blend any full voxel? False means ρ = 0 exactly there.
+    /// level's box, so fl ∈ [−1, n − 1]) blend any full voxel? False means ρ = 0 exactly there.
     #[inline]
-    fn bit(&self, fl: [isize; 3]) -> bool {
-        // Shifted by one so the half voxel below the first centre (−1) is cell 0.
-        let cell = |a: usize| (fl[a] + 1).clamp(0, self.dims[a] as isize - 1) as usize;
+    fn bit(&self, fl: [i32; 3]) -> bool {
+        // Shifted by one so the half voxel below the first centre (−1) is cell 0; a cell
+        // outside (never, for v inside the box) fails the slice's bound check.
+        let cell = |a: usize| (fl[a] + 1) as usize;
         let q = cell(0) + self.dims[0] * (cell(1) + self.dims[1] * cell(2));
         (self.bits[q / 64] >> (q % 64)) & 1 == 1
     }
 
-    /// [`Level::sample`] of `level` (the level this mask was made from) at `v` inside its box,
-    /// with the floors taken once for the mask and the blend: None at once in an empty dual cell,
-    /// else the very same operations as [`crate::math::Trilinear`], so the same bits.
+    /// [`Level::sample`] of `level` (the level this mask was made from) at `v`, None outside its
+    /// box [0, n]³ (or at NaN), with the floors taken once for the mask and the blend: None at
+    /// once in an empty dual cell, else the very same operations as [`crate::math::Trilinear`],
+    /// so the same bits.
     #[inline]
     pub fn sample(&self, level: &Level, v: Vec3) -> Option<Cell> {
         self.sample_slots(level, v).map(|(c, _)| c)
@@ -68,22 +77,27 @@ impl DualMask {
     /// stored on the same index (the gather source's ρ·I1 levels) blend at the same point.
     #[inline]
     pub fn sample_slots(&self, level: &Level, v: Vec3) -> Option<(Cell, Trilinear)> {
+        if !(v.cmpge(Vec3::ZERO).all() && v.cmple(self.size).all()) {
+            return None;
+        }
+        // Inside the box x = v − ½ ∈ [−½, n − ½]: the floors are in [−1, n − 1] (far below 2²²),
+        // so they convert without saturating casts and the clamps below need one side each.
         let p = v.to_array();
-        let mut fl = [0isize; 3];
+        let mut fl = [0i32; 3];
         let mut f = [0f32; 3];
         for a in 0..3 {
             let x = p[a] - 0.5;
-            // One SSE4.1 round on the x86-64-v2 build (math::fast_floor's casts cost more).
-            let x0 = x.floor();
-            fl[a] = x0 as isize;
+            // One SSE4.1 round on the x86-64-v2 build.
+            let x0 = fast_floor(x);
+            fl[a] = small_int(x0);
             f[a] = x - x0;
         }
         if !self.bit(fl) {
             return None;
         }
         let n = level.dims;
-        let lo = |a: usize| fl[a].clamp(0, n[a] as isize - 1) as usize;
-        let hi = |a: usize| (fl[a] + 1).clamp(0, n[a] as isize - 1) as usize;
+        let lo = |a: usize| fl[a].max(0) as usize;
+        let hi = |a: usize| (fl[a] + 1).min(n[a] as i32 - 1) as usize;
         let (x, y, z) = ([lo(0), hi(0)], [lo(1), hi(1)], [lo(2), hi(2)]);
         let ix = |c: usize| x[c & 1] + n[0] * (y[(c >> 1) & 1] + n[1] * z[c >> 2]);
         let t = level.cells.slots(&Trilinear {
@@ -142,7 +156,7 @@ mod tests {
                     v = Vec3::select(v.cmplt(d * 0.5), Vec3::ZERO, d);
                 }
                 assert_eq!(mask.sample(lev, v), lev.sample(v), "level {:?} at {v}", lev.dims);
-                let occupied = mask.bit(v.to_array().map(|x| (x - 0.5).floor() as isize));
+                let occupied = mask.bit(v.to_array().map(|x| (x - 0.5).floor() as i32));
                 match lev.sample(v) {
                     Some(_) => {
                         full += 1;
