@@ -260,23 +260,23 @@ impl Domain {
 /// Band `c`'s operator and right-hand side: [`assemble_with`] with the operator.
 #[cfg(test)]
 pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_min: f64, dom: &Domain) -> (Operator, Vec<f64>) {
-    let (a, b) = assemble_with(m, inc, bl, &[c], tau_min, dom);
-    (a, b.into_iter().map(|v| v[0]).collect())
+    let (a, b) = assemble_with(m, inc, bl, c, tau_min, dom, true);
+    (a.expect("asked for the operator"), b)
 }
 
-/// Assemble the operator (see the module docs) on the full voxels (in grid order, their cells
-/// indexing `dom`) of the bands `bands`, which share it (equal albedos), and each one's
-/// right-hand side (entry k of a voxel's array for `bands[k]`), with the light `bl` entering
-/// through the boundary faces: one pass for all of them.
+/// Assemble band `c`'s right-hand side and, when `operator`, its operator (see the module docs)
+/// on the full voxels (in grid order, their cells indexing `dom`), with the light `bl` entering
+/// through the boundary faces. A band sharing another's operator needs only its right-hand side
+/// (the rows are computed but not stored).
 fn assemble_with(
     m: &Medium,
     inc: &IncidentLight,
     bl: &BoundaryLight,
-    bands: &[usize],
+    c: usize,
     tau_min: f64,
     dom: &Domain,
-) -> (Operator, Vec<[f64; 3]>) {
-    let c = bands[0];
+    operator: bool,
+) -> (Option<Operator>, Vec<f64>) {
     let gd = m.dims();
     let d = dom.dims;
     let rho = m.density.data();
@@ -287,20 +287,17 @@ fn assemble_with(
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
     let gstride = [1, gd[0], gd[0] * gd[1]];
     // F = Q1/(ρσtr) per axis at voxel centres.
-    let f_at = |idx: usize, ax: usize, c: usize| -> f64 { inc.q1[ax][idx][c] as f64 / (rho[idx] as f64 * sigma_tr) };
+    let f_at = |idx: usize, ax: usize| -> f64 { inc.q1[ax][idx][c] as f64 / (rho[idx] as f64 * sigma_tr) };
     // Written in place (an unzip would hold a second copy while it gathers its pieces).
-    let mut b = vec![[0f64; 3]; full.len()];
-    let row = |(&idx, bv): (&usize, &mut [f64; 3])| {
+    let mut b = vec![0f64; full.len()];
+    let row = |(&idx, bv): (&usize, &mut f64)| {
         let rp = rho[idx] as f64;
         let cell = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])];
         let mut node = Node::at(dom.cell(cell));
         let mut diag = rp * sigma_a;
-        let mut rhs = [0.0; 3];
-        for (r, c) in rhs.iter_mut().zip(bands) {
-            *r = inc.q0[idx][*c] as f64;
-        }
+        let mut rhs = inc.q0[idx][c] as f64;
         for ax in 0..3 {
-            let fp = |c: usize| f_at(idx, ax, c);
+            let fp = f_at(idx, ax);
             for side in [-1i64, 1] {
                 let nc = cell[ax] as i64 + side;
                 let nidx = (nc >= 0 && nc < gd[ax] as i64).then(|| (idx as i64 + side * gstride[ax] as i64) as usize);
@@ -313,17 +310,13 @@ fn assemble_with(
                         node.up[ax] = -cf;
                         node.up_nbr[ax] = (index.slot(q) - 1) as u32;
                     }
-                    for (r, c) in rhs.iter_mut().zip(bands) {
-                        let ff = 0.5 * (fp(*c) + f_at(q, ax, *c));
-                        *r -= ff * side as f64 / h[ax];
-                    }
+                    let ff = 0.5 * (fp + f_at(q, ax));
+                    rhs -= ff * side as f64 / h[ax];
                 } else {
                     let (dterm, fterm) = boundary_terms(rp, sigma_tr, h[ax], tau_min);
                     diag += dterm;
                     // eq. 7 with incoming light: φ = (β(I_P − L_face) + f)/(1 + 2β).
-                    for (r, c) in rhs.iter_mut().zip(bands) {
-                        *r += dterm * bl.at(nidx, face_index(ax, side), *c) - fterm * fp(*c) * side as f64;
-                    }
+                    rhs += dterm * bl.at(nidx, face_index(ax, side), c) - fterm * fp * side as f64;
                 }
             }
         }
@@ -331,8 +324,19 @@ fn assemble_with(
         *bv = rhs;
         node
     };
-    let nodes = full.par_iter().zip(b.par_iter_mut()).map(row).collect();
-    (Operator { dims: d, nodes }, b)
+    let rows = full.par_iter().zip(b.par_iter_mut());
+    let nodes = if operator {
+        Some(Operator {
+            dims: d,
+            nodes: rows.map(row).collect(),
+        })
+    } else {
+        rows.for_each(|r| {
+            row(r);
+        });
+        None
+    };
+    (nodes, b)
 }
 
 /// Net outgoing diffuse power (W per band) through every boundary face of the cloud: Σ A·4π φ_f,
@@ -411,34 +415,31 @@ pub fn solve_diffusion(
             boundary: boundary.clone(),
         });
     };
-    // Bands with identical coefficients (albedos) share one operator, assembled in one pass
-    // with their right-hand sides, and one hierarchy; each group's operator becomes its
-    // hierarchy's finest level, so one is alive at a time. Right-hand sides kept in f32
-    // (rounding them is far below the solver's tolerance).
+    // Bands with identical coefficients share one hierarchy; each band's operator becomes its
+    // hierarchy's finest level or is dropped (a shared one), so one is alive at a time.
+    // Right-hand sides kept in f32 (rounding them is far below the solver's tolerance).
+    let mut rhs: Vec<Vec<f32>> = Vec::new();
+    let mut hier: Vec<(f32, Hierarchy)> = Vec::new();
     let mut groups: Vec<Vec<usize>> = Vec::new();
     for c in 0..3 {
         let alb = medium.optics.albedo[c];
-        match groups.iter_mut().find(|g| medium.optics.albedo[g[0]] == alb) {
-            Some(g) => g.push(c),
-            None => groups.push(vec![c]),
+        let shared = hier.iter().position(|(x, _)| *x == alb);
+        let (a, b) = assemble_with(medium, incident, boundary, c, settings.min_optical_depth, &dom, shared.is_none());
+        rhs.push(b.iter().map(|v| *v as f32).collect());
+        match (shared, a) {
+            (Some(p), _) => groups[p].push(c),
+            (None, a) => {
+                hier.push((alb, Hierarchy::build(a.expect("assembled"))));
+                groups.push(vec![c]);
+            }
         }
-    }
-    let mut rhs: Vec<Vec<f32>> = vec![Vec::new(); 3];
-    let mut hier: Vec<Hierarchy> = Vec::new();
-    for g in &groups {
-        let (a, b) = assemble_with(medium, incident, boundary, g, settings.min_optical_depth, &dom);
-        for (k, c) in g.iter().enumerate() {
-            rhs[*c] = b.par_iter().map(|v| v[k] as f32).collect();
-        }
-        drop(b);
-        hier.push(Hierarchy::build(a));
     }
     // The bands of a group share the operator and are solved together (its rows read once).
     let x0: Vec<Option<&[f32]>> = (0..3).map(|c| previous.map(|p| p.i0[c].packed())).collect();
     let solved: Vec<Vec<(Vec<f64>, SolveStats)>> = groups
         .par_iter()
         .zip(&hier)
-        .map(|(g, h)| {
+        .map(|(g, (_, h))| {
             let (tol, max) = (settings.tolerance, settings.max_iterations);
             let b = |k: usize| rhs[g[k]].as_slice();
             let x = |k: usize| x0[g[k]];
