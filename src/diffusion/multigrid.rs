@@ -101,33 +101,78 @@ impl Operator {
             let [i, j, k] = self.ijk(u);
             (i / 2 + cd[0] * (j / 2 + cd[1] * (k / 2))) as u32
         };
-        let keys: Vec<u32> = (0..self.nodes.len()).into_par_iter().map(key).collect();
-        let mut cells = keys.clone();
-        cells.par_sort_unstable();
-        cells.dedup();
-        let parent: Vec<u32> = keys
-            .par_iter()
-            .map(|k| cells.binary_search(k).expect("every aggregate is a coarse unknown") as u32)
+        // One task per coarse z plane: its aggregates' children are the fine unknowns of two
+        // fine planes (contiguous, as the unknowns are in box order). Aggregates are numbered
+        // in box order through a rank per coarse cell (NONE: no child), and each adds its
+        // children in the fine order a serial pass would, so nothing depends on the thread count.
+        let plane = cd[0] * cd[1];
+        let fine_planes: Vec<std::ops::Range<usize>> = (0..cd[2])
+            .map(|k| {
+                let first = |k: usize| self.nodes.partition_point(|n| (n.cell as usize) < k * nx * ny);
+                first(2 * k)..first(2 * k + 2)
+            })
             .collect();
-        drop(keys);
-        let mut nodes: Vec<Node> = cells.into_iter().map(Node::at).collect();
-        for (u, n) in self.nodes.iter().enumerate() {
-            let ijk = self.ijk(u);
-            let p = &mut nodes[parent[u] as usize];
-            p.diag += n.diag;
-            for (ax, at) in ijk.iter().enumerate() {
-                let v = n.up_nbr[ax];
-                if v == NONE {
-                    continue;
+        let mut rank = vec![NONE; plane * cd[2]];
+        let counts: Vec<u32> = rank
+            .par_chunks_mut(plane)
+            .zip(&fine_planes)
+            .enumerate()
+            .map(|(k, (r, fine))| {
+                for u in fine.clone() {
+                    r[key(u) as usize - k * plane] = 0;
                 }
-                if at % 2 == 0 {
-                    p.diag += 2.0 * n.up[ax];
-                } else {
-                    p.up[ax] += n.up[ax];
-                    p.up_nbr[ax] = parent[v as usize];
+                let mut c = 0;
+                for v in r.iter_mut().filter(|v| **v == 0) {
+                    *v = c;
+                    c += 1;
+                }
+                c
+            })
+            .collect();
+        let offsets: Vec<u32> = counts
+            .iter()
+            .scan(0, |s, c| {
+                *s += c;
+                Some(*s - c)
+            })
+            .collect();
+        rank.par_chunks_mut(plane).zip(&offsets).for_each(|(r, o)| {
+            r.iter_mut().filter(|v| **v != NONE).for_each(|v| *v += o);
+        });
+        let parent: Vec<u32> = (0..self.nodes.len()).into_par_iter().map(|u| rank[key(u) as usize]).collect();
+        let mut nodes: Vec<Node> = (0..rank.len() as u32)
+            .into_par_iter()
+            .filter(|c| rank[*c as usize] != NONE)
+            .map(Node::at)
+            .collect();
+        drop(rank);
+        let mut planes = Vec::with_capacity(cd[2]);
+        let (mut rest, mut base) = (&mut nodes[..], 0);
+        for (fine, here) in fine_planes.into_iter().zip(counts) {
+            let (mine, more) = rest.split_at_mut(here as usize);
+            planes.push((fine, base, mine));
+            (rest, base) = (more, base + here as usize);
+        }
+        planes.into_par_iter().for_each(|(fine, base, mine)| {
+            for u in fine {
+                let n = &self.nodes[u];
+                let ijk = self.ijk(u);
+                let p = &mut mine[parent[u] as usize - base];
+                p.diag += n.diag;
+                for (ax, at) in ijk.iter().enumerate() {
+                    let v = n.up_nbr[ax];
+                    if v == NONE {
+                        continue;
+                    }
+                    if at % 2 == 0 {
+                        p.diag += 2.0 * n.up[ax];
+                    } else {
+                        p.up[ax] += n.up[ax];
+                        p.up_nbr[ax] = parent[v as usize];
+                    }
                 }
             }
-        }
+        });
         (Operator { dims: cd, nodes }, parent)
     }
 }
@@ -603,7 +648,7 @@ impl Hierarchy {
 
     /// As [`Hierarchy::build`], coarsening until a level has at most `coarse_cells` unknowns.
     pub fn build_with(mut a: Operator, coarse_cells: usize) -> Hierarchy {
-        let scale_of: Vec<f64> = a.nodes.iter().map(|n| 1.0 / n.diag.sqrt()).collect();
+        let scale_of: Vec<f64> = a.nodes.par_iter().map(|n| 1.0 / n.diag.sqrt()).collect();
         a.nodes.par_iter_mut().enumerate().for_each(|(u, n)| {
             for ax in 0..3 {
                 if n.up_nbr[ax] != NONE {
@@ -616,7 +661,7 @@ impl Hierarchy {
         let (mut level, mut entry, plus) = Level::from_operator(&a, true);
         let scale = level
             .unk
-            .iter()
+            .par_iter()
             .map(|u| if *u == PAD { 0.0 } else { scale_of[*u as usize] })
             .collect();
         drop(scale_of);
