@@ -56,12 +56,13 @@ pub struct SparseSettings {
     /// evaluation scenes; 8 reaches 3·10⁻³ (backlit).
     pub partial_size: u32,
     /// Squares larger than `block`, up to this size (a power of two; ≤ `block`: none), are tried
-    /// first where K is smooth: all four corners must match in depth and their K agree within
-    /// `smooth_tolerance`, else the square is halved as usual. Where the cloud's light changes
-    /// little across a square, its inner lattice cubes are never rendered.
+    /// first where K is smooth: all four corners must match in depth and the cube part of E_j
+    /// their K give this pixel's segment (Σ q_i a^i K_i) agree within `smooth_tolerance`, else
+    /// the square is halved as usual. Where the cloud's light changes little across a square,
+    /// its inner lattice cubes are never rendered.
     pub coarse_block: u32,
-    /// Largest spread of the corners' K, per order and band, relative to the largest band of the
-    /// corners' mean K of that order, for interpolating over a coarse square.
+    /// Largest spread of the corners' cube part of E_j, per band, relative to the largest band
+    /// of their mean, for interpolating over a coarse square.
     pub smooth_tolerance: f32,
 }
 
