@@ -11,7 +11,10 @@
 //!   sums its children's diagonals and the couplings inside it; a coarse coupling sums the fine
 //!   couplings across the aggregates' shared face). Galerkin coarse operators follow coefficient
 //!   jumps and the domain's shape exactly, keep symmetry and definiteness, and need no
-//!   re-discretisation. A coarse cell exists where any child is full.
+//!   re-discretisation. A coarse cell exists where any child is full. The first coarsening
+//!   aggregates the operator as assembled, before the finest level is scaled to unit diagonal:
+//!   seen from the scaled level its prolongation is D^½ P₀ ([`Level::weight`]), so the coarse
+//!   space holds what the smoother leaves, errors smooth in the unscaled unknowns.
 //! * **Smoother:** red-black Gauss–Seidel, red then black before the coarse correction and black
 //!   then red after it, so the cycle is a symmetric preconditioner. A level stores its red
 //!   unknowns first, then its black ones, so a colour's pass streams through its own rows.
