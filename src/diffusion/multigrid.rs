@@ -13,7 +13,7 @@
 //!   jumps and the domain's shape exactly, keep symmetry and definiteness, and need no
 //!   re-discretisation. A coarse cell exists where any child is full. The first coarsening
 //!   aggregates the operator as assembled, before the finest level is scaled to unit diagonal:
-//!   seen from the scaled level its prolongation is D^½ P₀ ([`Level::weight`]), so the coarse
+//!   seen from the scaled level its prolongation is D^½ P₀ (`Level::weight`), so the coarse
 //!   space holds what the smoother leaves, errors smooth in the unscaled unknowns.
 //! * **Smoother:** red-black Gauss–Seidel, red then black before the coarse correction and black
 //!   then red after it, so the cycle is a symmetric preconditioner. A level stores its red
@@ -37,7 +37,7 @@ pub const COARSE_CELLS: usize = 800;
 /// Measured on the procedural cloud (iterations per band at 50×40×30, 100×80×60, 200×160×120, to
 /// 1e-6): 1.0 → 15/12/11, 1.2 → 14/11/9, 1.3 → 13/11/8, 1.5 → 17/14/11; to 1e-4, 1.1–1.4 all
 /// give 9/8/6 ±1. (With the coarse space piecewise constant in the scaled unknowns, before
-/// [`Level::weight`], the best was 1.5 → 28/32/38 to 1e-6.)
+/// `Level::weight`, the best was 1.5 → 28/32/38 to 1e-6.)
 pub const OVER_CORRECTION: f64 = 1.3;
 
 /// Rows per parallel task (and per partial sum of the reductions: fixed, so sums do not depend
