@@ -35,8 +35,8 @@ pub const COARSE_CELLS: usize = 800;
 /// errors (the interpolant jumps at every aggregate face, so PᵀAP overestimates a smooth error's
 /// energy and the correction comes out too small), so the correction is scaled up (Braess 1995).
 /// Measured on the procedural cloud (iterations per band at 50×40×30, 100×80×60, 200×160×120, to
-/// 1e-6): 1.0 → 15/12/11, 1.2 → 14/11/9, 1.3 → 13/11/8, 1.5 → 17/14/11; to 1e-4, 1.1–1.4 all
-/// give 9/8/6 ±1. (With the coarse space piecewise constant in the scaled unknowns, before
+/// 1e-6): 1.0 → 14–15/12/10–11, 1.2 → 13–14/11/8–9, 1.3 → 12–13/11/8, 1.5 → 16–18/13–14/10–11;
+/// to 1e-4, 1.1–1.4 all give 9/8/6 ±1. (With the coarse space piecewise constant in the scaled unknowns, before
 /// `Level::weight`, the best was 1.5 → 28/32/38 to 1e-6.)
 pub const OVER_CORRECTION: f64 = 1.3;
 
