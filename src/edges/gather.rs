@@ -460,12 +460,9 @@ impl<'a> EdgeGather<'a> {
     pub fn plan(&self, o: Vec3, d: Vec3, t_max: f32) -> PixelPlan {
         let m = self.medium;
         let t = self.settings.threshold;
-        let levels: Vec<f32> = if t > 0.0 {
-            vec![self.gap_level(), self.t_lo(), t]
-        } else {
-            Vec::new()
-        };
-        let mut profile = RayProfile::trace(m, o, d, 0.0, t_max, &levels);
+        let levels = [self.gap_level(), self.t_lo(), t];
+        let levels: &[f32] = if t > 0.0 { &levels } else { &[] };
+        let mut profile = RayProfile::trace(m, o, d, 0.0, t_max, levels);
         if self.settings.merge_transition && t > 0.0 {
             refine_extrema(&mut profile, m, self.gap_level(), self.t_lo(), t);
         }

@@ -10,6 +10,7 @@
 //! cell) is missed, which only moves a piece boundary, never the optical depth.
 
 use crate::math::Vec3;
+use crate::medium::dda::Dda;
 use crate::medium::Medium;
 use glam::DVec3;
 
@@ -132,11 +133,13 @@ impl CellDensity {
         let dims = m.density.dims();
         let lo: [usize; 3] = std::array::from_fn(|a| cell[a].saturating_sub(1).min(dims[a] - 1));
         let hi: [usize; 3] = std::array::from_fn(|a| cell[a].min(dims[a] - 1));
-        let g = &m.density;
-        let corners = std::array::from_fn(|c| {
-            let pick = |a: usize| if c >> a & 1 == 1 { hi[a] } else { lo[a] };
-            g.get(pick(0), pick(1), pick(2))
-        });
+        // One index and a stride per axis (0 where the cell is clamped at the grid's side):
+        // the same voxels as eight `get`s.
+        let (nx, nxy) = (dims[0], dims[0] * dims[1]);
+        let base = lo[0] + nx * lo[1] + nxy * lo[2];
+        let step = [hi[0] - lo[0], nx * (hi[1] - lo[1]), nxy * (hi[2] - lo[2])];
+        let data = m.density.data();
+        let corners = std::array::from_fn(|c| data[base + (c & 1) * step[0] + (c >> 1 & 1) * step[1] + (c >> 2 & 1) * step[2]]);
         CellDensity {
             corners,
             lo: std::array::from_fn(|a| cell[a] as f32 - 1.0),
@@ -213,6 +216,40 @@ impl CellCubic {
     }
 }
 
+/// The dual lattice's cells along `o + t·d`, t ∈ [t0, t1], inside the runs of consecutive
+/// non-empty majorant blocks: one DDA per run, where [`Medium::for_each_dual_block`] starts one
+/// per block and so cuts the dual cells that straddle a block face into two (more cells, pieces,
+/// sun look-ups and compositing steps for the same ray).
+fn for_each_dual_run(m: &Medium, o: Vec3, d: Vec3, t0: f32, t1: f32, mut f: impl FnMut(Dda)) {
+    let (od, dd) = (o.as_dvec3(), d.as_dvec3());
+    let h = m.voxel_size.as_dvec3();
+    let dual_origin = m.origin.as_dvec3() - 0.5 * h;
+    let dims = m.dims();
+    let dual_dims = [dims[0] + 1, dims[1] + 1, dims[2] + 1];
+    let mut walk = |a: f32, b: f32| f(Dda::new(dual_origin, h, dual_dims, od, dd, a as f64, b as f64));
+    let mut run: Option<(f32, f32)> = None;
+    m.majorant.for_each_block(m, o, d, t0, t1, |ta, tb, maj| {
+        run = match run {
+            _ if maj <= 0.0 => {
+                if let Some((a, b)) = run {
+                    walk(a, b);
+                }
+                None
+            }
+            Some((a, b)) if b == ta => Some((a, tb)),
+            Some((a, b)) => {
+                walk(a, b);
+                Some((ta, tb))
+            }
+            None => Some((ta, tb)),
+        };
+        true
+    });
+    if let Some((a, b)) = run {
+        walk(a, b);
+    }
+}
+
 impl RayProfile {
     /// Profile `o + t·d` (`d` unit), t ∈ [t_min, t_max], split wherever ρ crosses one of `levels`
     /// (density units; non-positive levels are ignored).
@@ -226,10 +263,11 @@ impl RayProfile {
         let Some((t0, t1)) = m.intersect(o, d, t_min, t_max) else {
             return prof;
         };
-        let levels: Vec<f32> = levels.iter().copied().filter(|l| *l > 0.0).collect();
         let sigma_t = m.optics.sigma_t as f64;
-        let mut cuts: Vec<f64> = Vec::with_capacity(8);
-        m.for_each_dual_block(o, d, t0, t1, |_, cells| {
+        // Allocated only on a ray's first level crossing (most rays have none).
+        let mut cuts: Vec<f64> = Vec::new();
+        prof.pieces.reserve(16);
+        for_each_dual_run(m, o, d, t0, t1, |cells| {
             for s in cells {
                 let cell = CellDensity::new(m, s.cell);
                 if cell.is_empty() {
@@ -254,8 +292,8 @@ impl RayProfile {
                 for w in samples.windows(2) {
                     let (ta, ra) = w[0];
                     let (tb, rb) = w[1];
-                    for &l in &levels {
-                        if (ra < l) != (rb < l) {
+                    for &l in levels {
+                        if l > 0.0 && (ra < l) != (rb < l) {
                             // ρ − l, signed so that ra's side is ≤ 0.
                             let sign = if ra < l { 1.0 } else { -1.0 };
                             let side = |t: f64| {
@@ -511,6 +549,45 @@ mod tests {
             });
         }
         assert!(checked > 1000, "{checked}");
+    }
+
+    #[test]
+    fn dual_runs_cover_the_block_walks_cells_without_splitting_them() {
+        let m = Medium::new(
+            crate::medium::procedural::cumulus([24, 20, 16], 3),
+            Vec3::new(-1.0, 2.0, 0.5),
+            Vec3::new(0.7, 1.1, 0.9),
+            1.0,
+            Rgb::ONE,
+            0.8,
+        );
+        let mut rng = crate::math::Rng::new(7, 3);
+        let mut merged = 0;
+        for _ in 0..200 {
+            let o = Vec3::new(-6.0, 2.0 + rng.uniform() * 22.0, 0.5 + rng.uniform() * 14.4);
+            let d = Vec3::new(1.0, rng.uniform() - 0.5, rng.uniform() - 0.5).normalize();
+            let Some((t0, t1)) = m.intersect(o, d, 0.0, 100.0) else { continue };
+            let (mut blocks, mut runs) = (Vec::new(), Vec::new());
+            m.for_each_dual_block(o, d, t0, t1, |_, cells| blocks.extend(cells.map(|s| (s.cell, s.t0, s.t1))));
+            for_each_dual_run(&m, o, d, t0, t1, |cells| runs.extend(cells.map(|s| (s.cell, s.t0, s.t1))));
+            // The same stretches of ray (lengths summed) in the same cells, each cell's midpoint inside it.
+            let len = |v: &[([usize; 3], f64, f64)]| v.iter().map(|c| c.2 - c.1).sum::<f64>();
+            assert!((len(&blocks) - len(&runs)).abs() <= 1e-9 * (1.0 + len(&blocks)));
+            let cells = |v: &[([usize; 3], f64, f64)]| {
+                let mut c: Vec<[usize; 3]> = v.iter().map(|c| c.0).collect();
+                c.dedup();
+                c
+            };
+            assert_eq!(cells(&blocks), cells(&runs));
+            for &(c, a, b) in &runs {
+                let v = (o.as_dvec3() + d.as_dvec3() * (0.5 * (a + b)) - m.origin.as_dvec3()) / m.voxel_size.as_dvec3();
+                assert!((0..3).all(|k| (v[k] + 0.5).floor() as usize == c[k]), "{c:?} at {v:?}");
+            }
+            // No cell twice in a row: a block face no longer cuts a cell in two.
+            assert!(runs.windows(2).all(|w| w[0].0 != w[1].0));
+            merged += blocks.len() - runs.len();
+        }
+        assert!(merged > 0, "no ray crossed a face between two non-empty blocks");
     }
 
     #[test]
