@@ -160,6 +160,16 @@ impl CellDensity {
         self.corners.iter().all(|c| *c == 0.0)
     }
 
+    /// Whether ρ > 0 everywhere in the cell and no level (the positive ones) lies between its
+    /// smallest and largest corner, with a relative margin of 10⁻⁵ so that the expanded cubic's
+    /// rounding (~10⁻¹⁴ relative) cannot put a sample across: the trilinear blend lies between its
+    /// corners, so the samples would find no crossing either.
+    fn clear_of(&self, levels: &[f32]) -> bool {
+        let lo = self.corners.iter().copied().fold(f32::INFINITY, f32::min);
+        let hi = self.corners.iter().copied().fold(0.0, f32::max);
+        lo > 0.0 && levels.iter().all(|&l| l <= 0.0 || hi < l * (1.0 - 1e-5) || lo > l * (1.0 + 1e-5))
+    }
+
     /// The trilinear ρ along the ray inside the cell as a cubic in τ = t − `t0` (the blend's three
     /// lerps with fractions linear in τ, expanded in f64), so that each look-up is three
     /// multiply-adds instead of a position and a blend; within rounding of [`rho_at`].
@@ -275,13 +285,30 @@ impl RayProfile {
                 }
                 let cubic = cell.cubic(m, od, dd, s.t0);
                 let rho = |t: f64| cubic.at(t);
+                let sample_t = |k: usize| s.t0 + (s.t1 - s.t0) * k as f64 / CELL_SAMPLES as f64;
+                let piece = |r: [f32; 3]| Piece {
+                    t0: s.t0,
+                    t1: s.t1,
+                    tau: sigma_t * (s.t1 - s.t0) / 6.0 * (r[0] as f64 + 4.0 * r[1] as f64 + r[2] as f64),
+                    rho: r,
+                };
+                if cell.clear_of(levels) {
+                    // ρ inside the cell lies between its corners, all on one side of every level
+                    // and positive: no crossing, one piece from the samples at 0, ½, 1.
+                    prof.pieces.push(piece([
+                        rho(sample_t(0)),
+                        rho(sample_t(CELL_SAMPLES / 2)),
+                        rho(sample_t(CELL_SAMPLES)),
+                    ]));
+                    continue;
+                }
                 let simpson = |a: f64, b: f64| -> (f64, [f32; 3]) {
                     let r = [rho(a), rho(0.5 * (a + b)), rho(b)];
                     (sigma_t * (b - a) / 6.0 * (r[0] as f64 + 4.0 * r[1] as f64 + r[2] as f64), r)
                 };
                 let mut samples = [(0f64, 0f32); CELL_SAMPLES + 1];
                 for (k, sm) in samples.iter_mut().enumerate() {
-                    let t = s.t0 + (s.t1 - s.t0) * k as f64 / CELL_SAMPLES as f64;
+                    let t = sample_t(k);
                     *sm = (t, rho(t));
                 }
                 if samples.iter().all(|x| x.1 <= 0.0) {
@@ -306,13 +333,8 @@ impl RayProfile {
                 }
                 if cuts.len() == 1 {
                     // No crossing (the common case): the samples at 0, ½, 1 give Simpson's rule.
-                    let r = [samples[0].1, samples[CELL_SAMPLES / 2].1, samples[CELL_SAMPLES].1];
-                    prof.pieces.push(Piece {
-                        t0: s.t0,
-                        t1: s.t1,
-                        tau: sigma_t * (s.t1 - s.t0) / 6.0 * (r[0] as f64 + 4.0 * r[1] as f64 + r[2] as f64),
-                        rho: r,
-                    });
+                    prof.pieces
+                        .push(piece([samples[0].1, samples[CELL_SAMPLES / 2].1, samples[CELL_SAMPLES].1]));
                     continue;
                 }
                 cuts.push(s.t1);
