@@ -540,7 +540,12 @@ impl<'a> EdgeGather<'a> {
         let m = self.medium;
         let (o, d, prof) = (plan.o, plan.d, &plan.profile);
         let mut aov = EdgeAov::default();
-        let mut edge_src = vec![Rgb::ZERO; prof.pieces.len()];
+        // A ray without jobs has no edge source anywhere: nothing allocated.
+        let mut edge_src = if plan.jobs.is_empty() {
+            Vec::new()
+        } else {
+            vec![Rgb::ZERO; prof.pieces.len()]
+        };
         for (job, ej) in plan.jobs.iter().zip(e) {
             let s = *ej / (-(-job.seg.depth).exp_m1()) as f32 * job.weight;
             for x in &mut edge_src[job.seg.first..job.seg.end] {
@@ -581,16 +586,18 @@ impl<'a> EdgeGather<'a> {
                     w = w.min(1.0 - self.surface_weight(tau + 0.5 * delta));
                 }
                 tau += delta;
-                let f = (tr * -(-delta).exp_m1()) as f32;
+                // e^{−δ} − 1 once for the step's weight and the transmittance behind it.
+                let em1 = (-delta).exp_m1();
+                let f = (tr * -em1) as f32;
                 if w > 0.0 {
                     aov.diffusion += f * w * (self.dense)(pos, to_eye);
                 }
                 if w < 1.0 {
-                    aov.edge += f * (1.0 - w) * edge_src[k];
+                    aov.edge += f * (1.0 - w) * edge_src.get(k).copied().unwrap_or(Rgb::ZERO);
                 }
                 let sun = if n == 1 { plan.sun[k] } else { (self.sun.irradiance_at)(pos) };
                 aov.sun_single += f * sun * sun_scatter;
-                tr *= (-delta).exp();
+                tr *= 1.0 + em1;
                 if tr < crate::medium::march::T_CUTOFF as f64 {
                     tr = 0.0;
                     break 'pieces;
