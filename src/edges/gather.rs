@@ -34,7 +34,7 @@
 //! segment instead of switching abruptly when the gap closes.
 
 use super::orders_kernel::{edge_radiance, segment_orders, OrderKernel, DEFAULT_TAIL};
-use super::segments::{depth_from_samples, LowSegment, RayProfile};
+use super::segments::{density_bounds, depth_from_samples, LowSegment, RayProfile};
 use crate::cube::CubeImage;
 use crate::math::{Rgb, Vec3};
 use crate::medium::Medium;
@@ -183,6 +183,8 @@ pub struct EdgeGather<'a> {
     cubes: &'a dyn CubeSource,
     sun: SunInput<'a>,
     dense: &'a (dyn Fn(Vec3, Vec3) -> Rgb + Sync),
+    /// Where ρ > 0 ([`density_bounds`]): the eye rays' profiles start there.
+    bounds: (Vec3, Vec3),
 }
 
 /// One low-density segment (or a bridge's merged/split variant) whose E is needed for a pixel.
@@ -242,6 +244,7 @@ impl<'a> EdgeGather<'a> {
             cubes,
             sun,
             dense,
+            bounds: density_bounds(medium).unwrap_or((Vec3::ZERO, Vec3::ZERO)),
         }
     }
 
@@ -253,6 +256,11 @@ impl<'a> EdgeGather<'a> {
     /// The medium.
     pub fn medium(&self) -> &Medium {
         self.medium
+    }
+
+    /// The profile of `o + t·d`, t ∈ [0, `t_max`], cut at `levels`, walked only where ρ > 0.
+    pub fn profile(&self, o: Vec3, d: Vec3, t_max: f32, levels: &[f32]) -> RayProfile {
+        RayProfile::trace_in(self.medium, self.bounds, o, d, 0.0, t_max, levels)
     }
 
     /// The settings.
@@ -462,7 +470,7 @@ impl<'a> EdgeGather<'a> {
         let t = self.settings.threshold;
         let levels = [self.gap_level(), self.t_lo(), t];
         let levels: &[f32] = if t > 0.0 { &levels } else { &[] };
-        let mut profile = RayProfile::trace(m, o, d, 0.0, t_max, levels);
+        let mut profile = self.profile(o, d, t_max, levels);
         if self.settings.merge_transition && t > 0.0 {
             refine_extrema(&mut profile, m, self.gap_level(), self.t_lo(), t);
         }

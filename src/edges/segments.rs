@@ -10,7 +10,7 @@
 //! cell) is missed, which only moves a piece boundary, never the optical depth.
 
 use crate::math::Vec3;
-use crate::medium::dda::Dda;
+use crate::medium::dda::{ray_box, Dda};
 use crate::medium::Medium;
 use glam::DVec3;
 
@@ -226,6 +226,15 @@ impl CellCubic {
     }
 }
 
+/// The world box (m) outside which ρ ≡ 0: the non-empty voxels' index box grown by one voxel
+/// (the trilinear field reaches the neighbouring centres, and the grid's side where it is
+/// clamped), or None for an empty medium.
+pub fn density_bounds(m: &Medium) -> Option<(Vec3, Vec3)> {
+    let (lo, hi) = m.active_box(1)?;
+    let at = |c: [usize; 3]| m.origin + m.voxel_size * Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32);
+    Some((at(lo), at(hi)))
+}
+
 /// The dual lattice's cells along `o + t·d`, t ∈ [t0, t1], inside the runs of consecutive
 /// non-empty majorant blocks: one DDA per run, where [`Medium::for_each_dual_block`] starts one
 /// per block and so cuts the dual cells that straddle a block face into two (more cells, pieces,
@@ -264,15 +273,24 @@ impl RayProfile {
     /// Profile `o + t·d` (`d` unit), t ∈ [t_min, t_max], split wherever ρ crosses one of `levels`
     /// (density units; non-positive levels are ignored).
     pub fn trace(m: &Medium, o: Vec3, d: Vec3, t_min: f32, t_max: f32, levels: &[f32]) -> RayProfile {
+        Self::trace_in(m, m.bbox(), o, d, t_min, t_max, levels)
+    }
+
+    /// [`Self::trace`] over the part of the ray inside `bounds` (world box, m), which must hold
+    /// every point where ρ > 0 (e.g. [`density_bounds`]): the block walk then starts at the cloud,
+    /// not at the grid's side.
+    pub fn trace_in(m: &Medium, bounds: (Vec3, Vec3), o: Vec3, d: Vec3, t_min: f32, t_max: f32, levels: &[f32]) -> RayProfile {
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
         let mut prof = RayProfile {
             pieces: Vec::new(),
             o: od,
             d: dd,
         };
-        let Some((t0, t1)) = m.intersect(o, d, t_min, t_max) else {
+        let (lo, hi) = bounds;
+        let Some((t0, t1)) = ray_box(lo.as_dvec3(), hi.as_dvec3(), od, dd, t_min as f64, t_max as f64) else {
             return prof;
         };
+        let (t0, t1) = (t0 as f32, t1 as f32);
         let sigma_t = m.optics.sigma_t as f64;
         // Allocated only on a ray's first level crossing (most rays have none).
         let mut cuts: Vec<f64> = Vec::new();
@@ -610,6 +628,38 @@ mod tests {
             merged += blocks.len() - runs.len();
         }
         assert!(merged > 0, "no ray crossed a face between two non-empty blocks");
+    }
+
+    #[test]
+    fn profiles_within_the_density_bounds_equal_the_whole_box() {
+        // A small cloud in the middle of a larger grid: ρ = 0 outside the bounds, and the profile
+        // walked only inside them has the same pieces' depth and segments as over the whole box.
+        let mut g = Grid3::filled([20, 16, 12], 0.0);
+        let mut rng = crate::math::Rng::new(5, 8);
+        for k in 4..8 {
+            for j in 5..10 {
+                for i in 6..13 {
+                    g.set(i, j, k, rng.uniform());
+                }
+            }
+        }
+        let m = Medium::new(g, Vec3::new(-2.0, 1.0, 0.0), Vec3::new(0.8, 1.2, 1.0), 1.5, Rgb::ONE, 0.8);
+        let (lo, hi) = density_bounds(&m).expect("a non-empty medium");
+        let (blo, bhi) = m.bbox();
+        for _ in 0..2000 {
+            let p = blo + (bhi - blo) * Vec3::new(rng.uniform(), rng.uniform(), rng.uniform());
+            let inside = (0..3).all(|a| p[a] >= lo[a] && p[a] <= hi[a]);
+            let rho = m.density.trilinear(m.to_voxel(p).to_array());
+            assert!(inside || rho == 0.0, "ρ = {rho} at {p:?} outside {lo:?}..{hi:?}");
+        }
+        for _ in 0..300 {
+            let o = Vec3::new(-8.0, rng.uniform() * 22.0, rng.uniform() * 14.0);
+            let d = Vec3::new(1.0, rng.uniform() - 0.5, rng.uniform() - 0.5).normalize();
+            let whole = RayProfile::trace(&m, o, d, 0.0, 100.0, &[0.3]);
+            let within = RayProfile::trace_in(&m, (lo, hi), o, d, 0.0, 100.0, &[0.3]);
+            assert!((whole.depth() - within.depth()).abs() <= 1e-9 * (1.0 + whole.depth()));
+            assert_eq!(whole.segments(&m, 0.3).len(), within.segments(&m, 0.3).len());
+        }
     }
 
     #[test]
