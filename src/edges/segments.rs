@@ -294,7 +294,8 @@ impl RayProfile {
         let sigma_t = m.optics.sigma_t as f64;
         // Allocated only on a ray's first level crossing (most rays have none).
         let mut cuts: Vec<f64> = Vec::new();
-        prof.pieces.reserve(16);
+        // Rays into the cloud have tens of pieces; the surface cut inserts one more.
+        prof.pieces.reserve(64);
         for_each_dual_run(m, o, d, t0, t1, |cells| {
             for s in cells {
                 let cell = CellDensity::new(m, s.cell);
