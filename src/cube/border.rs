@@ -31,26 +31,37 @@ pub const FACE_OFFSETS: [[isize; 3]; 6] = [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0,
 /// are not considered (a cloud touching the grid's side gets no cubes there).
 pub fn find_border_voxels(density: &Grid3) -> Vec<([usize; 3], u8)> {
     let d = density.dims();
-    let mut out = Vec::new();
-    for k in 0..d[2] {
-        for j in 0..d[1] {
-            for i in 0..d[0] {
-                if density.get(i, j, k) > 0.0 {
-                    continue;
-                }
-                let mut faces = 0u8;
-                for (f, o) in FACE_OFFSETS.iter().enumerate() {
-                    if density.get_or_zero(i as isize + o[0], j as isize + o[1], k as isize + o[2]) > 0.0 {
-                        faces |= 1 << f;
+    let data = density.data();
+    let (nx, nxy) = (d[0] as isize, (d[0] * d[1]) as isize);
+    // Per face, the index offset of the neighbour and whether voxel (i, j, k) has one there.
+    let strides = [1, -1, nx, -nx, nxy, -nxy];
+    // Slices in parallel, each in memory order; concatenated in order.
+    let slices: Vec<Vec<([usize; 3], u8)>> = (0..d[2])
+        .into_par_iter()
+        .map(|k| {
+            let mut out = Vec::new();
+            for j in 0..d[1] {
+                for i in 0..d[0] {
+                    let n = i + d[0] * (j + d[1] * k);
+                    if data[n] > 0.0 {
+                        continue;
+                    }
+                    let inside = [i + 1 < d[0], i > 0, j + 1 < d[1], j > 0, k + 1 < d[2], k > 0];
+                    let mut faces = 0u8;
+                    for f in 0..6 {
+                        if inside[f] && data[(n as isize + strides[f]) as usize] > 0.0 {
+                            faces |= 1 << f;
+                        }
+                    }
+                    if faces != 0 {
+                        out.push(([i, j, k], faces));
                     }
                 }
-                if faces != 0 {
-                    out.push(([i, j, k], faces));
-                }
             }
-        }
-    }
-    out
+            out
+        })
+        .collect();
+    slices.concat()
 }
 
 /// The rendered border cubes: per border voxel, the mean radiance in each needed bin. Only the
@@ -135,14 +146,17 @@ impl BorderCubes {
 /// parallel, marching with `opts.border_step_level_voxels` and `opts.border_t_cutoff`; the result does not depend on the
 /// thread count.
 pub fn render_border_cubes(lit: &LitVolume, opts: &CubeOptions, progress: &dyn Progress) -> BorderCubes {
-    let opts = CubeOptions {
+    render_border_cubes_with(&CubeRenderer::new(lit, &border_options(opts)), progress)
+}
+
+/// The border cubes' renderer options: `opts` with the border's step, cut-off and resolution.
+pub fn border_options(opts: &CubeOptions) -> CubeOptions {
+    CubeOptions {
         step_level_voxels: opts.border_step_level_voxels,
         t_cutoff: opts.border_t_cutoff,
         res: opts.border_res,
         ..opts.clone()
-    };
-    let renderer = CubeRenderer::new(lit, &opts);
-    render_border_cubes_with(&renderer, progress)
+    }
 }
 
 /// Blocks of 2^[`SHARED_SCALES`] voxels per edge are the largest whose border voxels share rays.
@@ -293,6 +307,40 @@ mod tests {
     use super::*;
     use crate::lighting::{Sky, Sun};
     use crate::pipeline::NoProgress;
+
+    #[test]
+    fn border_voxels_are_the_empty_ones_with_a_full_face_neighbour() {
+        // A random sparse grid (voxels on every side of the box full too), against the definition
+        // read voxel by voxel in memory order.
+        let dims = [9, 7, 6];
+        let mut g = Grid3::filled(dims, 0.0);
+        let mut rng = crate::math::Rng::new(11, 5);
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    if rng.uniform() < 0.3 {
+                        g.set(i, j, k, 0.5);
+                    }
+                }
+            }
+        }
+        let mut want = Vec::new();
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    let faces = FACE_OFFSETS.iter().enumerate().fold(0u8, |acc, (f, o)| {
+                        let full = g.get_or_zero(i as isize + o[0], j as isize + o[1], k as isize + o[2]) > 0.0;
+                        acc | (u8::from(full) << f)
+                    });
+                    if g.get(i, j, k) <= 0.0 && faces != 0 {
+                        want.push(([i, j, k], faces));
+                    }
+                }
+            }
+        }
+        assert!(want.len() > 50);
+        assert_eq!(find_border_voxels(&g), want);
+    }
 
     /// Two smooth lobes (peak 1) in a `dims` grid with a clear-air gap between them, lit with a
     /// constant I0, half sun transmittance and a grey sky.

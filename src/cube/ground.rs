@@ -149,11 +149,15 @@ pub const GROUND_TOLERANCE: f32 = 0.02;
 /// Render `opts.ground_samples`² hemicubes of `opts.ground_res` pixels per face edge over
 /// [`ground_area`] and return the lit ground.
 pub fn render_ground(lit: &LitVolume, ground: &Ground, opts: &CubeOptions, progress: &dyn Progress) -> LitGround {
-    let opts = CubeOptions {
+    render_ground_with(&CubeRenderer::new(lit, &ground_options(opts)), ground, progress)
+}
+
+/// The hemicubes' renderer options: `opts` at the ground's resolution.
+pub fn ground_options(opts: &CubeOptions) -> CubeOptions {
+    CubeOptions {
         res: opts.ground_res,
         ..opts.clone()
-    };
-    render_ground_with(&CubeRenderer::new(lit, &opts), ground, progress)
+    }
 }
 
 /// [`render_ground`] with a renderer already built (its `opts.res` is the hemicube resolution).

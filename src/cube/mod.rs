@@ -14,7 +14,7 @@ pub mod skip;
 pub use border::{find_border_voxels, render_border_cubes, BorderCubes};
 pub use ground::{render_ground, LitGround};
 pub use image::CubeImage;
-pub use render::{opposite_bin, render_cube_brute, BinMask, CubeOptions, CubeRenderer};
+pub use render::{opposite_bin, render_cube_brute, BinMask, CubeOptions, CubeRenderer, LevelTables};
 
 use crate::error::{check, Result};
 use crate::lighting::Ground;
@@ -76,10 +76,14 @@ pub struct ClearAir {
 /// `render.ground_samples`.
 pub fn clear_air(lit: LitVolume, ground: Option<&Ground>, opts: &CubeOptions, progress: &dyn Progress) -> ClearAir {
     let mut lit = lit;
+    // The lit ground keeps the pyramid: one set of level tables for both renderers.
+    let tables = LevelTables::new(&lit, opts);
     if let Some(g) = ground {
-        let lg = render_ground(&lit, g, opts, progress);
+        let renderer = CubeRenderer::with_tables(&lit, &ground::ground_options(opts), tables.clone());
+        let lg = ground::render_ground_with(&renderer, g, progress);
         lit = lit.with_ground(Some(lg));
     }
-    let cubes = render_border_cubes(&lit, opts, progress);
+    let renderer = CubeRenderer::with_tables(&lit, &border::border_options(opts), tables);
+    let cubes = border::render_border_cubes_with(&renderer, progress);
     ClearAir { lit, cubes }
 }

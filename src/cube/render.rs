@@ -314,9 +314,24 @@ pub struct CubeRenderer<'a> {
     pub sun_transformed: bool,
 }
 
-impl<'a> CubeRenderer<'a> {
-    /// Build the pyramid and tables.
-    pub fn new(lit: &'a LitVolume, opts: &CubeOptions) -> CubeRenderer<'a> {
+/// A renderer's per-level tables (the pyramid's levels used, their empty-cell masks, occupied
+/// boxes and march constants). They depend on the lit volume's pyramid and `max_levels` only, so
+/// renderers over lit volumes that share one pyramid (the clear-air stage's ground hemicubes and
+/// border cubes: adding the lit ground keeps it) build them once.
+#[derive(Clone)]
+pub struct LevelTables {
+    pyramid: Arc<LitPyramid>,
+    levels: usize,
+    masks: Arc<Vec<DualMask>>,
+    occupied: Arc<Vec<Option<(Vec3, Vec3)>>>,
+    occupied_union: Option<(Vec3, Vec3)>,
+    walk: Arc<Vec<LevelWalk>>,
+    max_levels: usize,
+}
+
+impl LevelTables {
+    /// The tables of `lit`'s pyramid for `opts.max_levels`.
+    pub fn new(lit: &LitVolume, opts: &CubeOptions) -> LevelTables {
         let pyramid = lit.pyramid();
         let levels = opts.max_levels.max(1).min(pyramid.levels.len());
         let masks = Arc::new(pyramid.levels[..levels].iter().map(DualMask::new).collect());
@@ -336,17 +351,43 @@ impl<'a> CubeRenderer<'a> {
                 .map(|(li, lev)| LevelWalk::new(lev, li, h_min))
                 .collect(),
         );
-        CubeRenderer {
-            lit,
+        LevelTables {
             pyramid,
             levels,
             masks,
             occupied,
             occupied_union,
             walk,
+            max_levels: opts.max_levels,
+        }
+    }
+}
+
+impl<'a> CubeRenderer<'a> {
+    /// Build the pyramid and tables.
+    pub fn new(lit: &'a LitVolume, opts: &CubeOptions) -> CubeRenderer<'a> {
+        Self::with_tables(lit, opts, LevelTables::new(lit, opts))
+    }
+
+    /// A renderer with `tables` made for `lit`'s pyramid (or a lit volume sharing it); made anew
+    /// when they were made for another pyramid or `max_levels`.
+    pub fn with_tables(lit: &'a LitVolume, opts: &CubeOptions, tables: LevelTables) -> CubeRenderer<'a> {
+        let tables = if Arc::ptr_eq(&tables.pyramid, &lit.pyramid()) && tables.max_levels == opts.max_levels {
+            tables
+        } else {
+            LevelTables::new(lit, opts)
+        };
+        CubeRenderer {
+            lit,
+            pyramid: tables.pyramid,
+            levels: tables.levels,
+            masks: tables.masks,
+            occupied: tables.occupied,
+            occupied_union: tables.occupied_union,
+            walk: tables.walk,
             opts: opts.clone(),
             pixels: PixelTable::new(opts.res),
-            h_min,
+            h_min: lit.medium.min_voxel(),
             gather_source: false,
             sun_transformed: false,
             uniform_short_levels: false,

@@ -34,7 +34,7 @@
 //! segment instead of switching abruptly when the gap closes.
 
 use super::orders_kernel::{edge_radiance, segment_orders, OrderKernel, DEFAULT_TAIL};
-use super::segments::{depth_from_samples, LowSegment, RayProfile};
+use super::segments::{density_bounds, depth_from_samples, LowSegment, RayProfile};
 use crate::cube::CubeImage;
 use crate::math::{Rgb, Vec3};
 use crate::medium::Medium;
@@ -183,6 +183,8 @@ pub struct EdgeGather<'a> {
     cubes: &'a dyn CubeSource,
     sun: SunInput<'a>,
     dense: &'a (dyn Fn(Vec3, Vec3) -> Rgb + Sync),
+    /// Where ρ > 0 ([`density_bounds`]): the eye rays' profiles start there.
+    bounds: (Vec3, Vec3),
 }
 
 /// One low-density segment (or a bridge's merged/split variant) whose E is needed for a pixel.
@@ -242,6 +244,7 @@ impl<'a> EdgeGather<'a> {
             cubes,
             sun,
             dense,
+            bounds: density_bounds(medium).unwrap_or((Vec3::ZERO, Vec3::ZERO)),
         }
     }
 
@@ -253,6 +256,11 @@ impl<'a> EdgeGather<'a> {
     /// The medium.
     pub fn medium(&self) -> &Medium {
         self.medium
+    }
+
+    /// The profile of `o + t·d`, t ∈ [0, `t_max`], cut at `levels`, walked only where ρ > 0.
+    pub fn profile(&self, o: Vec3, d: Vec3, t_max: f32, levels: &[f32]) -> RayProfile {
+        RayProfile::trace_in(self.medium, self.bounds, o, d, 0.0, t_max, levels)
     }
 
     /// The settings.
@@ -460,12 +468,9 @@ impl<'a> EdgeGather<'a> {
     pub fn plan(&self, o: Vec3, d: Vec3, t_max: f32) -> PixelPlan {
         let m = self.medium;
         let t = self.settings.threshold;
-        let levels: Vec<f32> = if t > 0.0 {
-            vec![self.gap_level(), self.t_lo(), t]
-        } else {
-            Vec::new()
-        };
-        let mut profile = RayProfile::trace(m, o, d, 0.0, t_max, &levels);
+        let levels = [self.gap_level(), self.t_lo(), t];
+        let levels: &[f32] = if t > 0.0 { &levels } else { &[] };
+        let mut profile = self.profile(o, d, t_max, levels);
         if self.settings.merge_transition && t > 0.0 {
             refine_extrema(&mut profile, m, self.gap_level(), self.t_lo(), t);
         }
@@ -543,7 +548,12 @@ impl<'a> EdgeGather<'a> {
         let m = self.medium;
         let (o, d, prof) = (plan.o, plan.d, &plan.profile);
         let mut aov = EdgeAov::default();
-        let mut edge_src = vec![Rgb::ZERO; prof.pieces.len()];
+        // A ray without jobs has no edge source anywhere: nothing allocated.
+        let mut edge_src = if plan.jobs.is_empty() {
+            Vec::new()
+        } else {
+            vec![Rgb::ZERO; prof.pieces.len()]
+        };
         for (job, ej) in plan.jobs.iter().zip(e) {
             let s = *ej / (-(-job.seg.depth).exp_m1()) as f32 * job.weight;
             for x in &mut edge_src[job.seg.first..job.seg.end] {
@@ -584,16 +594,18 @@ impl<'a> EdgeGather<'a> {
                     w = w.min(1.0 - self.surface_weight(tau + 0.5 * delta));
                 }
                 tau += delta;
-                let f = (tr * -(-delta).exp_m1()) as f32;
+                // e^{−δ} − 1 once for the step's weight and the transmittance behind it.
+                let em1 = (-delta).exp_m1();
+                let f = (tr * -em1) as f32;
                 if w > 0.0 {
                     aov.diffusion += f * w * (self.dense)(pos, to_eye);
                 }
                 if w < 1.0 {
-                    aov.edge += f * (1.0 - w) * edge_src[k];
+                    aov.edge += f * (1.0 - w) * edge_src.get(k).copied().unwrap_or(Rgb::ZERO);
                 }
                 let sun = if n == 1 { plan.sun[k] } else { (self.sun.irradiance_at)(pos) };
                 aov.sun_single += f * sun * sun_scatter;
-                tr *= (-delta).exp();
+                tr *= 1.0 + em1;
                 if tr < crate::medium::march::T_CUTOFF as f64 {
                     tr = 0.0;
                     break 'pieces;

@@ -122,36 +122,13 @@ impl OrderKernel {
         assert!(res > 0, "cube resolution must be positive");
         let max_order = max_order.max(1);
         let n = 6 * res * res;
-        // Per pixel, every order: the first two levels of the adaptive rule are the SUB² coarse
-        // and (2·SUB)² fine midpoints; a pixel where they disagree is integrated adaptively on
-        // a tree of rectangles built once for all its orders.
         let orders: Vec<Hg> = (1..=max_order).map(|i| phase.order(i)).collect();
-        let raw: Vec<Vec<f64>> = (0..n)
-            .into_par_iter()
-            .map(|p| {
-                let (face, j, i) = (p / (res * res), (p / res) % res, p % res);
-                let (u0, u1) = CubeImage::pixel_range(res, i);
-                let (v0, v1) = CubeImage::pixel_range(res, j);
-                let mut coarse = [(0.0, 0.0); SUB * SUB];
-                let mut fine = [(0.0, 0.0); 4 * SUB * SUB];
-                rect_points(face, u0, u1, v0, v1, SUB, &mut coarse);
-                rect_points(face, u0, u1, v0, v1, 2 * SUB, &mut fine);
-                let mut tree: Option<RectNode> = None;
-                orders
-                    .iter()
-                    .map(|gi| {
-                        let c: f64 = coarse.iter().map(|(x, w)| gi.eval_cos_f64(*x) * w).sum();
-                        let f: f64 = fine.iter().map(|(x, w)| gi.eval_cos_f64(*x) * w).sum();
-                        if (f - c).abs() <= PIXEL_TOL * f + 1e-12 {
-                            f
-                        } else {
-                            let r = (u0, u1, v0, v1);
-                            tree.get_or_insert_with(|| RectNode::new(face, r)).integrate(face, r, *gi, 0)
-                        }
-                    })
-                    .collect()
-            })
-            .collect();
+        // The weights depend on a pixel only through ω_x over it, the same on pixels that the
+        // cube's symmetries about the x axis map onto each other (8 per ±x face, the four side
+        // faces alike): each class is integrated once, at its first pixel.
+        let (class, reps) = symmetry_classes(res);
+        let unique: Vec<Vec<f64>> = reps.par_iter().map(|&p| pixel_integrals(res, p, &orders)).collect();
+        let raw: Vec<&Vec<f64>> = class.iter().map(|&c| &unique[c]).collect();
         let mut weights = Vec::with_capacity(max_order * n);
         for i in 0..max_order {
             let total: f64 = raw.iter().map(|r| r[i]).sum();
@@ -227,6 +204,66 @@ impl OrderKernel {
     }
 }
 
+/// ∫ HG(g_i, ω_x) dΩ over pixel `p` (face-major, then rows) of a cube of `res` pixels per edge,
+/// for each order's phase function: the first two levels of the adaptive rule are the SUB²
+/// coarse and (2·SUB)² fine midpoints; where they disagree the pixel is integrated adaptively on
+/// a tree of rectangles built once for all its orders.
+fn pixel_integrals(res: usize, p: usize, orders: &[Hg]) -> Vec<f64> {
+    let (face, j, i) = (p / (res * res), (p / res) % res, p % res);
+    let (u0, u1) = CubeImage::pixel_range(res, i);
+    let (v0, v1) = CubeImage::pixel_range(res, j);
+    let mut coarse = [(0.0, 0.0); SUB * SUB];
+    let mut fine = [(0.0, 0.0); 4 * SUB * SUB];
+    rect_points(face, u0, u1, v0, v1, SUB, &mut coarse);
+    rect_points(face, u0, u1, v0, v1, 2 * SUB, &mut fine);
+    let mut tree: Option<RectNode> = None;
+    orders
+        .iter()
+        .map(|gi| {
+            let c: f64 = coarse.iter().map(|(x, w)| gi.eval_cos_f64(*x) * w).sum();
+            let f: f64 = fine.iter().map(|(x, w)| gi.eval_cos_f64(*x) * w).sum();
+            if (f - c).abs() <= PIXEL_TOL * f + 1e-12 {
+                f
+            } else {
+                let r = (u0, u1, v0, v1);
+                tree.get_or_insert_with(|| RectNode::new(face, r)).integrate(face, r, *gi, 0)
+            }
+        })
+        .collect()
+}
+
+/// The pixels of a cube of `res` pixels per edge grouped by the symmetries that keep ω_x: per
+/// pixel the index of its class, and each class's first pixel. On a ±x face ω_x = ±1/|dir| is
+/// even in u and v and symmetric under their swap; on a side face it is ±(the x-aligned
+/// coordinate)/|dir|, even in the other one, and the four side faces map onto each other by
+/// quarter turns about x. Mirroring a pixel index i ↦ res − 1 − i mirrors its range exactly.
+fn symmetry_classes(res: usize) -> (Vec<usize>, Vec<usize>) {
+    let fold = |i: usize| i.min(res - 1 - i);
+    let key = |p: usize| -> (u8, usize, usize) {
+        let (face, j, i) = (p / (res * res), (p / res) % res, p % res);
+        let f = &CUBE_FACES[face];
+        if f.n.x != 0.0 {
+            let (a, b) = (fold(i), fold(j));
+            (if f.n.x > 0.0 { 0 } else { 1 }, a.min(b), a.max(b))
+        } else {
+            // The tangent along ±x carries ω_x's sign; the other coordinate enters squared.
+            let (along, sign, other) = if f.tu.x != 0.0 { (i, f.tu.x, j) } else { (j, f.tv.x, i) };
+            (2, if sign > 0.0 { along } else { res - 1 - along }, fold(other))
+        }
+    };
+    let mut first = std::collections::HashMap::new();
+    let mut reps = Vec::new();
+    let class = (0..6 * res * res)
+        .map(|p| {
+            *first.entry(key(p)).or_insert_with(|| {
+                reps.push(p);
+                reps.len() - 1
+            })
+        })
+        .collect();
+    (class, reps)
+}
+
 /// The scattering weights of one segment: c_i = q_i (i ≥ 1) from eq. 8 with the omitted Poisson
 /// tail (< `tail`) added to the highest order kept, so Σ_{i≥0} q_i = 1 exactly and the furnace
 /// test holds to rounding. Index 0 of the result is order 1.
@@ -274,6 +311,25 @@ mod tests {
     use super::*;
     use crate::math::Vec3;
     use std::f64::consts::PI;
+
+    #[test]
+    fn symmetric_pixels_have_the_integrals_of_their_class() {
+        // Every pixel's own integrals against its class representative's, at an even and an odd
+        // resolution; the classes are the 8-fold folds of the ±x faces and one side face's halves.
+        let orders: Vec<Hg> = (1..=4).map(|i| Hg::new(0.85).order(i)).collect();
+        for res in [4, 5] {
+            let (class, reps) = symmetry_classes(res);
+            let half = res.div_ceil(2);
+            assert_eq!(reps.len(), 2 * half * (half + 1) / 2 + res * half, "res {res}");
+            for p in 0..6 * res * res {
+                let own = pixel_integrals(res, p, &orders);
+                let rep = pixel_integrals(res, reps[class[p]], &orders);
+                for (a, b) in own.iter().zip(&rep) {
+                    assert!((a - b).abs() <= 1e-12 * b.abs().max(1e-300), "res {res} pixel {p}: {a} vs {b}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn weights_sum_to_one_and_peak_forward() {

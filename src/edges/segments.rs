@@ -10,6 +10,7 @@
 //! cell) is missed, which only moves a piece boundary, never the optical depth.
 
 use crate::math::Vec3;
+use crate::medium::dda::{ray_box, Dda};
 use crate::medium::Medium;
 use glam::DVec3;
 
@@ -132,11 +133,13 @@ impl CellDensity {
         let dims = m.density.dims();
         let lo: [usize; 3] = std::array::from_fn(|a| cell[a].saturating_sub(1).min(dims[a] - 1));
         let hi: [usize; 3] = std::array::from_fn(|a| cell[a].min(dims[a] - 1));
-        let g = &m.density;
-        let corners = std::array::from_fn(|c| {
-            let pick = |a: usize| if c >> a & 1 == 1 { hi[a] } else { lo[a] };
-            g.get(pick(0), pick(1), pick(2))
-        });
+        // One index and a stride per axis (0 where the cell is clamped at the grid's side):
+        // the same voxels as eight `get`s.
+        let (nx, nxy) = (dims[0], dims[0] * dims[1]);
+        let base = lo[0] + nx * lo[1] + nxy * lo[2];
+        let step = [hi[0] - lo[0], nx * (hi[1] - lo[1]), nxy * (hi[2] - lo[2])];
+        let data = m.density.data();
+        let corners = std::array::from_fn(|c| data[base + (c & 1) * step[0] + (c >> 1 & 1) * step[1] + (c >> 2 & 1) * step[2]]);
         CellDensity {
             corners,
             lo: std::array::from_fn(|a| cell[a] as f32 - 1.0),
@@ -155,6 +158,16 @@ impl CellDensity {
     /// No density anywhere in the cell (a trilinear blend of zeros).
     fn is_empty(&self) -> bool {
         self.corners.iter().all(|c| *c == 0.0)
+    }
+
+    /// Whether ρ > 0 everywhere in the cell and no level (the positive ones) lies between its
+    /// smallest and largest corner, with a relative margin of 10⁻⁵ so that the expanded cubic's
+    /// rounding (~10⁻¹⁴ relative) cannot put a sample across: the trilinear blend lies between its
+    /// corners, so the samples would find no crossing either.
+    fn clear_of(&self, levels: &[f32]) -> bool {
+        let lo = self.corners.iter().copied().fold(f32::INFINITY, f32::min);
+        let hi = self.corners.iter().copied().fold(0.0, f32::max);
+        lo > 0.0 && levels.iter().all(|&l| l <= 0.0 || hi < l * (1.0 - 1e-5) || lo > l * (1.0 + 1e-5))
     }
 
     /// The trilinear ρ along the ray inside the cell as a cubic in τ = t − `t0` (the blend's three
@@ -213,23 +226,77 @@ impl CellCubic {
     }
 }
 
+/// The world box (m) outside which ρ ≡ 0: the non-empty voxels' index box grown by one voxel
+/// (the trilinear field reaches the neighbouring centres, and the grid's side where it is
+/// clamped), or None for an empty medium.
+pub fn density_bounds(m: &Medium) -> Option<(Vec3, Vec3)> {
+    let (lo, hi) = m.active_box(1)?;
+    let at = |c: [usize; 3]| m.origin + m.voxel_size * Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32);
+    Some((at(lo), at(hi)))
+}
+
+/// The dual lattice's cells along `o + t·d`, t ∈ [t0, t1], inside the runs of consecutive
+/// non-empty majorant blocks: one DDA per run, where [`Medium::for_each_dual_block`] starts one
+/// per block and so cuts the dual cells that straddle a block face into two (more cells, pieces,
+/// sun look-ups and compositing steps for the same ray).
+fn for_each_dual_run(m: &Medium, o: Vec3, d: Vec3, t0: f32, t1: f32, mut f: impl FnMut(Dda)) {
+    let (od, dd) = (o.as_dvec3(), d.as_dvec3());
+    let h = m.voxel_size.as_dvec3();
+    let dual_origin = m.origin.as_dvec3() - 0.5 * h;
+    let dims = m.dims();
+    let dual_dims = [dims[0] + 1, dims[1] + 1, dims[2] + 1];
+    let mut walk = |a: f32, b: f32| f(Dda::new(dual_origin, h, dual_dims, od, dd, a as f64, b as f64));
+    let mut run: Option<(f32, f32)> = None;
+    m.majorant.for_each_block(m, o, d, t0, t1, |ta, tb, maj| {
+        run = match run {
+            _ if maj <= 0.0 => {
+                if let Some((a, b)) = run {
+                    walk(a, b);
+                }
+                None
+            }
+            Some((a, b)) if b == ta => Some((a, tb)),
+            Some((a, b)) => {
+                walk(a, b);
+                Some((ta, tb))
+            }
+            None => Some((ta, tb)),
+        };
+        true
+    });
+    if let Some((a, b)) = run {
+        walk(a, b);
+    }
+}
+
 impl RayProfile {
     /// Profile `o + t·d` (`d` unit), t ∈ [t_min, t_max], split wherever ρ crosses one of `levels`
     /// (density units; non-positive levels are ignored).
     pub fn trace(m: &Medium, o: Vec3, d: Vec3, t_min: f32, t_max: f32, levels: &[f32]) -> RayProfile {
+        Self::trace_in(m, m.bbox(), o, d, t_min, t_max, levels)
+    }
+
+    /// [`Self::trace`] over the part of the ray inside `bounds` (world box, m), which must hold
+    /// every point where ρ > 0 (e.g. [`density_bounds`]): the block walk then starts at the cloud,
+    /// not at the grid's side.
+    pub fn trace_in(m: &Medium, bounds: (Vec3, Vec3), o: Vec3, d: Vec3, t_min: f32, t_max: f32, levels: &[f32]) -> RayProfile {
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
         let mut prof = RayProfile {
             pieces: Vec::new(),
             o: od,
             d: dd,
         };
-        let Some((t0, t1)) = m.intersect(o, d, t_min, t_max) else {
+        let (lo, hi) = bounds;
+        let Some((t0, t1)) = ray_box(lo.as_dvec3(), hi.as_dvec3(), od, dd, t_min as f64, t_max as f64) else {
             return prof;
         };
-        let levels: Vec<f32> = levels.iter().copied().filter(|l| *l > 0.0).collect();
+        let (t0, t1) = (t0 as f32, t1 as f32);
         let sigma_t = m.optics.sigma_t as f64;
-        let mut cuts: Vec<f64> = Vec::with_capacity(8);
-        m.for_each_dual_block(o, d, t0, t1, |_, cells| {
+        // Allocated only on a ray's first level crossing (most rays have none).
+        let mut cuts: Vec<f64> = Vec::new();
+        // Rays into the cloud have tens of pieces; the surface cut inserts one more.
+        prof.pieces.reserve(64);
+        for_each_dual_run(m, o, d, t0, t1, |cells| {
             for s in cells {
                 let cell = CellDensity::new(m, s.cell);
                 if cell.is_empty() {
@@ -237,13 +304,30 @@ impl RayProfile {
                 }
                 let cubic = cell.cubic(m, od, dd, s.t0);
                 let rho = |t: f64| cubic.at(t);
+                let sample_t = |k: usize| s.t0 + (s.t1 - s.t0) * k as f64 / CELL_SAMPLES as f64;
+                let piece = |r: [f32; 3]| Piece {
+                    t0: s.t0,
+                    t1: s.t1,
+                    tau: sigma_t * (s.t1 - s.t0) / 6.0 * (r[0] as f64 + 4.0 * r[1] as f64 + r[2] as f64),
+                    rho: r,
+                };
+                if cell.clear_of(levels) {
+                    // ρ inside the cell lies between its corners, all on one side of every level
+                    // and positive: no crossing, one piece from the samples at 0, ½, 1.
+                    prof.pieces.push(piece([
+                        rho(sample_t(0)),
+                        rho(sample_t(CELL_SAMPLES / 2)),
+                        rho(sample_t(CELL_SAMPLES)),
+                    ]));
+                    continue;
+                }
                 let simpson = |a: f64, b: f64| -> (f64, [f32; 3]) {
                     let r = [rho(a), rho(0.5 * (a + b)), rho(b)];
                     (sigma_t * (b - a) / 6.0 * (r[0] as f64 + 4.0 * r[1] as f64 + r[2] as f64), r)
                 };
                 let mut samples = [(0f64, 0f32); CELL_SAMPLES + 1];
                 for (k, sm) in samples.iter_mut().enumerate() {
-                    let t = s.t0 + (s.t1 - s.t0) * k as f64 / CELL_SAMPLES as f64;
+                    let t = sample_t(k);
                     *sm = (t, rho(t));
                 }
                 if samples.iter().all(|x| x.1 <= 0.0) {
@@ -254,8 +338,8 @@ impl RayProfile {
                 for w in samples.windows(2) {
                     let (ta, ra) = w[0];
                     let (tb, rb) = w[1];
-                    for &l in &levels {
-                        if (ra < l) != (rb < l) {
+                    for &l in levels {
+                        if l > 0.0 && (ra < l) != (rb < l) {
                             // ρ − l, signed so that ra's side is ≤ 0.
                             let sign = if ra < l { 1.0 } else { -1.0 };
                             let side = |t: f64| {
@@ -268,13 +352,8 @@ impl RayProfile {
                 }
                 if cuts.len() == 1 {
                     // No crossing (the common case): the samples at 0, ½, 1 give Simpson's rule.
-                    let r = [samples[0].1, samples[CELL_SAMPLES / 2].1, samples[CELL_SAMPLES].1];
-                    prof.pieces.push(Piece {
-                        t0: s.t0,
-                        t1: s.t1,
-                        tau: sigma_t * (s.t1 - s.t0) / 6.0 * (r[0] as f64 + 4.0 * r[1] as f64 + r[2] as f64),
-                        rho: r,
-                    });
+                    prof.pieces
+                        .push(piece([samples[0].1, samples[CELL_SAMPLES / 2].1, samples[CELL_SAMPLES].1]));
                     continue;
                 }
                 cuts.push(s.t1);
@@ -511,6 +590,77 @@ mod tests {
             });
         }
         assert!(checked > 1000, "{checked}");
+    }
+
+    #[test]
+    fn dual_runs_cover_the_block_walks_cells_without_splitting_them() {
+        let m = Medium::new(
+            crate::medium::procedural::cumulus([24, 20, 16], 3),
+            Vec3::new(-1.0, 2.0, 0.5),
+            Vec3::new(0.7, 1.1, 0.9),
+            1.0,
+            Rgb::ONE,
+            0.8,
+        );
+        let mut rng = crate::math::Rng::new(7, 3);
+        let mut merged = 0;
+        for _ in 0..200 {
+            let o = Vec3::new(-6.0, 2.0 + rng.uniform() * 22.0, 0.5 + rng.uniform() * 14.4);
+            let d = Vec3::new(1.0, rng.uniform() - 0.5, rng.uniform() - 0.5).normalize();
+            let Some((t0, t1)) = m.intersect(o, d, 0.0, 100.0) else { continue };
+            let (mut blocks, mut runs) = (Vec::new(), Vec::new());
+            m.for_each_dual_block(o, d, t0, t1, |_, cells| blocks.extend(cells.map(|s| (s.cell, s.t0, s.t1))));
+            for_each_dual_run(&m, o, d, t0, t1, |cells| runs.extend(cells.map(|s| (s.cell, s.t0, s.t1))));
+            // The same stretches of ray (lengths summed) in the same cells, each cell's midpoint inside it.
+            let len = |v: &[([usize; 3], f64, f64)]| v.iter().map(|c| c.2 - c.1).sum::<f64>();
+            assert!((len(&blocks) - len(&runs)).abs() <= 1e-9 * (1.0 + len(&blocks)));
+            let cells = |v: &[([usize; 3], f64, f64)]| {
+                let mut c: Vec<[usize; 3]> = v.iter().map(|c| c.0).collect();
+                c.dedup();
+                c
+            };
+            assert_eq!(cells(&blocks), cells(&runs));
+            for &(c, a, b) in &runs {
+                let v = (o.as_dvec3() + d.as_dvec3() * (0.5 * (a + b)) - m.origin.as_dvec3()) / m.voxel_size.as_dvec3();
+                assert!((0..3).all(|k| (v[k] + 0.5).floor() as usize == c[k]), "{c:?} at {v:?}");
+            }
+            // No cell twice in a row: a block face no longer cuts a cell in two.
+            assert!(runs.windows(2).all(|w| w[0].0 != w[1].0));
+            merged += blocks.len() - runs.len();
+        }
+        assert!(merged > 0, "no ray crossed a face between two non-empty blocks");
+    }
+
+    #[test]
+    fn profiles_within_the_density_bounds_equal_the_whole_box() {
+        // A small cloud in the middle of a larger grid: ρ = 0 outside the bounds, and the profile
+        // walked only inside them has the same pieces' depth and segments as over the whole box.
+        let mut g = Grid3::filled([20, 16, 12], 0.0);
+        let mut rng = crate::math::Rng::new(5, 8);
+        for k in 4..8 {
+            for j in 5..10 {
+                for i in 6..13 {
+                    g.set(i, j, k, rng.uniform());
+                }
+            }
+        }
+        let m = Medium::new(g, Vec3::new(-2.0, 1.0, 0.0), Vec3::new(0.8, 1.2, 1.0), 1.5, Rgb::ONE, 0.8);
+        let (lo, hi) = density_bounds(&m).expect("a non-empty medium");
+        let (blo, bhi) = m.bbox();
+        for _ in 0..2000 {
+            let p = blo + (bhi - blo) * Vec3::new(rng.uniform(), rng.uniform(), rng.uniform());
+            let inside = (0..3).all(|a| p[a] >= lo[a] && p[a] <= hi[a]);
+            let rho = m.density.trilinear(m.to_voxel(p).to_array());
+            assert!(inside || rho == 0.0, "ρ = {rho} at {p:?} outside {lo:?}..{hi:?}");
+        }
+        for _ in 0..300 {
+            let o = Vec3::new(-8.0, rng.uniform() * 22.0, rng.uniform() * 14.0);
+            let d = Vec3::new(1.0, rng.uniform() - 0.5, rng.uniform() - 0.5).normalize();
+            let whole = RayProfile::trace(&m, o, d, 0.0, 100.0, &[0.3]);
+            let within = RayProfile::trace_in(&m, (lo, hi), o, d, 0.0, 100.0, &[0.3]);
+            assert!((whole.depth() - within.depth()).abs() <= 1e-9 * (1.0 + whole.depth()));
+            assert_eq!(whole.segments(&m, 0.3).len(), within.segments(&m, 0.3).len());
+        }
     }
 
     #[test]

@@ -131,7 +131,7 @@ pub fn gather_image(
         tops[i].get_or_init(|| {
             let r = rays[i];
             let t = g.settings().threshold;
-            let mut prof = super::segments::RayProfile::trace(g.medium(), r.o, r.d, 0.0, r.t_max, &[t]);
+            let mut prof = g.profile(r.o, r.d, r.t_max, &[t]);
             let surface_end = g.cut_surface(&mut prof);
             let segs = g.top_segments(&prof, surface_end);
             let k = (0..segs.len()).map(|_| OnceLock::new()).collect();

@@ -78,12 +78,22 @@ impl SubGrid {
     pub fn trilinear(&self, p: [f32; 3]) -> f32 {
         // Trilinear::new's corners and fractions, as grid coordinates.
         let (lo, hi, f) = Trilinear::corners(self.dims, p);
-        let pick = |c: usize, a: usize| if (c >> a) & 1 == 0 { lo[a] } else { hi[a] };
-        let s = Trilinear {
-            idx: std::array::from_fn(|c| self.slot([pick(c, 0), pick(c, 1), pick(c, 2)])),
-            f,
+        let b = self.box_dims;
+        let (l, h) = (
+            [0, 1, 2].map(|a| lo[a].wrapping_sub(self.lo[a])),
+            [0, 1, 2].map(|a| hi[a].wrapping_sub(self.lo[a])),
+        );
+        let idx = if (0..3).all(|a| l[a] < b[a] && h[a] < b[a]) {
+            // Both corners in the box, so all eight: one slot and strides (hi − lo is 0 or 1 per
+            // axis), the same slots as eight `slot` calls. The sun's look-ups per eye-ray piece.
+            let base = l[0] + b[0] * (l[1] + b[1] * l[2]);
+            let step = [h[0] - l[0], b[0] * (h[1] - l[1]), b[0] * b[1] * (h[2] - l[2])];
+            std::array::from_fn(|c| base + (c & 1) * step[0] + (c >> 1 & 1) * step[1] + (c >> 2 & 1) * step[2])
+        } else {
+            let pick = |c: usize, a: usize| if (c >> a) & 1 == 0 { lo[a] } else { hi[a] };
+            std::array::from_fn(|c| self.slot([pick(c, 0), pick(c, 1), pick(c, 2)]))
         };
-        s.blend(|n| self.data[n])
+        Trilinear { idx, f }.blend(|n| self.data[n])
     }
 
     /// Bytes held.
