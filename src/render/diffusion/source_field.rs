@@ -155,7 +155,9 @@ impl RaySource<'_> {
     #[inline]
     pub fn at(&self, v: Vec3, rho: f32) -> Rgb {
         let f = self.field;
-        let t = Trilinear::new(f.dims, v.to_array());
+        // The corners once, for the records and the sun's transmittance.
+        let (lo, hi, fr) = Trilinear::corners(f.dims, v.to_array());
+        let t = Trilinear::from_corners(f.dims, lo, hi, fr);
         let e = self.to_eye;
         let aniso = |o: &[f32]| o[0] + o[1] * e.x + o[2] * e.y + o[3] * e.z;
         let diffuse: [f32; 3] = match &f.rec {
@@ -172,7 +174,7 @@ impl RaySource<'_> {
                 })
             }
         };
-        f.optics.albedo * Rgb::from_array(diffuse) + self.sun * f.sun_t.trilinear(v.to_array())
+        f.optics.albedo * Rgb::from_array(diffuse) + self.sun * f.sun_t.trilinear_at_corners(lo, hi, fr)
     }
 }
 
