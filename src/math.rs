@@ -191,13 +191,6 @@ impl Trilinear {
     #[inline(always)]
     pub fn new(dims: [usize; 3], p: [f32; 3]) -> Trilinear {
         let (lo, hi, f) = Self::corners(dims, p);
-        Self::from_corners(dims, lo, hi, f)
-    }
-
-    /// From [`Self::corners`]' lower and upper corners and fractions (grid `dims`): for a caller
-    /// that also reads a field stored otherwise (a [`crate::medium::SubGrid`]) at the same point.
-    #[inline(always)]
-    pub fn from_corners(dims: [usize; 3], lo: [usize; 3], hi: [usize; 3], f: [f32; 3]) -> Trilinear {
         let nx = dims[0];
         let nxy = nx * dims[1];
         let ix = |i: usize, j: usize, k: usize| i + nx * j + nxy * k;

@@ -181,9 +181,10 @@ impl RaySource<'_> {
     #[inline]
     pub fn at(&self, v: Vec3, rho: f32) -> Rgb {
         let f = self.field;
-        // The corners once, for the records and the sun's transmittance.
+        let t = Trilinear::new(f.dims, v.to_array());
+        // The same corners for the sun's transmittance, located again: taking them out of
+        // `Trilinear::new`, which every march inlines, made `single`'s gather 7 % slower.
         let (lo, hi, fr) = Trilinear::corners(f.dims, v.to_array());
-        let t = Trilinear::from_corners(f.dims, lo, hi, fr);
         let e = self.to_eye;
         let aniso = |o: &[f32]| o[0] + o[1] * e.x + o[2] * e.y + o[3] * e.z;
         let diffuse: [f32; 3] = match &f.rec {
