@@ -78,17 +78,31 @@ impl SubGrid {
     pub fn trilinear(&self, p: [f32; 3]) -> f32 {
         // Trilinear::new's corners and fractions, as grid coordinates.
         let (lo, hi, f) = Trilinear::corners(self.dims, p);
-        let b = self.box_dims;
-        let (l, h) = (
-            [0, 1, 2].map(|a| lo[a].wrapping_sub(self.lo[a])),
-            [0, 1, 2].map(|a| hi[a].wrapping_sub(self.lo[a])),
-        );
-        let idx = if (0..3).all(|a| l[a] < b[a] && h[a] < b[a]) {
-            // Both corners in the box, so all eight: one slot and strides (hi − lo is 0 or 1 per
-            // axis), the same slots as eight `slot` calls. The sun's look-ups per eye-ray piece.
-            let base = l[0] + b[0] * (l[1] + b[1] * l[2]);
-            let step = [h[0] - l[0], b[0] * (h[1] - l[1]), b[0] * b[1] * (h[2] - l[2])];
-            std::array::from_fn(|c| base + (c & 1) * step[0] + (c >> 1 & 1) * step[1] + (c >> 2 & 1) * step[2])
+        self.trilinear_at_corners(lo, hi, f)
+    }
+
+    /// [`Self::trilinear`] at the point whose [`Trilinear::corners`] are `lo`, `hi`, `f` (the same
+    /// bits): for a caller that has them already. When the eight corners lie in the box (nearly
+    /// every sample in a cloud, and the sun's look-ups per eye-ray piece) one bounds check serves
+    /// them all: one slot and strides (hi − lo is 0 or 1 per axis), the same slots as eight `slot`
+    /// calls.
+    #[inline(always)]
+    pub fn trilinear_at_corners(&self, lo: [usize; 3], hi: [usize; 3], f: [f32; 3]) -> f32 {
+        let inside = (0..3).all(|a| lo[a] >= self.lo[a] && hi[a] < self.lo[a] + self.box_dims[a]);
+        let idx = if inside {
+            let (bx, bxy) = (self.box_dims[0], self.box_dims[0] * self.box_dims[1]);
+            let base = (lo[0] - self.lo[0]) + bx * (lo[1] - self.lo[1]) + bxy * (lo[2] - self.lo[2]);
+            let (dx, dy, dz) = (hi[0] - lo[0], bx * (hi[1] - lo[1]), bxy * (hi[2] - lo[2]));
+            [
+                base,
+                base + dx,
+                base + dy,
+                base + dx + dy,
+                base + dz,
+                base + dx + dz,
+                base + dy + dz,
+                base + dx + dy + dz,
+            ]
         } else {
             let pick = |c: usize, a: usize| if (c >> a) & 1 == 0 { lo[a] } else { hi[a] };
             std::array::from_fn(|c| self.slot([pick(c, 0), pick(c, 1), pick(c, 2)]))
@@ -145,6 +159,17 @@ mod tests {
         for _ in 0..2000 {
             let p = [0, 1, 2].map(|a| (rng.uniform() * 1.2 - 0.1) * dims[a] as f32);
             assert_eq!(sub.trilinear(p).to_bits(), dense.trilinear(p).to_bits(), "at {p:?}");
+        }
+        // From corners located by the caller: the same bits, inside the box, across its faces and
+        // outside it.
+        for _ in 0..2000 {
+            let p = [0, 1, 2].map(|a| (rng.uniform() * 1.2 - 0.1) * dims[a] as f32);
+            let (c0, c1, f) = Trilinear::corners(dims, p);
+            assert_eq!(
+                sub.trilinear_at_corners(c0, c1, f).to_bits(),
+                dense.trilinear(p).to_bits(),
+                "at {p:?}"
+            );
         }
         let whole: SubGrid = dense.clone().into();
         assert_eq!(whole.values().collect::<Vec<_>>(), dense.data());
