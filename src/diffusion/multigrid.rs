@@ -388,8 +388,8 @@ impl Level {
         coarse.children = children;
     }
 
-    /// r = b − A x on the red unknowns. Called right after a black pass, which leaves the black
-    /// residuals at zero, so r's black entries (and pads) keep the zeros they start with.
+    /// r = b − A x on the red unknowns (`r` has one value per red entry). Called right after a
+    /// black pass, which leaves the black residuals at zero, so they are not stored.
     fn residual_red<const K: usize>(&self, x: &[[Mg; K]], b: &[[Mg; K]], r: &mut [[Mg; K]]) {
         let (xr, xb) = x.split_at(self.red + 1);
         r[..self.red].par_chunks_mut(CHUNK).enumerate().for_each(|(ci, rs)| {
@@ -634,6 +634,24 @@ struct Work<const K: usize> {
     r: Vec<[Mg; K]>,
     bc: Vec<[Mg; K]>,
     xc: Vec<[Mg; K]>,
+}
+
+impl<const K: usize> Work<K> {
+    /// The vectors for the cycle on `fine` with `coarse` below it. The residual has the red
+    /// entries only: the black ones are zero after the black pass before every restriction, and
+    /// the restriction reads red children only (`Level::residual_red`, `Level::restrict`).
+    fn new(fine: &Level, coarse: &Level) -> Work<K> {
+        Work {
+            r: vec![[0.0; K]; fine.red],
+            bc: vec![[0.0; K]; coarse.len()],
+            xc: vec![[0.0; K]; coarse.len()],
+        }
+    }
+
+    /// The vectors for every level of `h` above its coarsest.
+    fn all(h: &Hierarchy) -> Vec<Work<K>> {
+        h.levels.windows(2).map(|w| Work::new(&w[0], &w[1])).collect()
+    }
 }
 
 /// The multigrid hierarchy of one (diagonally scaled) operator.
@@ -941,16 +959,17 @@ impl Hierarchy {
             levels: self.levels.len(),
             bytes_per_unknown: 0.0,
         });
-        // The hierarchy; y in f64; r, A p, z and p in the multigrid's precision, and two
-        // three vectors per level in `work` (the caller's b and x, per unknown, not counted).
+        // The hierarchy; y in f64; r, p and q (A p, then z) in the multigrid's precision, and
+        // per level in `work` a red residual and the next level's b and x (the caller's b and
+        // x, per unknown, not counted).
         let lanes = |v: usize, bytes: usize| v * bytes * K;
         let held = self.bytes()
             + lanes(n, 8)
-            + lanes(4 * n, std::mem::size_of::<Mg>())
+            + lanes(3 * n, std::mem::size_of::<Mg>())
             + self
                 .levels
                 .windows(2)
-                .map(|w| lanes(w[0].len() + 2 * w[1].len(), std::mem::size_of::<Mg>()))
+                .map(|w| lanes(w[0].red + 2 * w[1].len(), std::mem::size_of::<Mg>()))
                 .sum::<usize>();
         for st in &mut stats {
             st.bytes_per_unknown = held as f64 / (K * a.unknowns().max(1)) as f64;
@@ -970,16 +989,10 @@ impl Hierarchy {
         };
         // Each system's final true r·r, kept from the check that stopped it.
         let mut last: [Option<f64>; K] = [None; K];
-        let (mut ap, mut p, mut z) = (vec![[0.0; K]; n], vec![[0.0; K]; n], vec![[0.0; K]; n]);
-        let mut work: Vec<Work<K>> = self
-            .levels
-            .windows(2)
-            .map(|w| Work {
-                r: vec![[0.0; K]; w[0].len()],
-                bc: vec![[0.0; K]; w[1].len()],
-                xc: vec![[0.0; K]; w[1].len()],
-            })
-            .collect();
+        // `q` holds A p from the product to the step, then the preconditioned residual z = M r
+        // (each is dead when the other is written: one vector for both).
+        let (mut p, mut q) = (vec![[0.0; K]; n], vec![[0.0; K]; n]);
+        let mut work: Vec<Work<K>> = Work::all(self);
         let mut active = [false; K];
         for k in 0..K {
             if bnorm[k] == 0.0 {
@@ -995,12 +1008,12 @@ impl Hierarchy {
             }
         }
         if active.iter().any(|a| *a) {
-            self.cycle(0, &r, &mut z, &mut work);
-            p.copy_from_slice(&z);
-            let mut rz = dot(&r, &z);
+            self.cycle(0, &r, &mut q, &mut work);
+            p.copy_from_slice(&q);
+            let mut rz = dot(&r, &q);
             let mut iterations = 0;
             while iterations < max_iter {
-                let pap = self.apply(&p, &mut ap);
+                let pap = self.apply(&p, &mut q);
                 let mut alpha = [0.0; K];
                 for k in 0..K {
                     if pap[k].is_nan() || pap[k] <= 0.0 {
@@ -1013,7 +1026,7 @@ impl Hierarchy {
                 if !active.iter().any(|a| *a) {
                     break;
                 }
-                let rr = cg_step(y, &mut r, &p, &ap, alpha);
+                let rr = cg_step(y, &mut r, &p, &q, alpha);
                 iterations += 1;
                 let mut check = [false; K];
                 for k in 0..K {
@@ -1043,18 +1056,18 @@ impl Hierarchy {
                 if !active.iter().any(|a| *a) {
                     break;
                 }
-                self.cycle(0, &r, &mut z, &mut work);
-                let rz_new = dot(&r, &z);
+                self.cycle(0, &r, &mut q, &mut work);
+                let rz_new = dot(&r, &q);
                 let beta: [f64; K] = std::array::from_fn(|k| if active[k] && !restart[k] { rz_new[k] / rz[k] } else { 0.0 });
                 rz = rz_new;
                 p.par_iter_mut()
-                    .zip(&z)
-                    .for_each(|(q, zz)| *q = std::array::from_fn(|k| Mg::of(zz[k].get() + beta[k] * q[k].get())));
+                    .zip(&q)
+                    .for_each(|(pv, zz)| *pv = std::array::from_fn(|k| Mg::of(zz[k].get() + beta[k] * pv[k].get())));
             }
         }
         // Report the true residuals (those not known from the stop: a breakdown or the
         // iteration cap).
-        drop((ap, p, z, work));
+        drop((p, q, work));
         let need: [bool; K] = std::array::from_fn(|k| bnorm[k] > 0.0 && last[k].is_none());
         let rr = if need.iter().any(|v| *v) {
             self.true_residual(bs, y, &mut r, need)
@@ -1287,15 +1300,7 @@ mod operator_tests {
     fn precondition(h: &Hierarchy, b: &[f64]) -> Vec<f64> {
         let b: Vec<[Mg; 1]> = b.iter().map(|v| [*v as Mg]).collect();
         let mut x = vec![[0.0; 1]; b.len()];
-        let mut work: Vec<Work<1>> = h
-            .levels
-            .windows(2)
-            .map(|w| Work {
-                r: vec![[0.0; 1]; w[0].len()],
-                bc: vec![[0.0; 1]; w[1].len()],
-                xc: vec![[0.0; 1]; w[1].len()],
-            })
-            .collect();
+        let mut work: Vec<Work<1>> = Work::all(h);
         h.cycle(0, &b, &mut x, &mut work);
         x.iter().map(|v| v[0] as f64).collect()
     }
