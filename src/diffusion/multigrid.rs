@@ -21,7 +21,8 @@
 //! * **Cycle:** a W-cycle whose coarse correction is scaled by [`OVER_CORRECTION`].
 //! * **Coarsest level** (≤ [`COARSE_CELLS`] unknowns): dense Cholesky, exact.
 //! * **Krylov:** CG with the iterate in f64 and its other vectors in f32, stopped on the true
-//!   residual in f64 ([`Hierarchy::solve_many`]).
+//!   residual in f64 ([`Hierarchy::solve_many`]); its operator is the finest level's rows (f32
+//!   couplings, products summed in f64).
 //! * **Determinism:** updates within a colour are independent; reductions sum fixed-size chunks'
 //!   partial sums in order. Bit-identical at any thread count.
 
@@ -273,9 +274,8 @@ fn couple<const K: usize>(row: &Row, x: &[[Mg; K]], off: usize) -> [Mg; K] {
 }
 
 impl Level {
-    /// The level of operator `a` and each unknown's entry. `want_plus` also returns each entry's
-    /// +x, +y, +z couplings in f64 (the finest level's operator for CG).
-    fn from_operator(a: &Operator, want_plus: bool) -> (Level, Vec<u32>, Vec<[f64; 3]>) {
+    /// The level of operator `a` and each unknown's entry.
+    fn from_operator(a: &Operator) -> (Level, Vec<u32>) {
         let n = a.nodes.len();
         let colour = |u: usize| a.ijk(u).iter().sum::<usize>() % 2;
         let red = (0..n).filter(|u| colour(*u) == 0).count();
@@ -298,8 +298,7 @@ impl Level {
             }
         }
         let pads = [(n + 1) as u32, red as u32];
-        let mut plus = vec![[0.0; 3]; if want_plus { n + 2 } else { 0 }];
-        let row = |e: usize, u: u32, up: &mut [f64; 3]| {
+        let row = |e: usize, u: u32| {
             if u == PAD {
                 return Row {
                     cpl: [0.0; 6],
@@ -322,21 +321,11 @@ impl Level {
                 if nd.up_nbr[ax] != NONE && nd.up[ax] != 0.0 {
                     row.nbr[2 * ax + 1] = entry[nd.up_nbr[ax] as usize];
                     row.cpl[2 * ax + 1] = Mg::of(nd.up[ax]);
-                    up[ax] = nd.up[ax];
                 }
             }
             row
         };
-        // Written in place (an unzip would hold a second copy while it gathers its pieces).
-        let rows: Vec<Row> = if want_plus {
-            unk.par_iter()
-                .zip(plus.par_iter_mut())
-                .enumerate()
-                .map(|(e, (u, p))| row(e, *u, p))
-                .collect()
-        } else {
-            unk.par_iter().enumerate().map(|(e, u)| row(e, *u, &mut [0.0; 3])).collect()
-        };
+        let rows: Vec<Row> = unk.par_iter().enumerate().map(|(e, u)| row(e, *u)).collect();
         let level = Level {
             red,
             unit_diag: a.nodes.iter().all(|n| n.diag == 1.0),
@@ -347,7 +336,7 @@ impl Level {
             child_start: Vec::new(),
             children: Vec::new(),
         };
-        (level, entry, plus)
+        (level, entry)
     }
 
     /// Entries, pads included (the length of the level's vectors).
@@ -659,9 +648,6 @@ impl<const K: usize> Work<K> {
 pub struct Hierarchy {
     /// D^{-1/2} of the finest operator per entry of the finest level (0 on the pads).
     scale: Vec<f64>,
-    /// The scaled finest operator's +x, +y, +z couplings per entry in f64 (its diagonal is 1):
-    /// the operator CG solves.
-    plus: Vec<[f64; 3]>,
     /// Levels, finest first (scaled).
     levels: Vec<Level>,
     coarse: Dense,
@@ -695,7 +681,7 @@ impl Hierarchy {
             n.diag = 1.0;
         });
         // Each level is built from its operator, which is dropped once the next one exists.
-        let (mut level, mut entry, plus) = Level::from_operator(&a, true);
+        let (mut level, mut entry) = Level::from_operator(&a);
         let scale: Vec<f64> = level
             .unk
             .par_iter()
@@ -713,7 +699,7 @@ impl Hierarchy {
                 None if !levels.is_empty() && level.unknowns() > coarse_cells && fine.dims.iter().any(|d| *d > 1) => fine.coarsen(),
                 None => break,
             };
-            let (mut next, next_entry, _) = Level::from_operator(&c, false);
+            let (mut next, next_entry) = Level::from_operator(&c);
             level.link(&parent, &mut next, &next_entry);
             levels.push(std::mem::replace(&mut level, next));
             (fine, entry) = (c, next_entry);
@@ -722,7 +708,6 @@ impl Hierarchy {
         levels.push(level);
         Hierarchy {
             scale,
-            plus,
             levels,
             coarse,
             cycle: 2,
@@ -743,10 +728,7 @@ impl Hierarchy {
             l.rows.len() * std::mem::size_of::<Row>()
                 + 4 * (l.weight.len() + l.unk.len() + l.parent.len() + l.child_start.len() + l.children.len())
         };
-        self.levels.iter().map(level).sum::<usize>()
-            + 8 * self.scale.len()
-            + 24 * self.plus.len()
-            + 8 * (self.coarse.l.len() + self.coarse.cells.len())
+        self.levels.iter().map(level).sum::<usize>() + 8 * self.scale.len() + 8 * (self.coarse.l.len() + self.coarse.cells.len())
     }
 
     /// One cycle on level `l` for A_l x = b, x starting at zero; `work` holds the vectors of
@@ -786,19 +768,19 @@ impl Hierarchy {
         }
     }
 
-    /// Entry e of A x per system with the scaled finest operator in f64 (unit diagonal, couplings
-    /// `plus`, each −a coupling read from the −a neighbour's +a one). 0 on the pads.
+    /// Entry e of A x per system with the scaled finest operator, summed in f64: unit diagonal,
+    /// the rows' f32 couplings. CG solves this operator, the f32 rounding of the assembled one,
+    /// which is the one the smoother uses (its ~6·10⁻⁸ relative rounding is far below the
+    /// discretisation and the tolerance; the f64 couplings took 24 B per unknown). 0 on the pads.
     #[inline(always)]
     fn apply_row<X: Real, const K: usize>(&self, e: usize, x: &[[X; K]]) -> [f64; K] {
-        let (nb, up) = (&self.levels[0].rows[e].nbr, &self.plus[e]);
-        let v = |q: usize, c: f64, k: usize| c * x[nb[q] as usize][k].get();
+        let row = &self.levels[0].rows[e];
+        let v = |q: usize, k: usize| f64::from(row.cpl[q]) * x[row.nbr[q] as usize][k].get();
         // A plain loop, not `array::from_fn`: the closure was not always inlined here (+0.35 G
-        // instructions in the solve, depending on how the crate was split); same bits.
+        // instructions in the solve, depending on how the crate was split).
         let mut out = [0.0; K];
         for (k, o) in out.iter_mut().enumerate() {
-            let s = (v(0, self.plus[nb[0] as usize][0], k) + v(1, up[0], k))
-                + (v(2, self.plus[nb[2] as usize][1], k) + v(3, up[1], k))
-                + (v(4, self.plus[nb[4] as usize][2], k) + v(5, up[2], k));
+            let s = (v(0, k) + v(1, k)) + (v(2, k) + v(3, k)) + (v(4, k) + v(5, k));
             *o = x[e][k].get() + s;
         }
         out
@@ -1087,7 +1069,7 @@ impl Hierarchy {
 /// (moved here from tests/ so the solver's internals need not be public).
 #[cfg(test)]
 mod operator_tests {
-    use super::{Hierarchy, Mg, Operator, Work, NONE, PAD};
+    use super::{Hierarchy, Mg, Operator, Real, Work, NONE, PAD};
     use crate::diffusion::{assemble, BoundaryLight, Domain};
     use crate::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
     use crate::lighting::DirectionBins;
@@ -1140,6 +1122,22 @@ mod operator_tests {
             }
         }
         a
+    }
+
+    /// The operator CG solves for `s`: its couplings scaled to unit diagonal, rounded to the
+    /// multigrid's precision and unscaled again (`Hierarchy::apply_row`).
+    fn as_solved(s: &Operator) -> Operator {
+        let scale: Vec<f64> = s.nodes.iter().map(|n| 1.0 / n.diag.sqrt()).collect();
+        let mut r = s.clone();
+        for (q, nd) in r.nodes.iter_mut().enumerate() {
+            for ax in 0..3 {
+                if nd.up_nbr[ax] != NONE {
+                    let st = scale[q] * scale[nd.up_nbr[ax] as usize];
+                    nd.up[ax] = f64::from(Mg::of(nd.up[ax] * st)) / st;
+                }
+            }
+        }
+        r
     }
 
     /// Gaussian elimination with partial pivoting.
@@ -1201,7 +1199,7 @@ mod operator_tests {
             assert!(h.levels() >= 4, "levels {}", h.levels());
             let (x, st) = h.solve(&b, None, 1e-12, 500);
             assert!(st.relative_residual <= 1e-12, "{st:?}");
-            let xd = dense_solve(dense(&s), b.clone());
+            let xd = dense_solve(dense(&as_solved(&s)), b.clone());
             let num: f64 = x.iter().zip(&xd).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
             let den: f64 = xd.iter().map(|v| v * v).sum::<f64>().sqrt();
             assert!(num / den < 1e-8, "relative difference {}", num / den);
@@ -1232,7 +1230,8 @@ mod operator_tests {
     #[test]
     fn stops_on_the_true_residual_in_f64() {
         // Far below what the f32 recursion can follow: the stop must come from the true residual
-        // (CG restarted from it), checked here densely on the scaled system D^-1/2 (b − A x).
+        // (CG restarted from it), checked here densely on the scaled system D^-1/2 (b − A x), A
+        // the operator CG solves (couplings rounded to f32 on the scaled system).
         let m = random_cloud([12, 10, 9], 6, 0.98, 0.8);
         let inc = lit(&m, 1.0, Some((Vec3::new(0.2, 1.0, -0.3), 2.0)));
         let dom = Domain::of(&m).unwrap();
@@ -1240,7 +1239,7 @@ mod operator_tests {
         let h = Hierarchy::build_with(s.clone(), 16);
         let tol = 1e-10;
         let (x, st) = h.solve(&b, None, tol, 500);
-        let (a, n) = (dense(&s), b.len());
+        let (a, n) = (dense(&as_solved(&s)), b.len());
         let d: Vec<f64> = (0..n).map(|q| a[q * n + q].sqrt()).collect();
         let res: f64 = (0..n)
             .map(|q| {
