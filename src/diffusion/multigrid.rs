@@ -21,7 +21,8 @@
 //! * **Cycle:** a W-cycle whose coarse correction is scaled by [`OVER_CORRECTION`].
 //! * **Coarsest level** (≤ [`COARSE_CELLS`] unknowns): dense Cholesky, exact.
 //! * **Krylov:** CG with the iterate in f64 and its other vectors in f32, stopped on the true
-//!   residual in f64 ([`Hierarchy::solve_many`]).
+//!   residual in f64 ([`Hierarchy::solve_many`]); its operator is the finest level's rows (f32
+//!   couplings, products summed in f64).
 //! * **Determinism:** updates within a colour are independent; reductions sum fixed-size chunks'
 //!   partial sums in order. Bit-identical at any thread count.
 
@@ -273,9 +274,8 @@ fn couple<const K: usize>(row: &Row, x: &[[Mg; K]], off: usize) -> [Mg; K] {
 }
 
 impl Level {
-    /// The level of operator `a` and each unknown's entry. `want_plus` also returns each entry's
-    /// +x, +y, +z couplings in f64 (the finest level's operator for CG).
-    fn from_operator(a: &Operator, want_plus: bool) -> (Level, Vec<u32>, Vec<[f64; 3]>) {
+    /// The level of operator `a` and each unknown's entry.
+    fn from_operator(a: &Operator) -> (Level, Vec<u32>) {
         let n = a.nodes.len();
         let colour = |u: usize| a.ijk(u).iter().sum::<usize>() % 2;
         let red = (0..n).filter(|u| colour(*u) == 0).count();
@@ -298,8 +298,7 @@ impl Level {
             }
         }
         let pads = [(n + 1) as u32, red as u32];
-        let mut plus = vec![[0.0; 3]; if want_plus { n + 2 } else { 0 }];
-        let row = |e: usize, u: u32, up: &mut [f64; 3]| {
+        let row = |e: usize, u: u32| {
             if u == PAD {
                 return Row {
                     cpl: [0.0; 6],
@@ -322,21 +321,11 @@ impl Level {
                 if nd.up_nbr[ax] != NONE && nd.up[ax] != 0.0 {
                     row.nbr[2 * ax + 1] = entry[nd.up_nbr[ax] as usize];
                     row.cpl[2 * ax + 1] = Mg::of(nd.up[ax]);
-                    up[ax] = nd.up[ax];
                 }
             }
             row
         };
-        // Written in place (an unzip would hold a second copy while it gathers its pieces).
-        let rows: Vec<Row> = if want_plus {
-            unk.par_iter()
-                .zip(plus.par_iter_mut())
-                .enumerate()
-                .map(|(e, (u, p))| row(e, *u, p))
-                .collect()
-        } else {
-            unk.par_iter().enumerate().map(|(e, u)| row(e, *u, &mut [0.0; 3])).collect()
-        };
+        let rows: Vec<Row> = unk.par_iter().enumerate().map(|(e, u)| row(e, *u)).collect();
         let level = Level {
             red,
             unit_diag: a.nodes.iter().all(|n| n.diag == 1.0),
@@ -347,7 +336,7 @@ impl Level {
             child_start: Vec::new(),
             children: Vec::new(),
         };
-        (level, entry, plus)
+        (level, entry)
     }
 
     /// Entries, pads included (the length of the level's vectors).
@@ -388,8 +377,8 @@ impl Level {
         coarse.children = children;
     }
 
-    /// r = b − A x on the red unknowns. Called right after a black pass, which leaves the black
-    /// residuals at zero, so r's black entries (and pads) keep the zeros they start with.
+    /// r = b − A x on the red unknowns (`r` has one value per red entry). Called right after a
+    /// black pass, which leaves the black residuals at zero, so they are not stored.
     fn residual_red<const K: usize>(&self, x: &[[Mg; K]], b: &[[Mg; K]], r: &mut [[Mg; K]]) {
         let (xr, xb) = x.split_at(self.red + 1);
         r[..self.red].par_chunks_mut(CHUNK).enumerate().for_each(|(ci, rs)| {
@@ -478,6 +467,36 @@ impl Level {
                 }
             });
     }
+}
+
+/// Per entry of `level` (the finest, of the operator `a` scaled by `scale` per unknown): what
+/// rounding its couplings to f32 took from the unscaled row's sum, in the scaled row's units:
+/// Σ (exact − stored) · s_u / s_t over its neighbours t (the −a couplings read from the −a
+/// neighbours' +a ones). Added to the unit diagonal, A·1 (the absorption and the leakage, for a
+/// uniform fluence) is the assembled one's.
+fn rounding_fix(a: &Operator, level: &Level, scale: &[f64]) -> Vec<Mg> {
+    level
+        .unk
+        .par_iter()
+        .zip(&level.rows)
+        .map(|(u, row)| {
+            if *u == PAD {
+                return Mg::of(0.0);
+            }
+            let (nd, su) = (&a.nodes[*u as usize], scale[*u as usize]);
+            let mut d = 0.0;
+            for ax in 0..3 {
+                let m = level.unk[row.nbr[2 * ax] as usize];
+                if m != PAD {
+                    d += (a.nodes[m as usize].up[ax] - f64::from(row.cpl[2 * ax])) * su / scale[m as usize];
+                }
+                if nd.up_nbr[ax] != NONE {
+                    d += (nd.up[ax] - f64::from(row.cpl[2 * ax + 1])) * su / scale[nd.up_nbr[ax] as usize];
+                }
+            }
+            Mg::of(d)
+        })
+        .collect()
 }
 
 /// Deterministic dot products per system: per-chunk partial sums added in order.
@@ -636,14 +655,32 @@ struct Work<const K: usize> {
     xc: Vec<[Mg; K]>,
 }
 
+impl<const K: usize> Work<K> {
+    /// The vectors for the cycle on `fine` with `coarse` below it. The residual has the red
+    /// entries only: the black ones are zero after the black pass before every restriction, and
+    /// the restriction reads red children only (`Level::residual_red`, `Level::restrict`).
+    fn new(fine: &Level, coarse: &Level) -> Work<K> {
+        Work {
+            r: vec![[0.0; K]; fine.red],
+            bc: vec![[0.0; K]; coarse.len()],
+            xc: vec![[0.0; K]; coarse.len()],
+        }
+    }
+
+    /// The vectors for every level of `h` above its coarsest.
+    fn all(h: &Hierarchy) -> Vec<Work<K>> {
+        h.levels.windows(2).map(|w| Work::new(&w[0], &w[1])).collect()
+    }
+}
+
 /// The multigrid hierarchy of one (diagonally scaled) operator.
 #[derive(Clone, Debug)]
 pub struct Hierarchy {
     /// D^{-1/2} of the finest operator per entry of the finest level (0 on the pads).
     scale: Vec<f64>,
-    /// The scaled finest operator's +x, +y, +z couplings per entry in f64 (its diagonal is 1):
-    /// the operator CG solves.
-    plus: Vec<[f64; 3]>,
+    /// Per entry of the finest level, what rounding its couplings to f32 took from its unscaled
+    /// row sum ([`rounding_fix`]); 0 on the pads.
+    fix: Vec<Mg>,
     /// Levels, finest first (scaled).
     levels: Vec<Level>,
     coarse: Dense,
@@ -677,7 +714,8 @@ impl Hierarchy {
             n.diag = 1.0;
         });
         // Each level is built from its operator, which is dropped once the next one exists.
-        let (mut level, mut entry, plus) = Level::from_operator(&a, true);
+        let (mut level, mut entry) = Level::from_operator(&a);
+        let fix = rounding_fix(&a, &level, &scale_of);
         let scale: Vec<f64> = level
             .unk
             .par_iter()
@@ -695,7 +733,7 @@ impl Hierarchy {
                 None if !levels.is_empty() && level.unknowns() > coarse_cells && fine.dims.iter().any(|d| *d > 1) => fine.coarsen(),
                 None => break,
             };
-            let (mut next, next_entry, _) = Level::from_operator(&c, false);
+            let (mut next, next_entry) = Level::from_operator(&c);
             level.link(&parent, &mut next, &next_entry);
             levels.push(std::mem::replace(&mut level, next));
             (fine, entry) = (c, next_entry);
@@ -704,7 +742,7 @@ impl Hierarchy {
         levels.push(level);
         Hierarchy {
             scale,
-            plus,
+            fix,
             levels,
             coarse,
             cycle: 2,
@@ -727,7 +765,7 @@ impl Hierarchy {
         };
         self.levels.iter().map(level).sum::<usize>()
             + 8 * self.scale.len()
-            + 24 * self.plus.len()
+            + 4 * self.fix.len()
             + 8 * (self.coarse.l.len() + self.coarse.cells.len())
     }
 
@@ -768,20 +806,25 @@ impl Hierarchy {
         }
     }
 
-    /// Entry e of A x per system with the scaled finest operator in f64 (unit diagonal, couplings
-    /// `plus`, each −a coupling read from the −a neighbour's +a one). 0 on the pads.
+    /// Entry e of A x per system with the scaled finest operator, summed in f64: the rows' f32
+    /// couplings, and the unit diagonal plus what their rounding took from the row's sum
+    /// (`fix`). So CG solves the assembled operator up to a ~6·10⁻⁸ relative change of each
+    /// coupling with every unscaled row sum kept (the absorption and the boundary's leakage, which are
+    /// small against the couplings in a thick cloud: rounding them too moved the 400×320×240
+    /// cloud's image by 1.2·10⁻⁵); the f64 couplings took 24 B per unknown. 0 on the pads.
     #[inline(always)]
     fn apply_row<X: Real, const K: usize>(&self, e: usize, x: &[[X; K]]) -> [f64; K] {
-        let (nb, up) = (&self.levels[0].rows[e].nbr, &self.plus[e]);
-        let v = |q: usize, c: f64, k: usize| c * x[nb[q] as usize][k].get();
+        let (row, fix) = (&self.levels[0].rows[e], f64::from(self.fix[e]));
+        // Widened once for all systems.
+        let c = row.cpl.map(f64::from);
+        let v = |q: usize, k: usize| c[q] * x[row.nbr[q] as usize][k].get();
         // A plain loop, not `array::from_fn`: the closure was not always inlined here (+0.35 G
-        // instructions in the solve, depending on how the crate was split); same bits.
+        // instructions in the solve, depending on how the crate was split).
         let mut out = [0.0; K];
         for (k, o) in out.iter_mut().enumerate() {
-            let s = (v(0, self.plus[nb[0] as usize][0], k) + v(1, up[0], k))
-                + (v(2, self.plus[nb[2] as usize][1], k) + v(3, up[1], k))
-                + (v(4, self.plus[nb[4] as usize][2], k) + v(5, up[2], k));
-            *o = x[e][k].get() + s;
+            let s = (v(0, k) + v(1, k)) + (v(2, k) + v(3, k)) + (v(4, k) + v(5, k));
+            let xe = x[e][k].get();
+            *o = xe + (fix * xe + s);
         }
         out
     }
@@ -941,16 +984,17 @@ impl Hierarchy {
             levels: self.levels.len(),
             bytes_per_unknown: 0.0,
         });
-        // The hierarchy; y in f64; r, A p, z and p in the multigrid's precision, and two
-        // three vectors per level in `work` (the caller's b and x, per unknown, not counted).
+        // The hierarchy; y in f64; r, p and q (A p, then z) in the multigrid's precision, and
+        // per level in `work` a red residual and the next level's b and x (the caller's b and
+        // x, per unknown, not counted).
         let lanes = |v: usize, bytes: usize| v * bytes * K;
         let held = self.bytes()
             + lanes(n, 8)
-            + lanes(4 * n, std::mem::size_of::<Mg>())
+            + lanes(3 * n, std::mem::size_of::<Mg>())
             + self
                 .levels
                 .windows(2)
-                .map(|w| lanes(w[0].len() + 2 * w[1].len(), std::mem::size_of::<Mg>()))
+                .map(|w| lanes(w[0].red + 2 * w[1].len(), std::mem::size_of::<Mg>()))
                 .sum::<usize>();
         for st in &mut stats {
             st.bytes_per_unknown = held as f64 / (K * a.unknowns().max(1)) as f64;
@@ -970,16 +1014,10 @@ impl Hierarchy {
         };
         // Each system's final true r·r, kept from the check that stopped it.
         let mut last: [Option<f64>; K] = [None; K];
-        let (mut ap, mut p, mut z) = (vec![[0.0; K]; n], vec![[0.0; K]; n], vec![[0.0; K]; n]);
-        let mut work: Vec<Work<K>> = self
-            .levels
-            .windows(2)
-            .map(|w| Work {
-                r: vec![[0.0; K]; w[0].len()],
-                bc: vec![[0.0; K]; w[1].len()],
-                xc: vec![[0.0; K]; w[1].len()],
-            })
-            .collect();
+        // `q` holds A p from the product to the step, then the preconditioned residual z = M r
+        // (each is dead when the other is written: one vector for both).
+        let (mut p, mut q) = (vec![[0.0; K]; n], vec![[0.0; K]; n]);
+        let mut work: Vec<Work<K>> = Work::all(self);
         let mut active = [false; K];
         for k in 0..K {
             if bnorm[k] == 0.0 {
@@ -995,12 +1033,12 @@ impl Hierarchy {
             }
         }
         if active.iter().any(|a| *a) {
-            self.cycle(0, &r, &mut z, &mut work);
-            p.copy_from_slice(&z);
-            let mut rz = dot(&r, &z);
+            self.cycle(0, &r, &mut q, &mut work);
+            p.copy_from_slice(&q);
+            let mut rz = dot(&r, &q);
             let mut iterations = 0;
             while iterations < max_iter {
-                let pap = self.apply(&p, &mut ap);
+                let pap = self.apply(&p, &mut q);
                 let mut alpha = [0.0; K];
                 for k in 0..K {
                     if pap[k].is_nan() || pap[k] <= 0.0 {
@@ -1013,7 +1051,7 @@ impl Hierarchy {
                 if !active.iter().any(|a| *a) {
                     break;
                 }
-                let rr = cg_step(y, &mut r, &p, &ap, alpha);
+                let rr = cg_step(y, &mut r, &p, &q, alpha);
                 iterations += 1;
                 let mut check = [false; K];
                 for k in 0..K {
@@ -1043,18 +1081,18 @@ impl Hierarchy {
                 if !active.iter().any(|a| *a) {
                     break;
                 }
-                self.cycle(0, &r, &mut z, &mut work);
-                let rz_new = dot(&r, &z);
+                self.cycle(0, &r, &mut q, &mut work);
+                let rz_new = dot(&r, &q);
                 let beta: [f64; K] = std::array::from_fn(|k| if active[k] && !restart[k] { rz_new[k] / rz[k] } else { 0.0 });
                 rz = rz_new;
                 p.par_iter_mut()
-                    .zip(&z)
-                    .for_each(|(q, zz)| *q = std::array::from_fn(|k| Mg::of(zz[k].get() + beta[k] * q[k].get())));
+                    .zip(&q)
+                    .for_each(|(pv, zz)| *pv = std::array::from_fn(|k| Mg::of(zz[k].get() + beta[k] * pv[k].get())));
             }
         }
         // Report the true residuals (those not known from the stop: a breakdown or the
         // iteration cap).
-        drop((ap, p, z, work));
+        drop((p, q, work));
         let need: [bool; K] = std::array::from_fn(|k| bnorm[k] > 0.0 && last[k].is_none());
         let rr = if need.iter().any(|v| *v) {
             self.true_residual(bs, y, &mut r, need)
@@ -1074,7 +1112,7 @@ impl Hierarchy {
 /// (moved here from tests/ so the solver's internals need not be public).
 #[cfg(test)]
 mod operator_tests {
-    use super::{Hierarchy, Mg, Operator, Work, NONE, PAD};
+    use super::{Hierarchy, Mg, Operator, Real, Work, NONE, PAD};
     use crate::diffusion::{assemble, BoundaryLight, Domain};
     use crate::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
     use crate::lighting::DirectionBins;
@@ -1127,6 +1165,31 @@ mod operator_tests {
             }
         }
         a
+    }
+
+    /// The operator CG solves for `s`: its couplings scaled to unit diagonal and rounded to the
+    /// multigrid's precision, each diagonal given back what the rounding took from its unscaled
+    /// row sum (in f32, as stored), unscaled again (`Hierarchy::apply_row`).
+    fn as_solved(s: &Operator) -> Operator {
+        let scale: Vec<f64> = s.nodes.iter().map(|n| 1.0 / n.diag.sqrt()).collect();
+        let mut r = s.clone();
+        let mut fix = vec![0.0; s.nodes.len()];
+        for (q, nd) in r.nodes.iter_mut().enumerate() {
+            for ax in 0..3 {
+                if nd.up_nbr[ax] != NONE {
+                    let t = nd.up_nbr[ax] as usize;
+                    let st = scale[q] * scale[t];
+                    let rounded = f64::from(Mg::of(nd.up[ax] * st));
+                    fix[q] += (nd.up[ax] * st - rounded) * scale[q] / scale[t];
+                    fix[t] += (nd.up[ax] * st - rounded) * scale[t] / scale[q];
+                    nd.up[ax] = rounded / st;
+                }
+            }
+        }
+        for (q, nd) in r.nodes.iter_mut().enumerate() {
+            nd.diag *= 1.0 + f64::from(Mg::of(fix[q]));
+        }
+        r
     }
 
     /// Gaussian elimination with partial pivoting.
@@ -1188,7 +1251,7 @@ mod operator_tests {
             assert!(h.levels() >= 4, "levels {}", h.levels());
             let (x, st) = h.solve(&b, None, 1e-12, 500);
             assert!(st.relative_residual <= 1e-12, "{st:?}");
-            let xd = dense_solve(dense(&s), b.clone());
+            let xd = dense_solve(dense(&as_solved(&s)), b.clone());
             let num: f64 = x.iter().zip(&xd).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
             let den: f64 = xd.iter().map(|v| v * v).sum::<f64>().sqrt();
             assert!(num / den < 1e-8, "relative difference {}", num / den);
@@ -1217,9 +1280,31 @@ mod operator_tests {
     }
 
     #[test]
+    fn cg_operator_keeps_every_row_sum() {
+        // Couplings rounded to f32, each diagonal given the rounding back: A·1 is the assembled
+        // operator's to f64 rounding (rounding alone moves it by ~10⁻⁸ of the diagonal).
+        let m = random_cloud([12, 10, 9], 4, 0.999, 0.85);
+        let inc = lit(&m, 1.0, Some((Vec3::new(0.3, 1.0, 0.1), 2.0)));
+        let dom = Domain::of(&m).unwrap();
+        let (s, _) = assemble(&m, &inc, &BoundaryLight::none(), 0, 1e-3, &dom);
+        let h = Hierarchy::build_with(s.clone(), 16);
+        let (a, n) = (dense(&s), s.nodes.len());
+        // y = D^½ 1 on the scaled system, so (S A S) y / s = (A 1).
+        let y: Vec<[f64; 1]> = h.scale.iter().map(|v| [if *v == 0.0 { 0.0 } else { 1.0 / v }]).collect();
+        let fine = &h.levels[0];
+        for e in (0..fine.len()).filter(|e| fine.unk[*e] != PAD) {
+            let u = fine.unk[e] as usize;
+            let want: f64 = a[u * n..(u + 1) * n].iter().sum();
+            let got = h.apply_row(e, &y)[0] / h.scale[e];
+            assert!((got - want).abs() <= 1e-12 * a[u * n + u], "row {u}: {got} vs {want}");
+        }
+    }
+
+    #[test]
     fn stops_on_the_true_residual_in_f64() {
         // Far below what the f32 recursion can follow: the stop must come from the true residual
-        // (CG restarted from it), checked here densely on the scaled system D^-1/2 (b − A x).
+        // (CG restarted from it), checked here densely on the scaled system D^-1/2 (b − A x), A
+        // the operator CG solves (couplings rounded to f32 on the scaled system).
         let m = random_cloud([12, 10, 9], 6, 0.98, 0.8);
         let inc = lit(&m, 1.0, Some((Vec3::new(0.2, 1.0, -0.3), 2.0)));
         let dom = Domain::of(&m).unwrap();
@@ -1227,7 +1312,7 @@ mod operator_tests {
         let h = Hierarchy::build_with(s.clone(), 16);
         let tol = 1e-10;
         let (x, st) = h.solve(&b, None, tol, 500);
-        let (a, n) = (dense(&s), b.len());
+        let (a, n) = (dense(&as_solved(&s)), b.len());
         let d: Vec<f64> = (0..n).map(|q| a[q * n + q].sqrt()).collect();
         let res: f64 = (0..n)
             .map(|q| {
@@ -1287,15 +1372,7 @@ mod operator_tests {
     fn precondition(h: &Hierarchy, b: &[f64]) -> Vec<f64> {
         let b: Vec<[Mg; 1]> = b.iter().map(|v| [*v as Mg]).collect();
         let mut x = vec![[0.0; 1]; b.len()];
-        let mut work: Vec<Work<1>> = h
-            .levels
-            .windows(2)
-            .map(|w| Work {
-                r: vec![[0.0; 1]; w[0].len()],
-                bc: vec![[0.0; 1]; w[1].len()],
-                xc: vec![[0.0; 1]; w[1].len()],
-            })
-            .collect();
+        let mut work: Vec<Work<1>> = Work::all(h);
         h.cycle(0, &b, &mut x, &mut work);
         x.iter().map(|v| v[0] as f64).collect()
     }
