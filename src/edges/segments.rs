@@ -538,6 +538,12 @@ mod tests {
         Medium::new(g, Vec3::ZERO, Vec3::ONE, sigma_t, Rgb::ONE, 0.0)
     }
 
+    /// A procedural cumulus on an offset grid with unequal voxel sides (the walks' general case).
+    fn skewed_cumulus(dims: [usize; 3], seed: u64) -> Medium {
+        let grid = crate::medium::procedural::cumulus(dims, seed);
+        Medium::new(grid, Vec3::new(-1.0, 2.0, 0.5), Vec3::new(0.7, 1.1, 0.9), 1.0, Rgb::ONE, 0.8)
+    }
+
     #[test]
     fn find_crossing_closes_on_the_exact_root_in_few_steps() {
         use std::cell::Cell;
@@ -562,14 +568,7 @@ mod tests {
 
     #[test]
     fn cell_cubic_matches_the_trilinear_look_up() {
-        let m = Medium::new(
-            crate::medium::procedural::cumulus([12, 10, 8], 5),
-            Vec3::new(-1.0, 2.0, 0.5),
-            Vec3::new(0.7, 1.1, 0.9),
-            1.0,
-            Rgb::ONE,
-            0.8,
-        );
+        let m = skewed_cumulus([12, 10, 8], 5);
         let mut rng = crate::math::Rng::new(4, 2);
         let mut checked = 0;
         for _ in 0..200 {
@@ -594,14 +593,7 @@ mod tests {
 
     #[test]
     fn dual_runs_cover_the_block_walks_cells_without_splitting_them() {
-        let m = Medium::new(
-            crate::medium::procedural::cumulus([24, 20, 16], 3),
-            Vec3::new(-1.0, 2.0, 0.5),
-            Vec3::new(0.7, 1.1, 0.9),
-            1.0,
-            Rgb::ONE,
-            0.8,
-        );
+        let m = skewed_cumulus([24, 20, 16], 3);
         let mut rng = crate::math::Rng::new(7, 3);
         let mut merged = 0;
         for _ in 0..200 {
