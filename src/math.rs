@@ -209,6 +209,16 @@ impl Trilinear {
         }
     }
 
+    /// The eight corner indices (c = x + 2y + 4z, as [`Trilinear::idx`]) of the cell from `lo` to
+    /// `hi` (per axis equal or one apart) in a grid of `dims`: one index and a stride per axis.
+    #[inline(always)]
+    pub fn corner_indices(dims: [usize; 3], lo: [usize; 3], hi: [usize; 3]) -> [usize; 8] {
+        let (nx, nxy) = (dims[0], dims[0] * dims[1]);
+        let base = lo[0] + nx * lo[1] + nxy * lo[2];
+        let step = [hi[0] - lo[0], nx * (hi[1] - lo[1]), nxy * (hi[2] - lo[2])];
+        std::array::from_fn(|c| base + (c & 1) * step[0] + (c >> 1 & 1) * step[1] + (c >> 2 & 1) * step[2])
+    }
+
     /// The lower and upper corner per axis (clamped to the grid) and the fractions of `p`
     /// (continuous voxel coordinates, centres at +0.5) between them.
     #[inline(always)]

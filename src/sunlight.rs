@@ -13,7 +13,7 @@
 //! exp(−τ) is 0 in f32.
 
 use crate::math::Vec3;
-use crate::medium::{Dda, Medium, SubGrid};
+use crate::medium::{Medium, SubGrid};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -96,7 +96,7 @@ fn transmittance(m: &Medium, o: Vec3, d: Vec3) -> f32 {
         let mut r0 = None;
         // Dual cell c spans the voxel centres c − 1 and c (clamped to the grid, as the trilinear
         // field is), voxel coordinates [c − ½, c + ½].
-        for s in Dda::new(orig - 0.5 * h, h, [dims[0] + 1, dims[1] + 1, dims[2] + 1], od, dd, ta, tb) {
+        for s in m.dual_dda(o, d, ta, tb) {
             let c = s.cell;
             let lo: [usize; 3] = std::array::from_fn(|a| c[a].saturating_sub(1).min(dims[a] - 1));
             let hi: [usize; 3] = std::array::from_fn(|a| c[a].min(dims[a] - 1));

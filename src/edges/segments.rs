@@ -9,8 +9,8 @@
 //! samples per cell; a level crossed twice between two samples (a dip shorter than a quarter
 //! cell) is missed, which only moves a piece boundary, never the optical depth.
 
-use crate::math::Vec3;
-use crate::medium::dda::{ray_box, Dda};
+use crate::math::{Trilinear, Vec3};
+use crate::medium::dda::ray_box;
 use crate::medium::Medium;
 use glam::DVec3;
 
@@ -133,13 +133,9 @@ impl CellDensity {
         let dims = m.density.dims();
         let lo: [usize; 3] = std::array::from_fn(|a| cell[a].saturating_sub(1).min(dims[a] - 1));
         let hi: [usize; 3] = std::array::from_fn(|a| cell[a].min(dims[a] - 1));
-        // One index and a stride per axis (0 where the cell is clamped at the grid's side):
-        // the same voxels as eight `get`s.
-        let (nx, nxy) = (dims[0], dims[0] * dims[1]);
-        let base = lo[0] + nx * lo[1] + nxy * lo[2];
-        let step = [hi[0] - lo[0], nx * (hi[1] - lo[1]), nxy * (hi[2] - lo[2])];
+        // The same voxels as eight `get`s (a stride is 0 where the cell is clamped at the side).
         let data = m.density.data();
-        let corners = std::array::from_fn(|c| data[base + (c & 1) * step[0] + (c >> 1 & 1) * step[1] + (c >> 2 & 1) * step[2]]);
+        let corners = Trilinear::corner_indices(dims, lo, hi).map(|n| data[n]);
         CellDensity {
             corners,
             lo: std::array::from_fn(|a| cell[a] as f32 - 1.0),
@@ -235,40 +231,6 @@ pub fn density_bounds(m: &Medium) -> Option<(Vec3, Vec3)> {
     Some((at(lo), at(hi)))
 }
 
-/// The dual lattice's cells along `o + t·d`, t ∈ [t0, t1], inside the runs of consecutive
-/// non-empty majorant blocks: one DDA per run, where [`Medium::for_each_dual_block`] starts one
-/// per block and so cuts the dual cells that straddle a block face into two (more cells, pieces,
-/// sun look-ups and compositing steps for the same ray).
-fn for_each_dual_run(m: &Medium, o: Vec3, d: Vec3, t0: f32, t1: f32, mut f: impl FnMut(Dda)) {
-    let (od, dd) = (o.as_dvec3(), d.as_dvec3());
-    let h = m.voxel_size.as_dvec3();
-    let dual_origin = m.origin.as_dvec3() - 0.5 * h;
-    let dims = m.dims();
-    let dual_dims = [dims[0] + 1, dims[1] + 1, dims[2] + 1];
-    let mut walk = |a: f32, b: f32| f(Dda::new(dual_origin, h, dual_dims, od, dd, a as f64, b as f64));
-    let mut run: Option<(f32, f32)> = None;
-    m.majorant.for_each_block(m, o, d, t0, t1, |ta, tb, maj| {
-        run = match run {
-            _ if maj <= 0.0 => {
-                if let Some((a, b)) = run {
-                    walk(a, b);
-                }
-                None
-            }
-            Some((a, b)) if b == ta => Some((a, tb)),
-            Some((a, b)) => {
-                walk(a, b);
-                Some((ta, tb))
-            }
-            None => Some((ta, tb)),
-        };
-        true
-    });
-    if let Some((a, b)) = run {
-        walk(a, b);
-    }
-}
-
 impl RayProfile {
     /// Profile `o + t·d` (`d` unit), t ∈ [t_min, t_max], split wherever ρ crosses one of `levels`
     /// (density units; non-positive levels are ignored).
@@ -296,7 +258,7 @@ impl RayProfile {
         let mut cuts: Vec<f64> = Vec::new();
         // Rays into the cloud have tens of pieces; the surface cut inserts one more.
         prof.pieces.reserve(64);
-        for_each_dual_run(m, o, d, t0, t1, |cells| {
+        m.for_each_dual_run(o, d, t0, t1, |cells| {
             for s in cells {
                 let cell = CellDensity::new(m, s.cell);
                 if cell.is_empty() {
@@ -602,7 +564,7 @@ mod tests {
             let Some((t0, t1)) = m.intersect(o, d, 0.0, 100.0) else { continue };
             let (mut blocks, mut runs) = (Vec::new(), Vec::new());
             m.for_each_dual_block(o, d, t0, t1, |_, cells| blocks.extend(cells.map(|s| (s.cell, s.t0, s.t1))));
-            for_each_dual_run(&m, o, d, t0, t1, |cells| runs.extend(cells.map(|s| (s.cell, s.t0, s.t1))));
+            m.for_each_dual_run(o, d, t0, t1, |cells| runs.extend(cells.map(|s| (s.cell, s.t0, s.t1))));
             // The same stretches of ray (lengths summed) in the same cells, each cell's midpoint inside it.
             let len = |v: &[([usize; 3], f64, f64)]| v.iter().map(|c| c.2 - c.1).sum::<f64>();
             assert!((len(&blocks) - len(&runs)).abs() <= 1e-9 * (1.0 + len(&blocks)));

@@ -2,8 +2,8 @@
 //! crosses with the ray-parameter interval inside it. The entry boundaries come from the integer
 //! cell index, then each step adds one cell's ray length (no division per step); each segment
 //! starts where the previous ended, so the lengths telescope exactly to the chord length. Users:
-//! the dual-lattice Simpson walk of the exact optical depth
-//! ([`super::Medium::for_each_dual_block`]) and the majorant blocks; stage 1
+//! the dual-lattice Simpson walks ([`super::Medium::dual_dda`]: the exact optical depth, the
+//! sun's transmittance, the eye rays' profiles) and the majorant blocks; stage 1
 //! ([`crate::incident`]) sweeps its ray lattices plane by plane instead and is tested against a
 //! per-ray walk with this DDA.
 

@@ -262,16 +262,13 @@ impl Medium {
             let v = ((od + dd * t) - orig) * inv_h;
             self.density.trilinear([v.x as f32, v.y as f32, v.z as f32]) as f64
         };
-        let dual_origin = orig - 0.5 * h;
-        let dims = self.dims();
-        let dual_dims = [dims[0] + 1, dims[1] + 1, dims[2] + 1];
         let mut sum = 0.0;
         self.majorant.for_each_block(self, o, d, t0, t1, |ta, tb, maj| {
             if maj <= 0.0 {
                 return true;
             }
             let mut r0 = rho(ta as f64);
-            for s in Dda::new(dual_origin, h, dual_dims, od, dd, ta as f64, tb as f64) {
+            for s in self.dual_dda(o, d, ta as f64, tb as f64) {
                 let rm = rho(0.5 * (s.t0 + s.t1));
                 let r1 = rho(s.t1);
                 sum += (s.t1 - s.t0) / 6.0 * (r0 + 4.0 * rm + r1);
@@ -285,19 +282,53 @@ impl Medium {
         sum
     }
 
-    /// The one dual-lattice walk: along `o + t·d` for t ∈ [t0, t1] (inside the box), for every
-    /// majorant block that is not empty, `f(t_enter, cells)` with the DDA over the dual cells
-    /// (between adjacent voxel centres, where the trilinear ρ is a cubic in t, so Simpson's rule
-    /// on a cell is exact) crossed inside the block. Empty blocks are skipped.
-    pub fn for_each_dual_block(&self, o: Vec3, d: Vec3, t0: f32, t1: f32, mut f: impl FnMut(f32, Dda)) {
-        let (od, dd) = (o.as_dvec3(), d.as_dvec3());
+    /// The DDA over the dual lattice's cells (between adjacent voxel centres, where the trilinear
+    /// ρ is a cubic in t, so Simpson's rule on a cell is exact; cell c spans voxel coordinates
+    /// [c − ½, c + ½]) crossed by `o + t·d` for t ∈ [ta, tb].
+    #[inline]
+    pub fn dual_dda(&self, o: Vec3, d: Vec3, ta: f64, tb: f64) -> Dda {
         let h = self.voxel_size.as_dvec3();
-        let dual_origin = self.origin.as_dvec3() - 0.5 * h;
         let dims = self.dims();
         let dual_dims = [dims[0] + 1, dims[1] + 1, dims[2] + 1];
+        Dda::new(self.origin.as_dvec3() - 0.5 * h, h, dual_dims, o.as_dvec3(), d.as_dvec3(), ta, tb)
+    }
+
+    /// The dual lattice's cells along `o + t·d`, t ∈ [t0, t1] (inside the box), in the runs of
+    /// consecutive non-empty majorant blocks: `f(cells)` once per run, with one DDA over it.
+    /// Empty blocks are skipped. (A DDA per block would cut every dual cell that straddles a
+    /// block face into two: more cells, pieces, sun look-ups and compositing steps per ray.)
+    pub fn for_each_dual_run(&self, o: Vec3, d: Vec3, t0: f32, t1: f32, mut f: impl FnMut(Dda)) {
+        let mut walk = |a: f32, b: f32| f(self.dual_dda(o, d, a as f64, b as f64));
+        let mut run: Option<(f32, f32)> = None;
+        self.majorant.for_each_block(self, o, d, t0, t1, |ta, tb, maj| {
+            run = match run {
+                _ if maj <= 0.0 => {
+                    if let Some((a, b)) = run {
+                        walk(a, b);
+                    }
+                    None
+                }
+                Some((a, b)) if b == ta => Some((a, tb)),
+                Some((a, b)) => {
+                    walk(a, b);
+                    Some((ta, tb))
+                }
+                None => Some((ta, tb)),
+            };
+            true
+        });
+        if let Some((a, b)) = run {
+            walk(a, b);
+        }
+    }
+
+    /// The dual cells per non-empty majorant block, `f(t_enter, cells)`: the per-block walk the
+    /// tests check [`Self::for_each_dual_run`] against.
+    #[cfg(test)]
+    pub fn for_each_dual_block(&self, o: Vec3, d: Vec3, t0: f32, t1: f32, mut f: impl FnMut(f32, Dda)) {
         self.majorant.for_each_block(self, o, d, t0, t1, |ta, tb, maj| {
             if maj > 0.0 {
-                f(ta, Dda::new(dual_origin, h, dual_dims, od, dd, ta as f64, tb as f64));
+                f(ta, self.dual_dda(o, d, ta as f64, tb as f64));
             }
             true
         });

@@ -90,19 +90,8 @@ impl SubGrid {
     pub fn trilinear_at_corners(&self, lo: [usize; 3], hi: [usize; 3], f: [f32; 3]) -> f32 {
         let inside = (0..3).all(|a| lo[a] >= self.lo[a] && hi[a] < self.lo[a] + self.box_dims[a]);
         let idx = if inside {
-            let (bx, bxy) = (self.box_dims[0], self.box_dims[0] * self.box_dims[1]);
-            let base = (lo[0] - self.lo[0]) + bx * (lo[1] - self.lo[1]) + bxy * (lo[2] - self.lo[2]);
-            let (dx, dy, dz) = (hi[0] - lo[0], bx * (hi[1] - lo[1]), bxy * (hi[2] - lo[2]));
-            [
-                base,
-                base + dx,
-                base + dy,
-                base + dx + dy,
-                base + dz,
-                base + dx + dz,
-                base + dy + dz,
-                base + dx + dy + dz,
-            ]
+            let rel = |c: [usize; 3]| [0, 1, 2].map(|a| c[a] - self.lo[a]);
+            Trilinear::corner_indices(self.box_dims, rel(lo), rel(hi))
         } else {
             let pick = |c: usize, a: usize| if (c >> a) & 1 == 0 { lo[a] } else { hi[a] };
             std::array::from_fn(|c| self.slot([pick(c, 0), pick(c, 1), pick(c, 2)]))
