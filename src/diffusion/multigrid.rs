@@ -1148,12 +1148,13 @@ mod operator_tests {
         compute(m, &DirectionBins::new(), &sky_and_sun(l, sun), &IncidentSettings::default(), None)
     }
 
-    /// Band 0's operator on a random cloud under a unit sky and a sun of irradiance 2 from `sun`.
-    fn sun_lit_operator(d: [usize; 3], seed: u64, albedo: f32, g: f32, sun: Vec3) -> Operator {
+    /// Band `band`'s operator and right-hand side on a random cloud under a unit sky and a sun
+    /// of irradiance 2 from `sun`.
+    fn sun_lit_system(d: [usize; 3], seed: u64, albedo: f32, g: f32, sun: Vec3, band: usize) -> (Operator, Vec<f64>) {
         let m = random_cloud(d, seed, albedo, g);
         let inc = lit(&m, 1.0, Some((sun, 2.0)));
         let dom = Domain::of(&m).unwrap();
-        assemble(&m, &inc, &BoundaryLight::none(), 0, 1e-3, &dom).0
+        assemble(&m, &inc, &BoundaryLight::none(), band, 1e-3, &dom)
     }
 
     /// The operator as a dense matrix (row-major, one row per unknown).
@@ -1268,10 +1269,7 @@ mod operator_tests {
 
     #[test]
     fn systems_solved_together_match_their_own_solves_exactly() {
-        let m = random_cloud([12, 10, 9], 5, 0.97, 0.8);
-        let inc = lit(&m, 1.0, Some((Vec3::new(0.3, 1.0, -0.2), 2.0)));
-        let dom = Domain::of(&m).unwrap();
-        let (s, b) = assemble(&m, &inc, &BoundaryLight::none(), 0, 1e-3, &dom);
+        let (s, b) = sun_lit_system([12, 10, 9], 5, 0.97, 0.8, Vec3::new(0.3, 1.0, -0.2), 0);
         let h = Hierarchy::build_with(s, 16);
         // A second right-hand side that converges at another iteration, and a zero one.
         let b2: Vec<f64> = b.iter().enumerate().map(|(c, v)| if c % 3 == 0 { -2.0 * v } else { *v }).collect();
@@ -1291,7 +1289,7 @@ mod operator_tests {
     fn cg_operator_keeps_every_row_sum() {
         // Couplings rounded to f32, each diagonal given the rounding back: A·1 is the assembled
         // operator's to f64 rounding (rounding alone moves it by ~10⁻⁸ of the diagonal).
-        let s = sun_lit_operator([12, 10, 9], 4, 0.999, 0.85, Vec3::new(0.3, 1.0, 0.1));
+        let (s, _) = sun_lit_system([12, 10, 9], 4, 0.999, 0.85, Vec3::new(0.3, 1.0, 0.1), 0);
         let h = Hierarchy::build_with(s.clone(), 16);
         let (a, n) = (dense(&s), s.nodes.len());
         // y = D^½ 1 on the scaled system, so (S A S) y / s = (A 1).
@@ -1310,10 +1308,7 @@ mod operator_tests {
         // Far below what the f32 recursion can follow: the stop must come from the true residual
         // (CG restarted from it), checked here densely on the scaled system D^-1/2 (b − A x), A
         // the operator CG solves (couplings rounded to f32 on the scaled system).
-        let m = random_cloud([12, 10, 9], 6, 0.98, 0.8);
-        let inc = lit(&m, 1.0, Some((Vec3::new(0.2, 1.0, -0.3), 2.0)));
-        let dom = Domain::of(&m).unwrap();
-        let (s, b) = assemble(&m, &inc, &BoundaryLight::none(), 2, 1e-3, &dom);
+        let (s, b) = sun_lit_system([12, 10, 9], 6, 0.98, 0.8, Vec3::new(0.2, 1.0, -0.3), 2);
         let h = Hierarchy::build_with(s.clone(), 16);
         let tol = 1e-10;
         let (x, st) = h.solve(&b, None, tol, 500);
@@ -1345,7 +1340,7 @@ mod operator_tests {
     #[test]
     fn coarse_operator_is_the_galerkin_product() {
         // Odd box sides: the last aggregates of each axis are one cell thick.
-        let s = sun_lit_operator([11, 9, 8], 4, 0.9, 0.8, Vec3::new(0.2, 1.0, 0.3));
+        let (s, _) = sun_lit_system([11, 9, 8], 4, 0.9, 0.8, Vec3::new(0.2, 1.0, 0.3), 0);
         let (c, parent) = s.coarsen();
         let (n, nc) = (s.nodes.len(), c.nodes.len());
         assert!(nc > 10 && nc < n, "{nc} of {n}");
@@ -1382,7 +1377,7 @@ mod operator_tests {
     #[test]
     fn preconditioner_is_symmetric() {
         // zᵀ M⁻¹ y = yᵀ M⁻¹ z (to the cycle's f32 rounding), so CG's theory holds.
-        let s = sun_lit_operator([14, 12, 10], 8, 0.99, 0.85, Vec3::new(0.1, 1.0, 0.3));
+        let (s, _) = sun_lit_system([14, 12, 10], 8, 0.99, 0.85, Vec3::new(0.1, 1.0, 0.3), 0);
         let h = Hierarchy::build_with(s, 16);
         assert!(h.levels() >= 4);
         let unk = &h.levels[0].unk;
@@ -1405,7 +1400,7 @@ mod operator_tests {
         // Two levels: the scaled finest one Ã = D^-½ A D^-½ and the direct one. Its matrix (L Lᵀ)
         // must be PᵀÃP for the weighted prolongation P = D^½ P₀ (= P₀ᵀ A P₀), and the finest level's
         // weights D^½.
-        let s = sun_lit_operator([11, 9, 8], 4, 0.9, 0.8, Vec3::new(0.2, 1.0, 0.3));
+        let (s, _) = sun_lit_system([11, 9, 8], 4, 0.9, 0.8, Vec3::new(0.2, 1.0, 0.3), 0);
         let n = s.nodes.len();
         let h = Hierarchy::build_with(s.clone(), n - 1);
         assert_eq!(h.levels(), 2);
