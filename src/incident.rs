@@ -64,7 +64,9 @@ use crate::medium::sparse::VoxelField;
 use crate::medium::Medium;
 use crate::sunlight::SunTransmittance;
 use rayon::prelude::*;
-use std::f64::consts::PI;
+pub use scattering::FirstScattering;
+
+mod scattering;
 
 /// The clear-air hook: `(empty voxel, bin) → Some(radiance arriving from that bin)`; see the module docs.
 pub type EntryRadiance<'h> = dyn Fn([usize; 3], usize) -> Option<Rgb> + Sync + 'h;
@@ -133,14 +135,11 @@ impl IncidentSources {
 pub struct IncidentLight {
     /// Grid resolution (same as the medium's).
     pub dims: [usize; 3],
-    /// Q0 per voxel (eq. 5, W·m⁻³·sr⁻¹ per band); zero where ρ = 0. Like every field here,
-    /// stored per full voxel and read by grid index ([`crate::medium::sparse`]).
-    pub q0: VoxelField<Rgb>,
-    /// Q1 per voxel (eq. 6), `q1[axis][voxel]` is the axis component per band (W·m⁻³·sr⁻¹).
-    pub q1: [VoxelField<Rgb>; 3],
-    /// Voxel-mean transmittance of the direct sun (piecewise-constant ρ), used for Q0/Q1; 1
-    /// where ρ = 0.
-    pub sun_mean_transmittance: VoxelField<f32>,
+    /// Q0 (eq. 5) and Q1 (eq. 6) per voxel, read with [`Self::q0`] and [`Self::q1`]; zero where
+    /// ρ = 0. Like every field here, stored per full voxel and read by grid index
+    /// ([`crate::medium::sparse`]); with the sun as the only source, as ρ times its voxel-mean
+    /// transmittance alone.
+    pub scattering: FirstScattering,
     /// Sun transmittance at voxel centres (exact), for the gather's single scattering.
     pub sun_transmittance: SunTransmittance,
     /// Sun irradiance (W/m² per band); zero without a sun.
@@ -153,6 +152,20 @@ pub struct IncidentLight {
     pub sky_sh: Option<VoxelField<[f32; 3 * SH_COEFFS]>>,
     /// Rays that crossed the medium's active box (all bins and the sun).
     pub rays: u64,
+}
+
+impl IncidentLight {
+    /// Q0 of grid voxel `g` (eq. 5, W·m⁻³·sr⁻¹ per band).
+    #[inline]
+    pub fn q0(&self, g: usize) -> Rgb {
+        self.scattering.q0(g)
+    }
+
+    /// The `axis` component of Q1 of grid voxel `g` (eq. 6, W·m⁻³·sr⁻¹ per band).
+    #[inline]
+    pub fn q1(&self, axis: usize, g: usize) -> Rgb {
+        self.scattering.q1(axis, g)
+    }
 }
 
 /// One propagated direction: a sky bin or the sun.
@@ -465,14 +478,10 @@ impl Family {
     }
 }
 
-/// Per full voxel: Σ0 (3 bands) then Σ1 (3 axes × 3 bands) in f64, then at [`SUN_T`] the sun's
-/// mean transmittance (an f32, exact in f64; written at every full voxel when the sun shines).
-/// The sky SH, when asked for, lives in its own array: 108 B per voxel saved without it. All
-/// zero at first, so the allocator hands the pages over zeroed (no serial fill of 100 B a voxel).
-type Acc = [f64; 13];
-
-/// Where an [`Acc`] keeps the sun's mean transmittance.
-const SUN_T: usize = 12;
+/// Per full voxel: Σ0 (3 bands) then Σ1 (3 axes × 3 bands) in f64. The sky SH, when asked
+/// for, lives in its own array: 108 B per voxel saved without it. All zero at first, so the
+/// allocator hands the pages over zeroed (no serial fill of 96 B a voxel).
+type Acc = [f64; 12];
 
 /// The accumulators of one box row (y, z) of full voxels, in x order, and the row's cursor: the
 /// rank of the next voxel an x-axis sweep reaches (its planes cross the row one voxel at a time).
@@ -507,8 +516,6 @@ struct Coef {
     m: [f64; 12],
     /// The sky SH per (band, lm): Δω_c·Y_lm / Σ w l (bins only).
     sh: Option<[f32; 3 * SH_COEFFS]>,
-    /// For the sun: 1 / Σ w l, its mean transmittance per unit S.
-    sun: Option<f64>,
 }
 
 impl Coef {
@@ -525,7 +532,6 @@ impl Coef {
         Coef {
             m,
             sh: src.sh.map(|y| std::array::from_fn(|j| k[j / SH_COEFFS] as f32 * y[j % SH_COEFFS])),
-            sun: src.bin.is_none().then_some(inv),
         }
     }
 }
@@ -537,11 +543,8 @@ fn reduce_voxel(fams: &[Family], coef: &[Coef], lay: &Layout, c: [usize; 3], acc
     let pi = c[lay.v] * lay.nu + c[lay.u];
     for (f, k) in fams.iter().zip(coef) {
         let s = f.sums[pi];
-        if let Some(inv) = k.sun {
-            acc[SUN_T] = ((s[0] as f64 * inv) as f32).into();
-        }
         let sd = [s[0] as f64, s[1] as f64, s[2] as f64];
-        for (a, km) in acc[..SUN_T].chunks_exact_mut(3).zip(k.m.chunks_exact(3)) {
+        for (a, km) in acc.chunks_exact_mut(3).zip(k.m.chunks_exact(3)) {
             for c in 0..3 {
                 a[c] += sd[c] * km[c];
             }
@@ -673,12 +676,9 @@ pub fn compute_with_sun(
     // Stored per full voxel; the empty medium's fields (no full voxel) until the sweeps fill them.
     let index = m.density.full_index();
     let Some((lo, hi)) = m.active_box(1) else {
-        let zero = VoxelField::filled(index.clone(), Rgb::ZERO);
         return IncidentLight {
             dims,
-            q0: zero.clone(),
-            q1: [zero.clone(), zero.clone(), zero],
-            sun_mean_transmittance: VoxelField::filled(index, 1.0),
+            scattering: FirstScattering::zero(index),
             sun_transmittance,
             sun_irradiance: sun_e,
             bin_radiance: sources.bin_radiance.clone(),
@@ -719,7 +719,7 @@ pub fn compute_with_sun(
     let row_len: Vec<usize> = rho.chunks_exact(bd[0]).map(|r| r.iter().filter(|v| **v > 0.0).count()).collect();
     let full: usize = row_len.iter().sum();
     assert_eq!(full, index.count(), "stage 1 accumulates every full voxel once");
-    let mut acc: Vec<Acc> = vec![[0.0; 13]; full];
+    let mut acc: Vec<Acc> = vec![[0.0; 12]; full];
     // The sky SH in its field's slots (slot 0 the empty voxels' zero), filled in place.
     let mut sh = vec![[0f32; 3 * SH_COEFFS]; if settings.sky_single { full + 1 } else { 0 }];
     let mut rays = 0u64;
@@ -803,15 +803,19 @@ pub fn compute_with_sun(
     // ρ of the full voxels in box order, the accumulators' order.
     let packed_rho: Vec<f32> = rho.iter().copied().filter(|&r| r > 0.0).collect();
     drop(rho);
-    let (q0, q1, sun_mean_transmittance) = scatter(&optics, &acc, &packed_rho, sw.sources.iter().any(|s| s.bin.is_none()));
+    // The sun alone (no bin propagated) and one extinction for every band: Q0 and Q1 follow from
+    // ρT̄ (4 B per full voxel instead of 48).
+    let grey = sw.atten.iter().all(|&a| a == sw.atten[0]);
+    let scattering = if grey && sw.sources.iter().all(|s| s.bin.is_none()) {
+        let (dir, e) = sources.sun.unwrap_or((Vec3::Y, Rgb::ZERO));
+        FirstScattering::sun(index.clone(), &optics, &acc, &packed_rho, dir, e)
+    } else {
+        FirstScattering::general(index.clone(), &optics, &acc, &packed_rho)
+    };
     drop(acc);
-    let field = |slots| VoxelField::from_slots(index.clone(), slots);
-    let [q1x, q1y, q1z] = q1;
     IncidentLight {
         dims,
-        q0: field(q0),
-        q1: [field(q1x), field(q1y), field(q1z)],
-        sun_mean_transmittance: VoxelField::from_slots(index.clone(), sun_mean_transmittance),
+        scattering,
         sun_transmittance,
         sun_irradiance: sun_e,
         bin_radiance: sources.bin_radiance.clone(),
@@ -820,50 +824,11 @@ pub fn compute_with_sun(
     }
 }
 
-/// Voxels per task of [`scatter`]'s parallel pass.
-const SCATTER_CHUNK: usize = 4096;
-
-/// Q0, Q1 (per axis) and the sun's mean transmittance as field slots (slot 0 the empty voxels':
-/// zero, and 1 for the transmittance) from the accumulators `acc` of the full voxels of density
-/// `rho`: Σ0, Σ1 scattered with ρσs/(4π) and ρσs·g/(4π); the transmittance where `sun` shone,
-/// else 1. One parallel pass, ρσs/(4π) once per voxel and band. With δ-scaling (f = g) the
-/// scattering that changes direction is σs(1 − g), isotropic (g' = 0).
-#[allow(clippy::type_complexity)]
-fn scatter(optics: &crate::optics::ScaledOptics, acc: &[Acc], rho: &[f32], sun: bool) -> (Vec<Rgb>, [Vec<Rgb>; 3], Vec<f32>) {
-    let (sigma_s, g) = (optics.sigma_s, optics.phase.mean_cosine());
-    let n = acc.len() + 1;
-    let mut q0 = vec![Rgb::ZERO; n];
-    let mut q1: [Vec<Rgb>; 3] = std::array::from_fn(|_| vec![Rgb::ZERO; n]);
-    let mut sun_t = vec![1f32; n];
-    let [q1x, q1y, q1z] = &mut q1;
-    acc.par_chunks(SCATTER_CHUNK)
-        .zip(rho.par_chunks(SCATTER_CHUNK))
-        .zip(q0[1..].par_chunks_mut(SCATTER_CHUNK))
-        .zip(q1x[1..].par_chunks_mut(SCATTER_CHUNK))
-        .zip(q1y[1..].par_chunks_mut(SCATTER_CHUNK))
-        .zip(q1z[1..].par_chunks_mut(SCATTER_CHUNK))
-        .zip(sun_t[1..].par_chunks_mut(SCATTER_CHUNK))
-        .for_each(|((((((acc, rho), q0), qx), qy), qz), st)| {
-            for (i, v) in acc.iter().enumerate() {
-                let s: [f64; 3] = std::array::from_fn(|c| rho[i] as f64 * sigma_s[c] as f64 / (4.0 * PI));
-                let term =
-                    |t: usize, k: f64| Rgb::new((s[0] * k * v[t]) as f32, (s[1] * k * v[t + 1]) as f32, (s[2] * k * v[t + 2]) as f32);
-                q0[i] = term(0, 1.0);
-                qx[i] = term(3, g);
-                qy[i] = term(6, g);
-                qz[i] = term(9, g);
-                if sun {
-                    st[i] = v[SUN_T] as f32;
-                }
-            }
-        });
-    (q0, q1, sun_t)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::medium::Grid3;
+    use std::f64::consts::PI;
 
     /// A 4³ block of density 1 in a 6³ grid, optically thin (τ = 4·10⁻⁴ across), albedo 0.9.
     fn thin_block() -> Medium {
@@ -876,6 +841,11 @@ mod tests {
             }
         }
         Medium::new(g, Vec3::ZERO, Vec3::ONE, 1e-4, Rgb::splat(0.9), 0.7)
+    }
+
+    /// Q0 of every grid voxel, in grid order.
+    fn q0_of(inc: &IncidentLight) -> Vec<Rgb> {
+        (0..inc.dims.iter().product()).map(|g| inc.q0(g)).collect()
     }
 
     fn uniform_sky(l: f32) -> IncidentSources {
@@ -892,16 +862,47 @@ mod tests {
         let m = thin_block();
         let inc = compute(&m, &DirectionBins::new(), &uniform_sky(2.0), &IncidentSettings::default(), None);
         let want = 0.9 * 1e-4 * 2.0;
-        for (n, q) in inc.q0.iter().enumerate() {
+        for (n, q) in q0_of(&inc).into_iter().enumerate() {
             if m.density.data()[n] > 0.0 {
                 assert!((q.x - want).abs() < 1e-3 * want, "voxel {n}: Q0 {q:?} vs {want}");
                 for ax in 0..3 {
-                    assert!(inc.q1[ax][n].x.abs() < 1e-3 * want, "voxel {n}: Q1 {:?}", inc.q1[ax][n]);
+                    assert!(inc.q1(ax, n).x.abs() < 1e-3 * want, "voxel {n}: Q1 {:?}", inc.q1(ax, n));
                 }
             } else {
-                assert_eq!(*q, Rgb::ZERO);
+                assert_eq!(q, Rgb::ZERO);
             }
         }
+    }
+
+    /// The sun alone is kept as ρT̄ (4 B per full voxel), with the thin block's Q0 = ρσs/(4π)·E·T̄
+    /// (T̄ ≈ 1) and Q1 = g·Q0·(−sun dir); a lit bin beside it needs the general form.
+    #[test]
+    fn sun_alone_is_kept_in_four_bytes_per_full_voxel() {
+        let m = thin_block();
+        let dir = Vec3::new(0.2, 0.9, -0.4).normalize();
+        let sun = IncidentSources {
+            bin_radiance: vec![Rgb::ZERO; NUM_BINS],
+            sun: Some((dir, Rgb::new(2.0, 3.0, 1.0))),
+        };
+        let inc = compute(&m, &DirectionBins::new(), &sun, &IncidentSettings::default(), None);
+        assert!(matches!(inc.scattering, FirstScattering::Sun { .. }));
+        assert_eq!(inc.scattering.bytes(), 4 * (64 + 1));
+        let want = 0.9 * 1e-4 / (4.0 * PI) as f32 * Rgb::new(2.0, 3.0, 1.0);
+        let n = 1 + 6 * (2 + 6 * 3);
+        let (q0, g) = (inc.q0(n), 0.7);
+        assert!((0..3).all(|c| (q0[c] - want[c]).abs() < 1e-3 * want[c]), "{q0:?} vs {want:?}");
+        for ax in 0..3 {
+            let q1 = inc.q1(ax, n);
+            assert!(
+                (0..3).all(|c| (q1[c] + g * dir[ax] * q0[c]).abs() < 1e-6 * q0[c]),
+                "axis {ax}: {q1:?}"
+            );
+        }
+        let mut lit = sun.clone();
+        lit.bin_radiance[40] = Rgb::ONE;
+        let both = compute(&m, &DirectionBins::new(), &lit, &IncidentSettings::default(), None);
+        assert!(matches!(both.scattering, FirstScattering::General { .. }));
+        assert!(both.q0(n).x > q0.x);
     }
 
     /// The clear-air hook replaces the radiance a ray carries where it enters the cloud from an
@@ -918,7 +919,7 @@ mod tests {
             Some(&hook),
         );
         let want = 0.9 * 1e-4 * 2.0;
-        for (n, q) in inc.q0.iter().enumerate() {
+        for (n, q) in q0_of(&inc).into_iter().enumerate() {
             if m.density.data()[n] > 0.0 {
                 assert!((q.x - want).abs() < 1e-3 * want, "voxel {n}: Q0 {q:?} vs {want}");
             }
@@ -930,7 +931,7 @@ mod tests {
             &IncidentSettings::default(),
             Some(&|_, _| None),
         );
-        assert!(none.q0.iter().all(|q| *q == Rgb::ZERO));
+        assert!(q0_of(&none).iter().all(|q| *q == Rgb::ZERO));
     }
 
     /// The scheme the sweep replaces, as an independent oracle: every lattice ray of source `si`'s
@@ -1036,7 +1037,7 @@ mod tests {
                 let si = srcs.iter().position(|s| s.bin == Some(b)).unwrap();
                 let mean = per_ray_mean(&m, &srcs, &plan_families(&srcs, &bins, &settings), si, entry);
                 let (sigma_s, dw) = (m.optics.similarity(0.0).sigma_s, bins.bins[b].solid_angle);
-                for (n, q) in inc.q0.iter().enumerate() {
+                for (n, q) in q0_of(&inc).into_iter().enumerate() {
                     let rho = m.density.data()[n] as f64;
                     for band in 0..3 {
                         let want = rho * sigma_s[band] as f64 / (4.0 * PI) * dw * mean[n][band];
@@ -1047,7 +1048,7 @@ mod tests {
                         );
                     }
                 }
-                assert!(inc.q0.iter().filter(|q| q.x > 0.0).count() > 100);
+                assert!(q0_of(&inc).iter().filter(|q| q.x > 0.0).count() > 100);
             }
         }
     }

@@ -3,7 +3,7 @@
 
 use cloudgi::diffusion::flux::{diffuse_flux, FluxField};
 use cloudgi::diffusion::{solve_diffusion, BoundaryLight, DiffusionSettings, DiffusionSolution};
-use cloudgi::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
+use cloudgi::incident::{compute, FirstScattering, IncidentLight, IncidentSettings, IncidentSources};
 use cloudgi::lighting::{DirectionBins, Sky, Sun};
 use cloudgi::lit::LitVolume;
 use cloudgi::math::{Rgb, Vec3};
@@ -52,9 +52,11 @@ fn flux_is_ficks_law_in_the_interior() {
     let linear = solution_of(&m, |i, j, k| 3.0 + grad.dot(Vec3::new(i as f32, j as f32, k as f32)));
     let lin = diffuse_flux(&m, &inc, &linear, TAU_MIN);
     let q1 = Vec3::new(0.02, -0.01, 0.03);
-    for ax in 0..3 {
-        inc.q1[ax] = VoxelField::filled(m.density.full_index(), Rgb::splat(q1[ax]));
-    }
+    let field = |v: f32| VoxelField::filled(m.density.full_index(), Rgb::splat(v));
+    inc.scattering = FirstScattering::General {
+        q0: field(0.0),
+        q1: [field(q1[0]), field(q1[1]), field(q1[2])],
+    };
     let with_q1 = diffuse_flux(&m, &inc, &linear, TAU_MIN);
     let want_lin = -grad / sigma_tr;
     let want_q1 = want_lin + 3.0 * q1 / sigma_tr;

@@ -3,7 +3,7 @@
 
 use cloudgi::diffusion::slab::{default_cells, slab_forward_fraction, solve_slab, solve_slab_similar, Incidence};
 use cloudgi::diffusion::{boundary_outflow, solve_diffusion, BoundaryLight, DiffusionSettings};
-use cloudgi::incident::{compute, IncidentSettings, IncidentSources};
+use cloudgi::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
 use cloudgi::lighting::DirectionBins;
 use cloudgi::math::{Rgb, Vec3};
 use cloudgi::medium::{Grid3, Medium};
@@ -142,12 +142,12 @@ fn q0_q1_homogeneous_box_under_vertical_sun_and_one_bin() {
         for (i, k) in [(0, 0), (3, 2), (1, 1)] {
             let idx = i + 4 * (j + 6 * k);
             assert!(
-                (inc.q0[idx].x as f64 - q0).abs() < 1e-5 * q0,
+                (inc.q0(idx).x as f64 - q0).abs() < 1e-5 * q0,
                 "layer {j}: {} vs {q0}",
-                inc.q0[idx].x
+                inc.q0(idx).x
             );
-            assert!((inc.q1[1][idx].y as f64 + g as f64 * q0).abs() < 1e-5 * q0);
-            assert!(inc.q1[0][idx].z.abs() < 1e-9 && inc.q1[2][idx].x.abs() < 1e-9);
+            assert!((inc.q1(1, idx).y as f64 + g as f64 * q0).abs() < 1e-5 * q0);
+            assert!(inc.q1(0, idx).z.abs() < 1e-9 && inc.q1(2, idx).x.abs() < 1e-9);
         }
     }
     // One bin of radiance L and a nearly transparent box: Q0 = ρσs/(4π)·Δω·L in every voxel,
@@ -176,14 +176,14 @@ fn q0_q1_homogeneous_box_under_vertical_sun_and_one_bin() {
         );
         let q0 = 1e-7 / (4.0 * PI) * bins.bins[b].solid_angle * 1.5;
         let q1 = -bins.bins[b].mean_dir * (0.5 * q0) as f32;
-        for idx in 0..inc.q0.len() {
+        for idx in 0..inc.dims.iter().product() {
             assert!(
-                (inc.q0[idx].y as f64 - q0).abs() < 1e-5 * q0,
+                (inc.q0(idx).y as f64 - q0).abs() < 1e-5 * q0,
                 "bin {b} voxel {idx}: {} vs {q0}",
-                inc.q0[idx].y
+                inc.q0(idx).y
             );
             for ax in 0..3 {
-                assert!((inc.q1[ax][idx].y - q1[ax]).abs() < 1e-5 * q0 as f32);
+                assert!((inc.q1(ax, idx).y - q1[ax]).abs() < 1e-5 * q0 as f32);
             }
         }
     }
@@ -311,6 +311,11 @@ fn convergence_independent_of_resolution_warm_start_and_failure() {
     assert!(iters[1] <= iters[0] + 15, "iterations grow with resolution: {iters:?}");
 }
 
+/// Q0 of every grid voxel, in grid order.
+fn q0_of(inc: &IncidentLight) -> Vec<Rgb> {
+    (0..inc.dims.iter().product()).map(|g| inc.q0(g)).collect()
+}
+
 #[test]
 fn deterministic_at_any_thread_count_and_hook_replaces_radiance() {
     let scene = default_small();
@@ -319,7 +324,7 @@ fn deterministic_at_any_thread_count_and_hook_replaces_radiance() {
         pool.install(|| {
             let inc = compute_incident(&scene, None);
             let sol = solve_diffusion(&scene.medium, &inc, &boundary_light(&scene), None, &DiffusionSettings::default()).unwrap();
-            (inc.q0.clone(), sol.i0.clone())
+            (q0_of(&inc), sol.i0.clone())
         })
     };
     let (q1, s1) = run(1);
@@ -333,7 +338,7 @@ fn deterministic_at_any_thread_count_and_hook_replaces_radiance() {
         sun: None,
     };
     let none = compute(&scene.medium, &bins, &dark, &IncidentSettings::default(), Some(&|_, _| None));
-    assert!(none.q0.iter().all(|q| *q == Rgb::ZERO));
+    assert!(q0_of(&none).iter().all(|q| *q == Rgb::ZERO));
     let lit = compute(
         &scene.medium,
         &bins,
@@ -342,7 +347,7 @@ fn deterministic_at_any_thread_count_and_hook_replaces_radiance() {
         Some(&|_, _| Some(Rgb::ONE)),
     );
     let rho = scene.medium.density.data();
-    let n_lit = lit.q0.iter().zip(rho).filter(|(q, r)| **r > 0.0 && q.x > 0.0).count();
+    let n_lit = q0_of(&lit).iter().zip(rho).filter(|(q, r)| **r > 0.0 && q.x > 0.0).count();
     let n_full = rho.iter().filter(|r| **r > 0.0).count();
     assert!(n_lit * 10 > n_full * 9, "{n_lit} of {n_full} full voxels lit by the hook");
 }
@@ -421,9 +426,9 @@ fn jittered_direction_strata_keep_the_bin_power() {
         );
         let q0 = 1e-7 / (4.0 * PI) * bins.bins[b].solid_angle;
         let q1 = -bins.bins[b].mean_dir * (0.5 * q0) as f32;
-        for idx in 0..inc.q0.len() {
-            assert!((inc.q0[idx].x as f64 - q0).abs() < 1e-5 * q0, "{} vs {q0}", inc.q0[idx].x);
-            let got = Vec3::new(inc.q1[0][idx].x, inc.q1[1][idx].x, inc.q1[2][idx].x);
+        for idx in 0..inc.dims.iter().product() {
+            assert!((inc.q0(idx).x as f64 - q0).abs() < 1e-5 * q0, "{} vs {q0}", inc.q0(idx).x);
+            let got = Vec3::new(inc.q1(0, idx).x, inc.q1(1, idx).x, inc.q1(2, idx).x);
             assert!((got - q1).length() < 0.02 * q1.length(), "{got} vs {q1}");
         }
     }

@@ -1,0 +1,215 @@
+//! Stage 1's first scattering per full voxel, Q0 (eq. 5) and Q1 (eq. 6), kept in the smallest form
+//! its sources allow and read through [`FirstScattering::q0`] and [`FirstScattering::q1`].
+//!
+//! **The sun alone** (`render.sky_boundary`, the default: sky and ground enter through the
+//! diffusion's boundary condition, stage 1 propagates the sun only): with one source of irradiance
+//! E, Σ0_c = E_c·T̄_c and Σ1 = Σ0·(−sun dir), T̄ the sun's voxel-mean transmittance, so
+//!
+//! ```text
+//!   Q0_c = ρT̄ · σs_c E_c/(4π),   Q1 = g · Q0 · (−sun dir)
+//! ```
+//!
+//! and, when every band decays with the same extinction (stage 1's similarity with f = 0 has one
+//! σt for all bands), T̄ is one number per voxel: ρT̄ in 4 B per full voxel instead of 48.
+//! **Otherwise** (sky bins, the clear-air hook, or per-band extinction) Q0 and Q1 are stored per
+//! band.
+
+use super::Acc;
+use crate::math::{Rgb, Vec3};
+use crate::medium::sparse::{FullIndex, VoxelField};
+use crate::optics::ScaledOptics;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+use std::sync::Arc;
+
+/// Q0 and Q1 per full voxel (zero where ρ = 0); see the module docs.
+#[derive(Clone, Debug)]
+pub enum FirstScattering {
+    /// Any sources: Q0 per band (W·m⁻³·sr⁻¹), and Q1 as `q1[axis]` per band.
+    General { q0: VoxelField<Rgb>, q1: [VoxelField<Rgb>; 3] },
+    /// The sun alone, one extinction for all bands: ρ times the sun's voxel-mean transmittance.
+    Sun {
+        /// ρT̄ per full voxel (density units); 0 where ρ = 0.
+        rho_t: VoxelField<f32>,
+        /// Q0 per unit ρT̄, σs_c E_c/(4π) per band (W·m⁻²·sr⁻¹ per unit density, × m⁻¹).
+        q0_per_rho_t: [f64; 3],
+        /// Q1 per unit Q0: g·(−sun dir), per axis.
+        q1_per_q0: [f64; 3],
+    },
+}
+
+impl FirstScattering {
+    /// Q0 of grid voxel `g` per band (W·m⁻³·sr⁻¹).
+    #[inline]
+    pub fn q0(&self, g: usize) -> Rgb {
+        match self {
+            FirstScattering::General { q0, .. } => q0[g],
+            FirstScattering::Sun { rho_t, q0_per_rho_t, .. } => scaled(rho_t[g] as f64, q0_per_rho_t),
+        }
+    }
+
+    /// The `axis` component of Q1 of grid voxel `g` per band (W·m⁻³·sr⁻¹).
+    #[inline]
+    pub fn q1(&self, axis: usize, g: usize) -> Rgb {
+        match self {
+            FirstScattering::General { q1, .. } => q1[axis][g],
+            FirstScattering::Sun {
+                rho_t,
+                q0_per_rho_t,
+                q1_per_q0,
+            } => scaled(rho_t[g] as f64 * q1_per_q0[axis], q0_per_rho_t),
+        }
+    }
+
+    /// Bytes held by the values (the shared index not counted).
+    pub fn bytes(&self) -> usize {
+        match self {
+            FirstScattering::General { q0, q1 } => q0.bytes() + q1.iter().map(|f| f.bytes()).sum::<usize>(),
+            FirstScattering::Sun { rho_t, .. } => rho_t.bytes(),
+        }
+    }
+
+    /// Zero everywhere (nothing propagated), in the sun's form.
+    pub fn zero(index: Arc<FullIndex>) -> FirstScattering {
+        FirstScattering::Sun {
+            rho_t: VoxelField::filled(index, 0.0),
+            q0_per_rho_t: [0.0; 3],
+            q1_per_q0: [0.0; 3],
+        }
+    }
+
+    /// From the accumulators `acc` of the full voxels (in `index` order) of density `rho`:
+    /// Σ0, Σ1 scattered with ρσs/(4π) and ρσs·g/(4π). One parallel pass, ρσs/(4π) once per voxel
+    /// and band. With δ-scaling (f = g) the scattering that changes direction is σs(1 − g),
+    /// isotropic (g' = 0).
+    pub fn general(index: Arc<FullIndex>, optics: &ScaledOptics, acc: &[Acc], rho: &[f32]) -> FirstScattering {
+        let (sigma_s, g) = (optics.sigma_s, optics.phase.mean_cosine());
+        let n = acc.len() + 1;
+        let mut q0 = vec![Rgb::ZERO; n];
+        let mut q1: [Vec<Rgb>; 3] = std::array::from_fn(|_| vec![Rgb::ZERO; n]);
+        let [q1x, q1y, q1z] = &mut q1;
+        acc.par_chunks(CHUNK)
+            .zip(rho.par_chunks(CHUNK))
+            .zip(q0[1..].par_chunks_mut(CHUNK))
+            .zip(q1x[1..].par_chunks_mut(CHUNK))
+            .zip(q1y[1..].par_chunks_mut(CHUNK))
+            .zip(q1z[1..].par_chunks_mut(CHUNK))
+            .for_each(|(((((acc, rho), q0), qx), qy), qz)| {
+                for (i, v) in acc.iter().enumerate() {
+                    let s: [f64; 3] = std::array::from_fn(|c| rho[i] as f64 * sigma_s[c] as f64 / (4.0 * PI));
+                    let term =
+                        |t: usize, k: f64| Rgb::new((s[0] * k * v[t]) as f32, (s[1] * k * v[t + 1]) as f32, (s[2] * k * v[t + 2]) as f32);
+                    q0[i] = term(0, 1.0);
+                    qx[i] = term(3, g);
+                    qy[i] = term(6, g);
+                    qz[i] = term(9, g);
+                }
+            });
+        let field = |slots| VoxelField::from_slots(index.clone(), slots);
+        let [q1x, q1y, q1z] = q1;
+        FirstScattering::General {
+            q0: field(q0),
+            q1: [field(q1x), field(q1y), field(q1z)],
+        }
+    }
+
+    /// From the accumulators of a sweep whose only source was the sun, towards unit `sun_dir`
+    /// with irradiance `sun_e` (W/m² per band), every band decaying alike: Σ0_c = E_c·T̄, so
+    /// ρT̄ = ρΣ0_c/E_c read in the band of the largest E (Σ1 is the same light along the flow).
+    pub fn sun(index: Arc<FullIndex>, optics: &ScaledOptics, acc: &[Acc], rho: &[f32], sun_dir: Vec3, sun_e: Rgb) -> FirstScattering {
+        let band = (0..3).fold(0, |b, c| if sun_e[c] > sun_e[b] { c } else { b });
+        let inv_e = if sun_e[band] > 0.0 { 1.0 / sun_e[band] as f64 } else { 0.0 };
+        let mut rho_t = vec![0f32; acc.len() + 1];
+        acc.par_chunks(CHUNK)
+            .zip(rho.par_chunks(CHUNK))
+            .zip(rho_t[1..].par_chunks_mut(CHUNK))
+            .for_each(|((acc, rho), out)| {
+                for ((v, r), o) in acc.iter().zip(rho).zip(out) {
+                    *o = (*r as f64 * v[band] * inv_e) as f32;
+                }
+            });
+        let g = optics.phase.mean_cosine();
+        FirstScattering::Sun {
+            rho_t: VoxelField::from_slots(index, rho_t),
+            q0_per_rho_t: std::array::from_fn(|c| optics.sigma_s[c] as f64 * sun_e[c] as f64 / (4.0 * PI)),
+            q1_per_q0: std::array::from_fn(|a| -g * sun_dir[a] as f64),
+        }
+    }
+}
+
+/// Voxels per task of the parallel passes.
+const CHUNK: usize = 4096;
+
+/// `u·k` per band, rounded to f32.
+#[inline]
+fn scaled(u: f64, k: &[f64; 3]) -> Rgb {
+    Rgb::new((u * k[0]) as f32, (u * k[1]) as f32, (u * k[2]) as f32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::Rng;
+    use crate::medium::Grid3;
+    use crate::optics::Optics;
+
+    /// A sun-only sweep's accumulators (Σ0_c = E_c·T̄, Σ1 = Σ0·flow) on a random cloud: the sun's
+    /// form gives the general form's Q0 and Q1 to f32 rounding, in 4 B per full voxel.
+    #[test]
+    fn sun_form_matches_the_general_form_on_sun_only_sums() {
+        let dims = [9, 7, 5];
+        let mut rng = Rng::new(3, 0);
+        let mut g = Grid3::filled(dims, 0.0);
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    if rng.uniform() < 0.6 {
+                        g.set(i, j, k, 0.1 + 2.0 * rng.uniform());
+                    }
+                }
+            }
+        }
+        let index = g.full_index();
+        let rho: Vec<f32> = g.data().iter().copied().filter(|r| *r > 0.0).collect();
+        let optics = Optics::new(0.8, Rgb::new(0.9, 0.7, 0.99), 0.6).similarity(0.0);
+        let (dir, e) = (Vec3::new(0.3, 0.8, -0.5).normalize(), Rgb::new(2.0, 3.0, 1.5));
+        let acc: Vec<Acc> = rho
+            .iter()
+            .map(|_| {
+                let t = rng.uniform_f64();
+                let mut a = [0.0; 12];
+                for c in 0..3 {
+                    a[c] = e[c] as f64 * t;
+                    for ax in 0..3 {
+                        a[3 + 3 * ax + c] = a[c] * -dir[ax] as f64;
+                    }
+                }
+                a
+            })
+            .collect();
+        let general = FirstScattering::general(index.clone(), &optics, &acc, &rho);
+        let sun = FirstScattering::sun(index.clone(), &optics, &acc, &rho, dir, e);
+        assert_eq!(sun.bytes(), 4 * (rho.len() + 1));
+        assert_eq!(general.bytes(), 48 * (rho.len() + 1));
+        let close = |a: Rgb, b: Rgb| (0..3).all(|c| (a[c] - b[c]).abs() <= 4.0 * f32::EPSILON * b[c].abs());
+        let mut lit = 0;
+        for v in 0..index.len() {
+            let (a, b) = (sun.q0(v), general.q0(v));
+            assert!(close(a, b), "voxel {v}: Q0 {a:?} vs {b:?}");
+            for ax in 0..3 {
+                let (a, b) = (sun.q1(ax, v), general.q1(ax, v));
+                assert!(close(a, b), "voxel {v}: Q1[{ax}] {a:?} vs {b:?}");
+            }
+            lit += usize::from(b.x > 0.0);
+        }
+        assert!(lit > 100, "{lit} lit voxels");
+    }
+
+    /// Nothing propagated: zero everywhere.
+    #[test]
+    fn zero_reads_zero() {
+        let g = Grid3::filled([3, 2, 2], 1.0);
+        let z = FirstScattering::zero(g.full_index());
+        assert!((0..12).all(|v| z.q0(v) == Rgb::ZERO && (0..3).all(|a| z.q1(a, v) == Rgb::ZERO)));
+    }
+}
