@@ -41,9 +41,16 @@ use crate::math::Rgb;
 pub struct BoundaryLight {
     /// L_face per face orientation where no ghost value is known; zero: the paper's eq. 7.
     pub uniform: [Rgb; 6],
-    /// Per empty voxel (grid index, ascending) that has its own light: L_face for each of the six
-    /// faces of the full voxels around it, by the full voxel's outward normal.
-    ghosts: Vec<(usize, [Rgb; 6])>,
+    /// The faces with their own light, ascending by [`ghost_key`] (empty voxel, the full voxel's
+    /// outward normal), and that light beside them: only faces next to a full voxel, 20 B each.
+    ghost_faces: Vec<u64>,
+    ghost_light: Vec<Rgb>,
+}
+
+/// Sort key of the face with outward normal `face` whose empty neighbour is grid voxel `ghost`.
+#[inline]
+fn ghost_key(ghost: usize, face: usize) -> u64 {
+    6 * ghost as u64 + face as u64
 }
 
 /// The cosine-weighted mean radiance (1/π)∫_{ω·n > 0} L(ω) (ω·n) dω (W·m⁻²·sr⁻¹) over the
@@ -75,16 +82,17 @@ impl BoundaryLight {
     pub fn uniform(bins: &[Bin], radiance: &[Rgb]) -> Self {
         BoundaryLight {
             uniform: std::array::from_fn(|f| hemisphere_radiance(bins, radiance, CUBE_FACES[f].n)),
-            ghosts: Vec::new(),
+            ..Self::default()
         }
     }
 
-    /// `self` with its own light for the faces next to some empty voxels: `ghosts` yields
-    /// (grid index of the empty voxel, L_face by the full voxel's outward normal). A face whose
-    /// empty voxel is not listed keeps the uniform value.
-    pub fn with_ghosts(mut self, ghosts: impl IntoIterator<Item = (usize, [Rgb; 6])>) -> Self {
-        self.ghosts = ghosts.into_iter().collect();
-        self.ghosts.sort_by_key(|g| g.0);
+    /// `self` with its own light on some faces next to empty voxels: `ghosts` yields (grid index
+    /// of the empty voxel, the full voxel's outward normal, L_face), each face once. A face not
+    /// listed keeps the uniform value.
+    pub fn with_ghosts(mut self, ghosts: impl IntoIterator<Item = (usize, usize, Rgb)>) -> Self {
+        let mut faces: Vec<(u64, Rgb)> = ghosts.into_iter().map(|(g, f, l)| (ghost_key(g, f), l)).collect();
+        faces.sort_by_key(|e| e.0);
+        (self.ghost_faces, self.ghost_light) = faces.into_iter().unzip();
         self
     }
 
@@ -92,9 +100,9 @@ impl BoundaryLight {
     /// [`CUBE_FACES`]) whose empty neighbour is grid voxel `ghost` (None outside the grid).
     #[inline]
     pub fn at(&self, ghost: Option<usize>, face: usize, c: usize) -> f64 {
-        let own = ghost.and_then(|g| self.ghosts.binary_search_by_key(&g, |e| e.0).ok());
+        let own = ghost.and_then(|g| self.ghost_faces.binary_search(&ghost_key(g, face)).ok());
         let v = match own {
-            Some(p) => self.ghosts[p].1[face],
+            Some(p) => self.ghost_light[p],
             None => self.uniform[face],
         };
         v[c] as f64
@@ -102,7 +110,7 @@ impl BoundaryLight {
 
     /// True when no face receives light (the paper's eq. 7).
     pub fn is_dark(&self) -> bool {
-        self.uniform.iter().all(|v| *v == Rgb::ZERO) && self.ghosts.is_empty()
+        self.uniform.iter().all(|v| *v == Rgb::ZERO) && self.ghost_faces.is_empty()
     }
 }
 
@@ -159,11 +167,13 @@ mod tests {
     fn ghost_light_overrides_the_uniform_value_on_its_faces_only() {
         let b = BoundaryLight {
             uniform: [Rgb::splat(1.0); 6],
-            ghosts: Vec::new(),
+            ..BoundaryLight::default()
         }
-        .with_ghosts([(42, [Rgb::splat(3.0); 6]), (7, [Rgb::splat(2.0); 6])]);
+        .with_ghosts([(42, 1, Rgb::splat(3.0)), (7, 5, Rgb::splat(2.0)), (7, 0, Rgb::splat(4.0))]);
         assert_eq!(b.at(Some(42), 1, 0), 3.0);
+        assert_eq!(b.at(Some(42), 0, 0), 1.0, "face 0 of voxel 42 has no light of its own");
         assert_eq!(b.at(Some(7), 5, 2), 2.0);
+        assert_eq!(b.at(Some(7), 0, 1), 4.0);
         assert_eq!(b.at(Some(8), 5, 2), 1.0);
         assert_eq!(b.at(None, 0, 0), 1.0);
         assert!(!b.is_dark());

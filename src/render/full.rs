@@ -68,16 +68,16 @@ pub fn relative_change(old: &DiffusionSolution, new: &DiffusionSolution) -> f64 
 pub fn cube_boundary(base: &BoundaryLight, cubes: &BorderCubes) -> BoundaryLight {
     let bins = DirectionBins::new();
     let d = cubes.dims;
-    let ghosts = cubes.voxels.iter().enumerate().map(|(n, v)| {
-        let mut light = base.uniform;
-        let radiance = cubes.bins(n);
-        for f in (0..6).filter(|f| cubes.faces[n] & (1 << f) != 0) {
-            // The full neighbour lies along FACE_OFFSETS[f]; its face towards this voxel has the
-            // opposite normal, the other index of the pair (+a, −a).
+    let bin_list = &bins.bins;
+    let ghosts = cubes.voxels.iter().enumerate().flat_map(|(n, v)| {
+        let (radiance, faces) = (cubes.bins(n), cubes.faces[n]);
+        let ghost = v[0] + d[0] * (v[1] + d[1] * v[2]);
+        // The full neighbour lies along FACE_OFFSETS[f]; its face towards this voxel has the
+        // opposite normal, the other index of the pair (+a, −a).
+        (0..6).filter(move |f| faces & (1 << f) != 0).map(move |f| {
             let face = f ^ 1;
-            light[face] = hemisphere_radiance(&bins.bins, &radiance, CUBE_FACES[face].n);
-        }
-        (v[0] + d[0] * (v[1] + d[1] * v[2]), light)
+            (ghost, face, hemisphere_radiance(bin_list, &radiance, CUBE_FACES[face].n))
+        })
     });
     base.clone().with_ghosts(ghosts)
 }
