@@ -155,16 +155,16 @@ pub struct IncidentLight {
 }
 
 impl IncidentLight {
-    /// Q0 of grid voxel `g` (eq. 5, W·m⁻³·sr⁻¹ per band).
+    /// Q0 of grid voxel `g` in `band` (eq. 5, W·m⁻³·sr⁻¹).
     #[inline]
-    pub fn q0(&self, g: usize) -> Rgb {
-        self.scattering.q0(g)
+    pub fn q0(&self, g: usize, band: usize) -> f32 {
+        self.scattering.q0(g, band)
     }
 
-    /// The `axis` component of Q1 of grid voxel `g` (eq. 6, W·m⁻³·sr⁻¹ per band).
+    /// The `axis` component of Q1 of grid voxel `g` in `band` (eq. 6, W·m⁻³·sr⁻¹).
     #[inline]
-    pub fn q1(&self, axis: usize, g: usize) -> Rgb {
-        self.scattering.q1(axis, g)
+    pub fn q1(&self, axis: usize, g: usize, band: usize) -> f32 {
+        self.scattering.q1(axis, g, band)
     }
 }
 
@@ -845,7 +845,9 @@ mod tests {
 
     /// Q0 of every grid voxel, in grid order.
     fn q0_of(inc: &IncidentLight) -> Vec<Rgb> {
-        (0..inc.dims.iter().product()).map(|g| inc.q0(g)).collect()
+        (0..inc.dims.iter().product())
+            .map(|g| Rgb::new(inc.q0(g, 0), inc.q0(g, 1), inc.q0(g, 2)))
+            .collect()
     }
 
     fn uniform_sky(l: f32) -> IncidentSources {
@@ -866,7 +868,7 @@ mod tests {
             if m.density.data()[n] > 0.0 {
                 assert!((q.x - want).abs() < 1e-3 * want, "voxel {n}: Q0 {q:?} vs {want}");
                 for ax in 0..3 {
-                    assert!(inc.q1(ax, n).x.abs() < 1e-3 * want, "voxel {n}: Q1 {:?}", inc.q1(ax, n));
+                    assert!(inc.q1(ax, n, 0).abs() < 1e-3 * want, "voxel {n}: Q1 {}", inc.q1(ax, n, 0));
                 }
             } else {
                 assert_eq!(q, Rgb::ZERO);
@@ -889,20 +891,17 @@ mod tests {
         assert_eq!(inc.scattering.bytes(), 4 * (64 + 1));
         let want = 0.9 * 1e-4 / (4.0 * PI) as f32 * Rgb::new(2.0, 3.0, 1.0);
         let n = 1 + 6 * (2 + 6 * 3);
-        let (q0, g) = (inc.q0(n), 0.7);
+        let (q0, g) = (q0_of(&inc)[n], 0.7);
         assert!((0..3).all(|c| (q0[c] - want[c]).abs() < 1e-3 * want[c]), "{q0:?} vs {want:?}");
         for ax in 0..3 {
-            let q1 = inc.q1(ax, n);
-            assert!(
-                (0..3).all(|c| (q1[c] + g * dir[ax] * q0[c]).abs() < 1e-6 * q0[c]),
-                "axis {ax}: {q1:?}"
-            );
+            let q1 = |c| inc.q1(ax, n, c);
+            assert!((0..3).all(|c| (q1(c) + g * dir[ax] * q0[c]).abs() < 1e-6 * q0[c]), "axis {ax}");
         }
         let mut lit = sun.clone();
         lit.bin_radiance[40] = Rgb::ONE;
         let both = compute(&m, &DirectionBins::new(), &lit, &IncidentSettings::default(), None);
         assert!(matches!(both.scattering, FirstScattering::General { .. }));
-        assert!(both.q0(n).x > q0.x);
+        assert!(both.q0(n, 0) > q0.x);
     }
 
     /// The clear-air hook replaces the radiance a ray carries where it enters the cloud from an

@@ -142,12 +142,12 @@ fn q0_q1_homogeneous_box_under_vertical_sun_and_one_bin() {
         for (i, k) in [(0, 0), (3, 2), (1, 1)] {
             let idx = i + 4 * (j + 6 * k);
             assert!(
-                (inc.q0(idx).x as f64 - q0).abs() < 1e-5 * q0,
+                (inc.q0(idx, 0) as f64 - q0).abs() < 1e-5 * q0,
                 "layer {j}: {} vs {q0}",
-                inc.q0(idx).x
+                inc.q0(idx, 0)
             );
-            assert!((inc.q1(1, idx).y as f64 + g as f64 * q0).abs() < 1e-5 * q0);
-            assert!(inc.q1(0, idx).z.abs() < 1e-9 && inc.q1(2, idx).x.abs() < 1e-9);
+            assert!((inc.q1(1, idx, 1) as f64 + g as f64 * q0).abs() < 1e-5 * q0);
+            assert!(inc.q1(0, idx, 2).abs() < 1e-9 && inc.q1(2, idx, 0).abs() < 1e-9);
         }
     }
     // One bin of radiance L and a nearly transparent box: Q0 = ρσs/(4π)·Δω·L in every voxel,
@@ -178,12 +178,12 @@ fn q0_q1_homogeneous_box_under_vertical_sun_and_one_bin() {
         let q1 = -bins.bins[b].mean_dir * (0.5 * q0) as f32;
         for idx in 0..inc.dims.iter().product() {
             assert!(
-                (inc.q0(idx).y as f64 - q0).abs() < 1e-5 * q0,
+                (inc.q0(idx, 1) as f64 - q0).abs() < 1e-5 * q0,
                 "bin {b} voxel {idx}: {} vs {q0}",
-                inc.q0(idx).y
+                inc.q0(idx, 1)
             );
             for ax in 0..3 {
-                assert!((inc.q1(ax, idx).y - q1[ax]).abs() < 1e-5 * q0 as f32);
+                assert!((inc.q1(ax, idx, 1) - q1[ax]).abs() < 1e-5 * q0 as f32);
             }
         }
     }
@@ -313,7 +313,9 @@ fn convergence_independent_of_resolution_warm_start_and_failure() {
 
 /// Q0 of every grid voxel, in grid order.
 fn q0_of(inc: &IncidentLight) -> Vec<Rgb> {
-    (0..inc.dims.iter().product()).map(|g| inc.q0(g)).collect()
+    (0..inc.dims.iter().product())
+        .map(|g| Rgb::new(inc.q0(g, 0), inc.q0(g, 1), inc.q0(g, 2)))
+        .collect()
 }
 
 #[test]
@@ -427,8 +429,8 @@ fn jittered_direction_strata_keep_the_bin_power() {
         let q0 = 1e-7 / (4.0 * PI) * bins.bins[b].solid_angle;
         let q1 = -bins.bins[b].mean_dir * (0.5 * q0) as f32;
         for idx in 0..inc.dims.iter().product() {
-            assert!((inc.q0(idx).x as f64 - q0).abs() < 1e-5 * q0, "{} vs {q0}", inc.q0(idx).x);
-            let got = Vec3::new(inc.q1(0, idx).x, inc.q1(1, idx).x, inc.q1(2, idx).x);
+            assert!((inc.q0(idx, 0) as f64 - q0).abs() < 1e-5 * q0, "{} vs {q0}", inc.q0(idx, 0));
+            let got = Vec3::new(inc.q1(0, idx, 0), inc.q1(1, idx, 0), inc.q1(2, idx, 0));
             assert!((got - q1).length() < 0.02 * q1.length(), "{got} vs {q1}");
         }
     }

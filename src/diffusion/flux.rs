@@ -43,7 +43,7 @@ pub fn diffuse_flux(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, ta
         for (c, o) in out.iter_mut().enumerate() {
             let s = sigma_tr[c];
             let ip = sol.i0[c][idx] as f64;
-            let f_at = |q: usize, ax: usize| inc.q1(ax, q)[c] as f64 / (rho[q] as f64 * s);
+            let f_at = |q: usize, ax: usize| inc.q1(ax, q, c) as f64 / (rho[q] as f64 * s);
             let mut v = [0f64; 3];
             for ax in 0..3 {
                 let fp = f_at(idx, ax);

@@ -287,7 +287,7 @@ fn assemble_with(
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
     let gstride = [1, gd[0], gd[0] * gd[1]];
     // F = Q1/(ρσtr) per axis at voxel centres.
-    let f_at = |idx: usize, ax: usize| -> f64 { inc.q1(ax, idx)[c] as f64 / (rho[idx] as f64 * sigma_tr) };
+    let f_at = |idx: usize, ax: usize| -> f64 { inc.q1(ax, idx, c) as f64 / (rho[idx] as f64 * sigma_tr) };
     // Written in place (an unzip would hold a second copy while it gathers its pieces).
     let mut b = vec![0f64; full.len()];
     let row = |(&idx, bv): (&usize, &mut f64)| {
@@ -295,7 +295,7 @@ fn assemble_with(
         let cell = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])];
         let mut node = Node::at(dom.cell(cell));
         let mut diag = rp * sigma_a;
-        let mut rhs = inc.q0(idx)[c] as f64;
+        let mut rhs = inc.q0(idx, c) as f64;
         for ax in 0..3 {
             let fp = f_at(idx, ax);
             for side in [-1i64, 1] {
@@ -366,7 +366,7 @@ pub fn boundary_outflow(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution
                             let nidx = (nc >= 0 && nc < d[ax] as i64).then(|| (idx as i64 + side * stride[ax] as i64) as usize);
                             if nidx.map_or(true, |q| rho[q] <= 0.0) {
                                 let (dt, ft) = boundary_terms(rp, sigma_tr, h[ax], tau_min);
-                                let f = inc.q1(ax, idx)[c] as f64 / (rp * sigma_tr) * side as f64;
+                                let f = inc.q1(ax, idx, c) as f64 / (rp * sigma_tr) * side as f64;
                                 let l_in = bl.at(nidx, face_index(ax, side), c);
                                 let phi_over_h = dt * (sol.i0[c][idx] as f64 - l_in) + ft * f;
                                 *o += 4.0 * std::f64::consts::PI * phi_over_h * vol;

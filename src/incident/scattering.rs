@@ -39,25 +39,26 @@ pub enum FirstScattering {
 }
 
 impl FirstScattering {
-    /// Q0 of grid voxel `g` per band (W·m⁻³·sr⁻¹).
+    /// Q0 of grid voxel `g` in `band` (W·m⁻³·sr⁻¹). One band at a time: the diffusion reads
+    /// one band per pass, and the sun's form computes only what is read.
     #[inline]
-    pub fn q0(&self, g: usize) -> Rgb {
+    pub fn q0(&self, g: usize, band: usize) -> f32 {
         match self {
-            FirstScattering::General { q0, .. } => q0[g],
-            FirstScattering::Sun { rho_t, q0_per_rho_t, .. } => scaled(rho_t[g] as f64, q0_per_rho_t),
+            FirstScattering::General { q0, .. } => q0[g][band],
+            FirstScattering::Sun { rho_t, q0_per_rho_t, .. } => (rho_t[g] as f64 * q0_per_rho_t[band]) as f32,
         }
     }
 
-    /// The `axis` component of Q1 of grid voxel `g` per band (W·m⁻³·sr⁻¹).
+    /// The `axis` component of Q1 of grid voxel `g` in `band` (W·m⁻³·sr⁻¹).
     #[inline]
-    pub fn q1(&self, axis: usize, g: usize) -> Rgb {
+    pub fn q1(&self, axis: usize, g: usize, band: usize) -> f32 {
         match self {
-            FirstScattering::General { q1, .. } => q1[axis][g],
+            FirstScattering::General { q1, .. } => q1[axis][g][band],
             FirstScattering::Sun {
                 rho_t,
                 q0_per_rho_t,
                 q1_per_q0,
-            } => scaled(rho_t[g] as f64 * q1_per_q0[axis], q0_per_rho_t),
+            } => (rho_t[g] as f64 * q1_per_q0[axis] * q0_per_rho_t[band]) as f32,
         }
     }
 
@@ -140,12 +141,6 @@ impl FirstScattering {
 /// Voxels per task of the parallel passes.
 const CHUNK: usize = 4096;
 
-/// `u·k` per band, rounded to f32.
-#[inline]
-fn scaled(u: f64, k: &[f64; 3]) -> Rgb {
-    Rgb::new((u * k[0]) as f32, (u * k[1]) as f32, (u * k[2]) as f32)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -191,16 +186,18 @@ mod tests {
         let sun = FirstScattering::sun(index.clone(), &optics, &acc, &rho, dir, e);
         assert_eq!(sun.bytes(), 4 * (rho.len() + 1));
         assert_eq!(general.bytes(), 48 * (rho.len() + 1));
-        let close = |a: Rgb, b: Rgb| (0..3).all(|c| (a[c] - b[c]).abs() <= 4.0 * f32::EPSILON * b[c].abs());
+        let close = |a: f32, b: f32| (a - b).abs() <= 4.0 * f32::EPSILON * b.abs();
         let mut lit = 0;
         for v in 0..index.len() {
-            let (a, b) = (sun.q0(v), general.q0(v));
-            assert!(close(a, b), "voxel {v}: Q0 {a:?} vs {b:?}");
-            for ax in 0..3 {
-                let (a, b) = (sun.q1(ax, v), general.q1(ax, v));
-                assert!(close(a, b), "voxel {v}: Q1[{ax}] {a:?} vs {b:?}");
+            for c in 0..3 {
+                let (a, b) = (sun.q0(v, c), general.q0(v, c));
+                assert!(close(a, b), "voxel {v} band {c}: Q0 {a} vs {b}");
+                for ax in 0..3 {
+                    let (a, b) = (sun.q1(ax, v, c), general.q1(ax, v, c));
+                    assert!(close(a, b), "voxel {v} band {c}: Q1[{ax}] {a} vs {b}");
+                }
             }
-            lit += usize::from(b.x > 0.0);
+            lit += usize::from(general.q0(v, 0) > 0.0);
         }
         assert!(lit > 100, "{lit} lit voxels");
     }
@@ -210,6 +207,6 @@ mod tests {
     fn zero_reads_zero() {
         let g = Grid3::filled([3, 2, 2], 1.0);
         let z = FirstScattering::zero(g.full_index());
-        assert!((0..12).all(|v| z.q0(v) == Rgb::ZERO && (0..3).all(|a| z.q1(a, v) == Rgb::ZERO)));
+        assert!((0..12).all(|v| (0..3).all(|c| z.q0(v, c) == 0.0 && (0..3).all(|a| z.q1(a, v, c) == 0.0))));
     }
 }
