@@ -156,13 +156,13 @@ pub struct IncidentLight {
 
 impl IncidentLight {
     /// Q0 of grid voxel `g` in `band` (eq. 5, W·m⁻³·sr⁻¹).
-    #[inline]
+    #[inline(always)]
     pub fn q0(&self, g: usize, band: usize) -> f32 {
         self.scattering.q0(g, band)
     }
 
     /// The `axis` component of Q1 of grid voxel `g` in `band` (eq. 6, W·m⁻³·sr⁻¹).
-    #[inline]
+    #[inline(always)]
     pub fn q1(&self, axis: usize, g: usize, band: usize) -> f32 {
         self.scattering.q1(axis, g, band)
     }

@@ -41,7 +41,7 @@ pub enum FirstScattering {
 impl FirstScattering {
     /// Q0 of grid voxel `g` in `band` (W·m⁻³·sr⁻¹). One band at a time: the diffusion reads
     /// one band per pass, and the sun's form computes only what is read.
-    #[inline]
+    #[inline(always)]
     pub fn q0(&self, g: usize, band: usize) -> f32 {
         match self {
             FirstScattering::General { q0, .. } => q0[g][band],
@@ -50,7 +50,7 @@ impl FirstScattering {
     }
 
     /// The `axis` component of Q1 of grid voxel `g` in `band` (W·m⁻³·sr⁻¹).
-    #[inline]
+    #[inline(always)]
     pub fn q1(&self, axis: usize, g: usize, band: usize) -> f32 {
         match self {
             FirstScattering::General { q1, .. } => q1[axis][g][band],
