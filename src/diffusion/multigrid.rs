@@ -45,7 +45,7 @@ pub const OVER_CORRECTION: f64 = 1.3;
 /// on the thread count).
 const CHUNK: usize = 4096;
 
-/// Marks a pad entry in [`Level::unk`].
+/// Marks a pad entry ([`Level::unknown`]).
 const PAD: u32 = u32::MAX;
 
 /// Marks a missing neighbour in [`Node::up_nbr`].
@@ -215,13 +215,81 @@ impl Real for f64 {
 /// when the recursion's rounding left it above the tolerance; 1e-12 is still reached).
 type Mg = f32;
 
-/// One row of a [`Level`]: the couplings to the six neighbours (−x, +x, −y, +y, −z, +z), the
-/// diagonal and the neighbours' entries.
+/// One row of a [`Level`]: the couplings to the six neighbours (−x, +x, −y, +y, −z, +z) and
+/// where their entries lie (40 B; six plain u32 entries took 24 B of the 52 with the diagonal).
+///
+/// The entries are coded from `base`, the other colour's first entry after this unknown in box
+/// order: the ±x neighbours (cells c ± 1) are the entries just before and at `base`, the ±y and
+/// ±z ones lie `dy` and `dz` entries before or after it (the other colour's unknowns between
+/// the cells, fewer than half a box row or plane). A missing neighbour (or one coupled by 0) is
+/// the other colour's pad: a flag bit of `base` for ±x, [`FAR_Y`] or [`FAR_Z`] for the others.
 #[derive(Clone, Copy, Debug)]
 struct Row {
     cpl: [Mg; 6],
-    diag: Mg,
-    nbr: [u32; 6],
+    /// The other colour's first entry after this unknown, and the [`NO_MINUS_X`], [`NO_PLUS_X`]
+    /// flags.
+    base: u32,
+    /// Entries from `base` back to the −y neighbour and on to the +y one.
+    dy: [u16; 2],
+    /// Entries from `base` back to the −z neighbour and on to the +z one.
+    dz: [u32; 2],
+}
+
+/// [`Row::base`] flag: no −x neighbour.
+const NO_MINUS_X: u32 = 1 << 31;
+/// [`Row::base`] flag: no +x neighbour.
+const NO_PLUS_X: u32 = 1 << 30;
+/// [`Row::dy`] of a missing neighbour.
+const FAR_Y: u16 = u16::MAX;
+/// [`Row::dz`] of a missing neighbour.
+const FAR_Z: u32 = u32::MAX;
+
+impl Row {
+    /// The row of couplings `cpl` to the entries `nbr` (`pad` where there is none), `base` the
+    /// other colour's first entry after the unknown.
+    fn encode(cpl: [Mg; 6], nbr: [u32; 6], base: u32, pad: u32) -> Row {
+        assert!(base < NO_PLUS_X, "more than 2^30 entries on one level");
+        let missing = |q: usize| nbr[q] == pad;
+        debug_assert!(missing(0) || nbr[0] + 1 == base, "−x neighbour just before base");
+        debug_assert!(missing(1) || nbr[1] == base, "+x neighbour at base");
+        // Entries between base and neighbour q (before base for the − ones).
+        let dist = |q: usize| if q % 2 == 0 { base - nbr[q] } else { nbr[q] - base };
+        let dy = |q: usize| match missing(q) {
+            true => FAR_Y,
+            false => u16::try_from(dist(q))
+                .ok()
+                .filter(|d| *d != FAR_Y)
+                .expect("a box row of over 131 000 cells"),
+        };
+        let dz = |q: usize| if missing(q) { FAR_Z } else { dist(q) };
+        let flag = |q: usize, f: u32| if missing(q) { f } else { 0 };
+        Row {
+            cpl,
+            base: base | flag(0, NO_MINUS_X) | flag(1, NO_PLUS_X),
+            dy: [dy(2), dy(3)],
+            dz: [dz(4), dz(5)],
+        }
+    }
+
+    /// The neighbours' entries (−x, +x, −y, +y, −z, +z), `pad` the other colour's pad.
+    #[inline(always)]
+    fn neighbours(&self, pad: u32) -> [u32; 6] {
+        let base = self.base & !(NO_MINUS_X | NO_PLUS_X);
+        let or_pad = |missing: bool, e: u32| if missing { pad } else { e };
+        [
+            or_pad(self.base & NO_MINUS_X != 0, base.wrapping_sub(1)),
+            or_pad(self.base & NO_PLUS_X != 0, base),
+            or_pad(self.dy[0] == FAR_Y, base.wrapping_sub(self.dy[0].into())),
+            or_pad(self.dy[1] == FAR_Y, base.wrapping_add(self.dy[1].into())),
+            or_pad(self.dz[0] == FAR_Z, base.wrapping_sub(self.dz[0])),
+            or_pad(self.dz[1] == FAR_Z, base.wrapping_add(self.dz[1])),
+        ]
+    }
+
+    /// The other colour's first entry after the unknown.
+    fn base(&self) -> u32 {
+        self.base & !(NO_MINUS_X | NO_PLUS_X)
+    }
 }
 
 /// One level's operator on its unknowns only.
@@ -235,9 +303,9 @@ struct Row {
 #[derive(Clone, Debug)]
 struct Level {
     red: usize,
-    /// Every diagonal is 1 (the finest level, scaled): the first red pass is a copy and reads
-    /// no rows.
-    unit_diag: bool,
+    /// The diagonal per entry (0 on the pads); empty where every diagonal is 1 (the finest
+    /// level, scaled: its first red pass is then a copy and reads no rows).
+    diag: Vec<Mg>,
     /// The finest level's prolongation weights per red entry (empty elsewhere: 1). The finest
     /// level is scaled to unit diagonal (y = D^½ x), but the errors multigrid leaves to the
     /// coarse levels are smooth in the unscaled x: so the prolongation is P = D^½ P₀ (P₀
@@ -246,10 +314,8 @@ struct Level {
     /// iterations at 50×40×30/100×80×60/200×160×120 instead of 9/8/6.)
     weight: Vec<Mg>,
     rows: Vec<Row>,
-    /// The [`Operator`]'s unknown per entry; [`PAD`] on the pads.
-    unk: Vec<u32>,
-    /// Entry of the next coarser level holding each entry (a pad of it for the pads); empty on
-    /// the coarsest level.
+    /// Entry of the next coarser level holding each red entry (only the red ones are
+    /// prolonged: [`Level::prolong_red`]); empty on the coarsest level.
     parent: Vec<u32>,
     /// The finer level's red entries aggregated into entry e: `children[child_start[e]..child_start[e + 1]]`;
     /// empty on the finest level.
@@ -263,7 +329,9 @@ struct Level {
 /// solve's instructions.)
 #[inline(always)]
 fn couple<const K: usize>(row: &Row, x: &[[Mg; K]], off: usize) -> [Mg; K] {
-    let n = |q: usize| &x[row.nbr[q] as usize - off];
+    // The other colour's pad ends its slice.
+    let nbr = row.neighbours((off + x.len() - 1) as u32);
+    let n = |q: usize| &x[nbr[q] as usize - off];
     let (n0, n1, n2, n3, n4, n5) = (n(0), n(1), n(2), n(3), n(4), n(5));
     let c = &row.cpl;
     let mut s = [0.0; K];
@@ -279,12 +347,15 @@ impl Level {
         let n = a.nodes.len();
         let colour = |u: usize| a.ijk(u).iter().sum::<usize>() % 2;
         let red = (0..n).filter(|u| colour(*u) == 0).count();
+        // Each unknown's entry, the other colour's next entry at it (its rows' `base`), and
+        // (while the rows are built) each entry's unknown.
         let mut entry = vec![0u32; n];
+        let mut base = vec![0u32; n];
         let mut unk = vec![PAD; n + 2];
         let mut next = [0, red + 1];
-        for (u, e) in entry.iter_mut().enumerate() {
+        for u in 0..n {
             let c = colour(u);
-            *e = next[c] as u32;
+            (entry[u], base[u]) = (next[c] as u32, next[1 - c] as u32);
             unk[next[c]] = u as u32;
             next[c] += 1;
         }
@@ -299,44 +370,71 @@ impl Level {
         }
         let pads = [(n + 1) as u32, red as u32];
         let row = |e: usize, u: u32| {
+            let pad = pads[usize::from(e > red)];
             if u == PAD {
-                return Row {
-                    cpl: [0.0; 6],
-                    diag: 0.0,
-                    nbr: [e as u32; 6],
-                };
+                return Row::encode([0.0; 6], [pad; 6], 0, pad);
             }
             let nd = &a.nodes[u as usize];
-            let mut row = Row {
-                cpl: [0.0; 6],
-                diag: Mg::of(nd.diag),
-                nbr: [pads[usize::from(e > red)]; 6],
-            };
+            let (mut cpl, mut nbr) = ([0.0; 6], [pad; 6]);
             for ax in 0..3 {
                 let d = down[u as usize][ax];
                 if d != NONE && a.nodes[d as usize].up[ax] != 0.0 {
-                    row.nbr[2 * ax] = entry[d as usize];
-                    row.cpl[2 * ax] = Mg::of(a.nodes[d as usize].up[ax]);
+                    nbr[2 * ax] = entry[d as usize];
+                    cpl[2 * ax] = Mg::of(a.nodes[d as usize].up[ax]);
                 }
                 if nd.up_nbr[ax] != NONE && nd.up[ax] != 0.0 {
-                    row.nbr[2 * ax + 1] = entry[nd.up_nbr[ax] as usize];
-                    row.cpl[2 * ax + 1] = Mg::of(nd.up[ax]);
+                    nbr[2 * ax + 1] = entry[nd.up_nbr[ax] as usize];
+                    cpl[2 * ax + 1] = Mg::of(nd.up[ax]);
                 }
             }
-            row
+            Row::encode(cpl, nbr, base[u as usize], pad)
         };
         let rows: Vec<Row> = unk.par_iter().enumerate().map(|(e, u)| row(e, *u)).collect();
+        let unit_diag = a.nodes.iter().all(|n| n.diag == 1.0);
+        let diag = match unit_diag {
+            true => Vec::new(),
+            false => unk
+                .iter()
+                .map(|u| if *u == PAD { 0.0 } else { Mg::of(a.nodes[*u as usize].diag) })
+                .collect(),
+        };
         let level = Level {
             red,
-            unit_diag: a.nodes.iter().all(|n| n.diag == 1.0),
+            diag,
             weight: Vec::new(),
             rows,
-            unk,
             parent: Vec::new(),
             child_start: Vec::new(),
             children: Vec::new(),
         };
         (level, entry)
+    }
+
+    /// The [`Operator`]'s unknown at entry `e` ([`PAD`] on the pads): the unknowns of its
+    /// colour before it plus those of the other colour (its row's `base`).
+    fn unknown(&self, e: usize) -> u32 {
+        let black = self.red + 1;
+        match e {
+            _ if e == self.red || e + 1 == self.len() => PAD,
+            _ if e < self.red => (e + self.rows[e].base() as usize - black) as u32,
+            _ => (e - black + self.rows[e].base() as usize) as u32,
+        }
+    }
+
+    /// Entry e's diagonal.
+    #[inline(always)]
+    fn diag(&self, e: usize) -> Mg {
+        self.diag.get(e).copied().unwrap_or(1.0)
+    }
+
+    /// The other colour's pad, as seen from entry `e`.
+    #[inline(always)]
+    fn other_pad(&self, e: usize) -> u32 {
+        if e < self.red {
+            (self.len() - 1) as u32
+        } else {
+            self.red as u32
+        }
     }
 
     /// Entries, pads included (the length of the level's vectors).
@@ -353,13 +451,11 @@ impl Level {
     /// pads) and each coarse entry's red children (a black pass before every restriction of the
     /// cycle leaves the black residuals at zero: [`Level::residual_red`]).
     fn link(&mut self, parent: &[u32], coarse: &mut Level, coarse_entry: &[u32]) {
-        let pad = coarse.red as u32;
-        self.parent = self
-            .unk
-            .par_iter()
-            .map(|&u| if u == PAD { pad } else { coarse_entry[parent[u as usize] as usize] })
+        self.parent = (0..self.red)
+            .into_par_iter()
+            .map(|e| coarse_entry[parent[self.unknown(e) as usize] as usize])
             .collect();
-        let red_parents = &self.parent[..self.red];
+        let red_parents = &self.parent;
         let mut start = vec![0u32; coarse.len() + 1];
         for p in red_parents {
             start[*p as usize + 1] += 1;
@@ -389,7 +485,8 @@ impl Level {
                 let s = couple(row, xb, self.red + 1);
                 // Restricted with the weights: each red residual is stored times its weight.
                 let w = self.weight.get(e).copied().unwrap_or(1.0);
-                *rv = std::array::from_fn(|k| w * (b[e][k] - (row.diag * xr[e][k] + s[k])));
+                let d = self.diag(e);
+                *rv = std::array::from_fn(|k| w * (b[e][k] - (d * xr[e][k] + s[k])));
             }
         });
     }
@@ -421,10 +518,10 @@ impl Level {
                 let e = first + t;
                 *xv = if e >= self.red {
                     [0.0; K]
-                } else if self.unit_diag {
+                } else if self.diag.is_empty() {
                     b[e]
                 } else {
-                    b[e].map(|v| v / self.rows[e].diag)
+                    b[e].map(|v| v / self.diag[e])
                 };
             }
         });
@@ -443,9 +540,9 @@ impl Level {
         mine.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, xs)| {
             let start = first + ci * CHUNK;
             for (t, xv) in xs.iter_mut().enumerate() {
-                let row = &self.rows[start + t];
-                let s = couple(row, other, off);
-                *xv = std::array::from_fn(|k| (b[start + t][k] - s[k]) / row.diag);
+                let s = couple(&self.rows[start + t], other, off);
+                let d = self.diag(start + t);
+                *xv = std::array::from_fn(|k| (b[start + t][k] - s[k]) / d);
             }
         });
     }
@@ -455,7 +552,7 @@ impl Level {
     fn prolong_red<const K: usize>(&self, x: &mut [[Mg; K]], xc: &[[Mg; K]], w: Mg) {
         x[..self.red]
             .par_chunks_mut(CHUNK)
-            .zip(self.parent[..self.red].par_chunks(CHUNK))
+            .zip(self.parent.par_chunks(CHUNK))
             .enumerate()
             .for_each(|(ci, (xs, ps))| {
                 for (t, (v, p)) in xs.iter_mut().zip(ps).enumerate() {
@@ -475,18 +572,18 @@ impl Level {
 /// neighbours' +a ones). Added to the unit diagonal, A·1 (the absorption and the leakage, for a
 /// uniform fluence) is the assembled one's.
 fn rounding_fix(a: &Operator, level: &Level, scale: &[f64]) -> Vec<Mg> {
-    level
-        .unk
-        .par_iter()
-        .zip(&level.rows)
-        .map(|(u, row)| {
-            if *u == PAD {
+    (0..level.len())
+        .into_par_iter()
+        .map(|e| {
+            let u = level.unknown(e);
+            if u == PAD {
                 return Mg::of(0.0);
             }
-            let (nd, su) = (&a.nodes[*u as usize], scale[*u as usize]);
+            let (row, nd, su) = (&level.rows[e], &a.nodes[u as usize], scale[u as usize]);
+            let nbr = row.neighbours(level.other_pad(e));
             let mut d = 0.0;
             for ax in 0..3 {
-                let m = level.unk[row.nbr[2 * ax] as usize];
+                let m = level.unknown(nbr[2 * ax] as usize);
                 if m != PAD {
                     d += (a.nodes[m as usize].up[ax] - f64::from(row.cpl[2 * ax])) * su / scale[m as usize];
                 }
@@ -584,7 +681,7 @@ fn cholesky_in_place(a: &mut [f64], n: usize) -> f64 {
 impl Dense {
     /// The factor of operator `s`, whose unknowns are the entries `entry` of `level`.
     fn build(s: &Operator, level: &Level, entry: &[u32]) -> Dense {
-        let cells: Vec<usize> = (0..level.len()).filter(|e| level.unk[*e] != PAD).collect();
+        let cells: Vec<usize> = (0..level.len()).filter(|e| level.unknown(*e) != PAD).collect();
         let n = cells.len();
         let mut q_of = vec![usize::MAX; level.len()];
         for (q, e) in cells.iter().enumerate() {
@@ -592,7 +689,7 @@ impl Dense {
         }
         let mut a = vec![0f64; n * n];
         for (q, &e) in cells.iter().enumerate() {
-            let nd = &s.nodes[level.unk[e] as usize];
+            let nd = &s.nodes[level.unknown(e) as usize];
             a[q * n + q] = nd.diag;
             for ax in 0..3 {
                 let v = nd.up[ax];
@@ -716,10 +813,12 @@ impl Hierarchy {
         // Each level is built from its operator, which is dropped once the next one exists.
         let (mut level, mut entry) = Level::from_operator(&a);
         let fix = rounding_fix(&a, &level, &scale_of);
-        let scale: Vec<f64> = level
-            .unk
-            .par_iter()
-            .map(|u| if *u == PAD { 0.0 } else { scale_of[*u as usize] })
+        let scale: Vec<f64> = (0..level.len())
+            .into_par_iter()
+            .map(|e| match level.unknown(e) {
+                PAD => 0.0,
+                u => scale_of[u as usize],
+            })
             .collect();
         drop(scale_of);
         if first.is_some() {
@@ -761,7 +860,7 @@ impl Hierarchy {
     fn bytes(&self) -> usize {
         let level = |l: &Level| {
             l.rows.len() * std::mem::size_of::<Row>()
-                + 4 * (l.weight.len() + l.unk.len() + l.parent.len() + l.child_start.len() + l.children.len())
+                + 4 * (l.diag.len() + l.weight.len() + l.parent.len() + l.child_start.len() + l.children.len())
         };
         self.levels.iter().map(level).sum::<usize>()
             + 8 * self.scale.len()
@@ -817,7 +916,8 @@ impl Hierarchy {
         let (row, fix) = (&self.levels[0].rows[e], f64::from(self.fix[e]));
         // Widened once for all systems.
         let c = row.cpl.map(f64::from);
-        let v = |q: usize, k: usize| c[q] * x[row.nbr[q] as usize][k].get();
+        let nbr = row.neighbours(self.levels[0].other_pad(e));
+        let v = |q: usize, k: usize| c[q] * x[nbr[q] as usize][k].get();
         // A plain loop, not `array::from_fn`: the closure was not always inlined here (+0.35 G
         // instructions in the solve, depending on how the crate was split).
         let mut out = [0.0; K];
@@ -908,36 +1008,29 @@ impl Hierarchy {
         let mut y: Vec<[f64; K]> = match x0 {
             Some(x) => {
                 assert!(x.iter().all(|v| v.len() == a.unknowns()), "one value per unknown");
-                a.unk
-                    .par_iter()
-                    .zip(&self.scale)
-                    .map(|(u, s)| {
-                        if *u == PAD {
-                            [0.0; K]
-                        } else {
-                            x.map(|v| v[*u as usize].into() / s)
-                        }
+                (0..a.len())
+                    .into_par_iter()
+                    .map(|e| match a.unknown(e) {
+                        PAD => [0.0; K],
+                        u => x.map(|v| v[u as usize].into() / self.scale[e]),
                     })
                     .collect()
             }
             None => vec![[0.0; K]; a.len()],
         };
         // The scaled right-hand sides, made where they are read (not held).
-        let bs = |e: usize| {
-            let u = a.unk[e];
-            if u == PAD {
-                [0.0; K]
-            } else {
-                b.map(|v| v[u as usize].into() * self.scale[e])
-            }
+        let bs = |e: usize| match a.unknown(e) {
+            PAD => [0.0; K],
+            u => b.map(|v| v[u as usize].into() * self.scale[e]),
         };
         let stats = self.solve_scaled(&bs, &mut y, x0.is_none(), tol, max_iter);
         let mut lane = 0;
         stats.map(|st| {
             let mut out = vec![0.0; a.unknowns()];
-            for ((u, v), s) in a.unk.iter().zip(&y).zip(&self.scale) {
-                if *u != PAD {
-                    out[*u as usize] = v[lane] * s;
+            for (e, (v, s)) in y.iter().zip(&self.scale).enumerate() {
+                let u = a.unknown(e);
+                if u != PAD {
+                    out[u as usize] = v[lane] * s;
                 }
             }
             lane += 1;
@@ -1112,12 +1205,13 @@ impl Hierarchy {
 /// (moved here from tests/ so the solver's internals need not be public).
 #[cfg(test)]
 mod operator_tests {
-    use super::{Hierarchy, Mg, Operator, Real, Work, NONE, PAD};
+    use super::{Hierarchy, Level, Mg, Operator, Real, Work, NONE, PAD};
     use crate::diffusion::{assemble, BoundaryLight, Domain};
     use crate::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
     use crate::lighting::DirectionBins;
     use crate::math::{Rgb, Rng, Vec3};
     use crate::medium::{Grid3, Medium};
+    use std::collections::HashMap;
 
     /// A random cloud: each voxel of the inner region full with probability 0.8, with optical depth
     /// per voxel log-uniform in [1e-3, 10] (σt = 1 m⁻¹, 1 m voxels).
@@ -1295,8 +1389,8 @@ mod operator_tests {
         // y = D^½ 1 on the scaled system, so (S A S) y / s = (A 1).
         let y: Vec<[f64; 1]> = h.scale.iter().map(|v| [if *v == 0.0 { 0.0 } else { 1.0 / v }]).collect();
         let fine = &h.levels[0];
-        for e in (0..fine.len()).filter(|e| fine.unk[*e] != PAD) {
-            let u = fine.unk[e] as usize;
+        for e in (0..fine.len()).filter(|e| fine.unknown(*e) != PAD) {
+            let u = fine.unknown(e) as usize;
             let want: f64 = a[u * n..(u + 1) * n].iter().sum();
             let got = h.apply_row(e, &y)[0] / h.scale[e];
             assert!((got - want).abs() <= 1e-12 * a[u * n + u], "row {u}: {got} vs {want}");
@@ -1380,11 +1474,11 @@ mod operator_tests {
         let (s, _) = sun_lit_system([14, 12, 10], 8, 0.99, 0.85, Vec3::new(0.1, 1.0, 0.3), 0);
         let h = Hierarchy::build_with(s, 16);
         assert!(h.levels() >= 4);
-        let unk = &h.levels[0].unk;
+        let fine = &h.levels[0];
         let mut rng = Rng::new(9, 1);
         let mut random = || -> Vec<f64> {
-            unk.iter()
-                .map(|u| if *u == PAD { 0.0 } else { rng.uniform() as f64 - 0.5 })
+            (0..fine.len())
+                .map(|e| if fine.unknown(e) == PAD { 0.0 } else { rng.uniform() as f64 - 0.5 })
                 .collect()
         };
         let (y, z) = (random(), random());
@@ -1420,7 +1514,7 @@ mod operator_tests {
         let c = &h.coarse;
         assert_eq!(c.cells.len(), nc);
         // The coarse level's unknowns in its entries' order: map them to the aggregates (box order).
-        let coarse_unk: Vec<usize> = c.cells.iter().map(|e| h.levels[1].unk[*e] as usize).collect();
+        let coarse_unk: Vec<usize> = c.cells.iter().map(|e| h.levels[1].unknown(*e) as usize).collect();
         for (q, cq) in coarse_unk.iter().enumerate() {
             for (r, cr) in coarse_unk.iter().enumerate() {
                 let llt: f64 = (0..=q.min(r)).map(|k| c.l[q * nc + k] * c.l[r * nc + k]).sum();
@@ -1430,10 +1524,60 @@ mod operator_tests {
         }
         let l0 = &h.levels[0];
         for (e, w) in l0.weight.iter().enumerate() {
-            let u = l0.unk[e] as usize;
+            let u = l0.unknown(e) as usize;
             assert!(((*w as f64) - d[u]).abs() <= 1e-6 * d[u], "{w} vs {}", d[u]);
         }
         assert_eq!(l0.weight.len(), l0.red);
+    }
+
+    #[test]
+    fn coded_neighbours_are_the_plain_ones() {
+        // A random sparse cloud, some couplings 0 (a zero coupling reads the pad, as a missing
+        // neighbour does): each row's decoded neighbours are those found from the cells.
+        let (mut s, _) = sun_lit_system([13, 11, 9], 3, 0.95, 0.8, Vec3::new(0.2, 1.0, 0.3), 0);
+        for (u, nd) in s.nodes.iter_mut().enumerate() {
+            if u % 7 == 0 {
+                nd.up[u % 3] = 0.0;
+            }
+        }
+        let (level, entry) = Level::from_operator(&s);
+        let by_cell: HashMap<usize, usize> = s.nodes.iter().enumerate().map(|(u, n)| (n.cell as usize, u)).collect();
+        let [nx, ny, _] = s.dims;
+        let (mut seen, mut coupled) = (0, 0);
+        for e in 0..level.len() {
+            let u = level.unknown(e);
+            let pad = level.other_pad(e);
+            let got = level.rows[e].neighbours(pad);
+            if u == PAD {
+                assert!(e == level.red || e + 1 == level.len());
+                assert_eq!(got, [pad; 6]);
+                continue;
+            }
+            assert_eq!(entry[u as usize] as usize, e, "entry {e}'s unknown");
+            seen += 1;
+            let (nd, cell) = (&s.nodes[u as usize], s.nodes[u as usize].cell as usize);
+            for (q, stride) in [1, 1, nx, nx, nx * ny, nx * ny].into_iter().enumerate() {
+                let ax = q / 2;
+                let at = if q % 2 == 0 {
+                    cell.checked_sub(stride)
+                } else {
+                    Some(cell + stride)
+                };
+                let v = at
+                    .and_then(|c| by_cell.get(&c))
+                    .copied()
+                    .filter(|v| s.ijk(*v)[(ax + 1) % 3] == s.ijk(u as usize)[(ax + 1) % 3]);
+                let coupling = v.map_or(0.0, |v| if q % 2 == 0 { s.nodes[v].up[ax] } else { nd.up[ax] });
+                let want = match v {
+                    Some(v) if coupling != 0.0 => entry[v],
+                    _ => pad,
+                };
+                assert_eq!(got[q], want, "entry {e} neighbour {q}");
+                coupled += usize::from(want != pad);
+            }
+        }
+        assert_eq!(seen, s.nodes.len());
+        assert!(coupled > 3 * seen, "{coupled} couplings for {seen} unknowns");
     }
 
     #[test]
