@@ -221,13 +221,14 @@ type Mg = f32;
 /// The entries are coded from `base`, the other colour's first entry after this unknown in box
 /// order: the ±x neighbours (cells c ± 1) are the entries just before and at `base`, the ±y and
 /// ±z ones lie `dy` and `dz` entries before or after it (the other colour's unknowns between
-/// the cells, fewer than half a box row or plane). A missing neighbour (or one coupled by 0) is
-/// the other colour's pad: a flag bit of `base` for ±x, [`FAR_Y`] or [`FAR_Z`] for the others.
+/// the cells, fewer than half a box row or plane). A missing neighbour (or one coupled by 0)
+/// has coupling 0 and reads `base` (a flag bit of `base` for −x, distance 0 for ±y, ±z): any
+/// entry of the other colour would do, as its value (finite) is multiplied by 0, and decoding
+/// needs no branch or select.
 #[derive(Clone, Copy, Debug)]
 struct Row {
     cpl: [Mg; 6],
-    /// The other colour's first entry after this unknown, and the [`NO_MINUS_X`], [`NO_PLUS_X`]
-    /// flags.
+    /// The other colour's first entry after this unknown, and the [`NO_MINUS_X`] flag.
     base: u32,
     /// Entries from `base` back to the −y neighbour and on to the +y one.
     dy: [u16; 2],
@@ -235,60 +236,52 @@ struct Row {
     dz: [u32; 2],
 }
 
-/// [`Row::base`] flag: no −x neighbour.
+/// [`Row::base`] flag: no −x neighbour (it reads `base`, not the entry before).
 const NO_MINUS_X: u32 = 1 << 31;
-/// [`Row::base`] flag: no +x neighbour.
-const NO_PLUS_X: u32 = 1 << 30;
-/// [`Row::dy`] of a missing neighbour.
-const FAR_Y: u16 = u16::MAX;
-/// [`Row::dz`] of a missing neighbour.
-const FAR_Z: u32 = u32::MAX;
 
 impl Row {
-    /// The row of couplings `cpl` to the entries `nbr` (`pad` where there is none), `base` the
-    /// other colour's first entry after the unknown.
+    /// The row of couplings `cpl` to the entries `nbr` (`pad` for a missing neighbour, whose
+    /// coupling is 0), `base` the other colour's first entry after the unknown.
     fn encode(cpl: [Mg; 6], nbr: [u32; 6], base: u32, pad: u32) -> Row {
-        assert!(base < NO_PLUS_X, "more than 2^30 entries on one level");
+        assert!(base < NO_MINUS_X, "more than 2^31 entries on one level");
         let missing = |q: usize| nbr[q] == pad;
+        debug_assert!((0..6).all(|q| !missing(q) || cpl[q] == 0.0), "a missing neighbour's coupling is 0");
         debug_assert!(missing(0) || nbr[0] + 1 == base, "−x neighbour just before base");
         debug_assert!(missing(1) || nbr[1] == base, "+x neighbour at base");
-        // Entries between base and neighbour q (before base for the − ones).
-        let dist = |q: usize| if q % 2 == 0 { base - nbr[q] } else { nbr[q] - base };
-        let dy = |q: usize| match missing(q) {
-            true => FAR_Y,
-            false => u16::try_from(dist(q))
-                .ok()
-                .filter(|d| *d != FAR_Y)
-                .expect("a box row of over 131 000 cells"),
+        // Entries between base and neighbour q (before base for the − ones); 0: base itself.
+        let dist = |q: usize| match (missing(q), q % 2) {
+            (true, _) => 0,
+            (false, 0) => base - nbr[q],
+            (false, _) => nbr[q] - base,
         };
-        let dz = |q: usize| if missing(q) { FAR_Z } else { dist(q) };
-        let flag = |q: usize, f: u32| if missing(q) { f } else { 0 };
+        let dy = |q: usize| u16::try_from(dist(q)).expect("a box row of over 131 000 cells");
         Row {
             cpl,
-            base: base | flag(0, NO_MINUS_X) | flag(1, NO_PLUS_X),
+            base: base | if missing(0) { NO_MINUS_X } else { 0 },
             dy: [dy(2), dy(3)],
-            dz: [dz(4), dz(5)],
+            dz: [dist(4), dist(5)],
         }
     }
 
-    /// The neighbours' entries (−x, +x, −y, +y, −z, +z), `pad` the other colour's pad.
+    /// The neighbours' entries (−x, +x, −y, +y, −z, +z); a missing one's is `base`.
     #[inline(always)]
-    fn neighbours(&self, pad: u32) -> [u32; 6] {
-        let base = self.base & !(NO_MINUS_X | NO_PLUS_X);
-        let or_pad = |missing: bool, e: u32| if missing { pad } else { e };
+    fn neighbours(&self) -> [u32; 6] {
+        let base = self.base();
         [
-            or_pad(self.base & NO_MINUS_X != 0, base.wrapping_sub(1)),
-            or_pad(self.base & NO_PLUS_X != 0, base),
-            or_pad(self.dy[0] == FAR_Y, base.wrapping_sub(self.dy[0].into())),
-            or_pad(self.dy[1] == FAR_Y, base.wrapping_add(self.dy[1].into())),
-            or_pad(self.dz[0] == FAR_Z, base.wrapping_sub(self.dz[0])),
-            or_pad(self.dz[1] == FAR_Z, base.wrapping_add(self.dz[1])),
+            // base − 1, or base with the flag.
+            (base + (self.base >> 31)).wrapping_sub(1),
+            base,
+            base - u32::from(self.dy[0]),
+            base + u32::from(self.dy[1]),
+            base - self.dz[0],
+            base + self.dz[1],
         ]
     }
 
     /// The other colour's first entry after the unknown.
+    #[inline(always)]
     fn base(&self) -> u32 {
-        self.base & !(NO_MINUS_X | NO_PLUS_X)
+        self.base & !NO_MINUS_X
     }
 }
 
@@ -329,8 +322,7 @@ struct Level {
 /// solve's instructions.)
 #[inline(always)]
 fn couple<const K: usize>(row: &Row, x: &[[Mg; K]], off: usize) -> [Mg; K] {
-    // The other colour's pad ends its slice.
-    let nbr = row.neighbours((off + x.len() - 1) as u32);
+    let nbr = row.neighbours();
     let n = |q: usize| &x[nbr[q] as usize - off];
     let (n0, n1, n2, n3, n4, n5) = (n(0), n(1), n(2), n(3), n(4), n(5));
     let c = &row.cpl;
@@ -372,7 +364,7 @@ impl Level {
         let row = |e: usize, u: u32| {
             let pad = pads[usize::from(e > red)];
             if u == PAD {
-                return Row::encode([0.0; 6], [pad; 6], 0, pad);
+                return Row::encode([0.0; 6], [pad; 6], pad, pad);
             }
             let nd = &a.nodes[u as usize];
             let (mut cpl, mut nbr) = ([0.0; 6], [pad; 6]);
@@ -425,16 +417,6 @@ impl Level {
     #[inline(always)]
     fn diag(&self, e: usize) -> Mg {
         self.diag.get(e).copied().unwrap_or(1.0)
-    }
-
-    /// The other colour's pad, as seen from entry `e`.
-    #[inline(always)]
-    fn other_pad(&self, e: usize) -> u32 {
-        if e < self.red {
-            (self.len() - 1) as u32
-        } else {
-            self.red as u32
-        }
     }
 
     /// Entries, pads included (the length of the level's vectors).
@@ -580,11 +562,12 @@ fn rounding_fix(a: &Operator, level: &Level, scale: &[f64]) -> Vec<Mg> {
                 return Mg::of(0.0);
             }
             let (row, nd, su) = (&level.rows[e], &a.nodes[u as usize], scale[u as usize]);
-            let nbr = row.neighbours(level.other_pad(e));
+            let nbr = row.neighbours();
             let mut d = 0.0;
             for ax in 0..3 {
-                let m = level.unknown(nbr[2 * ax] as usize);
-                if m != PAD {
+                // (A coupling that rounds to 0 in f32, below 10⁻⁴⁵, is left out.)
+                if row.cpl[2 * ax] != 0.0 {
+                    let m = level.unknown(nbr[2 * ax] as usize);
                     d += (a.nodes[m as usize].up[ax] - f64::from(row.cpl[2 * ax])) * su / scale[m as usize];
                 }
                 if nd.up_nbr[ax] != NONE {
@@ -916,7 +899,7 @@ impl Hierarchy {
         let (row, fix) = (&self.levels[0].rows[e], f64::from(self.fix[e]));
         // Widened once for all systems.
         let c = row.cpl.map(f64::from);
-        let nbr = row.neighbours(self.levels[0].other_pad(e));
+        let nbr = row.neighbours();
         let v = |q: usize, k: usize| c[q] * x[nbr[q] as usize][k].get();
         // A plain loop, not `array::from_fn`: the closure was not always inlined here (+0.35 G
         // instructions in the solve, depending on how the crate was split).
@@ -1532,8 +1515,9 @@ mod operator_tests {
 
     #[test]
     fn coded_neighbours_are_the_plain_ones() {
-        // A random sparse cloud, some couplings 0 (a zero coupling reads the pad, as a missing
-        // neighbour does): each row's decoded neighbours are those found from the cells.
+        // A random sparse cloud, some couplings 0: each row's decoded neighbours are those found
+        // from the cells, and a missing one (or one coupled by 0) has coupling 0 and reads an
+        // entry of the other colour.
         let (mut s, _) = sun_lit_system([13, 11, 9], 3, 0.95, 0.8, Vec3::new(0.2, 1.0, 0.3), 0);
         for (u, nd) in s.nodes.iter_mut().enumerate() {
             if u % 7 == 0 {
@@ -1546,11 +1530,17 @@ mod operator_tests {
         let (mut seen, mut coupled) = (0, 0);
         for e in 0..level.len() {
             let u = level.unknown(e);
-            let pad = level.other_pad(e);
-            let got = level.rows[e].neighbours(pad);
+            // The other colour's entries, its pad last.
+            let other = if e <= level.red {
+                level.red + 1..level.len()
+            } else {
+                0..level.red + 1
+            };
+            let pad = other.end - 1;
+            let (row, got) = (&level.rows[e], level.rows[e].neighbours());
             if u == PAD {
                 assert!(e == level.red || e + 1 == level.len());
-                assert_eq!(got, [pad; 6]);
+                assert_eq!((row.cpl, got), ([0.0; 6], [pad as u32; 6]));
                 continue;
             }
             assert_eq!(entry[u as usize] as usize, e, "entry {e}'s unknown");
@@ -1568,12 +1558,14 @@ mod operator_tests {
                     .copied()
                     .filter(|v| s.ijk(*v)[(ax + 1) % 3] == s.ijk(u as usize)[(ax + 1) % 3]);
                 let coupling = v.map_or(0.0, |v| if q % 2 == 0 { s.nodes[v].up[ax] } else { nd.up[ax] });
-                let want = match v {
-                    Some(v) if coupling != 0.0 => entry[v],
-                    _ => pad,
-                };
-                assert_eq!(got[q], want, "entry {e} neighbour {q}");
-                coupled += usize::from(want != pad);
+                match v {
+                    Some(v) if coupling != 0.0 => {
+                        assert_eq!(got[q], entry[v], "entry {e} neighbour {q}");
+                        assert_eq!(row.cpl[q], coupling as f32);
+                        coupled += 1;
+                    }
+                    _ => assert!(row.cpl[q] == 0.0 && other.contains(&(got[q] as usize)), "entry {e} neighbour {q}"),
+                }
             }
         }
         assert_eq!(seen, s.nodes.len());
