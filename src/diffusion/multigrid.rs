@@ -431,7 +431,7 @@ impl Level {
     /// Record that `coarse` aggregates this level: each entry's parent (from each unknown's
     /// aggregate `parent` and the coarse unknowns' entries `coarse_entry`; a pad of it for the
     /// pads) and each coarse entry's red children (a black pass before every restriction of the
-    /// cycle leaves the black residuals at zero: [`Level::residual_red`]).
+    /// cycle leaves the black residuals at zero: [`Level::restrict_residual`]).
     fn link(&mut self, parent: &[u32], coarse: &mut Level, coarse_entry: &[u32]) {
         self.parent = (0..self.red)
             .into_par_iter()
@@ -455,34 +455,28 @@ impl Level {
         coarse.children = children;
     }
 
-    /// r = b − A x on the red unknowns (`r` has one value per red entry). Called right after a
-    /// black pass, which leaves the black residuals at zero, so they are not stored.
-    fn residual_red<const K: usize>(&self, x: &[[Mg; K]], b: &[[Mg; K]], r: &mut [[Mg; K]]) {
-        let (xr, xb) = x.split_at(self.red + 1);
-        r[..self.red].par_chunks_mut(CHUNK).enumerate().for_each(|(ci, rs)| {
-            let first = ci * CHUNK;
-            for (t, rv) in rs.iter_mut().enumerate() {
-                let e = first + t;
-                let row = &self.rows[e];
-                let s = couple(row, xb, self.red + 1);
-                // Restricted with the weights: each red residual is stored times its weight.
-                let w = self.weight.get(e).copied().unwrap_or(1.0);
-                let d = self.diag(e);
-                *rv = std::array::from_fn(|k| w * (b[e][k] - (d * xr[e][k] + s[k])));
-            }
-        });
+    /// The residual b − A x at red entry e (of `x` split at the black entries `xr`, `xb`),
+    /// times its prolongation weight: restricted with the weights.
+    #[inline(always)]
+    fn residual_red<const K: usize>(&self, e: usize, xr: &[[Mg; K]], xb: &[[Mg; K]], b: &[[Mg; K]]) -> [Mg; K] {
+        let s = couple(&self.rows[e], xb, self.red + 1);
+        let w = self.weight.get(e).copied().unwrap_or(1.0);
+        let d = self.diag(e);
+        std::array::from_fn(|k| w * (b[e][k] - (d * xr[e][k] + s[k])))
     }
 
-    /// b = Pᵀ r: each entry sums its red children's residuals `r` (of the finer level; its
-    /// black residuals are zero).
-    fn restrict<const K: usize>(&self, r: &[[Mg; K]], b: &mut [[Mg; K]]) {
+    /// b = Pᵀ r, r = bf − Af xf the residual of the finer level `fine`: each entry sums its red
+    /// children's residuals as they are made (not stored). Called right after a black pass,
+    /// which leaves the black residuals at zero.
+    fn restrict_residual<const K: usize>(&self, fine: &Level, xf: &[[Mg; K]], bf: &[[Mg; K]], b: &mut [[Mg; K]]) {
+        let (xr, xb) = xf.split_at(fine.red + 1);
         b.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, bs)| {
             let first = ci * CHUNK;
             for (t, v) in bs.iter_mut().enumerate() {
                 let e = first + t;
                 let mut s = [0.0; K];
                 for f in &self.children[self.child_start[e] as usize..self.child_start[e + 1] as usize] {
-                    let rf = &r[*f as usize];
+                    let rf = fine.residual_red(*f as usize, xr, xb, bf);
                     for k in 0..K {
                         s[k] += rf[k];
                     }
@@ -727,21 +721,17 @@ impl Dense {
     }
 }
 
-/// Vectors of one multigrid level's cycle: its residual (red entries) and the next level's
-/// right-hand side and correction.
+/// Vectors of one multigrid level's cycle: the next level's right-hand side and correction
+/// (the level's residual is restricted as it is made: [`Level::restrict_residual`]).
 struct Work<const K: usize> {
-    r: Vec<[Mg; K]>,
     bc: Vec<[Mg; K]>,
     xc: Vec<[Mg; K]>,
 }
 
 impl<const K: usize> Work<K> {
-    /// The vectors for the cycle on `fine` with `coarse` below it. The residual has the red
-    /// entries only: the black ones are zero after the black pass before every restriction, and
-    /// the restriction reads red children only (`Level::residual_red`, `Level::restrict`).
-    fn new(fine: &Level, coarse: &Level) -> Work<K> {
+    /// The vectors for the cycle on a level with `coarse` below it.
+    fn new(coarse: &Level) -> Work<K> {
         Work {
-            r: vec![[0.0; K]; fine.red],
             bc: vec![[0.0; K]; coarse.len()],
             xc: vec![[0.0; K]; coarse.len()],
         }
@@ -749,7 +739,7 @@ impl<const K: usize> Work<K> {
 
     /// The vectors for every level of `h` above its coarsest.
     fn all(h: &Hierarchy) -> Vec<Work<K>> {
-        h.levels.windows(2).map(|w| Work::new(&w[0], &w[1])).collect()
+        h.levels[1..].iter().map(Work::new).collect()
     }
 }
 
@@ -872,8 +862,7 @@ impl Hierarchy {
         let coarse_is_direct = l + 2 == self.levels.len();
         let visits = if coarse_is_direct { 1 } else { self.cycle.max(1) };
         for visit in 0..visits {
-            s.residual_red(x, b, &mut w.r);
-            self.levels[l + 1].restrict(&w.r, &mut w.bc);
+            self.levels[l + 1].restrict_residual(s, x, b, &mut w.bc);
             self.cycle(l + 1, &w.bc, &mut w.xc, rest);
             s.prolong_red(x, &w.xc, Mg::of(self.over_correction));
             if visit + 1 < visits {
@@ -1061,16 +1050,15 @@ impl Hierarchy {
             bytes_per_unknown: 0.0,
         });
         // The hierarchy; y in f64; r, p and q (A p, then z) in the multigrid's precision, and
-        // per level in `work` a red residual and the next level's b and x (the caller's b and
-        // x, per unknown, not counted).
+        // per level in `work` the next level's b and x (the caller's b and x, per unknown, not
+        // counted).
         let lanes = |v: usize, bytes: usize| v * bytes * K;
         let held = self.bytes()
             + lanes(n, 8)
             + lanes(3 * n, std::mem::size_of::<Mg>())
-            + self
-                .levels
-                .windows(2)
-                .map(|w| lanes(w[0].red + 2 * w[1].len(), std::mem::size_of::<Mg>()))
+            + self.levels[1..]
+                .iter()
+                .map(|l| lanes(2 * l.len(), std::mem::size_of::<Mg>()))
                 .sum::<usize>();
         for st in &mut stats {
             st.bytes_per_unknown = held as f64 / (K * a.unknowns().max(1)) as f64;
