@@ -543,11 +543,12 @@ impl Level {
 }
 
 /// Per entry of `level` (the finest, of the operator `a` scaled by `scale` per unknown): what
-/// rounding its couplings to f32 took from the unscaled row's sum, in the scaled row's units:
-/// Σ (exact − stored) · s_u / s_t over its neighbours t (the −a couplings read from the −a
+/// rounding took from the unscaled row's sum, in the scaled row's units: its scaled diagonal's
+/// distance from 1 (`unit_error`: the scale is rounded to f32) plus Σ (exact − stored) · s_u / s_t
+/// over its neighbours t for its couplings rounded to f32 (the −a couplings read from the −a
 /// neighbours' +a ones). Added to the unit diagonal, A·1 (the absorption and the leakage, for a
 /// uniform fluence) is the assembled one's.
-fn rounding_fix(a: &Operator, level: &Level, scale: &[f64]) -> Vec<Mg> {
+fn rounding_fix(a: &Operator, level: &Level, scale: &[Mg], unit_error: &[f64]) -> Vec<Mg> {
     (0..level.len())
         .into_par_iter()
         .map(|e| {
@@ -555,17 +556,17 @@ fn rounding_fix(a: &Operator, level: &Level, scale: &[f64]) -> Vec<Mg> {
             if u == PAD {
                 return Mg::of(0.0);
             }
-            let (row, nd, su) = (&level.rows[e], &a.nodes[u as usize], scale[u as usize]);
+            let (row, nd, su) = (&level.rows[e], &a.nodes[u as usize], f64::from(scale[u as usize]));
             let nbr = row.neighbours();
-            let mut d = 0.0;
+            let mut d = unit_error[u as usize];
             for ax in 0..3 {
                 // (A coupling that rounds to 0 in f32, below 10⁻⁴⁵, is left out.)
                 if row.cpl[2 * ax] != 0.0 {
                     let m = level.unknown(nbr[2 * ax] as usize);
-                    d += (a.nodes[m as usize].up[ax] - f64::from(row.cpl[2 * ax])) * su / scale[m as usize];
+                    d += (a.nodes[m as usize].up[ax] - f64::from(row.cpl[2 * ax])) * su / f64::from(scale[m as usize]);
                 }
                 if nd.up_nbr[ax] != NONE {
-                    d += (nd.up[ax] - f64::from(row.cpl[2 * ax + 1])) * su / scale[nd.up_nbr[ax] as usize];
+                    d += (nd.up[ax] - f64::from(row.cpl[2 * ax + 1])) * su / f64::from(scale[nd.up_nbr[ax] as usize]);
                 }
             }
             Mg::of(d)
@@ -746,10 +747,12 @@ impl<const K: usize> Work<K> {
 /// The multigrid hierarchy of one (diagonally scaled) operator.
 #[derive(Clone, Debug)]
 pub struct Hierarchy {
-    /// D^{-1/2} of the finest operator per entry of the finest level (0 on the pads).
-    scale: Vec<f64>,
-    /// Per entry of the finest level, what rounding its couplings to f32 took from its unscaled
-    /// row sum ([`rounding_fix`]); 0 on the pads.
+    /// D^{-1/2} of the finest operator per entry of the finest level, rounded to f32 (0 on the
+    /// pads). The rounding only changes which scaled system is solved: the operator is scaled
+    /// with these values, and `fix` keeps its row sums.
+    scale: Vec<Mg>,
+    /// Per entry of the finest level, what rounding its scale and couplings took from its
+    /// unscaled row sum ([`rounding_fix`]); 0 on the pads.
     fix: Vec<Mg>,
     /// Levels, finest first (scaled).
     levels: Vec<Level>,
@@ -774,19 +777,28 @@ impl Hierarchy {
         // piecewise constant in the unscaled unknowns, whose smooth errors are locally constant
         // (see [`Level::weight`]).
         let mut first = (a.nodes.len() > coarse_cells && a.dims.iter().any(|d| *d > 1)).then(|| a.coarsen());
-        let scale_of: Vec<f64> = a.nodes.par_iter().map(|n| 1.0 / n.diag.sqrt()).collect();
-        a.nodes.par_iter_mut().enumerate().for_each(|(u, n)| {
-            for ax in 0..3 {
-                if n.up_nbr[ax] != NONE {
-                    n.up[ax] *= scale_of[u] * scale_of[n.up_nbr[ax] as usize];
+        let scale_of: Vec<Mg> = a.nodes.par_iter().map(|n| Mg::of(1.0 / n.diag.sqrt())).collect();
+        let unit_error: Vec<f64> = a
+            .nodes
+            .par_iter_mut()
+            .enumerate()
+            .map(|(u, n)| {
+                let s = f64::from(scale_of[u]);
+                for ax in 0..3 {
+                    if n.up_nbr[ax] != NONE {
+                        n.up[ax] *= s * f64::from(scale_of[n.up_nbr[ax] as usize]);
+                    }
                 }
-            }
-            n.diag = 1.0;
-        });
+                let error = n.diag * s * s - 1.0;
+                n.diag = 1.0;
+                error
+            })
+            .collect();
         // Each level is built from its operator, which is dropped once the next one exists.
         let (mut level, mut entry) = Level::from_operator(&a);
-        let fix = rounding_fix(&a, &level, &scale_of);
-        let scale: Vec<f64> = (0..level.len())
+        let fix = rounding_fix(&a, &level, &scale_of, &unit_error);
+        drop(unit_error);
+        let scale: Vec<Mg> = (0..level.len())
             .into_par_iter()
             .map(|e| match level.unknown(e) {
                 PAD => 0.0,
@@ -795,7 +807,7 @@ impl Hierarchy {
             .collect();
         drop(scale_of);
         if first.is_some() {
-            level.weight = scale[..level.red].par_iter().map(|s| Mg::of(1.0 / s)).collect();
+            level.weight = scale[..level.red].par_iter().map(|s| Mg::of(1.0 / f64::from(*s))).collect();
         }
         let mut levels = Vec::new();
         let mut fine = a;
@@ -836,7 +848,7 @@ impl Hierarchy {
                 + 4 * (l.diag.len() + l.weight.len() + l.parent.len() + l.child_start.len() + l.children.len())
         };
         self.levels.iter().map(level).sum::<usize>()
-            + 8 * self.scale.len()
+            + 4 * self.scale.len()
             + 4 * self.fix.len()
             + 8 * (self.coarse.l.len() + self.coarse.cells.len())
     }
@@ -984,7 +996,7 @@ impl Hierarchy {
                     .into_par_iter()
                     .map(|e| match a.unknown(e) {
                         PAD => [0.0; K],
-                        u => x.map(|v| v[u as usize].into() / self.scale[e]),
+                        u => x.map(|v| v[u as usize].into() / f64::from(self.scale[e])),
                     })
                     .collect()
             }
@@ -993,7 +1005,7 @@ impl Hierarchy {
         // The scaled right-hand sides, made where they are read (not held).
         let bs = |e: usize| match a.unknown(e) {
             PAD => [0.0; K],
-            u => b.map(|v| v[u as usize].into() * self.scale[e]),
+            u => b.map(|v| v[u as usize].into() * f64::from(self.scale[e])),
         };
         let stats = self.solve_scaled(&bs, &mut y, x0.is_none(), tol, max_iter);
         let mut lane = 0;
@@ -1002,7 +1014,7 @@ impl Hierarchy {
             for (e, (v, s)) in y.iter().zip(&self.scale).enumerate() {
                 let u = a.unknown(e);
                 if u != PAD {
-                    out[u as usize] = v[lane] * s;
+                    out[u as usize] = v[lane] * f64::from(*s);
                 }
             }
             lane += 1;
@@ -1241,13 +1253,13 @@ mod operator_tests {
         a
     }
 
-    /// The operator CG solves for `s`: its couplings scaled to unit diagonal and rounded to the
-    /// multigrid's precision, each diagonal given back what the rounding took from its unscaled
-    /// row sum (in f32, as stored), unscaled again (`Hierarchy::apply_row`).
+    /// The operator CG solves for `s`: scaled by D^-½ rounded to f32, its couplings rounded to
+    /// the multigrid's precision, each (unit) diagonal given back what the rounding took from
+    /// its unscaled row sum (in f32, as stored), unscaled again (`Hierarchy::apply_row`).
     fn as_solved(s: &Operator) -> Operator {
-        let scale: Vec<f64> = s.nodes.iter().map(|n| 1.0 / n.diag.sqrt()).collect();
+        let scale: Vec<f64> = s.nodes.iter().map(|n| f64::from(Mg::of(1.0 / n.diag.sqrt()))).collect();
         let mut r = s.clone();
-        let mut fix = vec![0.0; s.nodes.len()];
+        let mut fix: Vec<f64> = s.nodes.iter().zip(&scale).map(|(n, s)| n.diag * s * s - 1.0).collect();
         for (q, nd) in r.nodes.iter_mut().enumerate() {
             for ax in 0..3 {
                 if nd.up_nbr[ax] != NONE {
@@ -1261,7 +1273,7 @@ mod operator_tests {
             }
         }
         for (q, nd) in r.nodes.iter_mut().enumerate() {
-            nd.diag *= 1.0 + f64::from(Mg::of(fix[q]));
+            nd.diag = (1.0 + f64::from(Mg::of(fix[q]))) / (scale[q] * scale[q]);
         }
         r
     }
@@ -1358,12 +1370,16 @@ mod operator_tests {
         let h = Hierarchy::build_with(s.clone(), 16);
         let (a, n) = (dense(&s), s.nodes.len());
         // y = D^½ 1 on the scaled system, so (S A S) y / s = (A 1).
-        let y: Vec<[f64; 1]> = h.scale.iter().map(|v| [if *v == 0.0 { 0.0 } else { 1.0 / v }]).collect();
+        let y: Vec<[f64; 1]> = h
+            .scale
+            .iter()
+            .map(|v| [if *v == 0.0 { 0.0 } else { 1.0 / f64::from(*v) }])
+            .collect();
         let fine = &h.levels[0];
         for e in (0..fine.len()).filter(|e| fine.unknown(*e) != PAD) {
             let u = fine.unknown(e) as usize;
             let want: f64 = a[u * n..(u + 1) * n].iter().sum();
-            let got = h.apply_row(e, &y)[0] / h.scale[e];
+            let got = h.apply_row(e, &y)[0] / f64::from(h.scale[e]);
             assert!((got - want).abs() <= 1e-12 * a[u * n + u], "row {u}: {got} vs {want}");
         }
     }
