@@ -334,32 +334,46 @@ fn couple<const K: usize>(row: &Row, x: &[[Mg; K]], off: usize) -> [Mg; K] {
 }
 
 impl Level {
-    /// The level of operator `a` and each unknown's entry.
-    fn from_operator(a: &Operator) -> (Level, Vec<u32>) {
+    /// The level of operator `a` and each unknown's entry. With `unit_diag` every diagonal
+    /// counts as 1 and none is stored (the finest level, scaled: its diagonal differs from 1 by
+    /// the scale's rounding, which [`rounding_fix`] gives back to CG's operator).
+    fn from_operator(a: &Operator, unit_diag: bool) -> (Level, Vec<u32>) {
         let n = a.nodes.len();
         let colour = |u: usize| a.ijk(u).iter().sum::<usize>() % 2;
         let red = (0..n).filter(|u| colour(*u) == 0).count();
-        // Each unknown's entry, the other colour's next entry at it (its rows' `base`), and
-        // (while the rows are built) each entry's unknown.
+        // Each unknown's entry, and (while the rows are built) each entry's unknown.
         let mut entry = vec![0u32; n];
-        let mut base = vec![0u32; n];
         let mut unk = vec![PAD; n + 2];
         let mut next = [0, red + 1];
         for u in 0..n {
             let c = colour(u);
-            (entry[u], base[u]) = (next[c] as u32, next[1 - c] as u32);
+            entry[u] = next[c] as u32;
             unk[next[c]] = u as u32;
             next[c] += 1;
         }
-        // Each unknown's −x, −y, −z neighbours: the unknowns whose +a neighbour it is.
-        let mut down = vec![[NONE; 3]; n];
+        // The other colour's next entry at unknown u (its row's `base`): a red one has u − e
+        // black unknowns before it, a black one u − (e − red − 1) red ones.
+        let base = |u: usize| match entry[u] as usize {
+            e if e < red => (u - e + red + 1) as u32,
+            e => (u + red + 1 - e) as u32,
+        };
+        // Each unknown's −y, −z neighbours: the unknowns whose +a neighbour it is (the −x one
+        // is the unknown before it, if that is coupled to it).
+        let mut down = vec![[NONE; 2]; n];
         for (u, nd) in a.nodes.iter().enumerate() {
-            for ax in 0..3 {
+            for ax in 1..3 {
                 if nd.up_nbr[ax] != NONE {
-                    down[nd.up_nbr[ax] as usize][ax] = u as u32;
+                    down[nd.up_nbr[ax] as usize][ax - 1] = u as u32;
                 }
             }
         }
+        let down_of = |u: usize, ax: usize| match ax {
+            0 => match u.checked_sub(1) {
+                Some(d) if a.nodes[d].up_nbr[0] == u as u32 => d as u32,
+                _ => NONE,
+            },
+            _ => down[u][ax - 1],
+        };
         let pads = [(n + 1) as u32, red as u32];
         let row = |e: usize, u: u32| {
             let pad = pads[usize::from(e > red)];
@@ -369,7 +383,7 @@ impl Level {
             let nd = &a.nodes[u as usize];
             let (mut cpl, mut nbr) = ([0.0; 6], [pad; 6]);
             for ax in 0..3 {
-                let d = down[u as usize][ax];
+                let d = down_of(u as usize, ax);
                 if d != NONE && a.nodes[d as usize].up[ax] != 0.0 {
                     nbr[2 * ax] = entry[d as usize];
                     cpl[2 * ax] = Mg::of(a.nodes[d as usize].up[ax]);
@@ -379,10 +393,10 @@ impl Level {
                     cpl[2 * ax + 1] = Mg::of(nd.up[ax]);
                 }
             }
-            Row::encode(cpl, nbr, base[u as usize], pad)
+            Row::encode(cpl, nbr, base(u as usize), pad)
         };
         let rows: Vec<Row> = unk.par_iter().enumerate().map(|(e, u)| row(e, *u)).collect();
-        let unit_diag = a.nodes.iter().all(|n| n.diag == 1.0);
+        drop(down);
         let diag = match unit_diag {
             true => Vec::new(),
             false => unk
@@ -544,11 +558,11 @@ impl Level {
 
 /// Per entry of `level` (the finest, of the operator `a` scaled by `scale` per unknown): what
 /// rounding took from the unscaled row's sum, in the scaled row's units: its scaled diagonal's
-/// distance from 1 (`unit_error`: the scale is rounded to f32) plus Σ (exact − stored) · s_u / s_t
-/// over its neighbours t for its couplings rounded to f32 (the −a couplings read from the −a
-/// neighbours' +a ones). Added to the unit diagonal, A·1 (the absorption and the leakage, for a
-/// uniform fluence) is the assembled one's.
-fn rounding_fix(a: &Operator, level: &Level, scale: &[Mg], unit_error: &[f64]) -> Vec<Mg> {
+/// distance from 1 (the scale is rounded to f32) plus Σ (exact − stored) · s_u / s_t over its
+/// neighbours t for its couplings rounded to f32 (the −a couplings read from the −a neighbours'
+/// +a ones). Added to the unit diagonal, A·1 (the absorption and the leakage, for a uniform
+/// fluence) is the assembled one's.
+fn rounding_fix(a: &Operator, level: &Level, scale: &[Mg]) -> Vec<Mg> {
     (0..level.len())
         .into_par_iter()
         .map(|e| {
@@ -558,7 +572,7 @@ fn rounding_fix(a: &Operator, level: &Level, scale: &[Mg], unit_error: &[f64]) -
             }
             let (row, nd, su) = (&level.rows[e], &a.nodes[u as usize], f64::from(scale[u as usize]));
             let nbr = row.neighbours();
-            let mut d = unit_error[u as usize];
+            let mut d = nd.diag - 1.0;
             for ax in 0..3 {
                 // (A coupling that rounds to 0 in f32, below 10⁻⁴⁵, is left out.)
                 if row.cpl[2 * ax] != 0.0 {
@@ -778,26 +792,18 @@ impl Hierarchy {
         // (see [`Level::weight`]).
         let mut first = (a.nodes.len() > coarse_cells && a.dims.iter().any(|d| *d > 1)).then(|| a.coarsen());
         let scale_of: Vec<Mg> = a.nodes.par_iter().map(|n| Mg::of(1.0 / n.diag.sqrt())).collect();
-        let unit_error: Vec<f64> = a
-            .nodes
-            .par_iter_mut()
-            .enumerate()
-            .map(|(u, n)| {
-                let s = f64::from(scale_of[u]);
-                for ax in 0..3 {
-                    if n.up_nbr[ax] != NONE {
-                        n.up[ax] *= s * f64::from(scale_of[n.up_nbr[ax] as usize]);
-                    }
+        a.nodes.par_iter_mut().enumerate().for_each(|(u, n)| {
+            let s = f64::from(scale_of[u]);
+            for ax in 0..3 {
+                if n.up_nbr[ax] != NONE {
+                    n.up[ax] *= s * f64::from(scale_of[n.up_nbr[ax] as usize]);
                 }
-                let error = n.diag * s * s - 1.0;
-                n.diag = 1.0;
-                error
-            })
-            .collect();
+            }
+            n.diag = n.diag * s * s;
+        });
         // Each level is built from its operator, which is dropped once the next one exists.
-        let (mut level, mut entry) = Level::from_operator(&a);
-        let fix = rounding_fix(&a, &level, &scale_of, &unit_error);
-        drop(unit_error);
+        let (mut level, mut entry) = Level::from_operator(&a, true);
+        let fix = rounding_fix(&a, &level, &scale_of);
         let scale: Vec<Mg> = (0..level.len())
             .into_par_iter()
             .map(|e| match level.unknown(e) {
@@ -817,7 +823,7 @@ impl Hierarchy {
                 None if !levels.is_empty() && level.unknowns() > coarse_cells && fine.dims.iter().any(|d| *d > 1) => fine.coarsen(),
                 None => break,
             };
-            let (mut next, next_entry) = Level::from_operator(&c);
+            let (mut next, next_entry) = Level::from_operator(&c, false);
             level.link(&parent, &mut next, &next_entry);
             levels.push(std::mem::replace(&mut level, next));
             (fine, entry) = (c, next_entry);
@@ -1528,7 +1534,7 @@ mod operator_tests {
                 nd.up[u % 3] = 0.0;
             }
         }
-        let (level, entry) = Level::from_operator(&s);
+        let (level, entry) = Level::from_operator(&s, false);
         let by_cell: HashMap<usize, usize> = s.nodes.iter().enumerate().map(|(u, n)| (n.cell as usize, u)).collect();
         let [nx, ny, _] = s.dims;
         let (mut seen, mut coupled) = (0, 0);
