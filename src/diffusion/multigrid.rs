@@ -4,7 +4,7 @@
 //! * **Operator.** A symmetric 7-point stencil. Callers assemble it straight onto its unknowns as
 //!   an [`Operator`] (each unknown's box cell, diagonal and +x, +y, +z couplings and neighbours);
 //!   [`Hierarchy::build`] turns every level into a [`Level`] that stores its unknowns with their
-//!   six neighbours' indices and couplings. Nothing is stored per cell of the box (the cloud fills
+//!   six neighbours' couplings and coded entries ([`Row`], 40 B). Nothing is stored per cell of the box (the cloud fills
 //!   about half of its tight box), so the memory and the work scale with the unknowns.
 //! * **Coarsening** by 2×2×2 aggregation with the Galerkin product Aᶜ = PᵀAP, P the piecewise-
 //!   constant prolongation: the coarse operator is again a 7-point stencil (an aggregate's diagonal
@@ -345,9 +345,9 @@ impl Level {
         let mut entry = vec![0u32; n];
         let mut unk = vec![PAD; n + 2];
         let mut next = [0, red + 1];
-        for u in 0..n {
+        for (u, e) in entry.iter_mut().enumerate() {
             let c = colour(u);
-            entry[u] = next[c] as u32;
+            *e = next[c] as u32;
             unk[next[c]] = u as u32;
             next[c] += 1;
         }
