@@ -4,7 +4,7 @@
 //! * **Operator.** A symmetric 7-point stencil. Callers assemble it straight onto its unknowns as
 //!   an [`Operator`] (each unknown's box cell, diagonal and +x, +y, +z couplings and neighbours);
 //!   [`Hierarchy::build`] turns every level into a [`Level`] that stores its unknowns with their
-//!   six neighbours' indices and couplings. Nothing is stored per cell of the box (the cloud fills
+//!   six neighbours' couplings and coded entries ([`Row`], 40 B). Nothing is stored per cell of the box (the cloud fills
 //!   about half of its tight box), so the memory and the work scale with the unknowns.
 //! * **Coarsening** by 2×2×2 aggregation with the Galerkin product Aᶜ = PᵀAP, P the piecewise-
 //!   constant prolongation: the coarse operator is again a 7-point stencil (an aggregate's diagonal
@@ -45,7 +45,7 @@ pub const OVER_CORRECTION: f64 = 1.3;
 /// on the thread count).
 const CHUNK: usize = 4096;
 
-/// Marks a pad entry in [`Level::unk`].
+/// Marks a pad entry ([`Level::unknown`]).
 const PAD: u32 = u32::MAX;
 
 /// Marks a missing neighbour in [`Node::up_nbr`].
@@ -215,13 +215,74 @@ impl Real for f64 {
 /// when the recursion's rounding left it above the tolerance; 1e-12 is still reached).
 type Mg = f32;
 
-/// One row of a [`Level`]: the couplings to the six neighbours (−x, +x, −y, +y, −z, +z), the
-/// diagonal and the neighbours' entries.
+/// One row of a [`Level`]: the couplings to the six neighbours (−x, +x, −y, +y, −z, +z) and
+/// where their entries lie (40 B; six plain u32 entries took 24 B of the 52 with the diagonal).
+///
+/// The entries are coded from `base`, the other colour's first entry after this unknown in box
+/// order: the ±x neighbours (cells c ± 1) are the entries just before and at `base`, the ±y and
+/// ±z ones lie `dy` and `dz` entries before or after it (the other colour's unknowns between
+/// the cells, fewer than half a box row or plane). A missing neighbour (or one coupled by 0)
+/// has coupling 0 and reads `base` (a flag bit of `base` for −x, distance 0 for ±y, ±z): any
+/// entry of the other colour would do, as its value (finite) is multiplied by 0, and decoding
+/// needs no branch or select.
 #[derive(Clone, Copy, Debug)]
 struct Row {
     cpl: [Mg; 6],
-    diag: Mg,
-    nbr: [u32; 6],
+    /// The other colour's first entry after this unknown, and the [`NO_MINUS_X`] flag.
+    base: u32,
+    /// Entries from `base` back to the −y neighbour and on to the +y one.
+    dy: [u16; 2],
+    /// Entries from `base` back to the −z neighbour and on to the +z one.
+    dz: [u32; 2],
+}
+
+/// [`Row::base`] flag: no −x neighbour (it reads `base`, not the entry before).
+const NO_MINUS_X: u32 = 1 << 31;
+
+impl Row {
+    /// The row of couplings `cpl` to the entries `nbr` (`pad` for a missing neighbour, whose
+    /// coupling is 0), `base` the other colour's first entry after the unknown.
+    fn encode(cpl: [Mg; 6], nbr: [u32; 6], base: u32, pad: u32) -> Row {
+        assert!(base < NO_MINUS_X, "more than 2^31 entries on one level");
+        let missing = |q: usize| nbr[q] == pad;
+        debug_assert!((0..6).all(|q| !missing(q) || cpl[q] == 0.0), "a missing neighbour's coupling is 0");
+        debug_assert!(missing(0) || nbr[0] + 1 == base, "−x neighbour just before base");
+        debug_assert!(missing(1) || nbr[1] == base, "+x neighbour at base");
+        // Entries between base and neighbour q (before base for the − ones); 0: base itself.
+        let dist = |q: usize| match (missing(q), q % 2) {
+            (true, _) => 0,
+            (false, 0) => base - nbr[q],
+            (false, _) => nbr[q] - base,
+        };
+        let dy = |q: usize| u16::try_from(dist(q)).expect("a box row of over 131 000 cells");
+        Row {
+            cpl,
+            base: base | if missing(0) { NO_MINUS_X } else { 0 },
+            dy: [dy(2), dy(3)],
+            dz: [dist(4), dist(5)],
+        }
+    }
+
+    /// The neighbours' entries (−x, +x, −y, +y, −z, +z); a missing one's is `base`.
+    #[inline(always)]
+    fn neighbours(&self) -> [u32; 6] {
+        let base = self.base();
+        [
+            // base − 1, or base with the flag.
+            (base + (self.base >> 31)).wrapping_sub(1),
+            base,
+            base - u32::from(self.dy[0]),
+            base + u32::from(self.dy[1]),
+            base - self.dz[0],
+            base + self.dz[1],
+        ]
+    }
+
+    /// The other colour's first entry after the unknown.
+    #[inline(always)]
+    fn base(&self) -> u32 {
+        self.base & !NO_MINUS_X
+    }
 }
 
 /// One level's operator on its unknowns only.
@@ -235,9 +296,9 @@ struct Row {
 #[derive(Clone, Debug)]
 struct Level {
     red: usize,
-    /// Every diagonal is 1 (the finest level, scaled): the first red pass is a copy and reads
-    /// no rows.
-    unit_diag: bool,
+    /// The diagonal per entry (0 on the pads); empty where every diagonal is 1 (the finest
+    /// level, scaled: its first red pass is then a copy and reads no rows).
+    diag: Vec<Mg>,
     /// The finest level's prolongation weights per red entry (empty elsewhere: 1). The finest
     /// level is scaled to unit diagonal (y = D^½ x), but the errors multigrid leaves to the
     /// coarse levels are smooth in the unscaled x: so the prolongation is P = D^½ P₀ (P₀
@@ -246,10 +307,8 @@ struct Level {
     /// iterations at 50×40×30/100×80×60/200×160×120 instead of 9/8/6.)
     weight: Vec<Mg>,
     rows: Vec<Row>,
-    /// The [`Operator`]'s unknown per entry; [`PAD`] on the pads.
-    unk: Vec<u32>,
-    /// Entry of the next coarser level holding each entry (a pad of it for the pads); empty on
-    /// the coarsest level.
+    /// Entry of the next coarser level holding each red entry (only the red ones are
+    /// prolonged: [`Level::prolong_red`]); empty on the coarsest level.
     parent: Vec<u32>,
     /// The finer level's red entries aggregated into entry e: `children[child_start[e]..child_start[e + 1]]`;
     /// empty on the finest level.
@@ -263,7 +322,8 @@ struct Level {
 /// solve's instructions.)
 #[inline(always)]
 fn couple<const K: usize>(row: &Row, x: &[[Mg; K]], off: usize) -> [Mg; K] {
-    let n = |q: usize| &x[row.nbr[q] as usize - off];
+    let nbr = row.neighbours();
+    let n = |q: usize| &x[nbr[q] as usize - off];
     let (n0, n1, n2, n3, n4, n5) = (n(0), n(1), n(2), n(3), n(4), n(5));
     let c = &row.cpl;
     let mut s = [0.0; K];
@@ -274,11 +334,14 @@ fn couple<const K: usize>(row: &Row, x: &[[Mg; K]], off: usize) -> [Mg; K] {
 }
 
 impl Level {
-    /// The level of operator `a` and each unknown's entry.
-    fn from_operator(a: &Operator) -> (Level, Vec<u32>) {
+    /// The level of operator `a` and each unknown's entry. With `unit_diag` every diagonal
+    /// counts as 1 and none is stored (the finest level, scaled: its diagonal differs from 1 by
+    /// the scale's rounding, which [`rounding_fix`] gives back to CG's operator).
+    fn from_operator(a: &Operator, unit_diag: bool) -> (Level, Vec<u32>) {
         let n = a.nodes.len();
         let colour = |u: usize| a.ijk(u).iter().sum::<usize>() % 2;
         let red = (0..n).filter(|u| colour(*u) == 0).count();
+        // Each unknown's entry, and (while the rows are built) each entry's unknown.
         let mut entry = vec![0u32; n];
         let mut unk = vec![PAD; n + 2];
         let mut next = [0, red + 1];
@@ -288,55 +351,86 @@ impl Level {
             unk[next[c]] = u as u32;
             next[c] += 1;
         }
-        // Each unknown's −x, −y, −z neighbours: the unknowns whose +a neighbour it is.
-        let mut down = vec![[NONE; 3]; n];
+        // The other colour's next entry at unknown u (its row's `base`): a red one has u − e
+        // black unknowns before it, a black one u − (e − red − 1) red ones.
+        let base = |u: usize| match entry[u] as usize {
+            e if e < red => (u - e + red + 1) as u32,
+            e => (u + red + 1 - e) as u32,
+        };
+        // Each unknown's −y, −z neighbours: the unknowns whose +a neighbour it is (the −x one
+        // is the unknown before it, if that is coupled to it).
+        let mut down = vec![[NONE; 2]; n];
         for (u, nd) in a.nodes.iter().enumerate() {
-            for ax in 0..3 {
+            for ax in 1..3 {
                 if nd.up_nbr[ax] != NONE {
-                    down[nd.up_nbr[ax] as usize][ax] = u as u32;
+                    down[nd.up_nbr[ax] as usize][ax - 1] = u as u32;
                 }
             }
         }
+        let down_of = |u: usize, ax: usize| match ax {
+            0 => match u.checked_sub(1) {
+                Some(d) if a.nodes[d].up_nbr[0] == u as u32 => d as u32,
+                _ => NONE,
+            },
+            _ => down[u][ax - 1],
+        };
         let pads = [(n + 1) as u32, red as u32];
         let row = |e: usize, u: u32| {
+            let pad = pads[usize::from(e > red)];
             if u == PAD {
-                return Row {
-                    cpl: [0.0; 6],
-                    diag: 0.0,
-                    nbr: [e as u32; 6],
-                };
+                return Row::encode([0.0; 6], [pad; 6], pad, pad);
             }
             let nd = &a.nodes[u as usize];
-            let mut row = Row {
-                cpl: [0.0; 6],
-                diag: Mg::of(nd.diag),
-                nbr: [pads[usize::from(e > red)]; 6],
-            };
+            let (mut cpl, mut nbr) = ([0.0; 6], [pad; 6]);
             for ax in 0..3 {
-                let d = down[u as usize][ax];
+                let d = down_of(u as usize, ax);
                 if d != NONE && a.nodes[d as usize].up[ax] != 0.0 {
-                    row.nbr[2 * ax] = entry[d as usize];
-                    row.cpl[2 * ax] = Mg::of(a.nodes[d as usize].up[ax]);
+                    nbr[2 * ax] = entry[d as usize];
+                    cpl[2 * ax] = Mg::of(a.nodes[d as usize].up[ax]);
                 }
                 if nd.up_nbr[ax] != NONE && nd.up[ax] != 0.0 {
-                    row.nbr[2 * ax + 1] = entry[nd.up_nbr[ax] as usize];
-                    row.cpl[2 * ax + 1] = Mg::of(nd.up[ax]);
+                    nbr[2 * ax + 1] = entry[nd.up_nbr[ax] as usize];
+                    cpl[2 * ax + 1] = Mg::of(nd.up[ax]);
                 }
             }
-            row
+            Row::encode(cpl, nbr, base(u as usize), pad)
         };
         let rows: Vec<Row> = unk.par_iter().enumerate().map(|(e, u)| row(e, *u)).collect();
+        drop(down);
+        let diag = match unit_diag {
+            true => Vec::new(),
+            false => unk
+                .iter()
+                .map(|u| if *u == PAD { 0.0 } else { Mg::of(a.nodes[*u as usize].diag) })
+                .collect(),
+        };
         let level = Level {
             red,
-            unit_diag: a.nodes.iter().all(|n| n.diag == 1.0),
+            diag,
             weight: Vec::new(),
             rows,
-            unk,
             parent: Vec::new(),
             child_start: Vec::new(),
             children: Vec::new(),
         };
         (level, entry)
+    }
+
+    /// The [`Operator`]'s unknown at entry `e` ([`PAD`] on the pads): the unknowns of its
+    /// colour before it plus those of the other colour (its row's `base`).
+    fn unknown(&self, e: usize) -> u32 {
+        let black = self.red + 1;
+        match e {
+            _ if e == self.red || e + 1 == self.len() => PAD,
+            _ if e < self.red => (e + self.rows[e].base() as usize - black) as u32,
+            _ => (e - black + self.rows[e].base() as usize) as u32,
+        }
+    }
+
+    /// Entry e's diagonal.
+    #[inline(always)]
+    fn diag(&self, e: usize) -> Mg {
+        self.diag.get(e).copied().unwrap_or(1.0)
     }
 
     /// Entries, pads included (the length of the level's vectors).
@@ -351,15 +445,13 @@ impl Level {
     /// Record that `coarse` aggregates this level: each entry's parent (from each unknown's
     /// aggregate `parent` and the coarse unknowns' entries `coarse_entry`; a pad of it for the
     /// pads) and each coarse entry's red children (a black pass before every restriction of the
-    /// cycle leaves the black residuals at zero: [`Level::residual_red`]).
+    /// cycle leaves the black residuals at zero: [`Level::restrict_residual`]).
     fn link(&mut self, parent: &[u32], coarse: &mut Level, coarse_entry: &[u32]) {
-        let pad = coarse.red as u32;
-        self.parent = self
-            .unk
-            .par_iter()
-            .map(|&u| if u == PAD { pad } else { coarse_entry[parent[u as usize] as usize] })
+        self.parent = (0..self.red)
+            .into_par_iter()
+            .map(|e| coarse_entry[parent[self.unknown(e) as usize] as usize])
             .collect();
-        let red_parents = &self.parent[..self.red];
+        let red_parents = &self.parent;
         let mut start = vec![0u32; coarse.len() + 1];
         for p in red_parents {
             start[*p as usize + 1] += 1;
@@ -377,33 +469,28 @@ impl Level {
         coarse.children = children;
     }
 
-    /// r = b − A x on the red unknowns (`r` has one value per red entry). Called right after a
-    /// black pass, which leaves the black residuals at zero, so they are not stored.
-    fn residual_red<const K: usize>(&self, x: &[[Mg; K]], b: &[[Mg; K]], r: &mut [[Mg; K]]) {
-        let (xr, xb) = x.split_at(self.red + 1);
-        r[..self.red].par_chunks_mut(CHUNK).enumerate().for_each(|(ci, rs)| {
-            let first = ci * CHUNK;
-            for (t, rv) in rs.iter_mut().enumerate() {
-                let e = first + t;
-                let row = &self.rows[e];
-                let s = couple(row, xb, self.red + 1);
-                // Restricted with the weights: each red residual is stored times its weight.
-                let w = self.weight.get(e).copied().unwrap_or(1.0);
-                *rv = std::array::from_fn(|k| w * (b[e][k] - (row.diag * xr[e][k] + s[k])));
-            }
-        });
+    /// The residual b − A x at red entry e (of `x` split at the black entries `xr`, `xb`),
+    /// times its prolongation weight: restricted with the weights.
+    #[inline(always)]
+    fn residual_red<const K: usize>(&self, e: usize, xr: &[[Mg; K]], xb: &[[Mg; K]], b: &[[Mg; K]]) -> [Mg; K] {
+        let s = couple(&self.rows[e], xb, self.red + 1);
+        let w = self.weight.get(e).copied().unwrap_or(1.0);
+        let d = self.diag(e);
+        std::array::from_fn(|k| w * (b[e][k] - (d * xr[e][k] + s[k])))
     }
 
-    /// b = Pᵀ r: each entry sums its red children's residuals `r` (of the finer level; its
-    /// black residuals are zero).
-    fn restrict<const K: usize>(&self, r: &[[Mg; K]], b: &mut [[Mg; K]]) {
+    /// b = Pᵀ r, r = bf − Af xf the residual of the finer level `fine`: each entry sums its red
+    /// children's residuals as they are made (not stored). Called right after a black pass,
+    /// which leaves the black residuals at zero.
+    fn restrict_residual<const K: usize>(&self, fine: &Level, xf: &[[Mg; K]], bf: &[[Mg; K]], b: &mut [[Mg; K]]) {
+        let (xr, xb) = xf.split_at(fine.red + 1);
         b.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, bs)| {
             let first = ci * CHUNK;
             for (t, v) in bs.iter_mut().enumerate() {
                 let e = first + t;
                 let mut s = [0.0; K];
                 for f in &self.children[self.child_start[e] as usize..self.child_start[e + 1] as usize] {
-                    let rf = &r[*f as usize];
+                    let rf = fine.residual_red(*f as usize, xr, xb, bf);
                     for k in 0..K {
                         s[k] += rf[k];
                     }
@@ -421,10 +508,10 @@ impl Level {
                 let e = first + t;
                 *xv = if e >= self.red {
                     [0.0; K]
-                } else if self.unit_diag {
+                } else if self.diag.is_empty() {
                     b[e]
                 } else {
-                    b[e].map(|v| v / self.rows[e].diag)
+                    b[e].map(|v| v / self.diag[e])
                 };
             }
         });
@@ -443,9 +530,9 @@ impl Level {
         mine.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, xs)| {
             let start = first + ci * CHUNK;
             for (t, xv) in xs.iter_mut().enumerate() {
-                let row = &self.rows[start + t];
-                let s = couple(row, other, off);
-                *xv = std::array::from_fn(|k| (b[start + t][k] - s[k]) / row.diag);
+                let s = couple(&self.rows[start + t], other, off);
+                let d = self.diag(start + t);
+                *xv = std::array::from_fn(|k| (b[start + t][k] - s[k]) / d);
             }
         });
     }
@@ -455,7 +542,7 @@ impl Level {
     fn prolong_red<const K: usize>(&self, x: &mut [[Mg; K]], xc: &[[Mg; K]], w: Mg) {
         x[..self.red]
             .par_chunks_mut(CHUNK)
-            .zip(self.parent[..self.red].par_chunks(CHUNK))
+            .zip(self.parent.par_chunks(CHUNK))
             .enumerate()
             .for_each(|(ci, (xs, ps))| {
                 for (t, (v, p)) in xs.iter_mut().zip(ps).enumerate() {
@@ -470,28 +557,30 @@ impl Level {
 }
 
 /// Per entry of `level` (the finest, of the operator `a` scaled by `scale` per unknown): what
-/// rounding its couplings to f32 took from the unscaled row's sum, in the scaled row's units:
-/// Σ (exact − stored) · s_u / s_t over its neighbours t (the −a couplings read from the −a
-/// neighbours' +a ones). Added to the unit diagonal, A·1 (the absorption and the leakage, for a
-/// uniform fluence) is the assembled one's.
-fn rounding_fix(a: &Operator, level: &Level, scale: &[f64]) -> Vec<Mg> {
-    level
-        .unk
-        .par_iter()
-        .zip(&level.rows)
-        .map(|(u, row)| {
-            if *u == PAD {
+/// rounding took from the unscaled row's sum, in the scaled row's units: its scaled diagonal's
+/// distance from 1 (the scale is rounded to f32) plus Σ (exact − stored) · s_u / s_t over its
+/// neighbours t for its couplings rounded to f32 (the −a couplings read from the −a neighbours'
+/// +a ones). Added to the unit diagonal, A·1 (the absorption and the leakage, for a uniform
+/// fluence) is the assembled one's.
+fn rounding_fix(a: &Operator, level: &Level, scale: &[Mg]) -> Vec<Mg> {
+    (0..level.len())
+        .into_par_iter()
+        .map(|e| {
+            let u = level.unknown(e);
+            if u == PAD {
                 return Mg::of(0.0);
             }
-            let (nd, su) = (&a.nodes[*u as usize], scale[*u as usize]);
-            let mut d = 0.0;
+            let (row, nd, su) = (&level.rows[e], &a.nodes[u as usize], f64::from(scale[u as usize]));
+            let nbr = row.neighbours();
+            let mut d = nd.diag - 1.0;
             for ax in 0..3 {
-                let m = level.unk[row.nbr[2 * ax] as usize];
-                if m != PAD {
-                    d += (a.nodes[m as usize].up[ax] - f64::from(row.cpl[2 * ax])) * su / scale[m as usize];
+                // (A coupling that rounds to 0 in f32, below 10⁻⁴⁵, is left out.)
+                if row.cpl[2 * ax] != 0.0 {
+                    let m = level.unknown(nbr[2 * ax] as usize);
+                    d += (a.nodes[m as usize].up[ax] - f64::from(row.cpl[2 * ax])) * su / f64::from(scale[m as usize]);
                 }
                 if nd.up_nbr[ax] != NONE {
-                    d += (nd.up[ax] - f64::from(row.cpl[2 * ax + 1])) * su / scale[nd.up_nbr[ax] as usize];
+                    d += (nd.up[ax] - f64::from(row.cpl[2 * ax + 1])) * su / f64::from(scale[nd.up_nbr[ax] as usize]);
                 }
             }
             Mg::of(d)
@@ -584,7 +673,7 @@ fn cholesky_in_place(a: &mut [f64], n: usize) -> f64 {
 impl Dense {
     /// The factor of operator `s`, whose unknowns are the entries `entry` of `level`.
     fn build(s: &Operator, level: &Level, entry: &[u32]) -> Dense {
-        let cells: Vec<usize> = (0..level.len()).filter(|e| level.unk[*e] != PAD).collect();
+        let cells: Vec<usize> = (0..level.len()).filter(|e| level.unknown(*e) != PAD).collect();
         let n = cells.len();
         let mut q_of = vec![usize::MAX; level.len()];
         for (q, e) in cells.iter().enumerate() {
@@ -592,7 +681,7 @@ impl Dense {
         }
         let mut a = vec![0f64; n * n];
         for (q, &e) in cells.iter().enumerate() {
-            let nd = &s.nodes[level.unk[e] as usize];
+            let nd = &s.nodes[level.unknown(e) as usize];
             a[q * n + q] = nd.diag;
             for ax in 0..3 {
                 let v = nd.up[ax];
@@ -647,21 +736,17 @@ impl Dense {
     }
 }
 
-/// Vectors of one multigrid level's cycle: its residual (red entries) and the next level's
-/// right-hand side and correction.
+/// Vectors of one multigrid level's cycle: the next level's right-hand side and correction
+/// (the level's residual is restricted as it is made: [`Level::restrict_residual`]).
 struct Work<const K: usize> {
-    r: Vec<[Mg; K]>,
     bc: Vec<[Mg; K]>,
     xc: Vec<[Mg; K]>,
 }
 
 impl<const K: usize> Work<K> {
-    /// The vectors for the cycle on `fine` with `coarse` below it. The residual has the red
-    /// entries only: the black ones are zero after the black pass before every restriction, and
-    /// the restriction reads red children only (`Level::residual_red`, `Level::restrict`).
-    fn new(fine: &Level, coarse: &Level) -> Work<K> {
+    /// The vectors for the cycle on a level with `coarse` below it.
+    fn new(coarse: &Level) -> Work<K> {
         Work {
-            r: vec![[0.0; K]; fine.red],
             bc: vec![[0.0; K]; coarse.len()],
             xc: vec![[0.0; K]; coarse.len()],
         }
@@ -669,17 +754,19 @@ impl<const K: usize> Work<K> {
 
     /// The vectors for every level of `h` above its coarsest.
     fn all(h: &Hierarchy) -> Vec<Work<K>> {
-        h.levels.windows(2).map(|w| Work::new(&w[0], &w[1])).collect()
+        h.levels[1..].iter().map(Work::new).collect()
     }
 }
 
 /// The multigrid hierarchy of one (diagonally scaled) operator.
 #[derive(Clone, Debug)]
 pub struct Hierarchy {
-    /// D^{-1/2} of the finest operator per entry of the finest level (0 on the pads).
-    scale: Vec<f64>,
-    /// Per entry of the finest level, what rounding its couplings to f32 took from its unscaled
-    /// row sum ([`rounding_fix`]); 0 on the pads.
+    /// D^{-1/2} of the finest operator per entry of the finest level, rounded to f32 (0 on the
+    /// pads). The rounding only changes which scaled system is solved: the operator is scaled
+    /// with these values, and `fix` keeps its row sums.
+    scale: Vec<Mg>,
+    /// Per entry of the finest level, what rounding its scale and couplings took from its
+    /// unscaled row sum ([`rounding_fix`]); 0 on the pads.
     fix: Vec<Mg>,
     /// Levels, finest first (scaled).
     levels: Vec<Level>,
@@ -704,26 +791,29 @@ impl Hierarchy {
         // piecewise constant in the unscaled unknowns, whose smooth errors are locally constant
         // (see [`Level::weight`]).
         let mut first = (a.nodes.len() > coarse_cells && a.dims.iter().any(|d| *d > 1)).then(|| a.coarsen());
-        let scale_of: Vec<f64> = a.nodes.par_iter().map(|n| 1.0 / n.diag.sqrt()).collect();
+        let scale_of: Vec<Mg> = a.nodes.par_iter().map(|n| Mg::of(1.0 / n.diag.sqrt())).collect();
         a.nodes.par_iter_mut().enumerate().for_each(|(u, n)| {
+            let s = f64::from(scale_of[u]);
             for ax in 0..3 {
                 if n.up_nbr[ax] != NONE {
-                    n.up[ax] *= scale_of[u] * scale_of[n.up_nbr[ax] as usize];
+                    n.up[ax] *= s * f64::from(scale_of[n.up_nbr[ax] as usize]);
                 }
             }
-            n.diag = 1.0;
+            n.diag = n.diag * s * s;
         });
         // Each level is built from its operator, which is dropped once the next one exists.
-        let (mut level, mut entry) = Level::from_operator(&a);
+        let (mut level, mut entry) = Level::from_operator(&a, true);
         let fix = rounding_fix(&a, &level, &scale_of);
-        let scale: Vec<f64> = level
-            .unk
-            .par_iter()
-            .map(|u| if *u == PAD { 0.0 } else { scale_of[*u as usize] })
+        let scale: Vec<Mg> = (0..level.len())
+            .into_par_iter()
+            .map(|e| match level.unknown(e) {
+                PAD => 0.0,
+                u => scale_of[u as usize],
+            })
             .collect();
         drop(scale_of);
         if first.is_some() {
-            level.weight = scale[..level.red].par_iter().map(|s| Mg::of(1.0 / s)).collect();
+            level.weight = scale[..level.red].par_iter().map(|s| Mg::of(1.0 / f64::from(*s))).collect();
         }
         let mut levels = Vec::new();
         let mut fine = a;
@@ -733,7 +823,7 @@ impl Hierarchy {
                 None if !levels.is_empty() && level.unknowns() > coarse_cells && fine.dims.iter().any(|d| *d > 1) => fine.coarsen(),
                 None => break,
             };
-            let (mut next, next_entry) = Level::from_operator(&c);
+            let (mut next, next_entry) = Level::from_operator(&c, false);
             level.link(&parent, &mut next, &next_entry);
             levels.push(std::mem::replace(&mut level, next));
             (fine, entry) = (c, next_entry);
@@ -761,10 +851,10 @@ impl Hierarchy {
     fn bytes(&self) -> usize {
         let level = |l: &Level| {
             l.rows.len() * std::mem::size_of::<Row>()
-                + 4 * (l.weight.len() + l.unk.len() + l.parent.len() + l.child_start.len() + l.children.len())
+                + 4 * (l.diag.len() + l.weight.len() + l.parent.len() + l.child_start.len() + l.children.len())
         };
         self.levels.iter().map(level).sum::<usize>()
-            + 8 * self.scale.len()
+            + 4 * self.scale.len()
             + 4 * self.fix.len()
             + 8 * (self.coarse.l.len() + self.coarse.cells.len())
     }
@@ -790,8 +880,7 @@ impl Hierarchy {
         let coarse_is_direct = l + 2 == self.levels.len();
         let visits = if coarse_is_direct { 1 } else { self.cycle.max(1) };
         for visit in 0..visits {
-            s.residual_red(x, b, &mut w.r);
-            self.levels[l + 1].restrict(&w.r, &mut w.bc);
+            self.levels[l + 1].restrict_residual(s, x, b, &mut w.bc);
             self.cycle(l + 1, &w.bc, &mut w.xc, rest);
             s.prolong_red(x, &w.xc, Mg::of(self.over_correction));
             if visit + 1 < visits {
@@ -817,7 +906,8 @@ impl Hierarchy {
         let (row, fix) = (&self.levels[0].rows[e], f64::from(self.fix[e]));
         // Widened once for all systems.
         let c = row.cpl.map(f64::from);
-        let v = |q: usize, k: usize| c[q] * x[row.nbr[q] as usize][k].get();
+        let nbr = row.neighbours();
+        let v = |q: usize, k: usize| c[q] * x[nbr[q] as usize][k].get();
         // A plain loop, not `array::from_fn`: the closure was not always inlined here (+0.35 G
         // instructions in the solve, depending on how the crate was split).
         let mut out = [0.0; K];
@@ -908,36 +998,29 @@ impl Hierarchy {
         let mut y: Vec<[f64; K]> = match x0 {
             Some(x) => {
                 assert!(x.iter().all(|v| v.len() == a.unknowns()), "one value per unknown");
-                a.unk
-                    .par_iter()
-                    .zip(&self.scale)
-                    .map(|(u, s)| {
-                        if *u == PAD {
-                            [0.0; K]
-                        } else {
-                            x.map(|v| v[*u as usize].into() / s)
-                        }
+                (0..a.len())
+                    .into_par_iter()
+                    .map(|e| match a.unknown(e) {
+                        PAD => [0.0; K],
+                        u => x.map(|v| v[u as usize].into() / f64::from(self.scale[e])),
                     })
                     .collect()
             }
             None => vec![[0.0; K]; a.len()],
         };
         // The scaled right-hand sides, made where they are read (not held).
-        let bs = |e: usize| {
-            let u = a.unk[e];
-            if u == PAD {
-                [0.0; K]
-            } else {
-                b.map(|v| v[u as usize].into() * self.scale[e])
-            }
+        let bs = |e: usize| match a.unknown(e) {
+            PAD => [0.0; K],
+            u => b.map(|v| v[u as usize].into() * f64::from(self.scale[e])),
         };
         let stats = self.solve_scaled(&bs, &mut y, x0.is_none(), tol, max_iter);
         let mut lane = 0;
         stats.map(|st| {
             let mut out = vec![0.0; a.unknowns()];
-            for ((u, v), s) in a.unk.iter().zip(&y).zip(&self.scale) {
-                if *u != PAD {
-                    out[*u as usize] = v[lane] * s;
+            for (e, (v, s)) in y.iter().zip(&self.scale).enumerate() {
+                let u = a.unknown(e);
+                if u != PAD {
+                    out[u as usize] = v[lane] * f64::from(*s);
                 }
             }
             lane += 1;
@@ -985,16 +1068,15 @@ impl Hierarchy {
             bytes_per_unknown: 0.0,
         });
         // The hierarchy; y in f64; r, p and q (A p, then z) in the multigrid's precision, and
-        // per level in `work` a red residual and the next level's b and x (the caller's b and
-        // x, per unknown, not counted).
+        // per level in `work` the next level's b and x (the caller's b and x, per unknown, not
+        // counted).
         let lanes = |v: usize, bytes: usize| v * bytes * K;
         let held = self.bytes()
             + lanes(n, 8)
             + lanes(3 * n, std::mem::size_of::<Mg>())
-            + self
-                .levels
-                .windows(2)
-                .map(|w| lanes(w[0].red + 2 * w[1].len(), std::mem::size_of::<Mg>()))
+            + self.levels[1..]
+                .iter()
+                .map(|l| lanes(2 * l.len(), std::mem::size_of::<Mg>()))
                 .sum::<usize>();
         for st in &mut stats {
             st.bytes_per_unknown = held as f64 / (K * a.unknowns().max(1)) as f64;
@@ -1112,12 +1194,13 @@ impl Hierarchy {
 /// (moved here from tests/ so the solver's internals need not be public).
 #[cfg(test)]
 mod operator_tests {
-    use super::{Hierarchy, Mg, Operator, Real, Work, NONE, PAD};
+    use super::{Hierarchy, Level, Mg, Operator, Real, Work, NONE, PAD};
     use crate::diffusion::{assemble, BoundaryLight, Domain};
     use crate::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
     use crate::lighting::DirectionBins;
     use crate::math::{Rgb, Rng, Vec3};
     use crate::medium::{Grid3, Medium};
+    use std::collections::HashMap;
 
     /// A random cloud: each voxel of the inner region full with probability 0.8, with optical depth
     /// per voxel log-uniform in [1e-3, 10] (σt = 1 m⁻¹, 1 m voxels).
@@ -1176,13 +1259,13 @@ mod operator_tests {
         a
     }
 
-    /// The operator CG solves for `s`: its couplings scaled to unit diagonal and rounded to the
-    /// multigrid's precision, each diagonal given back what the rounding took from its unscaled
-    /// row sum (in f32, as stored), unscaled again (`Hierarchy::apply_row`).
+    /// The operator CG solves for `s`: scaled by D^-½ rounded to f32, its couplings rounded to
+    /// the multigrid's precision, each (unit) diagonal given back what the rounding took from
+    /// its unscaled row sum (in f32, as stored), unscaled again (`Hierarchy::apply_row`).
     fn as_solved(s: &Operator) -> Operator {
-        let scale: Vec<f64> = s.nodes.iter().map(|n| 1.0 / n.diag.sqrt()).collect();
+        let scale: Vec<f64> = s.nodes.iter().map(|n| f64::from(Mg::of(1.0 / n.diag.sqrt()))).collect();
         let mut r = s.clone();
-        let mut fix = vec![0.0; s.nodes.len()];
+        let mut fix: Vec<f64> = s.nodes.iter().zip(&scale).map(|(n, s)| n.diag * s * s - 1.0).collect();
         for (q, nd) in r.nodes.iter_mut().enumerate() {
             for ax in 0..3 {
                 if nd.up_nbr[ax] != NONE {
@@ -1196,7 +1279,7 @@ mod operator_tests {
             }
         }
         for (q, nd) in r.nodes.iter_mut().enumerate() {
-            nd.diag *= 1.0 + f64::from(Mg::of(fix[q]));
+            nd.diag = (1.0 + f64::from(Mg::of(fix[q]))) / (scale[q] * scale[q]);
         }
         r
     }
@@ -1293,12 +1376,16 @@ mod operator_tests {
         let h = Hierarchy::build_with(s.clone(), 16);
         let (a, n) = (dense(&s), s.nodes.len());
         // y = D^½ 1 on the scaled system, so (S A S) y / s = (A 1).
-        let y: Vec<[f64; 1]> = h.scale.iter().map(|v| [if *v == 0.0 { 0.0 } else { 1.0 / v }]).collect();
+        let y: Vec<[f64; 1]> = h
+            .scale
+            .iter()
+            .map(|v| [if *v == 0.0 { 0.0 } else { 1.0 / f64::from(*v) }])
+            .collect();
         let fine = &h.levels[0];
-        for e in (0..fine.len()).filter(|e| fine.unk[*e] != PAD) {
-            let u = fine.unk[e] as usize;
+        for e in (0..fine.len()).filter(|e| fine.unknown(*e) != PAD) {
+            let u = fine.unknown(e) as usize;
             let want: f64 = a[u * n..(u + 1) * n].iter().sum();
-            let got = h.apply_row(e, &y)[0] / h.scale[e];
+            let got = h.apply_row(e, &y)[0] / f64::from(h.scale[e]);
             assert!((got - want).abs() <= 1e-12 * a[u * n + u], "row {u}: {got} vs {want}");
         }
     }
@@ -1380,11 +1467,11 @@ mod operator_tests {
         let (s, _) = sun_lit_system([14, 12, 10], 8, 0.99, 0.85, Vec3::new(0.1, 1.0, 0.3), 0);
         let h = Hierarchy::build_with(s, 16);
         assert!(h.levels() >= 4);
-        let unk = &h.levels[0].unk;
+        let fine = &h.levels[0];
         let mut rng = Rng::new(9, 1);
         let mut random = || -> Vec<f64> {
-            unk.iter()
-                .map(|u| if *u == PAD { 0.0 } else { rng.uniform() as f64 - 0.5 })
+            (0..fine.len())
+                .map(|e| if fine.unknown(e) == PAD { 0.0 } else { rng.uniform() as f64 - 0.5 })
                 .collect()
         };
         let (y, z) = (random(), random());
@@ -1420,7 +1507,7 @@ mod operator_tests {
         let c = &h.coarse;
         assert_eq!(c.cells.len(), nc);
         // The coarse level's unknowns in its entries' order: map them to the aggregates (box order).
-        let coarse_unk: Vec<usize> = c.cells.iter().map(|e| h.levels[1].unk[*e] as usize).collect();
+        let coarse_unk: Vec<usize> = c.cells.iter().map(|e| h.levels[1].unknown(*e) as usize).collect();
         for (q, cq) in coarse_unk.iter().enumerate() {
             for (r, cr) in coarse_unk.iter().enumerate() {
                 let llt: f64 = (0..=q.min(r)).map(|k| c.l[q * nc + k] * c.l[r * nc + k]).sum();
@@ -1430,10 +1517,69 @@ mod operator_tests {
         }
         let l0 = &h.levels[0];
         for (e, w) in l0.weight.iter().enumerate() {
-            let u = l0.unk[e] as usize;
+            let u = l0.unknown(e) as usize;
             assert!(((*w as f64) - d[u]).abs() <= 1e-6 * d[u], "{w} vs {}", d[u]);
         }
         assert_eq!(l0.weight.len(), l0.red);
+    }
+
+    #[test]
+    fn coded_neighbours_are_the_plain_ones() {
+        // A random sparse cloud, some couplings 0: each row's decoded neighbours are those found
+        // from the cells, and a missing one (or one coupled by 0) has coupling 0 and reads an
+        // entry of the other colour.
+        let (mut s, _) = sun_lit_system([13, 11, 9], 3, 0.95, 0.8, Vec3::new(0.2, 1.0, 0.3), 0);
+        for (u, nd) in s.nodes.iter_mut().enumerate() {
+            if u % 7 == 0 {
+                nd.up[u % 3] = 0.0;
+            }
+        }
+        let (level, entry) = Level::from_operator(&s, false);
+        let by_cell: HashMap<usize, usize> = s.nodes.iter().enumerate().map(|(u, n)| (n.cell as usize, u)).collect();
+        let [nx, ny, _] = s.dims;
+        let (mut seen, mut coupled) = (0, 0);
+        for e in 0..level.len() {
+            let u = level.unknown(e);
+            // The other colour's entries, its pad last.
+            let other = if e <= level.red {
+                level.red + 1..level.len()
+            } else {
+                0..level.red + 1
+            };
+            let pad = other.end - 1;
+            let (row, got) = (&level.rows[e], level.rows[e].neighbours());
+            if u == PAD {
+                assert!(e == level.red || e + 1 == level.len());
+                assert_eq!((row.cpl, got), ([0.0; 6], [pad as u32; 6]));
+                continue;
+            }
+            assert_eq!(entry[u as usize] as usize, e, "entry {e}'s unknown");
+            seen += 1;
+            let (nd, cell) = (&s.nodes[u as usize], s.nodes[u as usize].cell as usize);
+            for (q, stride) in [1, 1, nx, nx, nx * ny, nx * ny].into_iter().enumerate() {
+                let ax = q / 2;
+                let at = if q % 2 == 0 {
+                    cell.checked_sub(stride)
+                } else {
+                    Some(cell + stride)
+                };
+                let v = at
+                    .and_then(|c| by_cell.get(&c))
+                    .copied()
+                    .filter(|v| s.ijk(*v)[(ax + 1) % 3] == s.ijk(u as usize)[(ax + 1) % 3]);
+                let coupling = v.map_or(0.0, |v| if q % 2 == 0 { s.nodes[v].up[ax] } else { nd.up[ax] });
+                match v {
+                    Some(v) if coupling != 0.0 => {
+                        assert_eq!(got[q], entry[v], "entry {e} neighbour {q}");
+                        assert_eq!(row.cpl[q], coupling as f32);
+                        coupled += 1;
+                    }
+                    _ => assert!(row.cpl[q] == 0.0 && other.contains(&(got[q] as usize)), "entry {e} neighbour {q}"),
+                }
+            }
+        }
+        assert_eq!(seen, s.nodes.len());
+        assert!(coupled > 3 * seen, "{coupled} couplings for {seen} unknowns");
     }
 
     #[test]
