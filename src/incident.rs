@@ -893,7 +893,7 @@ mod tests {
         let inc = compute(&m, &DirectionBins::new(), &uniform_sky(2.0), &IncidentSettings::default(), None);
         let want = 0.9 * 1e-4 * 2.0;
         for (n, q) in inc.q0.iter().enumerate() {
-            if m.density.data()[n] > 0.0 {
+            if m.density.at(n) > 0.0 {
                 assert!((q.x - want).abs() < 1e-3 * want, "voxel {n}: Q0 {q:?} vs {want}");
                 for ax in 0..3 {
                     assert!(inc.q1[ax][n].x.abs() < 1e-3 * want, "voxel {n}: Q1 {:?}", inc.q1[ax][n]);
@@ -919,7 +919,7 @@ mod tests {
         );
         let want = 0.9 * 1e-4 * 2.0;
         for (n, q) in inc.q0.iter().enumerate() {
-            if m.density.data()[n] > 0.0 {
+            if m.density.at(n) > 0.0 {
                 assert!((q.x - want).abs() < 1e-3 * want, "voxel {n}: Q0 {q:?} vs {want}");
             }
         }
@@ -1037,7 +1037,7 @@ mod tests {
                 let mean = per_ray_mean(&m, &srcs, &plan_families(&srcs, &bins, &settings), si, entry);
                 let (sigma_s, dw) = (m.optics.similarity(0.0).sigma_s, bins.bins[b].solid_angle);
                 for (n, q) in inc.q0.iter().enumerate() {
-                    let rho = m.density.data()[n] as f64;
+                    let rho = m.density.at(n) as f64;
                     for band in 0..3 {
                         let want = rho * sigma_s[band] as f64 / (4.0 * PI) * dw * mean[n][band];
                         let got = q[band] as f64;

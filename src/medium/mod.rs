@@ -10,6 +10,7 @@
 //! is exact up to floating-point rounding.
 
 pub mod dda;
+pub mod density;
 pub mod grid;
 pub mod loaders;
 pub mod majorant;
@@ -29,6 +30,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 pub use dda::{ray_box, Dda, Segment};
+pub use density::Density;
 pub use grid::Grid3;
 pub use majorant::MajorantGrid;
 pub use subgrid::SubGrid;
@@ -92,8 +94,8 @@ impl Default for MediumDesc {
 /// A validated medium.
 #[derive(Clone, Debug)]
 pub struct Medium {
-    /// Density ρ per voxel (unitless, ≥ 0).
-    pub density: Arc<Grid3>,
+    /// Density ρ per voxel (unitless, ≥ 0), stored per full voxel.
+    pub density: Arc<Density>,
     /// Minimum corner of the grid (m).
     pub origin: Vec3,
     /// Voxel edge lengths (m).
@@ -110,9 +112,11 @@ impl Medium {
         Medium::with_optics(density, origin, voxel_size, Optics::new(sigma_t, albedo, g))
     }
 
-    /// [`Medium::new`] from an [`Optics`] (e.g. another medium's).
+    /// [`Medium::new`] from an [`Optics`] (e.g. another medium's). The dense grid is packed
+    /// ([`Density::from_grid`]) and dropped.
     pub fn with_optics(density: Grid3, origin: Vec3, voxel_size: Vec3, optics: Optics) -> Medium {
-        let majorant = MajorantGrid::build(&density, 4);
+        let density = Density::from_grid(&density);
+        let majorant = MajorantGrid::of_density(&density, 4);
         Medium {
             density: Arc::new(density),
             origin,
@@ -360,18 +364,11 @@ impl Medium {
         let d = self.dims();
         let mut lo = d;
         let mut hi = [0usize; 3];
-        let data = self.density.data();
-        for k in 0..d[2] {
-            for j in 0..d[1] {
-                for i in 0..d[0] {
-                    if data[i + d[0] * (j + d[1] * k)] > 0.0 {
-                        let c = [i, j, k];
-                        for a in 0..3 {
-                            lo[a] = lo[a].min(c[a]);
-                            hi[a] = hi[a].max(c[a] + 1);
-                        }
-                    }
-                }
+        for (n, _) in self.density.full_voxels() {
+            let c = [n % d[0], (n / d[0]) % d[1], n / (d[0] * d[1])];
+            for a in 0..3 {
+                lo[a] = lo[a].min(c[a]);
+                hi[a] = hi[a].max(c[a] + 1);
             }
         }
         if hi[0] == 0 {
