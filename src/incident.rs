@@ -689,13 +689,7 @@ pub fn compute_with_sun(
     let bd = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
     let nb = bd[0] * bd[1] * bd[2];
     let mut rho = vec![0f32; nb];
-    rho.par_chunks_mut(bd[0] * bd[1]).enumerate().for_each(|(k, plane)| {
-        for (j, row) in plane.chunks_exact_mut(bd[0]).enumerate() {
-            for (i, r) in row.iter_mut().enumerate() {
-                *r = m.density.get(i + lo[0], j + lo[1], k + lo[2]);
-            }
-        }
-    });
+    m.density.fill_box(lo, hi, &mut rho);
     // The medium's optics per band. A similarity transform is never applied here alone: it is
     // already in `m.optics` when `render.forward_fraction` asks for one (`render::delta_m`, the
     // same medium for every stage).

@@ -7,7 +7,7 @@
 //! same f32 the dense grid held (empty voxels read 0), so images do not change.
 
 use super::sparse::{FullIndex, VoxelField};
-use super::Grid3;
+use super::{Grid3, SubGrid};
 use crate::math::Trilinear;
 use std::sync::Arc;
 
@@ -102,7 +102,7 @@ impl Density {
     /// Trilinear interpolation at continuous voxel coordinates `p`, where voxel (i, j, k) has its
     /// centre at (i + 0.5, j + 0.5, k + 0.5). Indices are clamped to the grid (clamp-to-edge), so
     /// the field is defined on the whole box [0, n]³; the caller decides what lies outside it.
-    #[inline]
+    #[inline(always)]
     pub fn trilinear(&self, p: [f32; 3]) -> f32 {
         self.blend(&Trilinear::new(self.dims(), p))
     }
@@ -146,6 +146,29 @@ impl Density {
     /// (grid index, ρ) of every full voxel, in grid order.
     pub fn full_voxels(&self) -> impl Iterator<Item = (usize, f32)> + '_ {
         self.values.index().full_voxels().zip(self.packed().iter().copied())
+    }
+
+    /// ρ on the box [lo, hi) as a dense [`SubGrid`] (0 outside it): a transient copy for a stage
+    /// that reads ρ many times per voxel of the cloud's box (the sun's march); 4 B per box voxel.
+    /// Every full voxel must lie in the box.
+    pub fn box_copy(&self, lo: [usize; 3], hi: [usize; 3]) -> SubGrid {
+        let mut sub = SubGrid::filled(self.dims(), lo, hi, 0.0, 0.0);
+        self.fill_box(lo, hi, sub.box_values_mut());
+        sub
+    }
+
+    /// Write ρ on the box [lo, hi) into `out` (x fastest, zeroed by the caller) from the full
+    /// voxels, all of which must lie in the box.
+    pub fn fill_box(&self, lo: [usize; 3], hi: [usize; 3], out: &mut [f32]) {
+        let d = self.dims();
+        let bd = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
+        assert_eq!(out.len(), bd[0] * bd[1] * bd[2], "one value per box voxel");
+        for (n, rho) in self.full_voxels() {
+            let c = [n % d[0], (n / d[0]) % d[1], n / (d[0] * d[1])];
+            let r = [0, 1, 2].map(|a| c[a].wrapping_sub(lo[a]));
+            assert!((0..3).all(|a| r[a] < bd[a]), "full voxel {c:?} outside the box");
+            out[r[0] + bd[0] * (r[1] + bd[1] * r[2])] = rho;
+        }
     }
 
     /// Every grid voxel's ρ in grid order (empty voxels read 0).
@@ -224,6 +247,27 @@ mod tests {
             let t = Trilinear::new(dims, p);
             assert_eq!(d.corners(&t.idx), t.idx.map(|n| g.data()[n]));
         }
+    }
+
+    #[test]
+    fn a_box_copy_reads_the_density_inside_and_zero_outside() {
+        let dims = [9, 7, 6];
+        let mut g = Grid3::filled(dims, 0.0);
+        for (i, j, k) in [(2, 1, 1), (6, 5, 4), (3, 3, 2), (6, 1, 1)] {
+            g.set(i, j, k, 0.5 + i as f32);
+        }
+        let d = Density::from_grid(&g);
+        let (lo, hi) = ([1, 1, 0], [8, 7, 5]);
+        let sub = d.box_copy(lo, hi);
+        assert_eq!(sub.bounds(), (lo, [7, 6, 5]));
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    assert_eq!(sub.get(i, j, k), g.get(i, j, k), "({i}, {j}, {k})");
+                }
+            }
+        }
+        assert_eq!(sub.corner_values([2, 1, 1], [3, 2, 1]), [2.5, 0.0, 0.0, 0.0, 2.5, 0.0, 0.0, 0.0]);
     }
 
     #[test]
