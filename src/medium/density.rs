@@ -68,6 +68,19 @@ impl Density {
         self.values.get(n)
     }
 
+    /// ρ in slot `s` of [`Self::full_index`] (0: every empty voxel): for a caller that reads
+    /// several fields on that index at one voxel with one slot look-up.
+    #[inline]
+    pub fn at_slot(&self, s: usize) -> f32 {
+        *self.values.at_slot(s)
+    }
+
+    /// True where ρ > 0 (the occupancy bit alone, no value load).
+    #[inline]
+    pub fn is_full(&self, n: usize) -> bool {
+        self.values.index().is_full(n)
+    }
+
     /// ρ at (i, j, k); the caller guarantees the index is inside.
     #[inline]
     pub fn get(&self, i: usize, j: usize, k: usize) -> f32 {
@@ -175,11 +188,6 @@ impl Density {
     pub fn iter(&self) -> impl Iterator<Item = f32> + '_ {
         self.values.iter().copied()
     }
-
-    /// Bytes held: the values and the index.
-    pub fn bytes(&self) -> usize {
-        self.values.bytes() + self.values.index().bytes()
-    }
 }
 
 #[cfg(test)]
@@ -213,6 +221,7 @@ mod tests {
                 for i in 0..dims[0] {
                     let n = g.index(i, j, k);
                     assert_eq!((d.index(i, j, k), d.at(n), d.get(i, j, k)), (n, g.data()[n], g.get(i, j, k)));
+                    assert_eq!((d.at_slot(d.full_index().slot(n)), d.is_full(n)), (g.data()[n], g.data()[n] > 0.0));
                 }
             }
         }
@@ -231,7 +240,6 @@ mod tests {
         let full: Vec<(usize, f32)> = g.data().iter().copied().enumerate().filter(|(_, v)| *v > 0.0).collect();
         assert_eq!(d.full_voxels().collect::<Vec<_>>(), full);
         assert_eq!(d.packed(), full.iter().map(|f| f.1).collect::<Vec<_>>());
-        assert_eq!(d.bytes(), 4 * (full.len() + 1) + 8 * g.len().div_ceil(32));
     }
 
     #[test]
