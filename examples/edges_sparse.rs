@@ -51,7 +51,7 @@ fn main() {
     let m = &scene.medium;
 
     // Density statistics of the default cloud.
-    let nz: Vec<f32> = m.density.data().iter().copied().filter(|v| *v > 0.0).collect();
+    let nz: Vec<f32> = m.density.packed().to_vec();
     let max = nz.iter().copied().fold(0.0, f32::max);
     println!("default cloud: {} non-zero voxels, max density {max:.3}", nz.len());
     for t in [0.05, 0.1, 0.2, 0.3, 0.5, 0.75] {

@@ -689,13 +689,7 @@ pub fn compute_with_sun(
     let bd = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
     let nb = bd[0] * bd[1] * bd[2];
     let mut rho = vec![0f32; nb];
-    rho.par_chunks_mut(bd[0] * bd[1]).enumerate().for_each(|(k, plane)| {
-        for (j, row) in plane.chunks_exact_mut(bd[0]).enumerate() {
-            for (i, r) in row.iter_mut().enumerate() {
-                *r = m.density.get(i + lo[0], j + lo[1], k + lo[2]);
-            }
-        }
-    });
+    m.density.fill_box(lo, hi, &mut rho);
     // The medium's optics per band. A similarity transform is never applied here alone: it is
     // already in `m.optics` when `render.forward_fraction` asks for one (`render::delta_m`, the
     // same medium for every stage).
@@ -865,7 +859,7 @@ mod tests {
         let inc = compute(&m, &DirectionBins::new(), &uniform_sky(2.0), &IncidentSettings::default(), None);
         let want = 0.9 * 1e-4 * 2.0;
         for (n, q) in q0_of(&inc).into_iter().enumerate() {
-            if m.density.data()[n] > 0.0 {
+            if m.density.at(n) > 0.0 {
                 assert!((q.x - want).abs() < 1e-3 * want, "voxel {n}: Q0 {q:?} vs {want}");
                 for ax in 0..3 {
                     assert!(inc.q1(ax, n, 0).abs() < 1e-3 * want, "voxel {n}: Q1 {}", inc.q1(ax, n, 0));
@@ -919,7 +913,7 @@ mod tests {
         );
         let want = 0.9 * 1e-4 * 2.0;
         for (n, q) in q0_of(&inc).into_iter().enumerate() {
-            if m.density.data()[n] > 0.0 {
+            if m.density.at(n) > 0.0 {
                 assert!((q.x - want).abs() < 1e-3 * want, "voxel {n}: Q0 {q:?} vs {want}");
             }
         }
@@ -1037,7 +1031,7 @@ mod tests {
                 let mean = per_ray_mean(&m, &srcs, &plan_families(&srcs, &bins, &settings), si, entry);
                 let (sigma_s, dw) = (m.optics.similarity(0.0).sigma_s, bins.bins[b].solid_angle);
                 for (n, q) in q0_of(&inc).into_iter().enumerate() {
-                    let rho = m.density.data()[n] as f64;
+                    let rho = m.density.at(n) as f64;
                     for band in 0..3 {
                         let want = rho * sigma_s[band] as f64 / (4.0 * PI) * dw * mean[n][band];
                         let got = q[band] as f64;

@@ -8,7 +8,7 @@ use cloudgi::cube::render::{opposite_bin, render_cube_brute, BinMask, CubeOption
 use cloudgi::lighting::{DirectionBins, Ground, Sky, Sun};
 use cloudgi::lit::LitVolume;
 use cloudgi::math::{Rgb, Vec3};
-use cloudgi::medium::{Grid3, Medium};
+use cloudgi::medium::{Density, Grid3, Medium};
 use cloudgi::NoProgress;
 use std::f64::consts::PI;
 
@@ -242,7 +242,7 @@ fn border_voxels_of_a_hand_made_grid() {
     g.set(2, 2, 2, 1.0);
     g.set(0, 0, 0, 0.5);
     g.set(3, 2, 2, 0.25);
-    let found = find_border_voxels(&g);
+    let found = find_border_voxels(&Density::from_grid(&g));
     let get = |v: [usize; 3]| found.iter().find(|(x, _)| *x == v).map(|(_, f)| *f);
     // Faces: bit 0 +x, 1 −x, 2 +y, 3 −y, 4 +z, 5 −z.
     assert_eq!(get([1, 2, 2]), Some(1 << 0)); // full neighbour (2,2,2) at +x

@@ -103,7 +103,7 @@ fn loaders_round_trip() {
     loaders::write_vol(&dir.path().join("a.vol"), &g, Vec3::new(1.0, 2.0, 3.0), Vec3::new(15.0, 12.0, 9.0)).unwrap();
     for f in ["a.npy", "a.raw", "a.vol"] {
         let s = scene_with_grid(dir.path(), f).unwrap();
-        assert_eq!(*s.medium.density, g, "{f}");
+        assert_eq!(s.medium.density.to_grid(), g, "{f}");
         assert_eq!(s.medium.origin, Vec3::new(1.0, 2.0, 3.0), "{f}");
         assert_eq!(s.medium.voxel_size, Vec3::splat(2.0), "{f}");
     }
@@ -156,7 +156,7 @@ fn procedural_cloud_is_deterministic_with_paper_proportions() {
         assert!((*e as i64 - want).abs() <= 6, "extent {ext:?} vs 91×51×25");
     }
     // A dense core and tenuous edges: densities span at least two orders of magnitude.
-    let nz: Vec<f32> = g.data().iter().copied().filter(|&v| v > 0.0).collect();
+    let nz: Vec<f32> = g.packed().to_vec();
     let max = nz.iter().copied().fold(0.0, f32::max);
     let small = nz.iter().filter(|&&v| v < 0.01 * max).count();
     assert!(max > 1.0 && small > nz.len() / 50, "max {max}, {small} of {} below 1 %", nz.len());

@@ -81,7 +81,7 @@ fn downsample_applies_to_every_grid_source() {
         let path = dir.path().join("s.toml");
         std::fs::write(&path, format!("[medium]\ngrid = \"{f}\"\nvoxel_size = 1.0\ndownsample = 2\n")).unwrap();
         let s = Scene::load(Some(&path), |_| {}).unwrap();
-        assert_eq!(*s.medium.density, want, "{f}");
+        assert_eq!(s.medium.density.to_grid(), want, "{f}");
         assert_eq!(s.medium.voxel_size, Vec3::splat(2.0), "{f}");
     }
     let path = dir.path().join("p.toml");

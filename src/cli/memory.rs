@@ -2,7 +2,7 @@
 //! allocator abort mid-render.
 
 use cloudgi::error::{Error, Result};
-use cloudgi::medium::Grid3;
+use cloudgi::medium::Density;
 use cloudgi::scene::{Method, Scene, SceneDesc};
 use cloudgi::transport::TransportMemory;
 
@@ -75,11 +75,11 @@ pub struct CloudSize {
 }
 
 impl CloudSize {
-    /// Count them in a density grid (one pass; no allocation).
-    pub fn of(density: &Grid3) -> CloudSize {
+    /// Count them in a density (one pass over its full voxels; no allocation).
+    pub fn of(density: &Density) -> CloudSize {
         let d = density.dims();
         let (mut lo, mut hi, mut full) = (d, [0usize; 3], 0u64);
-        for (n, _) in density.data().iter().enumerate().filter(|(_, r)| **r > 0.0) {
+        for (n, _) in density.full_voxels() {
             let ijk = [n % d[0], (n / d[0]) % d[1], n / (d[0] * d[1])];
             for a in 0..3 {
                 lo[a] = lo[a].min(ijk[a]);
@@ -106,13 +106,14 @@ impl CloudSize {
 pub struct GridMemory {
     /// Fixed bytes (program, thread stacks, tables).
     pub fixed: u64,
-    /// Per grid voxel: the density (4 B) and the full-voxel index's occupancy words (0.25 B).
+    /// Per grid voxel: the full-voxel index's occupancy words (0.25 B; the density is stored per
+    /// full voxel).
     pub per_grid: u64,
     /// Per voxel of the box of the full voxels: the sun transmittance (4 B, on the box grown by
     /// one voxel) and the solver's box-shaped bookkeeping.
     pub per_box: u64,
-    /// Per full voxel: the solver's hierarchy and vectors, stage 1's Q0/Q1, I0, I1, the lit
-    /// volume and its pyramid, the gather's source records.
+    /// Per full voxel: the density, the solver's hierarchy and vectors, stage 1's Q0/Q1, I0, I1,
+    /// the lit volume and its pyramid, the gather's source records.
     pub per_full: u64,
 }
 
@@ -131,13 +132,14 @@ impl GridMemory {
 /// four clouds — the procedural cumulus at 50×40×30, 100×80×60 and 200×160×120 (5.5 k, 44 k and
 /// 356 k full voxels, 9 % of the grid, 47 % of their box) and two spheres in opposite corners of a
 /// 200×160×120 grid (89 k full voxels, 3 % of their box of 2.6 M) — with 4.25 B per grid voxel (the
-/// density and the full-voxel index's occupancy words): `full` 11.9 MB fixed, 6.8 B per box voxel
-/// (the sun transmittance and the solver's box-shaped bookkeeping) and 321 B per full voxel (the
-/// solver's hierarchy and vectors, stage 1's light, I0, I1, the lit volume and its pyramid),
-/// `diffusion` 7.8 MB, 7.6 B and 268 B. The figures here are those rounded up by a fifth or more
-/// (the estimates are 23–35 % above the measured peaks of the three larger clouds). `single` and
-/// `reference` hold the grid and a majorant or transmittance grid (16 B per grid voxel, an upper
-/// bound).
+/// density, dense then, and the full-voxel index's occupancy words): `full` 11.9 MB fixed, 6.8 B
+/// per box voxel (the sun transmittance and the solver's box-shaped bookkeeping) and 321 B per full
+/// voxel (the solver's hierarchy and vectors, stage 1's light, I0, I1, the lit volume and its
+/// pyramid), `diffusion` 7.8 MB, 7.6 B and 268 B. The figures here are those rounded up by a fifth
+/// or more (the estimates are 23–35 % above the measured peaks of the three larger clouds), with
+/// the density's 4 B moved from the grid voxel to the full voxel since it is stored per full voxel
+/// (the index's 0.25 B per grid voxel rounded up to 1 B). `single` and `reference` hold the
+/// density and a majorant or transmittance grid (16 B per grid voxel, an upper bound).
 pub fn grid_memory(method: Method) -> GridMemory {
     const MB: u64 = 1 << 20;
     match method {
@@ -149,16 +151,16 @@ pub fn grid_memory(method: Method) -> GridMemory {
         },
         Method::Diffusion => GridMemory {
             fixed: 16 * MB,
-            per_grid: 5,
+            per_grid: 1,
             per_box: 10,
-            per_full: 330,
+            per_full: 334,
         },
         // full, and any method added later: the largest estimate.
         _ => GridMemory {
             fixed: 16 * MB,
-            per_grid: 5,
+            per_grid: 1,
             per_box: 10,
-            per_full: 390,
+            per_full: 394,
         },
     }
 }
@@ -271,9 +273,9 @@ mod tests {
 
     #[test]
     fn the_cloud_is_counted_by_its_full_voxels_and_their_box() {
-        let mut g = Grid3::filled([6, 5, 4], 0.0);
+        let mut g = cloudgi::medium::Grid3::filled([6, 5, 4], 0.0);
         assert_eq!(
-            CloudSize::of(&g),
+            CloudSize::of(&Density::from_grid(&g)),
             CloudSize {
                 grid: 120,
                 boxed: 0,
@@ -283,7 +285,7 @@ mod tests {
         g.set(1, 1, 1, 0.5);
         g.set(3, 4, 2, 1.0);
         assert_eq!(
-            CloudSize::of(&g),
+            CloudSize::of(&Density::from_grid(&g)),
             CloudSize {
                 grid: 120,
                 boxed: 3 * 4 * 2,

@@ -19,7 +19,7 @@ use super::render::{opposite_bin, BinMask, CubeOptions, CubeRenderer};
 use crate::lighting::bins::NUM_BINS;
 use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
-use crate::medium::Grid3;
+use crate::medium::Density;
 use crate::pipeline::Progress;
 use rayon::prelude::*;
 
@@ -29,9 +29,8 @@ pub const FACE_OFFSETS: [[isize; 3]; 6] = [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0,
 /// Border voxels of a density grid, in memory order (x fastest), each with the set of faces
 /// (bit f = [`FACE_OFFSETS`]`[f]`) across which it touches a full voxel. Voxels outside the grid
 /// are not considered (a cloud touching the grid's side gets no cubes there).
-pub fn find_border_voxels(density: &Grid3) -> Vec<([usize; 3], u8)> {
+pub fn find_border_voxels(density: &Density) -> Vec<([usize; 3], u8)> {
     let d = density.dims();
-    let data = density.data();
     let (nx, nxy) = (d[0] as isize, (d[0] * d[1]) as isize);
     // Per face, the index offset of the neighbour and whether voxel (i, j, k) has one there.
     let strides = [1, -1, nx, -nx, nxy, -nxy];
@@ -43,13 +42,13 @@ pub fn find_border_voxels(density: &Grid3) -> Vec<([usize; 3], u8)> {
             for j in 0..d[1] {
                 for i in 0..d[0] {
                     let n = i + d[0] * (j + d[1] * k);
-                    if data[n] > 0.0 {
+                    if density.is_full(n) {
                         continue;
                     }
                     let inside = [i + 1 < d[0], i > 0, j + 1 < d[1], j > 0, k + 1 < d[2], k > 0];
                     let mut faces = 0u8;
                     for f in 0..6 {
-                        if inside[f] && data[(n as isize + strides[f]) as usize] > 0.0 {
+                        if inside[f] && density.is_full((n as isize + strides[f]) as usize) {
                             faces |= 1 << f;
                         }
                     }
@@ -306,6 +305,7 @@ pub fn render_border_cubes_with(renderer: &CubeRenderer<'_>, progress: &dyn Prog
 mod tests {
     use super::*;
     use crate::lighting::{Sky, Sun};
+    use crate::medium::Grid3;
     use crate::pipeline::NoProgress;
 
     #[test]
@@ -339,7 +339,7 @@ mod tests {
             }
         }
         assert!(want.len() > 50);
-        assert_eq!(find_border_voxels(&g), want);
+        assert_eq!(find_border_voxels(&Density::from_grid(&g)), want);
     }
 
     /// Two smooth lobes (peak 1) in a `dims` grid with a clear-air gap between them, lit with a

@@ -32,18 +32,18 @@ use crate::medium::Medium;
 /// ρ = 0. See the module docs.
 pub fn diffuse_flux(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, tau_min: f64) -> VoxelField<[Vec3; 3]> {
     let d = m.dims();
-    let rho = m.density.data();
+    let rho = &*m.density;
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
     let stride = [1usize, d[0], d[0] * d[1]];
     let sigma_tr: [f64; 3] = std::array::from_fn(|c| m.optics.sigma_tr(c));
     VoxelField::from_fn(m.density.full_index(), [Vec3::ZERO; 3], |idx| {
-        let rp = rho[idx] as f64;
+        let rp = rho.at(idx) as f64;
         let mut out = [Vec3::ZERO; 3];
         let cell = [idx % d[0], (idx / d[0]) % d[1], idx / (d[0] * d[1])];
         for (c, o) in out.iter_mut().enumerate() {
             let s = sigma_tr[c];
             let ip = sol.i0[c][idx] as f64;
-            let f_at = |q: usize, ax: usize| inc.q1(ax, q, c) as f64 / (rho[q] as f64 * s);
+            let f_at = |q: usize, ax: usize| inc.q1(ax, q, c) as f64 / (rho.at(q) as f64 * s);
             let mut v = [0f64; 3];
             for ax in 0..3 {
                 let fp = f_at(idx, ax);
@@ -51,7 +51,7 @@ pub fn diffuse_flux(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, ta
                 for (t, side) in [-1i64, 1].into_iter().enumerate() {
                     let nc = cell[ax] as i64 + side;
                     let nidx = (nc >= 0 && nc < d[ax] as i64).then(|| (idx as i64 + side * stride[ax] as i64) as usize);
-                    let rn = nidx.map_or(0.0, |q| rho[q] as f64);
+                    let rn = nidx.map_or(0.0, |q| rho.at(q) as f64);
                     phi[t] = match nidx {
                         Some(q) if rn > 0.0 => {
                             let cf = interior_coupling(rp, rn, s, h[ax], tau_min);
@@ -87,9 +87,9 @@ pub struct FluxField {
 impl FluxField {
     /// From I1 per voxel ([`diffuse_flux`]) and the medium it was computed on.
     pub fn new(m: &Medium, i1: &VoxelField<[Vec3; 3]>) -> FluxField {
-        let rho = m.density.data();
+        let rho = &*m.density;
         let rho_i1 = VoxelField::from_fn(m.density.full_index(), [Vec3::ZERO; 3], |n| {
-            let (v, r) = (i1[n], rho[n]);
+            let (v, r) = (i1[n], rho.at(n));
             [v[0] * r, v[1] * r, v[2] * r]
         });
         FluxField {

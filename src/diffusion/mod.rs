@@ -89,6 +89,7 @@ use boundary::face_index;
 pub use boundary::BoundaryLight;
 use multigrid::{Hierarchy, Node, Operator};
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// Solver settings.
 #[derive(Clone, Debug)]
@@ -279,38 +280,42 @@ fn assemble_with(
 ) -> (Option<Operator>, Vec<f64>) {
     let gd = m.dims();
     let d = dom.dims;
-    let rho = m.density.data();
+    let rho = &*m.density;
     let index = m.density.full_index();
     let full: Vec<usize> = index.full_voxels().collect();
     let sigma_a = m.optics.sigma_a(c);
     let sigma_tr = m.optics.sigma_tr(c);
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
     let gstride = [1, gd[0], gd[0] * gd[1]];
-    // F = Q1/(ρσtr) per axis at voxel centres.
-    let f_at = |idx: usize, ax: usize| -> f64 { inc.q1(ax, idx, c) as f64 / (rho[idx] as f64 * sigma_tr) };
+    // ρ, Q0 and Q1 share one index: a voxel's slot, looked up once, reads all three.
+    assert!(Arc::ptr_eq(inc.scattering.index(), &index), "stage 1's fields are on the density's full voxels");
+    // F = Q1/(ρσtr) per axis at the centre of the full voxel in slot `s`.
+    let f_at = |s: usize, ax: usize| -> f64 { inc.scattering.q1_at_slot(ax, s, c) as f64 / (rho.at_slot(s) as f64 * sigma_tr) };
     // Written in place (an unzip would hold a second copy while it gathers its pieces).
     let mut b = vec![0f64; full.len()];
     let row = |(&idx, bv): (&usize, &mut f64)| {
-        let rp = rho[idx] as f64;
+        let sp = index.slot(idx);
+        let rp = rho.at_slot(sp) as f64;
         let cell = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])];
         let mut node = Node::at(dom.cell(cell));
         let mut diag = rp * sigma_a;
-        let mut rhs = inc.q0(idx, c) as f64;
+        let mut rhs = inc.scattering.q0_at_slot(sp, c) as f64;
         for ax in 0..3 {
-            let fp = f_at(idx, ax);
+            let fp = f_at(sp, ax);
             for side in [-1i64, 1] {
                 let nc = cell[ax] as i64 + side;
                 let nidx = (nc >= 0 && nc < gd[ax] as i64).then(|| (idx as i64 + side * gstride[ax] as i64) as usize);
-                let rn = nidx.map_or(0.0, |q| rho[q] as f64);
+                // Slot 0 (empty, or beyond the grid) reads ρ = 0.
+                let sn = nidx.map_or(0, |q| index.slot(q));
+                let rn = rho.at_slot(sn) as f64;
                 if rn > 0.0 {
-                    let q = nidx.unwrap_or(0);
                     let cf = interior_coupling(rp, rn, sigma_tr, h[ax], tau_min);
                     diag += cf;
                     if side > 0 {
                         node.up[ax] = -cf;
-                        node.up_nbr[ax] = (index.slot(q) - 1) as u32;
+                        node.up_nbr[ax] = (sn - 1) as u32;
                     }
-                    let ff = 0.5 * (fp + f_at(q, ax));
+                    let ff = 0.5 * (fp + f_at(sn, ax));
                     rhs -= ff * side as f64 / h[ax];
                 } else {
                     let (dterm, fterm) = boundary_terms(rp, sigma_tr, h[ax], tau_min);
@@ -344,7 +349,7 @@ fn assemble_with(
 pub fn boundary_outflow(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, tau_min: f64) -> Rgb {
     let bl = &sol.boundary;
     let d = m.dims();
-    let rho = m.density.data();
+    let rho = &*m.density;
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
     let vol = h[0] * h[1] * h[2];
     let stride = [1, d[0], d[0] * d[1]];
@@ -355,7 +360,7 @@ pub fn boundary_outflow(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution
             for j in 0..d[1] {
                 for i in 0..d[0] {
                     let idx = i + d[0] * (j + d[1] * k);
-                    let rp = rho[idx] as f64;
+                    let rp = rho.at(idx) as f64;
                     if rp <= 0.0 {
                         continue;
                     }
@@ -364,7 +369,7 @@ pub fn boundary_outflow(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution
                         for side in [-1i64, 1] {
                             let nc = cell[ax] as i64 + side;
                             let nidx = (nc >= 0 && nc < d[ax] as i64).then(|| (idx as i64 + side * stride[ax] as i64) as usize);
-                            if nidx.map_or(true, |q| rho[q] <= 0.0) {
+                            if nidx.map_or(true, |q| rho.at(q) <= 0.0) {
                                 let (dt, ft) = boundary_terms(rp, sigma_tr, h[ax], tau_min);
                                 let f = inc.q1(ax, idx, c) as f64 / (rp * sigma_tr) * side as f64;
                                 let l_in = bl.at(nidx, face_index(ax, side), c);

@@ -134,8 +134,7 @@ impl CellDensity {
         let lo: [usize; 3] = std::array::from_fn(|a| cell[a].saturating_sub(1).min(dims[a] - 1));
         let hi: [usize; 3] = std::array::from_fn(|a| cell[a].min(dims[a] - 1));
         // The same voxels as eight `get`s (a stride is 0 where the cell is clamped at the side).
-        let data = m.density.data();
-        let corners = Trilinear::corner_indices(dims, lo, hi).map(|n| data[n]);
+        let corners = m.density.corners(&Trilinear::corner_indices(dims, lo, hi));
         CellDensity {
             corners,
             lo: std::array::from_fn(|a| cell[a] as f32 - 1.0),

@@ -43,22 +43,43 @@ impl FirstScattering {
     /// one band per pass, and the sun's form computes only what is read.
     #[inline(always)]
     pub fn q0(&self, g: usize, band: usize) -> f32 {
-        match self {
-            FirstScattering::General { q0, .. } => q0[g][band],
-            FirstScattering::Sun { rho_t, q0_per_rho_t, .. } => (rho_t[g] as f64 * q0_per_rho_t[band]) as f32,
-        }
+        self.q0_at_slot(self.index().slot(g), band)
     }
 
     /// The `axis` component of Q1 of grid voxel `g` in `band` (W·m⁻³·sr⁻¹).
     #[inline(always)]
     pub fn q1(&self, axis: usize, g: usize, band: usize) -> f32 {
+        self.q1_at_slot(axis, self.index().slot(g), band)
+    }
+
+    /// [`FirstScattering::q0`] of the voxel in slot `s` of [`FirstScattering::index`] (the
+    /// density's: a caller that has the slot for ρ reads Q0 without a second look-up).
+    #[inline(always)]
+    pub fn q0_at_slot(&self, s: usize, band: usize) -> f32 {
         match self {
-            FirstScattering::General { q1, .. } => q1[axis][g][band],
+            FirstScattering::General { q0, .. } => q0.at_slot(s)[band],
+            FirstScattering::Sun { rho_t, q0_per_rho_t, .. } => (*rho_t.at_slot(s) as f64 * q0_per_rho_t[band]) as f32,
+        }
+    }
+
+    /// [`FirstScattering::q1`] of the voxel in slot `s`.
+    #[inline(always)]
+    pub fn q1_at_slot(&self, axis: usize, s: usize, band: usize) -> f32 {
+        match self {
+            FirstScattering::General { q1, .. } => q1[axis].at_slot(s)[band],
             FirstScattering::Sun {
                 rho_t,
                 q0_per_rho_t,
                 q1_per_q0,
-            } => (rho_t[g] as f64 * q1_per_q0[axis] * q0_per_rho_t[band]) as f32,
+            } => (*rho_t.at_slot(s) as f64 * q1_per_q0[axis] * q0_per_rho_t[band]) as f32,
+        }
+    }
+
+    /// The full-voxel index the values are stored on (the density's).
+    pub fn index(&self) -> &Arc<FullIndex> {
+        match self {
+            FirstScattering::General { q0, .. } => q0.index(),
+            FirstScattering::Sun { rho_t, .. } => rho_t.index(),
         }
     }
 

@@ -89,8 +89,8 @@ impl LitVolume {
     ) -> LitVolume {
         let sun_t = sun_t.into();
         assert_eq!(sun_t.dims(), medium.dims(), "sun transmittance must have the density grid's dims");
-        let rho = medium.density.data();
-        let rho_i0 = VoxelField::from_fn(medium.density.full_index(), Rgb::ZERO, |n| i0[n].max(Rgb::ZERO) * rho[n]);
+        let rho = &*medium.density;
+        let rho_i0 = VoxelField::from_fn(medium.density.full_index(), Rgb::ZERO, |n| i0[n].max(Rgb::ZERO) * rho.at(n));
         LitVolume {
             rho_i0: Arc::new(rho_i0),
             medium,
@@ -173,7 +173,7 @@ impl LitVolume {
             return self.diffuse(v, 0.0, to_eye);
         }
         let t = Trilinear::new(d, v.to_array());
-        let rho = t.blend(|n| m.density.data()[n]);
+        let rho = m.density.blend(&t);
         if rho <= 0.0 {
             return self.diffuse(v, rho, to_eye);
         }

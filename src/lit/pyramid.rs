@@ -11,7 +11,7 @@
 use super::LitVolume;
 use crate::math::{Trilinear, Vec3};
 use crate::medium::sparse::{FullIndex, VoxelField};
-use crate::medium::{Grid3, MajorantGrid};
+use crate::medium::MajorantGrid;
 use glam::Vec4;
 use std::sync::Arc;
 
@@ -66,17 +66,17 @@ impl LitPyramid {
     /// `max_levels` levels in all (at least 1).
     pub fn build(lit: &LitVolume, max_levels: usize) -> LitPyramid {
         let m = &lit.medium;
-        let rho = m.density.data();
+        let rho = &*m.density;
         let t = &lit.sun_t;
         let ri0 = lit.rho_i0_field();
         let cells = VoxelField::from_fn(m.density.full_index(), [0.0; 5], |n| {
-            let (r, c) = (rho[n], ri0[n]);
+            let (r, c) = (rho.at(n), ri0[n]);
             [r, c.x, c.y, c.z, r * t.at_index(n)]
         });
         // Level 0's occupancy is the medium's majorant grid where its blocks are the same.
         let occupancy = match m.majorant.block {
             BLOCK => (*m.majorant).clone(),
-            _ => MajorantGrid::build(&m.density, BLOCK),
+            _ => MajorantGrid::of_density(&m.density, BLOCK),
         };
         let level0 = Level {
             dims: m.dims(),
@@ -99,9 +99,9 @@ impl LitPyramid {
 
 /// A coarse level from its cells (all of them, x fastest), stored where ρ > 0.
 fn make_level(dims: [usize; 3], voxel_size: Vec3, cells: Vec<Cell>) -> Level {
-    let rho = Grid3::from_vec(dims, cells.iter().map(|c| c[0]).collect(), "pyramid level").expect("level dims are positive");
-    let occupancy = MajorantGrid::build(&rho, BLOCK);
-    let index = Arc::new(FullIndex::build(dims, rho.data(), |r| r > 0.0));
+    let rho: Vec<f32> = cells.iter().map(|c| c[0]).collect();
+    let index = Arc::new(FullIndex::build(dims, &rho, |r| r > 0.0));
+    let occupancy = MajorantGrid::build(dims, index.full_voxels().map(|n| (n, rho[n])), BLOCK);
     let cells = VoxelField::new(index, [0.0; 5], cells.into_iter().filter(|c| c[0] > 0.0));
     Level {
         dims,
@@ -146,7 +146,7 @@ mod tests {
     use super::*;
     use crate::lighting::{Sky, Sun};
     use crate::math::Rgb;
-    use crate::medium::Medium;
+    use crate::medium::{Grid3, Medium};
 
     #[test]
     fn every_level_keeps_mass_and_mean_colour() {

@@ -44,10 +44,10 @@ impl SkySingle {
     pub fn new(m: &Medium, sh: &VoxelField<[f32; 3 * SH_COEFFS]>) -> SkySingle {
         let g = m.optics.phase.mean_cosine() as f32;
         let gl: [f32; SH_COEFFS] = std::array::from_fn(|k| g.powi(DEGREE[k]));
-        let rho = m.density.data();
+        let rho = &*m.density;
         let rho_coef = VoxelField::from_fn(m.density.full_index(), [0.0; 3 * SH_COEFFS], |n| {
             let c = &sh[n];
-            std::array::from_fn(|k| c[k] * gl[k % SH_COEFFS] * rho[n])
+            std::array::from_fn(|k| c[k] * gl[k % SH_COEFFS] * rho.at(n))
         });
         SkySingle { dims: m.dims(), rho_coef }
     }

@@ -2,7 +2,7 @@
 //! It lets ray marchers skip empty space and gives delta/ratio tracking a tight local bound,
 //! so dense clouds do not crawl.
 
-use super::{Dda, Grid3, Medium};
+use super::{Dda, Density, Medium};
 use crate::math::Vec3;
 use glam::DVec3;
 
@@ -18,29 +18,36 @@ pub struct MajorantGrid {
 }
 
 impl MajorantGrid {
-    /// Build with blocks of `block`³ voxels. The bound of a block covers every voxel the trilinear
-    /// field can blend inside it (one voxel of apron on every side).
-    pub fn build(g: &Grid3, block: usize) -> MajorantGrid {
-        let d = g.dims();
-        let dims = [d[0].div_ceil(block), d[1].div_ceil(block), d[2].div_ceil(block)];
-        let mut max_density = vec![0f32; dims[0] * dims[1] * dims[2]];
-        for bk in 0..dims[2] {
-            for bj in 0..dims[1] {
-                for bi in 0..dims[0] {
-                    let range = |b: usize, n: usize| (b * block).saturating_sub(1)..((b + 1) * block + 1).min(n);
-                    let mut m = 0f32;
-                    for k in range(bk, d[2]) {
-                        for j in range(bj, d[1]) {
-                            for i in range(bi, d[0]) {
-                                m = m.max(g.get(i, j, k));
-                            }
-                        }
+    /// Build with blocks of `block`³ voxels over a grid of `dims` from its full voxels (grid
+    /// index, ρ > 0). The bound of a block covers every voxel the trilinear field can blend
+    /// inside it (one voxel of apron on every side), so a voxel raises the blocks whose region
+    /// it lies in: up to two per axis.
+    pub fn build(dims: [usize; 3], full: impl IntoIterator<Item = (usize, f32)>, block: usize) -> MajorantGrid {
+        let nb = [dims[0].div_ceil(block), dims[1].div_ceil(block), dims[2].div_ceil(block)];
+        let mut max_density = vec![0f32; nb[0] * nb[1] * nb[2]];
+        // Blocks b with b·B − 1 ≤ i < (b + 1)·B + 1.
+        let blocks = |i: usize, a: usize| i.saturating_sub(1) / block..=((i + 1) / block).min(nb[a] - 1);
+        for (n, rho) in full {
+            let c = [n % dims[0], (n / dims[0]) % dims[1], n / (dims[0] * dims[1])];
+            for bk in blocks(c[2], 2) {
+                for bj in blocks(c[1], 1) {
+                    for bi in blocks(c[0], 0) {
+                        let m = &mut max_density[bi + nb[0] * (bj + nb[1] * bk)];
+                        *m = m.max(rho);
                     }
-                    max_density[bi + dims[0] * (bj + dims[1] * bk)] = m;
                 }
             }
         }
-        MajorantGrid { block, dims, max_density }
+        MajorantGrid {
+            block,
+            dims: nb,
+            max_density,
+        }
+    }
+
+    /// [`Self::build`] for the medium's density.
+    pub fn of_density(rho: &Density, block: usize) -> MajorantGrid {
+        MajorantGrid::build(rho.dims(), rho.full_voxels(), block)
     }
 
     /// Bound of block (i, j, k).
@@ -72,5 +79,57 @@ impl MajorantGrid {
     /// Origin-independent helper: lattice cell size (m) for a medium.
     pub fn cell_size(&self, m: &Medium) -> DVec3 {
         m.voxel_size.as_dvec3() * self.block as f64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::Rng;
+    use crate::medium::Grid3;
+
+    /// The bound as defined: the max over each block's region and its one-voxel apron.
+    fn dense_oracle(g: &Grid3, block: usize) -> Vec<f32> {
+        let d = g.dims();
+        let nb = [d[0].div_ceil(block), d[1].div_ceil(block), d[2].div_ceil(block)];
+        let range = |b: usize, n: usize| (b * block).saturating_sub(1)..((b + 1) * block + 1).min(n);
+        let mut out = Vec::new();
+        for bk in 0..nb[2] {
+            for bj in 0..nb[1] {
+                for bi in 0..nb[0] {
+                    let mut m = 0f32;
+                    for k in range(bk, d[2]) {
+                        for j in range(bj, d[1]) {
+                            for i in range(bi, d[0]) {
+                                m = m.max(g.get(i, j, k));
+                            }
+                        }
+                    }
+                    out.push(m);
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn bounds_from_the_full_voxels_equal_the_max_over_each_blocks_apron() {
+        let mut rng = Rng::new(4, 4);
+        for (dims, block, fill) in [
+            ([11, 9, 7], 4, 0.1),
+            ([8, 8, 8], 4, 0.5),
+            ([5, 13, 3], 2, 0.3),
+            ([6, 2, 9], 3, 0.05),
+        ] {
+            let mut g = Grid3::filled(dims, 0.0);
+            for v in g.data_mut() {
+                if rng.uniform() < fill {
+                    *v = rng.uniform() * 2.0;
+                }
+            }
+            let m = MajorantGrid::of_density(&Density::from_grid(&g), block);
+            assert_eq!(m.dims, [dims[0].div_ceil(block), dims[1].div_ceil(block), dims[2].div_ceil(block)]);
+            assert_eq!(m.max_density, dense_oracle(&g, block), "{dims:?}, block {block}");
+        }
     }
 }

@@ -23,8 +23,16 @@ pub struct March {
 /// sub-interval at fraction `xi` ∈ [0, 1). `source(p_voxel, rho)` returns S (W·m⁻²·sr⁻¹) at a
 /// point given in continuous voxel coordinates with density ρ > 0.
 #[inline]
-pub fn march(
+pub fn march(m: &Medium, o: Vec3, d: Vec3, t_min: f32, t_max: f32, step_m: f32, xi: f32, source: impl FnMut(Vec3, f32) -> Rgb) -> March {
+    march_with(m, |v| m.density.trilinear(v), o, d, t_min, t_max, step_m, xi, source)
+}
+
+/// [`march`] with ρ at continuous voxel coordinates (clamped to the box) from `rho`, which must
+/// give the medium's trilinear density (e.g. from [`Medium::dense_density`], the same bits).
+#[inline]
+pub fn march_with(
     m: &Medium,
+    rho: impl Fn([f32; 3]) -> f32,
     o: Vec3,
     d: Vec3,
     t_min: f32,
@@ -55,7 +63,7 @@ pub fn march(
             let t = ta + (k as f32 + xi) * len;
             let v = ((o + d * t) - m.origin) * inv_h;
             let v = v.clamp(Vec3::ZERO, Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32));
-            let rho = m.density.trilinear(v.to_array());
+            let rho = rho(v.to_array());
             if rho <= 0.0 {
                 continue;
             }

@@ -10,6 +10,7 @@
 //! is exact up to floating-point rounding.
 
 pub mod dda;
+pub mod density;
 pub mod grid;
 pub mod loaders;
 pub mod majorant;
@@ -26,9 +27,10 @@ use crate::optics::Optics;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 pub use dda::{ray_box, Dda, Segment};
+pub use density::Density;
 pub use grid::Grid3;
 pub use majorant::MajorantGrid;
 pub use subgrid::SubGrid;
@@ -92,8 +94,8 @@ impl Default for MediumDesc {
 /// A validated medium.
 #[derive(Clone, Debug)]
 pub struct Medium {
-    /// Density ρ per voxel (unitless, ≥ 0).
-    pub density: Arc<Grid3>,
+    /// Density ρ per voxel (unitless, ≥ 0), stored per full voxel.
+    pub density: Arc<Density>,
     /// Minimum corner of the grid (m).
     pub origin: Vec3,
     /// Voxel edge lengths (m).
@@ -102,6 +104,10 @@ pub struct Medium {
     pub optics: Optics,
     /// Per-block bounds of ρ for empty-space skipping and delta tracking.
     pub majorant: Arc<MajorantGrid>,
+    /// ρ dense on the grown cloud box, built by the first [`Self::dense_density`]: only the path
+    /// tracer and `single` read it (their point look-ups cost 10 % and 6 % more instructions on
+    /// the packed density); every other method reads [`Self::density`].
+    dense_box: OnceLock<Arc<SubGrid>>,
 }
 
 impl Medium {
@@ -110,15 +116,18 @@ impl Medium {
         Medium::with_optics(density, origin, voxel_size, Optics::new(sigma_t, albedo, g))
     }
 
-    /// [`Medium::new`] from an [`Optics`] (e.g. another medium's).
+    /// [`Medium::new`] from an [`Optics`] (e.g. another medium's). The dense grid is packed
+    /// ([`Density::from_grid`]) and dropped.
     pub fn with_optics(density: Grid3, origin: Vec3, voxel_size: Vec3, optics: Optics) -> Medium {
-        let majorant = MajorantGrid::build(&density, 4);
+        let density = Density::from_grid(&density);
+        let majorant = MajorantGrid::of_density(&density, 4);
         Medium {
             density: Arc::new(density),
             origin,
             voxel_size,
             optics,
             majorant: Arc::new(majorant),
+            dense_box: OnceLock::new(),
         }
     }
 
@@ -227,12 +236,34 @@ impl Medium {
     /// ρ at a world point: trilinear inside the box, zero outside.
     #[inline]
     pub fn density_at(&self, p: Vec3) -> f32 {
+        self.inside_voxel(p).map_or(0.0, |v| self.density.trilinear(v))
+    }
+
+    /// A dense copy of ρ on the cloud's box grown by one voxel (0 beyond it), built on the first
+    /// call and kept: 4 B per box voxel for fewer instructions per look-up; its `trilinear` gives
+    /// the same bits as [`Density::trilinear`]. For `reference` and `single` only: `full` must not
+    /// build it (it would be alive at its peak).
+    pub fn dense_density(&self) -> &SubGrid {
+        self.dense_box.get_or_init(|| {
+            let (lo, hi) = self.active_box(1).unwrap_or(([0; 3], [0; 3]));
+            Arc::new(self.density.box_copy(lo, hi))
+        })
+    }
+
+    /// [`Self::density_at`] (the same bits) from [`Self::dense_density`].
+    #[inline]
+    pub fn dense_density_at(&self, p: Vec3) -> f32 {
+        let dense = self.dense_density();
+        self.inside_voxel(p).map_or(0.0, |v| dense.trilinear(v))
+    }
+
+    /// The continuous voxel coordinates of world point `p` if it lies in the box.
+    #[inline(always)]
+    fn inside_voxel(&self, p: Vec3) -> Option<[f32; 3]> {
         let v = self.to_voxel(p);
         let d = self.dims();
-        if v.x < 0.0 || v.y < 0.0 || v.z < 0.0 || v.x > d[0] as f32 || v.y > d[1] as f32 || v.z > d[2] as f32 {
-            return 0.0;
-        }
-        self.density.trilinear(v.to_array())
+        let outside = v.x < 0.0 || v.y < 0.0 || v.z < 0.0 || v.x > d[0] as f32 || v.y > d[1] as f32 || v.z > d[2] as f32;
+        (!outside).then(|| v.to_array())
     }
 
     /// Ray–box interval (m) clipped to [t_min, t_max].
@@ -360,18 +391,11 @@ impl Medium {
         let d = self.dims();
         let mut lo = d;
         let mut hi = [0usize; 3];
-        let data = self.density.data();
-        for k in 0..d[2] {
-            for j in 0..d[1] {
-                for i in 0..d[0] {
-                    if data[i + d[0] * (j + d[1] * k)] > 0.0 {
-                        let c = [i, j, k];
-                        for a in 0..3 {
-                            lo[a] = lo[a].min(c[a]);
-                            hi[a] = hi[a].max(c[a] + 1);
-                        }
-                    }
-                }
+        for (n, _) in self.density.full_voxels() {
+            let c = [n % d[0], (n / d[0]) % d[1], n / (d[0] * d[1])];
+            for a in 0..3 {
+                lo[a] = lo[a].min(c[a]);
+                hi[a] = hi[a].max(c[a] + 1);
             }
         }
         if hi[0] == 0 {
@@ -411,6 +435,27 @@ mod tests {
         assert_eq!(m.active_box(3), Some(([0, 0, 0], [6, 6, 6])));
         let empty = Medium::new(Grid3::filled([3, 3, 3], 0.0), Vec3::ZERO, Vec3::ONE, 1.0, Rgb::ONE, 0.0);
         assert_eq!(empty.active_box(1), None);
+    }
+
+    #[test]
+    fn the_dense_copy_reads_the_same_bits_as_the_packed_density() {
+        let mut g = Grid3::filled([9, 7, 6], 0.0);
+        let mut rng = crate::math::Rng::new(3, 9);
+        for k in 1..5 {
+            for j in 2..6 {
+                for i in 1..7 {
+                    if rng.uniform() < 0.6 {
+                        g.set(i, j, k, 0.1 + rng.uniform());
+                    }
+                }
+            }
+        }
+        let m = Medium::new(g, Vec3::new(-4.0, 0.0, -3.0), Vec3::new(1.0, 2.0, 1.5), 0.3, Rgb::ONE, 0.0);
+        for _ in 0..5000 {
+            // The whole box and beyond it on every side.
+            let p = Vec3::new(rng.uniform() * 13.0 - 6.0, rng.uniform() * 18.0 - 2.0, rng.uniform() * 12.0 - 5.0);
+            assert_eq!(m.dense_density_at(p).to_bits(), m.density_at(p).to_bits(), "at {p}");
+        }
     }
 
     #[test]

@@ -97,6 +97,12 @@ impl FullIndex {
         ((w.base + below.count_ones() + 1) & 0u32.wrapping_sub(full)) as usize
     }
 
+    /// True when grid voxel `g` is full (its occupancy bit).
+    #[inline(always)]
+    pub fn is_full(&self, g: usize) -> bool {
+        (self.words[g / WORD_VOXELS].mask >> (g % WORD_VOXELS)) & 1 != 0
+    }
+
     /// Slots of grid voxels `g0` and `g1`: when `g1` is `g0`'s neighbour along x in the same word
     /// (a trilinear look-up's corner pairs, nearly always), one load and one population count
     /// serve both.
@@ -381,6 +387,10 @@ mod tests {
             .collect();
         assert_eq!(idx.count(), rank);
         assert_eq!((0..105).map(|g| idx.slot(g)).collect::<Vec<_>>(), naive);
+        assert_eq!(
+            (0..105).map(|g| idx.is_full(g)).collect::<Vec<_>>(),
+            naive.iter().map(|s| *s > 0).collect::<Vec<_>>()
+        );
         assert_eq!(idx.slots().collect::<Vec<_>>(), naive);
         for g in 0..104 {
             assert_eq!(idx.slot_pair(g, g + 1), [naive[g], naive[g + 1]], "pair at {g}");

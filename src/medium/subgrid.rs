@@ -46,7 +46,11 @@ impl SubGrid {
     /// Slot of grid voxel (i, j, k): its box index, or the outside slot.
     #[inline]
     fn slot(&self, c: [usize; 3]) -> usize {
-        let [x, y, z] = [0, 1, 2].map(|a| c[a].wrapping_sub(self.lo[a]));
+        let (x, y, z) = (
+            c[0].wrapping_sub(self.lo[0]),
+            c[1].wrapping_sub(self.lo[1]),
+            c[2].wrapping_sub(self.lo[2]),
+        );
         if x < self.box_dims[0] && y < self.box_dims[1] && z < self.box_dims[2] {
             x + self.box_dims[0] * (y + self.box_dims[1] * z)
         } else {
@@ -88,15 +92,34 @@ impl SubGrid {
     /// calls.
     #[inline(always)]
     pub fn trilinear_at_corners(&self, lo: [usize; 3], hi: [usize; 3], f: [f32; 3]) -> f32 {
+        Trilinear {
+            idx: self.corner_slots(lo, hi),
+            f,
+        }
+        .blend(|n| self.data[n])
+    }
+
+    /// The values of the eight grid voxels from `lo` to `hi` (per axis equal or one apart), in
+    /// [`Trilinear::idx`] order (c = x + 2y + 4z).
+    #[inline(always)]
+    pub fn corner_values(&self, lo: [usize; 3], hi: [usize; 3]) -> [f32; 8] {
+        let s = self.corner_slots(lo, hi);
+        let d = &self.data;
+        // Spelled out: an array `map` here stays out of line (a call per dual cell).
+        [d[s[0]], d[s[1]], d[s[2]], d[s[3]], d[s[4]], d[s[5]], d[s[6]], d[s[7]]]
+    }
+
+    /// The slots of the eight corners from `lo` to `hi`.
+    #[inline(always)]
+    fn corner_slots(&self, lo: [usize; 3], hi: [usize; 3]) -> [usize; 8] {
         let inside = (0..3).all(|a| lo[a] >= self.lo[a] && hi[a] < self.lo[a] + self.box_dims[a]);
-        let idx = if inside {
-            let rel = |c: [usize; 3]| [0, 1, 2].map(|a| c[a] - self.lo[a]);
+        if inside {
+            let rel = |c: [usize; 3]| [c[0] - self.lo[0], c[1] - self.lo[1], c[2] - self.lo[2]];
             Trilinear::corner_indices(self.box_dims, rel(lo), rel(hi))
         } else {
             let pick = |c: usize, a: usize| if (c >> a) & 1 == 0 { lo[a] } else { hi[a] };
             std::array::from_fn(|c| self.slot([pick(c, 0), pick(c, 1), pick(c, 2)]))
-        };
-        Trilinear { idx, f }.blend(|n| self.data[n])
+        }
     }
 
     /// Bytes held.

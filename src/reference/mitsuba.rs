@@ -160,7 +160,7 @@ pub fn export(scene: &Scene, dir: &Path) -> Result<Vec<PathBuf>> {
     let vol = dir.join("density.vol");
     let xml = dir.join("scene.xml");
     let (lo, hi) = scene.medium.bbox();
-    write_vol(&vol, &scene.medium.density, lo, hi)?;
+    write_vol(&vol, &scene.medium.density.to_grid(), lo, hi)?;
     crate::io::write_atomic(&xml, scene_xml(scene, "density.vol")?.as_bytes())?;
     Ok(vec![xml, vol])
 }
@@ -203,7 +203,7 @@ mod tests {
         assert!(xml.contains("<translate value=\"0, -0.0501, 0\"/>"), "{xml}");
         let bytes = std::fs::read(&files[1]).unwrap();
         let (g, lo, hi) = parse_vol(&bytes, "density.vol").unwrap();
-        assert_eq!(g.data(), scene.medium.density.data());
+        assert_eq!(g, scene.medium.density.to_grid());
         assert_eq!((lo, hi), scene.medium.bbox());
         // Balanced tags.
         assert_eq!(xml.matches("<shape").count(), xml.matches("</shape>").count());

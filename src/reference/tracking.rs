@@ -68,7 +68,7 @@ fn tentative_collisions(
                 t_f64 += dt as f64;
                 t = t_f64 as f32;
             }
-            let rho = m.density_at(o + d * t);
+            let rho = m.dense_density_at(o + d * t);
             if !at(t, rho, maj, rng) {
                 return false;
             }

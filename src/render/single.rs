@@ -6,7 +6,7 @@ use super::{render_rows, Progress, Timings};
 use crate::error::Result;
 use crate::image::Image;
 use crate::math::{Rgb, Rng, Vec3};
-use crate::medium::march::march;
+use crate::medium::march::march_with;
 use crate::scene::Scene;
 use crate::sunlight::SunTransmittance;
 
@@ -42,7 +42,19 @@ pub fn radiance(scene: &Scene, sun_t: &SunTransmittance, o: Vec3, d: Vec3, xi: f
     // Light travels from the sun (direction −sun.dir) towards the eye (direction −d).
     let phase = m.optics.phase.eval(scene.sun.dir, -d);
     let sun_term = m.optics.albedo * scene.sun.irradiance * phase;
-    let r = march(m, o, d, 0.0, t_max, step, xi, |v, _| sun_term * sun_t.at_voxel(v));
+    // ρ from the dense copy on the cloud's box: the same bits, without the packed density's slot look-ups.
+    let dense = m.dense_density();
+    let r = march_with(
+        m,
+        |v| dense.trilinear(v),
+        o,
+        d,
+        0.0,
+        t_max,
+        step,
+        xi,
+        |v, _| sun_term * sun_t.at_voxel(v),
+    );
     if r.transmittance <= 0.0 {
         return r.radiance;
     }

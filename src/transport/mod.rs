@@ -98,7 +98,7 @@ impl TransportMemory {
 
     /// The estimate for medium `m` solved with `s`.
     pub fn of(m: &Medium, s: &TransportSettings) -> TransportMemory {
-        let full = m.density.data().iter().filter(|r| **r > 0.0).count() as u64;
+        let full = m.density.count() as u64;
         let domain = crate::diffusion::Domain::of(m).map_or(0, |d| d.dims.iter().product::<usize>()) as u64;
         TransportMemory {
             full_voxels: full,

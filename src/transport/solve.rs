@@ -27,7 +27,7 @@ use crate::diffusion::{boundary_terms, interior_coupling, Domain, DEFAULT_MIN_OP
 use crate::lighting::{Ground, Sky, Sun};
 use crate::math::{real_sh, sh_count};
 use crate::math::{Rgb, Vec3};
-use crate::medium::Medium;
+use crate::medium::{Density, Medium};
 use crate::pipeline::Progress;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -165,7 +165,7 @@ struct Ctx<'a> {
     lo: [usize; 3],
     n: [usize; 3],
     h: [f64; 3],
-    rho: &'a [f32],
+    rho: &'a Density,
     full: &'a [u32],
     nsh: usize,
     /// Even-l harmonics (the first of the inner order, [`parity_order`]).
@@ -516,7 +516,7 @@ fn cross_axes(a: usize) -> (usize, usize) {
 /// cells follow the last, so that the sweep's look-ahead never runs off the end. Every index is
 /// checked below `voxels` (the number of full voxels) here, once per solve: the sweeps index the
 /// sources and radiances by it unchecked.
-fn box_cells(dims: [usize; 3], lo: [usize; 3], n: [usize; 3], rho: &[f32], full: &[u32], voxels: usize, a: usize) -> Vec<(f32, u32)> {
+fn box_cells(dims: [usize; 3], lo: [usize; 3], n: [usize; 3], rho: &Density, full: &[u32], voxels: usize, a: usize) -> Vec<(f32, u32)> {
     let (b, cc) = cross_axes(a);
     let mut out = Vec::with_capacity(n[0] * n[1] * n[2] + PREFETCH_AHEAD);
     for pa in 0..n[a] {
@@ -531,7 +531,7 @@ fn box_cells(dims: [usize; 3], lo: [usize; 3], n: [usize; 3], rho: &[f32], full:
                     full[vi] == u32::MAX || (full[vi] as usize) < voxels,
                     "full-voxel index out of range"
                 );
-                out.push((rho[vi], full[vi]));
+                out.push((rho.at(vi), full[vi]));
             }
         }
     }
@@ -832,7 +832,7 @@ with_avx!(@ sweep_ordinate, sweep_ordinate_avx, sweep_kernel::<false>, sweep_ker
 /// The DSA operator of one band on the full voxels (δ-M coefficients), in grid order.
 fn dsa_operator(m: &Medium, dom: &Domain, sigma_t: f64, albedo: f64, chi1: f64) -> Operator {
     let gd = m.dims();
-    let rho = m.density.data();
+    let rho = &*m.density;
     let index = m.density.full_index();
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
     let sigma_tr = sigma_t * (1.0 - albedo * chi1);
@@ -841,7 +841,7 @@ fn dsa_operator(m: &Medium, dom: &Domain, sigma_t: f64, albedo: f64, chi1: f64) 
     let nodes = index
         .full_voxels()
         .map(|idx| {
-            let rp = rho[idx] as f64;
+            let rp = rho.at(idx) as f64;
             let cell = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])];
             let mut node = Node::at(dom.cell(cell));
             let mut diag = rp * sigma_a;
@@ -851,7 +851,7 @@ fn dsa_operator(m: &Medium, dom: &Domain, sigma_t: f64, albedo: f64, chi1: f64) 
                     let mut nb = cell;
                     let rn = if nc >= 0 && nc < gd[ax] as i64 {
                         nb[ax] = nc as usize;
-                        rho[nb[0] + gd[0] * (nb[1] + gd[1] * nb[2])] as f64
+                        rho.get(nb[0], nb[1], nb[2]) as f64
                     } else {
                         0.0
                     };
@@ -910,7 +910,7 @@ fn dsa_rhs(c: &Ctx, voxels: &[usize], bo: &BandOptics, b: usize, moments: &[f32]
         .enumerate()
         .map(|(f, &v)| {
             let d0 = (next[(f * 3 + b) * nsh] - moments[(f * 3 + b) * nsh]) as f64 * y00;
-            c.rho[v] as f64 * bo.sigma_t * bo.albedo * d0
+            c.rho.at(v) as f64 * bo.sigma_t * bo.albedo * d0
         })
         .collect()
 }
@@ -942,7 +942,13 @@ fn dsa_apply(c: &Ctx, voxels: &[usize], bo: &BandOptics, b: usize, delta: &[f64]
                     u32::MAX => continue,
                     nf => nf as usize,
                 };
-                let cf = interior_coupling(c.rho[v] as f64, c.rho[nv] as f64, sigma_tr, c.h[ax], DEFAULT_MIN_OPTICAL_DEPTH);
+                let cf = interior_coupling(
+                    c.rho.at(v) as f64,
+                    c.rho.at(nv) as f64,
+                    sigma_tr,
+                    c.h[ax],
+                    DEFAULT_MIN_OPTICAL_DEPTH,
+                );
                 sum += 3.0 * cf * c.h[ax] * (delta[nf] - delta[f]) * side as f64;
                 faces += 1.0;
             }
@@ -976,14 +982,12 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
     let optics = Optics::from_medium(m, s.order);
     let dims = m.dims();
     let [nx, _, nz] = dims;
-    let rho = m.density.data();
+    let rho = &*m.density;
     let mut full = vec![u32::MAX; rho.len()];
     let mut nfull = 0usize;
-    for (f, r) in full.iter_mut().zip(rho) {
-        if *r > 0.0 {
-            *f = nfull as u32;
-            nfull += 1;
-        }
+    for (g, _) in rho.full_voxels() {
+        full[g] = nfull as u32;
+        nfull += 1;
     }
     let nsh = sh_count(s.order);
     let (perm, even) = parity_order(s.order);
@@ -1200,6 +1204,7 @@ mod tests {
                 voxels.push(v);
             }
         }
+        let density = Density::from_grid(&crate::medium::Grid3::from_vec(dims, rho, "test").unwrap());
         let nfull = voxels.len();
         let order = 7;
         let (perm, even) = parity_order(order);
@@ -1211,13 +1216,13 @@ mod tests {
             lo: [0; 3],
             n: dims,
             h: [10.0, 8.0, 12.0],
-            rho: &rho,
+            rho: &density,
             full: &full,
             nsh,
             even,
             voxels: &voxels,
             sun_t: &sun_t,
-            cells: [0, 1, 2].map(|a| box_cells(dims, [0; 3], dims, &rho, &full, voxels.len(), a)),
+            cells: [0, 1, 2].map(|a| box_cells(dims, [0; 3], dims, &density, &full, voxels.len(), a)),
             sigma_t: [0.05, 0.06, 0.07],
             grey: false,
             sky: &sky,

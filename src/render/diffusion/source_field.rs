@@ -84,7 +84,7 @@ impl SourceField {
             i0.iter().all(|f| same(f.index())) && i1.map_or(true, |f| same(f.index())) && sky_sh.map_or(true, |f| same(f.index())),
             "the diffusion's fields are stored on the medium's full voxels"
         );
-        let rho: Vec<f32> = index.full_voxels().map(|gi| m.density.data()[gi]).collect();
+        let rho = m.density.packed();
         let i0 = i0.each_ref().map(|f| f.packed());
         let i1 = i1.map(|f| f.packed());
         // Bands of `b` floats: ρ·max(I0, 0), ρ·g·I1, then (if `b` = BAND) ρ·g^l·L_lm.
