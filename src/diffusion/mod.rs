@@ -288,7 +288,10 @@ fn assemble_with(
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
     let gstride = [1, gd[0], gd[0] * gd[1]];
     // ρ, Q0 and Q1 share one index: a voxel's slot, looked up once, reads all three.
-    assert!(Arc::ptr_eq(inc.scattering.index(), &index), "stage 1's fields are on the density's full voxels");
+    assert!(
+        Arc::ptr_eq(inc.scattering.index(), &index),
+        "stage 1's fields are on the density's full voxels"
+    );
     // F = Q1/(ρσtr) per axis at the centre of the full voxel in slot `s`.
     let f_at = |s: usize, ax: usize| -> f64 { inc.scattering.q1_at_slot(ax, s, c) as f64 / (rho.at_slot(s) as f64 * sigma_tr) };
     // Written in place (an unzip would hold a second copy while it gathers its pieces).
