@@ -1,6 +1,7 @@
 //! Refuse an image too large for this machine's memory before any work, instead of letting the
 //! allocator abort mid-render.
 
+use cloudgi::diffusion::MAX_BOX_ROW_CELLS;
 use cloudgi::error::{Error, Result};
 use cloudgi::medium::Density;
 use cloudgi::scene::{Method, Scene, SceneDesc};
@@ -72,6 +73,8 @@ pub struct CloudSize {
     pub boxed: u64,
     /// Full voxels (ρ > 0).
     pub full: u64,
+    /// Cells along x of that box (the diffusion solver's rows).
+    pub row: u64,
 }
 
 impl CloudSize {
@@ -96,6 +99,7 @@ impl CloudSize {
             grid: density.len() as u64,
             boxed,
             full,
+            row: if full == 0 { 0 } else { (hi[0] - lo[0]) as u64 },
         }
     }
 }
@@ -169,6 +173,7 @@ pub fn grid_memory(method: Method) -> GridMemory {
 /// `available` bytes beside the image: `transport` per full voxel ([`TransportMemory`]), the other
 /// methods from the grid's, the cloud's box's and the full voxels' counts ([`grid_memory`]).
 pub fn check_solver_fits(scene: &Scene, available: Option<u64>) -> Result<()> {
+    check_solver_row(scene)?;
     let Some(avail) = available else {
         return Ok(());
     };
@@ -215,6 +220,27 @@ pub fn check_solver_fits(scene: &Scene, available: Option<u64>) -> Result<()> {
     ))
 }
 
+/// The diffusion solver (of `diffusion`, `full` and `transport`'s acceleration) takes clouds at
+/// most [`MAX_BOX_ROW_CELLS`] voxels wide along x.
+fn check_solver_row(scene: &Scene) -> Result<()> {
+    if matches!(scene.render.method, Method::Single | Method::Reference) {
+        return Ok(());
+    }
+    let row = CloudSize::of(&scene.medium.density).row;
+    if row <= MAX_BOX_ROW_CELLS as u64 {
+        return Ok(());
+    }
+    Err(Error::invalid(
+        &scene.source,
+        "medium",
+        format!(
+            "the cloud spans {row} voxels along x, and method {}'s diffusion solver takes at most {MAX_BOX_ROW_CELLS}; \
+             coarsen the cloud (medium.downsample or medium.resolution), or use --method single or reference",
+            scene.render.method.name()
+        ),
+    ))
+}
+
 /// [`check_solver_fits`] against this machine's available memory.
 pub fn check_solver(scene: &Scene) -> Result<()> {
     check_solver_fits(scene, available_bytes())
@@ -223,6 +249,7 @@ pub fn check_solver(scene: &Scene) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use cloudgi::medium::{Grid3, Medium};
 
     #[test]
     fn a_huge_image_is_refused_with_what_it_needs() {
@@ -250,6 +277,28 @@ mod tests {
     }
 
     #[test]
+    fn a_cloud_wider_than_the_solvers_rows_is_refused_for_its_methods() {
+        let mut scene = Scene::default_scene().unwrap();
+        let m = &scene.medium;
+        let medium = |nx: usize| Medium::with_optics(Grid3::filled([nx, 1, 1], 1.0), m.origin, m.voxel_size, m.optics.clone());
+        let (wide, widest) = (medium(MAX_BOX_ROW_CELLS + 1), medium(MAX_BOX_ROW_CELLS));
+        scene.medium = wide;
+        for method in [Method::Full, Method::Diffusion, Method::Transport] {
+            scene.render.method = method;
+            let e = check_solver_fits(&scene, None).unwrap_err().to_string();
+            let spans = format!("spans {} voxels along x", MAX_BOX_ROW_CELLS + 1);
+            assert!(e.contains(&spans) && e.contains("medium.downsample"), "{e}");
+        }
+        for method in [Method::Single, Method::Reference] {
+            scene.render.method = method;
+            assert!(check_solver_fits(&scene, None).is_ok());
+        }
+        scene.medium = widest;
+        scene.render.method = Method::Full;
+        assert!(check_solver_fits(&scene, None).is_ok());
+    }
+
+    #[test]
     fn the_grid_methods_are_refused_beyond_the_memory_and_named() {
         let mut scene = Scene::default_scene().unwrap();
         scene.camera.width = 8;
@@ -273,13 +322,14 @@ mod tests {
 
     #[test]
     fn the_cloud_is_counted_by_its_full_voxels_and_their_box() {
-        let mut g = cloudgi::medium::Grid3::filled([6, 5, 4], 0.0);
+        let mut g = Grid3::filled([6, 5, 4], 0.0);
         assert_eq!(
             CloudSize::of(&Density::from_grid(&g)),
             CloudSize {
                 grid: 120,
                 boxed: 0,
-                full: 0
+                full: 0,
+                row: 0
             }
         );
         g.set(1, 1, 1, 0.5);
@@ -289,7 +339,8 @@ mod tests {
             CloudSize {
                 grid: 120,
                 boxed: 3 * 4 * 2,
-                full: 2
+                full: 2,
+                row: 3
             }
         );
         // The default cloud at 100×80×60: 9 % of the grid is full and the estimate is above the

@@ -78,6 +78,8 @@
 pub mod boundary;
 pub mod flux;
 pub(crate) mod multigrid;
+
+pub use multigrid::MAX_BOX_ROW_CELLS;
 pub mod slab;
 
 use crate::error::{Error, Result};

@@ -239,6 +239,11 @@ struct Row {
 /// [`Row::base`] flag: no −x neighbour (it reads `base`, not the entry before).
 const NO_MINUS_X: u32 = 1 << 31;
 
+/// Widest box (cells along x) the solver takes: a row's ±y distances, at most half a box row of
+/// the other colour's entries, are stored in a u16. The command line refuses a wider cloud
+/// before any work (`medium.downsample` is the fix); a library caller's build panics.
+pub const MAX_BOX_ROW_CELLS: usize = 2 * u16::MAX as usize;
+
 impl Row {
     /// The row of couplings `cpl` to the entries `nbr` (`pad` for a missing neighbour, whose
     /// coupling is 0), `base` the other colour's first entry after the unknown.
@@ -254,7 +259,7 @@ impl Row {
             (false, 0) => base - nbr[q],
             (false, _) => nbr[q] - base,
         };
-        let dy = |q: usize| u16::try_from(dist(q)).expect("a box row of over 131 000 cells");
+        let dy = |q: usize| u16::try_from(dist(q)).expect("a box row of at most MAX_BOX_ROW_CELLS cells");
         Row {
             cpl,
             base: base | if missing(0) { NO_MINUS_X } else { 0 },
