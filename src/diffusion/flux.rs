@@ -27,6 +27,7 @@ use crate::incident::IncidentLight;
 use crate::math::{Rgb, Vec3};
 use crate::medium::sparse::VoxelField;
 use crate::medium::Medium;
+use std::sync::Arc;
 
 /// I1 per voxel per band (`[band]` a vector, W·m⁻²·sr⁻¹), stored per full voxel; zero where
 /// ρ = 0. See the module docs.
@@ -36,33 +37,46 @@ pub fn diffuse_flux(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, ta
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
     let stride = [1usize, d[0], d[0] * d[1]];
     let sigma_tr: [f64; 3] = std::array::from_fn(|c| m.optics.sigma_tr(c));
-    VoxelField::from_fn(m.density.full_index(), [Vec3::ZERO; 3], |idx| {
-        let rp = rho.at(idx) as f64;
-        let mut out = [Vec3::ZERO; 3];
+    let index = m.density.full_index();
+    let scattering = &inc.scattering;
+    assert!(
+        Arc::ptr_eq(scattering.index(), &index) && sol.i0.iter().all(|f| Arc::ptr_eq(f.index(), &index)),
+        "stage 1's and the diffusion's fields are on the density's full voxels"
+    );
+    VoxelField::from_fn(index.clone(), [Vec3::ZERO; 3], |idx| {
         let cell = [idx % d[0], (idx / d[0]) % d[1], idx / (d[0] * d[1])];
+        // The slots of the voxel and its six neighbours (0: empty or beyond the grid, which reads
+        // ρ = 0), looked up once for ρ, Q1 and I0 of every band.
+        let sp = index.slot(idx);
+        let rp = rho.at_slot(sp) as f64;
+        let nbr: [[(Option<usize>, usize); 2]; 3] = std::array::from_fn(|ax| {
+            [-1i64, 1].map(|side| {
+                let nc = cell[ax] as i64 + side;
+                let nidx = (nc >= 0 && nc < d[ax] as i64).then(|| (idx as i64 + side * stride[ax] as i64) as usize);
+                (nidx, nidx.map_or(0, |q| index.slot(q)))
+            })
+        });
+        let mut out = [Vec3::ZERO; 3];
         for (c, o) in out.iter_mut().enumerate() {
             let s = sigma_tr[c];
-            let ip = sol.i0[c][idx] as f64;
-            let f_at = |q: usize, ax: usize| inc.q1(ax, q, c) as f64 / (rho.at(q) as f64 * s);
+            let i0 = &sol.i0[c];
+            let ip = *i0.at_slot(sp) as f64;
+            let f_at = |q: usize, ax: usize| scattering.q1_at_slot(ax, q, c) as f64 / (rho.at_slot(q) as f64 * s);
             let mut v = [0f64; 3];
             for ax in 0..3 {
-                let fp = f_at(idx, ax);
+                let fp = f_at(sp, ax);
                 let mut phi = [0f64; 2];
                 for (t, side) in [-1i64, 1].into_iter().enumerate() {
-                    let nc = cell[ax] as i64 + side;
-                    let nidx = (nc >= 0 && nc < d[ax] as i64).then(|| (idx as i64 + side * stride[ax] as i64) as usize);
-                    let rn = nidx.map_or(0.0, |q| rho.at(q) as f64);
-                    phi[t] = match nidx {
-                        Some(q) if rn > 0.0 => {
-                            let cf = interior_coupling(rp, rn, s, h[ax], tau_min);
-                            let ff = 0.5 * (fp + f_at(q, ax));
-                            -cf * h[ax] * (sol.i0[c][q] as f64 - ip) + ff * side as f64
-                        }
-                        _ => {
-                            let (dt, ft) = boundary_terms(rp, s, h[ax], tau_min);
-                            let l_in = sol.boundary.at(nidx, face_index(ax, side), c);
-                            h[ax] * (dt * (ip - l_in) + ft * fp * side as f64)
-                        }
+                    let (nidx, sq) = nbr[ax][t];
+                    let rn = rho.at_slot(sq) as f64;
+                    phi[t] = if rn > 0.0 {
+                        let cf = interior_coupling(rp, rn, s, h[ax], tau_min);
+                        let ff = 0.5 * (fp + f_at(sq, ax));
+                        -cf * h[ax] * (*i0.at_slot(sq) as f64 - ip) + ff * side as f64
+                    } else {
+                        let (dt, ft) = boundary_terms(rp, s, h[ax], tau_min);
+                        let l_in = sol.boundary.at(nidx, face_index(ax, side), c);
+                        h[ax] * (dt * (ip - l_in) + ft * fp * side as f64)
                     };
                 }
                 // φ_+ = I1_a/3 through the + face, φ_− = −I1_a/3 through the − face.

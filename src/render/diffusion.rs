@@ -18,7 +18,7 @@ use crate::lit::ground::LitGround;
 use crate::lit::sky_single::SkySingle;
 use crate::lit::LitVolume;
 use crate::math::Rgb;
-use crate::medium::march::march;
+use crate::medium::march::march_with;
 use crate::medium::sparse::VoxelField;
 use crate::scene::Scene;
 use crate::sunlight::SunTransmittance;
@@ -127,7 +127,10 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
     let cam = &scene.camera;
     let spp = scene.render.aa_samples;
     let step = scene.render.step_voxels * scene.medium.min_voxel();
+    // ρ from the dense copy on the cloud's box (built here, after the solve's peak): the same
+    // bits as the packed density's, without its slot look-ups.
     let px = timings.time("gather", || {
+        let dense = scene.medium.dense_density();
         render_rows(cam.width, cam.height, progress, "diffusion gather", |x, y| {
             let mut sum = Rgb::ZERO;
             for s in 0..spp {
@@ -139,7 +142,17 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
                     .and_then(|g| g.intersect(ray.origin, ray.dir))
                     .unwrap_or(f32::INFINITY);
                 let src = field.along(-ray.dir);
-                let r = march(&scene.medium, ray.origin, ray.dir, 0.0, t_max, step, xi, |v, rho| src.at(v, rho));
+                let r = march_with(
+                    &scene.medium,
+                    |v| dense.trilinear(v),
+                    ray.origin,
+                    ray.dir,
+                    0.0,
+                    t_max,
+                    step,
+                    xi,
+                    |v, rho| src.at(v, rho),
+                );
                 sum += r.radiance;
                 if r.transmittance > 0.0 {
                     sum += r.transmittance * background(scene, ray.origin, ray.dir);
