@@ -280,7 +280,7 @@ mod tests {
     fn a_cloud_wider_than_the_solvers_rows_is_refused_for_its_methods() {
         let mut scene = Scene::default_scene().unwrap();
         let m = &scene.medium;
-        let medium = |nx: usize| Medium::with_optics(Grid3::filled([nx, 1, 1], 1.0), m.origin, m.voxel_size, m.optics.clone());
+        let medium = |nx: usize| Medium::with_optics(Grid3::filled([nx, 1, 1], 1.0), m.origin, m.voxel_size, m.optics);
         let (wide, widest) = (medium(MAX_BOX_ROW_CELLS + 1), medium(MAX_BOX_ROW_CELLS));
         scene.medium = wide;
         for method in [Method::Full, Method::Diffusion, Method::Transport] {
