@@ -132,18 +132,17 @@ impl GridMemory {
 }
 
 /// The memory model of each grid method (docs/performance.md, "The memory guard"). Fitted to the
-/// peak resident memory of 8×6-pixel renders on the development sandbox (`/usr/bin/time -f %M`) of
-/// four clouds — the procedural cumulus at 50×40×30, 100×80×60 and 200×160×120 (5.5 k, 44 k and
-/// 356 k full voxels, 9 % of the grid, 47 % of their box) and two spheres in opposite corners of a
-/// 200×160×120 grid (89 k full voxels, 3 % of their box of 2.6 M) — with 4.25 B per grid voxel (the
-/// density, dense then, and the full-voxel index's occupancy words): `full` 11.9 MB fixed, 6.8 B
-/// per box voxel (the sun transmittance and the solver's box-shaped bookkeeping) and 321 B per full
-/// voxel (the solver's hierarchy and vectors, stage 1's light, I0, I1, the lit volume and its
-/// pyramid), `diffusion` 7.8 MB, 7.6 B and 268 B. The figures here are those rounded up by a fifth
-/// or more (the estimates are 23–35 % above the measured peaks of the three larger clouds), with
-/// the density's 4 B moved from the grid voxel to the full voxel since it is stored per full voxel
-/// (the index's 0.25 B per grid voxel rounded up to 1 B). `single` and `reference` hold the
-/// density and a majorant or transmittance grid (16 B per grid voxel, an upper bound).
+/// peak resident memory of 8×6-pixel renders on the development sandbox (`/usr/bin/time -f %M`):
+/// first (fifth round) to four clouds — the procedural cumulus at 50×40×30, 100×80×60 and
+/// 200×160×120 (5.5 k, 44 k and 356 k full voxels, 9 % of the grid, 47 % of their box) and two
+/// spheres in opposite corners of a 200×160×120 grid (89 k full voxels, 3 % of their box of
+/// 2.6 M), which set the fixed and per-box terms; the per-full-voxel terms refitted in the eighth
+/// round (the density, stage 1's light and the solver's rows smaller) to the cumulus at 100×80×60,
+/// 200×160×120 and 400×320×240 (2.85 M full voxels, at 160×120 pixels), where `full` measured
+/// 21.1, 81.5 and 521 MB and `diffusion` 14.9 and 67.2 MB: the estimates are 30–45 % above those
+/// (on the safe side). The index's 0.25 B per grid voxel is rounded up to 1 B. `single` and
+/// `reference` hold the density, a dense copy of its box and a majorant or transmittance grid
+/// (16 B per grid voxel, an upper bound).
 pub fn grid_memory(method: Method) -> GridMemory {
     const MB: u64 = 1 << 20;
     match method {
@@ -157,14 +156,14 @@ pub fn grid_memory(method: Method) -> GridMemory {
             fixed: 16 * MB,
             per_grid: 1,
             per_box: 10,
-            per_full: 334,
+            per_full: 170,
         },
         // full, and any method added later: the largest estimate.
         _ => GridMemory {
             fixed: 16 * MB,
             per_grid: 1,
             per_box: 10,
-            per_full: 394,
+            per_full: 220,
         },
     }
 }
@@ -344,11 +343,11 @@ mod tests {
             }
         );
         // The default cloud at 100×80×60: 9 % of the grid is full and the estimate is above the
-        // 26.5 MB measured at 8×6 pixels, by less than half again (docs/performance.md).
+        // 21.1 MB measured at 8×6 pixels, by less than half again (docs/performance.md).
         let scene = Scene::default_scene().unwrap();
         let size = CloudSize::of(&scene.medium.density);
         assert!((40_000..50_000).contains(&size.full), "{size:?}");
         let mb = grid_memory(Method::Full).bytes(size) >> 20;
-        assert!((27..40).contains(&mb), "{mb} MB");
+        assert!((22..32).contains(&mb), "{mb} MB");
     }
 }
