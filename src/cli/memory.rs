@@ -139,7 +139,7 @@ impl GridMemory {
 /// 2.6 M), which set the fixed and per-box terms; the per-full-voxel terms refitted in the eighth
 /// round (the density, stage 1's light and the solver's rows smaller) to the cumulus at 100×80×60,
 /// 200×160×120 and 400×320×240 (2.85 M full voxels, at 160×120 pixels), where `full` measured
-/// 21.1, 81.5 and 521 MB and `diffusion` 14.9 and 67.2 MB: the estimates are 30–45 % above those
+/// 21.0, 73.2 and 490 MB and `diffusion` 15.0 and 66.0 MB: the estimates are 33–50 % above those
 /// (on the safe side). The index's 0.25 B per grid voxel is rounded up to 1 B. `single` and
 /// `reference` hold the density, a dense copy of its box and a majorant or transmittance grid
 /// (16 B per grid voxel, an upper bound).
