@@ -78,28 +78,16 @@ pub struct CloudSize {
 }
 
 impl CloudSize {
-    /// Count them in a density (one pass over its full voxels; no allocation).
+    /// Read them off a density (its full-voxel count and box).
     pub fn of(density: &Density) -> CloudSize {
-        let d = density.dims();
-        let (mut lo, mut hi, mut full) = (d, [0usize; 3], 0u64);
-        for (n, _) in density.full_voxels() {
-            let ijk = [n % d[0], (n / d[0]) % d[1], n / (d[0] * d[1])];
-            for a in 0..3 {
-                lo[a] = lo[a].min(ijk[a]);
-                hi[a] = hi[a].max(ijk[a] + 1);
-            }
-            full += 1;
-        }
-        let boxed = if full == 0 {
-            0
-        } else {
-            (0..3).map(|a| (hi[a] - lo[a]) as u64).product()
-        };
+        let (boxed, row) = density.full_box().map_or((0, 0), |(lo, hi)| {
+            ((0..3).map(|a| (hi[a] - lo[a]) as u64).product(), (hi[0] - lo[0]) as u64)
+        });
         CloudSize {
             grid: density.len() as u64,
             boxed,
-            full,
-            row: if full == 0 { 0 } else { (hi[0] - lo[0]) as u64 },
+            full: density.count() as u64,
+            row,
         }
     }
 }

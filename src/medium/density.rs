@@ -18,6 +18,8 @@ pub struct Density {
     values: VoxelField<f32>,
     /// Largest ρ (0 for an empty grid).
     max: f32,
+    /// Index box [lo, hi) of the full voxels (`None` without any).
+    full_box: Option<([usize; 3], [usize; 3])>,
 }
 
 impl Density {
@@ -26,10 +28,27 @@ impl Density {
         let index = grid.full_index();
         let data = grid.data();
         let packed = index.full_voxels().map(|g| data[g]);
+        let d = grid.dims();
+        let (mut lo, mut hi) = (d, [0usize; 3]);
+        for g in index.full_voxels() {
+            let c = [g % d[0], (g / d[0]) % d[1], g / (d[0] * d[1])];
+            for a in 0..3 {
+                lo[a] = lo[a].min(c[a]);
+                hi[a] = hi[a].max(c[a] + 1);
+            }
+        }
         Density {
             values: VoxelField::new(index.clone(), 0.0, packed),
             max: grid.max_value(),
+            full_box: (index.count() > 0).then_some((lo, hi)),
         }
+    }
+
+    /// Index box [lo, hi) of the full voxels, `None` when there is none (computed once, when
+    /// packed: the solver's domain, the dense box copies and the memory guard read it).
+    #[inline]
+    pub fn full_box(&self) -> Option<([usize; 3], [usize; 3])> {
+        self.full_box
     }
 
     /// The dense grid (for exports and tests; 4 B per grid voxel while it lives).

@@ -390,18 +390,7 @@ impl Medium {
     /// Index box [lo, hi) of every non-empty voxel grown by `margin` voxels, clipped to the grid.
     pub fn active_box(&self, margin: usize) -> Option<([usize; 3], [usize; 3])> {
         let d = self.dims();
-        let mut lo = d;
-        let mut hi = [0usize; 3];
-        for (n, _) in self.density.full_voxels() {
-            let c = [n % d[0], (n / d[0]) % d[1], n / (d[0] * d[1])];
-            for a in 0..3 {
-                lo[a] = lo[a].min(c[a]);
-                hi[a] = hi[a].max(c[a] + 1);
-            }
-        }
-        if hi[0] == 0 {
-            return None;
-        }
+        let (mut lo, mut hi) = self.density.full_box()?;
         for a in 0..3 {
             lo[a] = lo[a].saturating_sub(margin);
             hi[a] = (hi[a] + margin).min(d[a]);
