@@ -483,20 +483,23 @@ impl Family {
 /// allocator hands the pages over zeroed (no serial fill of 96 B a voxel).
 type Acc = [f64; 12];
 
+/// The lanes of [`Acc`], in order: a sweep accumulates lanes `lanes[..]` of it per voxel.
+const ALL_LANES: [usize; 12] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11];
+
 /// The accumulators of one box row (y, z) of full voxels, in x order, and the row's cursor: the
 /// rank of the next voxel an x-axis sweep reaches (its planes cross the row one voxel at a time).
-struct Row<'a> {
-    acc: &'a mut [Acc],
+struct Row<'a, const L: usize> {
+    acc: &'a mut [[f64; L]],
     /// Empty without the sky SH.
     sh: &'a mut [[f32; 3 * SH_COEFFS]],
     cursor: usize,
 }
 
-impl Row<'_> {
-    /// Reduce into the row's voxel of rank `r`.
+impl<const L: usize> Row<'_, L> {
+    /// Reduce lanes `lanes` into the row's voxel of rank `r`.
     #[inline]
-    fn reduce(&mut self, fams: &[Family], coef: &[Coef], lay: &Layout, c: [usize; 3], r: usize) {
-        reduce_voxel(fams, coef, lay, c, &mut self.acc[r], self.sh.get_mut(r));
+    fn reduce(&mut self, fams: &[Family], coef: &[Coef], lay: &Layout, c: [usize; 3], r: usize, lanes: &[usize; L]) {
+        reduce_voxel(fams, coef, lay, c, &mut self.acc[r], lanes, self.sh.get_mut(r));
     }
 }
 
@@ -539,15 +542,22 @@ impl Coef {
 /// Add the current plane's sums of `fams` (coefficients `coef`) into voxel `c`'s accumulators,
 /// in family order.
 #[inline]
-fn reduce_voxel(fams: &[Family], coef: &[Coef], lay: &Layout, c: [usize; 3], acc: &mut Acc, mut sh: Option<&mut [f32; 3 * SH_COEFFS]>) {
+fn reduce_voxel<const L: usize>(
+    fams: &[Family],
+    coef: &[Coef],
+    lay: &Layout,
+    c: [usize; 3],
+    acc: &mut [f64; L],
+    lanes: &[usize; L],
+    mut sh: Option<&mut [f32; 3 * SH_COEFFS]>,
+) {
     let pi = c[lay.v] * lay.nu + c[lay.u];
     for (f, k) in fams.iter().zip(coef) {
         let s = f.sums[pi];
         let sd = [s[0] as f64, s[1] as f64, s[2] as f64];
-        for (a, km) in acc.chunks_exact_mut(3).zip(k.m.chunks_exact(3)) {
-            for c in 0..3 {
-                a[c] += sd[c] * km[c];
-            }
+        // Lane t is band t % 3 of term t / 3.
+        for (a, &t) in acc.iter_mut().zip(lanes) {
+            *a += sd[t % 3] * k.m[t];
         }
         if let (Some(ksh), Some(sh)) = (&k.sh, sh.as_deref_mut()) {
             for ((a, kc), sc) in sh.chunks_exact_mut(SH_COEFFS).zip(ksh.chunks_exact(SH_COEFFS)).zip(s) {
@@ -556,6 +566,114 @@ fn reduce_voxel(fams: &[Family], coef: &[Coef], lay: &Layout, c: [usize; 3], acc
                 }
             }
         }
+    }
+}
+
+/// What stage 1's sweeps read: the cloud box's density `rho` (box dims `bd`), voxel size `h`,
+/// the families `plan` of the sources in `sw`.
+struct Swept<'a> {
+    rho: &'a [f32],
+    bd: [usize; 3],
+    h: Vec3,
+    plan: &'a [Planned],
+    sw: &'a Sweep<'a>,
+    sky_single: bool,
+    /// Full voxels (the accumulators).
+    full: usize,
+}
+
+impl Swept<'_> {
+    /// Sweep every family, accumulating lanes `lanes` of [`Acc`] per full voxel (in grid order);
+    /// also the sky SH (in its field's slots, when asked for) and the rays that hit the cloud.
+    fn sweep<const L: usize>(&self, lanes: &[usize; L]) -> (Vec<[f64; L]>, Vec<[f32; 3 * SH_COEFFS]>, u64) {
+        let (rho, bd, h, plan, sw) = (self.rho, self.bd, self.h, self.plan, self.sw);
+        // Accumulators per full voxel in box order (= grid order: they are the fields' packed
+        // storage), split into rows (y, z) for the parallel reduction.
+        let row_len: Vec<usize> = rho.chunks_exact(bd[0]).map(|r| r.iter().filter(|v| **v > 0.0).count()).collect();
+        let full: usize = row_len.iter().sum();
+        assert_eq!(full, self.full, "stage 1 accumulates every full voxel once");
+        let mut acc: Vec<[f64; L]> = vec![[0.0; L]; full];
+        // The sky SH in its field's slots (slot 0 the empty voxels' zero), filled in place.
+        let mut sh = vec![[0f32; 3 * SH_COEFFS]; if self.sky_single { full + 1 } else { 0 }];
+        let mut rays = 0u64;
+        {
+            let mut rows: Vec<Row<L>> = Vec::with_capacity(row_len.len());
+            let (mut rest, mut rest_sh) = (&mut acc[..], sh.get_mut(1..).unwrap_or_default());
+            for &len in &row_len {
+                let (row, r) = rest.split_at_mut(len);
+                let (row_sh, r_sh) = rest_sh.split_at_mut(if self.sky_single { len } else { 0 });
+                rows.push(Row {
+                    acc: row,
+                    sh: row_sh,
+                    cursor: 0,
+                });
+                (rest, rest_sh) = (r, r_sh);
+            }
+            // Sweep the families in groups of one axis and direction, in a fixed order: within a
+            // group every family crosses the same plane at the same step, so its voxels are reduced
+            // into the accumulators while that plane is in cache. One axis's layout at a time.
+            for a in 0..3 {
+                if !plan.iter().any(|f| f.axis == a) {
+                    continue;
+                }
+                let lay = Layout::new(a, bd, rho);
+                for forward in [true, false] {
+                    let group: Vec<_> = plan.iter().filter(|f| f.axis == a && (f.d[a] > 0.0) == forward).collect();
+                    if group.is_empty() {
+                        continue;
+                    }
+                    let mut fams: Vec<Family> = group.iter().map(|f| Family::new(f, &lay, h, sw.sources[f.src].radiance)).collect();
+                    let coef: Vec<Coef> = fams.iter().map(|f| Coef::new(&sw.sources[f.src])).collect();
+                    // An x sweep meets each row's voxels in x order (backwards: from its end).
+                    for (row, &len) in rows.iter_mut().zip(&row_len) {
+                        row.cursor = if forward { 0 } else { len };
+                    }
+                    for p in 0..lay.na {
+                        fams.par_iter_mut().for_each(|f| f.step(sw, &lay, p));
+                        let ca = fams[0].plane(&lay, p);
+                        let by = bd[1];
+                        let (fams, coef, lay) = (&fams[..], &coef[..], &lay);
+                        match a {
+                            2 => rows[ca * by..(ca + 1) * by].par_iter_mut().enumerate().for_each(|(y, row)| {
+                                let mut r = 0;
+                                for x in 0..bd[0] {
+                                    if rho[x + bd[0] * (y + by * ca)] > 0.0 {
+                                        row.reduce(fams, coef, lay, [x, y, ca], r, lanes);
+                                        r += 1;
+                                    }
+                                }
+                            }),
+                            _ => rows.par_chunks_mut(by).enumerate().for_each(|(z, rz)| {
+                                if a == 0 {
+                                    for (y, row) in rz.iter_mut().enumerate() {
+                                        if rho[ca + bd[0] * (y + by * z)] > 0.0 {
+                                            if !forward {
+                                                row.cursor -= 1;
+                                            }
+                                            let r = row.cursor;
+                                            row.reduce(fams, coef, lay, [ca, y, z], r, lanes);
+                                            if forward {
+                                                row.cursor += 1;
+                                            }
+                                        }
+                                    }
+                                } else {
+                                    let mut r = 0;
+                                    for x in 0..bd[0] {
+                                        if rho[x + bd[0] * (ca + by * z)] > 0.0 {
+                                            rz[ca].reduce(fams, coef, lay, [x, ca, z], r, lanes);
+                                            r += 1;
+                                        }
+                                    }
+                                }
+                            }),
+                        }
+                    }
+                    rays += fams.iter().map(|f| f.hit.iter().filter(|h| **h).count() as u64).sum::<u64>();
+                }
+            }
+        }
+        (acc, sh, rays)
     }
 }
 
@@ -708,105 +826,32 @@ pub fn compute_with_sun(
         lo,
         atten: optics.sigma_t,
     };
-    // Accumulators per full voxel in box order (= grid order: they are the fields' packed
-    // storage), split into rows (y, z) for the parallel reduction.
-    let row_len: Vec<usize> = rho.chunks_exact(bd[0]).map(|r| r.iter().filter(|v| **v > 0.0).count()).collect();
-    let full: usize = row_len.iter().sum();
-    assert_eq!(full, index.count(), "stage 1 accumulates every full voxel once");
-    let mut acc: Vec<Acc> = vec![[0.0; 12]; full];
-    // The sky SH in its field's slots (slot 0 the empty voxels' zero), filled in place.
-    let mut sh = vec![[0f32; 3 * SH_COEFFS]; if settings.sky_single { full + 1 } else { 0 }];
-    let mut rays = 0u64;
-    {
-        let mut rows: Vec<Row> = Vec::with_capacity(row_len.len());
-        let (mut rest, mut rest_sh) = (&mut acc[..], sh.get_mut(1..).unwrap_or_default());
-        for &len in &row_len {
-            let (row, r) = rest.split_at_mut(len);
-            let (row_sh, r_sh) = rest_sh.split_at_mut(if settings.sky_single { len } else { 0 });
-            rows.push(Row {
-                acc: row,
-                sh: row_sh,
-                cursor: 0,
-            });
-            (rest, rest_sh) = (r, r_sh);
-        }
-        // Sweep the families in groups of one axis and direction, in a fixed order: within a
-        // group every family crosses the same plane at the same step, so its voxels are reduced
-        // into the accumulators while that plane is in cache. One axis's layout at a time.
-        for a in 0..3 {
-            if !plan.iter().any(|f| f.axis == a) {
-                continue;
-            }
-            let lay = Layout::new(a, bd, &rho);
-            for forward in [true, false] {
-                let group: Vec<_> = plan.iter().filter(|f| f.axis == a && (f.d[a] > 0.0) == forward).collect();
-                if group.is_empty() {
-                    continue;
-                }
-                let mut fams: Vec<Family> = group.iter().map(|f| Family::new(f, &lay, h, sw.sources[f.src].radiance)).collect();
-                let coef: Vec<Coef> = fams.iter().map(|f| Coef::new(&sw.sources[f.src])).collect();
-                // An x sweep meets each row's voxels in x order (backwards: from its end).
-                for (row, &len) in rows.iter_mut().zip(&row_len) {
-                    row.cursor = if forward { 0 } else { len };
-                }
-                for p in 0..lay.na {
-                    fams.par_iter_mut().for_each(|f| f.step(&sw, &lay, p));
-                    let ca = fams[0].plane(&lay, p);
-                    let by = bd[1];
-                    let (fams, coef, lay) = (&fams[..], &coef[..], &lay);
-                    match a {
-                        2 => rows[ca * by..(ca + 1) * by].par_iter_mut().enumerate().for_each(|(y, row)| {
-                            let mut r = 0;
-                            for x in 0..bd[0] {
-                                if rho[x + bd[0] * (y + by * ca)] > 0.0 {
-                                    row.reduce(fams, coef, lay, [x, y, ca], r);
-                                    r += 1;
-                                }
-                            }
-                        }),
-                        _ => rows.par_chunks_mut(by).enumerate().for_each(|(z, rz)| {
-                            if a == 0 {
-                                for (y, row) in rz.iter_mut().enumerate() {
-                                    if rho[ca + bd[0] * (y + by * z)] > 0.0 {
-                                        if !forward {
-                                            row.cursor -= 1;
-                                        }
-                                        let r = row.cursor;
-                                        row.reduce(fams, coef, lay, [ca, y, z], r);
-                                        if forward {
-                                            row.cursor += 1;
-                                        }
-                                    }
-                                }
-                            } else {
-                                let mut r = 0;
-                                for x in 0..bd[0] {
-                                    if rho[x + bd[0] * (ca + by * z)] > 0.0 {
-                                        rz[ca].reduce(fams, coef, lay, [x, ca, z], r);
-                                        r += 1;
-                                    }
-                                }
-                            }
-                        }),
-                    }
-                }
-                rays += fams.iter().map(|f| f.hit.iter().filter(|h| **h).count() as u64).sum::<u64>();
-            }
-        }
-    }
-    // ρ of the full voxels in box order, the accumulators' order.
-    let packed_rho: Vec<f32> = rho.iter().copied().filter(|&r| r > 0.0).collect();
-    drop(rho);
-    // The sun alone (no bin propagated) and one extinction for every band: Q0 and Q1 follow from
-    // ρT̄ (4 B per full voxel instead of 48).
+    // With the sun the only source and one extinction for every band, Q0 and Q1 follow from
+    // ρT̄ (4 B per full voxel instead of 48), and the sweep accumulates Σ0 of one band only: 8 B
+    // per full voxel instead of 96 (the accumulators were `full`'s peak at 200×160×120).
     let grey = sw.atten.iter().all(|&a| a == sw.atten[0]);
-    let scattering = if grey && sw.sources.iter().all(|s| s.bin.is_none()) {
-        let (dir, e) = sources.sun.unwrap_or((Vec3::Y, Rgb::ZERO));
-        FirstScattering::sun(index.clone(), &optics, &acc, &packed_rho, dir, e)
-    } else {
-        FirstScattering::general(index.clone(), &optics, &acc, &packed_rho)
+    let sun_only = grey && sw.sources.iter().all(|s| s.bin.is_none());
+    let (dir, e) = sources.sun.unwrap_or((Vec3::Y, Rgb::ZERO));
+    let swept = Swept {
+        rho: &rho,
+        bd,
+        h,
+        plan: &plan,
+        sw: &sw,
+        sky_single: settings.sky_single,
+        full: index.count(),
     };
-    drop(acc);
+    // ρ of the full voxels in box order, the accumulators' order (the box is dropped first).
+    let pack = |rho: Vec<f32>| -> Vec<f32> { rho.into_iter().filter(|&r| r > 0.0).collect() };
+    let (scattering, sh, rays) = if sun_only {
+        let (acc, sh, rays) = swept.sweep(&[FirstScattering::sun_band(e)]);
+        let packed_rho = pack(rho);
+        (FirstScattering::sun(index.clone(), &optics, &acc, &packed_rho, dir, e), sh, rays)
+    } else {
+        let (acc, sh, rays) = swept.sweep(&ALL_LANES);
+        let packed_rho = pack(rho);
+        (FirstScattering::general(index.clone(), &optics, &acc, &packed_rho), sh, rays)
+    };
     IncidentLight {
         dims,
         scattering,

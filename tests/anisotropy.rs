@@ -138,7 +138,7 @@ fn slab_lit_from_above_is_brighter_below_darker_above() {
     };
     let sun_t = inc.sun_transmittance.grid.clone();
     let off = LitVolume::new(m.clone(), i0_rgb(&sol), sun_t, sun, Sky::constant(Rgb::ZERO), None);
-    let on = off.clone().with_flux(FluxField::new(&m, &i1));
+    let on = off.clone().with_flux(FluxField::new(&m, i1.clone()));
     for j in 2..8 {
         let idx = 5 + d[0] * (j + d[1] * 5);
         assert!(i1[idx][1].y < 0.0, "layer {j}: I1 = {:?}", i1[idx][1]);

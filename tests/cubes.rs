@@ -5,7 +5,9 @@
 use cloudgi::cube::border::{find_border_voxels, render_border_cubes};
 use cloudgi::cube::ground::{hemicube_irradiance, hemicube_weights, render_ground, LitGround};
 use cloudgi::cube::render::{opposite_bin, render_cube_brute, BinMask, CubeOptions, CubeRenderer};
-use cloudgi::lighting::{DirectionBins, Ground, Sky, Sun};
+use cloudgi::cube::{clear_air, BorderKeep, BorderLight};
+use cloudgi::diffusion::boundary::hemisphere_radiance;
+use cloudgi::lighting::{DirectionBins, Ground, Sky, Sun, CUBE_FACES};
 use cloudgi::lit::LitVolume;
 use cloudgi::math::{Rgb, Vec3};
 use cloudgi::medium::{Density, Grid3, Medium};
@@ -506,22 +508,56 @@ fn clear_air_on_a_small_scene_lights_the_ground_and_fills_every_needed_bin() {
     let n = scene.medium.density.len();
     let l = scene.sky.radiance(Vec3::Y);
     let lit = cloudgi::render::diffusion::scene_lit_volume(&scene, vec![l; n], &sun_t);
-    let out = cloudgi::cube::clear_air(lit, scene.ground.as_ref(), &scene.render.cubes, &NoProgress);
-    assert!(!out.cubes.is_empty());
+    let out = clear_air(
+        lit.clone(),
+        scene.ground.as_ref(),
+        &scene.render.cubes,
+        BorderKeep::Bins,
+        &NoProgress,
+    );
+    let BorderLight::Bins(cubes) = &out.border else {
+        panic!("asked for the bins")
+    };
+    assert!(!cubes.is_empty());
     let g = out.lit.ground.as_ref().unwrap();
     let grid = g.grid.as_ref().expect("the cloud's ground is rendered");
     // Somewhere in its shadow the ground gets clearly less than the unoccluded irradiance.
     assert!(grid.irradiance.iter().any(|e| e.x < 0.9 * g.unoccluded.x));
-    for (q, m) in out.cubes.needed.iter().enumerate() {
+    for (q, m) in cubes.needed.iter().enumerate() {
         for b in 0..96 {
-            let x = out.cubes.bins(q)[b];
-            assert_eq!(m.contains(b), out.cubes.lookup(out.cubes.voxels[q], b).is_some());
+            let x = cubes.bins(q)[b];
+            assert_eq!(m.contains(b), cubes.lookup(cubes.voxels[q], b).is_some());
             assert!(x.is_finite() && x.min_element() >= 0.0);
             if m.contains(b) {
                 assert!(x.max_element() > 0.0, "needed bin {b} of cube {q} is black");
             }
         }
     }
+    // Kept as face light, each cube gives, per face it shares with the cloud, exactly its bins'
+    // hemisphere mean over that face's outer side (the full voxel's face has the opposite normal).
+    let faces = clear_air(lit, scene.ground.as_ref(), &scene.render.cubes, BorderKeep::FaceLight, &NoProgress);
+    let BorderLight::FaceLight(n, light) = &faces.border else {
+        panic!("asked for the face light")
+    };
+    assert_eq!(*n, cubes.len());
+    let bins = DirectionBins::new();
+    let d = scene.medium.dims();
+    let mut want = Vec::new();
+    for q in 0..cubes.len() {
+        let v = cubes.voxels[q];
+        for f in (0..6).filter(|f| cubes.faces[q] & (1 << f) != 0) {
+            let l = hemisphere_radiance(&bins.bins, &cubes.bins(q), CUBE_FACES[f ^ 1].n);
+            want.push((v[0] + d[0] * (v[1] + d[1] * v[2]), f ^ 1, l));
+        }
+    }
+    let mut got = light.clone();
+    let key = |e: &(usize, usize, Rgb)| (e.0, e.1);
+    got.sort_by_key(key);
+    want.sort_by_key(key);
+    assert_eq!(got, want);
+    assert!(want
+        .iter()
+        .all(|(_, _, l)| l.is_finite() && l.min_element() >= 0.0 && l.max_element() > 0.0));
 }
 
 #[test]

@@ -16,7 +16,8 @@
 //! edge, 72 of the 96 bins; the paper rendered 80).
 
 use super::render::{opposite_bin, BinMask, CubeOptions, CubeRenderer};
-use crate::lighting::bins::NUM_BINS;
+use crate::diffusion::boundary::hemisphere_radiance;
+use crate::lighting::bins::{DirectionBins, CUBE_FACES, NUM_BINS};
 use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
 use crate::medium::Density;
@@ -185,17 +186,70 @@ pub const SHARED_FOOTPRINTS: f32 = 4.0;
 /// estimates of the bins' means as each voxel's own rays (unit test below); the clear-air stage
 /// runs ~40 % fewer instructions (docs/performance.md).
 pub fn render_border_cubes_with(renderer: &CubeRenderer<'_>, progress: &dyn Progress) -> BorderCubes {
-    let mut uniform = renderer.clone();
-    uniform.uniform_short_levels = true;
-    let renderer = &uniform;
-    let lit = renderer.lit;
-    let found = find_border_voxels(&lit.medium.density);
+    let found = find_border_voxels(&renderer.lit.medium.density);
     let needed: Vec<BinMask> = found.iter().map(|(_, f)| BinMask::for_faces(*f)).collect();
     let mut offsets = Vec::with_capacity(found.len() + 1);
     offsets.push(0);
     for m in &needed {
         offsets.push(offsets.last().copied().unwrap_or(0) + m.count() as usize);
     }
+    let mut radiance = vec![Rgb::ZERO; offsets[found.len()]];
+    render_each(renderer, progress, &found, &needed, |n, bins| {
+        radiance[offsets[n]..offsets[n + 1]].copy_from_slice(bins);
+    });
+    BorderCubes {
+        dims: renderer.lit.dims(),
+        voxels: found.iter().map(|(v, _)| *v).collect(),
+        faces: found.iter().map(|(_, f)| *f).collect(),
+        needed,
+        radiance,
+        offsets,
+    }
+}
+
+/// What the border cubes send into the cloud through its boundary faces, without their bins:
+/// for each face between a border voxel and a full one, (the border voxel's grid index, the
+/// full voxel's outward normal there as an index into [`CUBE_FACES`], the cube's cosine-weighted
+/// mean radiance over that face's outer hemisphere) — the input of
+/// [`crate::diffusion::BoundaryLight::with_ghosts`]. Each cube is reduced as its batch is
+/// rendered, so the bins of only one batch are held (all cubes' bins took 66 B per full voxel
+/// at 200×160×120, the peak of `full`). Returns the number of cubes too.
+pub fn render_border_face_light_with(renderer: &CubeRenderer<'_>, progress: &dyn Progress) -> (usize, Vec<(usize, usize, Rgb)>) {
+    let found = find_border_voxels(&renderer.lit.medium.density);
+    let needed: Vec<BinMask> = found.iter().map(|(_, f)| BinMask::for_faces(*f)).collect();
+    let d = renderer.lit.dims();
+    let bins = DirectionBins::new();
+    let mut light = Vec::new();
+    render_each(renderer, progress, &found, &needed, |n, packed| {
+        let mut all = [Rgb::ZERO; NUM_BINS];
+        for (b, l) in needed[n].iter().zip(packed) {
+            all[b] = *l;
+        }
+        let (v, faces) = found[n];
+        let ghost = v[0] + d[0] * (v[1] + d[1] * v[2]);
+        // The full neighbour lies along FACE_OFFSETS[f]; its face towards this voxel has the
+        // opposite normal, the other index of the pair (+a, −a).
+        for f in (0..6).filter(|f| faces & (1 << f) != 0) {
+            let face = f ^ 1;
+            light.push((ghost, face, hemisphere_radiance(&bins.bins, &all, CUBE_FACES[face].n)));
+        }
+    });
+    (found.len(), light)
+}
+
+/// Render the cubes of the border voxels `found` (bins `needed`), handing each cube's packed
+/// bins to `take` in an order that does not depend on the thread count.
+fn render_each(
+    renderer: &CubeRenderer<'_>,
+    progress: &dyn Progress,
+    found: &[([usize; 3], u8)],
+    needed: &[BinMask],
+    mut take: impl FnMut(usize, &[Rgb]),
+) {
+    let mut uniform = renderer.clone();
+    uniform.uniform_short_levels = true;
+    let renderer = &uniform;
+    let lit = renderer.lit;
     let top = SHARED_SCALES.min(renderer.levels().saturating_sub(1));
     // The voxels of each largest block, blocks in memory order of their first voxel.
     let key = |n: usize, scale: usize| {
@@ -283,22 +337,13 @@ pub fn render_border_cubes_with(renderer: &CubeRenderer<'_>, progress: &dyn Prog
     // rendered: the per-voxel vectors of only one batch are alive at a time (all of them at once
     // were 2× the packed bins, 41 MB at 200×160×120).
     const BATCH: usize = 64;
-    let mut radiance = vec![Rgb::ZERO; offsets[found.len()]];
     for batch in groups.chunks(BATCH) {
         let per_group: Vec<Vec<(usize, Vec<Rgb>)>> = batch.par_iter().map(render_group).collect();
         for (n, bins) in per_group.into_iter().flatten() {
-            radiance[offsets[n]..offsets[n + 1]].copy_from_slice(&bins);
+            take(n, &bins);
         }
     }
     progress.end();
-    BorderCubes {
-        dims: lit.dims(),
-        voxels: found.iter().map(|(v, _)| *v).collect(),
-        faces: found.iter().map(|(_, f)| *f).collect(),
-        needed,
-        radiance,
-        offsets,
-    }
 }
 
 #[cfg(test)]

@@ -19,6 +19,7 @@ pub use render::{opposite_bin, render_cube_brute, BinMask, CubeOptions, CubeRend
 use crate::error::{check, Result};
 use crate::lighting::Ground;
 use crate::lit::LitVolume;
+use crate::math::Rgb;
 use crate::pipeline::Progress;
 
 /// The clear-air loop of `full` (paper section 3).
@@ -66,15 +67,44 @@ impl ClearAirSettings {
 pub struct ClearAir {
     /// The lit volume, with the ground from its hemicubes (if the scene has a ground).
     pub lit: LitVolume,
-    /// The border cubes, rendered over that ground; [`BorderCubes::hook`] is stage 1's hook.
-    pub cubes: BorderCubes,
+    /// What the border cubes, rendered over that ground, keep.
+    pub border: BorderLight,
+}
+
+/// What is kept of the border cubes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BorderKeep {
+    /// Every cube's needed bins: stage 1's hook ([`BorderCubes::hook`]).
+    Bins,
+    /// Only the light each cube sends through its faces into the cloud
+    /// ([`border::render_border_face_light_with`]): the boundary condition's.
+    FaceLight,
+}
+
+/// The border cubes' light, as [`BorderKeep`] asked.
+#[derive(Clone, Debug)]
+pub enum BorderLight {
+    Bins(BorderCubes),
+    /// The number of cubes, and (border voxel's grid index, the full voxel's face, L_face) per
+    /// face between them and the cloud.
+    FaceLight(usize, Vec<(usize, usize, Rgb)>),
+}
+
+impl BorderLight {
+    /// Number of border cubes rendered.
+    pub fn cubes(&self) -> usize {
+        match self {
+            BorderLight::Bins(c) => c.len(),
+            BorderLight::FaceLight(n, _) => *n,
+        }
+    }
 }
 
 /// One iteration's cubes over `lit` (the current I0, its ground unoccluded): the ground's
-/// hemicubes first (they look up only), then every border cube with that lit ground behind it.
-/// Both render through the lit volume's one pyramid. `opts`: `render.cube_resolution`,
-/// `render.ground_samples`.
-pub fn clear_air(lit: LitVolume, ground: Option<&Ground>, opts: &CubeOptions, progress: &dyn Progress) -> ClearAir {
+/// hemicubes first (they look up only), then every border cube with that lit ground behind it,
+/// of which `keep` is kept. Both render through the lit volume's one pyramid. `opts`:
+/// `render.cube_resolution`, `render.ground_samples`.
+pub fn clear_air(lit: LitVolume, ground: Option<&Ground>, opts: &CubeOptions, keep: BorderKeep, progress: &dyn Progress) -> ClearAir {
     let mut lit = lit;
     // The lit ground keeps the pyramid: one set of level tables for both renderers.
     let tables = LevelTables::new(&lit, opts);
@@ -84,6 +114,13 @@ pub fn clear_air(lit: LitVolume, ground: Option<&Ground>, opts: &CubeOptions, pr
         lit = lit.with_ground(Some(lg));
     }
     let renderer = CubeRenderer::with_tables(&lit, &border::border_options(opts), tables);
-    let cubes = border::render_border_cubes_with(&renderer, progress);
-    ClearAir { lit, cubes }
+    let border = match keep {
+        BorderKeep::Bins => BorderLight::Bins(border::render_border_cubes_with(&renderer, progress)),
+        BorderKeep::FaceLight => {
+            let (n, light) = border::render_border_face_light_with(&renderer, progress);
+            BorderLight::FaceLight(n, light)
+        }
+    };
+    drop(renderer);
+    ClearAir { lit, border }
 }

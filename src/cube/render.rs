@@ -832,7 +832,7 @@ mod tests {
         let i1 = [Vec3::new(3.0, -1.0, 0.5), Vec3::new(-0.4, 0.2, 1.0), Vec3::new(0.0, 0.0, -2.5)];
         let n = dims[0] * dims[1] * dims[2];
         let field = VoxelField::from_fn(m.density.full_index(), [Vec3::ZERO; 3], |_| i1);
-        let flux = FluxField::new(&m, &field);
+        let flux = FluxField::new(&m, field.clone());
         let sun = Sun {
             dir: Vec3::Y,
             irradiance: Rgb::ONE,

@@ -27,6 +27,7 @@ use crate::incident::IncidentLight;
 use crate::math::{Rgb, Vec3};
 use crate::medium::sparse::VoxelField;
 use crate::medium::Medium;
+use rayon::prelude::*;
 use std::sync::Arc;
 
 /// I1 per voxel per band (`[band]` a vector, W·m⁻²·sr⁻¹), stored per full voxel; zero where
@@ -99,12 +100,16 @@ pub struct FluxField {
 }
 
 impl FluxField {
-    /// From I1 per voxel ([`diffuse_flux`]) and the medium it was computed on.
-    pub fn new(m: &Medium, i1: &VoxelField<[Vec3; 3]>) -> FluxField {
+    /// From I1 per voxel ([`diffuse_flux`]) and the medium it was computed on; I1's storage
+    /// becomes ρ·I1 in place (a copy was 36 B per full voxel at `full`'s last peak).
+    pub fn new(m: &Medium, i1: VoxelField<[Vec3; 3]>) -> FluxField {
         let rho = &*m.density;
-        let rho_i1 = VoxelField::from_fn(m.density.full_index(), [Vec3::ZERO; 3], |n| {
-            let (v, r) = (i1[n], rho.at(n));
-            [v[0] * r, v[1] * r, v[2] * r]
+        assert_eq!(i1.index(), &m.density.full_index(), "I1 is on the medium's full voxels");
+        let mut rho_i1 = i1;
+        rho_i1.packed_mut().par_iter_mut().enumerate().for_each(|(u, v)| {
+            // Full voxel u is slot u + 1.
+            let r = rho.at_slot(u + 1);
+            *v = [v[0] * r, v[1] * r, v[2] * r];
         });
         FluxField {
             dims: m.dims(),

@@ -89,7 +89,9 @@ use crate::medium::sparse::VoxelField;
 use crate::medium::Medium;
 use boundary::face_index;
 pub use boundary::BoundaryLight;
-use multigrid::{Hierarchy, Node, Operator};
+#[cfg(test)]
+use multigrid::Operator;
+use multigrid::{Hierarchy, Stencil, Stencils, NONE};
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -260,32 +262,111 @@ impl Domain {
     }
 }
 
-/// Band `c`'s operator and right-hand side: [`assemble_with`] with the operator.
+/// Band `c`'s operator (stored) and right-hand side, for the tests' dense comparisons.
 #[cfg(test)]
 pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_min: f64, dom: &Domain) -> (Operator, Vec<f64>) {
-    let (a, b) = assemble_with(m, inc, bl, c, tau_min, dom, true);
-    (a.expect("asked for the operator"), b)
+    use multigrid::Stencils;
+    let a = BandOperator::new(m, c, tau_min, dom);
+    let nodes = (0..a.len()).map(|u| a.node(u)).collect();
+    let b = band_rhs(m, inc, bl, c, tau_min).iter().map(|v| f64::from(*v)).collect();
+    (Operator { dims: dom.dims, nodes }, b)
 }
 
-/// Assemble band `c`'s right-hand side and, when `operator`, its operator (see the module docs)
-/// on the full voxels (in grid order, their cells indexing `dom`), with the light `bl` entering
-/// through the boundary faces. A band sharing another's operator needs only its right-hand side
-/// (the rows are computed but not stored).
-fn assemble_with(
-    m: &Medium,
-    inc: &IncidentLight,
-    bl: &BoundaryLight,
-    c: usize,
+/// Band `c`'s operator (see the module docs) on the full voxels (in grid order, their cells
+/// indexing `dom`), its rows made from the density when they are read: the multigrid's build
+/// reads each a few times instead of holding the assembled operator (48 B per unknown) beside
+/// the rows it builds.
+struct BandOperator<'a> {
+    rho: &'a crate::medium::density::Density,
+    index: Arc<crate::medium::sparse::FullIndex>,
+    dom: Domain,
+    grid: [usize; 3],
+    /// The box cell of each unknown (4 B per unknown while the hierarchy is built).
+    cells: Vec<u32>,
+    /// Absorption and transport coefficients at density 1 (m⁻¹).
+    sigma_a: f64,
+    sigma_tr: f64,
+    /// Voxel size per axis (m).
+    h: [f64; 3],
     tau_min: f64,
-    dom: &Domain,
-    operator: bool,
-) -> (Option<Operator>, Vec<f64>) {
+}
+
+impl<'a> BandOperator<'a> {
+    fn new(m: &'a Medium, c: usize, tau_min: f64, dom: &Domain) -> BandOperator<'a> {
+        let index = m.density.full_index();
+        let gd = m.dims();
+        let cells = index
+            .full_voxels()
+            .map(|idx| dom.cell([idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])]))
+            .collect();
+        BandOperator {
+            rho: &m.density,
+            index,
+            dom: *dom,
+            grid: gd,
+            cells,
+            sigma_a: m.optics.sigma_a(c),
+            sigma_tr: m.optics.sigma_tr(c),
+            h: [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64],
+            tau_min,
+        }
+    }
+}
+
+impl Stencils for BandOperator<'_> {
+    fn dims(&self) -> [usize; 3] {
+        self.dom.dims
+    }
+
+    fn len(&self) -> usize {
+        self.cells.len()
+    }
+
+    fn cell(&self, u: usize) -> u32 {
+        self.cells[u]
+    }
+
+    fn stencil(&self, u: usize) -> Stencil {
+        let (gd, d, lo) = (self.grid, self.dom.dims, self.dom.lo);
+        let c = self.cells[u] as usize;
+        let cell = [lo[0] + c % d[0], lo[1] + (c / d[0]) % d[1], lo[2] + c / (d[0] * d[1])];
+        let idx = cell[0] + gd[0] * (cell[1] + gd[1] * cell[2]);
+        let gstride = [1, gd[0], gd[0] * gd[1]];
+        // Unknown u is the u-th full voxel: slot u + 1.
+        let rp = self.rho.at_slot(u + 1) as f64;
+        let mut st = Stencil {
+            diag: rp * self.sigma_a,
+            off: [0.0; 6],
+            nbr: [NONE; 6],
+        };
+        for ax in 0..3 {
+            for (q, side) in [(2 * ax, -1i64), (2 * ax + 1, 1)] {
+                let nc = cell[ax] as i64 + side;
+                let nidx = (nc >= 0 && nc < gd[ax] as i64).then(|| (idx as i64 + side * gstride[ax] as i64) as usize);
+                // Slot 0 (empty, or beyond the grid) reads ρ = 0.
+                let sn = nidx.map_or(0, |g| self.index.slot(g));
+                let rn = self.rho.at_slot(sn) as f64;
+                if rn > 0.0 {
+                    let cf = interior_coupling(rp, rn, self.sigma_tr, self.h[ax], self.tau_min);
+                    st.diag += cf;
+                    (st.off[q], st.nbr[q]) = (-cf, (sn - 1) as u32);
+                } else {
+                    st.diag += boundary_terms(rp, self.sigma_tr, self.h[ax], self.tau_min).0;
+                }
+            }
+        }
+        st
+    }
+}
+
+/// Band `c`'s right-hand side per full voxel (in grid order), with the light `bl` entering
+/// through the boundary faces; computed in f64, kept in f32 (rounding it is far below the
+/// solver's tolerance).
+fn band_rhs(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_min: f64) -> Vec<f32> {
     let gd = m.dims();
-    let d = dom.dims;
     let rho = &*m.density;
     let index = m.density.full_index();
     let full: Vec<usize> = index.full_voxels().collect();
-    let sigma_a = m.optics.sigma_a(c);
     let sigma_tr = m.optics.sigma_tr(c);
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
     let gstride = [1, gd[0], gd[0] * gd[1]];
@@ -296,57 +377,32 @@ fn assemble_with(
     );
     // F = Q1/(ρσtr) per axis at the centre of the full voxel in slot `s`.
     let f_at = |s: usize, ax: usize| -> f64 { inc.scattering.q1_at_slot(ax, s, c) as f64 / (rho.at_slot(s) as f64 * sigma_tr) };
-    // Written in place (an unzip would hold a second copy while it gathers its pieces).
-    let mut b = vec![0f64; full.len()];
-    let row = |(&idx, bv): (&usize, &mut f64)| {
-        let sp = index.slot(idx);
-        let rp = rho.at_slot(sp) as f64;
-        let cell = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])];
-        let mut node = Node::at(dom.cell(cell));
-        let mut diag = rp * sigma_a;
-        let mut rhs = inc.scattering.q0_at_slot(sp, c) as f64;
-        for ax in 0..3 {
-            let fp = f_at(sp, ax);
-            for side in [-1i64, 1] {
-                let nc = cell[ax] as i64 + side;
-                let nidx = (nc >= 0 && nc < gd[ax] as i64).then(|| (idx as i64 + side * gstride[ax] as i64) as usize);
-                // Slot 0 (empty, or beyond the grid) reads ρ = 0.
-                let sn = nidx.map_or(0, |q| index.slot(q));
-                let rn = rho.at_slot(sn) as f64;
-                if rn > 0.0 {
-                    let cf = interior_coupling(rp, rn, sigma_tr, h[ax], tau_min);
-                    diag += cf;
-                    if side > 0 {
-                        node.up[ax] = -cf;
-                        node.up_nbr[ax] = (sn - 1) as u32;
+    full.par_iter()
+        .map(|&idx| {
+            let sp = index.slot(idx);
+            let rp = rho.at_slot(sp) as f64;
+            let cell = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])];
+            let mut rhs = inc.scattering.q0_at_slot(sp, c) as f64;
+            for ax in 0..3 {
+                let fp = f_at(sp, ax);
+                for side in [-1i64, 1] {
+                    let nc = cell[ax] as i64 + side;
+                    let nidx = (nc >= 0 && nc < gd[ax] as i64).then(|| (idx as i64 + side * gstride[ax] as i64) as usize);
+                    // Slot 0 (empty, or beyond the grid) reads ρ = 0.
+                    let sn = nidx.map_or(0, |q| index.slot(q));
+                    if rho.at_slot(sn) > 0.0 {
+                        let ff = 0.5 * (fp + f_at(sn, ax));
+                        rhs -= ff * side as f64 / h[ax];
+                    } else {
+                        let (dterm, fterm) = boundary_terms(rp, sigma_tr, h[ax], tau_min);
+                        // eq. 7 with incoming light: φ = (β(I_P − L_face) + f)/(1 + 2β).
+                        rhs += dterm * bl.at(nidx, face_index(ax, side), c) - fterm * fp * side as f64;
                     }
-                    let ff = 0.5 * (fp + f_at(sn, ax));
-                    rhs -= ff * side as f64 / h[ax];
-                } else {
-                    let (dterm, fterm) = boundary_terms(rp, sigma_tr, h[ax], tau_min);
-                    diag += dterm;
-                    // eq. 7 with incoming light: φ = (β(I_P − L_face) + f)/(1 + 2β).
-                    rhs += dterm * bl.at(nidx, face_index(ax, side), c) - fterm * fp * side as f64;
                 }
             }
-        }
-        node.diag = diag;
-        *bv = rhs;
-        node
-    };
-    let rows = full.par_iter().zip(b.par_iter_mut());
-    let nodes = if operator {
-        Some(Operator {
-            dims: d,
-            nodes: rows.map(row).collect(),
+            rhs as f32
         })
-    } else {
-        rows.for_each(|r| {
-            row(r);
-        });
-        None
-    };
-    (nodes, b)
+        .collect()
 }
 
 /// Net outgoing diffuse power (W per band) through every boundary face of the cloud: Σ A·4π φ_f,
@@ -393,6 +449,9 @@ pub fn boundary_outflow(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution
 /// Solve eq. 4 with eq. 7 for all three bands, `boundary` the light entering through the boundary
 /// faces ([`BoundaryLight::none`] for the paper's eq. 7). `previous` warm-starts each band. Fails with
 /// [`Error::Numerical`] when a band does not reach `settings.tolerance` within `max_iterations`.
+///
+/// The bands that share their coefficients are solved together ([`BandSolves::Together`]): the
+/// fastest order, for `diffusion`. [`solve_diffusion_lean`] is the one for large clouds.
 pub fn solve_diffusion(
     medium: &Medium,
     incident: &IncidentLight,
@@ -400,6 +459,50 @@ pub fn solve_diffusion(
     previous: Option<&DiffusionSolution>,
     settings: &DiffusionSettings,
 ) -> Result<DiffusionSolution> {
+    let start = previous.map(|p| p.i0.clone());
+    solve_bands(medium, incident, boundary, start, BandSolves::Together, settings).map(|(sol, _)| sol)
+}
+
+/// [`solve_diffusion`] with the bands one after another ([`BandSolves::OneByOne`]), warm-started
+/// from `start` if given, whose I0 is overwritten band by band (no second copy is held). Also
+/// returns the relative change ‖I0_new − I0_old‖₂/‖I0_new‖₂ over all voxels and bands from the
+/// start (0 from none), of I0 clamped at 0 as the lit volume uses it (the raw P1 solution's
+/// negative dipoles on sunlit faces would count as change the image never sees).
+pub fn solve_diffusion_lean(
+    medium: &Medium,
+    incident: &IncidentLight,
+    boundary: &BoundaryLight,
+    start: Option<DiffusionSolution>,
+    settings: &DiffusionSettings,
+) -> Result<(DiffusionSolution, f64)> {
+    solve_bands(medium, incident, boundary, start.map(|s| s.i0), BandSolves::OneByOne, settings)
+}
+
+/// The order of the bands' solves: speed against memory.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BandSolves {
+    /// The bands with the same coefficients solved together: the rows are read once per pass
+    /// for all of them, but the f64 iterate, CG's three f32 vectors and the right-hand sides of
+    /// every band are held at once (72 B per unknown for three bands).
+    Together,
+    /// One band at a time (24 B per unknown): the solve took ~1.6× as long at 100×80×60.
+    OneByOne,
+}
+
+/// The solves of [`solve_diffusion`] and [`solve_diffusion_lean`] from `start` (I0 = 0 without),
+/// and the relative change from it (0 without).
+///
+/// Bands with the same coefficients share one hierarchy, built once and dropped before the next
+/// one is built; each band's right-hand side is assembled just before its solve, and its
+/// solution overwrites its start.
+fn solve_bands(
+    medium: &Medium,
+    incident: &IncidentLight,
+    boundary: &BoundaryLight,
+    start: Option<[VoxelField<f32>; 3]>,
+    order: BandSolves,
+    settings: &DiffusionSettings,
+) -> Result<(DiffusionSolution, f64)> {
     let dims = medium.dims();
     if incident.dims != dims {
         return Err(Error::Numerical {
@@ -407,93 +510,119 @@ pub fn solve_diffusion(
             message: format!("incident light is for a {:?} grid but the medium is {:?}", incident.dims, dims),
         });
     }
-    if let Some(p) = previous {
-        if p.dims != dims {
-            return Err(Error::Numerical {
-                stage: "diffusion solver".into(),
-                message: format!("warm start is for a {:?} grid but the medium is {:?}", p.dims, dims),
-            });
-        }
-    }
     let index = medium.density.full_index();
-    let Some(dom) = Domain::of(medium) else {
-        let zero = VoxelField::filled(index, 0.0);
-        return Ok(DiffusionSolution {
-            dims,
-            i0: [zero.clone(), zero.clone(), zero],
-            stats: Default::default(),
-            boundary: boundary.clone(),
-        });
-    };
-    // Bands with identical coefficients share one hierarchy; each band's operator becomes its
-    // hierarchy's finest level or is dropped (a shared one), so one is alive at a time.
-    // Right-hand sides kept in f32 (rounding them is far below the solver's tolerance).
-    let mut rhs: Vec<Vec<f32>> = Vec::new();
-    let mut hier: Vec<(f32, Hierarchy)> = Vec::new();
-    let mut groups: Vec<Vec<usize>> = Vec::new();
-    for c in 0..3 {
-        let alb = medium.optics.albedo[c];
-        let shared = hier.iter().position(|(x, _)| *x == alb);
-        let (a, b) = assemble_with(medium, incident, boundary, c, settings.min_optical_depth, &dom, shared.is_none());
-        rhs.push(b.iter().map(|v| *v as f32).collect());
-        match (shared, a) {
-            (Some(p), _) => groups[p].push(c),
-            (None, a) => {
-                hier.push((alb, Hierarchy::build(a.expect("assembled"))));
-                groups.push(vec![c]);
-            }
-        }
-    }
-    // The bands of a group share the operator and are solved together (its rows read once).
-    let x0: Vec<Option<&[f32]>> = (0..3).map(|c| previous.map(|p| p.i0[c].packed())).collect();
-    let solved: Vec<Vec<(Vec<f64>, SolveStats)>> = groups
-        .par_iter()
-        .zip(&hier)
-        .map(|(g, (_, h))| {
-            let (tol, max) = (settings.tolerance, settings.max_iterations);
-            let b = |k: usize| rhs[g[k]].as_slice();
-            let x = |k: usize| x0[g[k]];
-            match g.len() {
-                1 => h.solve_many([b(0)], x(0).map(|a| [a]), tol, max).into(),
-                2 => h.solve_many([b(0), b(1)], x(0).zip(x(1)).map(|(a, b)| [a, b]), tol, max).into(),
-                _ => h
-                    .solve_many([b(0), b(1), b(2)], x(0).zip(x(1)).zip(x(2)).map(|((a, b), c)| [a, b, c]), tol, max)
-                    .into(),
-            }
-        })
-        .collect();
-    let mut results: Vec<Option<(Vec<f64>, SolveStats)>> = vec![None, None, None];
-    for (g, out) in groups.iter().zip(solved) {
-        for (c, r) in g.iter().zip(out) {
-            results[*c] = Some(r);
-        }
-    }
-    let results: Vec<(Vec<f64>, SolveStats)> = results.into_iter().map(|r| r.expect("every band is in a group")).collect();
-    for (c, (_, stats)) in results.iter().enumerate() {
-        if stats.relative_residual.is_nan() || stats.relative_residual > settings.tolerance {
+    let warm = start.is_some();
+    let mut i0 = match start {
+        Some(fields) if fields.iter().any(|f| *f.index() != index) => {
             return Err(Error::Numerical {
                 stage: "diffusion solver".into(),
-                message: format!(
-                    "band {c} reached relative residual {:.3e} after {} iterations, above the tolerance {:.1e}; \
-                     raise render.solver_max_iterations or render.solver_tolerance",
-                    stats.relative_residual, stats.iterations, settings.tolerance
-                ),
+                message: format!("the warm start is not on this medium's {:?} grid of full voxels", dims),
             });
         }
+        Some(fields) => fields,
+        None => {
+            let zero = VoxelField::filled(index.clone(), 0.0);
+            [zero.clone(), zero.clone(), zero]
+        }
+    };
+    let mut stats: [SolveStats; 3] = Default::default();
+    let Some(dom) = Domain::of(medium) else {
+        let sol = DiffusionSolution {
+            dims,
+            i0,
+            stats,
+            boundary: boundary.clone(),
+        };
+        return Ok((sol, 0.0));
+    };
+    // Σ (new⁺ − old⁺)² and Σ (new⁺)² over the bands, for the relative change.
+    let (mut change, mut norm) = (0f64, 0f64);
+    let albedo = medium.optics.albedo;
+    let mut done = [false; 3];
+    for first in 0..3 {
+        if done[first] {
+            continue;
+        }
+        let group: Vec<usize> = (first..3).filter(|c| albedo[*c] == albedo[first]).collect();
+        let rhs = |c: usize| band_rhs(medium, incident, boundary, c, settings.min_optical_depth);
+        let h = Hierarchy::build(&BandOperator::new(medium, first, settings.min_optical_depth, &dom));
+        let b_first = rhs(first);
+        let (tol, max) = (settings.tolerance, settings.max_iterations);
+        let solved: Vec<(usize, (Vec<f64>, SolveStats))> = match (order, group.len()) {
+            (BandSolves::OneByOne, _) | (_, 1) => {
+                let mut out = Vec::new();
+                let mut b_first = Some(b_first);
+                for &c in &group {
+                    let b = b_first.take().unwrap_or_else(|| rhs(c));
+                    let x0 = warm.then(|| i0[c].packed());
+                    let r = h.solve(&b, x0, tol, max);
+                    drop(b);
+                    converged(c, &r.1, settings)?;
+                    // Written back before the next band's vectors exist.
+                    store(&mut i0[c], &r.0, &mut change, &mut norm);
+                    out.push((c, (Vec::new(), r.1)));
+                }
+                out
+            }
+            (BandSolves::Together, n) => {
+                let mut bs = vec![b_first];
+                bs.extend(group[1..].iter().map(|c| rhs(*c)));
+                let b = |k: usize| bs[k].as_slice();
+                let x = |k: usize| warm.then(|| i0[group[k]].packed());
+                let res: Vec<(Vec<f64>, SolveStats)> = if n == 2 {
+                    h.solve_many([b(0), b(1)], x(0).zip(x(1)).map(|(p, q)| [p, q]), tol, max).into()
+                } else {
+                    h.solve_many([b(0), b(1), b(2)], x(0).zip(x(1)).zip(x(2)).map(|((p, q), r)| [p, q, r]), tol, max)
+                        .into()
+                };
+                group.iter().copied().zip(res).collect()
+            }
+        };
+        drop(h);
+        for (c, (x, st)) in solved {
+            converged(c, &st, settings)?;
+            if !x.is_empty() {
+                store(&mut i0[c], &x, &mut change, &mut norm);
+            }
+            stats[c] = st;
+            done[c] = true;
+        }
     }
-    let mut it = results
-        .into_iter()
-        .map(|(x, s)| (VoxelField::new(index.clone(), 0.0, x.iter().map(|v| *v as f32)), s));
-    let mut band = || it.next().expect("three bands");
-    let (x0, s0) = band();
-    let (x1, s1) = band();
-    let (x2, s2) = band();
-    Ok(DiffusionSolution {
+    let relative = if warm && norm > 0.0 { (change / norm).sqrt() } else { 0.0 };
+    let sol = DiffusionSolution {
         dims,
-        i0: [x0, x1, x2],
-        stats: [s0, s1, s2],
+        i0,
+        stats,
         boundary: boundary.clone(),
-    })
+    };
+    Ok((sol, relative))
+}
+
+/// An error unless band `c`'s solve reached the tolerance.
+fn converged(c: usize, st: &SolveStats, settings: &DiffusionSettings) -> Result<()> {
+    if st.relative_residual.is_nan() || st.relative_residual > settings.tolerance {
+        return Err(Error::Numerical {
+            stage: "diffusion solver".into(),
+            message: format!(
+                "band {c} reached relative residual {:.3e} after {} iterations, above the tolerance {:.1e}; \
+                 raise render.solver_max_iterations or render.solver_tolerance",
+                st.relative_residual, st.iterations, settings.tolerance
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// Overwrite `field` with the solution `x` (per full voxel), adding Σ (x⁺ − old⁺)² to `change` and
+/// Σ (x⁺)² to `norm` (⁺: clamped at 0).
+fn store(field: &mut VoxelField<f32>, x: &[f64], change: &mut f64, norm: &mut f64) {
+    for (old, new) in field.packed_mut().iter_mut().zip(x) {
+        let new = *new as f32;
+        let (a, b) = (f64::from(old.max(0.0)), f64::from(new.max(0.0)));
+        *change += (b - a).powi(2);
+        *norm += b * b;
+        *old = new;
+    }
 }
 
 impl Default for SolveStats {

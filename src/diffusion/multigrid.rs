@@ -86,99 +86,239 @@ pub struct Operator {
     pub nodes: Vec<Node>,
 }
 
-impl Operator {
-    /// Cell (i, j, k) of unknown `u`.
-    fn ijk(&self, u: usize) -> [usize; 3] {
-        let [nx, ny, _] = self.dims;
-        let c = self.nodes[u].cell as usize;
-        [c % nx, (c / nx) % ny, c / (nx * ny)]
+/// One unknown's full row of a symmetric 7-point operator.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stencil {
+    /// Diagonal (> 0).
+    pub diag: f64,
+    /// Matrix entries to the −x, +x, −y, +y, −z, +z neighbours (0 where there is none).
+    pub off: [f64; 6],
+    /// Those neighbours' unknowns ([`NONE`]: not an unknown).
+    pub nbr: [u32; 6],
+}
+
+/// A symmetric 7-point operator read one unknown at a time, its unknowns in box order: an
+/// [`Operator`] ([`Operator::rows`]) or rows made on demand from what they are assembled from,
+/// so that the finest level's build need not hold them all (the diffusion bands' assembly).
+pub trait Stencils: Sync {
+    /// Cells per axis of the box the unknowns' cells index.
+    fn dims(&self) -> [usize; 3];
+    /// Unknowns.
+    fn len(&self) -> usize;
+    /// Box cell (x fastest) of unknown `u`.
+    fn cell(&self, u: usize) -> u32;
+    /// Unknown `u`'s row.
+    fn stencil(&self, u: usize) -> Stencil;
+
+    /// Unknown `u` in [`Operator`] form (its +a half of the row).
+    fn node(&self, u: usize) -> Node {
+        let st = self.stencil(u);
+        Node {
+            cell: self.cell(u),
+            up_nbr: [st.nbr[1], st.nbr[3], st.nbr[5]],
+            diag: st.diag,
+            up: [st.off[1], st.off[3], st.off[5]],
+        }
     }
 
-    /// Galerkin coarse operator PᵀAP for 2×2×2 piecewise-constant aggregation, and each unknown's
-    /// aggregate. A coarse unknown exists where any child is one; its diagonal sums its children's
-    /// diagonals and the couplings inside it (twice: both directions), a coarse coupling the fine
-    /// ones across the shared face. Children add in box order, as the box-array form did.
-    fn coarsen(&self) -> (Operator, Vec<u32>) {
-        let [nx, ny, nz] = self.dims;
-        let cd = [nx.div_ceil(2), ny.div_ceil(2), nz.div_ceil(2)];
-        let key = |u: usize| {
-            let [i, j, k] = self.ijk(u);
-            (i / 2 + cd[0] * (j / 2 + cd[1] * (k / 2))) as u32
-        };
-        // One task per coarse z plane: its aggregates' children are the fine unknowns of two
-        // fine planes (contiguous, as the unknowns are in box order). Aggregates are numbered
-        // in box order through a rank per coarse cell (NONE: no child), and each adds its
-        // children in the fine order a serial pass would, so nothing depends on the thread count.
-        let plane = cd[0] * cd[1];
-        let fine_planes: Vec<std::ops::Range<usize>> = (0..cd[2])
-            .map(|k| {
-                let first = |k: usize| self.nodes.partition_point(|n| (n.cell as usize) < k * nx * ny);
-                first(2 * k)..first(2 * k + 2)
-            })
-            .collect();
-        let mut rank = vec![NONE; plane * cd[2]];
-        let counts: Vec<u32> = rank
-            .par_chunks_mut(plane)
-            .zip(&fine_planes)
-            .enumerate()
-            .map(|(k, (r, fine))| {
-                for u in fine.clone() {
-                    r[key(u) as usize - k * plane] = 0;
-                }
-                let mut c = 0;
-                for v in r.iter_mut().filter(|v| **v == 0) {
-                    *v = c;
-                    c += 1;
-                }
-                c
-            })
-            .collect();
-        let offsets: Vec<u32> = counts
-            .iter()
-            .scan(0, |s, c| {
-                *s += c;
-                Some(*s - c)
-            })
-            .collect();
-        rank.par_chunks_mut(plane).zip(&offsets).for_each(|(r, o)| {
-            r.iter_mut().filter(|v| **v != NONE).for_each(|v| *v += o);
-        });
-        let parent: Vec<u32> = (0..self.nodes.len()).into_par_iter().map(|u| rank[key(u) as usize]).collect();
-        let mut nodes: Vec<Node> = (0..rank.len() as u32)
-            .into_par_iter()
-            .filter(|c| rank[*c as usize] != NONE)
-            .map(Node::at)
-            .collect();
-        drop(rank);
-        let mut planes = Vec::with_capacity(cd[2]);
-        let (mut rest, mut base) = (&mut nodes[..], 0);
-        for (fine, here) in fine_planes.into_iter().zip(counts) {
-            let (mine, more) = rest.split_at_mut(here as usize);
-            planes.push((fine, base, mine));
-            (rest, base) = (more, base + here as usize);
-        }
-        planes.into_par_iter().for_each(|(fine, base, mine)| {
-            for u in fine {
-                let n = &self.nodes[u];
-                let ijk = self.ijk(u);
-                let p = &mut mine[parent[u] as usize - base];
-                p.diag += n.diag;
-                for (ax, at) in ijk.iter().enumerate() {
-                    let v = n.up_nbr[ax];
-                    if v == NONE {
-                        continue;
-                    }
-                    if at % 2 == 0 {
-                        p.diag += 2.0 * n.up[ax];
-                    } else {
-                        p.up[ax] += n.up[ax];
-                        p.up_nbr[ax] = parent[v as usize];
-                    }
+    /// Cell (i, j, k) of unknown `u`.
+    fn ijk(&self, u: usize) -> [usize; 3] {
+        let [nx, ny, _] = self.dims();
+        let c = self.cell(u) as usize;
+        [c % nx, (c / nx) % ny, c / (nx * ny)]
+    }
+}
+
+impl Operator {
+    /// The operator's full rows (each unknown's −a neighbours found once, 8 B per unknown).
+    pub fn rows(&self) -> OperatorRows<'_> {
+        let mut down = vec![[NONE; 2]; self.nodes.len()];
+        for (u, nd) in self.nodes.iter().enumerate() {
+            for ax in 1..3 {
+                if nd.up_nbr[ax] != NONE {
+                    down[nd.up_nbr[ax] as usize][ax - 1] = u as u32;
                 }
             }
-        });
-        (Operator { dims: cd, nodes }, parent)
+        }
+        OperatorRows { a: self, down }
     }
+}
+
+/// An [`Operator`] read as [`Stencils`]: each −a entry is the −a neighbour's +a one.
+pub struct OperatorRows<'a> {
+    a: &'a Operator,
+    /// Each unknown's −y and −z neighbours (the −x one is the unknown before it, if that is
+    /// coupled to it).
+    down: Vec<[u32; 2]>,
+}
+
+impl Stencils for OperatorRows<'_> {
+    fn dims(&self) -> [usize; 3] {
+        self.a.dims
+    }
+
+    fn len(&self) -> usize {
+        self.a.nodes.len()
+    }
+
+    fn cell(&self, u: usize) -> u32 {
+        self.a.nodes[u].cell
+    }
+
+    fn stencil(&self, u: usize) -> Stencil {
+        let nodes = &self.a.nodes;
+        let nd = &nodes[u];
+        let mut st = Stencil {
+            diag: nd.diag,
+            off: [0.0; 6],
+            nbr: [NONE; 6],
+        };
+        for ax in 0..3 {
+            let d = match ax {
+                0 => match u.checked_sub(1) {
+                    Some(d) if nodes[d].up_nbr[0] == u as u32 => d as u32,
+                    _ => NONE,
+                },
+                _ => self.down[u][ax - 1],
+            };
+            if d != NONE {
+                (st.off[2 * ax], st.nbr[2 * ax]) = (nodes[d as usize].up[ax], d);
+            }
+            (st.off[2 * ax + 1], st.nbr[2 * ax + 1]) = (nd.up[ax], nd.up_nbr[ax]);
+        }
+        st
+    }
+
+    fn node(&self, u: usize) -> Node {
+        self.a.nodes[u]
+    }
+}
+
+/// `a` scaled to unit diagonal by `scale` (f32, so its rounding is known): S A S, each entry in
+/// f64 as scaling the rows in place did.
+struct Scaled<'a, S> {
+    a: &'a S,
+    scale: &'a [Mg],
+}
+
+impl<S: Stencils> Stencils for Scaled<'_, S> {
+    fn dims(&self) -> [usize; 3] {
+        self.a.dims()
+    }
+
+    fn len(&self) -> usize {
+        self.a.len()
+    }
+
+    fn cell(&self, u: usize) -> u32 {
+        self.a.cell(u)
+    }
+
+    fn stencil(&self, u: usize) -> Stencil {
+        let mut st = self.a.stencil(u);
+        let s = f64::from(self.scale[u]);
+        for (o, v) in st.off.iter_mut().zip(st.nbr) {
+            if v != NONE {
+                *o *= s * f64::from(self.scale[v as usize]);
+            }
+        }
+        st.diag = st.diag * s * s;
+        st
+    }
+}
+
+/// The first unknown of `a` whose cell is at least `cell` (the unknowns are in box order).
+fn first_at(a: &impl Stencils, cell: usize) -> usize {
+    let (mut lo, mut hi) = (0, a.len());
+    while lo < hi {
+        let mid = (lo + hi) / 2;
+        if (a.cell(mid) as usize) < cell {
+            lo = mid + 1;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
+}
+
+/// Galerkin coarse operator PᵀAP of `a` for 2×2×2 piecewise-constant aggregation, and each
+/// unknown's aggregate. A coarse unknown exists where any child is one; its diagonal sums its
+/// children's diagonals and the couplings inside it (twice: both directions), a coarse coupling
+/// the fine ones across the shared face. Children add in box order, as the box-array form did.
+fn coarsen(a: &impl Stencils) -> (Operator, Vec<u32>) {
+    let [nx, ny, nz] = a.dims();
+    let cd = [nx.div_ceil(2), ny.div_ceil(2), nz.div_ceil(2)];
+    let key = |ijk: [usize; 3]| (ijk[0] / 2 + cd[0] * (ijk[1] / 2 + cd[1] * (ijk[2] / 2))) as u32;
+    // One task per coarse z plane: its aggregates' children are the fine unknowns of two
+    // fine planes (contiguous, as the unknowns are in box order). Aggregates are numbered
+    // in box order through a rank per coarse cell (NONE: no child), and each adds its
+    // children in the fine order a serial pass would, so nothing depends on the thread count.
+    let plane = cd[0] * cd[1];
+    let fine_planes: Vec<std::ops::Range<usize>> = (0..cd[2])
+        .map(|k| first_at(a, 2 * k * nx * ny)..first_at(a, (2 * k + 2) * nx * ny))
+        .collect();
+    let mut rank = vec![NONE; plane * cd[2]];
+    let counts: Vec<u32> = rank
+        .par_chunks_mut(plane)
+        .zip(&fine_planes)
+        .enumerate()
+        .map(|(k, (r, fine))| {
+            for u in fine.clone() {
+                r[key(a.ijk(u)) as usize - k * plane] = 0;
+            }
+            let mut c = 0;
+            for v in r.iter_mut().filter(|v| **v == 0) {
+                *v = c;
+                c += 1;
+            }
+            c
+        })
+        .collect();
+    let offsets: Vec<u32> = counts
+        .iter()
+        .scan(0, |s, c| {
+            *s += c;
+            Some(*s - c)
+        })
+        .collect();
+    rank.par_chunks_mut(plane).zip(&offsets).for_each(|(r, o)| {
+        r.iter_mut().filter(|v| **v != NONE).for_each(|v| *v += o);
+    });
+    let parent: Vec<u32> = (0..a.len()).into_par_iter().map(|u| rank[key(a.ijk(u)) as usize]).collect();
+    let mut nodes: Vec<Node> = (0..rank.len() as u32)
+        .into_par_iter()
+        .filter(|c| rank[*c as usize] != NONE)
+        .map(Node::at)
+        .collect();
+    drop(rank);
+    let mut planes = Vec::with_capacity(cd[2]);
+    let (mut rest, mut base) = (&mut nodes[..], 0);
+    for (fine, here) in fine_planes.into_iter().zip(counts) {
+        let (mine, more) = rest.split_at_mut(here as usize);
+        planes.push((fine, base, mine));
+        (rest, base) = (more, base + here as usize);
+    }
+    planes.into_par_iter().for_each(|(fine, base, mine)| {
+        for u in fine {
+            let n = a.node(u);
+            let ijk = a.ijk(u);
+            let p = &mut mine[parent[u] as usize - base];
+            p.diag += n.diag;
+            for (ax, at) in ijk.iter().enumerate() {
+                let v = n.up_nbr[ax];
+                if v == NONE {
+                    continue;
+                }
+                if at % 2 == 0 {
+                    p.diag += 2.0 * n.up[ax];
+                } else {
+                    p.up[ax] += n.up[ax];
+                    p.up_nbr[ax] = parent[v as usize];
+                }
+            }
+        }
+    });
+    (Operator { dims: cd, nodes }, parent)
 }
 
 /// The scalar of the multigrid levels ([`Level`]) and of the CG vectors.
@@ -342,8 +482,8 @@ impl Level {
     /// The level of operator `a` and each unknown's entry. With `unit_diag` every diagonal
     /// counts as 1 and none is stored (the finest level, scaled: its diagonal differs from 1 by
     /// the scale's rounding, which [`rounding_fix`] gives back to CG's operator).
-    fn from_operator(a: &Operator, unit_diag: bool) -> (Level, Vec<u32>) {
-        let n = a.nodes.len();
+    fn from_stencils(a: &impl Stencils, unit_diag: bool) -> (Level, Vec<u32>) {
+        let n = a.len();
         let colour = |u: usize| a.ijk(u).iter().sum::<usize>() % 2;
         let red = (0..n).filter(|u| colour(*u) == 0).count();
         // Each unknown's entry, and (while the rows are built) each entry's unknown.
@@ -362,52 +502,26 @@ impl Level {
             e if e < red => (u - e + red + 1) as u32,
             e => (u + red + 1 - e) as u32,
         };
-        // Each unknown's −y, −z neighbours: the unknowns whose +a neighbour it is (the −x one
-        // is the unknown before it, if that is coupled to it).
-        let mut down = vec![[NONE; 2]; n];
-        for (u, nd) in a.nodes.iter().enumerate() {
-            for ax in 1..3 {
-                if nd.up_nbr[ax] != NONE {
-                    down[nd.up_nbr[ax] as usize][ax - 1] = u as u32;
-                }
-            }
-        }
-        let down_of = |u: usize, ax: usize| match ax {
-            0 => match u.checked_sub(1) {
-                Some(d) if a.nodes[d].up_nbr[0] == u as u32 => d as u32,
-                _ => NONE,
-            },
-            _ => down[u][ax - 1],
-        };
         let pads = [(n + 1) as u32, red as u32];
+        // The rows, and the diagonals where they are stored, from one stencil each.
         let row = |e: usize, u: u32| {
             let pad = pads[usize::from(e > red)];
             if u == PAD {
-                return Row::encode([0.0; 6], [pad; 6], pad, pad);
+                return (Row::encode([0.0; 6], [pad; 6], pad, pad), 0.0);
             }
-            let nd = &a.nodes[u as usize];
+            let st = a.stencil(u as usize);
             let (mut cpl, mut nbr) = ([0.0; 6], [pad; 6]);
-            for ax in 0..3 {
-                let d = down_of(u as usize, ax);
-                if d != NONE && a.nodes[d as usize].up[ax] != 0.0 {
-                    nbr[2 * ax] = entry[d as usize];
-                    cpl[2 * ax] = Mg::of(a.nodes[d as usize].up[ax]);
-                }
-                if nd.up_nbr[ax] != NONE && nd.up[ax] != 0.0 {
-                    nbr[2 * ax + 1] = entry[nd.up_nbr[ax] as usize];
-                    cpl[2 * ax + 1] = Mg::of(nd.up[ax]);
+            for q in 0..6 {
+                if st.nbr[q] != NONE && st.off[q] != 0.0 {
+                    nbr[q] = entry[st.nbr[q] as usize];
+                    cpl[q] = Mg::of(st.off[q]);
                 }
             }
-            Row::encode(cpl, nbr, base(u as usize), pad)
+            (Row::encode(cpl, nbr, base(u as usize), pad), Mg::of(st.diag))
         };
-        let rows: Vec<Row> = unk.par_iter().enumerate().map(|(e, u)| row(e, *u)).collect();
-        drop(down);
-        let diag = match unit_diag {
-            true => Vec::new(),
-            false => unk
-                .iter()
-                .map(|u| if *u == PAD { 0.0 } else { Mg::of(a.nodes[*u as usize].diag) })
-                .collect(),
+        let (rows, diag): (Vec<Row>, Vec<Mg>) = match unit_diag {
+            true => (unk.par_iter().enumerate().map(|(e, u)| row(e, *u).0).collect(), Vec::new()),
+            false => unk.par_iter().enumerate().map(|(e, u)| row(e, *u)).unzip(),
         };
         let level = Level {
             red,
@@ -567,7 +681,7 @@ impl Level {
 /// neighbours t for its couplings rounded to f32 (the −a couplings read from the −a neighbours'
 /// +a ones). Added to the unit diagonal, A·1 (the absorption and the leakage, for a uniform
 /// fluence) is the assembled one's.
-fn rounding_fix(a: &Operator, level: &Level, scale: &[Mg]) -> Vec<Mg> {
+fn rounding_fix(a: &impl Stencils, level: &Level, scale: &[Mg]) -> Vec<Mg> {
     (0..level.len())
         .into_par_iter()
         .map(|e| {
@@ -575,17 +689,13 @@ fn rounding_fix(a: &Operator, level: &Level, scale: &[Mg]) -> Vec<Mg> {
             if u == PAD {
                 return Mg::of(0.0);
             }
-            let (row, nd, su) = (&level.rows[e], &a.nodes[u as usize], f64::from(scale[u as usize]));
-            let nbr = row.neighbours();
-            let mut d = nd.diag - 1.0;
-            for ax in 0..3 {
+            let (row, st, su) = (&level.rows[e], a.stencil(u as usize), f64::from(scale[u as usize]));
+            let mut d = st.diag - 1.0;
+            for q in 0..6 {
                 // (A coupling that rounds to 0 in f32, below 10⁻⁴⁵, is left out.)
-                if row.cpl[2 * ax] != 0.0 {
-                    let m = level.unknown(nbr[2 * ax] as usize);
-                    d += (a.nodes[m as usize].up[ax] - f64::from(row.cpl[2 * ax])) * su / f64::from(scale[m as usize]);
-                }
-                if nd.up_nbr[ax] != NONE {
-                    d += (nd.up[ax] - f64::from(row.cpl[2 * ax + 1])) * su / f64::from(scale[nd.up_nbr[ax] as usize]);
+                let m = st.nbr[q];
+                if m != NONE && (q % 2 == 1 || row.cpl[q] != 0.0) {
+                    d += (st.off[q] - f64::from(row.cpl[q])) * su / f64::from(scale[m as usize]);
                 }
             }
             Mg::of(d)
@@ -677,7 +787,7 @@ fn cholesky_in_place(a: &mut [f64], n: usize) -> f64 {
 
 impl Dense {
     /// The factor of operator `s`, whose unknowns are the entries `entry` of `level`.
-    fn build(s: &Operator, level: &Level, entry: &[u32]) -> Dense {
+    fn build(s: &impl Stencils, level: &Level, entry: &[u32]) -> Dense {
         let cells: Vec<usize> = (0..level.len()).filter(|e| level.unknown(*e) != PAD).collect();
         let n = cells.len();
         let mut q_of = vec![usize::MAX; level.len()];
@@ -686,7 +796,7 @@ impl Dense {
         }
         let mut a = vec![0f64; n * n];
         for (q, &e) in cells.iter().enumerate() {
-            let nd = &s.nodes[level.unknown(e) as usize];
+            let nd = s.node(level.unknown(e) as usize);
             a[q * n + q] = nd.diag;
             for ax in 0..3 {
                 let v = nd.up[ax];
@@ -786,29 +896,24 @@ pub struct Hierarchy {
 
 impl Hierarchy {
     /// Scale `a` to unit diagonal and build the levels down to [`COARSE_CELLS`] unknowns.
-    pub fn build(a: Operator) -> Hierarchy {
+    pub fn build(a: &impl Stencils) -> Hierarchy {
         Self::build_with(a, COARSE_CELLS)
     }
 
     /// As [`Hierarchy::build`], coarsening until a level has at most `coarse_cells` unknowns.
-    pub fn build_with(mut a: Operator, coarse_cells: usize) -> Hierarchy {
+    ///
+    /// `a` is read row by row (several times: for the first coarse operator, the scale, the
+    /// rows and their rounding), never held as a whole here; each coarser operator is held only
+    /// until its level and the next operator exist.
+    pub fn build_with(a: &impl Stencils, coarse_cells: usize) -> Hierarchy {
         // The first coarse operator aggregates the unscaled operator: its coarse space is
         // piecewise constant in the unscaled unknowns, whose smooth errors are locally constant
         // (see [`Level::weight`]).
-        let mut first = (a.nodes.len() > coarse_cells && a.dims.iter().any(|d| *d > 1)).then(|| a.coarsen());
-        let scale_of: Vec<Mg> = a.nodes.par_iter().map(|n| Mg::of(1.0 / n.diag.sqrt())).collect();
-        a.nodes.par_iter_mut().enumerate().for_each(|(u, n)| {
-            let s = f64::from(scale_of[u]);
-            for ax in 0..3 {
-                if n.up_nbr[ax] != NONE {
-                    n.up[ax] *= s * f64::from(scale_of[n.up_nbr[ax] as usize]);
-                }
-            }
-            n.diag = n.diag * s * s;
-        });
-        // Each level is built from its operator, which is dropped once the next one exists.
-        let (mut level, mut entry) = Level::from_operator(&a, true);
-        let fix = rounding_fix(&a, &level, &scale_of);
+        let mut first = (a.len() > coarse_cells && a.dims().iter().any(|d| *d > 1)).then(|| coarsen(a));
+        let scale_of: Vec<Mg> = (0..a.len()).into_par_iter().map(|u| Mg::of(1.0 / a.node(u).diag.sqrt())).collect();
+        let scaled = Scaled { a, scale: &scale_of };
+        let (mut level, mut entry) = Level::from_stencils(&scaled, true);
+        let fix = rounding_fix(&scaled, &level, &scale_of);
         let scale: Vec<Mg> = (0..level.len())
             .into_par_iter()
             .map(|e| match level.unknown(e) {
@@ -816,24 +921,27 @@ impl Hierarchy {
                 u => scale_of[u as usize],
             })
             .collect();
-        drop(scale_of);
         if first.is_some() {
             level.weight = scale[..level.red].par_iter().map(|s| Mg::of(1.0 / f64::from(*s))).collect();
         }
         let mut levels = Vec::new();
-        let mut fine = a;
+        // The operator of `level` when it is a coarse one.
+        let mut coarsest: Option<Operator> = None;
         loop {
-            let (c, parent) = match first.take() {
-                Some(c) => c,
-                None if !levels.is_empty() && level.unknowns() > coarse_cells && fine.dims.iter().any(|d| *d > 1) => fine.coarsen(),
-                None => break,
+            let (c, parent) = match (first.take(), &coarsest) {
+                (Some(c), _) => c,
+                (None, Some(f)) if level.unknowns() > coarse_cells && f.dims.iter().any(|d| *d > 1) => coarsen(&f.rows()),
+                _ => break,
             };
-            let (mut next, next_entry) = Level::from_operator(&c, false);
+            let (mut next, next_entry) = Level::from_stencils(&c.rows(), false);
             level.link(&parent, &mut next, &next_entry);
             levels.push(std::mem::replace(&mut level, next));
-            (fine, entry) = (c, next_entry);
+            (coarsest, entry) = (Some(c), next_entry);
         }
-        let coarse = Dense::build(&fine, &level, &entry);
+        let coarse = match &coarsest {
+            Some(c) => Dense::build(&c.rows(), &level, &entry),
+            None => Dense::build(&scaled, &level, &entry),
+        };
         levels.push(level);
         Hierarchy {
             scale,
@@ -1199,7 +1307,7 @@ impl Hierarchy {
 /// (moved here from tests/ so the solver's internals need not be public).
 #[cfg(test)]
 mod operator_tests {
-    use super::{Hierarchy, Level, Mg, Operator, Real, Work, NONE, PAD};
+    use super::{coarsen, Hierarchy, Level, Mg, Operator, Real, Stencils, Work, NONE, PAD};
     use crate::diffusion::{assemble, BoundaryLight, Domain};
     use crate::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
     use crate::lighting::DirectionBins;
@@ -1344,7 +1452,7 @@ mod operator_tests {
             let inc = lit(&m, 1.0, Some((Vec3::new(-0.2, 1.0, 0.4), 2.0)));
             let dom = Domain::of(&m).unwrap();
             let (s, b) = assemble(&m, &inc, &BoundaryLight::none(), 1, 0.0, &dom);
-            let h = Hierarchy::build_with(s.clone(), 16);
+            let h = Hierarchy::build_with(&s.rows(), 16);
             assert!(h.levels() >= 4, "levels {}", h.levels());
             let (x, st) = h.solve(&b, None, 1e-12, 500);
             assert!(st.relative_residual <= 1e-12, "{st:?}");
@@ -1358,7 +1466,7 @@ mod operator_tests {
     #[test]
     fn systems_solved_together_match_their_own_solves_exactly() {
         let (s, b) = sun_lit_system([12, 10, 9], 5, 0.97, 0.8, Vec3::new(0.3, 1.0, -0.2), 0);
-        let h = Hierarchy::build_with(s, 16);
+        let h = Hierarchy::build_with(&s.rows(), 16);
         // A second right-hand side that converges at another iteration, and a zero one.
         let b2: Vec<f64> = b.iter().enumerate().map(|(c, v)| if c % 3 == 0 { -2.0 * v } else { *v }).collect();
         let zero = vec![0.0; b.len()];
@@ -1378,7 +1486,7 @@ mod operator_tests {
         // Couplings rounded to f32, each diagonal given the rounding back: A·1 is the assembled
         // operator's to f64 rounding (rounding alone moves it by ~10⁻⁸ of the diagonal).
         let (s, _) = sun_lit_system([12, 10, 9], 4, 0.999, 0.85, Vec3::new(0.3, 1.0, 0.1), 0);
-        let h = Hierarchy::build_with(s.clone(), 16);
+        let h = Hierarchy::build_with(&s.rows(), 16);
         let (a, n) = (dense(&s), s.nodes.len());
         // y = D^½ 1 on the scaled system, so (S A S) y / s = (A 1).
         let y: Vec<[f64; 1]> = h
@@ -1401,7 +1509,7 @@ mod operator_tests {
         // (CG restarted from it), checked here densely on the scaled system D^-1/2 (b − A x), A
         // the operator CG solves (couplings rounded to f32 on the scaled system).
         let (s, b) = sun_lit_system([12, 10, 9], 6, 0.98, 0.8, Vec3::new(0.2, 1.0, -0.3), 2);
-        let h = Hierarchy::build_with(s.clone(), 16);
+        let h = Hierarchy::build_with(&s.rows(), 16);
         let tol = 1e-10;
         let (x, st) = h.solve(&b, None, tol, 500);
         let (a, n) = (dense(&as_solved(&s)), b.len());
@@ -1433,7 +1541,7 @@ mod operator_tests {
     fn coarse_operator_is_the_galerkin_product() {
         // Odd box sides: the last aggregates of each axis are one cell thick.
         let (s, _) = sun_lit_system([11, 9, 8], 4, 0.9, 0.8, Vec3::new(0.2, 1.0, 0.3), 0);
-        let (c, parent) = s.coarsen();
+        let (c, parent) = coarsen(&s.rows());
         let (n, nc) = (s.nodes.len(), c.nodes.len());
         assert!(nc > 10 && nc < n, "{nc} of {n}");
         assert_eq!(c.dims, [s.dims[0].div_ceil(2), s.dims[1].div_ceil(2), s.dims[2].div_ceil(2)]);
@@ -1449,7 +1557,7 @@ mod operator_tests {
             assert!((x - y).abs() <= 1e-12 * x.abs().max(1.0), "{x} vs {y}");
         }
         for (u, p) in parent.iter().enumerate() {
-            let [i, j, k] = s.ijk(u);
+            let [i, j, k] = s.rows().ijk(u);
             let cell = i / 2 + c.dims[0] * (j / 2 + c.dims[1] * (k / 2));
             assert_eq!(c.nodes[*p as usize].cell as usize, cell);
         }
@@ -1470,7 +1578,7 @@ mod operator_tests {
     fn preconditioner_is_symmetric() {
         // zᵀ M⁻¹ y = yᵀ M⁻¹ z (to the cycle's f32 rounding), so CG's theory holds.
         let (s, _) = sun_lit_system([14, 12, 10], 8, 0.99, 0.85, Vec3::new(0.1, 1.0, 0.3), 0);
-        let h = Hierarchy::build_with(s, 16);
+        let h = Hierarchy::build_with(&s.rows(), 16);
         assert!(h.levels() >= 4);
         let fine = &h.levels[0];
         let mut rng = Rng::new(9, 1);
@@ -1494,9 +1602,9 @@ mod operator_tests {
         // weights D^½.
         let (s, _) = sun_lit_system([11, 9, 8], 4, 0.9, 0.8, Vec3::new(0.2, 1.0, 0.3), 0);
         let n = s.nodes.len();
-        let h = Hierarchy::build_with(s.clone(), n - 1);
+        let h = Hierarchy::build_with(&s.rows(), n - 1);
         assert_eq!(h.levels(), 2);
-        let (_, parent) = s.coarsen();
+        let (_, parent) = coarsen(&s.rows());
         let nc = parent.iter().max().unwrap() + 1;
         let nc = nc as usize;
         let a = dense(&s);
@@ -1539,7 +1647,8 @@ mod operator_tests {
                 nd.up[u % 3] = 0.0;
             }
         }
-        let (level, entry) = Level::from_operator(&s, false);
+        let rows = s.rows();
+        let (level, entry) = Level::from_stencils(&rows, false);
         let by_cell: HashMap<usize, usize> = s.nodes.iter().enumerate().map(|(u, n)| (n.cell as usize, u)).collect();
         let [nx, ny, _] = s.dims;
         let (mut seen, mut coupled) = (0, 0);
@@ -1571,7 +1680,7 @@ mod operator_tests {
                 let v = at
                     .and_then(|c| by_cell.get(&c))
                     .copied()
-                    .filter(|v| s.ijk(*v)[(ax + 1) % 3] == s.ijk(u as usize)[(ax + 1) % 3]);
+                    .filter(|v| rows.ijk(*v)[(ax + 1) % 3] == rows.ijk(u as usize)[(ax + 1) % 3]);
                 let coupling = v.map_or(0.0, |v| if q % 2 == 0 { s.nodes[v].up[ax] } else { nd.up[ax] });
                 match v {
                     Some(v) if coupling != 0.0 => {
@@ -1596,7 +1705,7 @@ mod operator_tests {
         let inc = lit(&m, 1.0, Some((Vec3::new(0.3, 1.0, 0.2), 3.0)));
         let dom = Domain::of(&m).unwrap();
         let (s, b) = assemble(&m, &inc, &BoundaryLight::none(), 0, 1e-3, &dom);
-        let h = Hierarchy::build_with(s, 64);
+        let h = Hierarchy::build_with(&s.rows(), 64);
         let (_, st) = h.solve(&b, None, 1e-6, 200);
         assert!(st.relative_residual <= 1e-6 && st.iterations <= 20, "{st:?}");
     }

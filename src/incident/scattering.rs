@@ -135,19 +135,20 @@ impl FirstScattering {
         }
     }
 
-    /// From the accumulators of a sweep whose only source was the sun, towards unit `sun_dir`
-    /// with irradiance `sun_e` (W/m² per band), every band decaying alike: Σ0_c = E_c·T̄, so
-    /// ρT̄ = ρΣ0_c/E_c read in the band of the largest E (Σ1 is the same light along the flow).
-    pub fn sun(index: Arc<FullIndex>, optics: &ScaledOptics, acc: &[Acc], rho: &[f32], sun_dir: Vec3, sun_e: Rgb) -> FirstScattering {
-        let band = (0..3).fold(0, |b, c| if sun_e[c] > sun_e[b] { c } else { b });
+    /// From a sweep whose only source was the sun, towards unit `sun_dir` with irradiance
+    /// `sun_e` (W/m² per band), every band decaying alike: Σ0_c = E_c·T̄, so ρT̄ = ρΣ0_c/E_c;
+    /// `sums` holds Σ0 of the band [`Self::sun_band`] only (Σ1 is the same light along the flow).
+    pub fn sun(index: Arc<FullIndex>, optics: &ScaledOptics, sums: &[[f64; 1]], rho: &[f32], sun_dir: Vec3, sun_e: Rgb) -> FirstScattering {
+        let band = Self::sun_band(sun_e);
         let inv_e = if sun_e[band] > 0.0 { 1.0 / sun_e[band] as f64 } else { 0.0 };
+        let acc = sums;
         let mut rho_t = vec![0f32; acc.len() + 1];
         acc.par_chunks(CHUNK)
             .zip(rho.par_chunks(CHUNK))
             .zip(rho_t[1..].par_chunks_mut(CHUNK))
             .for_each(|((acc, rho), out)| {
                 for ((v, r), o) in acc.iter().zip(rho).zip(out) {
-                    *o = (*r as f64 * v[band] * inv_e) as f32;
+                    *o = (*r as f64 * v[0] * inv_e) as f32;
                 }
             });
         let g = optics.phase.mean_cosine();
@@ -156,6 +157,12 @@ impl FirstScattering {
             q0_per_rho_t: std::array::from_fn(|c| optics.sigma_s[c] as f64 * sun_e[c] as f64 / (4.0 * PI)),
             q1_per_q0: std::array::from_fn(|a| -g * sun_dir[a] as f64),
         }
+    }
+
+    /// The band whose Σ0 a sun-only stage 1 accumulates ([`FirstScattering::sun`]'s `sums`):
+    /// the sun's brightest (any would do, the bands differing only by the sun's colour).
+    pub fn sun_band(sun_e: Rgb) -> usize {
+        (0..3).fold(0, |b, c| if sun_e[c] > sun_e[b] { c } else { b })
     }
 }
 
@@ -204,7 +211,9 @@ mod tests {
             })
             .collect();
         let general = FirstScattering::general(index.clone(), &optics, &acc, &rho);
-        let sun = FirstScattering::sun(index.clone(), &optics, &acc, &rho, dir, e);
+        let band = FirstScattering::sun_band(e);
+        let sums: Vec<[f64; 1]> = acc.iter().map(|a| [a[band]]).collect();
+        let sun = FirstScattering::sun(index.clone(), &optics, &sums, &rho, dir, e);
         assert_eq!(sun.bytes(), 4 * (rho.len() + 1));
         assert_eq!(general.bytes(), 48 * (rho.len() + 1));
         let close = |a: f32, b: f32| (a - b).abs() <= 4.0 * f32::EPSILON * b.abs();

@@ -213,7 +213,9 @@ impl<T: Copy + Send + Sync> VoxelField<T> {
 
     /// `at(grid index)` for every full voxel, in parallel; `empty` elsewhere.
     pub fn from_fn(index: Arc<FullIndex>, empty: T, at: impl Fn(usize) -> T + Sync) -> VoxelField<T> {
-        let full: Vec<usize> = index.full_voxels().collect();
+        // Sized up front: a collected list grew to twice its length.
+        let mut full = Vec::with_capacity(index.count());
+        full.extend(index.full_voxels());
         let mut data = Vec::with_capacity(full.len() + 1);
         data.push(empty);
         data.par_extend(full.par_iter().map(|&g| at(g)));
@@ -260,6 +262,12 @@ impl<T: Copy + Send + Sync> VoxelField<T> {
     #[inline]
     pub fn packed(&self) -> &[T] {
         &self.data[1..]
+    }
+
+    /// The values of the full voxels in grid order, to overwrite in place.
+    #[inline]
+    pub fn packed_mut(&mut self) -> &mut [T] {
+        &mut self.data[1..]
     }
 
     /// The index the field is addressed by.

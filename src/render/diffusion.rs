@@ -90,7 +90,7 @@ pub fn solved_lit_volume(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolu
     let mut lit = scene_lit_volume(scene, i0_rgb(sol), &inc.sun_transmittance);
     if scene.render.diffuse_anisotropy {
         let i1 = diffuse_flux(&scene.medium, inc, sol, scene.render.solver.min_optical_depth);
-        lit = lit.with_flux(FluxField::new(&scene.medium, &i1));
+        lit = lit.with_flux(FluxField::new(&scene.medium, i1));
     }
     if let Some(sh) = &inc.sky_sh {
         lit = lit.with_sky_single(SkySingle::new(&scene.medium, sh));

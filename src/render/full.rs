@@ -19,16 +19,13 @@
 use super::diffusion::{boundary_light, compute_incident, compute_incident_with, i0_rgb, scene_lit_volume, solved_lit_volume};
 use super::single::pixel_sample;
 use super::{Progress, Timings};
-use crate::cube::border::BorderCubes;
-use crate::cube::{clear_air, CubeImage, CubeOptions, CubeRenderer};
-use crate::diffusion::boundary::hemisphere_radiance;
-use crate::diffusion::{solve_diffusion, BoundaryLight, DiffusionSettings, DiffusionSolution};
+use crate::cube::{clear_air, BorderKeep, BorderLight, ClearAir, CubeImage, CubeOptions, CubeRenderer};
+use crate::diffusion::{solve_diffusion_lean, BoundaryLight, DiffusionSettings, DiffusionSolution};
 use crate::edges::gather::{CubeRequest, CubeSource, EdgeGather, SunInput};
 use crate::edges::sparse::{gather_image, PixelRay, SparseSettings};
 use crate::error::Result;
 use crate::image::Image;
 use crate::incident::IncidentLight;
-use crate::lighting::bins::{DirectionBins, CUBE_FACES};
 use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
 use crate::scene::Scene;
@@ -43,43 +40,6 @@ pub struct Propagation {
     pub incident: IncidentLight,
     /// Relative change ‖I0_new − I0_old‖/‖I0_new‖ of each clear-air iteration.
     pub changes: Vec<f64>,
-}
-
-/// ‖a − b‖₂ / ‖b‖₂ over all voxels and bands, of I0 clamped at 0 as the lit volume uses it (the
-/// raw P1 solution's negative dipoles on sunlit faces would count as change the image never sees).
-pub fn relative_change(old: &DiffusionSolution, new: &DiffusionSolution) -> f64 {
-    let (mut num, mut den) = (0f64, 0f64);
-    for c in 0..3 {
-        for (a, b) in old.i0[c].iter().zip(&new.i0[c]) {
-            let (a, b) = (a.max(0.0), b.max(0.0));
-            num += ((b - a) as f64).powi(2);
-            den += (b as f64).powi(2);
-        }
-    }
-    if den > 0.0 {
-        (num / den).sqrt()
-    } else {
-        0.0
-    }
-}
-
-/// The light entering the cloud through the faces next to each border voxel: its cube's radiance
-/// over the face's outer hemisphere (src/diffusion/boundary.rs); `base` elsewhere.
-pub fn cube_boundary(base: &BoundaryLight, cubes: &BorderCubes) -> BoundaryLight {
-    let bins = DirectionBins::new();
-    let d = cubes.dims;
-    let bin_list = &bins.bins;
-    let ghosts = cubes.voxels.iter().enumerate().flat_map(|(n, v)| {
-        let (radiance, faces) = (cubes.bins(n), cubes.faces[n]);
-        let ghost = v[0] + d[0] * (v[1] + d[1] * v[2]);
-        // The full neighbour lies along FACE_OFFSETS[f]; its face towards this voxel has the
-        // opposite normal, the other index of the pair (+a, −a).
-        (0..6).filter(move |f| faces & (1 << f) != 0).map(move |f| {
-            let face = f ^ 1;
-            (ghost, face, hemisphere_radiance(bin_list, &radiance, CUBE_FACES[face].n))
-        })
-    });
-    base.clone().with_ghosts(ghosts)
 }
 
 /// Relative residual of the first diffusion solve when clear-air iterations follow it: its I0 only
@@ -108,12 +68,27 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         ..settings.clone()
     };
     let mut sol = timings.time("diffusion solve", || {
-        solve_diffusion(&scene.medium, &inc, &unoccluded, None, &first)
+        solve_diffusion_lean(&scene.medium, &inc, &unoccluded, None, &first).map(|(sol, _)| sol)
     })?;
     progress.log(&sol.summary());
     let mut changes = Vec::new();
     let opts = &scene.render.cubes;
-    let cubes = |sol: &DiffusionSolution| clear_air(scene_lit_volume(scene, i0_rgb(sol), &sun_t), scene.ground.as_ref(), opts, progress);
+    // With `render.sky_boundary` the cubes' light enters through the boundary condition, and
+    // only what each cube sends through its faces is kept; else stage 1 reads their bins.
+    let keep = if settings.sky_boundary {
+        BorderKeep::FaceLight
+    } else {
+        BorderKeep::Bins
+    };
+    let cubes = |sol: &DiffusionSolution| {
+        clear_air(
+            scene_lit_volume(scene, i0_rgb(sol), &sun_t),
+            scene.ground.as_ref(),
+            opts,
+            keep,
+            progress,
+        )
+    };
     // Memory: each iteration's cubes, and the old stage-1 light, are dropped once the new stage-1
     // light no longer needs them; only the cubes' lit ground is kept.
     let mut ca = Some(timings.time("clear-air cubes", || cubes(&sol)));
@@ -123,28 +98,28 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
             Some(c) => c,
             None => timings.time("clear-air cubes", || cubes(&sol)),
         };
-        ground = c.lit.ground.clone();
-        let n_cubes = c.cubes.len();
+        // The lit volume (its I0 and pyramid) is dropped before the re-solve.
+        let ClearAir { lit, border } = c;
+        ground = lit.ground.clone();
+        drop(lit);
+        let n_cubes = border.cubes();
         // Stage 1 asks with bin b = the direction the light comes from (its rays flow along −ω_b),
         // which is the cube's own bin b ("radiance arriving from ω_b").
         // With `render.sky_boundary` the cubes' light enters through the boundary condition and
         // stage 1 (the sun only) does not change; else stage 1 is re-run with the cubes' light.
-        let boundary = if settings.sky_boundary {
-            let b = cube_boundary(&unoccluded, &c.cubes);
-            drop(c);
-            b
-        } else {
-            drop(inc);
-            let hook = c.cubes.hook();
-            inc = timings.time("incident light", || compute_incident_with(scene, Some(&hook), sun_t.clone()));
-            drop(hook);
-            drop(c);
-            BoundaryLight::none()
+        let boundary = match border {
+            BorderLight::FaceLight(_, light) => unoccluded.clone().with_ghosts(light),
+            BorderLight::Bins(cubes) => {
+                drop(inc);
+                let hook = cubes.hook();
+                inc = timings.time("incident light", || compute_incident_with(scene, Some(&hook), sun_t.clone()));
+                BoundaryLight::none()
+            }
         };
-        let new = timings.time("diffusion solve", || {
-            solve_diffusion(&scene.medium, &inc, &boundary, Some(&sol), settings)
+        // The new I0 overwrites the old band by band; the change is measured as it does.
+        let (new, change) = timings.time("diffusion solve", || {
+            solve_diffusion_lean(&scene.medium, &inc, &boundary, Some(sol), settings)
         })?;
-        let change = relative_change(&sol, &new);
         // A change near or above 100 % is not noise: on grids whose voxels are optically very
         // thick (τ ≫ 1 per voxel) stage 1 deposits all light in the first voxel, and the P1 dipole
         // source −∇·(Q1/ρσtr) is not resolved, so the cubes' anisotropic light moves I0 a lot.

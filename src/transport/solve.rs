@@ -1088,7 +1088,7 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         (Some(dom), true) => (0..distinct)
             .map(|b| {
                 let bo = &bands[b];
-                Hierarchy::build(dsa_operator(m, dom, bo.sigma_t, bo.albedo, bo.chi.get(1).copied().unwrap_or(0.0)))
+                Hierarchy::build(&dsa_operator(m, dom, bo.sigma_t, bo.albedo, bo.chi.get(1).copied().unwrap_or(0.0)).rows())
             })
             .collect(),
         _ => Vec::new(),

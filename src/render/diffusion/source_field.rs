@@ -256,7 +256,7 @@ mod tests {
         let i1 = VoxelField::from_fn(idx.clone(), [Vec3::ZERO; 3], |g| i1[g]);
         let sh = VoxelField::from_fn(idx.clone(), [0.0; 3 * SH_COEFFS], |g| sh[g]);
         let lit = LitVolume::new(m.clone(), i0_rgb, sun_t.clone(), sun.clone(), Sky::constant(Rgb::ONE), None)
-            .with_flux(FluxField::new(&m, &i1))
+            .with_flux(FluxField::new(&m, i1.clone()))
             .with_sky_single(SkySingle::new(&m, &sh));
         let field = SourceField::new(&m, &i0f, Some(&i1), Some(&sh), &Arc::new(sun_t.clone().into()), &sun);
         let mut checked = 0;
