@@ -17,15 +17,14 @@ fn main() {
     }
 }
 
-/// Every allocation of 4 MiB or more gets its own mapping, returned to the system when freed.
+/// Every allocation of 1 MiB or more gets its own mapping, returned to the system when freed.
 /// By default glibc raises its mapping threshold to the size of each freed mapping (up to
 /// 32 MiB), after which the stages' large arrays come from the heap, whose freed ranges stay
-/// resident: `full`'s peak resident memory at 200×160×120 was ~10 MB above what its live arrays
-/// need. 16 MiB (the seventh round) still left the per-band arrays of 4–16 MiB on the heap:
-/// 4 MiB takes `full`'s peak from 81 to 73 MB at 200×160×120 and from 539 to 490 MB at
-/// 400×320×240, without measurable system time. (1 MiB saved no more but mapped the smaller
-/// per-stage arrays afresh each time: +0.15 s of system time at 200×160×120; docs/performance.md,
-/// "`full`'s peak, seventh round" and "Issue 16, eighth round".)
+/// resident. 16 MiB (the seventh round) left the per-band arrays of 4–16 MiB on the heap; 4 MiB
+/// (the eighth) took `full`'s peak from 81 to 73 MB at 200×160×120. Since the ninth round's
+/// per-band and per-stage arrays (1–4 MiB at 200×160×120) are what the peak holds, 1 MiB takes it
+/// from 71 to 55 MB there (its live heap is 42 MB), for ~0.06 s more system time in a 1.6 s run
+/// (docs/performance.md, "Memory of `full`, ninth round").
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 fn large_arrays_mapped() {
     extern "C" {
@@ -35,7 +34,7 @@ fn large_arrays_mapped() {
     // SAFETY: sets one allocator parameter (a fixed threshold also stops its adjustment), before
     // any other thread exists; a failure (0) leaves the default, which is only less frugal.
     unsafe {
-        mallopt(M_MMAP_THRESHOLD, 4 << 20);
+        mallopt(M_MMAP_THRESHOLD, 1 << 20);
     }
 }
 
