@@ -89,9 +89,7 @@ use crate::medium::sparse::VoxelField;
 use crate::medium::Medium;
 use boundary::face_index;
 pub use boundary::BoundaryLight;
-#[cfg(test)]
-use multigrid::Operator;
-use multigrid::{Hierarchy, Stencil, Stencils, NONE};
+use multigrid::{Hierarchy, Operator, Stencil, Stencils, NONE};
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -265,11 +263,8 @@ impl Domain {
 /// Band `c`'s operator (stored) and right-hand side, for the tests' dense comparisons.
 #[cfg(test)]
 pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_min: f64, dom: &Domain) -> (Operator, Vec<f64>) {
-    use multigrid::Stencils;
-    let a = BandOperator::new(m, c, tau_min, dom);
-    let nodes = (0..a.len()).map(|u| a.node(u)).collect();
     let b = band_rhs(m, inc, bl, c, tau_min).iter().map(|v| f64::from(*v)).collect();
-    (Operator { dims: dom.dims, nodes }, b)
+    (BandOperator::new(m, c, tau_min, dom).assembled(), b)
 }
 
 /// Band `c`'s operator (see the module docs) on the full voxels (in grid order, their cells
@@ -309,6 +304,16 @@ impl<'a> BandOperator<'a> {
             sigma_tr: m.optics.sigma_tr(c),
             h: [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64],
             tau_min,
+        }
+    }
+}
+
+impl BandOperator<'_> {
+    /// The operator assembled once (48 B per unknown).
+    fn assembled(&self) -> Operator {
+        Operator {
+            dims: self.dom.dims,
+            nodes: (0..self.len()).into_par_iter().map(|u| self.node(u)).collect(),
         }
     }
 }
@@ -545,7 +550,14 @@ fn solve_bands(
         }
         let group: Vec<usize> = (first..3).filter(|c| albedo[*c] == albedo[first]).collect();
         let rhs = |c: usize| band_rhs(medium, incident, boundary, c, settings.min_optical_depth);
-        let h = Hierarchy::build(&BandOperator::new(medium, first, settings.min_optical_depth, &dom));
+        let band = BandOperator::new(medium, first, settings.min_optical_depth, &dom);
+        // One band at a time (memory first) reads the rows as they are made; together (speed
+        // first) assembles them once, as the build reads each row a few times.
+        let h = match order {
+            BandSolves::OneByOne => Hierarchy::build(&band),
+            BandSolves::Together => Hierarchy::build(&band.assembled().rows()),
+        };
+        drop(band);
         let b_first = rhs(first);
         let (tol, max) = (settings.tolerance, settings.max_iterations);
         let solved: Vec<(usize, (Vec<f64>, SolveStats))> = match (order, group.len()) {
@@ -635,5 +647,44 @@ impl Default for SolveStats {
             levels: 0,
             bytes_per_unknown: 0.0,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::{Rng, Vec3};
+    use crate::medium::Grid3;
+
+    #[test]
+    fn rows_made_on_demand_are_the_assembled_ones() {
+        // Full voxels touching the grid's sides too (neighbours beyond the grid read ρ = 0).
+        let d = [9, 7, 6];
+        let mut grid = Grid3::filled(d, 0.0);
+        let mut rng = Rng::new(5, 3);
+        for v in grid.data_mut() {
+            if rng.uniform() < 0.7 {
+                *v = 10f32.powf(rng.uniform() * 3.0 - 2.0);
+            }
+        }
+        let m = Medium::new(grid, Vec3::ZERO, Vec3::new(1.0, 2.0, 1.5), 1.0, Rgb::new(0.99, 0.9, 0.999), 0.85);
+        let dom = Domain::of(&m).unwrap();
+        let band = BandOperator::new(&m, 1, 1e-3, &dom);
+        let a = band.assembled();
+        let rows = a.rows();
+        assert!(band.len() > 200 && band.len() == m.density.full_index().count());
+        let mut coupled = 0;
+        for u in 0..band.len() {
+            let (st, want) = (band.stencil(u), rows.stencil(u));
+            assert_eq!(st, want, "unknown {u}");
+            assert_eq!(band.cell(u), rows.cell(u));
+            coupled += st.nbr.iter().filter(|n| **n != NONE).count();
+        }
+        assert!(coupled > 2 * band.len(), "{coupled} couplings");
+        // Built either way, the hierarchy solves to the same bits.
+        let b: Vec<f64> = (0..band.len()).map(|u| 1.0 + (u % 5) as f64).collect();
+        let (x, _) = Hierarchy::build_with(&band, 16).solve(&b, None, 1e-8, 100);
+        let (y, _) = Hierarchy::build_with(&rows, 16).solve(&b, None, 1e-8, 100);
+        assert_eq!(x, y);
     }
 }
