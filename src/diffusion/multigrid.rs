@@ -1,8 +1,10 @@
 //! Matrix-free geometric multigrid on the voxel lattice, used as the preconditioner of conjugate
 //! gradients (MGPCG, McAdams et al. 2010).
 //!
-//! * **Operator.** A symmetric 7-point stencil. Callers assemble it straight onto its unknowns as
-//!   an [`Operator`] (each unknown's box cell, diagonal and +x, +y, +z couplings and neighbours);
+//! * **Operator.** A symmetric 7-point stencil on its unknowns, read row by row ([`Stencils`]):
+//!   assembled as an [`Operator`] (each unknown's box cell, diagonal and +x, +y, +z couplings and
+//!   neighbours), or made on demand from what it is assembled from (the diffusion bands' rows, from
+//!   the density: the build then never holds the finest operator beside its level);
 //!   [`Hierarchy::build`] turns every level into a [`Level`] that stores its unknowns with their
 //!   six neighbours' couplings and coded entries ([`Row`], 40 B). Nothing is stored per cell of the box (the cloud fills
 //!   about half of its tight box), so the memory and the work scale with the unknowns.
