@@ -218,20 +218,21 @@ impl Real for f64 {
 type Mg = f32;
 
 /// One row of a [`Level`]: its couplings to its +x, +y, +z neighbours and where the entries of
-/// the six neighbours (−x, +x, −y, +y, −z, +z) lie (28 B; the six couplings and six plain u32
-/// entries took 52 B with the diagonal).
+/// the six neighbours (−x, +x, −y, +y, −z, +z) lie (28 B; 40 B with all six couplings, each
+/// face's then stored in both its rows). The −a couplings are read from the −a neighbours' rows
+/// (a separate array of couplings, 16 + 12 B, took as many instructions as the 40 B rows, but
+/// `full`'s peak at 200×160×120 came out 4 MB above these rows', through the allocator).
 ///
 /// The entries are the other colour's, counted from its first (a colour's pass indexes the
-/// other's values and rows with them as they are: subtracting an offset cost ~7 % of the
+/// other's values and rows with them as they are: subtracting an offset cost ~7 % more of the
 /// solve's instructions), and coded from `base`, the other colour's first entry after this
 /// unknown in box order: the ±x neighbours (cells c ± 1) are the entries just before and at
 /// `base`, the ±y and ±z ones lie `dy` and `dz` entries before or after it (the other colour's
 /// unknowns between the cells, fewer than half a box row or plane). A missing neighbour (or one
-/// coupled by 0)
-/// has coupling 0: a missing +a one reads `base` (distance 0), its own coupling being 0 (any
-/// entry of the other colour would do, its value finite); a missing −a one reads the other
-/// colour's pad, whose value and couplings are 0, as its coupling is the neighbour's (the
-/// [`NO_MINUS_X`] flag, distance 0 for −y, and for −z the distance from `base` to the pad,
+/// coupled by 0) has coupling 0: a missing +a one reads `base` (distance 0), its own coupling
+/// being 0 (any entry of the other colour would do, its value finite); a missing −a one reads
+/// the other colour's pad, whose value and couplings are 0, as its coupling is the neighbour's
+/// (the [`NO_MINUS_X`] flag, distance 0 for −y, and for −z the distance from `base` to the pad,
 /// wrapped).
 #[derive(Clone, Copy, Debug)]
 struct Row {
