@@ -97,21 +97,6 @@ impl LitPyramid {
     }
 }
 
-/// A coarse level from its cells (all of them, x fastest), stored where ρ > 0.
-fn make_level(dims: [usize; 3], voxel_size: Vec3, cells: Vec<Cell>) -> Level {
-    let rho: Vec<f32> = cells.iter().map(|c| c[0]).collect();
-    let index = Arc::new(FullIndex::build(dims, &rho, |r| r > 0.0));
-    let occupancy = MajorantGrid::build(dims, index.full_voxels().map(|n| (n, rho[n])), BLOCK);
-    let cells = VoxelField::new(index, [0.0; 5], cells.into_iter().filter(|c| c[0] > 0.0));
-    Level {
-        dims,
-        voxel_size,
-        cells,
-        occupancy,
-    }
-}
-
-/// Average 2×2×2 blocks; cells beyond the grid count as empty (mass-preserving).
 /// Grid indices (x fastest, in that order) of the cells of a `d` grid that the coarser cell `c`
 /// averages: its 2×2×2 block, less the cells beyond the grid (they count as empty, so the mean
 /// still divides by 8).
@@ -120,25 +105,44 @@ pub fn children(d: [usize; 3], c: [usize; 3]) -> impl Iterator<Item = usize> {
     span(2).flat_map(move |kk| span(1).flat_map(move |jj| span(0).map(move |ii| ii + d[0] * (jj + d[1] * kk))))
 }
 
+/// Average 2×2×2 blocks; cells beyond the grid count as empty (mass-preserving). Walks the
+/// finer level's full cells only, in grid order, so each coarse cell adds its full children in
+/// the order of [`children`] (its empty ones add nothing): the coarse level is never held for
+/// every cell of its grid (20 B per coarse cell, the 200×160×120 cloud's `full` peak), only its
+/// ρ (4 B per coarse cell, for its index) while it is built.
 fn downsample(l: &Level) -> Level {
     let d = l.dims;
     let nd = [d[0].div_ceil(2), d[1].div_ceil(2), d[2].div_ceil(2)];
-    let mut cells = vec![[0f32; 5]; nd[0] * nd[1] * nd[2]];
-    for k in 0..nd[2] {
-        for j in 0..nd[1] {
-            for i in 0..nd[0] {
-                let mut s = [0f32; 5];
-                for n in children(d, [i, j, k]) {
-                    let c = &l.cells[n];
-                    for a in 0..5 {
-                        s[a] += c[a];
-                    }
-                }
-                cells[i + nd[0] * (j + nd[1] * k)] = s.map(|x| x * 0.125);
+    let coarse = |n: usize| {
+        let (i, j, k) = (n % d[0], (n / d[0]) % d[1], n / (d[0] * d[1]));
+        i / 2 + nd[0] * (j / 2 + nd[1] * (k / 2))
+    };
+    let fine = || l.cells.index().full_voxels().zip(l.cells.packed());
+    let mut rho = vec![0f32; nd[0] * nd[1] * nd[2]];
+    for (n, c) in fine() {
+        rho[coarse(n)] += c[0];
+    }
+    rho.iter_mut().for_each(|r| *r *= 0.125);
+    let index = Arc::new(FullIndex::build(nd, &rho, |r| r > 0.0));
+    let occupancy = MajorantGrid::build(nd, index.full_voxels().map(|n| (n, rho[n])), BLOCK);
+    drop(rho);
+    let mut cells = vec![[0f32; 5]; index.count() + 1];
+    for (n, c) in fine() {
+        // Slot 0: a coarse cell whose mean ρ rounds to 0 is empty.
+        let s = index.slot(coarse(n));
+        if s != 0 {
+            for (a, v) in cells[s].iter_mut().zip(c) {
+                *a += v;
             }
         }
     }
-    make_level(nd, l.voxel_size * 2.0, cells)
+    cells[1..].iter_mut().for_each(|c| *c = c.map(|x| x * 0.125));
+    Level {
+        dims: nd,
+        voxel_size: l.voxel_size * 2.0,
+        cells: VoxelField::from_slots(index, cells),
+        occupancy,
+    }
 }
 
 #[cfg(test)]
