@@ -560,21 +560,19 @@ fn solve_bands(
         drop(band);
         let b_first = rhs(first);
         let (tol, max) = (settings.tolerance, settings.max_iterations);
-        let solved: Vec<(usize, (Vec<f64>, SolveStats))> = match (order, group.len()) {
+        match (order, group.len()) {
             (BandSolves::OneByOne, _) | (_, 1) => {
-                let mut out = Vec::new();
                 let mut b_first = Some(b_first);
                 for &c in &group {
                     let b = b_first.take().unwrap_or_else(|| rhs(c));
                     let x0 = warm.then(|| i0[c].packed());
-                    let r = h.solve(&b, x0, tol, max);
+                    let (x, st) = h.solve(&b, x0, tol, max);
                     drop(b);
-                    converged(c, &r.1, settings)?;
+                    converged(c, &st, settings)?;
                     // Written back before the next band's vectors exist.
-                    store(&mut i0[c], &r.0, &mut change, &mut norm);
-                    out.push((c, (Vec::new(), r.1)));
+                    store(&mut i0[c], &x, &mut change, &mut norm);
+                    (stats[c], done[c]) = (st, true);
                 }
-                out
             }
             (BandSolves::Together, n) => {
                 let mut bs = vec![b_first];
@@ -587,17 +585,13 @@ fn solve_bands(
                     h.solve_many([b(0), b(1), b(2)], x(0).zip(x(1)).zip(x(2)).map(|((p, q), r)| [p, q, r]), tol, max)
                         .into()
                 };
-                group.iter().copied().zip(res).collect()
+                drop(bs);
+                for (&c, (x, st)) in group.iter().zip(res) {
+                    converged(c, &st, settings)?;
+                    store(&mut i0[c], &x, &mut change, &mut norm);
+                    (stats[c], done[c]) = (st, true);
+                }
             }
-        };
-        drop(h);
-        for (c, (x, st)) in solved {
-            converged(c, &st, settings)?;
-            if !x.is_empty() {
-                store(&mut i0[c], &x, &mut change, &mut norm);
-            }
-            stats[c] = st;
-            done[c] = true;
         }
     }
     let relative = if warm && norm > 0.0 { (change / norm).sqrt() } else { 0.0 };
