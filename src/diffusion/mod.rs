@@ -271,7 +271,7 @@ pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: u
 /// indexing `dom`), its rows made from the density when they are read: the multigrid's build
 /// reads each a few times instead of holding the assembled operator (48 B per unknown) beside
 /// the rows it builds.
-struct BandOperator<'a> {
+pub(crate) struct BandOperator<'a> {
     rho: &'a crate::medium::density::Density,
     index: Arc<crate::medium::sparse::FullIndex>,
     dom: Domain,
@@ -287,7 +287,14 @@ struct BandOperator<'a> {
 }
 
 impl<'a> BandOperator<'a> {
+    /// Band `c` of `m`'s optics.
     fn new(m: &'a Medium, c: usize, tau_min: f64, dom: &Domain) -> BandOperator<'a> {
+        Self::with_coefficients(m, dom, m.optics.sigma_a(c), m.optics.sigma_tr(c), tau_min)
+    }
+
+    /// Absorption and transport coefficients `sigma_a`, `sigma_tr` at density 1 (m⁻¹) of the
+    /// caller's choosing (the transport's DSA: its δ-M ones).
+    pub(crate) fn with_coefficients(m: &'a Medium, dom: &Domain, sigma_a: f64, sigma_tr: f64, tau_min: f64) -> BandOperator<'a> {
         let index = m.density.full_index();
         let gd = m.dims();
         let cells = index
@@ -300,8 +307,8 @@ impl<'a> BandOperator<'a> {
             dom: *dom,
             grid: gd,
             cells,
-            sigma_a: m.optics.sigma_a(c),
-            sigma_tr: m.optics.sigma_tr(c),
+            sigma_a,
+            sigma_tr,
             h: [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64],
             tau_min,
         }

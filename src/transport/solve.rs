@@ -22,8 +22,8 @@
 
 use super::sphere::Quadrature;
 use super::{BandOptics, Optics};
-use crate::diffusion::multigrid::{Hierarchy, Node, Operator};
-use crate::diffusion::{boundary_terms, interior_coupling, Domain, DEFAULT_MIN_OPTICAL_DEPTH};
+use crate::diffusion::multigrid::Hierarchy;
+use crate::diffusion::{interior_coupling, BandOperator, Domain, DEFAULT_MIN_OPTICAL_DEPTH};
 use crate::lighting::{Ground, Sky, Sun};
 use crate::math::{real_sh, sh_count};
 use crate::math::{Rgb, Vec3};
@@ -829,51 +829,6 @@ fn sweep_kernel<const AVX: bool>(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], g
 }
 with_avx!(@ sweep_ordinate, sweep_ordinate_avx, sweep_kernel::<false>, sweep_kernel::<true>, (c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, radiance: &mut [[f32; 3]]) -> Splats);
 
-/// The DSA operator of one band on the full voxels (δ-M coefficients), in grid order.
-fn dsa_operator(m: &Medium, dom: &Domain, sigma_t: f64, albedo: f64, chi1: f64) -> Operator {
-    let gd = m.dims();
-    let rho = &*m.density;
-    let index = m.density.full_index();
-    let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
-    let sigma_tr = sigma_t * (1.0 - albedo * chi1);
-    let sigma_a = sigma_t * (1.0 - albedo);
-    let tau_min = DEFAULT_MIN_OPTICAL_DEPTH;
-    let nodes = index
-        .full_voxels()
-        .map(|idx| {
-            let rp = rho.at(idx) as f64;
-            let cell = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])];
-            let mut node = Node::at(dom.cell(cell));
-            let mut diag = rp * sigma_a;
-            for ax in 0..3 {
-                for side in [-1i64, 1] {
-                    let nc = cell[ax] as i64 + side;
-                    let mut nb = cell;
-                    let rn = if nc >= 0 && nc < gd[ax] as i64 {
-                        nb[ax] = nc as usize;
-                        rho.get(nb[0], nb[1], nb[2]) as f64
-                    } else {
-                        0.0
-                    };
-                    if rn > 0.0 {
-                        let cf = interior_coupling(rp, rn, sigma_tr, h[ax], tau_min);
-                        diag += cf;
-                        if side > 0 {
-                            node.up[ax] = -cf;
-                            node.up_nbr[ax] = (index.slot(nb[0] + gd[0] * (nb[1] + gd[1] * nb[2])) - 1) as u32;
-                        }
-                    } else {
-                        diag += boundary_terms(rp, sigma_tr, h[ax], tau_min).0;
-                    }
-                }
-            }
-            node.diag = diag;
-            node
-        })
-        .collect();
-    Operator { dims: dom.dims, nodes }
-}
-
 /// Diffusion synthetic acceleration of band `b` after a sweep (module docs): the isotropic change
 /// ΔI0 of the sweep drives the diffusion equation for the error δ of the mean radiance (W·m⁻²·sr⁻¹);
 /// I_00 += √(4π) δ, and the P1 radiance of the correction, δI(Ω) = δ − Ω·∇δ/(ρσtr′) (Fick's law
@@ -1088,7 +1043,16 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         (Some(dom), true) => (0..distinct)
             .map(|b| {
                 let bo = &bands[b];
-                Hierarchy::build(&dsa_operator(m, dom, bo.sigma_t, bo.albedo, bo.chi.get(1).copied().unwrap_or(0.0)).rows())
+                // The DSA operator: the diffusion operator with the δ-M coefficients.
+                let chi1 = bo.chi.get(1).copied().unwrap_or(0.0);
+                let (sigma_a, sigma_tr) = (bo.sigma_t * (1.0 - bo.albedo), bo.sigma_t * (1.0 - bo.albedo * chi1));
+                Hierarchy::build(&BandOperator::with_coefficients(
+                    m,
+                    dom,
+                    sigma_a,
+                    sigma_tr,
+                    DEFAULT_MIN_OPTICAL_DEPTH,
+                ))
             })
             .collect(),
         _ => Vec::new(),
