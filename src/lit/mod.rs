@@ -26,10 +26,13 @@
 //! do not darken the cloud's edge, and it is the rule a mip pyramid of pre-multiplied ρ·I0 obeys
 //! at every level, so the gathers and the cubes see one field.
 //!
-//! **Storage.** Every per-voxel field here (ρ·I0, ρ·I1, the sky harmonics, the pyramid's cells)
-//! is zero where ρ = 0 and is stored only at the full voxels ([`crate::medium::sparse`]), so a
-//! lit volume costs bytes per voxel of the cloud, not of its box; only the density and the sun
-//! transmittance (sampled beside the cloud too) are dense.
+//! **Storage.** Every per-voxel field here (the cells [ρ, ρ·I0, ρ·T_sun], ρ·I1, the sky
+//! harmonics, the pyramid's coarser cells) is zero where ρ = 0 and is stored only at the full
+//! voxels ([`crate::medium::sparse`]), so a lit volume costs bytes per voxel of the cloud, not of
+//! its box; only the density and the sun transmittance (sampled beside the cloud too) are dense.
+//! ρ·I0 is stored once, in the lit volume's cells ([`pyramid::Cell`], 20 B per full voxel), which
+//! are also the pyramid's level 0 (the same allocation, not a copy): the gathers read ρ·I0 from
+//! their channels 1..4.
 
 pub mod ground;
 pub mod pyramid;
@@ -42,7 +45,7 @@ use crate::medium::march::{march, March};
 use crate::medium::sparse::VoxelField;
 use crate::medium::{Medium, SubGrid};
 use ground::LitGround;
-use pyramid::LitPyramid;
+use pyramid::{Cell, LitPyramid};
 use sky_single::SkySingle;
 use std::sync::{Arc, OnceLock};
 
@@ -50,13 +53,15 @@ use std::sync::{Arc, OnceLock};
 /// Cheap to clone (the grids are shared).
 #[derive(Clone, Debug)]
 pub struct LitVolume {
-    /// The medium (density, optics, box). Its pyramid is built from it once: do not replace it.
+    /// The medium (density, optics, box). The cells and the pyramid are built from it once: do
+    /// not replace it.
     pub medium: Medium,
-    /// ρ·max(I0, 0) per band at voxel centres (W·m⁻²·sr⁻¹), for the density-weighted rule;
-    /// stored per full voxel.
-    rho_i0: Arc<VoxelField<Rgb>>,
-    /// Transmittance towards the sun at voxel centres (unitless), the density grid's dims.
-    pub sun_t: Arc<SubGrid>,
+    /// Per full voxel at voxel centres, [ρ, ρ·max(I0, 0) (RGB, W·m⁻²·sr⁻¹), ρ·T_sun]: the
+    /// density-weighted rule's ρ·I0 and the pyramid's level 0 (shared with it, one copy).
+    cells: Arc<VoxelField<Cell>>,
+    /// Transmittance towards the sun at voxel centres (unitless), the density grid's dims. Private
+    /// (read by [`Self::sun_t`]): the cells' ρ·T_sun is made from it once.
+    sun_t: Arc<SubGrid>,
     /// The sun (its light enters only through `sun_t` and the phase function, never as a disc).
     pub sun: Sun,
     /// The sky behind everything.
@@ -90,9 +95,14 @@ impl LitVolume {
         let sun_t = sun_t.into();
         assert_eq!(sun_t.dims(), medium.dims(), "sun transmittance must have the density grid's dims");
         let rho = &*medium.density;
-        let rho_i0 = VoxelField::from_fn(medium.density.full_index(), Rgb::ZERO, |n| i0[n].max(Rgb::ZERO) * rho.at(n));
+        let t = &*sun_t;
+        let cells = VoxelField::from_fn(medium.density.full_index(), [0.0; 5], |n| {
+            let r = rho.at(n);
+            let c = i0[n].max(Rgb::ZERO) * r;
+            [r, c.x, c.y, c.z, r * t.at_index(n)]
+        });
         LitVolume {
-            rho_i0: Arc::new(rho_i0),
+            cells: Arc::new(cells),
             medium,
             sun_t,
             sun,
@@ -128,10 +138,17 @@ impl LitVolume {
         self.medium.dims()
     }
 
-    /// ρ·I0 (RGB) at voxel centres (W·m⁻²·sr⁻¹), stored per full voxel.
+    /// The cells [ρ, ρ·I0 (RGB, W·m⁻²·sr⁻¹), ρ·T_sun] at voxel centres, stored per full voxel:
+    /// the pyramid's level 0.
     #[inline]
-    pub fn rho_i0_field(&self) -> &VoxelField<Rgb> {
-        &self.rho_i0
+    pub fn cells(&self) -> &Arc<VoxelField<Cell>> {
+        &self.cells
+    }
+
+    /// The transmittance towards the sun at voxel centres (unitless), the density grid's dims.
+    #[inline]
+    pub fn sun_t(&self) -> &Arc<SubGrid> {
+        &self.sun_t
     }
 
     /// The mip pyramid (all levels down to [`pyramid::BLOCK`] cells), built on first use.
@@ -146,8 +163,8 @@ impl LitVolume {
         if rho <= 0.0 {
             return Rgb::ZERO;
         }
-        let f = &*self.rho_i0;
-        f.slots(&Trilinear::new(self.dims(), v.to_array())).blend(|s| *f.at_slot(s)) / rho
+        let f = &*self.cells;
+        f.slots(&Trilinear::new(self.dims(), v.to_array())).blend(|s| rho_i0(f.at_slot(s))) / rho
     }
 
     /// The diffuse radiance scattered towards `to_eye` per unit albedo (W·m⁻²·sr⁻¹): I0, or
@@ -184,15 +201,15 @@ impl LitVolume {
     /// one slot look-up when they share the density's index.
     #[inline]
     fn diffuse_corners(&self, v: Vec3, rho: f32, t: &Trilinear, to_eye: Vec3) -> Rgb {
-        let f = &*self.rho_i0;
+        let f = &*self.cells;
         let slots = f.slots(t);
-        let i0 = slots.blend(|s| *f.at_slot(s)) / rho;
+        let i0 = slots.blend(|s| rho_i0(f.at_slot(s))) / rho;
         let shared = self.flux.as_ref().filter(|fl| Arc::ptr_eq(fl.rho_i1().index(), f.index()));
         self.diffuse_parts(v, rho, i0, shared.map(|_| &slots), to_eye)
     }
 
     /// max(0, I0 + g·I1·ω) (or I0) plus the sky's single scattering, given I0 and, when the flux
-    /// shares ρ·I0's index, the slots of `v`'s corners.
+    /// shares the cells' index, the slots of `v`'s corners.
     #[inline(always)]
     fn diffuse_parts(&self, v: Vec3, rho: f32, i0: Rgb, slots: Option<&Trilinear>, to_eye: Vec3) -> Rgb {
         let d = match (&self.flux, slots) {
@@ -246,5 +263,67 @@ impl LitVolume {
     #[inline]
     pub fn ground_hit(&self, o: Vec3, d: Vec3) -> Option<f32> {
         self.ground.as_ref().and_then(|g| g.ground.intersect(o, d))
+    }
+}
+
+/// A cell's ρ·I0 (channels 1..4).
+#[inline(always)]
+fn rho_i0(c: &Cell) -> Rgb {
+    Rgb::new(c[1], c[2], c[3])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::medium::Grid3;
+
+    /// The pyramid's level 0 is the lit volume's cells (one allocation), and `i0` is the
+    /// density-weighted rule on ρ·max(I0, 0): trilinear(ρ·I0)/trilinear(ρ), bit for bit.
+    #[test]
+    fn level0_is_the_cells_and_i0_is_the_rule() {
+        let dims = [6, 5, 7];
+        let n = dims[0] * dims[1] * dims[2];
+        let mut g = Grid3::filled(dims, 0.0);
+        for (k, x) in g.data_mut().iter_mut().enumerate() {
+            *x = ((k * 7) % 4) as f32 * 0.3;
+        }
+        let i0: Vec<Rgb> = (0..n)
+            .map(|k| Rgb::new((k % 5) as f32 - 1.0, 0.5 + (k % 3) as f32, 2.0 - (k % 7) as f32 * 0.4))
+            .collect();
+        let sun_t = Grid3::from_vec(dims, (0..n).map(|k| (k % 9) as f32 / 8.0).collect(), "test").unwrap();
+        let m = Medium::new(g, Vec3::ZERO, Vec3::ONE, 1.0, Rgb::ONE, 0.5);
+        let sun = Sun {
+            dir: Vec3::Y,
+            irradiance: Rgb::ONE,
+        };
+        let lit = LitVolume::new(m.clone(), i0.clone(), sun_t.clone(), sun, Sky::constant(Rgb::ONE), None);
+        let p = lit.pyramid();
+        assert!(Arc::ptr_eq(&p.levels[0].cells, lit.cells()));
+        assert!(p.levels.len() >= 2);
+        let rho = |k: usize| m.density.at(k);
+        let st: Arc<SubGrid> = Arc::new(sun_t.into());
+        for (k, i) in i0.iter().enumerate() {
+            let c = lit.cells()[k];
+            let ri0 = i.max(Rgb::ZERO) * rho(k);
+            assert_eq!(
+                c.map(f32::to_bits),
+                [rho(k), ri0.x, ri0.y, ri0.z, rho(k) * st.at_index(k)].map(f32::to_bits)
+            );
+        }
+        let dense: Vec<Rgb> = (0..n).map(|k| i0[k].max(Rgb::ZERO) * rho(k)).collect();
+        let mut checked = 0;
+        for s in 0..200 {
+            let v = Vec3::new(s as f32 * 0.037 % 6.0, s as f32 * 0.061 % 5.0, s as f32 * 0.023 % 7.0);
+            let t = Trilinear::new(dims, v.to_array());
+            let r = m.density.blend(&t);
+            let want = if r <= 0.0 { Rgb::ZERO } else { t.blend(|k| dense[k]) / r };
+            assert_eq!(
+                lit.i0(v, r).to_array().map(f32::to_bits),
+                want.to_array().map(f32::to_bits),
+                "at {v}"
+            );
+            checked += (r > 0.0) as usize;
+        }
+        assert!(checked > 100, "{checked}");
     }
 }

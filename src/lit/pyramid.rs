@@ -1,7 +1,8 @@
 //! Mip pyramid of the lit volume for cone-matched volume rendering (the modern stand-in for the
 //! paper's octree of least-squares approximations, Schussman and Max 2001).
 //!
-//! Level 0 holds, per voxel, the pre-multiplied quantities (ρ, ρ·I0 (RGB), ρ·T_sun); level l+1
+//! Level 0 holds, per voxel, the pre-multiplied quantities (ρ, ρ·I0 (RGB), ρ·T_sun): it is the lit
+//! volume's own cells ([`LitVolume::cells`], the same allocation, not a copy); level l+1
 //! averages 2×2×2 blocks of level l, counting cells beyond the grid as empty, so every level keeps
 //! the cloud's total mass and the mass-weighted mean colour. A sample at level l interpolates
 //! trilinearly and divides by ρ to recover the colour, so empty space never darkens the colour.
@@ -28,8 +29,9 @@ pub struct Level {
     pub dims: [usize; 3],
     /// Voxel edge lengths at this level (m).
     pub voxel_size: Vec3,
-    /// Pre-multiplied cells, x fastest, stored where ρ > 0 (zero elsewhere).
-    pub cells: VoxelField<Cell>,
+    /// Pre-multiplied cells, x fastest, stored where ρ > 0 (zero elsewhere); level 0's are the
+    /// lit volume's cells (shared).
+    pub cells: Arc<VoxelField<Cell>>,
     /// Upper bounds of ρ per block of [`BLOCK`]³ cells (with a one-cell apron).
     pub occupancy: MajorantGrid,
 }
@@ -66,13 +68,6 @@ impl LitPyramid {
     /// `max_levels` levels in all (at least 1).
     pub fn build(lit: &LitVolume, max_levels: usize) -> LitPyramid {
         let m = &lit.medium;
-        let rho = &*m.density;
-        let t = &lit.sun_t;
-        let ri0 = lit.rho_i0_field();
-        let cells = VoxelField::from_fn(m.density.full_index(), [0.0; 5], |n| {
-            let (r, c) = (rho.at(n), ri0[n]);
-            [r, c.x, c.y, c.z, r * t.at_index(n)]
-        });
         // Level 0's occupancy is the medium's majorant grid where its blocks are the same.
         let occupancy = match m.majorant.block {
             BLOCK => (*m.majorant).clone(),
@@ -81,7 +76,7 @@ impl LitPyramid {
         let level0 = Level {
             dims: m.dims(),
             voxel_size: m.voxel_size,
-            cells,
+            cells: lit.cells().clone(),
             occupancy,
         };
         let mut levels = vec![level0];
@@ -140,7 +135,7 @@ fn downsample(l: &Level) -> Level {
     Level {
         dims: nd,
         voxel_size: l.voxel_size * 2.0,
-        cells: VoxelField::from_slots(index, cells),
+        cells: Arc::new(VoxelField::from_slots(index, cells)),
         occupancy,
     }
 }

@@ -319,7 +319,7 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
     let cubes = GatherCubes::new(lit, scene);
     let m = &lit.medium;
     let sun_e = lit.sun.irradiance;
-    let sun_at = move |p: Vec3| sun_e * lit.sun_t.trilinear(m.to_voxel(p).to_array());
+    let sun_at = move |p: Vec3| sun_e * lit.sun_t().trilinear(m.to_voxel(p).to_array());
     let sun = SunInput {
         dir: lit.sun.dir,
         irradiance_at: &sun_at,
