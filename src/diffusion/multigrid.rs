@@ -449,10 +449,13 @@ struct Level {
     /// Entry of the next coarser level holding each red entry (only the red ones are
     /// prolonged: [`Level::prolong_red`]); empty on the coarsest level.
     parent: Vec<u32>,
-    /// The finer level's red entries aggregated into entry e: `children[child_start[e]..child_start[e + 1]]`;
-    /// empty on the finest level.
-    child_start: Vec<u32>,
-    children: Vec<u32>,
+    /// Per z plane of the level's box, and one past the last: the first red entry of the finer
+    /// level aggregated into it (those of two finer planes, contiguous, as the red entries are
+    /// in box order) and its first red and black entries (each colour in box order). A plane's
+    /// entries have their red children in its range and no others, so the restriction is one
+    /// task per plane, each adding its children in their order ([`Level::restrict_residual`]).
+    /// Empty on the finest level.
+    planes: Vec<[u32; 3]>,
 }
 
 /// A row's diagonal from its sum `sum` and its couplings `c` (−x, +x, −y, +y, −z, +z):
@@ -578,8 +581,7 @@ impl Level {
             row_sums,
             rows,
             parent: Vec::new(),
-            child_start: Vec::new(),
-            children: Vec::new(),
+            planes: Vec::new(),
         };
         (level, entry)
     }
@@ -631,31 +633,33 @@ impl Level {
         self.len() - 2
     }
 
-    /// Record that `coarse` aggregates this level: each entry's parent (from each unknown's
-    /// aggregate `parent` and the coarse unknowns' entries `coarse_entry`; a pad of it for the
-    /// pads) and each coarse entry's red children (a black pass before every restriction of the
-    /// cycle leaves the black residuals at zero: [`Level::restrict_residual`]).
-    fn link(&mut self, parent: &[u32], coarse: &mut Level, coarse_entry: &[u32]) {
+    /// Record that `coarse`, of operator `op`, aggregates this level: each red entry's parent
+    /// (from each unknown's aggregate `parent` and the coarse unknowns' entries `coarse_entry`)
+    /// and the ranges of the coarse level's planes ([`Level::planes`]). Only the red entries
+    /// are linked: a black pass before every restriction of the cycle leaves the black
+    /// residuals at zero, and one after every prolongation overwrites the black values.
+    fn link(&mut self, parent: &[u32], coarse: &mut Level, coarse_entry: &[u32], op: &Operator) {
+        let plane_cells = (op.dims[0] * op.dims[1]) as u32;
+        let plane = |cu: u32| (op.nodes[cu as usize].cell / plane_cells) as usize;
         self.parent = (0..self.red)
             .into_par_iter()
             .map(|e| coarse_entry[parent[self.unknown(e) as usize] as usize])
             .collect();
-        let red_parents = &self.parent;
-        let mut start = vec![0u32; coarse.len() + 1];
-        for p in red_parents {
-            start[*p as usize + 1] += 1;
+        // Counts per plane (shifted by one), then their running sums from each range's start.
+        let mut planes = vec![[0u32; 3]; op.dims[2] + 1];
+        for e in 0..self.red {
+            planes[plane(parent[self.unknown(e) as usize]) + 1][0] += 1;
         }
-        for e in 0..coarse.len() {
-            start[e + 1] += start[e];
+        for (cu, e) in coarse_entry.iter().enumerate() {
+            planes[plane(cu as u32) + 1][1 + usize::from(*e as usize > coarse.red)] += 1;
         }
-        let mut fill = start.clone();
-        let mut children = vec![0u32; start[coarse.len()] as usize];
-        for (f, p) in red_parents.iter().enumerate() {
-            children[fill[*p as usize] as usize] = f as u32;
-            fill[*p as usize] += 1;
+        planes[0] = [0, 0, coarse.red as u32 + 1];
+        for k in 0..op.dims[2] {
+            for q in 0..3 {
+                planes[k + 1][q] += planes[k][q];
+            }
         }
-        coarse.child_start = start;
-        coarse.children = children;
+        coarse.planes = planes;
     }
 
     /// The residual b − A x at red entry e (of `x` split at the black entries into `xr` and
@@ -675,23 +679,38 @@ impl Level {
     }
 
     /// b = Pᵀ r, r = bf − Af xf the residual of the finer level `fine`: each entry sums its red
-    /// children's residuals as they are made (not stored). Called right after a black pass,
-    /// which leaves the black residuals at zero.
+    /// children's residuals as they are made (not stored), in their order, one task per plane
+    /// ([`Level::planes`]). Called right after a black pass, which leaves the black residuals at
+    /// zero.
     fn restrict_residual<const K: usize>(&self, fine: &Level, xf: &[[Mg; K]], bf: &[[Mg; K]], b: &mut [[Mg; K]]) {
         let (xr, xb) = xf.split_at(fine.red + 1);
-        with_diagonal!(fine, |diag| b.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, bs)| {
-            let first = ci * CHUNK;
+        // Each plane's red and black entries (the pads, which have no children, hold 0).
+        let (mut red, mut black) = b.split_at_mut(self.red + 1);
+        let mut tasks = Vec::with_capacity(self.planes.len());
+        for w in self.planes.windows(2) {
+            let (here, rest) = std::mem::take(&mut red).split_at_mut((w[1][1] - w[0][1]) as usize);
+            let (here_black, rest_black) = std::mem::take(&mut black).split_at_mut((w[1][2] - w[0][2]) as usize);
+            tasks.push((w[0], w[1][0] as usize, here, here_black));
+            (red, black) = (rest, rest_black);
+        }
+        red.fill([0.0; K]);
+        black.fill([0.0; K]);
+        let split = self.red as u32;
+        with_diagonal!(fine, |diag| tasks.into_par_iter().for_each(|(start, end, red, black)| {
+            red.fill([0.0; K]);
+            black.fill([0.0; K]);
             let xb = OtherColour::of(fine, xb, fine.red + 1);
-            for (t, v) in bs.iter_mut().enumerate() {
-                let e = first + t;
-                let mut s = [0.0; K];
-                for f in &self.children[self.child_start[e] as usize..self.child_start[e + 1] as usize] {
-                    let rf = fine.residual_red(*f as usize, xr, &xb, bf, &diag);
-                    for k in 0..K {
-                        s[k] += rf[k];
-                    }
+            for f in start[0] as usize..end {
+                let rf = fine.residual_red(f, xr, &xb, bf, &diag);
+                let p = fine.parent[f];
+                let v = if p < split {
+                    &mut red[(p - start[1]) as usize]
+                } else {
+                    &mut black[(p - start[2]) as usize]
+                };
+                for k in 0..K {
+                    v[k] += rf[k];
                 }
-                *v = s;
             }
         }))
     }
@@ -975,7 +994,7 @@ impl Hierarchy {
                 _ => break,
             };
             let (mut next, next_entry) = Level::from_stencils(&c.rows(), false);
-            level.link(&parent, &mut next, &next_entry);
+            level.link(&parent, &mut next, &next_entry, &c);
             levels.push(std::mem::replace(&mut level, next));
             (coarsest, entry) = (Some(c), next_entry);
         }
@@ -1001,9 +1020,7 @@ impl Hierarchy {
 
     /// Bytes the hierarchy holds.
     fn bytes(&self) -> usize {
-        let level = |l: &Level| {
-            l.rows.len() * std::mem::size_of::<Row>() + 4 * (l.diag.len() + l.parent.len() + l.child_start.len() + l.children.len())
-        };
+        let level = |l: &Level| l.rows.len() * std::mem::size_of::<Row>() + 4 * (l.diag.len() + l.parent.len() + 3 * l.planes.len());
         self.levels.iter().map(level).sum::<usize>() + 8 * (self.coarse.l.len() + self.coarse.cells.len())
     }
 
@@ -1628,6 +1645,50 @@ mod operator_tests {
         let mut work: Vec<Work<1>> = Work::all(h);
         h.cycle(0, &b, &mut x, &mut work);
         x.iter().map(|v| v[0] as f64).collect()
+    }
+
+    #[test]
+    fn restriction_sums_each_coarse_entrys_red_children() {
+        // Each coarse entry gets the sum of its red children's residuals (whatever it held), the
+        // pads 0: checked on every level against residuals made densely from the decoded rows.
+        let (s, _) = sun_lit_system([14, 12, 10], 8, 0.99, 0.85, Vec3::new(0.1, 1.0, 0.3), 0);
+        let h = Hierarchy::build_with(&s.rows(), 16);
+        assert!(h.levels() >= 4);
+        let mut rng = Rng::new(3, 2);
+        for l in 0..h.levels() - 1 {
+            let (fine, coarse) = (&h.levels[l], &h.levels[l + 1]);
+            let mut random = || -> Vec<[Mg; 1]> {
+                (0..fine.len())
+                    .map(|e| [if fine.unknown(e) == PAD { 0.0 } else { rng.uniform() - 0.5 }])
+                    .collect()
+            };
+            let (x, b) = (random(), random());
+            let mut got = vec![[7.0; 1]; coarse.len()];
+            coarse.restrict_residual(fine, &x, &b, &mut got);
+            let (mut want, mut size) = (vec![0.0; coarse.len()], vec![0.0; coarse.len()]);
+            for f in 0..fine.red {
+                let nbr = fine.neighbours(f);
+                let c = fine.couplings(f, &nbr).map(f64::from);
+                let d = match fine.row_sums {
+                    true => super::less_couplings(f64::from(fine.diag[f]), c),
+                    false => f64::from(fine.diag[f]),
+                };
+                let terms = (0..6)
+                    .map(|q| c[q] * f64::from(x[nbr[q] as usize][0]))
+                    .chain([d * f64::from(x[f][0])]);
+                let p = fine.parent[f] as usize;
+                want[p] += f64::from(b[f][0]) - terms.clone().sum::<f64>();
+                size[p] += f64::from(b[f][0]).abs() + terms.map(f64::abs).sum::<f64>();
+            }
+            for e in 0..coarse.len() {
+                if coarse.unknown(e) == PAD {
+                    assert_eq!(got[e], [0.0], "level {l} pad {e}");
+                }
+                let g = f64::from(got[e][0]);
+                assert!((g - want[e]).abs() <= 1e-5 * size[e], "level {l} entry {e}: {g} vs {}", want[e]);
+            }
+            assert!(size.iter().filter(|v| **v > 0.0).count() > coarse.unknowns() / 2);
+        }
     }
 
     #[test]
