@@ -655,8 +655,9 @@ impl Level {
         }
         planes[0] = [0, 0, coarse.red as u32 + 1];
         for k in 0..op.dims[2] {
-            for q in 0..3 {
-                planes[k + 1][q] += planes[k][q];
+            let before = planes[k];
+            for (v, b) in planes[k + 1].iter_mut().zip(before) {
+                *v += b;
             }
         }
         coarse.planes = planes;
