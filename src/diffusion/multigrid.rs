@@ -493,7 +493,7 @@ impl<'a, const K: usize> OtherColour<'a, K> {
         }
     }
 
-    /// Σ_q cpl_q · x[nbr_q] per system, the off-diagonal part of `row` (of the other colour),
+    /// Σ_q cpl_q · x\[nbr_q\] per system, the off-diagonal part of `row` (of the other colour),
     /// and the couplings cpl_q (−x, +x, −y, +y, −z, +z; they give the finest level's diagonal).
     /// (Always inlined: it is the smoother's inner loop, and an outlined call costs ~10 % of the
     /// solve's instructions.)
