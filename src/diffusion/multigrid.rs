@@ -448,9 +448,9 @@ struct Level {
     /// stored as sums by 2·10⁻⁹, at the same speed (within the noise).
     row_sums: bool,
     rows: Vec<Row>,
-    /// The entry of the next coarser level holding each red entry (only the red ones are
+    /// Entry of the next coarser level holding each red entry (only the red ones are
     /// prolonged: [`Level::prolong_red`]); empty on the coarsest level.
-    parent: Parents,
+    parent: Vec<u32>,
     /// Per z plane of the level's box, and one past the last: the first red entry of the finer
     /// level aggregated into it (those of two finer planes, contiguous, as the red entries are
     /// in box order) and its first red and black entries (each colour in box order). A plane's
@@ -474,63 +474,6 @@ fn row_sum(st: &Stencil) -> f64 {
         .zip(st.nbr)
         .filter(|(_, v)| *v != NONE)
         .fold(st.diag, |s, (o, _)| s + o)
-}
-
-/// Each red entry's parent, its aggregate's entry on the next coarser level, counted within the
-/// parent's plane ([`Level::planes`]): the plane's red entries, then its black ones. A pass over
-/// one plane's children (restriction, prolongation) finds it with one comparison.
-#[derive(Clone, Debug)]
-enum Parents {
-    /// 2 B each, where every coarse plane has at most 2^16 entries (a box plane of up to 2^18
-    /// cells).
-    Narrow(Vec<u16>),
-    /// 4 B each, otherwise.
-    Wide(Vec<u32>),
-}
-
-impl Parents {
-    /// Bytes held.
-    fn bytes(&self) -> usize {
-        match self {
-            Parents::Narrow(v) => 2 * v.len(),
-            Parents::Wide(v) => 4 * v.len(),
-        }
-    }
-}
-
-/// A parent's offset in its plane, 2 B or 4 B ([`Parents`]).
-trait Offset: Copy + Sync {
-    fn get(self) -> usize;
-}
-
-impl Offset for u16 {
-    #[inline(always)]
-    fn get(self) -> usize {
-        usize::from(self)
-    }
-}
-
-impl Offset for u32 {
-    #[inline(always)]
-    fn get(self) -> usize {
-        self as usize
-    }
-}
-
-/// Runs `$pass` with `$p` the slice of `$parents` ([`Parents`]): one copy of the pass per width.
-macro_rules! with_parents {
-    ($parents:expr, |$p:ident| $pass:expr) => {{
-        match $parents {
-            Parents::Narrow(v) => {
-                let $p: &[u16] = v;
-                $pass
-            }
-            Parents::Wide(v) => {
-                let $p: &[u32] = v;
-                $pass
-            }
-        }
-    }};
 }
 
 /// The other colour's entries `off..off + x.len()` (its pad last) as the rows of one colour read
@@ -639,7 +582,7 @@ impl Level {
             diag,
             row_sums,
             rows,
-            parent: Parents::Wide(Vec::new()),
+            parent: Vec::new(),
             planes: Vec::new(),
         };
         (level, entry)
@@ -700,12 +643,14 @@ impl Level {
     fn link(&mut self, parent: &[u32], coarse: &mut Level, coarse_entry: &[u32], op: &Operator) {
         let plane_cells = (op.dims[0] * op.dims[1]) as u32;
         let plane = |cu: u32| (op.nodes[cu as usize].cell / plane_cells) as usize;
-        // Each red entry's coarse unknown, then its parent counted within its plane.
-        let mut up: Vec<u32> = (0..self.red).into_par_iter().map(|e| parent[self.unknown(e) as usize]).collect();
+        self.parent = (0..self.red)
+            .into_par_iter()
+            .map(|e| coarse_entry[parent[self.unknown(e) as usize] as usize])
+            .collect();
         // Counts per plane (shifted by one), then their running sums from each range's start.
         let mut planes = vec![[0u32; 3]; op.dims[2] + 1];
-        for cu in &up {
-            planes[plane(*cu) + 1][0] += 1;
+        for e in 0..self.red {
+            planes[plane(parent[self.unknown(e) as usize]) + 1][0] += 1;
         }
         for (cu, e) in coarse_entry.iter().enumerate() {
             planes[plane(cu as u32) + 1][1 + usize::from(*e as usize > coarse.red)] += 1;
@@ -717,24 +662,6 @@ impl Level {
                 *v += b;
             }
         }
-        let mut rest = &mut up[..];
-        let mut tasks = Vec::with_capacity(op.dims[2]);
-        for w in planes.windows(2) {
-            let (here, more) = std::mem::take(&mut rest).split_at_mut((w[1][0] - w[0][0]) as usize);
-            tasks.push((here, w[0], w[1][1] - w[0][1]));
-            rest = more;
-        }
-        tasks.into_par_iter().for_each(|(ps, start, red)| {
-            for p in ps {
-                let e = coarse_entry[*p as usize];
-                *p = if e < start[1] + red { e - start[1] } else { red + e - start[2] };
-            }
-        });
-        let widest = planes.windows(2).map(|w| w[1][1] - w[0][1] + w[1][2] - w[0][2]).max().unwrap_or(0);
-        self.parent = match u16::try_from(widest) {
-            Ok(_) => Parents::Narrow(up.into_par_iter().map(|p| p as u16).collect()),
-            Err(_) => Parents::Wide(up),
-        };
         coarse.planes = planes;
     }
 
@@ -771,22 +698,24 @@ impl Level {
         }
         red.fill([0.0; K]);
         black.fill([0.0; K]);
-        with_parents!(&fine.parent, |parents| with_diagonal!(fine, |diag| tasks.into_par_iter().for_each(
-            |(start, end, red, black)| {
-                red.fill([0.0; K]);
-                black.fill([0.0; K]);
-                let xb = OtherColour::of(fine, xb, fine.red + 1);
-                let first = start[0] as usize;
-                for (f, p) in (first..end).zip(&parents[first..end]) {
-                    let rf = fine.residual_red(f, xr, &xb, bf, &diag);
-                    let p = p.get();
-                    let v = if p < red.len() { &mut red[p] } else { &mut black[p - red.len()] };
-                    for k in 0..K {
-                        v[k] += rf[k];
-                    }
+        let split = self.red as u32;
+        with_diagonal!(fine, |diag| tasks.into_par_iter().for_each(|(start, end, red, black)| {
+            red.fill([0.0; K]);
+            black.fill([0.0; K]);
+            let xb = OtherColour::of(fine, xb, fine.red + 1);
+            for f in start[0] as usize..end {
+                let rf = fine.residual_red(f, xr, &xb, bf, &diag);
+                let p = fine.parent[f];
+                let v = if p < split {
+                    &mut red[(p - start[1]) as usize]
+                } else {
+                    &mut black[(p - start[2]) as usize]
+                };
+                for k in 0..K {
+                    v[k] += rf[k];
                 }
             }
-        )))
+        }))
     }
 
     /// The first red pass from x = 0: x = b / diag on the red unknowns, 0 elsewhere (the finest
@@ -832,30 +761,20 @@ impl Level {
         }))
     }
 
-    /// x += w P xc on the red unknowns, each adding its parent's correction (xc on `coarse`,
-    /// one task per coarse plane): a black pass follows, which overwrites the black ones
-    /// whatever they hold.
-    fn prolong_red<const K: usize>(&self, coarse: &Level, x: &mut [[Mg; K]], xc: &[[Mg; K]], w: Mg) {
-        let (red, black) = xc.split_at(coarse.red + 1);
-        let mut rest = &mut x[..self.red];
-        let mut tasks = Vec::with_capacity(coarse.planes.len());
-        for p in coarse.planes.windows(2) {
-            let (here, more) = std::mem::take(&mut rest).split_at_mut((p[1][0] - p[0][0]) as usize);
-            let black_of = |e: u32| e as usize - (coarse.red + 1);
-            let cr = &red[p[0][1] as usize..p[1][1] as usize];
-            let cb = &black[black_of(p[0][2])..black_of(p[1][2])];
-            tasks.push((here, p[0][0] as usize, cr, cb));
-            rest = more;
-        }
-        with_parents!(&self.parent, |parents| tasks.into_par_iter().for_each(|(xs, first, cr, cb)| {
-            for (v, p) in xs.iter_mut().zip(&parents[first..]) {
-                let p = p.get();
-                let c = if p < cr.len() { &cr[p] } else { &cb[p - cr.len()] };
-                for k in 0..K {
-                    v[k] += w * c[k];
+    /// x += w P xc on the red unknowns, each adding its parent's correction: a black pass
+    /// follows, which overwrites the black ones whatever they hold.
+    fn prolong_red<const K: usize>(&self, x: &mut [[Mg; K]], xc: &[[Mg; K]], w: Mg) {
+        x[..self.red]
+            .par_chunks_mut(CHUNK)
+            .zip(self.parent.par_chunks(CHUNK))
+            .for_each(|(xs, ps)| {
+                for (v, p) in xs.iter_mut().zip(ps) {
+                    let c = &xc[*p as usize];
+                    for k in 0..K {
+                        v[k] += w * c[k];
+                    }
                 }
-            }
-        }))
+            });
     }
 }
 
@@ -1104,7 +1023,7 @@ impl Hierarchy {
 
     /// Bytes the hierarchy holds.
     fn bytes(&self) -> usize {
-        let level = |l: &Level| l.rows.len() * std::mem::size_of::<Row>() + 4 * (l.diag.len() + 3 * l.planes.len()) + l.parent.bytes();
+        let level = |l: &Level| l.rows.len() * std::mem::size_of::<Row>() + 4 * (l.diag.len() + l.parent.len() + 3 * l.planes.len());
         self.levels.iter().map(level).sum::<usize>() + 8 * (self.coarse.l.len() + self.coarse.cells.len())
     }
 
@@ -1131,7 +1050,7 @@ impl Hierarchy {
         for visit in 0..visits {
             self.levels[l + 1].restrict_residual(s, x, b, &mut w.bc);
             self.cycle(l + 1, &w.bc, &mut w.xc, rest);
-            s.prolong_red(&self.levels[l + 1], x, &w.xc, Mg::of(self.over_correction));
+            s.prolong_red(x, &w.xc, Mg::of(self.over_correction));
             if visit + 1 < visits {
                 s.smooth(x, b, 1);
                 s.smooth(x, b, 0);
@@ -1462,7 +1381,7 @@ impl Hierarchy {
 /// (moved here from tests/ so the solver's internals need not be public).
 #[cfg(test)]
 mod operator_tests {
-    use super::{coarsen, row_sum, Hierarchy, Level, Mg, Operator, Parents, Real, Stencils, Work, NONE, PAD};
+    use super::{coarsen, row_sum, Hierarchy, Level, Mg, Operator, Real, Stencils, Work, NONE, PAD};
     use crate::diffusion::{assemble, BoundaryLight, Domain};
     use crate::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
     use crate::lighting::DirectionBins;
@@ -1731,18 +1650,6 @@ mod operator_tests {
         x.iter().map(|v| v[0] as f64).collect()
     }
 
-    /// The entry of `coarse` holding red entry `f` of `fine`, decoded from its plane's ranges.
-    fn parent_entry(fine: &Level, coarse: &Level, f: usize) -> usize {
-        let k = coarse.planes.partition_point(|p| p[0] as usize <= f) - 1;
-        let (here, next) = (coarse.planes[k], coarse.planes[k + 1]);
-        let o: u32 = match &fine.parent {
-            Parents::Narrow(v) => v[f].into(),
-            Parents::Wide(v) => v[f],
-        };
-        let red = next[1] - here[1];
-        (if o < red { here[1] + o } else { here[2] + o - red }) as usize
-    }
-
     #[test]
     fn restriction_sums_each_coarse_entrys_red_children() {
         // Each coarse entry gets the sum of its red children's residuals (whatever it held), the
@@ -1759,14 +1666,6 @@ mod operator_tests {
                     .collect()
             };
             let (x, b) = (random(), random());
-            // The decoded parents are the aggregates (checked on the first coarsening).
-            if l == 0 {
-                let aggregate = coarsen(&s.rows()).1;
-                for f in 0..fine.red {
-                    let p = parent_entry(fine, coarse, f);
-                    assert_eq!(coarse.unknown(p), aggregate[fine.unknown(f) as usize], "red entry {f}");
-                }
-            }
             let mut got = vec![[7.0; 1]; coarse.len()];
             coarse.restrict_residual(fine, &x, &b, &mut got);
             let (mut want, mut size) = (vec![0.0; coarse.len()], vec![0.0; coarse.len()]);
@@ -1780,7 +1679,7 @@ mod operator_tests {
                 let terms = (0..6)
                     .map(|q| c[q] * f64::from(x[nbr[q] as usize][0]))
                     .chain([d * f64::from(x[f][0])]);
-                let p = parent_entry(fine, coarse, f);
+                let p = fine.parent[f] as usize;
                 want[p] += f64::from(b[f][0]) - terms.clone().sum::<f64>();
                 size[p] += f64::from(b[f][0]).abs() + terms.map(f64::abs).sum::<f64>();
             }
@@ -1793,29 +1692,6 @@ mod operator_tests {
             }
             assert!(size.iter().filter(|v| **v > 0.0).count() > coarse.unknowns() / 2);
         }
-    }
-
-    #[test]
-    fn wide_parents_give_the_same_cycle() {
-        // The 4 B parents (coarse planes of more than 2^16 entries, too large for a unit test) in
-        // place of the 2 B ones: the same preconditioner, bit for bit.
-        let (s, _) = sun_lit_system([14, 12, 10], 8, 0.99, 0.85, Vec3::new(0.1, 1.0, 0.3), 0);
-        let h = Hierarchy::build_with(&s.rows(), 16);
-        let mut wide = h.clone();
-        for l in &mut wide.levels[..h.levels() - 1] {
-            let Parents::Narrow(v) = &l.parent else {
-                panic!("small planes take 2 B parents");
-            };
-            l.parent = Parents::Wide(v.iter().map(|p| u32::from(*p)).collect());
-        }
-        let fine = &h.levels[0];
-        let mut rng = Rng::new(4, 4);
-        let b: Vec<f64> = (0..fine.len())
-            .map(|e| if fine.unknown(e) == PAD { 0.0 } else { rng.uniform() as f64 - 0.5 })
-            .collect();
-        let (narrow_z, wide_z) = (precondition(&h, &b), precondition(&wide, &b));
-        assert_eq!(narrow_z, wide_z);
-        assert!(narrow_z.iter().any(|v| *v != 0.0));
     }
 
     #[test]
