@@ -68,9 +68,10 @@
 //! a symmetric 7-point stencil (the coupling of a face is the same from both sides), strictly
 //! diagonally dominant on rows that touch a boundary or absorb, weakly elsewhere, and irreducible
 //! within each connected piece of cloud, each of which touches a boundary: symmetric positive
-//! definite, also for albedo 1. The solver works on the diagonally scaled system
-//! D^{-1/2} A D^{-1/2} y = D^{-1/2} b (x = D^{-1/2} y), whose relative residual is the one reported
-//! and tested against the tolerance: thin voxels (large D/h²) then do not drown out thick ones.
+//! definite, also for albedo 1. The relative residual reported and tested against the tolerance
+//! is that of the diagonally scaled system D^{-1/2} A D^{-1/2} y = D^{-1/2} b (x = D^{-1/2} y),
+//! ‖D^{-1/2} (b − A x)‖ / ‖D^{-1/2} b‖: thin voxels (large D/h²) then do not drown out thick ones.
+//! (The solver iterates on A x = b itself, whose PCG iterates are the scaled system's.)
 //!
 //! The outgoing diffuse flux through a boundary face (W/m² per band) is 4π φ_f = 2π I0_face: the
 //! energy-balance test sums it.
