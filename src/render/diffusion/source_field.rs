@@ -15,8 +15,9 @@
 use crate::lighting::Sun;
 use crate::math::{Rgb, Trilinear, Vec3, SH_COEFFS};
 use crate::medium::sparse::{FullIndex, VoxelField};
-use crate::medium::{Medium, SubGrid};
+use crate::medium::Medium;
 use crate::optics::Optics;
+use crate::sunlight::SunGrid;
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -45,7 +46,7 @@ pub struct SourceField {
     /// scattering ρ·g^l·L_lm of the reduced sky and ground radiance (W·m⁻²·sr⁻¹ per unit density).
     rec: Records,
     /// The sun's transmittance at voxel centres (unitless).
-    sun_t: Arc<SubGrid>,
+    sun_t: Arc<SunGrid>,
     dims: [usize; 3],
     optics: Optics,
     sun: Sun,
@@ -72,7 +73,7 @@ impl SourceField {
         i0: &[VoxelField<f32>; 3],
         i1: Option<&VoxelField<[Vec3; 3]>>,
         sky_sh: Option<&VoxelField<[f32; 3 * SH_COEFFS]>>,
-        sun_t: &Arc<SubGrid>,
+        sun_t: &Arc<SunGrid>,
         sun: &Sun,
     ) -> SourceField {
         let g = m.optics.phase.mean_cosine() as f32;
