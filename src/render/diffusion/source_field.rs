@@ -90,10 +90,11 @@ impl SourceField {
         let i0 = i0.each_ref().map(|f| f.packed());
         // I1 is evaluated at grid indices: the r-th full voxel's (8 B per full voxel while the
         // records are built).
-        let grid: Vec<usize> = match i1 {
-            Some(_) => index.full_voxels().collect(),
-            None => Vec::new(),
-        };
+        let mut grid = Vec::with_capacity(if i1.is_some() { index.count() } else { 0 });
+        if i1.is_some() {
+            // Sized up front: a collected list grew to 1.5 times its length.
+            grid.extend(index.full_voxels());
+        }
         let i1_of = |r: usize| i1.map(|f| f(grid[r]));
         // Bands of `b` floats: ρ·max(I0, 0), ρ·g·I1 (I1 of record r, `i1r`), then (if `b` =
         // BAND) ρ·g^l·L_lm.
