@@ -11,6 +11,7 @@ pub mod diffusion;
 pub mod edges;
 pub mod error;
 pub mod figures;
+pub mod half;
 pub mod image;
 pub mod incident;
 pub mod io;

@@ -47,17 +47,19 @@ fn flux_is_ficks_law_in_the_interior() {
     let m = cube(n, a, g);
     let sigma_tr = 1.0 - a * g;
     let mut inc = unlit(&m);
-    let constant = diffuse_flux(&m, &inc, &solution_of(&m, |_, _, _| 2.0), TAU_MIN);
+    // I1 at every voxel (all are full), evaluated before stage 1's light is replaced below.
+    let all = |f: &dyn Fn(usize) -> [Vec3; 3]| (0..n * n * n).map(f).collect::<Vec<_>>();
+    let constant = all(&diffuse_flux(&m, &inc, &solution_of(&m, |_, _, _| 2.0), TAU_MIN));
     let grad = Vec3::new(0.1, 0.2, -0.05);
     let linear = solution_of(&m, |i, j, k| 3.0 + grad.dot(Vec3::new(i as f32, j as f32, k as f32)));
-    let lin = diffuse_flux(&m, &inc, &linear, TAU_MIN);
+    let lin = all(&diffuse_flux(&m, &inc, &linear, TAU_MIN));
     let q1 = Vec3::new(0.02, -0.01, 0.03);
     let field = |v: f32| VoxelField::filled(m.density.full_index(), Rgb::splat(v));
     inc.scattering = FirstScattering::General {
         q0: field(0.0),
         q1: [field(q1[0]), field(q1[1]), field(q1[2])],
     };
-    let with_q1 = diffuse_flux(&m, &inc, &linear, TAU_MIN);
+    let with_q1 = all(&diffuse_flux(&m, &inc, &linear, TAU_MIN));
     let want_lin = -grad / sigma_tr;
     let want_q1 = want_lin + 3.0 * q1 / sigma_tr;
     let mut boundary_outward = 0;
@@ -138,18 +140,19 @@ fn slab_lit_from_above_is_brighter_below_darker_above() {
     };
     let sun_t = inc.sun_transmittance.grid.clone();
     let off = LitVolume::new(m.clone(), i0_rgb(&sol), sun_t, sun, Sky::constant(Rgb::ZERO), None);
-    let on = off.clone().with_flux(FluxField::new(&m, i1.clone()));
+    let on = off.clone().with_flux(FluxField::new(&m, &i1));
     for j in 2..8 {
         let idx = 5 + d[0] * (j + d[1] * 5);
-        assert!(i1[idx][1].y < 0.0, "layer {j}: I1 = {:?}", i1[idx][1]);
+        assert!(i1(idx)[1].y < 0.0, "layer {j}: I1 = {:?}", i1(idx)[1]);
         let v = Vec3::new(5.5, j as f32 + 0.5, 5.5);
         // The source takes the direction to the eye: −Y is an eye below looking up.
         let below = (on.source(v, 1.0, -Vec3::Y) - off.source(v, 1.0, -Vec3::Y)).y;
         let above = (on.source(v, 1.0, Vec3::Y) - off.source(v, 1.0, Vec3::Y)).y;
         assert!(below > 0.0, "layer {j}: from below {below}");
         assert!(above < 0.0, "layer {j}: from above {above}");
-        // The change is ±a·g·|I1_y| (clamped at zero radiance from above).
-        let want = 0.99 * 0.8 * -i1[idx][1].y;
-        assert!((below - want).abs() <= 1e-4 * want.max(1e-3), "{below} vs {want}");
+        // The change is ±a·g·|I1_y| (clamped at zero radiance from above), I1 as the lit volume
+        // holds it: ρ·I1 in bf16, within 2⁻⁸ of it (ρ = 1 at the voxel centre).
+        let want = 0.99 * 0.8 * -i1(idx)[1].y;
+        assert!((below - want).abs() <= want / 256.0 + 1e-4 * want.max(1e-3), "{below} vs {want}");
     }
 }

@@ -101,7 +101,7 @@ pub struct GridMemory {
     /// Per grid voxel: the full-voxel index's occupancy words (0.25 B; the density is stored per
     /// full voxel).
     pub per_grid: u64,
-    /// Per voxel of the box of the full voxels: the sun transmittance (4 B, on the box grown by
+    /// Per voxel of the box of the full voxels: the sun transmittance (2 B, on the box grown by
     /// one voxel) and the solver's box-shaped bookkeeping.
     pub per_box: u64,
     /// Per full voxel: the density, the solver's hierarchy and vectors, stage 1's Q0/Q1, I0, I1,

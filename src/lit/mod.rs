@@ -43,7 +43,8 @@ use crate::lighting::{Sky, Sun};
 use crate::math::{Rgb, Trilinear, Vec3};
 use crate::medium::march::{march, March};
 use crate::medium::sparse::VoxelField;
-use crate::medium::{Medium, SubGrid};
+use crate::medium::Medium;
+use crate::sunlight::SunGrid;
 use ground::LitGround;
 use pyramid::{Cell, LitPyramid};
 use sky_single::SkySingle;
@@ -61,7 +62,7 @@ pub struct LitVolume {
     cells: Arc<VoxelField<Cell>>,
     /// Transmittance towards the sun at voxel centres (unitless), the density grid's dims. Private
     /// (read by [`Self::sun_t`]): the cells' ρ·T_sun is made from it once.
-    sun_t: Arc<SubGrid>,
+    sun_t: Arc<SunGrid>,
     /// The sun (its light enters only through `sun_t` and the phase function, never as a disc).
     pub sun: Sun,
     /// The sky behind everything.
@@ -87,7 +88,7 @@ impl LitVolume {
     pub fn new(
         medium: Medium,
         i0: impl std::ops::Index<usize, Output = Rgb> + Sync,
-        sun_t: impl Into<Arc<SubGrid>>,
+        sun_t: impl Into<Arc<SunGrid>>,
         sun: Sun,
         sky: Sky,
         ground: Option<LitGround>,
@@ -147,7 +148,7 @@ impl LitVolume {
 
     /// The transmittance towards the sun at voxel centres (unitless), the density grid's dims.
     #[inline]
-    pub fn sun_t(&self) -> &Arc<SubGrid> {
+    pub fn sun_t(&self) -> &Arc<SunGrid> {
         &self.sun_t
     }
 
@@ -301,7 +302,7 @@ mod tests {
         assert!(Arc::ptr_eq(&p.levels[0].cells, lit.cells()));
         assert!(p.levels.len() >= 2);
         let rho = |k: usize| m.density.at(k);
-        let st: Arc<SubGrid> = Arc::new(sun_t.into());
+        let st: Arc<SunGrid> = Arc::new(sun_t.into());
         for (k, i) in i0.iter().enumerate() {
             let c = lit.cells()[k];
             let ri0 = i.max(Rgb::ZERO) * rho(k);

@@ -2,27 +2,32 @@
 //! field that is constant away from the cloud (the sun transmittance is 1 beyond one voxel of it),
 //! so memory follows the cloud's box, not the whole grid. Reads give the same bits as the dense
 //! grid holding that constant outside the box (same corners, same weights, same blend).
+//!
+//! The values are stored as a [`Texel`]: f32 (the density's dense copies), or a 16-bit code (the
+//! sun transmittance, [`crate::half::Unit16`]) decoded at each read, before the blend.
 
 use super::Grid3;
+use crate::half::Texel;
 use crate::math::Trilinear;
 
-/// Values on the box [lo, lo + box_dims) of a grid of `dims`, `outside` elsewhere.
+/// Values on the box [lo, lo + box_dims) of a grid of `dims`, `outside` elsewhere, stored as `T`.
 #[derive(Clone, Debug, PartialEq)]
-pub struct SubGrid {
+pub struct SubGrid<T: Texel = f32> {
     dims: [usize; 3],
     lo: [usize; 3],
     box_dims: [usize; 3],
     /// The box's values (x fastest), then `outside` (the slot every corner outside the box reads).
-    data: Vec<f32>,
+    data: Vec<T>,
 }
 
-impl SubGrid {
-    /// The box [lo, hi) of a grid of `dims`, every value `fill`, `outside` beyond the box.
-    pub fn filled(dims: [usize; 3], lo: [usize; 3], hi: [usize; 3], fill: f32, outside: f32) -> SubGrid {
+impl<T: Texel> SubGrid<T> {
+    /// The box [lo, hi) of a grid of `dims`, every value `fill`, `outside` beyond the box (both
+    /// encoded as `T`).
+    pub fn filled(dims: [usize; 3], lo: [usize; 3], hi: [usize; 3], fill: f32, outside: f32) -> SubGrid<T> {
         assert!((0..3).all(|a| lo[a] <= hi[a] && hi[a] <= dims[a]), "the box lies in the grid");
         let box_dims = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
-        let mut data = vec![fill; box_dims.iter().product::<usize>() + 1];
-        *data.last_mut().expect("the outside slot") = outside;
+        let mut data = vec![T::encode(fill); box_dims.iter().product::<usize>() + 1];
+        *data.last_mut().expect("the outside slot") = T::encode(outside);
         SubGrid { dims, lo, box_dims, data }
     }
 
@@ -38,7 +43,7 @@ impl SubGrid {
     }
 
     /// The box's values, x fastest (without the outside slot), to fill in place.
-    pub fn box_values_mut(&mut self) -> &mut [f32] {
+    pub fn box_values_mut(&mut self) -> &mut [T] {
         let n = self.data.len() - 1;
         &mut self.data[..n]
     }
@@ -61,7 +66,7 @@ impl SubGrid {
     /// Value of grid voxel (i, j, k).
     #[inline]
     pub fn get(&self, i: usize, j: usize, k: usize) -> f32 {
-        self.data[self.slot([i, j, k])]
+        self.data[self.slot([i, j, k])].decode()
     }
 
     /// Value of the grid voxel with linear index `g` = i + nx(j + ny k).
@@ -98,7 +103,7 @@ impl SubGrid {
             idx: self.corner_slots(lo, hi),
             f,
         }
-        .blend(|n| self.data[n])
+        .blend(|n| self.data[n].decode())
     }
 
     /// The values of the eight grid voxels from `lo` to `hi` (per axis equal or one apart), in
@@ -108,7 +113,7 @@ impl SubGrid {
         let s = self.corner_slots(lo, hi);
         let d = &self.data;
         // Spelled out: an array `map` here stays out of line (a call per dual cell).
-        [d[s[0]], d[s[1]], d[s[2]], d[s[3]], d[s[4]], d[s[5]], d[s[6]], d[s[7]]]
+        [d[s[0]], d[s[1]], d[s[2]], d[s[3]], d[s[4]], d[s[5]], d[s[6]], d[s[7]]].map(T::decode)
     }
 
     /// The slots of the eight corners from `lo` to `hi`.
@@ -134,22 +139,24 @@ impl SubGrid {
 
     /// Bytes held.
     pub fn bytes(&self) -> usize {
-        4 * self.data.len()
+        std::mem::size_of::<T>() * self.data.len()
     }
 }
 
-/// The whole grid as its own box (nothing outside).
-impl From<Grid3> for SubGrid {
-    fn from(g: Grid3) -> SubGrid {
+/// The whole grid as its own box (nothing outside), each value encoded as `T`.
+impl<T: Texel> From<Grid3> for SubGrid<T> {
+    fn from(g: Grid3) -> SubGrid<T> {
         let dims = g.dims();
         let mut s = SubGrid::filled(dims, [0; 3], dims, 0.0, 0.0);
-        s.box_values_mut().copy_from_slice(g.data());
+        for (o, &v) in s.box_values_mut().iter_mut().zip(g.data()) {
+            *o = T::encode(v);
+        }
         s
     }
 }
 
-impl From<Grid3> for std::sync::Arc<SubGrid> {
-    fn from(g: Grid3) -> std::sync::Arc<SubGrid> {
+impl<T: Texel> From<Grid3> for std::sync::Arc<SubGrid<T>> {
+    fn from(g: Grid3) -> std::sync::Arc<SubGrid<T>> {
         std::sync::Arc::new(g.into())
     }
 }
@@ -196,5 +203,25 @@ mod tests {
         let whole: SubGrid = dense.clone().into();
         assert_eq!(whole.values().collect::<Vec<_>>(), dense.data());
         assert_eq!(whole.bytes(), 4 * (dense.len() + 1));
+    }
+
+    /// Stored as 16-bit codes: every read is that of the f32 grid holding the decoded values
+    /// (the codes are decoded before the blend), within the code's rounding of the originals.
+    #[test]
+    fn coded_reads_equal_the_grid_of_decoded_values() {
+        use crate::half::Unit16;
+        let dims = [6, 5, 4];
+        let mut rng = Rng::new(8, 2);
+        let exact = Grid3::from_vec(dims, (0..120).map(|_| rng.uniform()).collect(), "test").unwrap();
+        let coded: SubGrid<Unit16> = exact.clone().into();
+        let decoded = Grid3::from_vec(dims, coded.values().collect(), "test").unwrap();
+        for (d, e) in decoded.data().iter().zip(exact.data()) {
+            assert!((d - e).abs() <= e / 4096.0 + 1e-9, "{d} vs {e}");
+        }
+        for _ in 0..2000 {
+            let p = [0, 1, 2].map(|a| rng.uniform() * dims[a] as f32);
+            assert_eq!(coded.trilinear(p).to_bits(), decoded.trilinear(p).to_bits(), "at {p:?}");
+        }
+        assert_eq!(coded.bytes(), 2 * 121);
     }
 }

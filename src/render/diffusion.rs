@@ -100,14 +100,11 @@ pub fn solved_lit_volume(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolu
 
 /// The gather's source of a solved scene: [`solved_lit_volume`]'s terms packed per voxel.
 fn source_field(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution) -> SourceField {
-    let i1 = scene
-        .render
-        .diffuse_anisotropy
-        .then(|| diffuse_flux(&scene.medium, inc, sol, scene.render.solver.min_optical_depth));
+    let i1 = diffuse_flux(&scene.medium, inc, sol, scene.render.solver.min_optical_depth);
     SourceField::new(
         &scene.medium,
         &sol.i0,
-        i1.as_ref(),
+        scene.render.diffuse_anisotropy.then_some(&i1),
         inc.sky_sh.as_ref(),
         &inc.sun_transmittance.grid,
         &scene.sun,

@@ -15,8 +15,9 @@
 use crate::lighting::Sun;
 use crate::math::{Rgb, Trilinear, Vec3, SH_COEFFS};
 use crate::medium::sparse::{FullIndex, VoxelField};
-use crate::medium::{Medium, SubGrid};
+use crate::medium::Medium;
 use crate::optics::Optics;
+use crate::sunlight::SunGrid;
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -45,7 +46,7 @@ pub struct SourceField {
     /// scattering ρ·g^l·L_lm of the reduced sky and ground radiance (W·m⁻²·sr⁻¹ per unit density).
     rec: Records,
     /// The sun's transmittance at voxel centres (unitless).
-    sun_t: Arc<SubGrid>,
+    sun_t: Arc<SunGrid>,
     dims: [usize; 3],
     optics: Optics,
     sun: Sun,
@@ -63,16 +64,17 @@ pub struct RaySource<'a> {
 }
 
 impl SourceField {
-    /// From I0 per voxel (W·m⁻²·sr⁻¹, `i0[band][voxel]`), the first moment I1 per voxel and band
-    /// (W·m⁻²·sr⁻¹; `render.diffuse_anisotropy`), the SH projection of the reduced sky and ground
+    /// From I0 per voxel (W·m⁻²·sr⁻¹, `i0[band][voxel]`), the first moment I1 per band at each
+    /// full voxel (`i1(grid index)`, W·m⁻²·sr⁻¹, evaluated once per record and kept only in it,
+    /// in f32; `render.diffuse_anisotropy`), the SH projection of the reduced sky and ground
     /// radiance per voxel (`[band * 9 + lm]`, W·m⁻²·sr⁻¹; `render.sky_single_scattering`) and
     /// the sun transmittance at voxel centres, all on `m`'s grid.
     pub fn new(
         m: &Medium,
         i0: &[VoxelField<f32>; 3],
-        i1: Option<&VoxelField<[Vec3; 3]>>,
+        i1: Option<&(dyn Fn(usize) -> [Vec3; 3] + Sync)>,
         sky_sh: Option<&VoxelField<[f32; 3 * SH_COEFFS]>>,
-        sun_t: &Arc<SubGrid>,
+        sun_t: &Arc<SunGrid>,
         sun: &Sun,
     ) -> SourceField {
         let g = m.optics.phase.mean_cosine() as f32;
@@ -81,27 +83,36 @@ impl SourceField {
         // values r (no slot look-ups) and ρ of the r-th full voxel.
         let same = |f: &Arc<FullIndex>| Arc::ptr_eq(f, &index);
         assert!(
-            i0.iter().all(|f| same(f.index())) && i1.map_or(true, |f| same(f.index())) && sky_sh.map_or(true, |f| same(f.index())),
+            i0.iter().all(|f| same(f.index())) && sky_sh.map_or(true, |f| same(f.index())),
             "the diffusion's fields are stored on the medium's full voxels"
         );
         let rho = m.density.packed();
         let i0 = i0.each_ref().map(|f| f.packed());
-        let i1 = i1.map(|f| f.packed());
-        // Bands of `b` floats: ρ·max(I0, 0), ρ·g·I1, then (if `b` = BAND) ρ·g^l·L_lm.
-        let fill = |r: usize, b: usize, o: &mut [f32]| {
+        // I1 is evaluated at grid indices: the r-th full voxel's (8 B per full voxel while the
+        // records are built).
+        let mut grid = Vec::with_capacity(if i1.is_some() { index.count() } else { 0 });
+        if i1.is_some() {
+            // Sized up front: a collected list grew to 1.5 times its length.
+            grid.extend(index.full_voxels());
+        }
+        let i1_of = |r: usize| i1.map(|f| f(grid[r]));
+        // Bands of `b` floats: ρ·max(I0, 0), ρ·g·I1 (I1 of record r, `i1r`), then (if `b` =
+        // BAND) ρ·g^l·L_lm.
+        let fill = |r: usize, i1r: &Option<[Vec3; 3]>, b: usize, o: &mut [f32]| {
             let p = rho[r];
             o[0] = i0[b][r].max(0.0) * p;
-            if let Some(i1) = i1 {
+            if let Some(i1) = i1r {
                 for ax in 0..3 {
-                    o[1 + ax] = i1[r][b][ax] * p * g;
+                    o[1 + ax] = i1[b][ax] * p * g;
                 }
             }
         };
         let rec = match sky_sh {
             None => Records::Aniso(packed_field(index, |r| {
                 let mut rec = [0f32; 3 * ANISO];
+                let i1r = i1_of(r);
                 for (b, o) in rec.chunks_exact_mut(ANISO).enumerate() {
-                    fill(r, b, o);
+                    fill(r, &i1r, b, o);
                 }
                 rec
             })),
@@ -110,8 +121,9 @@ impl SourceField {
                 let sh = sh.packed();
                 Records::WithSky(packed_field(index, |r| {
                     let mut rec = [0f32; 3 * BAND];
+                    let i1r = i1_of(r);
                     for (b, o) in rec.chunks_exact_mut(BAND).enumerate() {
-                        fill(r, b, o);
+                        fill(r, &i1r, b, o);
                         for k in 0..SH_COEFFS {
                             o[ANISO + k] = sh[r][b * SH_COEFFS + k] * gl[k] * rho[r];
                         }
@@ -208,7 +220,7 @@ impl RaySource<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diffusion::flux::FluxField;
+    use crate::diffusion::flux::{decode_band, FluxField};
     use crate::lighting::Sky;
     use crate::lit::sky_single::SkySingle;
     use crate::lit::LitVolume;
@@ -253,12 +265,16 @@ mod tests {
         let i0_rgb: Vec<Rgb> = (0..n).map(|k| Rgb::new(i0[0][k], i0[1][k], i0[2][k])).collect();
         let idx = m.density.full_index();
         let i0f: [VoxelField<f32>; 3] = std::array::from_fn(|b| VoxelField::from_fn(idx.clone(), 0.0, |g| i0[b][g]));
-        let i1 = VoxelField::from_fn(idx.clone(), [Vec3::ZERO; 3], |g| i1[g]);
         let sh = VoxelField::from_fn(idx.clone(), [0.0; 3 * SH_COEFFS], |g| sh[g]);
+        let flux = FluxField::new(&m, |g| i1[g]);
+        // The records get the I1 the lit volume holds after its bf16 rounding of ρ·I1, so the two
+        // differ by f32 rounding only.
+        let coded = flux.rho_i1().clone();
+        let i1_held = |g: usize| coded[g].map(|b| decode_band(&b) / m.density.at(g));
         let lit = LitVolume::new(m.clone(), i0_rgb, sun_t.clone(), sun.clone(), Sky::constant(Rgb::ONE), None)
-            .with_flux(FluxField::new(&m, i1.clone()))
+            .with_flux(flux)
             .with_sky_single(SkySingle::new(&m, &sh));
-        let field = SourceField::new(&m, &i0f, Some(&i1), Some(&sh), &Arc::new(sun_t.clone().into()), &sun);
+        let field = SourceField::new(&m, &i0f, Some(&i1_held), Some(&sh), &Arc::new(sun_t.clone().into()), &sun);
         let mut checked = 0;
         for _ in 0..2000 {
             let v = Vec3::new(rng.uniform() * 9.0, rng.uniform() * 7.0, rng.uniform() * 8.0);
