@@ -127,8 +127,9 @@ impl GridMemory {
 /// 2.6 M), which set the fixed and per-box terms; the per-full-voxel terms refitted to the cumulus
 /// at 100×80×60, 200×160×120 and 400×320×240 (2.85 M full voxels, at 160×120 pixels): `diffusion`
 /// in the eighth round (15.0 and 66.0 MB), `full` in the ninth (the bands solved one by one, no
-/// assembled operator held, the border cubes reduced to face light: 15.3, 49.4 and 308 MB). The
-/// estimates are 33–51 % above those (on the safe side). The index's 0.25 B per grid voxel is rounded up to 1 B. `single` and
+/// assembled operator held, the border cubes reduced to face light: 15.3, 49.4 and 308 MB), then
+/// in the eleventh (the finest multigrid level unscaled, the sun transmittance and I1 in 16 bits:
+/// 15.0, 44.2 and 273 MB). The estimates are 39–49 % above those (on the safe side). The index's 0.25 B per grid voxel is rounded up to 1 B. `single` and
 /// `reference` hold the density, a dense copy of its box and a majorant or transmittance grid
 /// (16 B per grid voxel, an upper bound).
 pub fn grid_memory(method: Method) -> GridMemory {
@@ -151,7 +152,7 @@ pub fn grid_memory(method: Method) -> GridMemory {
             fixed: 16 * MB,
             per_grid: 1,
             per_box: 10,
-            per_full: 110,
+            per_full: 95,
         },
     }
 }
