@@ -33,6 +33,7 @@
 
 use super::SolveStats;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Unknowns at or below which a level is solved directly.
 pub const COARSE_CELLS: usize = 800;
@@ -344,7 +345,7 @@ type Mg = f32;
 /// being 0 (any entry of the other colour would do, its value finite); a missing −a one reads
 /// the other colour's pad, whose value and couplings are 0, as its coupling is the neighbour's
 /// (the [`NO_MINUS_X`] flag, distance 0 for −y, and for −z [`Dz::missing_minus`]).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 struct Row<Z> {
     /// Couplings to the +x, +y, +z neighbours (0 to a missing one, and on the pads): each
     /// face's coupling is stored once, and a row's −a coupling is its −a neighbour's +a one.
@@ -362,7 +363,7 @@ struct Row<Z> {
 /// colour's entries between any cell and its ±z neighbours: every level of the clouds measured,
 /// up to 400×320×240), else u32. Each level picks once ([`Rows`]); the passes are compiled per
 /// type ([`with_rows`]).
-trait Dz: Copy + Send + Sync + std::fmt::Debug + Into<u32> {
+trait Dz: Copy + Default + Send + Sync + std::fmt::Debug + Into<u32> {
     /// How a missing −z neighbour is coded, `base.wrapping_sub(pad)` in u32 (read back by the
     /// same subtraction as a present one: no select), 0 in u16 (the pad is too far, and a
     /// present −z neighbour lies at least 1 entry before `base`).
@@ -642,15 +643,23 @@ macro_rules! with_diagonal {
 type Plain = ([Mg; 3], [u32; 6], u32, u32, Mg);
 
 /// The rows `plain(e, unk[e])` of each entry e coded with ±z distances in `Z`, and their
-/// diagonals; `None` if a distance does not fit.
+/// diagonals; `None` if a distance does not fit. (An indexed collect, written in place: one
+/// into `Option` is unindexed, and held its chunks besides the rows, +12.6 MB at 200×160×120.)
 fn code_rows<Z: Dz>(unk: &[u32], plain: &(impl Fn(usize, u32) -> Plain + Sync)) -> Option<(Vec<Row<Z>>, Vec<Mg>)> {
-    unk.par_iter()
+    let fits = AtomicBool::new(true);
+    let coded = unk
+        .par_iter()
         .enumerate()
         .map(|(e, u)| {
             let (up, nbr, base, pad, d) = plain(e, *u);
-            Some((Row::encode(up, nbr, base, pad)?, d))
+            let row = Row::encode(up, nbr, base, pad).unwrap_or_else(|| {
+                fits.store(false, Ordering::Relaxed);
+                Row::default()
+            });
+            (row, d)
         })
-        .collect()
+        .unzip();
+    fits.into_inner().then_some(coded)
 }
 
 impl<Z: Dz> Coded<'_, Z> {
