@@ -828,6 +828,8 @@ impl Level {
     }
 
     /// The [`Operator`]'s unknown at entry `e` ([`PAD`] on the pads): [`Coded::unknown`].
+    /// (Inlined: it gives the right-hand sides per entry in the solve's passes.)
+    #[inline(always)]
     fn unknown(&self, e: usize) -> u32 {
         with_rows!(self, |c| c.unknown(e))
     }
