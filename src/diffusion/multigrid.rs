@@ -6,8 +6,9 @@
 //!   neighbours), or made on demand from what it is assembled from (the diffusion bands' rows, from
 //!   the density: the build then never holds the finest operator beside its level);
 //!   [`Hierarchy::build`] turns every level into a [`Level`] that stores its unknowns with their
-//!   six neighbours' coded entries and their +x, +y, +z couplings ([`Row`], 28 B; each −a
-//!   coupling is read from the −a neighbour's row, so each face's is stored once). Nothing is
+//!   six neighbours' coded entries and their +x, +y, +z couplings ([`Row`], 24 B, or 28 B on a
+//!   level whose z planes are too large for u16 ±z distances: [`Rows`]; each −a coupling is read
+//!   from the −a neighbour's row, so each face's is stored once). Nothing is
 //!   stored per cell of the box (the cloud fills about half of its tight box), so the memory and
 //!   the work scale with the unknowns.
 //! * **Coarsening** by 2×2×2 aggregation with the Galerkin product Aᶜ = PᵀAP, P the piecewise-
@@ -33,6 +34,7 @@
 
 use super::SolveStats;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Unknowns at or below which a level is solved directly.
 pub const COARSE_CELLS: usize = 800;
@@ -328,10 +330,11 @@ impl Real for f64 {
 type Mg = f32;
 
 /// One row of a [`Level`]: its couplings to its +x, +y, +z neighbours and where the entries of
-/// the six neighbours (−x, +x, −y, +y, −z, +z) lie (28 B; 40 B with all six couplings, each
-/// face's then stored in both its rows). The −a couplings are read from the −a neighbours' rows
-/// (a separate array of couplings, 16 + 12 B, took as many instructions as the 40 B rows, but
-/// `full`'s peak at 200×160×120 came out 4 MB above these rows', through the allocator).
+/// the six neighbours (−x, +x, −y, +y, −z, +z) lie (24 B with `Z` = u16, 28 B with u32: [`Rows`];
+/// 40 B with all six couplings, each face's then stored in both its rows). The −a couplings are
+/// read from the −a neighbours' rows (a separate array of couplings, 16 + 12 B, took as many
+/// instructions as the 40 B rows, but `full`'s peak at 200×160×120 came out 4 MB above these
+/// rows', through the allocator).
 ///
 /// The entries are the other colour's, counted from its first (a colour's pass indexes the
 /// other's values and rows with them as they are: subtracting an offset cost ~7 % more of the
@@ -342,10 +345,9 @@ type Mg = f32;
 /// coupled by 0) has coupling 0: a missing +a one reads `base` (distance 0), its own coupling
 /// being 0 (any entry of the other colour would do, its value finite); a missing −a one reads
 /// the other colour's pad, whose value and couplings are 0, as its coupling is the neighbour's
-/// (the [`NO_MINUS_X`] flag, distance 0 for −y, and for −z the distance from `base` to the pad,
-/// wrapped).
-#[derive(Clone, Copy, Debug)]
-struct Row {
+/// (the [`NO_MINUS_X`] flag, distance 0 for −y, and for −z [`Dz::missing_minus`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct Row<Z> {
     /// Couplings to the +x, +y, +z neighbours (0 to a missing one, and on the pads): each
     /// face's coupling is stored once, and a row's −a coupling is its −a neighbour's +a one.
     up: [Mg; 3],
@@ -355,7 +357,58 @@ struct Row {
     /// Entries from `base` back to the −y neighbour and on to the +y one.
     dy: [u16; 2],
     /// Entries from `base` back to the −z neighbour and on to the +z one.
-    dz: [u32; 2],
+    dz: [Z; 2],
+}
+
+/// The type of a [`Row`]'s ±z distances: u16 where they all fit (fewer than 2^16 of the other
+/// colour's entries between any cell and its ±z neighbours: every level of the clouds measured,
+/// up to 400×320×240), else u32. Each level picks once ([`Rows`]); the passes are compiled per
+/// type ([`with_rows`]).
+trait Dz: Copy + Default + Send + Sync + std::fmt::Debug + Into<u32> {
+    /// How a missing −z neighbour is coded, `base.wrapping_sub(pad)` in u32 (read back by the
+    /// same subtraction as a present one: no select), 0 in u16 (the pad is too far, and a
+    /// present −z neighbour lies at least 1 entry before `base`).
+    fn missing_minus(base: u32, pad: u32) -> Self;
+
+    /// Distance `d` in this type, if it fits.
+    fn of(d: u32) -> Option<Self>;
+
+    /// The −z neighbour's entry, `d` entries before `base` (`pad` when missing).
+    fn minus(base: u32, d: Self, pad: u32) -> u32;
+}
+
+impl Dz for u32 {
+    fn missing_minus(base: u32, pad: u32) -> u32 {
+        base.wrapping_sub(pad)
+    }
+
+    fn of(d: u32) -> Option<u32> {
+        Some(d)
+    }
+
+    #[inline(always)]
+    fn minus(base: u32, d: u32, _: u32) -> u32 {
+        base.wrapping_sub(d)
+    }
+}
+
+impl Dz for u16 {
+    fn missing_minus(_: u32, _: u32) -> u16 {
+        0
+    }
+
+    fn of(d: u32) -> Option<u16> {
+        u16::try_from(d).ok()
+    }
+
+    #[inline(always)]
+    fn minus(base: u32, d: u16, pad: u32) -> u32 {
+        if d == 0 {
+            pad
+        } else {
+            base.wrapping_sub(u32::from(d))
+        }
+    }
 }
 
 /// [`Row::base`] flag: no −x neighbour (it reads the other colour's pad, not the entry before
@@ -367,30 +420,31 @@ const NO_MINUS_X: u32 = 1 << 31;
 /// before any work (`medium.downsample` is the fix); a library caller's build panics.
 pub const MAX_BOX_ROW_CELLS: usize = 2 * u16::MAX as usize;
 
-impl Row {
+impl<Z: Dz> Row<Z> {
     /// The row of couplings `up` and of the neighbours' entries `nbr` (`pad`, the other colour's
     /// pad, for a missing neighbour), `base` the other colour's first entry after the unknown
-    /// (all counted from the other colour's first entry).
-    fn encode(up: [Mg; 3], nbr: [u32; 6], base: u32, pad: u32) -> Row {
+    /// (all counted from the other colour's first entry); `None` if a ±z distance does not fit
+    /// in `Z`.
+    fn encode(up: [Mg; 3], nbr: [u32; 6], base: u32, pad: u32) -> Option<Row<Z>> {
         assert!(base < NO_MINUS_X, "more than 2^31 entries on one level");
         let missing = |q: usize| nbr[q] == pad;
         debug_assert!(missing(0) || nbr[0] + 1 == base, "−x neighbour just before base");
         debug_assert!(missing(1) || nbr[1] == base, "+x neighbour at base");
         // Entries between base and neighbour q (before base for the − ones, at least 1); 0:
-        // base itself, or the pad for −y. The −z distance to the pad is wrapped.
+        // base itself, or the pad for −y (−z: [`Dz::missing_minus`]).
         let dist = |q: usize| match (missing(q), q) {
-            (true, 4) => base.wrapping_sub(pad),
             (true, _) => 0,
             (false, 0 | 2 | 4) => base - nbr[q],
             (false, _) => nbr[q] - base,
         };
         let dy = |q: usize| u16::try_from(dist(q)).expect("a box row of at most MAX_BOX_ROW_CELLS cells");
-        Row {
+        let minus_z = if missing(4) { Z::missing_minus(base, pad) } else { Z::of(dist(4))? };
+        Some(Row {
             up,
             base: base | if missing(0) { NO_MINUS_X } else { 0 },
             dy: [dy(2), dy(3)],
-            dz: [dist(4), dist(5)],
-        }
+            dz: [minus_z, Z::of(dist(5))?],
+        })
     }
 
     /// The neighbours' entries (−x, +x, −y, +y, −z, +z), `pad` the other colour's pad: a missing
@@ -404,8 +458,8 @@ impl Row {
             base,
             if self.dy[0] == 0 { pad } else { minus_y },
             base + u32::from(self.dy[1]),
-            base.wrapping_sub(self.dz[0]),
-            base + self.dz[1],
+            Z::minus(base, self.dz[0], pad),
+            base + self.dz[1].into(),
         ]
     }
 
@@ -414,6 +468,68 @@ impl Row {
     fn base(&self) -> u32 {
         self.base & !NO_MINUS_X
     }
+}
+
+/// A level's rows, their ±z distances in u16 where all fit, else in u32 ([`Dz`]). The 24 B
+/// rows lowered `full`'s peak heap at 200×160×120 by 1.6 MB (the solves', one thread) at the
+/// solve's instructions and speed (a −z select in u16, within 0.3 % of the 28 B rows').
+#[derive(Clone, Debug)]
+enum Rows {
+    Narrow(Vec<Row<u16>>),
+    Wide(Vec<Row<u32>>),
+}
+
+const _: () = assert!(std::mem::size_of::<Row<u16>>() == 24 && std::mem::size_of::<Row<u32>>() == 28);
+
+impl Rows {
+    fn len(&self) -> usize {
+        match self {
+            Rows::Narrow(r) => r.len(),
+            Rows::Wide(r) => r.len(),
+        }
+    }
+
+    /// Bytes held.
+    fn bytes(&self) -> usize {
+        match self {
+            Rows::Narrow(r) => r.len() * std::mem::size_of::<Row<u16>>(),
+            Rows::Wide(r) => r.len() * std::mem::size_of::<Row<u32>>(),
+        }
+    }
+}
+
+/// A [`Level`]'s rows with their type known ([`with_rows`]), its diagonals (or row sums) and its
+/// number of red entries: what the passes read.
+struct Coded<'a, Z> {
+    red: usize,
+    rows: &'a [Row<Z>],
+    diag: &'a [Mg],
+}
+
+/// Runs `$pass` with `$c`, the [`Coded`] rows of `$level`: one copy of the pass per row type,
+/// so its inner loops do not branch on it.
+macro_rules! with_rows {
+    ($level:expr, |$c:ident| $pass:expr) => {{
+        let level: &Level = $level;
+        match &level.rows {
+            Rows::Narrow(rows) => {
+                let $c = Coded {
+                    red: level.red,
+                    rows,
+                    diag: &level.diag,
+                };
+                $pass
+            }
+            Rows::Wide(rows) => {
+                let $c = Coded {
+                    red: level.red,
+                    rows,
+                    diag: &level.diag,
+                };
+                $pass
+            }
+        }
+    }};
 }
 
 /// One level's operator on its unknowns only.
@@ -439,7 +555,7 @@ struct Level {
     diag: Vec<Mg>,
     /// `diag` holds each row's sum, its diagonal plus its six couplings, computed in f64 from the
     /// assembled row and rounded once (the finest level); the diagonal is that sum less the row's
-    /// stored couplings ([`less_couplings`]). CG's operator ([`Hierarchy::apply_row`]) so keeps
+    /// stored couplings ([`less_couplings`]). CG's operator ([`Coded::apply_row`]) so keeps
     /// every assembled row sum to its own f32 rounding: the absorption and the boundary's
     /// leakage (A·1 for a uniform fluence), tiny against the couplings in a thick cloud, which a
     /// diagonal rounded to f32 would move by up to ~10⁻⁴ of themselves: stored so, the 100×80×60
@@ -447,7 +563,7 @@ struct Level {
     /// −3.3·10⁻⁶; the 400×320×240 one's by 1.2·10⁻⁵ when the scaled level's were rounded),
     /// stored as sums by 2·10⁻⁹, at the same speed (within the noise).
     row_sums: bool,
-    rows: Vec<Row>,
+    rows: Rows,
     /// Entry of the next coarser level holding each red entry (only the red ones are
     /// prolonged: [`Level::prolong_red`]); empty on the coarsest level.
     parent: Vec<u32>,
@@ -478,14 +594,14 @@ fn row_sum(st: &Stencil) -> f64 {
 
 /// The other colour's entries `off..off + x.len()` (its pad last) as the rows of one colour read
 /// them: their values and rows (for their +x, +y, +z couplings).
-struct OtherColour<'a, const K: usize> {
+struct OtherColour<'a, Z, const K: usize> {
     x: &'a [[Mg; K]],
-    rows: &'a [Row],
+    rows: &'a [Row<Z>],
 }
 
-impl<'a, const K: usize> OtherColour<'a, K> {
-    /// The other colour of `level` whose values, from entry `off` on, are `x`.
-    fn of(level: &'a Level, x: &'a [[Mg; K]], off: usize) -> Self {
+impl<'a, Z: Dz, const K: usize> OtherColour<'a, Z, K> {
+    /// The other colour of the level of rows `level` whose values, from entry `off` on, are `x`.
+    fn of(level: &Coded<'a, Z>, x: &'a [[Mg; K]], off: usize) -> Self {
         // Sliced to the length of `x`: one bounds check serves both reads of a neighbour.
         OtherColour {
             x,
@@ -498,7 +614,7 @@ impl<'a, const K: usize> OtherColour<'a, K> {
     /// (Always inlined: it is the smoother's inner loop, and an outlined call costs ~10 % of the
     /// solve's instructions.)
     #[inline(always)]
-    fn couple(&self, row: &Row) -> ([Mg; K], [Mg; 6]) {
+    fn couple(&self, row: &Row<Z>) -> ([Mg; K], [Mg; 6]) {
         let [i0, i1, i2, i3, i4, i5] = row.neighbours((self.x.len() - 1) as u32).map(|v| v as usize);
         let (up, rows) = (&row.up, self.rows);
         let c = [rows[i0].up[0], up[0], rows[i2].up[1], up[1], rows[i4].up[2], up[2]];
@@ -526,10 +642,130 @@ macro_rules! with_diagonal {
     }};
 }
 
+/// One row as [`Level::from_stencils`] makes it, before it is coded ([`Row::encode`]): its +a
+/// couplings, its neighbours' entries, its `base`, the other colour's pad, and its diagonal (or
+/// sum).
+type Plain = ([Mg; 3], [u32; 6], u32, u32, Mg);
+
+/// The rows `plain(e, unk[e])` of each entry e coded with ±z distances in `Z`, and their
+/// diagonals; `None` if a distance does not fit. (An indexed collect, written in place: one
+/// into `Option` is unindexed, and held its chunks besides the rows, +12.6 MB at 200×160×120.)
+fn code_rows<Z: Dz>(unk: &[u32], plain: &(impl Fn(usize, u32) -> Plain + Sync)) -> Option<(Vec<Row<Z>>, Vec<Mg>)> {
+    let fits = AtomicBool::new(true);
+    let coded = unk
+        .par_iter()
+        .enumerate()
+        .map(|(e, u)| {
+            let (up, nbr, base, pad, d) = plain(e, *u);
+            let row = Row::encode(up, nbr, base, pad).unwrap_or_else(|| {
+                fits.store(false, Ordering::Relaxed);
+                Row::default()
+            });
+            (row, d)
+        })
+        .unzip();
+    fits.into_inner().then_some(coded)
+}
+
+impl<Z: Dz> Coded<'_, Z> {
+    /// Entries, pads included.
+    fn len(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// The [`Operator`]'s unknown at entry `e` ([`PAD`] on the pads): the unknowns of its
+    /// colour before it plus those of the other colour (its row's `base`).
+    #[inline(always)]
+    fn unknown(&self, e: usize) -> u32 {
+        let black = self.red + 1;
+        match e {
+            _ if e == self.red || e + 1 == self.len() => PAD,
+            _ if e < self.red => (e + self.rows[e].base() as usize) as u32,
+            _ => (e - black + self.rows[e].base() as usize) as u32,
+        }
+    }
+
+    /// Entry e's neighbours' entries (−x, +x, −y, +y, −z, +z; [`Row::neighbours`], counted from
+    /// the level's first entry).
+    #[inline(always)]
+    fn neighbours(&self, e: usize) -> [u32; 6] {
+        // The other colour's first entry and its pad, counted from it.
+        let (other, pad) = if e <= self.red {
+            (self.red + 1, self.len() - self.red - 2)
+        } else {
+            (0, self.red)
+        };
+        self.rows[e].neighbours(pad as u32).map(|v| v + other as u32)
+    }
+
+    /// Entry e's couplings to its neighbours `nbr` (its [`Coded::neighbours`]; −x, +x, −y, +y,
+    /// −z, +z): the −a ones are the −a neighbours' +a ones.
+    #[inline(always)]
+    fn couplings(&self, e: usize, nbr: &[u32; 6]) -> [Mg; 6] {
+        let (rows, own) = (self.rows, &self.rows[e].up);
+        [
+            rows[nbr[0] as usize].up[0],
+            own[0],
+            rows[nbr[2] as usize].up[1],
+            own[1],
+            rows[nbr[4] as usize].up[2],
+            own[2],
+        ]
+    }
+
+    /// The residual b − A x at red entry e (of `x` split at the black entries into `xr` and
+    /// the black colour `xb`), `diag` the level's diagonal rule ([`with_diagonal`]).
+    #[inline(always)]
+    fn residual_red<const K: usize>(
+        &self,
+        e: usize,
+        xr: &[[Mg; K]],
+        xb: &OtherColour<Z, K>,
+        b: &[[Mg; K]],
+        diag: &impl Fn(usize, &[Mg; 6]) -> Mg,
+    ) -> [Mg; K] {
+        let (s, c) = xb.couple(&self.rows[e]);
+        let d = diag(e, &c);
+        std::array::from_fn(|k| b[e][k] - (d * xr[e][k] + s[k]))
+    }
+
+    /// Entry e of the finest level (which holds its rows' sums): its neighbours' entries, its
+    /// couplings to them (widened to f64) and its diagonal, the row's sum less those couplings
+    /// in f64 (0 on the pads).
+    #[inline(always)]
+    fn finest_row(&self, e: usize) -> ([u32; 6], [f64; 6], f64) {
+        let nbr = self.neighbours(e);
+        let c = self.couplings(e, &nbr).map(f64::from);
+        (nbr, c, less_couplings(f64::from(self.diag[e]), c))
+    }
+
+    /// Entry e of A x per system with the finest level's operator, summed in f64, and the
+    /// row's diagonal: the rows' f32 couplings, and the diagonal that gives each row its
+    /// assembled sum (to f32 rounding of the sum: [`Level::row_sums`]). So CG solves the
+    /// assembled operator up to a ~6·10⁻⁸ relative change of each coupling with every row sum
+    /// kept (the absorption and the boundary's leakage); the f64 couplings took 24 B per
+    /// unknown. 0 on the pads.
+    #[inline(always)]
+    fn apply_row<X: Real, const K: usize>(&self, e: usize, x: &[[X; K]]) -> ([f64; K], f64) {
+        let (nbr, c, d) = self.finest_row(e);
+        let v = |q: usize, k: usize| c[q] * x[nbr[q] as usize][k].get();
+        // A plain loop, not `array::from_fn`: the closure was not always inlined here (+0.35 G
+        // instructions in the solve, depending on how the crate was split).
+        let mut out = [0.0; K];
+        for (k, o) in out.iter_mut().enumerate() {
+            let s = (v(0, k) + v(1, k)) + (v(2, k) + v(3, k)) + (v(4, k) + v(5, k));
+            *o = d * x[e][k].get() + s;
+        }
+        (out, d)
+    }
+}
+
 impl Level {
     /// The level of operator `a` and each unknown's entry; with `row_sums` it holds the rows'
-    /// sums, not their diagonals (the finest level: [`Level::row_sums`]).
-    fn from_stencils(a: &impl Stencils, row_sums: bool) -> (Level, Vec<u32>) {
+    /// sums, not their diagonals (the finest level: [`Level::row_sums`]). Its rows are 24 B
+    /// where every ±z distance fits in a u16, else 28 B ([`Rows`]; always 28 B with `narrow`
+    /// false, for the tests).
+    fn from_stencils(a: &impl Stencils, row_sums: bool, narrow: bool) -> (Level, Vec<u32>) {
         let n = a.len();
         let colour = |u: usize| a.ijk(u).iter().sum::<usize>() % 2;
         let red = (0..n).filter(|u| colour(*u) == 0).count();
@@ -551,12 +787,12 @@ impl Level {
         };
         let pads = [(n + 1) as u32, red as u32];
         // The rows, and their diagonals or sums, from one stencil each.
-        let row = |e: usize, u: u32| {
+        let plain = |e: usize, u: u32| -> Plain {
             // The other colour's first entry, from which the row counts its entries.
             let other = [red + 1, 0][usize::from(e > red)] as u32;
             let pad = pads[usize::from(e > red)] - other;
             if u == PAD {
-                return (Row::encode([0.0; 3], [pad; 6], pad, pad), 0.0);
+                return ([0.0; 3], [pad; 6], pad, pad, 0.0);
             }
             let st = a.stencil(u as usize);
             // The +a couplings (each −a one is read from the −a neighbour's row).
@@ -574,9 +810,17 @@ impl Level {
                 }
             }
             let d = if row_sums { row_sum(&st) } else { st.diag };
-            (Row::encode(up, nbr, base(u as usize), pad), Mg::of(d))
+            (up, nbr, base(u as usize), pad, Mg::of(d))
         };
-        let (rows, diag): (Vec<Row>, Vec<Mg>) = unk.par_iter().enumerate().map(|(e, u)| row(e, *u)).unzip();
+        // The rows in u16 first; only where a distance does not fit, all again in u32 (the
+        // stencils made twice, but no 28 B rows held meanwhile).
+        let (rows, diag) = match narrow.then(|| code_rows(&unk, &plain)).flatten() {
+            Some((rows, diag)) => (Rows::Narrow(rows), diag),
+            None => {
+                let (rows, diag) = code_rows(&unk, &plain).expect("u32 distances always fit");
+                (Rows::Wide(rows), diag)
+            }
+        };
         let level = Level {
             red,
             diag,
@@ -588,42 +832,23 @@ impl Level {
         (level, entry)
     }
 
-    /// The [`Operator`]'s unknown at entry `e` ([`PAD`] on the pads): the unknowns of its
-    /// colour before it plus those of the other colour (its row's `base`).
-    fn unknown(&self, e: usize) -> u32 {
-        let black = self.red + 1;
-        match e {
-            _ if e == self.red || e + 1 == self.len() => PAD,
-            _ if e < self.red => (e + self.rows[e].base() as usize) as u32,
-            _ => (e - black + self.rows[e].base() as usize) as u32,
-        }
-    }
-
-    /// Entry e's neighbours' entries (−x, +x, −y, +y, −z, +z; [`Row::neighbours`], counted from
-    /// the level's first entry).
-    fn neighbours(&self, e: usize) -> [u32; 6] {
-        // The other colour's first entry and its pad, counted from it.
-        let (other, pad) = if e <= self.red {
-            (self.red + 1, self.len() - self.red - 2)
-        } else {
-            (0, self.red)
-        };
-        self.rows[e].neighbours(pad as u32).map(|v| v + other as u32)
-    }
-
-    /// Entry e's couplings to its neighbours `nbr` (its [`Level::neighbours`]; −x, +x, −y, +y,
-    /// −z, +z): the −a ones are the −a neighbours' +a ones.
+    /// The [`Operator`]'s unknown at entry `e` ([`PAD`] on the pads): [`Coded::unknown`].
+    /// (Inlined: it gives the right-hand sides per entry in the solve's passes.)
     #[inline(always)]
+    fn unknown(&self, e: usize) -> u32 {
+        with_rows!(self, |c| c.unknown(e))
+    }
+
+    /// Entry e's neighbours' entries: [`Coded::neighbours`].
+    #[cfg(test)]
+    fn neighbours(&self, e: usize) -> [u32; 6] {
+        with_rows!(self, |c| c.neighbours(e))
+    }
+
+    /// Entry e's couplings to its neighbours `nbr`: [`Coded::couplings`].
+    #[cfg(test)]
     fn couplings(&self, e: usize, nbr: &[u32; 6]) -> [Mg; 6] {
-        let (rows, own) = (&self.rows, &self.rows[e].up);
-        [
-            rows[nbr[0] as usize].up[0],
-            own[0],
-            rows[nbr[2] as usize].up[1],
-            own[1],
-            rows[nbr[4] as usize].up[2],
-            own[2],
-        ]
+        with_rows!(self, |c| c.couplings(e, nbr))
     }
 
     /// Entries, pads included (the length of the level's vectors).
@@ -665,22 +890,6 @@ impl Level {
         coarse.planes = planes;
     }
 
-    /// The residual b − A x at red entry e (of `x` split at the black entries into `xr` and
-    /// the black colour `xb`), `diag` the level's diagonal rule ([`with_diagonal`]).
-    #[inline(always)]
-    fn residual_red<const K: usize>(
-        &self,
-        e: usize,
-        xr: &[[Mg; K]],
-        xb: &OtherColour<K>,
-        b: &[[Mg; K]],
-        diag: &impl Fn(usize, &[Mg; 6]) -> Mg,
-    ) -> [Mg; K] {
-        let (s, c) = xb.couple(&self.rows[e]);
-        let d = diag(e, &c);
-        std::array::from_fn(|k| b[e][k] - (d * xr[e][k] + s[k]))
-    }
-
     /// b = Pᵀ r, r = bf − Af xf the residual of the finer level `fine`: each entry sums its red
     /// children's residuals as they are made (not stored), in their order, one task per plane
     /// ([`Level::planes`]). Called right after a black pass, which leaves the black residuals at
@@ -699,29 +908,31 @@ impl Level {
         red.fill([0.0; K]);
         black.fill([0.0; K]);
         let split = self.red as u32;
-        with_diagonal!(fine, |diag| tasks.into_par_iter().for_each(|(start, end, red, black)| {
-            red.fill([0.0; K]);
-            black.fill([0.0; K]);
-            let xb = OtherColour::of(fine, xb, fine.red + 1);
-            for f in start[0] as usize..end {
-                let rf = fine.residual_red(f, xr, &xb, bf, &diag);
-                let p = fine.parent[f];
-                let v = if p < split {
-                    &mut red[(p - start[1]) as usize]
-                } else {
-                    &mut black[(p - start[2]) as usize]
-                };
-                for k in 0..K {
-                    v[k] += rf[k];
+        with_rows!(fine, |rows| with_diagonal!(fine, |diag| tasks.into_par_iter().for_each(
+            |(start, end, red, black)| {
+                red.fill([0.0; K]);
+                black.fill([0.0; K]);
+                let xb = OtherColour::of(&rows, xb, fine.red + 1);
+                for f in start[0] as usize..end {
+                    let rf = rows.residual_red(f, xr, &xb, bf, &diag);
+                    let p = fine.parent[f];
+                    let v = if p < split {
+                        &mut red[(p - start[1]) as usize]
+                    } else {
+                        &mut black[(p - start[2]) as usize]
+                    };
+                    for k in 0..K {
+                        v[k] += rf[k];
+                    }
                 }
             }
-        }))
+        )))
     }
 
     /// The first red pass from x = 0: x = b / diag on the red unknowns, 0 elsewhere (the finest
     /// level's diagonals from its rows' sums and couplings: this pass reads its rows).
     fn smooth_red_from_zero<const K: usize>(&self, x: &mut [[Mg; K]], b: &[[Mg; K]]) {
-        x.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, xs)| {
+        with_rows!(self, |rows| x.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, xs)| {
             let first = ci * CHUNK;
             for (t, xv) in xs.iter_mut().enumerate() {
                 let e = first + t;
@@ -729,14 +940,14 @@ impl Level {
                     [0.0; K]
                 } else {
                     let d = if self.row_sums {
-                        less_couplings(self.diag[e], self.couplings(e, &self.neighbours(e)))
+                        less_couplings(self.diag[e], rows.couplings(e, &rows.neighbours(e)))
                     } else {
                         self.diag[e]
                     };
                     b[e].map(|v| v / d)
                 };
             }
-        });
+        }))
     }
 
     /// One Gauss–Seidel pass over the unknowns of `colour`: each reads only the other colour.
@@ -749,16 +960,19 @@ impl Level {
         } else {
             (&mut xb[..black], &*xr, red + 1, 0)
         };
-        with_diagonal!(self, |diag| mine.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, xs)| {
-            let start = first + ci * CHUNK;
-            let other = OtherColour::of(self, other, off);
-            let rows = &self.rows[start..start + xs.len()];
-            for (t, (xv, row)) in xs.iter_mut().zip(rows).enumerate() {
-                let (s, c) = other.couple(row);
-                let d = diag(start + t, &c);
-                *xv = std::array::from_fn(|k| (b[start + t][k] - s[k]) / d);
-            }
-        }))
+        with_rows!(self, |coded| with_diagonal!(self, |diag| mine
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .for_each(|(ci, xs)| {
+                let start = first + ci * CHUNK;
+                let other = OtherColour::of(&coded, other, off);
+                let rows = &coded.rows[start..start + xs.len()];
+                for (t, (xv, row)) in xs.iter_mut().zip(rows).enumerate() {
+                    let (s, c) = other.couple(row);
+                    let d = diag(start + t, &c);
+                    *xv = std::array::from_fn(|k| (b[start + t][k] - s[k]) / d);
+                }
+            })))
     }
 
     /// x += w P xc on the red unknowns, each adding its parent's correction: a black pass
@@ -985,8 +1199,13 @@ impl Hierarchy {
     /// rows), never held as a whole here; each coarser operator is held only until its level
     /// and the next operator exist.
     pub fn build_with(a: &impl Stencils, coarse_cells: usize) -> Hierarchy {
+        Self::build_coded(a, coarse_cells, true)
+    }
+
+    /// [`Hierarchy::build_with`], every level's rows 28 B unless `narrow` ([`Rows`]).
+    fn build_coded(a: &impl Stencils, coarse_cells: usize, narrow: bool) -> Hierarchy {
         let mut first = (a.len() > coarse_cells && a.dims().iter().any(|d| *d > 1)).then(|| coarsen(a));
-        let (mut level, mut entry) = Level::from_stencils(a, true);
+        let (mut level, mut entry) = Level::from_stencils(a, true, narrow);
         let mut levels = Vec::new();
         // The operator of `level` when it is a coarse one.
         let mut coarsest: Option<Operator> = None;
@@ -996,7 +1215,7 @@ impl Hierarchy {
                 (None, Some(f)) if level.unknowns() > coarse_cells && f.dims.iter().any(|d| *d > 1) => coarsen(&f.rows()),
                 _ => break,
             };
-            let (mut next, next_entry) = Level::from_stencils(&c.rows(), false);
+            let (mut next, next_entry) = Level::from_stencils(&c.rows(), false, narrow);
             level.link(&parent, &mut next, &next_entry, &c);
             levels.push(std::mem::replace(&mut level, next));
             (coarsest, entry) = (Some(c), next_entry);
@@ -1023,7 +1242,7 @@ impl Hierarchy {
 
     /// Bytes the hierarchy holds.
     fn bytes(&self) -> usize {
-        let level = |l: &Level| l.rows.len() * std::mem::size_of::<Row>() + 4 * (l.diag.len() + l.parent.len() + 3 * l.planes.len());
+        let level = |l: &Level| l.rows.bytes() + 4 * (l.diag.len() + l.parent.len() + 3 * l.planes.len());
         self.levels.iter().map(level).sum::<usize>() + 8 * (self.coarse.l.len() + self.coarse.cells.len())
     }
 
@@ -1063,42 +1282,12 @@ impl Hierarchy {
         }
     }
 
-    /// Entry e of the finest level: its neighbours' entries, its couplings to them (widened to
-    /// f64) and its diagonal, the row's sum less those couplings in f64 (0 on the pads).
-    #[inline(always)]
-    fn finest_row(&self, e: usize) -> ([u32; 6], [f64; 6], f64) {
-        let fine = &self.levels[0];
-        let nbr = fine.neighbours(e);
-        let c = fine.couplings(e, &nbr).map(f64::from);
-        (nbr, c, less_couplings(f64::from(fine.diag[e]), c))
-    }
-
-    /// Entry e of A x per system with the finest level's operator, summed in f64, and the
-    /// row's diagonal: the rows' f32 couplings, and the diagonal that gives each row its
-    /// assembled sum (to f32 rounding of the sum: [`Level::row_sums`]). So CG solves the
-    /// assembled operator up to a ~6·10⁻⁸ relative change of each coupling with every row sum
-    /// kept (the absorption and the boundary's leakage); the f64 couplings took 24 B per
-    /// unknown. 0 on the pads.
-    #[inline(always)]
-    fn apply_row<X: Real, const K: usize>(&self, e: usize, x: &[[X; K]]) -> ([f64; K], f64) {
-        let (nbr, c, d) = self.finest_row(e);
-        let v = |q: usize, k: usize| c[q] * x[nbr[q] as usize][k].get();
-        // A plain loop, not `array::from_fn`: the closure was not always inlined here (+0.35 G
-        // instructions in the solve, depending on how the crate was split).
-        let mut out = [0.0; K];
-        for (k, o) in out.iter_mut().enumerate() {
-            let s = (v(0, k) + v(1, k)) + (v(2, k) + v(3, k)) + (v(4, k) + v(5, k));
-            *o = d * x[e][k].get() + s;
-        }
-        (out, d)
-    }
-
     /// q = A p per system (computed in f64, stored in the multigrid's precision). Returns, in
     /// f64 and summed as [`dot`] does, pᵀA p and, for the scaled norm ‖D^-½ (r − α q)‖ of the
     /// step's residual (made before α is known), rᵀD⁻¹r, rᵀD⁻¹q and qᵀD⁻¹q (q as stored): D is
     /// not stored, so the norm is taken where the rows are read.
     fn apply<const K: usize>(&self, p: &[[Mg; K]], q: &mut [[Mg; K]], r: &[[Mg; K]]) -> [[f64; K]; 4] {
-        let parts: Vec<[[f64; K]; 4]> = q
+        let parts: Vec<[[f64; K]; 4]> = with_rows!(&self.levels[0], |fine| q
             .par_chunks_mut(CHUNK)
             .enumerate()
             .map(|(ci, qs)| {
@@ -1106,7 +1295,7 @@ impl Hierarchy {
                 let mut sums = [[0.0; K]; 4];
                 for (t, qv) in qs.iter_mut().enumerate() {
                     let e = first + t;
-                    let (ap, d) = self.apply_row(e, p);
+                    let (ap, d) = fine.apply_row(e, p);
                     let w = inverse(d);
                     for k in 0..K {
                         qv[k] = Mg::of(ap[k]);
@@ -1119,7 +1308,7 @@ impl Hierarchy {
                 }
                 sums
             })
-            .collect();
+            .collect());
         std::array::from_fn(|i| sum_parts(&parts.iter().map(|s| s[i]).collect::<Vec<_>>()))
     }
 
@@ -1133,7 +1322,7 @@ impl Hierarchy {
         r: &mut [[Mg; K]],
         which: [bool; K],
     ) -> [f64; K] {
-        let parts: Vec<[f64; K]> = r
+        let parts: Vec<[f64; K]> = with_rows!(&self.levels[0], |fine| r
             .par_chunks_mut(CHUNK)
             .enumerate()
             .map(|(ci, rs)| {
@@ -1141,7 +1330,7 @@ impl Hierarchy {
                 let mut rr = [0.0; K];
                 for (t, rv) in rs.iter_mut().enumerate() {
                     let e = first + t;
-                    let (b, (ax, d)) = (be(e), self.apply_row(e, x));
+                    let (b, (ax, d)) = (be(e), fine.apply_row(e, x));
                     let w = inverse(d);
                     for k in 0..K {
                         if which[k] {
@@ -1153,7 +1342,7 @@ impl Hierarchy {
                 }
                 rr
             })
-            .collect();
+            .collect());
         sum_parts(&parts)
     }
 
@@ -1227,20 +1416,20 @@ impl Hierarchy {
     ) -> [SolveStats; K] {
         let a = &self.levels[0];
         let n = a.len();
-        let parts: Vec<[f64; K]> = (0..n)
+        let parts: Vec<[f64; K]> = with_rows!(a, |fine| (0..n)
             .into_par_iter()
             .chunks(CHUNK)
             .map(|es| {
                 let mut s = [0.0; K];
                 for e in es {
-                    let (v, w) = (be(e), inverse(self.finest_row(e).2));
+                    let (v, w) = (be(e), inverse(fine.finest_row(e).2));
                     for k in 0..K {
                         s[k] += scaled_square(v[k], w);
                     }
                 }
                 s
             })
-            .collect();
+            .collect());
         let bb = sum_parts(&parts);
         let bnorm = bb.map(f64::sqrt);
         let mut stats: [SolveStats; K] = std::array::from_fn(|_| SolveStats {
@@ -1381,7 +1570,7 @@ impl Hierarchy {
 /// (moved here from tests/ so the solver's internals need not be public).
 #[cfg(test)]
 mod operator_tests {
-    use super::{coarsen, row_sum, Hierarchy, Level, Mg, Operator, Real, Stencils, Work, NONE, PAD};
+    use super::{coarsen, row_sum, Coded, Hierarchy, Level, Mg, Node, Operator, Real, Rows, Stencils, Work, NONE, PAD};
     use crate::diffusion::{assemble, BoundaryLight, Domain};
     use crate::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
     use crate::lighting::DirectionBins;
@@ -1448,7 +1637,7 @@ mod operator_tests {
 
     /// The operator CG solves for `s`: its couplings rounded to the multigrid's precision, each
     /// diagonal the row's assembled sum rounded to f32 less those couplings
-    /// (`Hierarchy::apply_row`).
+    /// (`Coded::apply_row`).
     fn as_solved(s: &Operator) -> Operator {
         let (mut r, rows) = (s.clone(), s.rows());
         // Each row's sum as assembled, rounded, then less its rounded couplings.
@@ -1566,7 +1755,7 @@ mod operator_tests {
         for e in (0..fine.len()).filter(|e| fine.unknown(*e) != PAD) {
             let u = fine.unknown(e) as usize;
             let want: f64 = a[u * n..(u + 1) * n].iter().sum();
-            let got = h.apply_row(e, &ones).0[0];
+            let got = with_rows!(fine, |c| c.apply_row(e, &ones).0[0]);
             assert!(
                 (got - want).abs() <= 1e-12 * a[u * n + u] + 6e-8 * want.abs(),
                 "row {u}: {got} vs {want}"
@@ -1576,7 +1765,7 @@ mod operator_tests {
         // Rows whose sum is far below their diagonal, where the difference shows.
         assert!(smallest < 1e-2, "{smallest}");
         // The pads' products are 0.
-        assert_eq!(h.apply_row(fine.red, &ones), ([0.0], 0.0));
+        assert_eq!(with_rows!(fine, |c| c.apply_row(fine.red, &ones)), ([0.0], 0.0));
     }
 
     #[test]
@@ -1762,13 +1951,53 @@ mod operator_tests {
         }
         let coarse = coarsen(&fine.rows()).0;
         for s in [fine, coarse] {
-            coded_rows_match(&s);
+            for narrow in [true, false] {
+                assert!(matches!(coded_rows_match(&s, narrow).rows, Rows::Narrow(_)) == narrow);
+            }
         }
     }
 
-    fn coded_rows_match(s: &Operator) {
+    #[test]
+    fn planes_too_wide_for_u16_distances_keep_u32_ones() {
+        // A full 370×370×2 box: a red cell's +z neighbour lies 68 450 black entries after its
+        // `base` (2^16 = 65 536), so the level keeps u32 ±z distances, and they decode right.
+        let dims = [370, 370, 2];
+        let n = dims.iter().product::<usize>();
+        let nodes = (0..n)
+            .map(|c| {
+                let (i, j, k) = (c % dims[0], (c / dims[0]) % dims[1], c / (dims[0] * dims[1]));
+                let mut nd = Node::at(c as u32);
+                nd.diag = 7.0;
+                for (ax, (at, stride)) in [(i, 1), (j, dims[0]), (k, dims[0] * dims[1])].into_iter().enumerate() {
+                    if at + 1 < dims[ax] {
+                        (nd.up_nbr[ax], nd.up[ax]) = ((c + stride) as u32, -1.0 - (c % 5) as f64 / 8.0);
+                    }
+                }
+                nd
+            })
+            .collect();
+        let s = Operator { dims, nodes };
+        assert!(matches!(coded_rows_match(&s, true).rows, Rows::Wide(_)));
+    }
+
+    #[test]
+    fn u16_and_u32_rows_solve_alike() {
+        // The same hierarchy with every level's rows 28 B: the same iterates, bit for bit.
+        let (s, b) = sun_lit_system([15, 13, 11], 5, 0.99, 0.85, Vec3::new(0.3, 1.0, 0.2), 1);
+        let [narrow, wide] = [true, false].map(|n| Hierarchy::build_coded(&s.rows(), 16, n));
+        assert!(narrow.levels.iter().all(|l| matches!(l.rows, Rows::Narrow(_))));
+        assert!(wide.levels.iter().all(|l| matches!(l.rows, Rows::Wide(_))));
+        let [(xn, sn), (xw, sw)] = [narrow, wide].map(|h| h.solve(&b, None, 1e-10, 100));
+        assert!(sn.iterations > 2 && sn.relative_residual <= 1e-10, "{sn:?}");
+        assert_eq!((sn.iterations, sn.history), (sw.iterations, sw.history));
+        assert!(xn.iter().zip(&xw).all(|(a, b)| a.to_bits() == b.to_bits()));
+    }
+
+    /// Checks the decoded rows of the level of `s` (u16 ±z distances allowed with `narrow`);
+    /// returns the level.
+    fn coded_rows_match(s: &Operator, narrow: bool) -> Level {
         let rows = s.rows();
-        let (level, entry) = Level::from_stencils(&rows, false);
+        let (level, entry) = Level::from_stencils(&rows, false, narrow);
         let by_cell: HashMap<usize, usize> = s.nodes.iter().enumerate().map(|(u, n)| (n.cell as usize, u)).collect();
         let [nx, ny, _] = s.dims;
         let (mut seen, mut coupled) = (0, 0);
@@ -1816,6 +2045,7 @@ mod operator_tests {
         }
         assert_eq!(seen, s.nodes.len());
         assert!(coupled > 3 * seen, "{coupled} couplings for {seen} unknowns");
+        level
     }
 
     #[test]
