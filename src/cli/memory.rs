@@ -128,8 +128,8 @@ impl GridMemory {
 /// at 100×80×60, 200×160×120 and 400×320×240 (2.85 M full voxels, at 160×120 pixels): `diffusion`
 /// in the eighth round (15.0 and 66.0 MB), `full` in the ninth (the bands solved one by one, no
 /// assembled operator held, the border cubes reduced to face light: 15.3, 49.4 and 308 MB), then
-/// in the eleventh (the finest multigrid level unscaled, the sun transmittance and I1 in 16 bits:
-/// 15.0, 44.2 and 273 MB). The estimates are 39–49 % above those (on the safe side). The index's 0.25 B per grid voxel is rounded up to 1 B. `single` and
+/// in the eleventh (the finest multigrid level unscaled with 24 B rows, the sun transmittance and
+/// I1 in 16 bits: 14.7, 42.9 and 258 MB). The estimates are 45–52 % above those (on the safe side). The index's 0.25 B per grid voxel is rounded up to 1 B. `single` and
 /// `reference` hold the density, a dense copy of its box and a majorant or transmittance grid
 /// (16 B per grid voxel, an upper bound).
 pub fn grid_memory(method: Method) -> GridMemory {
