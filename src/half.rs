@@ -176,6 +176,29 @@ impl Scaled16 {
     pub fn decode(self, scale: f32) -> f32 {
         f32::from_bits(u32::from(self.0) << SCALED_SHIFT) * scale
     }
+
+    /// Four codes decoded at once, each under its scale ([`Scaled16::decode`]): on x86-64 one
+    /// widening, one shift and one multiply of four SSE2 lanes (lane by lane, the compiler kept
+    /// four scalar shifts and multiplies: +2 % of `full`'s instructions).
+    #[inline(always)]
+    pub fn decode4(c: [Scaled16; 4], scale: [f32; 4]) -> [f32; 4] {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_mm_castsi128_ps, _mm_loadu_ps, _mm_mul_ps, _mm_set_epi32, _mm_slli_epi32, _mm_storeu_ps};
+            let mut out = [0.0; 4];
+            // SAFETY: SSE2 is part of x86-64; the loads and the store are of four f32.
+            unsafe {
+                let w = _mm_set_epi32(i32::from(c[3].0), i32::from(c[2].0), i32::from(c[1].0), i32::from(c[0].0));
+                let f = _mm_castsi128_ps(_mm_slli_epi32::<{ SCALED_SHIFT as i32 }>(w));
+                _mm_storeu_ps(out.as_mut_ptr(), _mm_mul_ps(f, _mm_loadu_ps(scale.as_ptr())));
+            }
+            out
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            std::array::from_fn(|i| c[i].decode(scale[i]))
+        }
+    }
 }
 
 #[cfg(test)]
@@ -286,6 +309,10 @@ mod tests {
             // Stored negated (couplings ≤ 0): the same magnitude, negative.
             assert_eq!(Scaled16::encode(max, k).decode(-s), -Scaled16::encode(max, k).decode(s));
         }
+        // Four at once: the same values, bit for bit.
+        let (codes, scales) = ([3u16, 0, 0xf7ff, 0x1234].map(Scaled16), [0.5f32, -2.0, 8.0, -1e30]);
+        let one_by_one: [f32; 4] = std::array::from_fn(|i| codes[i].decode(scales[i]));
+        assert_eq!(Scaled16::decode4(codes, scales).map(f32::to_bits), one_by_one.map(f32::to_bits));
         // Ties to even: 1 + 2⁻¹² lies half-way between 1 and 1 + 2⁻¹¹ (mantissa 0 is even).
         let k = Scaled16::exponent_for(1.5);
         assert_eq!(Scaled16::encode(1.0 + 1.0 / 4096.0, k).decode(Scaled16::scale(k)), 1.0);

@@ -220,7 +220,9 @@ fn first_at(a: &impl Stencils, cell: usize) -> usize {
 /// unknown's aggregate. A coarse unknown exists where any child is one; its diagonal sums its
 /// children's diagonals and the couplings inside it (twice: both directions), a coarse coupling
 /// the fine ones across the shared face. Children add in box order, as the box-array form did.
-fn coarsen(a: &impl Stencils) -> (Operator, Vec<u32>) {
+/// Also `a`'s [`Maxima`], from the same reading of its rows (the finest level's rows are made
+/// on demand: a pass of their own cost ~1 % of `full`'s instructions).
+fn coarsen(a: &impl Stencils) -> (Operator, Vec<u32>, Maxima) {
     let [nx, ny, nz] = a.dims();
     let cd = [nx.div_ceil(2), ny.div_ceil(2), nz.div_ceil(2)];
     let key = |ijk: [usize; 3]| (ijk[0] / 2 + cd[0] * (ijk[1] / 2 + cd[1] * (ijk[2] / 2))) as u32;
@@ -273,27 +275,76 @@ fn coarsen(a: &impl Stencils) -> (Operator, Vec<u32>) {
         planes.push((fine, base, mine));
         (rest, base) = (more, base + here as usize);
     }
-    planes.into_par_iter().for_each(|(fine, base, mine)| {
-        for u in fine {
-            let n = a.node(u);
-            let ijk = a.ijk(u);
-            let p = &mut mine[parent[u] as usize - base];
-            p.diag += n.diag;
-            for (ax, at) in ijk.iter().enumerate() {
-                let v = n.up_nbr[ax];
-                if v == NONE {
-                    continue;
-                }
-                if at % 2 == 0 {
-                    p.diag += 2.0 * n.up[ax];
-                } else {
-                    p.up[ax] += n.up[ax];
-                    p.up_nbr[ax] = parent[v as usize];
+    let maxima = planes
+        .into_par_iter()
+        .map(|(fine, base, mine)| {
+            let mut m = Maxima::default();
+            for u in fine {
+                let st = a.stencil(u);
+                m = m.max(Maxima::of(&st));
+                let ijk = a.ijk(u);
+                let p = &mut mine[parent[u] as usize - base];
+                p.diag += st.diag;
+                for (ax, at) in ijk.iter().enumerate() {
+                    let (v, up) = (st.nbr[2 * ax + 1], st.off[2 * ax + 1]);
+                    if v == NONE {
+                        continue;
+                    }
+                    if at % 2 == 0 {
+                        p.diag += 2.0 * up;
+                    } else {
+                        p.up[ax] += up;
+                        p.up_nbr[ax] = parent[v as usize];
+                    }
                 }
             }
+            m
+        })
+        .reduce(Maxima::default, Maxima::max);
+    (Operator { dims: cd, nodes }, parent, maxima)
+}
+
+/// The largest values of an operator's rows, from which a level's codes take their scales
+/// ([`Scaled16::exponent_for`]): coupling magnitude, diagonal, row sum.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Maxima {
+    cpl: f64,
+    diag: f64,
+    sum: f64,
+}
+
+impl Maxima {
+    /// Those of one row.
+    fn of(st: &Stencil) -> Maxima {
+        let cpl = st
+            .off
+            .iter()
+            .zip(st.nbr)
+            .filter(|(_, v)| *v != NONE)
+            .fold(0f64, |m, (c, _)| m.max(-c));
+        Maxima {
+            cpl,
+            diag: st.diag,
+            sum: row_sum(st),
         }
-    });
-    (Operator { dims: cd, nodes }, parent)
+    }
+
+    /// Each the larger of the two (the same in any order: thread-count independent).
+    fn max(self, o: Maxima) -> Maxima {
+        Maxima {
+            cpl: self.cpl.max(o.cpl),
+            diag: self.diag.max(o.diag),
+            sum: self.sum.max(o.sum),
+        }
+    }
+
+    /// Those of all of `a`'s rows (a pass over them: for a level not read by [`coarsen`]).
+    fn all(a: &impl Stencils) -> Maxima {
+        (0..a.len())
+            .into_par_iter()
+            .map(|u| Maxima::of(&a.stencil(u)))
+            .reduce(Maxima::default, Maxima::max)
+    }
 }
 
 /// The scalar of the multigrid levels ([`Level`]) and of the CG vectors.
@@ -616,6 +667,8 @@ struct OtherColour<'a, Z, const K: usize> {
     x: &'a [[Mg; K]],
     rows: &'a [Row<Z>],
     cpl: f32,
+    /// The scale of the rows' [`Row::own`] (this level's).
+    own: f32,
 }
 
 impl<'a, Z: Dz, const K: usize> OtherColour<'a, Z, K> {
@@ -626,45 +679,42 @@ impl<'a, Z: Dz, const K: usize> OtherColour<'a, Z, K> {
             x,
             rows: &level.rows[off..off + x.len()],
             cpl: level.cpl,
+            own: level.own,
         }
     }
 
     /// Σ_q cpl_q · x\[nbr_q\] per system, the off-diagonal part of `row` (of the other colour),
-    /// and the couplings cpl_q (−x, +x, −y, +y, −z, +z; they give the finest level's diagonal).
+    /// the couplings cpl_q (−x, +x, −y, +y, −z, +z; they give the finest level's diagonal) and
+    /// the row's decoded [`Row::own`].
     /// (Always inlined: it is the smoother's inner loop, and an outlined call costs ~10 % of the
     /// solve's instructions.)
     #[inline(always)]
-    fn couple(&self, row: &Row<Z>) -> ([Mg; K], [Mg; 6]) {
+    fn couple(&self, row: &Row<Z>) -> ([Mg; K], [Mg; 6], Mg) {
         let [i0, i1, i2, i3, i4, i5] = row.neighbours((self.x.len() - 1) as u32).map(|v| v as usize);
         let (up, rows, s) = (&row.up, self.rows, self.cpl);
-        let c = [
-            rows[i0].up[0].decode(s),
-            up[0].decode(s),
-            rows[i2].up[1].decode(s),
-            up[1].decode(s),
-            rows[i4].up[2].decode(s),
-            up[2].decode(s),
-        ];
+        // Four codes at a time (one vector shift and multiply where the target has them).
+        let mine = Scaled16::decode4([up[0], up[1], up[2], row.own], [s, s, s, self.own]);
+        let theirs = Scaled16::decode4([rows[i0].up[0], rows[i2].up[1], rows[i4].up[2], Scaled16::ZERO], [s; 4]);
+        let c = [theirs[0], mine[0], theirs[1], mine[1], theirs[2], mine[2]];
         let (n0, n1, n2, n3, n4, n5) = (&self.x[i0], &self.x[i1], &self.x[i2], &self.x[i3], &self.x[i4], &self.x[i5]);
         let mut s = [0.0; K];
         for k in 0..K {
             s[k] = (c[0] * n0[k] + c[1] * n1[k]) + (c[2] * n2[k] + c[3] * n3[k]) + (c[4] * n4[k] + c[5] * n5[k]);
         }
-        (s, c)
+        (s, c, mine[3])
     }
 }
 
-/// Runs `$pass` with `$d`, the rule giving a row's diagonal on `$level` (its rows `$coded`)
-/// from the row's coded [`Row::own`] and its couplings: one copy of the pass per rule, so its
+/// Runs `$pass` with `$d`, the rule giving a row's diagonal on `$level` from the row's decoded
+/// [`Row::own`] and its couplings: one copy of the pass per rule, so its
 /// inner loop does not branch on it.
 macro_rules! with_diagonal {
-    ($level:expr, $coded:expr, |$d:ident| $pass:expr) => {{
-        let own = $coded.own;
+    ($level:expr, |$d:ident| $pass:expr) => {{
         if $level.row_sums {
-            let $d = |v: Scaled16, c: &[Mg; 6]| less_couplings(v.decode(own), *c);
+            let $d = |own: Mg, c: &[Mg; 6]| less_couplings(own, *c);
             $pass
         } else {
-            let $d = |v: Scaled16, _: &[Mg; 6]| v.decode(own);
+            let $d = |own: Mg, _: &[Mg; 6]| own;
             $pass
         }
     }};
@@ -692,18 +742,6 @@ fn unit_of(max: f64) -> i32 {
 /// couplings (≤ 0) and its sum (or diagonal), in f64 as assembled, its neighbours' entries, its
 /// `base` and the other colour's pad.
 type Plain = ([f64; 3], f64, [u32; 6], u32, u32);
-
-/// The largest coupling magnitude and the largest sum (or diagonal) of the rows
-/// `plain(e, unk[e])` (maxima: the same at any thread count).
-fn largest(unk: &[u32], plain: &(impl Fn(usize, u32) -> Plain + Sync)) -> (f64, f64) {
-    unk.par_iter()
-        .enumerate()
-        .map(|(e, u)| {
-            let (up, own, ..) = plain(e, *u);
-            (up.iter().fold(0f64, |m, c| m.max(-c)), own)
-        })
-        .reduce(|| (0.0, 0.0), |a, b| (a.0.max(b.0), a.1.max(b.1)))
-}
 
 /// The rows `plain(e, unk[e])` of each entry e with ±z distances in `Z`, their values divided by
 /// 2^`unit` and coded at scale exponents `k` (couplings, sums or diagonals); `None` if a
@@ -761,18 +799,21 @@ impl<Z: Dz> Coded<'_, Z> {
     }
 
     /// Entry e's couplings to its neighbours `nbr` (its [`Coded::neighbours`]; −x, +x, −y, +y,
-    /// −z, +z): the −a ones are the −a neighbours' +a ones.
+    /// −z, +z; the −a ones are the −a neighbours' +a ones) and its decoded [`Row::own`].
     #[inline(always)]
-    fn couplings(&self, e: usize, nbr: &[u32; 6]) -> [Mg; 6] {
-        let (rows, own, s) = (self.rows, &self.rows[e].up, self.cpl);
-        [
-            rows[nbr[0] as usize].up[0].decode(s),
-            own[0].decode(s),
-            rows[nbr[2] as usize].up[1].decode(s),
-            own[1].decode(s),
-            rows[nbr[4] as usize].up[2].decode(s),
-            own[2].decode(s),
-        ]
+    fn couplings(&self, e: usize, nbr: &[u32; 6]) -> ([Mg; 6], Mg) {
+        let (rows, row, s) = (self.rows, &self.rows[e], self.cpl);
+        let mine = Scaled16::decode4([row.up[0], row.up[1], row.up[2], row.own], [s, s, s, self.own]);
+        let theirs = Scaled16::decode4(
+            [
+                rows[nbr[0] as usize].up[0],
+                rows[nbr[2] as usize].up[1],
+                rows[nbr[4] as usize].up[2],
+                Scaled16::ZERO,
+            ],
+            [s; 4],
+        );
+        ([theirs[0], mine[0], theirs[1], mine[1], theirs[2], mine[2]], mine[3])
     }
 
     /// The residual b − A x at red entry e (of `x` split at the black entries into `xr` and
@@ -784,11 +825,10 @@ impl<Z: Dz> Coded<'_, Z> {
         xr: &[[Mg; K]],
         xb: &OtherColour<Z, K>,
         b: &[[Mg; K]],
-        diag: &impl Fn(Scaled16, &[Mg; 6]) -> Mg,
+        diag: &impl Fn(Mg, &[Mg; 6]) -> Mg,
     ) -> [Mg; K] {
-        let row = &self.rows[e];
-        let (s, c) = xb.couple(row);
-        let d = diag(row.own, &c);
+        let (s, c, own) = xb.couple(&self.rows[e]);
+        let d = diag(own, &c);
         std::array::from_fn(|k| b[e][k] - (d * xr[e][k] + s[k]))
     }
 
@@ -798,8 +838,9 @@ impl<Z: Dz> Coded<'_, Z> {
     #[inline(always)]
     fn finest_row(&self, e: usize) -> ([u32; 6], [f64; 6], f64) {
         let nbr = self.neighbours(e);
-        let c = self.couplings(e, &nbr).map(f64::from);
-        (nbr, c, less_couplings(f64::from(self.own(e)), c))
+        let (c, own) = self.couplings(e, &nbr);
+        let c = c.map(f64::from);
+        (nbr, c, less_couplings(f64::from(own), c))
     }
 
     /// Entry e's [`Row::own`], decoded: its row's sum (the finest level) or its diagonal.
@@ -833,10 +874,10 @@ impl<Z: Dz> Coded<'_, Z> {
 impl Level {
     /// The level of operator `a` and each unknown's entry; with `row_sums` it holds the rows'
     /// sums, not their diagonals (the finest level: [`Level::row_sums`]). Its values are divided
-    /// by 2^`unit` (by default [`unit_of`] its own largest value: the finest level's). Its rows
-    /// are 20 B where every ±z distance fits in a u16, else 24 B ([`Rows`]; always 24 B with
-    /// `narrow` false, for the tests).
-    fn from_stencils(a: &impl Stencils, row_sums: bool, narrow: bool, unit: Option<i32>) -> (Level, Vec<u32>) {
+    /// by 2^`unit` (by default [`unit_of`] its own largest value: the finest level's), and
+    /// coded at scales from `a`'s [`Maxima`] `m`. Its rows are 20 B where every ±z distance
+    /// fits in a u16, else 24 B ([`Rows`]; always 24 B with `narrow` false, for the tests).
+    fn from_stencils(a: &impl Stencils, row_sums: bool, narrow: bool, unit: Option<i32>, m: Maxima) -> (Level, Vec<u32>) {
         let n = a.len();
         let colour = |u: usize| a.ijk(u).iter().sum::<usize>() % 2;
         let red = (0..n).filter(|u| colour(*u) == 0).count();
@@ -877,11 +918,10 @@ impl Level {
             let own = if row_sums { row_sum(&st) } else { st.diag };
             (up, own, nbr, base(u as usize), pad)
         };
-        // The codes' scales from the largest values (the stencils made once more: holding them
-        // would take more than the rows).
-        let (max_cpl, max_own) = largest(&unk, &plain);
-        let unit = unit.unwrap_or_else(|| unit_of(max_cpl.max(max_own)));
-        let k = [max_cpl, max_own].map(|m| Scaled16::exponent_for(m * pow2(-unit)));
+        // The codes' scales from the largest values.
+        let max_own = if row_sums { m.sum } else { m.diag };
+        let unit = unit.unwrap_or_else(|| unit_of(m.cpl.max(max_own)));
+        let k = [m.cpl, max_own].map(|v| Scaled16::exponent_for(v * pow2(-unit)));
         // The rows in u16 first; only where a distance does not fit, all again in u32 (the
         // stencils made again, but no wide rows held meanwhile).
         let rows = match narrow.then(|| code_rows(&unk, &plain, unit, k)).flatten() {
@@ -914,9 +954,10 @@ impl Level {
         with_rows!(self, |c| c.neighbours(e))
     }
 
-    /// Entry e's couplings to its neighbours `nbr`: [`Coded::couplings`].
+    /// Entry e's couplings to its neighbours `nbr` and its decoded [`Row::own`]:
+    /// [`Coded::couplings`].
     #[cfg(test)]
-    fn couplings(&self, e: usize, nbr: &[u32; 6]) -> [Mg; 6] {
+    fn couplings(&self, e: usize, nbr: &[u32; 6]) -> ([Mg; 6], Mg) {
         with_rows!(self, |c| c.couplings(e, nbr))
     }
 
@@ -977,7 +1018,7 @@ impl Level {
         red.fill([0.0; K]);
         black.fill([0.0; K]);
         let split = self.red as u32;
-        with_rows!(fine, |rows| with_diagonal!(fine, rows, |diag| tasks.into_par_iter().for_each(
+        with_rows!(fine, |rows| with_diagonal!(fine, |diag| tasks.into_par_iter().for_each(
             |(start, end, red, black)| {
                 red.fill([0.0; K]);
                 black.fill([0.0; K]);
@@ -1009,7 +1050,8 @@ impl Level {
                     [0.0; K]
                 } else {
                     let d = if self.row_sums {
-                        less_couplings(rows.own(e), rows.couplings(e, &rows.neighbours(e)))
+                        let (c, own) = rows.couplings(e, &rows.neighbours(e));
+                        less_couplings(own, c)
                     } else {
                         rows.own(e)
                     };
@@ -1029,7 +1071,7 @@ impl Level {
         } else {
             (&mut xb[..black], &*xr, red + 1, 0)
         };
-        with_rows!(self, |coded| with_diagonal!(self, coded, |diag| mine
+        with_rows!(self, |coded| with_diagonal!(self, |diag| mine
             .par_chunks_mut(CHUNK)
             .enumerate()
             .for_each(|(ci, xs)| {
@@ -1037,8 +1079,8 @@ impl Level {
                 let other = OtherColour::of(&coded, other, off);
                 let rows = &coded.rows[start..start + xs.len()];
                 for (t, (xv, row)) in xs.iter_mut().zip(rows).enumerate() {
-                    let (s, c) = other.couple(row);
-                    let d = diag(row.own, &c);
+                    let (s, c, own) = other.couple(row);
+                    let d = diag(own, &c);
                     *xv = std::array::from_fn(|k| (b[start + t][k] - s[k]) / d);
                 }
             })))
@@ -1276,18 +1318,23 @@ impl Hierarchy {
     /// [`Hierarchy::build_with`], every level's rows 28 B unless `narrow` ([`Rows`]).
     fn build_coded(a: &impl Stencils, coarse_cells: usize, narrow: bool) -> Hierarchy {
         let mut first = (a.len() > coarse_cells && a.dims().iter().any(|d| *d > 1)).then(|| coarsen(a));
-        let (mut level, mut entry) = Level::from_stencils(a, true, narrow, None);
+        let maxima = first.as_ref().map_or_else(|| Maxima::all(a), |c| c.2);
+        let (mut level, mut entry) = Level::from_stencils(a, true, narrow, None, maxima);
         let unit = Some(level.unit);
         let mut levels = Vec::new();
         // The operator of `level` when it is a coarse one.
         let mut coarsest: Option<Operator> = None;
         loop {
             let (c, parent) = match (first.take(), &coarsest) {
-                (Some(c), _) => c,
-                (None, Some(f)) if level.unknowns() > coarse_cells && f.dims.iter().any(|d| *d > 1) => coarsen(&f.rows()),
+                (Some((c, parent, _)), _) => (c, parent),
+                (None, Some(f)) if level.unknowns() > coarse_cells && f.dims.iter().any(|d| *d > 1) => {
+                    let (c, parent, _) = coarsen(&f.rows());
+                    (c, parent)
+                }
                 _ => break,
             };
-            let (mut next, next_entry) = Level::from_stencils(&c.rows(), false, narrow, unit);
+            let rows = c.rows();
+            let (mut next, next_entry) = Level::from_stencils(&rows, false, narrow, unit, Maxima::all(&rows));
             level.link(&parent, &mut next, &next_entry, &c);
             levels.push(std::mem::replace(&mut level, next));
             (coarsest, entry) = (Some(c), next_entry);
@@ -1882,7 +1929,10 @@ mod operator_tests {
     fn coarse_operator_is_the_galerkin_product() {
         // Odd box sides: the last aggregates of each axis are one cell thick.
         let (s, _) = sun_lit_system([11, 9, 8], 4, 0.9, 0.8, Vec3::new(0.2, 1.0, 0.3), 0);
-        let (c, parent) = coarsen(&s.rows());
+        let (c, parent, maxima) = coarsen(&s.rows());
+        // The fine rows' largest values, found on the way.
+        assert_eq!(maxima, super::Maxima::all(&s.rows()));
+        assert!(maxima.cpl > 0.0 && maxima.sum > 0.0 && maxima.diag > maxima.sum);
         let (n, nc) = (s.nodes.len(), c.nodes.len());
         assert!(nc > 10 && nc < n, "{nc} of {n}");
         assert_eq!(c.dims, [s.dims[0].div_ceil(2), s.dims[1].div_ceil(2), s.dims[2].div_ceil(2)]);
@@ -1936,7 +1986,7 @@ mod operator_tests {
             let (mut want, mut size) = (vec![0.0; coarse.len()], vec![0.0; coarse.len()]);
             for f in 0..fine.red {
                 let nbr = fine.neighbours(f);
-                let c = fine.couplings(f, &nbr).map(f64::from);
+                let c = fine.couplings(f, &nbr).0.map(f64::from);
                 let own = f64::from(with_rows!(fine, |rows| rows.own(f)));
                 let d = match fine.row_sums {
                     true => super::less_couplings(own, c),
@@ -1989,7 +2039,7 @@ mod operator_tests {
         let n = s.nodes.len();
         let h = Hierarchy::build_with(&s.rows(), n - 1);
         assert_eq!(h.levels(), 2);
-        let (_, parent) = coarsen(&s.rows());
+        let (_, parent, _) = coarsen(&s.rows());
         let nc = parent.iter().max().unwrap() + 1;
         let nc = nc as usize;
         let a = dense(&s);
@@ -2098,7 +2148,7 @@ mod operator_tests {
     /// returns the level.
     fn coded_rows_match(s: &Operator, narrow: bool) -> Level {
         let rows = s.rows();
-        let (level, entry) = Level::from_stencils(&rows, false, narrow, Some(0));
+        let (level, entry) = Level::from_stencils(&rows, false, narrow, Some(0), super::Maxima::all(&rows));
         let by_cell: HashMap<usize, usize> = s.nodes.iter().enumerate().map(|(u, n)| (n.cell as usize, u)).collect();
         let [nx, ny, _] = s.dims;
         let (mut seen, mut coupled) = (0, 0);
@@ -2112,7 +2162,7 @@ mod operator_tests {
             };
             let pad = other.end - 1;
             let got = level.neighbours(e);
-            let cpl = level.couplings(e, &got);
+            let cpl = level.couplings(e, &got).0;
             if u == PAD {
                 assert!(e == level.red || e + 1 == level.len());
                 assert_eq!((cpl, got), ([0.0; 6], [pad as u32; 6]));
