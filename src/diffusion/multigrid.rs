@@ -563,9 +563,11 @@ impl Rows {
 struct Coded<'a, Z> {
     red: usize,
     rows: &'a [Row<Z>],
-    /// [`Level::cpl_scale`], [`Level::own_scale`].
-    cpl: f32,
-    own: f32,
+    /// The scales of a row's own codes (+x, +y, +z couplings and [`Row::own`]:
+    /// [`Level::cpl_scale`] ×3, [`Level::own_scale`]) and of its −a neighbours' couplings (and
+    /// a zero lane), as [`Scaled16::decode4`] takes them.
+    mine: [f32; 4],
+    theirs: [f32; 4],
 }
 
 /// Runs `$pass` with `$c`, the [`Coded`] rows of `$level`: one copy of the pass per row type,
@@ -578,8 +580,8 @@ macro_rules! with_rows {
                 let $c = Coded {
                     red: level.red,
                     rows,
-                    cpl: level.cpl_scale,
-                    own: level.own_scale,
+                    mine: level.scales(),
+                    theirs: [level.cpl_scale; 4],
                 };
                 $pass
             }
@@ -587,8 +589,8 @@ macro_rules! with_rows {
                 let $c = Coded {
                     red: level.red,
                     rows,
-                    cpl: level.cpl_scale,
-                    own: level.own_scale,
+                    mine: level.scales(),
+                    theirs: [level.cpl_scale; 4],
                 };
                 $pass
             }
@@ -666,9 +668,9 @@ fn row_sum(st: &Stencil) -> f64 {
 struct OtherColour<'a, Z, const K: usize> {
     x: &'a [[Mg; K]],
     rows: &'a [Row<Z>],
-    cpl: f32,
-    /// The scale of the rows' [`Row::own`] (this level's).
-    own: f32,
+    /// [`Coded::mine`], [`Coded::theirs`].
+    mine: [f32; 4],
+    theirs: [f32; 4],
 }
 
 impl<'a, Z: Dz, const K: usize> OtherColour<'a, Z, K> {
@@ -678,8 +680,8 @@ impl<'a, Z: Dz, const K: usize> OtherColour<'a, Z, K> {
         OtherColour {
             x,
             rows: &level.rows[off..off + x.len()],
-            cpl: level.cpl,
-            own: level.own,
+            mine: level.mine,
+            theirs: level.theirs,
         }
     }
 
@@ -691,10 +693,10 @@ impl<'a, Z: Dz, const K: usize> OtherColour<'a, Z, K> {
     #[inline(always)]
     fn couple(&self, row: &Row<Z>) -> ([Mg; K], [Mg; 6], Mg) {
         let [i0, i1, i2, i3, i4, i5] = row.neighbours((self.x.len() - 1) as u32).map(|v| v as usize);
-        let (up, rows, s) = (&row.up, self.rows, self.cpl);
+        let (up, rows) = (&row.up, self.rows);
         // Four codes at a time (one vector shift and multiply where the target has them).
-        let mine = Scaled16::decode4([up[0], up[1], up[2], row.own], [s, s, s, self.own]);
-        let theirs = Scaled16::decode4([rows[i0].up[0], rows[i2].up[1], rows[i4].up[2], Scaled16::ZERO], [s; 4]);
+        let mine = Scaled16::decode4([up[0], up[1], up[2], row.own], self.mine);
+        let theirs = Scaled16::decode4([rows[i0].up[0], rows[i2].up[1], rows[i4].up[2], Scaled16::ZERO], self.theirs);
         let c = [theirs[0], mine[0], theirs[1], mine[1], theirs[2], mine[2]];
         let (n0, n1, n2, n3, n4, n5) = (&self.x[i0], &self.x[i1], &self.x[i2], &self.x[i3], &self.x[i4], &self.x[i5]);
         let mut s = [0.0; K];
@@ -802,8 +804,8 @@ impl<Z: Dz> Coded<'_, Z> {
     /// −z, +z; the −a ones are the −a neighbours' +a ones) and its decoded [`Row::own`].
     #[inline(always)]
     fn couplings(&self, e: usize, nbr: &[u32; 6]) -> ([Mg; 6], Mg) {
-        let (rows, row, s) = (self.rows, &self.rows[e], self.cpl);
-        let mine = Scaled16::decode4([row.up[0], row.up[1], row.up[2], row.own], [s, s, s, self.own]);
+        let (rows, row) = (self.rows, &self.rows[e]);
+        let mine = Scaled16::decode4([row.up[0], row.up[1], row.up[2], row.own], self.mine);
         let theirs = Scaled16::decode4(
             [
                 rows[nbr[0] as usize].up[0],
@@ -811,7 +813,7 @@ impl<Z: Dz> Coded<'_, Z> {
                 rows[nbr[4] as usize].up[2],
                 Scaled16::ZERO,
             ],
-            [s; 4],
+            self.theirs,
         );
         ([theirs[0], mine[0], theirs[1], mine[1], theirs[2], mine[2]], mine[3])
     }
@@ -846,7 +848,7 @@ impl<Z: Dz> Coded<'_, Z> {
     /// Entry e's [`Row::own`], decoded: its row's sum (the finest level) or its diagonal.
     #[inline(always)]
     fn own(&self, e: usize) -> Mg {
-        self.rows[e].own.decode(self.own)
+        self.rows[e].own.decode(self.mine[3])
     }
 
     /// Entry e of A x per system with the finest level's operator, summed in f64, and the
@@ -939,6 +941,12 @@ impl Level {
             planes: Vec::new(),
         };
         (level, entry)
+    }
+
+    /// The scales of a row's own codes: [`Coded::mine`].
+    fn scales(&self) -> [f32; 4] {
+        let c = self.cpl_scale;
+        [c, c, c, self.own_scale]
     }
 
     /// The [`Operator`]'s unknown at entry `e` ([`PAD`] on the pads): [`Coded::unknown`].
