@@ -6,11 +6,13 @@
 //!   neighbours), or made on demand from what it is assembled from (the diffusion bands' rows, from
 //!   the density: the build then never holds the finest operator beside its level);
 //!   [`Hierarchy::build`] turns every level into a [`Level`] that stores its unknowns with their
-//!   six neighbours' coded entries and their +x, +y, +z couplings ([`Row`], 24 B, or 28 B on a
-//!   level whose z planes are too large for u16 ±z distances: [`Rows`]; each −a coupling is read
-//!   from the −a neighbour's row, so each face's is stored once). Nothing is
-//!   stored per cell of the box (the cloud fills about half of its tight box), so the memory and
-//!   the work scale with the unknowns.
+//!   six neighbours' coded entries, their +x, +y, +z couplings and their row sum (or diagonal),
+//!   the values in 16-bit codes ([`Row`], 20 B, or 24 B on a level whose z planes are too large
+//!   for u16 ±z distances: [`Rows`]; each −a coupling is read from the −a neighbour's row, so
+//!   each face's is stored once). Nothing is stored per cell of the box (the cloud fills about
+//!   half of its tight box), so the memory and the work scale with the unknowns. The whole
+//!   hierarchy is divided by one power of two ([`unit_of`], the right-hand sides alike), which
+//!   keeps every level's code scale a normal f32 whatever the voxel size.
 //! * **Coarsening** by 2×2×2 aggregation with the Galerkin product Aᶜ = PᵀAP, P the piecewise-
 //!   constant prolongation: the coarse operator is again a 7-point stencil (an aggregate's diagonal
 //!   sums its children's diagonals and the couplings inside it; a coarse coupling sums the fine
@@ -25,8 +27,8 @@
 //! * **Cycle:** a W-cycle whose coarse correction is scaled by [`OVER_CORRECTION`].
 //! * **Coarsest level** (≤ [`COARSE_CELLS`] unknowns): dense Cholesky, exact.
 //! * **Krylov:** CG with the iterate in f64 and its other vectors in f32, stopped on the true
-//!   residual in f64 ([`Hierarchy::solve_many`]); its operator is the finest level's rows (f32
-//!   couplings and row sums, products summed in f64). It stops on the relative residual of the
+//!   residual in f64 ([`Hierarchy::solve_many`]); its operator is the finest level's rows (16-bit
+//!   couplings and row sums, ≤ 2⁻¹² relative, products summed in f64). It stops on the relative residual of the
 //!   diagonally scaled system, ‖D^-½ r‖/‖D^-½ b‖, D taken from the rows where the norms are
 //!   summed.
 //! * **Determinism:** updates within a colour are independent; reductions sum fixed-size chunks'
@@ -1323,7 +1325,7 @@ impl Hierarchy {
         Self::build_coded(a, coarse_cells, true)
     }
 
-    /// [`Hierarchy::build_with`], every level's rows 28 B unless `narrow` ([`Rows`]).
+    /// [`Hierarchy::build_with`], every level's rows 24 B unless `narrow` ([`Rows`]).
     fn build_coded(a: &impl Stencils, coarse_cells: usize, narrow: bool) -> Hierarchy {
         let mut first = (a.len() > coarse_cells && a.dims().iter().any(|d| *d > 1)).then(|| coarsen(a));
         let maxima = first.as_ref().map_or_else(|| Maxima::all(a), |c| c.2);
@@ -2117,7 +2119,7 @@ mod operator_tests {
 
     #[test]
     fn u16_and_u32_rows_solve_alike() {
-        // The same hierarchy with every level's rows 28 B: the same iterates, bit for bit.
+        // The same hierarchy with every level's rows 24 B: the same iterates, bit for bit.
         let (s, b) = sun_lit_system([15, 13, 11], 5, 0.99, 0.85, Vec3::new(0.3, 1.0, 0.2), 1);
         let [narrow, wide] = [true, false].map(|n| Hierarchy::build_coded(&s.rows(), 16, n));
         assert!(narrow.levels.iter().all(|l| matches!(l.rows, Rows::Narrow(_))));
