@@ -18,9 +18,10 @@
 //!   sums its children's diagonals and the couplings inside it; a coarse coupling sums the fine
 //!   couplings across the aggregates' shared face). Galerkin coarse operators follow coefficient
 //!   jumps and the domain's shape exactly, keep symmetry and definiteness, and need no
-//!   re-discretisation. A coarse cell exists where any child is full. No level is scaled: the
-//!   coarse space is piecewise constant in the unknowns as assembled, whose smooth errors are
-//!   locally constant (see [`Level`]).
+//!   re-discretisation. A coarse cell exists where any child is full. No level is scaled
+//!   diagonally (the hierarchy's power of two divides all alike): the coarse space is piecewise
+//!   constant in the unknowns as assembled, whose smooth errors are locally constant (see
+//!   [`Level`]).
 //! * **Smoother:** red-black Gauss–Seidel, red then black before the coarse correction and black
 //!   then red after it, so the cycle is a symmetric preconditioner. A level stores its red
 //!   unknowns first, then its black ones, so a colour's pass streams through its own rows.
@@ -28,9 +29,9 @@
 //! * **Coarsest level** (≤ [`COARSE_CELLS`] unknowns): dense Cholesky, exact.
 //! * **Krylov:** CG with the iterate in f64 and its other vectors in f32, stopped on the true
 //!   residual in f64 ([`Hierarchy::solve_many`]); its operator is the finest level's rows (16-bit
-//!   couplings and row sums, ≤ 2⁻¹² relative, products summed in f64). It stops on the relative residual of the
-//!   diagonally scaled system, ‖D^-½ r‖/‖D^-½ b‖, D taken from the rows where the norms are
-//!   summed.
+//!   couplings and row sums, ≤ 2⁻¹² relative, products summed in f64). It stops on the relative
+//!   residual of the diagonally scaled system, ‖D^-½ r‖/‖D^-½ b‖, D taken from the rows where
+//!   the norms are summed.
 //! * **Determinism:** updates within a colour are independent; reductions sum fixed-size chunks'
 //!   partial sums in order. Bit-identical at any thread count.
 
