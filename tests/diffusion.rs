@@ -193,7 +193,9 @@ fn q0_q1_homogeneous_box_under_vertical_sun_and_one_bin() {
 fn energy_balance_with_albedo_one() {
     // Albedo 1, box under a vertical sun: the diffuse power leaving through the cloud's boundary
     // must equal the power removed from the beam, E·A·(1 − e^{−τ}) (exact for the discrete scheme
-    // up to the solver tolerance 1e-10; 1e-6 relative allowed for f32 storage).
+    // up to the solver tolerance 1e-10 and the storage: the solver keeps each row's sum, here the
+    // boundary's leakage, to its 16-bit rounding, ≤ 2⁻¹² ≈ 2.4·10⁻⁴ of itself, and the balance
+    // came out within 5.3·10⁻⁵; with f32 sums within 10⁻⁶).
     let m = Medium::new(Grid3::filled([6, 8, 5], 1.0), Vec3::ZERO, Vec3::ONE, 0.4, Rgb::ONE, 0.7);
     let src = IncidentSources {
         bin_radiance: vec![Rgb::ZERO; 96],
@@ -209,7 +211,7 @@ fn energy_balance_with_albedo_one() {
     let sol = solve_diffusion(&m, &inc, &BoundaryLight::none(), None, &settings).unwrap();
     let out = boundary_outflow(&m, &inc, &sol, 0.0);
     let removed = 3.0 * 6.0 * 5.0 * (1.0 - (-0.4f64 * 8.0).exp());
-    assert!(((out.x as f64) - removed).abs() < 1e-5 * removed, "out {} removed {removed}", out.x);
+    assert!(((out.x as f64) - removed).abs() < 1e-4 * removed, "out {} removed {removed}", out.x);
     // All I0 positive deep inside, and the solution is symmetric under x ↦ 5 − x (vertical sun).
     for k in 0..5 {
         for j in 0..8 {

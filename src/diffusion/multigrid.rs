@@ -6,33 +6,37 @@
 //!   neighbours), or made on demand from what it is assembled from (the diffusion bands' rows, from
 //!   the density: the build then never holds the finest operator beside its level);
 //!   [`Hierarchy::build`] turns every level into a [`Level`] that stores its unknowns with their
-//!   six neighbours' coded entries and their +x, +y, +z couplings ([`Row`], 24 B, or 28 B on a
-//!   level whose z planes are too large for u16 ±z distances: [`Rows`]; each −a coupling is read
-//!   from the −a neighbour's row, so each face's is stored once). Nothing is
-//!   stored per cell of the box (the cloud fills about half of its tight box), so the memory and
-//!   the work scale with the unknowns.
+//!   six neighbours' coded entries, their +x, +y, +z couplings and their row sum (or diagonal),
+//!   the values in 16-bit codes ([`Row`], 20 B, or 24 B on a level whose z planes are too large
+//!   for u16 ±z distances: [`Rows`]; each −a coupling is read from the −a neighbour's row, so
+//!   each face's is stored once). Nothing is stored per cell of the box (the cloud fills about
+//!   half of its tight box), so the memory and the work scale with the unknowns. The whole
+//!   hierarchy is divided by one power of two ([`unit_of`], the right-hand sides alike), which
+//!   keeps every level's code scale a normal f32 whatever the voxel size.
 //! * **Coarsening** by 2×2×2 aggregation with the Galerkin product Aᶜ = PᵀAP, P the piecewise-
 //!   constant prolongation: the coarse operator is again a 7-point stencil (an aggregate's diagonal
 //!   sums its children's diagonals and the couplings inside it; a coarse coupling sums the fine
 //!   couplings across the aggregates' shared face). Galerkin coarse operators follow coefficient
 //!   jumps and the domain's shape exactly, keep symmetry and definiteness, and need no
-//!   re-discretisation. A coarse cell exists where any child is full. No level is scaled: the
-//!   coarse space is piecewise constant in the unknowns as assembled, whose smooth errors are
-//!   locally constant (see [`Level`]).
+//!   re-discretisation. A coarse cell exists where any child is full. No level is scaled
+//!   diagonally (the hierarchy's power of two divides all alike): the coarse space is piecewise
+//!   constant in the unknowns as assembled, whose smooth errors are locally constant (see
+//!   [`Level`]).
 //! * **Smoother:** red-black Gauss–Seidel, red then black before the coarse correction and black
 //!   then red after it, so the cycle is a symmetric preconditioner. A level stores its red
 //!   unknowns first, then its black ones, so a colour's pass streams through its own rows.
 //! * **Cycle:** a W-cycle whose coarse correction is scaled by [`OVER_CORRECTION`].
 //! * **Coarsest level** (≤ [`COARSE_CELLS`] unknowns): dense Cholesky, exact.
 //! * **Krylov:** CG with the iterate in f64 and its other vectors in f32, stopped on the true
-//!   residual in f64 ([`Hierarchy::solve_many`]); its operator is the finest level's rows (f32
-//!   couplings and row sums, products summed in f64). It stops on the relative residual of the
-//!   diagonally scaled system, ‖D^-½ r‖/‖D^-½ b‖, D taken from the rows where the norms are
-//!   summed.
+//!   residual in f64 ([`Hierarchy::solve_many`]); its operator is the finest level's rows (16-bit
+//!   couplings and row sums, ≤ 2⁻¹² relative, products summed in f64). It stops on the relative
+//!   residual of the diagonally scaled system, ‖D^-½ r‖/‖D^-½ b‖, D taken from the rows where
+//!   the norms are summed.
 //! * **Determinism:** updates within a colour are independent; reductions sum fixed-size chunks'
 //!   partial sums in order. Bit-identical at any thread count.
 
 use super::SolveStats;
+use crate::half::Scaled16;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -219,7 +223,9 @@ fn first_at(a: &impl Stencils, cell: usize) -> usize {
 /// unknown's aggregate. A coarse unknown exists where any child is one; its diagonal sums its
 /// children's diagonals and the couplings inside it (twice: both directions), a coarse coupling
 /// the fine ones across the shared face. Children add in box order, as the box-array form did.
-fn coarsen(a: &impl Stencils) -> (Operator, Vec<u32>) {
+/// Also `a`'s [`Maxima`], from the same reading of its rows (the finest level's rows are made
+/// on demand: a pass of their own cost ~1 % of `full`'s instructions).
+fn coarsen(a: &impl Stencils) -> (Operator, Vec<u32>, Maxima) {
     let [nx, ny, nz] = a.dims();
     let cd = [nx.div_ceil(2), ny.div_ceil(2), nz.div_ceil(2)];
     let key = |ijk: [usize; 3]| (ijk[0] / 2 + cd[0] * (ijk[1] / 2 + cd[1] * (ijk[2] / 2))) as u32;
@@ -272,27 +278,76 @@ fn coarsen(a: &impl Stencils) -> (Operator, Vec<u32>) {
         planes.push((fine, base, mine));
         (rest, base) = (more, base + here as usize);
     }
-    planes.into_par_iter().for_each(|(fine, base, mine)| {
-        for u in fine {
-            let n = a.node(u);
-            let ijk = a.ijk(u);
-            let p = &mut mine[parent[u] as usize - base];
-            p.diag += n.diag;
-            for (ax, at) in ijk.iter().enumerate() {
-                let v = n.up_nbr[ax];
-                if v == NONE {
-                    continue;
-                }
-                if at % 2 == 0 {
-                    p.diag += 2.0 * n.up[ax];
-                } else {
-                    p.up[ax] += n.up[ax];
-                    p.up_nbr[ax] = parent[v as usize];
+    let maxima = planes
+        .into_par_iter()
+        .map(|(fine, base, mine)| {
+            let mut m = Maxima::default();
+            for u in fine {
+                let st = a.stencil(u);
+                m = m.max(Maxima::of(&st));
+                let ijk = a.ijk(u);
+                let p = &mut mine[parent[u] as usize - base];
+                p.diag += st.diag;
+                for (ax, at) in ijk.iter().enumerate() {
+                    let (v, up) = (st.nbr[2 * ax + 1], st.off[2 * ax + 1]);
+                    if v == NONE {
+                        continue;
+                    }
+                    if at % 2 == 0 {
+                        p.diag += 2.0 * up;
+                    } else {
+                        p.up[ax] += up;
+                        p.up_nbr[ax] = parent[v as usize];
+                    }
                 }
             }
+            m
+        })
+        .reduce(Maxima::default, Maxima::max);
+    (Operator { dims: cd, nodes }, parent, maxima)
+}
+
+/// The largest values of an operator's rows, from which a level's codes take their scales
+/// ([`Scaled16::exponent_for`]): coupling magnitude, diagonal, row sum.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Maxima {
+    cpl: f64,
+    diag: f64,
+    sum: f64,
+}
+
+impl Maxima {
+    /// Those of one row.
+    fn of(st: &Stencil) -> Maxima {
+        let cpl = st
+            .off
+            .iter()
+            .zip(st.nbr)
+            .filter(|(_, v)| *v != NONE)
+            .fold(0f64, |m, (c, _)| m.max(-c));
+        Maxima {
+            cpl,
+            diag: st.diag,
+            sum: row_sum(st),
         }
-    });
-    (Operator { dims: cd, nodes }, parent)
+    }
+
+    /// Each the larger of the two (the same in any order: thread-count independent).
+    fn max(self, o: Maxima) -> Maxima {
+        Maxima {
+            cpl: self.cpl.max(o.cpl),
+            diag: self.diag.max(o.diag),
+            sum: self.sum.max(o.sum),
+        }
+    }
+
+    /// Those of all of `a`'s rows (a pass over them: for a level not read by [`coarsen`]).
+    fn all(a: &impl Stencils) -> Maxima {
+        (0..a.len())
+            .into_par_iter()
+            .map(|u| Maxima::of(&a.stencil(u)))
+            .reduce(Maxima::default, Maxima::max)
+    }
 }
 
 /// The scalar of the multigrid levels ([`Level`]) and of the CG vectors.
@@ -329,12 +384,13 @@ impl Real for f64 {
 /// when the recursion's rounding left it above the tolerance; 1e-12 is still reached).
 type Mg = f32;
 
-/// One row of a [`Level`]: its couplings to its +x, +y, +z neighbours and where the entries of
-/// the six neighbours (−x, +x, −y, +y, −z, +z) lie (24 B with `Z` = u16, 28 B with u32: [`Rows`];
-/// 40 B with all six couplings, each face's then stored in both its rows). The −a couplings are
-/// read from the −a neighbours' rows (a separate array of couplings, 16 + 12 B, took as many
-/// instructions as the 40 B rows, but `full`'s peak at 200×160×120 came out 4 MB above these
-/// rows', through the allocator).
+/// One row of a [`Level`]: its couplings to its +x, +y, +z neighbours, its sum (or diagonal)
+/// and where the entries of the six neighbours (−x, +x, −y, +y, −z, +z) lie (20 B with `Z` =
+/// u16, 24 B with u32: [`Rows`]). The couplings and the sum are 16-bit codes ([`Scaled16`],
+/// ≤ 2⁻¹² relative, under a power-of-two scale per level and field); in f32 beside 24 B rows
+/// they took 28 B per unknown. The −a couplings are read from the −a neighbours' rows (a
+/// separate array of couplings, 16 + 12 B, took as many instructions as 40 B rows with all six,
+/// but `full`'s peak at 200×160×120 came out 4 MB above the rows', through the allocator).
 ///
 /// The entries are the other colour's, counted from its first (a colour's pass indexes the
 /// other's values and rows with them as they are: subtracting an offset cost ~7 % more of the
@@ -348,12 +404,16 @@ type Mg = f32;
 /// (the [`NO_MINUS_X`] flag, distance 0 for −y, and for −z [`Dz::missing_minus`]).
 #[derive(Clone, Copy, Debug, Default)]
 struct Row<Z> {
-    /// Couplings to the +x, +y, +z neighbours (0 to a missing one, and on the pads): each
-    /// face's coupling is stored once, and a row's −a coupling is its −a neighbour's +a one.
-    up: [Mg; 3],
     /// The other colour's first entry after this unknown (its unknowns before this one), and
     /// the [`NO_MINUS_X`] flag.
     base: u32,
+    /// Couplings to the +x, +y, +z neighbours, negated (they are ≤ 0) and coded at the level's
+    /// [`Level::cpl_scale`] (0 to a missing one, and on the pads): each face's coupling is
+    /// stored once, and a row's −a coupling is its −a neighbour's +a one.
+    up: [Scaled16; 3],
+    /// The row's sum (the finest level: [`Level::row_sums`]) or its diagonal, coded at the
+    /// level's [`Level::own_scale`] (0 on the pads).
+    own: Scaled16,
     /// Entries from `base` back to the −y neighbour and on to the +y one.
     dy: [u16; 2],
     /// Entries from `base` back to the −z neighbour and on to the +z one.
@@ -421,11 +481,12 @@ const NO_MINUS_X: u32 = 1 << 31;
 pub const MAX_BOX_ROW_CELLS: usize = 2 * u16::MAX as usize;
 
 impl<Z: Dz> Row<Z> {
-    /// The row of couplings `up` and of the neighbours' entries `nbr` (`pad`, the other colour's
+    /// The row of coded couplings `up` and sum (or diagonal) `own` and of the neighbours' entries
+    /// `nbr` (`pad`, the other colour's
     /// pad, for a missing neighbour), `base` the other colour's first entry after the unknown
     /// (all counted from the other colour's first entry); `None` if a ±z distance does not fit
     /// in `Z`.
-    fn encode(up: [Mg; 3], nbr: [u32; 6], base: u32, pad: u32) -> Option<Row<Z>> {
+    fn encode(up: [Scaled16; 3], own: Scaled16, nbr: [u32; 6], base: u32, pad: u32) -> Option<Row<Z>> {
         assert!(base < NO_MINUS_X, "more than 2^31 entries on one level");
         let missing = |q: usize| nbr[q] == pad;
         debug_assert!(missing(0) || nbr[0] + 1 == base, "−x neighbour just before base");
@@ -440,8 +501,9 @@ impl<Z: Dz> Row<Z> {
         let dy = |q: usize| u16::try_from(dist(q)).expect("a box row of at most MAX_BOX_ROW_CELLS cells");
         let minus_z = if missing(4) { Z::missing_minus(base, pad) } else { Z::of(dist(4))? };
         Some(Row {
-            up,
             base: base | if missing(0) { NO_MINUS_X } else { 0 },
+            up,
+            own,
             dy: [dy(2), dy(3)],
             dz: [minus_z, Z::of(dist(5))?],
         })
@@ -470,16 +532,17 @@ impl<Z: Dz> Row<Z> {
     }
 }
 
-/// A level's rows, their ±z distances in u16 where all fit, else in u32 ([`Dz`]). The 24 B
-/// rows lowered `full`'s peak heap at 200×160×120 by 1.6 MB (the solves', one thread) at the
-/// solve's instructions and speed (a −z select in u16, within 0.3 % of the 28 B rows').
+/// A level's rows, their ±z distances in u16 where all fit, else in u32 ([`Dz`]). The narrow
+/// rows (then 24 B, against 28 B) lowered `full`'s peak heap at 200×160×120 by 1.6 MB (the
+/// solves', one thread) at the solve's instructions and speed (a −z select in u16, within 0.3 %
+/// of the wide rows').
 #[derive(Clone, Debug)]
 enum Rows {
     Narrow(Vec<Row<u16>>),
     Wide(Vec<Row<u32>>),
 }
 
-const _: () = assert!(std::mem::size_of::<Row<u16>>() == 24 && std::mem::size_of::<Row<u32>>() == 28);
+const _: () = assert!(std::mem::size_of::<Row<u16>>() == 20 && std::mem::size_of::<Row<u32>>() == 24);
 
 impl Rows {
     fn len(&self) -> usize {
@@ -498,12 +561,16 @@ impl Rows {
     }
 }
 
-/// A [`Level`]'s rows with their type known ([`with_rows`]), its diagonals (or row sums) and its
-/// number of red entries: what the passes read.
+/// A [`Level`]'s rows with their type known ([`with_rows`]), their scales and its number of red
+/// entries: what the passes read.
 struct Coded<'a, Z> {
     red: usize,
     rows: &'a [Row<Z>],
-    diag: &'a [Mg],
+    /// The scales of a row's own codes (+x, +y, +z couplings and [`Row::own`]:
+    /// [`Level::cpl_scale`] ×3, [`Level::own_scale`]) and of its −a neighbours' couplings (and
+    /// a zero lane), as [`Scaled16::decode4`] takes them.
+    mine: [f32; 4],
+    theirs: [f32; 4],
 }
 
 /// Runs `$pass` with `$c`, the [`Coded`] rows of `$level`: one copy of the pass per row type,
@@ -516,7 +583,8 @@ macro_rules! with_rows {
                 let $c = Coded {
                     red: level.red,
                     rows,
-                    diag: &level.diag,
+                    mine: level.scales(),
+                    theirs: [level.cpl_scale; 4],
                 };
                 $pass
             }
@@ -524,7 +592,8 @@ macro_rules! with_rows {
                 let $c = Coded {
                     red: level.red,
                     rows,
-                    diag: &level.diag,
+                    mine: level.scales(),
+                    theirs: [level.cpl_scale; 4],
                 };
                 $pass
             }
@@ -551,19 +620,24 @@ macro_rules! with_rows {
 #[derive(Clone, Debug)]
 struct Level {
     red: usize,
-    /// One value per entry (0 on the pads): the diagonal, or with `row_sums` the row's sum.
-    diag: Vec<Mg>,
-    /// `diag` holds each row's sum, its diagonal plus its six couplings, computed in f64 from the
-    /// assembled row and rounded once (the finest level); the diagonal is that sum less the row's
-    /// stored couplings ([`less_couplings`]). CG's operator ([`Coded::apply_row`]) so keeps
-    /// every assembled row sum to its own f32 rounding: the absorption and the boundary's
-    /// leakage (A·1 for a uniform fluence), tiny against the couplings in a thick cloud, which a
-    /// diagonal rounded to f32 would move by up to ~10⁻⁴ of themselves: stored so, the 100×80×60
-    /// cloud's `diffusion` image moved by 2.9·10⁻⁶ (block mean relative error, a bias of
-    /// −3.3·10⁻⁶; the 400×320×240 one's by 1.2·10⁻⁵ when the scaled level's were rounded),
-    /// stored as sums by 2·10⁻⁹, at the same speed (within the noise).
+    /// Each row's [`Row::own`] holds its sum, its diagonal plus its six couplings, computed in
+    /// f64 from the assembled row and rounded once (the finest level), not its diagonal; the
+    /// diagonal is that sum less the row's stored couplings ([`less_couplings`]). CG's operator
+    /// ([`Coded::apply_row`]) so keeps every assembled row sum to its own rounding: the
+    /// absorption and the boundary's leakage (A·1 for a uniform fluence), tiny against the
+    /// couplings in a thick cloud, which a rounded diagonal would move by far more (in f32 by up
+    /// to ~10⁻⁴ of themselves: the 100×80×60 cloud's `diffusion` image moved by 2.9·10⁻⁶, block
+    /// mean relative error, against 2·10⁻⁹ with f32 sums).
     row_sums: bool,
     rows: Rows,
+    /// The scales of the rows' codes ([`Scaled16`]): −2^k for the couplings (stored negated:
+    /// they are ≤ 0), 2^k for the sums or diagonals, each k from the level's largest value
+    /// ([`Scaled16::exponent_for`]). Values below ~2⁻²⁹ of the largest read 0.
+    cpl_scale: f32,
+    own_scale: f32,
+    /// The power of two 2^-unit that the whole hierarchy's operator is stored scaled by (the
+    /// finest level's, [`unit_of`]): the solve scales the right-hand sides alike.
+    unit: i32,
     /// Entry of the next coarser level holding each red entry (only the red ones are
     /// prolonged: [`Level::prolong_red`]); empty on the coarsest level.
     parent: Vec<u32>,
@@ -593,10 +667,13 @@ fn row_sum(st: &Stencil) -> f64 {
 }
 
 /// The other colour's entries `off..off + x.len()` (its pad last) as the rows of one colour read
-/// them: their values and rows (for their +x, +y, +z couplings).
+/// them: their values and rows (for their +x, +y, +z couplings), and the couplings' scale.
 struct OtherColour<'a, Z, const K: usize> {
     x: &'a [[Mg; K]],
     rows: &'a [Row<Z>],
+    /// [`Coded::mine`], [`Coded::theirs`].
+    mine: [f32; 4],
+    theirs: [f32; 4],
 }
 
 impl<'a, Z: Dz, const K: usize> OtherColour<'a, Z, K> {
@@ -606,65 +683,93 @@ impl<'a, Z: Dz, const K: usize> OtherColour<'a, Z, K> {
         OtherColour {
             x,
             rows: &level.rows[off..off + x.len()],
+            mine: level.mine,
+            theirs: level.theirs,
         }
     }
 
     /// Σ_q cpl_q · x\[nbr_q\] per system, the off-diagonal part of `row` (of the other colour),
-    /// and the couplings cpl_q (−x, +x, −y, +y, −z, +z; they give the finest level's diagonal).
+    /// the couplings cpl_q (−x, +x, −y, +y, −z, +z; they give the finest level's diagonal) and
+    /// the row's decoded [`Row::own`].
     /// (Always inlined: it is the smoother's inner loop, and an outlined call costs ~10 % of the
     /// solve's instructions.)
     #[inline(always)]
-    fn couple(&self, row: &Row<Z>) -> ([Mg; K], [Mg; 6]) {
+    fn couple(&self, row: &Row<Z>) -> ([Mg; K], [Mg; 6], Mg) {
         let [i0, i1, i2, i3, i4, i5] = row.neighbours((self.x.len() - 1) as u32).map(|v| v as usize);
         let (up, rows) = (&row.up, self.rows);
-        let c = [rows[i0].up[0], up[0], rows[i2].up[1], up[1], rows[i4].up[2], up[2]];
+        // Four codes at a time (one vector shift and multiply where the target has them).
+        let mine = Scaled16::decode4([up[0], up[1], up[2], row.own], self.mine);
+        let theirs = Scaled16::decode4([rows[i0].up[0], rows[i2].up[1], rows[i4].up[2], Scaled16::ZERO], self.theirs);
+        let c = [theirs[0], mine[0], theirs[1], mine[1], theirs[2], mine[2]];
         let (n0, n1, n2, n3, n4, n5) = (&self.x[i0], &self.x[i1], &self.x[i2], &self.x[i3], &self.x[i4], &self.x[i5]);
         let mut s = [0.0; K];
         for k in 0..K {
             s[k] = (c[0] * n0[k] + c[1] * n1[k]) + (c[2] * n2[k] + c[3] * n3[k]) + (c[4] * n4[k] + c[5] * n5[k]);
         }
-        (s, c)
+        (s, c, mine[3])
     }
 }
 
-/// Runs `$pass` with `$d`, the rule giving entry e's diagonal of `$level` from e and its
-/// couplings: one copy of the pass per rule, so its inner loop does not branch on it.
+/// Runs `$pass` with `$d`, the rule giving a row's diagonal on `$level` from the row's decoded
+/// [`Row::own`] and its couplings: one copy of the pass per rule, so its
+/// inner loop does not branch on it.
 macro_rules! with_diagonal {
     ($level:expr, |$d:ident| $pass:expr) => {{
-        let values = &$level.diag;
         if $level.row_sums {
-            let $d = |e: usize, c: &[Mg; 6]| less_couplings(values[e], *c);
+            let $d = |own: Mg, c: &[Mg; 6]| less_couplings(own, *c);
             $pass
         } else {
-            let $d = |e: usize, _: &[Mg; 6]| values[e];
+            let $d = |own: Mg, _: &[Mg; 6]| own;
             $pass
         }
     }};
 }
 
-/// One row as [`Level::from_stencils`] makes it, before it is coded ([`Row::encode`]): its +a
-/// couplings, its neighbours' entries, its `base`, the other colour's pad, and its diagonal (or
-/// sum).
-type Plain = ([Mg; 3], [u32; 6], u32, u32, Mg);
+/// 2^k in f64 (k in −1022 … 1023).
+fn pow2(k: i32) -> f64 {
+    f64::from_bits(((1023 + k) as u64) << 52)
+}
 
-/// The rows `plain(e, unk[e])` of each entry e coded with ±z distances in `Z`, and their
-/// diagonals; `None` if a distance does not fit. (An indexed collect, written in place: one
-/// into `Option` is unindexed, and held its chunks besides the rows, +12.6 MB at 200×160×120.)
-fn code_rows<Z: Dz>(unk: &[u32], plain: &(impl Fn(usize, u32) -> Plain + Sync)) -> Option<(Vec<Row<Z>>, Vec<Mg>)> {
+/// The power of two 2^unit a hierarchy's operator is divided by, from the largest coupling
+/// magnitude or row sum `max` of its finest level (0 for an empty one). Its values are then below
+/// 2⁻³ and its diagonals below 1 (each at most 7 of them: the sum plus six coupling magnitudes),
+/// and a coarse level's values below the finest level's unknowns (< 2³¹: a Galerkin diagonal is
+/// at most the sum of its aggregate's finer diagonals, a coupling at most a diagonal), so every
+/// level's scale 2^k is a normal f32 ([`Scaled16::exponent_for`]) for any voxel size or density.
+fn unit_of(max: f64) -> i32 {
+    if !(max > 0.0 && max.is_finite()) {
+        return 0;
+    }
+    (((max.to_bits() >> 52) & 0x7ff) as i32 - 1023 + 4).clamp(-1000, 1000)
+}
+
+/// One row as [`Level::from_stencils`] makes it, before it is coded ([`Row::encode`]): its +a
+/// couplings (≤ 0) and its sum (or diagonal), in f64 as assembled, its neighbours' entries, its
+/// `base` and the other colour's pad.
+type Plain = ([f64; 3], f64, [u32; 6], u32, u32);
+
+/// The rows `plain(e, unk[e])` of each entry e with ±z distances in `Z`, their values divided by
+/// 2^`unit` and coded at scale exponents `k` (couplings, sums or diagonals); `None` if a
+/// distance does not fit. (An indexed collect, written in place: one into `Option` is
+/// unindexed, and held its chunks besides the rows, +12.6 MB at 200×160×120.)
+fn code_rows<Z: Dz>(unk: &[u32], plain: &(impl Fn(usize, u32) -> Plain + Sync), unit: i32, k: [i32; 2]) -> Option<Vec<Row<Z>>> {
     let fits = AtomicBool::new(true);
-    let coded = unk
+    let to_unit = pow2(-unit);
+    let rows = unk
         .par_iter()
         .enumerate()
         .map(|(e, u)| {
-            let (up, nbr, base, pad, d) = plain(e, *u);
-            let row = Row::encode(up, nbr, base, pad).unwrap_or_else(|| {
+            let (up, own, nbr, base, pad) = plain(e, *u);
+            debug_assert!(up.iter().all(|c| *c <= 0.0), "an M-matrix's couplings are ≤ 0");
+            let up = up.map(|c| Scaled16::encode(-c * to_unit, k[0]));
+            let own = Scaled16::encode(own * to_unit, k[1]);
+            Row::encode(up, own, nbr, base, pad).unwrap_or_else(|| {
                 fits.store(false, Ordering::Relaxed);
                 Row::default()
-            });
-            (row, d)
+            })
         })
-        .unzip();
-    fits.into_inner().then_some(coded)
+        .collect();
+    fits.into_inner().then_some(rows)
 }
 
 impl<Z: Dz> Coded<'_, Z> {
@@ -699,18 +804,21 @@ impl<Z: Dz> Coded<'_, Z> {
     }
 
     /// Entry e's couplings to its neighbours `nbr` (its [`Coded::neighbours`]; −x, +x, −y, +y,
-    /// −z, +z): the −a ones are the −a neighbours' +a ones.
+    /// −z, +z; the −a ones are the −a neighbours' +a ones) and its decoded [`Row::own`].
     #[inline(always)]
-    fn couplings(&self, e: usize, nbr: &[u32; 6]) -> [Mg; 6] {
-        let (rows, own) = (self.rows, &self.rows[e].up);
-        [
-            rows[nbr[0] as usize].up[0],
-            own[0],
-            rows[nbr[2] as usize].up[1],
-            own[1],
-            rows[nbr[4] as usize].up[2],
-            own[2],
-        ]
+    fn couplings(&self, e: usize, nbr: &[u32; 6]) -> ([Mg; 6], Mg) {
+        let (rows, row) = (self.rows, &self.rows[e]);
+        let mine = Scaled16::decode4([row.up[0], row.up[1], row.up[2], row.own], self.mine);
+        let theirs = Scaled16::decode4(
+            [
+                rows[nbr[0] as usize].up[0],
+                rows[nbr[2] as usize].up[1],
+                rows[nbr[4] as usize].up[2],
+                Scaled16::ZERO,
+            ],
+            self.theirs,
+        );
+        ([theirs[0], mine[0], theirs[1], mine[1], theirs[2], mine[2]], mine[3])
     }
 
     /// The residual b − A x at red entry e (of `x` split at the black entries into `xr` and
@@ -722,10 +830,10 @@ impl<Z: Dz> Coded<'_, Z> {
         xr: &[[Mg; K]],
         xb: &OtherColour<Z, K>,
         b: &[[Mg; K]],
-        diag: &impl Fn(usize, &[Mg; 6]) -> Mg,
+        diag: &impl Fn(Mg, &[Mg; 6]) -> Mg,
     ) -> [Mg; K] {
-        let (s, c) = xb.couple(&self.rows[e]);
-        let d = diag(e, &c);
+        let (s, c, own) = xb.couple(&self.rows[e]);
+        let d = diag(own, &c);
         std::array::from_fn(|k| b[e][k] - (d * xr[e][k] + s[k]))
     }
 
@@ -735,16 +843,24 @@ impl<Z: Dz> Coded<'_, Z> {
     #[inline(always)]
     fn finest_row(&self, e: usize) -> ([u32; 6], [f64; 6], f64) {
         let nbr = self.neighbours(e);
-        let c = self.couplings(e, &nbr).map(f64::from);
-        (nbr, c, less_couplings(f64::from(self.diag[e]), c))
+        let (c, own) = self.couplings(e, &nbr);
+        let c = c.map(f64::from);
+        (nbr, c, less_couplings(f64::from(own), c))
+    }
+
+    /// Entry e's [`Row::own`], decoded: its row's sum (the finest level) or its diagonal.
+    #[inline(always)]
+    fn own(&self, e: usize) -> Mg {
+        self.rows[e].own.decode(self.mine[3])
     }
 
     /// Entry e of A x per system with the finest level's operator, summed in f64, and the
-    /// row's diagonal: the rows' f32 couplings, and the diagonal that gives each row its
-    /// assembled sum (to f32 rounding of the sum: [`Level::row_sums`]). So CG solves the
-    /// assembled operator up to a ~6·10⁻⁸ relative change of each coupling with every row sum
-    /// kept (the absorption and the boundary's leakage); the f64 couplings took 24 B per
-    /// unknown. 0 on the pads.
+    /// row's diagonal: the rows' coded couplings, and the diagonal that gives each row its
+    /// assembled sum (to the rounding of the coded sum: [`Level::row_sums`]). So CG solves the
+    /// assembled operator (divided by 2^unit) up to a ≤ 2⁻¹² relative change of each coupling,
+    /// with every row sum kept to ≤ 2⁻¹² of itself (the absorption and the boundary's leakage;
+    /// one below ~2⁻²⁹ of the level's largest reads 0); the f64 couplings took 24 B per unknown,
+    /// f32 ones and an f32 sum 16 B. 0 on the pads.
     #[inline(always)]
     fn apply_row<X: Real, const K: usize>(&self, e: usize, x: &[[X; K]]) -> ([f64; K], f64) {
         let (nbr, c, d) = self.finest_row(e);
@@ -762,10 +878,11 @@ impl<Z: Dz> Coded<'_, Z> {
 
 impl Level {
     /// The level of operator `a` and each unknown's entry; with `row_sums` it holds the rows'
-    /// sums, not their diagonals (the finest level: [`Level::row_sums`]). Its rows are 24 B
-    /// where every ±z distance fits in a u16, else 28 B ([`Rows`]; always 28 B with `narrow`
-    /// false, for the tests).
-    fn from_stencils(a: &impl Stencils, row_sums: bool, narrow: bool) -> (Level, Vec<u32>) {
+    /// sums, not their diagonals (the finest level: [`Level::row_sums`]). Its values are divided
+    /// by 2^`unit` (by default [`unit_of`] its own largest value: the finest level's), and
+    /// coded at scales from `a`'s [`Maxima`] `m`. Its rows are 20 B where every ±z distance
+    /// fits in a u16, else 24 B ([`Rows`]; always 24 B with `narrow` false, for the tests).
+    fn from_stencils(a: &impl Stencils, row_sums: bool, narrow: bool, unit: Option<i32>, m: Maxima) -> (Level, Vec<u32>) {
         let n = a.len();
         let colour = |u: usize| a.ijk(u).iter().sum::<usize>() % 2;
         let red = (0..n).filter(|u| colour(*u) == 0).count();
@@ -792,44 +909,47 @@ impl Level {
             let other = [red + 1, 0][usize::from(e > red)] as u32;
             let pad = pads[usize::from(e > red)] - other;
             if u == PAD {
-                return ([0.0; 3], [pad; 6], pad, pad, 0.0);
+                return ([0.0; 3], 0.0, [pad; 6], pad, pad);
             }
             let st = a.stencil(u as usize);
             // The +a couplings (each −a one is read from the −a neighbour's row).
-            let up = std::array::from_fn(|ax| {
-                if st.nbr[2 * ax + 1] != NONE {
-                    Mg::of(st.off[2 * ax + 1])
-                } else {
-                    0.0
-                }
-            });
+            let up = std::array::from_fn(|ax| if st.nbr[2 * ax + 1] != NONE { st.off[2 * ax + 1] } else { 0.0 });
             let mut nbr = [pad; 6];
             for q in 0..6 {
                 if st.nbr[q] != NONE && st.off[q] != 0.0 {
                     nbr[q] = entry[st.nbr[q] as usize] - other;
                 }
             }
-            let d = if row_sums { row_sum(&st) } else { st.diag };
-            (up, nbr, base(u as usize), pad, Mg::of(d))
+            let own = if row_sums { row_sum(&st) } else { st.diag };
+            (up, own, nbr, base(u as usize), pad)
         };
+        // The codes' scales from the largest values.
+        let max_own = if row_sums { m.sum } else { m.diag };
+        let unit = unit.unwrap_or_else(|| unit_of(m.cpl.max(max_own)));
+        let k = [m.cpl, max_own].map(|v| Scaled16::exponent_for(v * pow2(-unit)));
         // The rows in u16 first; only where a distance does not fit, all again in u32 (the
-        // stencils made twice, but no 28 B rows held meanwhile).
-        let (rows, diag) = match narrow.then(|| code_rows(&unk, &plain)).flatten() {
-            Some((rows, diag)) => (Rows::Narrow(rows), diag),
-            None => {
-                let (rows, diag) = code_rows(&unk, &plain).expect("u32 distances always fit");
-                (Rows::Wide(rows), diag)
-            }
+        // stencils made again, but no wide rows held meanwhile).
+        let rows = match narrow.then(|| code_rows(&unk, &plain, unit, k)).flatten() {
+            Some(rows) => Rows::Narrow(rows),
+            None => Rows::Wide(code_rows(&unk, &plain, unit, k).expect("u32 distances always fit")),
         };
         let level = Level {
             red,
-            diag,
             row_sums,
             rows,
+            cpl_scale: -Scaled16::scale(k[0]),
+            own_scale: Scaled16::scale(k[1]),
+            unit,
             parent: Vec::new(),
             planes: Vec::new(),
         };
         (level, entry)
+    }
+
+    /// The scales of a row's own codes: [`Coded::mine`].
+    fn scales(&self) -> [f32; 4] {
+        let c = self.cpl_scale;
+        [c, c, c, self.own_scale]
     }
 
     /// The [`Operator`]'s unknown at entry `e` ([`PAD`] on the pads): [`Coded::unknown`].
@@ -845,9 +965,10 @@ impl Level {
         with_rows!(self, |c| c.neighbours(e))
     }
 
-    /// Entry e's couplings to its neighbours `nbr`: [`Coded::couplings`].
+    /// Entry e's couplings to its neighbours `nbr` and its decoded [`Row::own`]:
+    /// [`Coded::couplings`].
     #[cfg(test)]
-    fn couplings(&self, e: usize, nbr: &[u32; 6]) -> [Mg; 6] {
+    fn couplings(&self, e: usize, nbr: &[u32; 6]) -> ([Mg; 6], Mg) {
         with_rows!(self, |c| c.couplings(e, nbr))
     }
 
@@ -940,9 +1061,10 @@ impl Level {
                     [0.0; K]
                 } else {
                     let d = if self.row_sums {
-                        less_couplings(self.diag[e], rows.couplings(e, &rows.neighbours(e)))
+                        let (c, own) = rows.couplings(e, &rows.neighbours(e));
+                        less_couplings(own, c)
                     } else {
-                        self.diag[e]
+                        rows.own(e)
                     };
                     b[e].map(|v| v / d)
                 };
@@ -968,8 +1090,8 @@ impl Level {
                 let other = OtherColour::of(&coded, other, off);
                 let rows = &coded.rows[start..start + xs.len()];
                 for (t, (xv, row)) in xs.iter_mut().zip(rows).enumerate() {
-                    let (s, c) = other.couple(row);
-                    let d = diag(start + t, &c);
+                    let (s, c, own) = other.couple(row);
+                    let d = diag(own, &c);
                     *xv = std::array::from_fn(|k| (b[start + t][k] - s[k]) / d);
                 }
             })))
@@ -1086,8 +1208,10 @@ fn cholesky_in_place(a: &mut [f64], n: usize) -> f64 {
 }
 
 impl Dense {
-    /// The factor of operator `s`, whose unknowns are the entries `entry` of `level`.
+    /// The factor of operator `s` divided by 2^unit (the level's [`Level::unit`]), whose
+    /// unknowns are the entries `entry` of `level`.
     fn build(s: &impl Stencils, level: &Level, entry: &[u32]) -> Dense {
+        let to_unit = pow2(-level.unit);
         let cells: Vec<usize> = (0..level.len()).filter(|e| level.unknown(*e) != PAD).collect();
         let n = cells.len();
         let mut q_of = vec![usize::MAX; level.len()];
@@ -1097,9 +1221,9 @@ impl Dense {
         let mut a = vec![0f64; n * n];
         for (q, &e) in cells.iter().enumerate() {
             let nd = s.node(level.unknown(e) as usize);
-            a[q * n + q] = nd.diag;
+            a[q * n + q] = nd.diag * to_unit;
             for ax in 0..3 {
-                let v = nd.up[ax];
+                let v = nd.up[ax] * to_unit;
                 if v != 0.0 && nd.up_nbr[ax] != NONE {
                     let r = q_of[entry[nd.up_nbr[ax] as usize] as usize];
                     a[q * n + r] += v;
@@ -1202,20 +1326,26 @@ impl Hierarchy {
         Self::build_coded(a, coarse_cells, true)
     }
 
-    /// [`Hierarchy::build_with`], every level's rows 28 B unless `narrow` ([`Rows`]).
+    /// [`Hierarchy::build_with`], every level's rows 24 B unless `narrow` ([`Rows`]).
     fn build_coded(a: &impl Stencils, coarse_cells: usize, narrow: bool) -> Hierarchy {
         let mut first = (a.len() > coarse_cells && a.dims().iter().any(|d| *d > 1)).then(|| coarsen(a));
-        let (mut level, mut entry) = Level::from_stencils(a, true, narrow);
+        let maxima = first.as_ref().map_or_else(|| Maxima::all(a), |c| c.2);
+        let (mut level, mut entry) = Level::from_stencils(a, true, narrow, None, maxima);
+        let unit = Some(level.unit);
         let mut levels = Vec::new();
         // The operator of `level` when it is a coarse one.
         let mut coarsest: Option<Operator> = None;
         loop {
             let (c, parent) = match (first.take(), &coarsest) {
-                (Some(c), _) => c,
-                (None, Some(f)) if level.unknowns() > coarse_cells && f.dims.iter().any(|d| *d > 1) => coarsen(&f.rows()),
+                (Some((c, parent, _)), _) => (c, parent),
+                (None, Some(f)) if level.unknowns() > coarse_cells && f.dims.iter().any(|d| *d > 1) => {
+                    let (c, parent, _) = coarsen(&f.rows());
+                    (c, parent)
+                }
                 _ => break,
             };
-            let (mut next, next_entry) = Level::from_stencils(&c.rows(), false, narrow);
+            let rows = c.rows();
+            let (mut next, next_entry) = Level::from_stencils(&rows, false, narrow, unit, Maxima::all(&rows));
             level.link(&parent, &mut next, &next_entry, &c);
             levels.push(std::mem::replace(&mut level, next));
             (coarsest, entry) = (Some(c), next_entry);
@@ -1242,7 +1372,7 @@ impl Hierarchy {
 
     /// Bytes the hierarchy holds.
     fn bytes(&self) -> usize {
-        let level = |l: &Level| l.rows.bytes() + 4 * (l.diag.len() + l.parent.len() + 3 * l.planes.len());
+        let level = |l: &Level| l.rows.bytes() + 4 * (l.parent.len() + 3 * l.planes.len());
         self.levels.iter().map(level).sum::<usize>() + 8 * (self.coarse.l.len() + self.coarse.cells.len())
     }
 
@@ -1380,10 +1510,12 @@ impl Hierarchy {
             }
             None => vec![[0.0; K]; a.len()],
         };
-        // The right-hand sides per entry, made where they are read (not held).
+        // The right-hand sides per entry, made where they are read (not held), divided by the
+        // power of two that the operator is (exactly: the solution is the caller's).
+        let to_unit = pow2(-a.unit);
         let be = |e: usize| match a.unknown(e) {
             PAD => [0.0; K],
-            u => b.map(|v| v[u as usize].into()),
+            u => b.map(|v| v[u as usize].into() * to_unit),
         };
         let stats = self.solve_entries(&be, &mut x, x0.is_none(), tol, max_iter);
         let mut lane = 0;
@@ -1570,7 +1702,7 @@ impl Hierarchy {
 /// (moved here from tests/ so the solver's internals need not be public).
 #[cfg(test)]
 mod operator_tests {
-    use super::{coarsen, row_sum, Coded, Hierarchy, Level, Mg, Node, Operator, Real, Rows, Stencils, Work, NONE, PAD};
+    use super::{coarsen, Coded, Hierarchy, Level, Mg, Node, Operator, Rows, Stencils, Work, NONE, PAD};
     use crate::diffusion::{assemble, BoundaryLight, Domain};
     use crate::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
     use crate::lighting::DirectionBins;
@@ -1635,26 +1767,22 @@ mod operator_tests {
         a
     }
 
-    /// The operator CG solves for `s`: its couplings rounded to the multigrid's precision, each
-    /// diagonal the row's assembled sum rounded to f32 less those couplings
-    /// (`Coded::apply_row`).
-    fn as_solved(s: &Operator) -> Operator {
-        let (mut r, rows) = (s.clone(), s.rows());
-        // Each row's sum as assembled, rounded, then less its rounded couplings.
-        let mut diag: Vec<f64> = (0..rows.len()).map(|u| f64::from(Mg::of(row_sum(&rows.stencil(u))))).collect();
-        for (q, nd) in r.nodes.iter_mut().enumerate() {
-            for ax in 0..3 {
-                if nd.up_nbr[ax] != NONE {
-                    nd.up[ax] = f64::from(Mg::of(nd.up[ax]));
-                    diag[q] -= nd.up[ax];
-                    diag[nd.up_nbr[ax] as usize] -= nd.up[ax];
-                }
+    /// The operator CG solves with `h`, densely (row-major, in the order of the `n` unknowns):
+    /// the finest level's coded couplings, each diagonal the row's coded sum less them
+    /// (`Coded::apply_row`), times the power of two the levels are divided by.
+    fn as_solved(h: &Hierarchy, n: usize) -> Vec<f64> {
+        let fine = &h.levels[0];
+        let unit = super::pow2(fine.unit);
+        let mut a = vec![0.0; n * n];
+        for e in (0..fine.len()).filter(|e| fine.unknown(*e) != PAD) {
+            let u = fine.unknown(e) as usize;
+            let (nbr, c, d) = with_rows!(fine, |rows| rows.finest_row(e));
+            a[u * n + u] = d * unit;
+            for q in (0..6).filter(|q| c[*q] != 0.0) {
+                a[u * n + fine.unknown(nbr[q] as usize) as usize] = c[q] * unit;
             }
         }
-        for (nd, d) in r.nodes.iter_mut().zip(diag) {
-            nd.diag = d;
-        }
-        r
+        a
     }
 
     /// Gaussian elimination with partial pivoting.
@@ -1716,7 +1844,7 @@ mod operator_tests {
             assert!(h.levels() >= 4, "levels {}", h.levels());
             let (x, st) = h.solve(&b, None, 1e-12, 500);
             assert!(st.relative_residual <= 1e-12, "{st:?}");
-            let xd = dense_solve(dense(&as_solved(&s)), b.clone());
+            let xd = dense_solve(as_solved(&h, b.len()), b.clone());
             let num: f64 = x.iter().zip(&xd).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
             let den: f64 = xd.iter().map(|v| v * v).sum::<f64>().sqrt();
             assert!(num / den < 1e-8, "relative difference {}", num / den);
@@ -1743,21 +1871,27 @@ mod operator_tests {
 
     #[test]
     fn cg_operator_keeps_every_row_sum() {
-        // Couplings rounded to f32, each diagonal the row's sum rounded to f32 less them: A·1 is
-        // the assembled operator's to f32 rounding of itself (~6·10⁻⁸ of the sum; rounding the
-        // diagonal on its own would move it by ~10⁻⁸ of the diagonal, up to ~10⁻⁴ of the sum here).
+        // Couplings coded to 16 bits, each diagonal the row's coded sum less them: each coupling
+        // and A·1 are the assembled operator's to ≤ 2⁻¹² of themselves (rounding the diagonal on
+        // its own would move A·1 by 2⁻¹² of the diagonal, up to ~4 times the sum here), no row
+        // sum lost below the code's range.
         let (s, _) = sun_lit_system([12, 10, 9], 4, 0.999, 0.85, Vec3::new(0.3, 1.0, 0.1), 0);
         let h = Hierarchy::build_with(&s.rows(), 16);
         let (a, n) = (dense(&s), s.nodes.len());
+        let solved = as_solved(&h, n);
+        for (x, y) in a.iter().zip(&solved) {
+            assert!((x - y).abs() <= x.abs() / 4096.0 + 1e-12 * a[0], "coupling {x} coded {y}");
+        }
         let fine = &h.levels[0];
+        let unit = super::pow2(fine.unit);
         let ones: Vec<[f64; 1]> = (0..fine.len()).map(|e| [if fine.unknown(e) == PAD { 0.0 } else { 1.0 }]).collect();
         let mut smallest = f64::INFINITY;
         for e in (0..fine.len()).filter(|e| fine.unknown(*e) != PAD) {
             let u = fine.unknown(e) as usize;
             let want: f64 = a[u * n..(u + 1) * n].iter().sum();
-            let got = with_rows!(fine, |c| c.apply_row(e, &ones).0[0]);
+            let got = with_rows!(fine, |c| c.apply_row(e, &ones).0[0]) * unit;
             assert!(
-                (got - want).abs() <= 1e-12 * a[u * n + u] + 6e-8 * want.abs(),
+                (got - want).abs() <= 1e-12 * a[u * n + u] + want.abs() / 4096.0,
                 "row {u}: {got} vs {want}"
             );
             smallest = smallest.min(want / a[u * n + u]);
@@ -1777,7 +1911,7 @@ mod operator_tests {
         let h = Hierarchy::build_with(&s.rows(), 16);
         let tol = 1e-10;
         let (x, st) = h.solve(&b, None, tol, 500);
-        let (a, n) = (dense(&as_solved(&s)), b.len());
+        let (a, n) = (as_solved(&h, b.len()), b.len());
         let d: Vec<f64> = (0..n).map(|q| a[q * n + q].sqrt()).collect();
         let res: f64 = (0..n)
             .map(|q| {
@@ -1806,7 +1940,10 @@ mod operator_tests {
     fn coarse_operator_is_the_galerkin_product() {
         // Odd box sides: the last aggregates of each axis are one cell thick.
         let (s, _) = sun_lit_system([11, 9, 8], 4, 0.9, 0.8, Vec3::new(0.2, 1.0, 0.3), 0);
-        let (c, parent) = coarsen(&s.rows());
+        let (c, parent, maxima) = coarsen(&s.rows());
+        // The fine rows' largest values, found on the way.
+        assert_eq!(maxima, super::Maxima::all(&s.rows()));
+        assert!(maxima.cpl > 0.0 && maxima.sum > 0.0 && maxima.diag > maxima.sum);
         let (n, nc) = (s.nodes.len(), c.nodes.len());
         assert!(nc > 10 && nc < n, "{nc} of {n}");
         assert_eq!(c.dims, [s.dims[0].div_ceil(2), s.dims[1].div_ceil(2), s.dims[2].div_ceil(2)]);
@@ -1860,10 +1997,11 @@ mod operator_tests {
             let (mut want, mut size) = (vec![0.0; coarse.len()], vec![0.0; coarse.len()]);
             for f in 0..fine.red {
                 let nbr = fine.neighbours(f);
-                let c = fine.couplings(f, &nbr).map(f64::from);
+                let c = fine.couplings(f, &nbr).0.map(f64::from);
+                let own = f64::from(with_rows!(fine, |rows| rows.own(f)));
                 let d = match fine.row_sums {
-                    true => super::less_couplings(f64::from(fine.diag[f]), c),
-                    false => f64::from(fine.diag[f]),
+                    true => super::less_couplings(own, c),
+                    false => own,
                 };
                 let terms = (0..6)
                     .map(|q| c[q] * f64::from(x[nbr[q] as usize][0]))
@@ -1912,7 +2050,7 @@ mod operator_tests {
         let n = s.nodes.len();
         let h = Hierarchy::build_with(&s.rows(), n - 1);
         assert_eq!(h.levels(), 2);
-        let (_, parent) = coarsen(&s.rows());
+        let (_, parent, _) = coarsen(&s.rows());
         let nc = parent.iter().max().unwrap() + 1;
         let nc = nc as usize;
         let a = dense(&s);
@@ -1929,7 +2067,7 @@ mod operator_tests {
         for (q, cq) in coarse_unk.iter().enumerate() {
             for (r, cr) in coarse_unk.iter().enumerate() {
                 let llt: f64 = (0..=q.min(r)).map(|k| c.l[q * nc + k] * c.l[r * nc + k]).sum();
-                let want = g[cq * nc + cr];
+                let want = g[cq * nc + cr] * super::pow2(-h.levels[0].unit);
                 assert!((llt - want).abs() <= 1e-9 * want.abs().max(1e-3), "{llt} vs {want}");
             }
         }
@@ -1982,7 +2120,7 @@ mod operator_tests {
 
     #[test]
     fn u16_and_u32_rows_solve_alike() {
-        // The same hierarchy with every level's rows 28 B: the same iterates, bit for bit.
+        // The same hierarchy with every level's rows 24 B: the same iterates, bit for bit.
         let (s, b) = sun_lit_system([15, 13, 11], 5, 0.99, 0.85, Vec3::new(0.3, 1.0, 0.2), 1);
         let [narrow, wide] = [true, false].map(|n| Hierarchy::build_coded(&s.rows(), 16, n));
         assert!(narrow.levels.iter().all(|l| matches!(l.rows, Rows::Narrow(_))));
@@ -1993,11 +2131,35 @@ mod operator_tests {
         assert!(xn.iter().zip(&xw).all(|(a, b)| a.to_bits() == b.to_bits()));
     }
 
+    #[test]
+    fn operator_scale_does_not_change_the_solve() {
+        // An operator and right-hand side times 2^±100 (couplings of µm or Gm voxels, far outside
+        // the codes' scales' range, 2⁻²²³ … 2³¹, unless divided by the hierarchy's unit): the
+        // same solution, bit for bit, and the same iterations.
+        let (s, b) = sun_lit_system([13, 11, 9], 7, 0.99, 0.85, Vec3::new(0.3, 1.0, 0.2), 0);
+        let base = Hierarchy::build_with(&s.rows(), 16).solve(&b, None, 1e-9, 100);
+        assert!(base.1.iterations > 2 && base.1.relative_residual <= 1e-9, "{:?}", base.1);
+        for k in [100, -100] {
+            let f = super::pow2(k);
+            let mut t = s.clone();
+            for nd in &mut t.nodes {
+                nd.diag *= f;
+                nd.up = nd.up.map(|v| v * f);
+            }
+            let h = Hierarchy::build_with(&t.rows(), 16);
+            assert_eq!(h.levels[0].unit, Hierarchy::build_with(&s.rows(), 16).levels[0].unit + k);
+            let bt: Vec<f64> = b.iter().map(|v| v * f).collect();
+            let (x, st) = h.solve(&bt, None, 1e-9, 100);
+            assert_eq!(st.history, base.1.history, "2^{k}");
+            assert!(x.iter().zip(&base.0).all(|(p, q)| p.to_bits() == q.to_bits()), "2^{k}");
+        }
+    }
+
     /// Checks the decoded rows of the level of `s` (u16 ±z distances allowed with `narrow`);
     /// returns the level.
     fn coded_rows_match(s: &Operator, narrow: bool) -> Level {
         let rows = s.rows();
-        let (level, entry) = Level::from_stencils(&rows, false, narrow);
+        let (level, entry) = Level::from_stencils(&rows, false, narrow, Some(0), super::Maxima::all(&rows));
         let by_cell: HashMap<usize, usize> = s.nodes.iter().enumerate().map(|(u, n)| (n.cell as usize, u)).collect();
         let [nx, ny, _] = s.dims;
         let (mut seen, mut coupled) = (0, 0);
@@ -2011,7 +2173,7 @@ mod operator_tests {
             };
             let pad = other.end - 1;
             let got = level.neighbours(e);
-            let cpl = level.couplings(e, &got);
+            let cpl = level.couplings(e, &got).0;
             if u == PAD {
                 assert!(e == level.red || e + 1 == level.len());
                 assert_eq!((cpl, got), ([0.0; 6], [pad as u32; 6]));
@@ -2035,7 +2197,8 @@ mod operator_tests {
                 match v {
                     Some(v) if coupling != 0.0 => {
                         assert_eq!(got[q], entry[v], "entry {e} neighbour {q}");
-                        assert_eq!(cpl[q], coupling as f32, "entry {e} coupling {q}");
+                        let coded = f64::from(cpl[q]);
+                        assert!((coded - coupling).abs() <= coupling.abs() / 4096.0, "entry {e} coupling {q}");
                         coupled += 1;
                     }
                     _ if q % 2 == 0 => assert!(cpl[q] == 0.0 && got[q] as usize == pad, "entry {e} neighbour {q}"),
