@@ -193,7 +193,8 @@ fn q0_q1_homogeneous_box_under_vertical_sun_and_one_bin() {
 fn energy_balance_with_albedo_one() {
     // Albedo 1, box under a vertical sun: the diffuse power leaving through the cloud's boundary
     // must equal the power removed from the beam, E·A·(1 − e^{−τ}) (exact for the discrete scheme
-    // up to the solver tolerance 1e-10; 1e-6 relative allowed for f32 storage).
+    // up to the solver tolerance 1e-10 and the storage of I0 in 16 bits, ≤ 2⁻¹² relative per
+    // value: measured 1.4e-5, the bound allowed).
     let m = Medium::new(Grid3::filled([6, 8, 5], 1.0), Vec3::ZERO, Vec3::ONE, 0.4, Rgb::ONE, 0.7);
     let src = IncidentSources {
         bin_radiance: vec![Rgb::ZERO; 96],
@@ -209,7 +210,11 @@ fn energy_balance_with_albedo_one() {
     let sol = solve_diffusion(&m, &inc, &BoundaryLight::none(), None, &settings).unwrap();
     let out = boundary_outflow(&m, &inc, &sol, 0.0);
     let removed = 3.0 * 6.0 * 5.0 * (1.0 - (-0.4f64 * 8.0).exp());
-    assert!(((out.x as f64) - removed).abs() < 1e-5 * removed, "out {} removed {removed}", out.x);
+    assert!(
+        ((out.x as f64) - removed).abs() < removed / 4096.0,
+        "out {} removed {removed}",
+        out.x
+    );
     // All I0 positive deep inside, and the solution is symmetric under x ↦ 5 − x (vertical sun).
     for k in 0..5 {
         for j in 0..8 {
@@ -292,8 +297,7 @@ fn convergence_independent_of_resolution_warm_start_and_failure() {
                 warm2.stats[0].iterations,
                 sol.stats[0].iterations
             );
-            // The bands one by one, warm-started in place: the same solution bit for bit (each
-            // band's iterates are those of its own solve), and the change from the start is
+            // The bands one by one, warm-started in place, and the change from the start is
             // ‖new⁺ − old⁺‖/‖new⁺‖ over all voxels and bands (⁺: clamped at 0).
             let inc3 = compute(
                 &scene.medium,
@@ -308,10 +312,20 @@ fn convergence_independent_of_resolution_warm_start_and_failure() {
             let settings = DiffusionSettings::default();
             let warm3 = solve_diffusion(&scene.medium, &inc3, &boundary_light(scene), Some(&sol), &settings).unwrap();
             let (lean, change) = solve_diffusion_lean(&scene.medium, &inc3, &boundary_light(scene), Some(sol.clone()), &settings).unwrap();
-            assert_eq!(lean.i0, warm3.i0);
+            // Its solve finds the correction to the coded start from the start's coded residual:
+            // the same solution to the solver's tolerance (measured 1.5e-5 relative, L2).
+            let (mut dd, mut nn) = (0f64, 0f64);
+            for c in 0..3 {
+                for (a, b) in lean.i0[c].decoded().iter().zip(warm3.i0[c].decoded()) {
+                    dd += f64::from(a - b).powi(2);
+                    nn += f64::from(b).powi(2);
+                }
+            }
+            let apart = (dd / nn).sqrt();
+            assert!(apart < 1e-4, "one by one and together apart by {apart:e}");
             let (mut num, mut den) = (0f64, 0f64);
             for c in 0..3 {
-                for (a, b) in sol.i0[c].packed().iter().zip(lean.i0[c].packed()) {
+                for (a, b) in sol.i0[c].decoded().iter().zip(lean.i0[c].decoded()) {
                     let (a, b) = (a.max(0.0) as f64, b.max(0.0) as f64);
                     num += (b - a).powi(2);
                     den += b * b;

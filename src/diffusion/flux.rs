@@ -73,7 +73,7 @@ pub fn diffuse_flux<'a>(
         for (c, o) in out.iter_mut().enumerate() {
             let s = sigma_tr[c];
             let i0 = &sol.i0[c];
-            let ip = *i0.at_slot(sp) as f64;
+            let ip = f64::from(i0.at_slot(sp));
             let f_at = |q: usize, ax: usize| scattering.q1_at_slot(ax, q, c) as f64 / (rho.at_slot(q) as f64 * s);
             let mut v = [0f64; 3];
             for ax in 0..3 {
@@ -85,7 +85,7 @@ pub fn diffuse_flux<'a>(
                     phi[t] = if rn > 0.0 {
                         let cf = interior_coupling(rp, rn, s, h[ax], tau_min);
                         let ff = 0.5 * (fp + f_at(sq, ax));
-                        -cf * h[ax] * (*i0.at_slot(sq) as f64 - ip) + ff * side as f64
+                        -cf * h[ax] * (f64::from(i0.at_slot(sq)) - ip) + ff * side as f64
                     } else {
                         let (dt, ft) = boundary_terms(rp, s, h[ax], tau_min);
                         let l_in = sol.boundary.at(nidx, face_index(ax, side), c);

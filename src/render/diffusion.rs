@@ -80,7 +80,9 @@ pub fn scene_lit_volume(scene: &Scene, i0: impl std::ops::Index<usize, Output = 
 /// I0 per voxel as RGB (stored per full voxel, like the solution).
 pub fn i0_rgb(sol: &DiffusionSolution) -> VoxelField<Rgb> {
     let i0 = &sol.i0;
-    VoxelField::from_fn(i0[0].index().clone(), Rgb::ZERO, |k| Rgb::new(i0[0][k], i0[1][k], i0[2][k]))
+    VoxelField::from_fn(i0[0].index().clone(), Rgb::ZERO, |k| {
+        Rgb::new(i0[0].get(k), i0[1].get(k), i0[2].get(k))
+    })
 }
 
 /// The lit volume of a solved scene, with the first moment attached when
