@@ -896,10 +896,10 @@ mod tests {
         }
     }
 
-    /// The sun alone is kept as ρT̄ (4 B per full voxel), with the thin block's Q0 = ρσs/(4π)·E·T̄
+    /// The sun alone is kept as ρT̄ (2 B per full voxel), with the thin block's Q0 = ρσs/(4π)·E·T̄
     /// (T̄ ≈ 1) and Q1 = g·Q0·(−sun dir); a lit bin beside it needs the general form.
     #[test]
-    fn sun_alone_is_kept_in_four_bytes_per_full_voxel() {
+    fn sun_alone_is_kept_in_two_bytes_per_full_voxel() {
         let m = thin_block();
         let dir = Vec3::new(0.2, 0.9, -0.4).normalize();
         let sun = IncidentSources {
@@ -908,7 +908,7 @@ mod tests {
         };
         let inc = compute(&m, &DirectionBins::new(), &sun, &IncidentSettings::default(), None);
         assert!(matches!(inc.scattering, FirstScattering::Sun { .. }));
-        assert_eq!(inc.scattering.bytes(), 4 * (64 + 1));
+        assert_eq!(inc.scattering.bytes(), 2 * (64 + 1));
         let want = 0.9 * 1e-4 / (4.0 * PI) as f32 * Rgb::new(2.0, 3.0, 1.0);
         let n = 1 + 6 * (2 + 6 * 3);
         let (q0, g) = (q0_of(&inc)[n], 0.7);
