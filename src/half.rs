@@ -121,6 +121,8 @@ const SIGNED_BIAS: u32 = 112 << 23;
 const SIGNED_MIN_NORMAL: f32 = 1.0 / 16384.0;
 /// The step of [`Signed16`]'s subnormal range (and of its lowest normal binade), 2⁻²⁵.
 const SIGNED_TINY: f32 = 1.0 / 33_554_432.0;
+/// 2¹¹², from f32's exponent bias (127) to the code's (15).
+const SIGNED_UNBIAS: f32 = 5.192_297e33;
 /// The largest magnitude code: (2 − 2⁻¹¹).
 const SIGNED_MAX_MAG: u32 = 0x7fff;
 
@@ -151,16 +153,13 @@ impl Signed16 {
         Signed16(sign | mag as u16)
     }
 
-    /// The value it stands for.
+    /// The value it stands for, without a branch: the code's bits placed in an f32 read
+    /// (1 + f/2¹¹)·2^(e−127) for e ≥ 1 and, as an f32 subnormal, f·2⁻¹¹·2⁻¹²⁶ for e = 0; times
+    /// 2¹¹² (exact) both are the code's values.
     #[inline(always)]
     pub fn to_f32(self) -> f32 {
-        let m = u32::from(self.0) & SIGNED_MAX_MAG;
-        let a = if m < 1 << 11 {
-            m as f32 * SIGNED_TINY
-        } else {
-            f32::from_bits((m << 12) + SIGNED_BIAS)
-        };
-        f32::from_bits(a.to_bits() | (u32::from(self.0 & 0x8000) << 16))
+        let c = u32::from(self.0);
+        f32::from_bits(((c & SIGNED_MAX_MAG) << 12) | ((c & 0x8000) << 16)) * SIGNED_UNBIAS
     }
 }
 
@@ -410,6 +409,28 @@ mod tests {
             assert_eq!(Signed16::from_f32(v).to_f32(), want, "{v}");
         }
         assert_eq!(Signed16::from_f32(f32::NAN).to_f32(), 0.0);
+    }
+
+    #[test]
+    fn signed16_decodes_every_code_as_its_definition() {
+        assert_eq!(SIGNED_UNBIAS, 2f32.powi(112));
+        for c in 0..=u16::MAX {
+            let (m, neg) = (u32::from(c) & SIGNED_MAX_MAG, c & 0x8000 != 0);
+            let (e, f) = ((m >> 11) as i32, (m & 0x7ff) as f64);
+            let mag = if e == 0 {
+                f * 2f64.powi(-25)
+            } else {
+                (1.0 + f / 2048.0) * 2f64.powi(e - 15)
+            };
+            let want = if neg { -mag } else { mag };
+            let got = Signed16(c).to_f32();
+            assert_eq!(f64::from(got), want, "code {c:#x}");
+            assert_eq!(got.is_sign_negative(), neg, "code {c:#x}");
+            // Every code encodes back to itself (−0 aside, which reads as 0 too).
+            if m != 0 {
+                assert_eq!(Signed16::from_f32(got), Signed16(c), "code {c:#x}");
+            }
+        }
     }
 
     #[test]

@@ -401,7 +401,8 @@ fn band_rhs(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_m
     // F = Q1/(ρσtr) per axis at the centre of the full voxel in slot `s`.
     let f_at = |s: usize, ax: usize| -> f64 { inc.scattering.q1_at_slot(ax, s, c) as f64 / (rho.at_slot(s) as f64 * sigma_tr) };
     let x_at = |s: usize| x0.map_or(0.0, |x| f64::from(x.at_slot(s)));
-    // (b − A x0, b, the diagonal of A) of the full voxel at grid index `idx`.
+    // (b − A x0, b, the diagonal of A) of the full voxel at grid index `idx`; without a start,
+    // (b, b, 1): the solve needs no norms then.
     let row = |idx: usize| -> (f64, f64, f64) {
         let sp = index.slot(idx);
         let (rp, xp) = (rho.at_slot(sp) as f64, x_at(sp));
@@ -421,9 +422,11 @@ fn band_rhs(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_m
                 if rn > 0.0 {
                     let ff = 0.5 * (fp + f_at(sn, a));
                     rhs -= ff * side as f64 / h[a];
-                    let cf = interior_coupling(rp, rn, sigma_tr, h[a], tau_min);
-                    diag += cf;
-                    ax -= cf * x_at(sn);
+                    if x0.is_some() {
+                        let cf = interior_coupling(rp, rn, sigma_tr, h[a], tau_min);
+                        diag += cf;
+                        ax -= cf * x_at(sn);
+                    }
                 } else {
                     let (dterm, fterm) = boundary_terms(rp, sigma_tr, h[a], tau_min);
                     // eq. 7 with incoming light: φ = (β(I_P − L_face) + f)/(1 + 2β).
@@ -432,7 +435,10 @@ fn band_rhs(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_m
                 }
             }
         }
-        (rhs - (ax + diag * xp), rhs, diag)
+        match x0 {
+            Some(_) => (rhs - (ax + diag * xp), rhs, diag),
+            None => (rhs, rhs, 1.0),
+        }
     };
     // Fixed chunks summed in order: the norms do not depend on the thread count.
     const CHUNK: usize = 4096;
@@ -454,8 +460,7 @@ fn band_rhs(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_m
     let [b2, r2] = parts.iter().fold([0.0; 2], |s, p| [s[0] + p[0], s[1] + p[1]]);
     Rhs {
         values,
-        b_norm: b2.sqrt(),
-        r_norm: r2.sqrt(),
+        norms: x0.map(|_| (b2.sqrt(), r2.sqrt())),
     }
 }
 
@@ -463,10 +468,9 @@ fn band_rhs(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_m
 struct Rhs {
     /// b − A x0 per full voxel in grid order (b without a start).
     values: Vec<f32>,
-    /// ‖D^-½ b‖ and ‖D^-½ (b − A x0)‖ (D the diagonal of A): the solver's tolerance is relative
-    /// to the first, its residuals to the second.
-    b_norm: f64,
-    r_norm: f64,
+    /// With a start, ‖D^-½ b‖ and ‖D^-½ (b − A x0)‖ (D the diagonal of A): the solver's
+    /// tolerance is relative to the first, its residuals to the second.
+    norms: Option<(f64, f64)>,
 }
 
 /// Net outgoing diffuse power (W per band) through every boundary face of the cloud: Σ A·4π φ_f,
@@ -662,17 +666,21 @@ fn solve_bands(
 /// scaled so that the solve stops at `tol` relative to ‖D^-½ b‖, where a warm start from x0
 /// would. The scaling by 2ᵏ is exact. The statistics report residuals relative to ‖D^-½ b‖.
 fn solve_from(h: &Hierarchy, rhs: Rhs, x0: Option<&Field16>, tol: f64, max: usize) -> (Vec<f64>, SolveStats) {
-    let Rhs { values, b_norm, r_norm } = rhs;
+    let Rhs { values, norms } = rhs;
     // b = 0: the solution is 0 whatever the start (the solver's own answer for b = 0).
-    let start = x0.filter(|_| b_norm > 0.0);
-    let (codes, scale) = if b_norm > 0.0 {
-        Signed16::code_all(&values)
-    } else {
+    let zero_b = norms.is_some_and(|(b, _)| b == 0.0);
+    let start = x0.filter(|_| !zero_b);
+    let (codes, scale) = if zero_b {
         (vec![Signed16::default(); values.len()], 1.0)
+    } else {
+        Signed16::code_all(&values)
     };
     drop(values);
     // r = 0 (the start solves it) gives y = 0 from the solver without iterating.
-    let ratio = if r_norm > 0.0 && b_norm > 0.0 { b_norm / r_norm } else { 1.0 };
+    let ratio = match norms {
+        Some((b, r)) if b > 0.0 && r > 0.0 => b / r,
+        _ => 1.0,
+    };
     let (mut x, mut st) = h.solve(&codes, None, tol * ratio, max);
     drop(codes);
     st.relative_residual /= ratio;
@@ -790,15 +798,17 @@ mod tests {
         let h = Hierarchy::build(&band);
         // The reference: b in f64 (from its f32 values) solved far below the tolerance.
         let cold = band_rhs(&m, &inc, &bl, 1, tau, None);
-        assert_eq!(cold.b_norm, cold.r_norm);
+        assert!(cold.norms.is_none());
         let b: Vec<f64> = cold.values.iter().map(|v| f64::from(*v)).collect();
         let (exact, _) = h.solve(&b, None, 1e-12, 500);
         // A start 3 % off, as a clear-air iteration's: its residual is b − A x0 ...
         let x0: Vec<f64> = exact.iter().enumerate().map(|(u, x)| x * (0.97 + 0.02 * (u % 3) as f64)).collect();
         let start = Field16::new(index.clone(), &x0);
         let warm = band_rhs(&m, &inc, &bl, 1, tau, Some(&start));
-        assert_eq!(warm.b_norm, cold.b_norm);
-        assert!(warm.r_norm < 0.1 * warm.b_norm && warm.r_norm > 0.0);
+        let (bn, rn) = warm.norms.unwrap();
+        let want_bn: f64 = (0..band.len()).map(|u| b[u] * b[u] / band.stencil(u).diag).sum::<f64>().sqrt();
+        assert!((bn - want_bn).abs() <= 1e-6 * want_bn, "{bn} vs {want_bn}");
+        assert!(rn < 0.1 * bn && rn > 0.0);
         let xs = start.decoded();
         for u in 0..band.len() {
             let st = band.stencil(u);
@@ -829,8 +839,7 @@ mod tests {
         // b = 0: the solution is 0 whatever the start.
         let zero = Rhs {
             values: vec![1.0; band.len()],
-            b_norm: 0.0,
-            r_norm: 1.0,
+            norms: Some((0.0, 1.0)),
         };
         assert!(solve_from(&h, zero, Some(&start), 1e-4, 10).0.iter().all(|x| *x == 0.0));
     }
