@@ -9,6 +9,13 @@
 //!   [2⁻³¹, 1]; relative rounding ≤ 2⁻¹² ≈ 0.024 %, values below 2⁻³¹ ≈ 4.7e-10 read 2⁻³¹;
 //!   decoding is a shift and an integer add. Used for the sun transmittance
 //!   ([`crate::sunlight::SunTransmittance`]).
+//! - [`Signed16`]: a signed float for values relative to a power-of-two scale, |y| < 2 (sign,
+//!   4-bit exponent, 11-bit mantissa, with subnormals): relative rounding ≤ 2⁻¹² for
+//!   |y| ≥ 2⁻¹⁴, absolute ≤ 2⁻²⁶ below; decoding is a shift, an or of the sign and a multiply by
+//!   2¹¹² (no branch). [`Field16`] holds one per full voxel with the field's scale 2ᵏ chosen from
+//!   its largest magnitude, so any irradiance scale fits: relative ≤ 2⁻¹² for every value above
+//!   2⁻¹³ of the largest, absolute ≤ 2⁻²⁵ of the largest below. Used for the diffusion's I0
+//!   ([`crate::diffusion::DiffusionSolution::i0`]), which is slightly negative on sunlit faces.
 //! - [`Scaled16`]: an unsigned float (5-bit exponent, 11-bit mantissa) under a power-of-two scale
 //!   2^k chosen per field from its largest value; code 0 is exactly 0. Relative rounding ≤ 2⁻¹²,
 //!   values more than ~2³⁰ below the field's largest read 0; decoding is a shift and a multiply
@@ -16,6 +23,10 @@
 //!   ([`crate::diffusion::multigrid`]).
 //!
 //! [`Texel`] is what a [`crate::medium::SubGrid`] stores: f32 itself or a code.
+
+use crate::medium::sparse::{FullIndex, VoxelField};
+use rayon::prelude::*;
+use std::sync::Arc;
 
 /// A value stored in a grid: encoded once from f32, decoded at every read.
 pub trait Texel: Copy + Send + Sync + PartialEq + std::fmt::Debug + 'static {
@@ -106,6 +117,181 @@ impl Texel for Unit16 {
     #[inline(always)]
     fn decode(self) -> f32 {
         self.to_f32()
+    }
+}
+
+/// The exponent offset of [`Signed16`] in f32 bits: the code's exponent 1 is 2⁻¹⁴ (f32's 113).
+const SIGNED_BIAS: u32 = 112 << 23;
+/// The smallest normal magnitude of [`Signed16`], 2⁻¹⁴; below it the codes are subnormal.
+const SIGNED_MIN_NORMAL: f32 = 1.0 / 16384.0;
+/// The step of [`Signed16`]'s subnormal range (and of its lowest normal binade), 2⁻²⁵.
+const SIGNED_TINY: f32 = 1.0 / 33_554_432.0;
+/// 2¹¹², from f32's exponent bias (127) to the code's (15).
+const SIGNED_UNBIAS: f32 = 5.192_297e33;
+/// The largest magnitude code: (2 − 2⁻¹¹).
+const SIGNED_MAX_MAG: u32 = 0x7fff;
+
+/// A signed float for values relative to a scale (module docs): bit 15 the sign, then a 4-bit
+/// exponent e and an 11-bit mantissa f; |y| = (1 + f/2¹¹)·2^(e−15) for e ≥ 1 (2⁻¹⁴ … 2 − 2⁻¹¹),
+/// f·2⁻²⁵ for e = 0.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Signed16(u16);
+
+impl Signed16 {
+    /// `y` rounded to nearest, ties to even, the sign kept; magnitudes from 2 − 2⁻¹² up
+    /// (infinity too) saturate to 2 − 2⁻¹¹; NaN reads 0.
+    #[inline]
+    pub fn from_f32(y: f32) -> Signed16 {
+        if y.is_nan() {
+            return Signed16(0);
+        }
+        let sign = ((y.to_bits() >> 16) & 0x8000) as u16;
+        let a = y.abs();
+        let mag = if a < SIGNED_MIN_NORMAL {
+            // a / 2⁻²⁵ < 2¹¹ is exact in f32; rounding to the integer is the code's rounding.
+            (a / SIGNED_TINY).round_ties_even() as u32
+        } else {
+            let b = a.to_bits();
+            // Infinity's bits (0x7f80_0000) plus the carry stay far below u32::MAX.
+            (((b + 0x7ff + ((b >> 12) & 1)) >> 12) - (SIGNED_BIAS >> 12)).min(SIGNED_MAX_MAG)
+        };
+        Signed16(sign | mag as u16)
+    }
+
+    /// The value it stands for, without a branch: the code's bits placed in an f32 read
+    /// (1 + f/2¹¹)·2^(e−127) for e ≥ 1 and, as an f32 subnormal, f·2⁻¹¹·2⁻¹²⁶ for e = 0; times
+    /// 2¹¹² (exact) both are the code's values.
+    #[inline(always)]
+    pub fn to_f32(self) -> f32 {
+        let c = u32::from(self.0);
+        f32::from_bits(((c & SIGNED_MAX_MAG) << 12) | ((c & 0x8000) << 16)) * SIGNED_UNBIAS
+    }
+}
+
+/// Values per full voxel in [`Signed16`] relative to one scale 2ᵏ (module docs): 2 B per full
+/// voxel. The scale is the power of two with max |v|·2⁻ᵏ in [1, 2 − 2⁻¹²), so the largest
+/// value uses the top binade without saturating.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Field16 {
+    codes: VoxelField<Signed16>,
+    /// 2ᵏ (decoding multiplies by it: exact, a power of two).
+    scale: f32,
+}
+
+/// k with 2ᵏ ≤ `max` < 2ᵏ⁺¹, raised by one where `max`·2⁻ᵏ would round to 2 (saturating), and
+/// kept where f32 holds 2ᵏ and 2⁻ᵏ as normal numbers; 0 for a zero or non-finite `max`.
+fn scale_exponent(max: f64) -> i32 {
+    if !(max.is_finite() && max > 0.0) {
+        return 0;
+    }
+    let k = max.log2().floor() as i32;
+    // log2 may be off by one ulp at powers of two: correct with the exact powers.
+    let k = if 2f64.powi(k) > max {
+        k - 1
+    } else if 2f64.powi(k + 1) <= max {
+        k + 1
+    } else {
+        k
+    };
+    let k = if max * 2f64.powi(-k) >= 2.0 - 1.0 / 4096.0 { k + 1 } else { k };
+    k.clamp(-125, 125)
+}
+
+impl Signed16 {
+    /// `values` relative to the scale 2ᵏ of [`Field16`] (returned): each scaled exactly in f64,
+    /// rounded to f32, then to the code (the bound stays 2⁻¹²: the f32 step, 2⁻²⁴, is within
+    /// the slack of the code's half step).
+    pub fn code_all<T: Copy + Into<f64> + Sync>(values: &[T]) -> (Vec<Signed16>, f32) {
+        code_after(values, 0)
+    }
+}
+
+/// The value relative to its scale (what the diffusion solver reads of a coded right-hand side).
+impl From<Signed16> for f64 {
+    #[inline(always)]
+    fn from(c: Signed16) -> f64 {
+        f64::from(c.to_f32())
+    }
+}
+
+/// The scale 2ᵏ [`Field16`] and [`Signed16::code_all`] choose for values of largest magnitude
+/// `max` (1 for 0): codes of v·2⁻ᵏ are within 2⁻¹² relative of every value above 2⁻¹³·`max`.
+pub fn power_of_two_scale(max: f64) -> f32 {
+    2f32.powi(scale_exponent(max))
+}
+
+/// [`Signed16::code_all`] after `lead` zero codes.
+fn code_after<T: Copy + Into<f64> + Sync>(values: &[T], lead: usize) -> (Vec<Signed16>, f32) {
+    let max = values.par_iter().map(|v| (*v).into().abs()).reduce(|| 0.0, f64::max);
+    let k = scale_exponent(max);
+    let inv = 2f64.powi(-k);
+    let mut codes = Vec::with_capacity(values.len() + lead);
+    codes.resize(lead, Signed16(0));
+    codes.par_extend(values.par_iter().map(|v| Signed16::from_f32(((*v).into() * inv) as f32)));
+    (codes, 2f32.powi(k))
+}
+
+impl Field16 {
+    /// The full voxels' values `packed` (in grid order, `index.count()` of them) coded
+    /// ([`Signed16::code_all`]); empty voxels read 0.
+    pub fn new<T: Copy + Into<f64> + Sync>(index: Arc<FullIndex>, packed: &[T]) -> Field16 {
+        let (codes, scale) = code_after(packed, 1);
+        Field16 {
+            codes: VoxelField::from_slots(index, codes),
+            scale,
+        }
+    }
+
+    /// Every voxel reads 0.
+    pub fn zero(index: Arc<FullIndex>) -> Field16 {
+        Field16 {
+            codes: VoxelField::filled(index, Signed16(0)),
+            scale: 1.0,
+        }
+    }
+
+    /// The value in slot `s` of the index (0: an empty voxel).
+    #[inline]
+    pub fn at_slot(&self, s: usize) -> f32 {
+        self.codes.at_slot(s).to_f32() * self.scale
+    }
+
+    /// The value of grid voxel `g`.
+    #[inline]
+    pub fn get(&self, g: usize) -> f32 {
+        self.at_slot(self.codes.index().slot(g))
+    }
+
+    /// The value of the `r`-th full voxel in grid order.
+    #[inline]
+    pub fn packed_at(&self, r: usize) -> f32 {
+        self.at_slot(r + 1)
+    }
+
+    /// The full voxels' values decoded, in grid order (4 B per full voxel).
+    pub fn decoded(&self) -> Vec<f32> {
+        self.codes.packed().par_iter().map(|c| c.to_f32() * self.scale).collect()
+    }
+
+    /// Every grid voxel's value in grid order (empty voxels read 0).
+    pub fn iter(&self) -> impl Iterator<Item = f32> + '_ {
+        self.codes.iter().map(|c| c.to_f32() * self.scale)
+    }
+
+    /// The index the field is addressed by.
+    #[inline]
+    pub fn index(&self) -> &Arc<FullIndex> {
+        self.codes.index()
+    }
+
+    /// The scale 2ᵏ the codes are relative to.
+    pub fn scale(&self) -> f32 {
+        self.scale
+    }
+
+    /// Bytes held by the codes (the index is shared and counted apart).
+    pub fn bytes(&self) -> usize {
+        self.codes.bytes()
     }
 }
 
@@ -278,6 +464,148 @@ mod tests {
             let r = Unit16::from_f32(k as f32 / 4000.0).to_f32();
             assert!(r >= last);
             last = r;
+        }
+    }
+
+    #[test]
+    fn signed16_round_trips_its_values_keeps_the_sign_and_rounds_to_nearest_even() {
+        let tiny = SIGNED_TINY;
+        for v in [
+            0.0f32,
+            1.0,
+            -1.0,
+            0.5,
+            -1.5,
+            2.0 - 1.0 / 2048.0,
+            SIGNED_MIN_NORMAL,
+            -SIGNED_MIN_NORMAL,
+            tiny,
+            -7.0 * tiny,
+            2047.0 * tiny,
+        ] {
+            assert_eq!(Signed16::from_f32(v).to_f32(), v, "{v}");
+        }
+        // −0 keeps its sign bit and reads zero.
+        assert_eq!(Signed16::from_f32(-0.0).to_f32(), 0.0);
+        // 1 + 2⁻¹² is half-way between 1 and 1 + 2⁻¹¹: ties go to the even mantissa (1); 1 + 3·2⁻¹²
+        // to 1 + 2⁻¹⁰.
+        assert_eq!(Signed16::from_f32(1.0 + 1.0 / 4096.0).to_f32(), 1.0);
+        assert_eq!(Signed16::from_f32(-(1.0 + 3.0 / 4096.0)).to_f32(), -(1.0 + 1.0 / 1024.0));
+        // In the subnormal range: 2.5 steps round to 2, 3.5 to 4.
+        assert_eq!(Signed16::from_f32(2.5 * tiny).to_f32(), 2.0 * tiny);
+        assert_eq!(Signed16::from_f32(-3.5 * tiny).to_f32(), -4.0 * tiny);
+        // The largest magnitude saturates, infinity too; NaN reads 0.
+        let top = 2.0 - 1.0 / 2048.0;
+        for (v, want) in [
+            (1.9999, top),
+            (2.0, top),
+            (-5.0, -top),
+            (f32::INFINITY, top),
+            (f32::NEG_INFINITY, -top),
+        ] {
+            assert_eq!(Signed16::from_f32(v).to_f32(), want, "{v}");
+        }
+        assert_eq!(Signed16::from_f32(f32::NAN).to_f32(), 0.0);
+    }
+
+    #[test]
+    fn signed16_decodes_every_code_as_its_definition() {
+        assert_eq!(SIGNED_UNBIAS, 2f32.powi(112));
+        for c in 0..=u16::MAX {
+            let (m, neg) = (u32::from(c) & SIGNED_MAX_MAG, c & 0x8000 != 0);
+            let (e, f) = ((m >> 11) as i32, (m & 0x7ff) as f64);
+            let mag = if e == 0 {
+                f * 2f64.powi(-25)
+            } else {
+                (1.0 + f / 2048.0) * 2f64.powi(e - 15)
+            };
+            let want = if neg { -mag } else { mag };
+            let got = Signed16(c).to_f32();
+            assert_eq!(f64::from(got), want, "code {c:#x}");
+            assert_eq!(got.is_sign_negative(), neg, "code {c:#x}");
+            // Every code encodes back to itself (−0 aside, which reads as 0 too).
+            if m != 0 {
+                assert_eq!(Signed16::from_f32(got), Signed16(c), "code {c:#x}");
+            }
+        }
+    }
+
+    #[test]
+    fn signed16_error_is_within_its_bounds_and_monotonic() {
+        let mut rng = Rng::new(3, 8);
+        let mut worst = 0f32;
+        for _ in 0..200_000 {
+            // Magnitudes from 2⁻³⁰ to 2, both signs.
+            let a = (-30.0 * rng.uniform() * std::f32::consts::LN_2).exp() * (2.0 - 1.0 / 4096.0);
+            let v = if rng.uniform() < 0.5 { -a } else { a };
+            let r = Signed16::from_f32(v).to_f32();
+            assert_eq!(r.is_sign_negative(), v.is_sign_negative(), "{v} → {r}");
+            if a >= SIGNED_MIN_NORMAL {
+                worst = worst.max((r - v).abs() / a);
+            } else {
+                assert!((r - v).abs() <= SIGNED_TINY / 2.0, "{v} → {r}");
+            }
+        }
+        assert!(worst <= 1.0 / 4096.0 && worst > 1.0 / 8192.0, "relative error {worst}");
+        let mut last = -2.0;
+        for k in -40_000..=40_000 {
+            let r = Signed16::from_f32(k as f32 / 20_000.0).to_f32();
+            assert!(r >= last, "{k}");
+            last = r;
+        }
+    }
+
+    /// A field of `values` on full voxels 0..n of a 1-D grid.
+    fn field16(values: &[f64]) -> Field16 {
+        let dims = [values.len(), 1, 1];
+        let index = Arc::new(FullIndex::build(dims, &vec![1.0; values.len()], |r| r > 0.0));
+        Field16::new(index, values)
+    }
+
+    #[test]
+    fn field16_scale_is_the_power_of_two_of_its_largest_value() {
+        for (max, want) in [
+            (1.0, 1.0),
+            (1.5, 1.0),
+            (0.75, 0.5),
+            (-3000.0, 2048.0),
+            (1e-20, 2f32.powi(-67)),
+            (2.0 - 1e-5, 2.0),
+        ] {
+            let f = field16(&[0.1 * max, max]);
+            assert_eq!(f.scale(), want, "{max}");
+            let r = f64::from(f.get(1));
+            assert!((r - max).abs() <= max.abs() / 4096.0, "{max} → {r}");
+        }
+        assert_eq!(field16(&[0.0, 0.0]).scale(), 1.0);
+        assert_eq!(Field16::zero(field16(&[1.0]).index().clone()).get(0), 0.0);
+    }
+
+    #[test]
+    fn field16_is_within_two_to_minus_12_above_the_floor_at_any_scale() {
+        let mut rng = Rng::new(11, 2);
+        for scale in [1e-30f64, 1e-3, 1.0, 7.0e4, 1e30] {
+            // Both signs, magnitudes over 12 binades below the largest, which is `scale`.
+            let mut v: Vec<f64> = (0..5000)
+                .map(|_| {
+                    scale * (-12.0 * f64::from(rng.uniform()) * std::f64::consts::LN_2).exp() * if rng.uniform() < 0.3 { -1.0 } else { 1.0 }
+                })
+                .collect();
+            v.push(scale);
+            let f = field16(&v);
+            let back = f.decoded();
+            for (k, (a, r)) in v.iter().zip(&back).enumerate() {
+                assert!((f64::from(*r) - a).abs() <= a.abs() / 4096.0, "{a} → {r}");
+                assert_eq!(f.get(k), *r);
+                assert_eq!(f.packed_at(k), *r);
+            }
+            assert!(f.iter().zip(&back).all(|(a, b)| a == *b));
+            // Far below the largest: an absolute bound of 2⁻²⁵ of it.
+            let g = field16(&[scale, scale * 1e-6, -scale * 3e-9, 0.0]);
+            for (k, a) in [scale, scale * 1e-6, -scale * 3e-9, 0.0].into_iter().enumerate() {
+                assert!((f64::from(g.get(k)) - a).abs() <= scale * 2f64.powi(-25) + a.abs() / 4096.0, "{a}");
+            }
+            assert_eq!(g.bytes(), 2 * 5);
         }
     }
 

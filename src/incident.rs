@@ -41,7 +41,8 @@
 //! **Sun.** The sun is traced apart, as one more parallel-ray direction without jitter, carrying
 //! its irradiance; it adds ρσs/(4π)·E·T̄ to Q0 and ρσs g/(4π)·E·T̄·(−sun dir) to Q1, with T̄ the
 //! voxel-mean transmittance. The reduced sun radiance for the gather's exact single scattering is
-//! kept at voxel centres (exact optical depth of the trilinear field, [`SunTransmittance`]).
+//! not part of stage 1: it is kept at voxel centres by [`crate::sunlight::SunTransmittance`]
+//! (exact optical depth of the trilinear field), which the renderers compute where it is read.
 //!
 //! **Clear-air hook** ([`EntryRadiance`]). When a sky-bin ray steps from an empty voxel X_e into a
 //! face-adjacent full voxel, [`compute`] asks `entry(X_e, b)`. `Some(L)` means: the radiance
@@ -62,7 +63,6 @@ use crate::math::{mix64, Rgb, Rng, Vec3};
 use crate::math::{sh9, SH_COEFFS};
 use crate::medium::sparse::VoxelField;
 use crate::medium::Medium;
-use crate::sunlight::SunTransmittance;
 use rayon::prelude::*;
 pub use scattering::FirstScattering;
 
@@ -140,8 +140,6 @@ pub struct IncidentLight {
     /// ([`crate::medium::sparse`]); with the sun as the only source, as ρ times its voxel-mean
     /// transmittance alone.
     pub scattering: FirstScattering,
-    /// Sun transmittance at voxel centres (exact), for the gather's single scattering.
-    pub sun_transmittance: SunTransmittance,
     /// Sun irradiance (W/m² per band); zero without a sun.
     pub sun_irradiance: Rgb,
     /// The mean radiance per bin that was propagated (W·m⁻²·sr⁻¹).
@@ -774,21 +772,6 @@ pub fn compute(
     settings: &IncidentSettings,
     entry: Option<&EntryRadiance<'_>>,
 ) -> IncidentLight {
-    let sun_dir = sources.sun.map_or(Vec3::Y, |s| s.0);
-    compute_with_sun(m, bins, sources, settings, entry, SunTransmittance::compute(m, sun_dir))
-}
-
-/// [`compute`] with the sun transmittance at voxel centres already known (it depends only on
-/// the medium and the sun, so a run computes it once; `sun_transmittance.dir` must be the
-/// sources' sun direction).
-pub fn compute_with_sun(
-    m: &Medium,
-    bins: &DirectionBins,
-    sources: &IncidentSources,
-    settings: &IncidentSettings,
-    entry: Option<&EntryRadiance<'_>>,
-    sun_transmittance: SunTransmittance,
-) -> IncidentLight {
     let dims = m.dims();
     let sun_e = sources.sun.map_or(Rgb::ZERO, |s| s.1);
     // Stored per full voxel; the empty medium's fields (no full voxel) until the sweeps fill them.
@@ -797,7 +780,6 @@ pub fn compute_with_sun(
         return IncidentLight {
             dims,
             scattering: FirstScattering::zero(index),
-            sun_transmittance,
             sun_irradiance: sun_e,
             bin_radiance: sources.bin_radiance.clone(),
             sky_sh: None,
@@ -855,7 +837,6 @@ pub fn compute_with_sun(
     IncidentLight {
         dims,
         scattering,
-        sun_transmittance,
         sun_irradiance: sun_e,
         bin_radiance: sources.bin_radiance.clone(),
         sky_sh: settings.sky_single.then(|| VoxelField::from_slots(index, sh)),
@@ -915,10 +896,10 @@ mod tests {
         }
     }
 
-    /// The sun alone is kept as ρT̄ (4 B per full voxel), with the thin block's Q0 = ρσs/(4π)·E·T̄
+    /// The sun alone is kept as ρT̄ (2 B per full voxel), with the thin block's Q0 = ρσs/(4π)·E·T̄
     /// (T̄ ≈ 1) and Q1 = g·Q0·(−sun dir); a lit bin beside it needs the general form.
     #[test]
-    fn sun_alone_is_kept_in_four_bytes_per_full_voxel() {
+    fn sun_alone_is_kept_in_two_bytes_per_full_voxel() {
         let m = thin_block();
         let dir = Vec3::new(0.2, 0.9, -0.4).normalize();
         let sun = IncidentSources {
@@ -927,7 +908,7 @@ mod tests {
         };
         let inc = compute(&m, &DirectionBins::new(), &sun, &IncidentSettings::default(), None);
         assert!(matches!(inc.scattering, FirstScattering::Sun { .. }));
-        assert_eq!(inc.scattering.bytes(), 4 * (64 + 1));
+        assert_eq!(inc.scattering.bytes(), 2 * (64 + 1));
         let want = 0.9 * 1e-4 / (4.0 * PI) as f32 * Rgb::new(2.0, 3.0, 1.0);
         let n = 1 + 6 * (2 + 6 * 3);
         let (q0, g) = (q0_of(&inc)[n], 0.7);

@@ -119,7 +119,8 @@ fn delta_m_slab_against_adding_doubling() {
 #[test]
 fn q0_q1_homogeneous_box_under_vertical_sun_and_one_bin() {
     // 4×6×3 box, ρ = 0.8, σt = 0.5 m⁻¹, voxels 2×1.5×1 m, sun straight down (E = 2). Layer j (from
-    // the top) has voxel-mean transmittance e^{−κ h j}(1 − e^{−κh})/(κh).
+    // the top) has voxel-mean transmittance e^{−κ h j}(1 − e^{−κh})/(κh). Stage 1 keeps ρT̄ in 16
+    // bits (≤ 2⁻¹² relative) besides its sweep's ~1e-5.
     let (rho, st, a, g) = (0.8f32, 0.5f32, 0.9f32, 0.6f32);
     let m = Medium::new(
         Grid3::filled([4, 6, 3], rho),
@@ -142,11 +143,11 @@ fn q0_q1_homogeneous_box_under_vertical_sun_and_one_bin() {
         for (i, k) in [(0, 0), (3, 2), (1, 1)] {
             let idx = i + 4 * (j + 6 * k);
             assert!(
-                (inc.q0(idx, 0) as f64 - q0).abs() < 1e-5 * q0,
+                (inc.q0(idx, 0) as f64 - q0).abs() < (1e-5 + 1.0 / 4096.0) * q0,
                 "layer {j}: {} vs {q0}",
                 inc.q0(idx, 0)
             );
-            assert!((inc.q1(1, idx, 1) as f64 + g as f64 * q0).abs() < 1e-5 * q0);
+            assert!((inc.q1(1, idx, 1) as f64 + g as f64 * q0).abs() < (1e-5 + 1.0 / 4096.0) * q0);
             assert!(inc.q1(0, idx, 2).abs() < 1e-9 && inc.q1(2, idx, 0).abs() < 1e-9);
         }
     }
@@ -194,8 +195,8 @@ fn energy_balance_with_albedo_one() {
     // Albedo 1, box under a vertical sun: the diffuse power leaving through the cloud's boundary
     // must equal the power removed from the beam, E·A·(1 − e^{−τ}) (exact for the discrete scheme
     // up to the solver tolerance 1e-10 and the storage: the solver keeps each row's sum, here the
-    // boundary's leakage, to its 16-bit rounding, ≤ 2⁻¹² ≈ 2.4·10⁻⁴ of itself, and the balance
-    // came out within 5.3·10⁻⁵; with f32 sums within 10⁻⁶).
+    // boundary's leakage, to its 16-bit rounding, and I0 is stored in 16 bits, each ≤ 2⁻¹² of
+    // itself; the balance came out within 5.3·10⁻⁵ and 1.4·10⁻⁵ with each alone, within 10⁻⁶ in f32).
     let m = Medium::new(Grid3::filled([6, 8, 5], 1.0), Vec3::ZERO, Vec3::ONE, 0.4, Rgb::ONE, 0.7);
     let src = IncidentSources {
         bin_radiance: vec![Rgb::ZERO; 96],
@@ -211,7 +212,11 @@ fn energy_balance_with_albedo_one() {
     let sol = solve_diffusion(&m, &inc, &BoundaryLight::none(), None, &settings).unwrap();
     let out = boundary_outflow(&m, &inc, &sol, 0.0);
     let removed = 3.0 * 6.0 * 5.0 * (1.0 - (-0.4f64 * 8.0).exp());
-    assert!(((out.x as f64) - removed).abs() < 1e-4 * removed, "out {} removed {removed}", out.x);
+    assert!(
+        ((out.x as f64) - removed).abs() < removed / 4096.0,
+        "out {} removed {removed}",
+        out.x
+    );
     // All I0 positive deep inside, and the solution is symmetric under x ↦ 5 − x (vertical sun).
     for k in 0..5 {
         for j in 0..8 {
@@ -294,8 +299,7 @@ fn convergence_independent_of_resolution_warm_start_and_failure() {
                 warm2.stats[0].iterations,
                 sol.stats[0].iterations
             );
-            // The bands one by one, warm-started in place: the same solution bit for bit (each
-            // band's iterates are those of its own solve), and the change from the start is
+            // The bands one by one, warm-started in place, and the change from the start is
             // ‖new⁺ − old⁺‖/‖new⁺‖ over all voxels and bands (⁺: clamped at 0).
             let inc3 = compute(
                 &scene.medium,
@@ -310,10 +314,20 @@ fn convergence_independent_of_resolution_warm_start_and_failure() {
             let settings = DiffusionSettings::default();
             let warm3 = solve_diffusion(&scene.medium, &inc3, &boundary_light(scene), Some(&sol), &settings).unwrap();
             let (lean, change) = solve_diffusion_lean(&scene.medium, &inc3, &boundary_light(scene), Some(sol.clone()), &settings).unwrap();
-            assert_eq!(lean.i0, warm3.i0);
+            // Its solve finds the correction to the coded start from the start's coded residual:
+            // the same solution to the solver's tolerance (measured 1.5e-5 relative, L2).
+            let (mut dd, mut nn) = (0f64, 0f64);
+            for c in 0..3 {
+                for (a, b) in lean.i0[c].decoded().iter().zip(warm3.i0[c].decoded()) {
+                    dd += f64::from(a - b).powi(2);
+                    nn += f64::from(b).powi(2);
+                }
+            }
+            let apart = (dd / nn).sqrt();
+            assert!(apart < 1e-4, "one by one and together apart by {apart:e}");
             let (mut num, mut den) = (0f64, 0f64);
             for c in 0..3 {
-                for (a, b) in sol.i0[c].packed().iter().zip(lean.i0[c].packed()) {
+                for (a, b) in sol.i0[c].decoded().iter().zip(lean.i0[c].decoded()) {
                     let (a, b) = (a.max(0.0) as f64, b.max(0.0) as f64);
                     num += (b - a).powi(2);
                     den += b * b;

@@ -84,7 +84,7 @@ fn propagation_in_a_furnace_creates_no_energy_and_converges_geometrically() {
     // radiance or a sign error in the entry direction exceeds it by tens of per cent.
     assert!((out.x as f64) <= bound * 1.005, "outflow {} > π·L·A = {bound}", out.x);
     assert!((out.x as f64) > 0.2 * bound, "outflow {} implausibly small against {bound}", out.x);
-    let max_i0 = p.solution.i0[0].iter().cloned().fold(0.0f32, f32::max);
+    let max_i0 = p.solution.i0[0].iter().fold(0.0f32, f32::max);
     assert!(max_i0 <= l * 1.01, "I0 {max_i0} above the furnace radiance {l}");
     // The change shrinks geometrically: each iteration at most half the previous one.
     assert_eq!(p.changes.len(), 3, "changes {:?}", p.changes);
@@ -173,9 +173,9 @@ fn light_crosses_clear_air_between_cloud_parts() {
     let p1 = propagate(&s, &NoProgress, &mut t).unwrap();
     let idx = |i: usize, j: usize, k: usize| i + d[0] * (j + d[1] * k);
     // Left block's face towards the gap (i = 11).
-    let (a, b) = (p0.solution.i0[0][idx(11, 6, 6)], p1.solution.i0[0][idx(11, 6, 6)]);
+    let (a, b) = (p0.solution.i0[0].get(idx(11, 6, 6)), p1.solution.i0[0].get(idx(11, 6, 6)));
     // The right block's gap face (i = 16) is what lights it; the left face must reach a fair share.
-    let src = p1.solution.i0[0][idx(16, 6, 6)];
+    let src = p1.solution.i0[0].get(idx(16, 6, 6));
     assert!(src > 0.0);
     assert!(
         a > 0.0 && b > 1.1 * a,

@@ -31,6 +31,7 @@
 //! the sky seen through the rest of the cloud plus the light the other cloud parts and the lit
 //! ground send — the paper's section 3, entering through the boundary condition instead of stage 1.
 
+use crate::half::{power_of_two_scale, Signed16};
 use crate::lighting::bins::{Bin, CUBE_FACES};
 use crate::math::Rgb;
 
@@ -42,9 +43,59 @@ pub struct BoundaryLight {
     /// L_face per face orientation where no ghost value is known; zero: the paper's eq. 7.
     pub uniform: [Rgb; 6],
     /// The faces with their own light, ascending by [`ghost_key`] (empty voxel, the full voxel's
-    /// outward normal), and that light beside them: only faces next to a full voxel, 20 B each.
-    ghost_faces: Vec<u64>,
-    ghost_light: Vec<Rgb>,
+    /// outward normal), and that light beside them relative to `light_scale`, in 16 bits
+    /// ([`Signed16`]: ≤ 2⁻¹² relative down to 2⁻¹³ of the brightest face): only faces next to a
+    /// full voxel, 10 B each (20 with u64 keys and f32 light; it is held through the re-solve,
+    /// the peak of `full`).
+    ghost_faces: GhostKeys,
+    ghost_light: Vec<[Signed16; 3]>,
+    /// 2ᵏ, the scale of `ghost_light`.
+    light_scale: f32,
+}
+
+/// The sorted keys of the faces with their own light: in 4 B each while every key fits (grids
+/// below 2³²/6 ≈ 7·10⁸ voxels), else in 8.
+#[derive(Clone, Debug)]
+enum GhostKeys {
+    Narrow(Vec<u32>),
+    Wide(Vec<u64>),
+}
+
+impl Default for GhostKeys {
+    fn default() -> Self {
+        GhostKeys::Narrow(Vec::new())
+    }
+}
+
+impl GhostKeys {
+    /// From keys in ascending order.
+    fn new(keys: Vec<u64>) -> GhostKeys {
+        match keys.iter().map(|k| u32::try_from(*k)).collect::<Result<Vec<u32>, _>>() {
+            Ok(narrow) => GhostKeys::Narrow(narrow),
+            Err(_) => {
+                // A collect in place may have kept the larger buffer it came from.
+                let mut keys = keys;
+                keys.shrink_to_fit();
+                GhostKeys::Wide(keys)
+            }
+        }
+    }
+
+    /// The position of `key`, if listed.
+    #[inline]
+    fn find(&self, key: u64) -> Option<usize> {
+        match self {
+            GhostKeys::Narrow(v) => u32::try_from(key).ok().and_then(|k| v.binary_search(&k).ok()),
+            GhostKeys::Wide(v) => v.binary_search(&key).ok(),
+        }
+    }
+
+    fn is_empty(&self) -> bool {
+        match self {
+            GhostKeys::Narrow(v) => v.is_empty(),
+            GhostKeys::Wide(v) => v.is_empty(),
+        }
+    }
 }
 
 /// Sort key of the face with outward normal `face` whose empty neighbour is grid voxel `ghost`.
@@ -92,7 +143,14 @@ impl BoundaryLight {
     pub fn with_ghosts(mut self, ghosts: impl IntoIterator<Item = (usize, usize, Rgb)>) -> Self {
         let mut faces: Vec<(u64, Rgb)> = ghosts.into_iter().map(|(g, f, l)| (ghost_key(g, f), l)).collect();
         faces.sort_by_key(|e| e.0);
-        (self.ghost_faces, self.ghost_light) = faces.into_iter().unzip();
+        let max = faces.iter().map(|(_, l)| l.abs().max_element()).fold(0f32, f32::max);
+        self.light_scale = power_of_two_scale(f64::from(max));
+        let inv = 1.0 / f64::from(self.light_scale);
+        self.ghost_light = faces
+            .iter()
+            .map(|(_, l)| [l.x, l.y, l.z].map(|v| Signed16::from_f32((f64::from(v) * inv) as f32)))
+            .collect();
+        self.ghost_faces = GhostKeys::new(faces.into_iter().map(|(k, _)| k).collect());
         self
     }
 
@@ -100,12 +158,10 @@ impl BoundaryLight {
     /// [`CUBE_FACES`]) whose empty neighbour is grid voxel `ghost` (None outside the grid).
     #[inline]
     pub fn at(&self, ghost: Option<usize>, face: usize, c: usize) -> f64 {
-        let own = ghost.and_then(|g| self.ghost_faces.binary_search(&ghost_key(g, face)).ok());
-        let v = match own {
-            Some(p) => self.ghost_light[p],
-            None => self.uniform[face],
-        };
-        v[c] as f64
+        match ghost.and_then(|g| self.ghost_faces.find(ghost_key(g, face))) {
+            Some(p) => f64::from(self.ghost_light[p][c].to_f32() * self.light_scale),
+            None => f64::from(self.uniform[face][c]),
+        }
     }
 
     /// True when no face receives light (the paper's eq. 7).
@@ -180,5 +236,29 @@ mod tests {
         assert!(BoundaryLight::none().is_dark());
         assert_eq!(face_index(1, -1), 3);
         assert_eq!(face_index(2, 1), 4);
+    }
+
+    #[test]
+    fn ghost_light_is_within_its_16_bit_rounding_with_narrow_and_wide_keys() {
+        let mut rng = crate::math::Rng::new(4, 4);
+        // Beyond 2³²/6 voxels the keys no longer fit 4 B.
+        for base in [0usize, 1 << 31] {
+            let ghosts: Vec<(usize, usize, Rgb)> = (0..500)
+                .map(|k| {
+                    let l = Rgb::new(rng.uniform(), rng.uniform(), rng.uniform()) * 1e3;
+                    (base + 3 * k, k % 6, l)
+                })
+                .collect();
+            let b = BoundaryLight::none().with_ghosts(ghosts.iter().rev().copied());
+            assert_eq!(matches!(b.ghost_faces, GhostKeys::Wide(_)), base > 0);
+            for (g, f, l) in &ghosts {
+                for c in 0..3 {
+                    let (got, want) = (b.at(Some(*g), *f, c), f64::from(l[c]));
+                    assert!((got - want).abs() <= want / 4096.0 + 1e3 * 2f64.powi(-25), "{got} vs {want}");
+                }
+                assert_eq!(b.at(Some(*g), (*f + 1) % 6, 0), 0.0, "not listed: the uniform value");
+            }
+            assert_eq!(b.at(Some(base + 1), 0, 0), 0.0);
+        }
     }
 }

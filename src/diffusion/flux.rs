@@ -21,6 +21,16 @@
 //! neighbours' F = Q1/(ρσtr); at a boundary face it uses the same ghost value as the solve. I1 is
 //! zero where ρ = 0, and is interpolated density-weighted like I0: trilinear(ρ I1)/trilinear(ρ).
 //!
+//! **I0 in 16 bits.** The solution keeps I0 rounded to ≤ 2⁻¹² relative
+//! ([`crate::half::Field16`]), and I1 is made of its differences: an interior face's
+//! −D_f (I_N − I_P)/h moves by at most D_f/h·2⁻¹²(|I_N| + |I_P|), i.e. I1 by about
+//! 2⁻¹¹·I0/τ_tr with τ_tr = ρσtr·h (floored at τ_min) the voxel's transport depth. That is small
+//! against I1 where the gradient is resolved, and can be a large part of it only where I0 is
+//! nearly flat over optically thin voxels, whose ρ-weighted contribution is small. Measured on the
+//! default cloud at 200×160×120 with everything else equal: the images of `full` moved by a block
+//! mean relative error of 3·10⁻⁶ (I0's rounding, its warm start and the solver's 16-bit residual
+//! together).
+//!
 //! **Storage.** The lit volume keeps ρ·I1 in bf16 ([`CodedFlux`], 18 B per full voxel instead of
 //! 36: it lives through the final gather of `full`): f32's range, so any irradiance scale fits,
 //! and rounding ≤ 2⁻⁸ per component, unbiased, which moves the images by ≤ 2e-6 block mean
@@ -73,7 +83,7 @@ pub fn diffuse_flux<'a>(
         for (c, o) in out.iter_mut().enumerate() {
             let s = sigma_tr[c];
             let i0 = &sol.i0[c];
-            let ip = *i0.at_slot(sp) as f64;
+            let ip = f64::from(i0.at_slot(sp));
             let f_at = |q: usize, ax: usize| scattering.q1_at_slot(ax, q, c) as f64 / (rho.at_slot(q) as f64 * s);
             let mut v = [0f64; 3];
             for ax in 0..3 {
@@ -85,7 +95,7 @@ pub fn diffuse_flux<'a>(
                     phi[t] = if rn > 0.0 {
                         let cf = interior_coupling(rp, rn, s, h[ax], tau_min);
                         let ff = 0.5 * (fp + f_at(sq, ax));
-                        -cf * h[ax] * (*i0.at_slot(sq) as f64 - ip) + ff * side as f64
+                        -cf * h[ax] * (f64::from(i0.at_slot(sq)) - ip) + ff * side as f64
                     } else {
                         let (dt, ft) = boundary_terms(rp, s, h[ax], tau_min);
                         let l_in = sol.boundary.at(nidx, face_index(ax, side), c);

@@ -10,11 +10,15 @@
 //! ```
 //!
 //! and, when every band decays with the same extinction (stage 1's similarity with f = 0 has one
-//! σt for all bands), T̄ is one number per voxel: ρT̄ in 4 B per full voxel instead of 48.
+//! σt for all bands), T̄ is one number per voxel: ρT̄ in 2 B per full voxel instead of 48, in 16
+//! bits ([`Field16`]: relative rounding ≤ 2⁻¹² down to 2⁻¹³ of the largest ρT̄, absolute
+//! ≤ 2⁻²⁵ of it below, where the sun's light is spent; it lives from stage 1 to the final lit
+//! volume of `full`, through both solves).
 //! **Otherwise** (sky bins, the clear-air hook, or per-band extinction) Q0 and Q1 are stored per
 //! band.
 
 use super::Acc;
+use crate::half::Field16;
 use crate::math::{Rgb, Vec3};
 use crate::medium::sparse::{FullIndex, VoxelField};
 use crate::optics::ScaledOptics;
@@ -29,8 +33,8 @@ pub enum FirstScattering {
     General { q0: VoxelField<Rgb>, q1: [VoxelField<Rgb>; 3] },
     /// The sun alone, one extinction for all bands: ρ times the sun's voxel-mean transmittance.
     Sun {
-        /// ρT̄ per full voxel (density units); 0 where ρ = 0.
-        rho_t: VoxelField<f32>,
+        /// ρT̄ per full voxel (density units), in 16 bits; 0 where ρ = 0.
+        rho_t: Field16,
         /// Q0 per unit ρT̄, σs_c E_c/(4π) per band (W·m⁻²·sr⁻¹ per unit density, × m⁻¹).
         q0_per_rho_t: [f64; 3],
         /// Q1 per unit Q0: g·(−sun dir), per axis.
@@ -58,7 +62,7 @@ impl FirstScattering {
     pub fn q0_at_slot(&self, s: usize, band: usize) -> f32 {
         match self {
             FirstScattering::General { q0, .. } => q0.at_slot(s)[band],
-            FirstScattering::Sun { rho_t, q0_per_rho_t, .. } => (*rho_t.at_slot(s) as f64 * q0_per_rho_t[band]) as f32,
+            FirstScattering::Sun { rho_t, q0_per_rho_t, .. } => (f64::from(rho_t.at_slot(s)) * q0_per_rho_t[band]) as f32,
         }
     }
 
@@ -71,7 +75,7 @@ impl FirstScattering {
                 rho_t,
                 q0_per_rho_t,
                 q1_per_q0,
-            } => (*rho_t.at_slot(s) as f64 * q1_per_q0[axis] * q0_per_rho_t[band]) as f32,
+            } => (f64::from(rho_t.at_slot(s)) * q1_per_q0[axis] * q0_per_rho_t[band]) as f32,
         }
     }
 
@@ -94,7 +98,7 @@ impl FirstScattering {
     /// Zero everywhere (nothing propagated), in the sun's form.
     pub fn zero(index: Arc<FullIndex>) -> FirstScattering {
         FirstScattering::Sun {
-            rho_t: VoxelField::filled(index, 0.0),
+            rho_t: Field16::zero(index),
             q0_per_rho_t: [0.0; 3],
             q1_per_q0: [0.0; 3],
         }
@@ -142,10 +146,10 @@ impl FirstScattering {
         let band = Self::sun_band(sun_e);
         let inv_e = if sun_e[band] > 0.0 { 1.0 / sun_e[band] as f64 } else { 0.0 };
         let acc = sums;
-        let mut rho_t = vec![0f32; acc.len() + 1];
+        let mut rho_t = vec![0f32; acc.len()];
         acc.par_chunks(CHUNK)
             .zip(rho.par_chunks(CHUNK))
-            .zip(rho_t[1..].par_chunks_mut(CHUNK))
+            .zip(rho_t.par_chunks_mut(CHUNK))
             .for_each(|((acc, rho), out)| {
                 for ((v, r), o) in acc.iter().zip(rho).zip(out) {
                     *o = (*r as f64 * v[0] * inv_e) as f32;
@@ -153,7 +157,7 @@ impl FirstScattering {
             });
         let g = optics.phase.mean_cosine();
         FirstScattering::Sun {
-            rho_t: VoxelField::from_slots(index, rho_t),
+            rho_t: Field16::new(index, &rho_t),
             q0_per_rho_t: std::array::from_fn(|c| optics.sigma_s[c] as f64 * sun_e[c] as f64 / (4.0 * PI)),
             q1_per_q0: std::array::from_fn(|a| -g * sun_dir[a] as f64),
         }
@@ -214,17 +218,20 @@ mod tests {
         let band = FirstScattering::sun_band(e);
         let sums: Vec<[f64; 1]> = acc.iter().map(|a| [a[band]]).collect();
         let sun = FirstScattering::sun(index.clone(), &optics, &sums, &rho, dir, e);
-        assert_eq!(sun.bytes(), 4 * (rho.len() + 1));
+        assert_eq!(sun.bytes(), 2 * (rho.len() + 1));
         assert_eq!(general.bytes(), 48 * (rho.len() + 1));
-        let close = |a: f32, b: f32| (a - b).abs() <= 4.0 * f32::EPSILON * b.abs();
+        // ρT̄ in 16 bits: within 2⁻¹² relative above 2⁻¹³ of the largest, 2⁻²⁵ of it below.
+        // (Q1 is Q0 times g·|sun dir| ≤ 1 per axis, so Q0's floor bounds it too.)
+        let floor: [f32; 3] = std::array::from_fn(|c| (0..index.len()).map(|v| general.q0(v, c)).fold(0.0, f32::max) / 33_554_432.0);
+        let close = |a: f32, b: f32, c: usize| (a - b).abs() <= b.abs() * (1.0 / 4096.0 + 4.0 * f32::EPSILON) + floor[c];
         let mut lit = 0;
         for v in 0..index.len() {
             for c in 0..3 {
                 let (a, b) = (sun.q0(v, c), general.q0(v, c));
-                assert!(close(a, b), "voxel {v} band {c}: Q0 {a} vs {b}");
+                assert!(close(a, b, c), "voxel {v} band {c}: Q0 {a} vs {b}");
                 for ax in 0..3 {
                     let (a, b) = (sun.q1(ax, v, c), general.q1(ax, v, c));
-                    assert!(close(a, b), "voxel {v} band {c}: Q1[{ax}] {a} vs {b}");
+                    assert!(close(a, b, c), "voxel {v} band {c}: Q1[{ax}] {a} vs {b}");
                 }
             }
             lit += usize::from(general.q0(v, 0) > 0.0);

@@ -12,7 +12,7 @@ use crate::diffusion::flux::{diffuse_flux, FluxField};
 use crate::diffusion::{solve_diffusion, BoundaryLight, DiffusionSolution};
 use crate::error::Result;
 use crate::image::Image;
-use crate::incident::{compute_with_sun, EntryRadiance, IncidentLight, IncidentSources};
+use crate::incident::{compute, EntryRadiance, IncidentLight, IncidentSources};
 use crate::lighting::bins::DirectionBins;
 use crate::lit::ground::LitGround;
 use crate::lit::sky_single::SkySingle;
@@ -25,15 +25,9 @@ use crate::sunlight::SunTransmittance;
 use source_field::SourceField;
 
 /// Stage 1 for a scene with default sampling (seed from `render.seed`), the clear-air hook
-/// `entry` if any; the sun transmittance computed here unless given.
+/// `entry` if any. With `render.sky_boundary` stage 1 propagates the sun only: the sky and
+/// ground enter through the diffusion's boundary condition instead ([`boundary_light`]).
 pub fn compute_incident(scene: &Scene, entry: Option<&EntryRadiance<'_>>) -> IncidentLight {
-    compute_incident_with(scene, entry, SunTransmittance::compute(&scene.medium, scene.sun.dir))
-}
-
-/// [`compute_incident`] with the sun transmittance of the scene's medium already computed. With
-/// `render.sky_boundary` stage 1 propagates the sun only: the sky and ground enter through the
-/// diffusion's boundary condition instead ([`boundary_light`]).
-pub fn compute_incident_with(scene: &Scene, entry: Option<&EntryRadiance<'_>>, sun_t: SunTransmittance) -> IncidentLight {
     let mut settings = scene.render.incident.clone();
     let bins = DirectionBins::new();
     let mut sources = scene_sources(scene, &bins);
@@ -41,7 +35,7 @@ pub fn compute_incident_with(scene: &Scene, entry: Option<&EntryRadiance<'_>>, s
         sources.bin_radiance.fill(Rgb::ZERO);
         settings.sky_single = false;
     }
-    compute_with_sun(&scene.medium, &bins, &sources, &settings, entry, sun_t)
+    compute(&scene.medium, &bins, &sources, &settings, entry)
 }
 
 /// The light entering the diffusion through its boundary faces: with `render.sky_boundary`, the
@@ -80,14 +74,16 @@ pub fn scene_lit_volume(scene: &Scene, i0: impl std::ops::Index<usize, Output = 
 /// I0 per voxel as RGB (stored per full voxel, like the solution).
 pub fn i0_rgb(sol: &DiffusionSolution) -> VoxelField<Rgb> {
     let i0 = &sol.i0;
-    VoxelField::from_fn(i0[0].index().clone(), Rgb::ZERO, |k| Rgb::new(i0[0][k], i0[1][k], i0[2][k]))
+    VoxelField::from_fn(i0[0].index().clone(), Rgb::ZERO, |k| {
+        Rgb::new(i0[0].get(k), i0[1].get(k), i0[2].get(k))
+    })
 }
 
-/// The lit volume of a solved scene, with the first moment attached when
-/// `render.diffuse_anisotropy` is on and the sky and ground single scattering when stage 1
-/// projected it (`render.sky_single_scattering`).
-pub fn solved_lit_volume(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution) -> LitVolume {
-    let mut lit = scene_lit_volume(scene, i0_rgb(sol), &inc.sun_transmittance);
+/// The lit volume of a solved scene (`sun_t` its medium's sun transmittance), with the first
+/// moment attached when `render.diffuse_anisotropy` is on and the sky and ground single
+/// scattering when stage 1 projected it (`render.sky_single_scattering`).
+pub fn solved_lit_volume(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution, sun_t: &SunTransmittance) -> LitVolume {
+    let mut lit = scene_lit_volume(scene, i0_rgb(sol), sun_t);
     if scene.render.diffuse_anisotropy {
         let i1 = diffuse_flux(&scene.medium, inc, sol, scene.render.solver.min_optical_depth);
         lit = lit.with_flux(FluxField::new(&scene.medium, i1));
@@ -99,28 +95,30 @@ pub fn solved_lit_volume(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolu
 }
 
 /// The gather's source of a solved scene: [`solved_lit_volume`]'s terms packed per voxel.
-fn source_field(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution) -> SourceField {
+fn source_field(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution, sun_t: &SunTransmittance) -> SourceField {
     let i1 = diffuse_flux(&scene.medium, inc, sol, scene.render.solver.min_optical_depth);
     SourceField::new(
         &scene.medium,
         &sol.i0,
         scene.render.diffuse_anisotropy.then_some(&i1),
         inc.sky_sh.as_ref(),
-        &inc.sun_transmittance.grid,
+        &sun_t.grid,
         &scene.sun,
     )
 }
 
 /// Render the image.
 pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
-    let sun_t = timings.time("sun transmittance", || SunTransmittance::compute(&scene.medium, scene.sun.dir));
-    let inc = timings.time("incident light", || compute_incident_with(scene, None, sun_t));
+    let inc = timings.time("incident light", || compute_incident(scene, None));
     let sol = timings.time("diffusion solve", || {
         solve_diffusion(&scene.medium, &inc, &boundary_light(scene), None, &scene.render.solver)
     })?;
     progress.log(&sol.summary());
-    let field = timings.time("source field", || source_field(scene, &inc, &sol));
-    drop(inc);
+    // Only the source field reads the sun transmittance: computed after the solve, not held
+    // through it.
+    let sun_t = timings.time("sun transmittance", || SunTransmittance::compute(&scene.medium, scene.sun.dir));
+    let field = timings.time("source field", || source_field(scene, &inc, &sol, &sun_t));
+    drop((inc, sun_t));
     let cam = &scene.camera;
     let spp = scene.render.aa_samples;
     let step = scene.render.step_voxels * scene.medium.min_voxel();

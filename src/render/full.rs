@@ -16,7 +16,7 @@
 //! With `iterations = 0` this is the paper's Figure 6 (diffusion plus the low-density edges, the
 //! ground still lit by its hemicubes).
 
-use super::diffusion::{boundary_light, compute_incident, compute_incident_with, i0_rgb, scene_lit_volume, solved_lit_volume};
+use super::diffusion::{boundary_light, compute_incident, i0_rgb, scene_lit_volume, solved_lit_volume};
 use super::single::pixel_sample;
 use super::{Progress, Timings};
 use crate::cube::{clear_air, BorderKeep, BorderLight, ClearAir, CubeImage, CubeOptions, CubeRenderer};
@@ -29,6 +29,7 @@ use crate::incident::IncidentLight;
 use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
 use crate::scene::Scene;
+use crate::sunlight::SunTransmittance;
 
 /// The lit scene after the clear-air iterations.
 pub struct Propagation {
@@ -51,9 +52,7 @@ const FIRST_SOLVE_TOLERANCE: f64 = 1e-2;
 /// Stages 1–2 and the clear-air iterations.
 pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Propagation> {
     let settings = &scene.render.solver;
-    // The sun transmittance depends only on the medium and the sun: once per run.
     let mut inc = timings.time("incident light", || compute_incident(scene, None));
-    let sun_t = inc.sun_transmittance.clone();
     let unoccluded = boundary_light(scene);
     // The first solution only lights the clear-air cubes when a clear-air iteration follows
     // (their light moves I0 by a few per cent, and the re-solve meets the full tolerance): it
@@ -71,6 +70,9 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         solve_diffusion_lean(&scene.medium, &inc, &unoccluded, None, &first).map(|(sol, _)| sol)
     })?;
     progress.log(&sol.summary());
+    // The sun transmittance depends only on the medium and the sun: once per run, after the
+    // first solve (only the lit volumes read it), so that solve does not hold it.
+    let sun_t = timings.time("sun transmittance", || SunTransmittance::compute(&scene.medium, scene.sun.dir));
     let mut changes = Vec::new();
     let opts = &scene.render.cubes;
     // With `render.sky_boundary` the cubes' light enters through the boundary condition, and
@@ -112,7 +114,7 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
             BorderLight::Bins(cubes) => {
                 drop(inc);
                 let hook = cubes.hook();
-                inc = timings.time("incident light", || compute_incident_with(scene, Some(&hook), sun_t.clone()));
+                inc = timings.time("incident light", || compute_incident(scene, Some(&hook)));
                 BoundaryLight::none()
             }
         };
@@ -146,7 +148,7 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
             break;
         }
     }
-    let lit = solved_lit_volume(scene, &inc, &sol).with_ground(ground);
+    let lit = solved_lit_volume(scene, &inc, &sol, &sun_t).with_ground(ground);
     Ok(Propagation {
         lit,
         solution: sol,

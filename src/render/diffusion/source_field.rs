@@ -12,6 +12,7 @@
 //! at the full voxels (an empty corner reads the zero record): the field costs 48 B per full
 //! voxel, not the 160 B per voxel of the cloud's box it took when every box voxel had a record.
 
+use crate::half::Field16;
 use crate::lighting::Sun;
 use crate::math::{Rgb, Trilinear, Vec3, SH_COEFFS};
 use crate::medium::sparse::{FullIndex, VoxelField};
@@ -71,7 +72,7 @@ impl SourceField {
     /// the sun transmittance at voxel centres, all on `m`'s grid.
     pub fn new(
         m: &Medium,
-        i0: &[VoxelField<f32>; 3],
+        i0: &[Field16; 3],
         i1: Option<&(dyn Fn(usize) -> [Vec3; 3] + Sync)>,
         sky_sh: Option<&VoxelField<[f32; 3 * SH_COEFFS]>>,
         sun_t: &Arc<SunGrid>,
@@ -87,7 +88,6 @@ impl SourceField {
             "the diffusion's fields are stored on the medium's full voxels"
         );
         let rho = m.density.packed();
-        let i0 = i0.each_ref().map(|f| f.packed());
         // I1 is evaluated at grid indices: the r-th full voxel's (8 B per full voxel while the
         // records are built).
         let mut grid = Vec::with_capacity(if i1.is_some() { index.count() } else { 0 });
@@ -100,7 +100,7 @@ impl SourceField {
         // BAND) ρ·g^l·L_lm.
         let fill = |r: usize, i1r: &Option<[Vec3; 3]>, b: usize, o: &mut [f32]| {
             let p = rho[r];
-            o[0] = i0[b][r].max(0.0) * p;
+            o[0] = i0[b].packed_at(r).max(0.0) * p;
             if let Some(i1) = i1r {
                 for ax in 0..3 {
                     o[1 + ax] = i1[b][ax] * p * g;
@@ -262,9 +262,13 @@ mod tests {
             dir: Vec3::new(0.3, 0.8, 0.5).normalize(),
             irradiance: Rgb::new(3.0, 2.5, 2.0),
         };
-        let i0_rgb: Vec<Rgb> = (0..n).map(|k| Rgb::new(i0[0][k], i0[1][k], i0[2][k])).collect();
         let idx = m.density.full_index();
-        let i0f: [VoxelField<f32>; 3] = std::array::from_fn(|b| VoxelField::from_fn(idx.clone(), 0.0, |g| i0[b][g]));
+        // I0 as the solution holds it (16 bits), read the same by the lit volume.
+        let i0f: [Field16; 3] = std::array::from_fn(|b| {
+            let packed: Vec<f32> = idx.full_voxels().map(|g| i0[b][g]).collect();
+            Field16::new(idx.clone(), &packed)
+        });
+        let i0_rgb: Vec<Rgb> = (0..n).map(|k| Rgb::new(i0f[0].get(k), i0f[1].get(k), i0f[2].get(k))).collect();
         let sh = VoxelField::from_fn(idx.clone(), [0.0; 3 * SH_COEFFS], |g| sh[g]);
         let flux = FluxField::new(&m, |g| i1[g]);
         // The records get the I1 the lit volume holds after its bf16 rounding of ρ·I1, so the two
