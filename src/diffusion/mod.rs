@@ -825,8 +825,11 @@ mod tests {
             );
         }
         // ... and the solve from it meets the tolerance relative to b and lands on the solution,
-        // closer than the cold solve of b in 16 bits: the coding rounds the smaller residual
-        // (measured 4.2e-6 and 5.2e-5 relative, L2).
+        // closer than the cold solve of b in 16 bits: the coding rounds the smaller residual.
+        // The residual is formed with the assembled stencil and solved with the hierarchy's
+        // 16-bit rows (≤ 2⁻¹² relative per coupling and row sum), so x0 + δ differs from the
+        // cold solution by A₁₆⁻¹(A₁₆ − A)x0 as well (measured 4.1e-5 and 5.2e-5 relative, L2;
+        // 4.2e-6 with f32 rows).
         let apart = |x: &[f64]| {
             let d: f64 = x.iter().zip(&exact).map(|(a, e)| (a - e).powi(2)).sum();
             (d / exact.iter().map(|e| e * e).sum::<f64>()).sqrt()
@@ -835,7 +838,7 @@ mod tests {
         let (xc, sc) = solve_from(&h, cold, None, 1e-8, 200);
         assert!(sw.relative_residual <= 1e-8 && sc.relative_residual <= 1e-8);
         let (ew, ec) = (apart(&xw), apart(&xc));
-        assert!(ew < 1e-5 && ec < 1e-3 && ew < ec, "from the start {ew:e}, cold {ec:e}");
+        assert!(ew < 1e-4 && ec < 1e-3 && ew < ec, "from the start {ew:e}, cold {ec:e}");
         // b = 0: the solution is 0 whatever the start.
         let zero = Rhs {
             values: vec![1.0; band.len()],
