@@ -306,10 +306,13 @@ impl<'a> BandOperator<'a> {
     pub(crate) fn with_coefficients(m: &'a Medium, dom: &Domain, sigma_a: f64, sigma_tr: f64, tau_min: f64) -> BandOperator<'a> {
         let index = m.density.full_index();
         let gd = m.dims();
-        let cells = index
-            .full_voxels()
-            .map(|idx| dom.cell([idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])]))
-            .collect();
+        // Sized up front: collected, the list (no exact size hint) grew to 1.5× its length.
+        let mut cells = Vec::with_capacity(index.count());
+        cells.extend(
+            index
+                .full_voxels()
+                .map(|idx| dom.cell([idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])])),
+        );
         BandOperator {
             rho: &m.density,
             index,
