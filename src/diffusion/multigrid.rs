@@ -7,9 +7,10 @@
 //!   the density: the build then never holds the finest operator beside its level);
 //!   [`Hierarchy::build`] turns every level into a [`Level`] that stores its unknowns with their
 //!   six neighbours' coded entries, their +x, +y, +z couplings and their row sum (or diagonal),
-//!   the values in 16-bit codes ([`Row`], 20 B, or 24 B on a level whose z planes are too large
-//!   for u16 ±z distances: [`Rows`]; each −a coupling is read from the −a neighbour's row, so
-//!   each face's is stored once). Nothing is stored per cell of the box (the cloud fills about
+//!   the values in 16-bit codes ([`Row`]: its 8 B of codes per entry, its neighbours' coding once
+//!   per run of entries that share it, [`Runs`], 16 B, or 20 B on a level whose z planes are too
+//!   large for u16 ±z distances: [`Rows`]; each −a coupling is read from the −a neighbour's
+//!   codes, so each face's is stored once). Nothing is stored per cell of the box (the cloud fills about
 //!   half of its tight box), so the memory and the work scale with the unknowns. The whole
 //!   hierarchy is divided by one power of two ([`unit_of`], the right-hand sides alike), which
 //!   keeps every level's code scale a normal f32 whatever the voxel size.
@@ -386,7 +387,7 @@ type Mg = f32;
 
 /// One row of a [`Level`]: its couplings to its +x, +y, +z neighbours, its sum (or diagonal)
 /// and where the entries of the six neighbours (−x, +x, −y, +y, −z, +z) lie (20 B with `Z` =
-/// u16, 24 B with u32: [`Rows`]). The couplings and the sum are 16-bit codes ([`Scaled16`],
+/// u16, 24 B with u32; stored as [`Runs`]: its codes per entry, the rest per run). The couplings and the sum are 16-bit codes ([`Scaled16`],
 /// ≤ 2⁻¹² relative, under a power-of-two scale per level and field); in f32 beside 24 B rows
 /// they took 28 B per unknown. The −a couplings are read from the −a neighbours' rows (a
 /// separate array of couplings, 16 + 12 B, took as many instructions as 40 B rows with all six,
@@ -509,28 +510,6 @@ impl<Z: Dz> Row<Z> {
         })
     }
 
-    /// The neighbours' entries (−x, +x, −y, +y, −z, +z), `pad` the other colour's pad: a missing
-    /// −a one's is `pad`, a missing +a one's `base`.
-    #[inline(always)]
-    fn neighbours(&self, pad: u32) -> [u32; 6] {
-        let base = self.base();
-        let minus_y = base.wrapping_sub(u32::from(self.dy[0]));
-        [
-            if self.base & NO_MINUS_X == 0 { base.wrapping_sub(1) } else { pad },
-            base,
-            if self.dy[0] == 0 { pad } else { minus_y },
-            base + u32::from(self.dy[1]),
-            Z::minus(base, self.dz[0], pad),
-            base + self.dz[1].into(),
-        ]
-    }
-
-    /// The other colour's first entry after the unknown.
-    #[inline(always)]
-    fn base(&self) -> u32 {
-        self.base & !NO_MINUS_X
-    }
-
     /// Its codes, stored per entry ([`Runs`]).
     fn codes(&self) -> Codes {
         Codes {
@@ -592,15 +571,46 @@ impl<Z: Dz> Run<Z> {
 
     /// The row of entry `e` of the run, whose codes are `c`.
     #[inline(always)]
-    fn row(&self, e: usize, c: Codes) -> Row<Z> {
-        let l = self.link_at(e);
-        Row {
-            base: l.base,
-            up: c.up,
-            own: c.own,
-            dy: l.dy,
-            dz: l.dz,
+    fn at<'a>(&'a self, e: usize, c: &'a Codes) -> RowAt<'a, Z> {
+        RowAt {
+            base: self.link_at(e).base,
+            link: &self.link,
+            codes: c,
         }
+    }
+}
+
+/// Entry e's row as the passes read it ([`Run::at`]): its `base` with the [`NO_MINUS_X`] flag,
+/// its run's link (for the distances) and its codes, read where they are stored (a [`Row`]
+/// rebuilt by value, its fields copied, took ~15 % more of the solve's instructions).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct RowAt<'a, Z> {
+    base: u32,
+    link: &'a Link<Z>,
+    codes: &'a Codes,
+}
+
+impl<Z: Dz> RowAt<'_, Z> {
+    /// The neighbours' entries (−x, +x, −y, +y, −z, +z), `pad` the other colour's pad: a missing
+    /// −a one's is `pad`, a missing +a one's `base`.
+    #[inline(always)]
+    fn neighbours(&self, pad: u32) -> [u32; 6] {
+        let base = self.base();
+        let minus_y = base.wrapping_sub(u32::from(self.link.dy[0]));
+        [
+            if self.base & NO_MINUS_X == 0 { base.wrapping_sub(1) } else { pad },
+            base,
+            if self.link.dy[0] == 0 { pad } else { minus_y },
+            base + u32::from(self.link.dy[1]),
+            Z::minus(base, self.link.dz[0], pad),
+            base + self.link.dz[1].into(),
+        ]
+    }
+
+    /// The other colour's first entry after the unknown.
+    #[inline(always)]
+    fn base(&self) -> u32 {
+        self.base & !NO_MINUS_X
     }
 }
 
@@ -628,7 +638,7 @@ impl<Z: Dz> Runs<Z> {
 }
 
 /// A level's rows, their ±z distances in u16 where all fit, else in u32 ([`Dz`]). The narrow
-/// rows (then 24 B, against 28 B) lowered `full`'s peak heap at 200×160×120 by 1.6 MB (the
+/// rows (when stored whole per entry, 24 B against 28 B) lowered `full`'s peak heap at 200×160×120 by 1.6 MB (the
 /// solves', one thread) at the solve's instructions and speed (a −z select in u16, within 0.3 %
 /// of the wide rows').
 #[derive(Clone, Debug)]
@@ -794,11 +804,11 @@ impl<'a, const K: usize> OtherColour<'a, K> {
     /// (Always inlined: it is the smoother's inner loop, and an outlined call costs ~10 % of the
     /// solve's instructions.)
     #[inline(always)]
-    fn couple<Z: Dz>(&self, row: &Row<Z>) -> ([Mg; K], [Mg; 6], Mg) {
+    fn couple<Z: Dz>(&self, row: &RowAt<Z>) -> ([Mg; K], [Mg; 6], Mg) {
         let [i0, i1, i2, i3, i4, i5] = row.neighbours((self.x.len() - 1) as u32).map(|v| v as usize);
-        let (up, codes) = (&row.up, self.codes);
+        let (up, codes) = (&row.codes.up, self.codes);
         // Four codes at a time (one vector shift and multiply where the target has them).
-        let mine = Scaled16::decode4([up[0], up[1], up[2], row.own], self.mine);
+        let mine = Scaled16::decode4([up[0], up[1], up[2], row.codes.own], self.mine);
         let theirs = Scaled16::decode4([codes[i0].up[0], codes[i2].up[1], codes[i4].up[2], Scaled16::ZERO], self.theirs);
         let c = [theirs[0], mine[0], theirs[1], mine[1], theirs[2], mine[2]];
         let (n0, n1, n2, n3, n4, n5) = (&self.x[i0], &self.x[i1], &self.x[i2], &self.x[i3], &self.x[i4], &self.x[i5]);
@@ -892,7 +902,7 @@ fn code_rows<Z: Dz>(unk: &[u32], plain: &(impl Fn(usize, u32) -> Plain + Sync), 
     fits.into_inner().then_some(Runs { codes, runs })
 }
 
-impl<Z: Dz> Coded<'_, Z> {
+impl<'a, Z: Dz> Coded<'a, Z> {
     /// Entries, pads included.
     fn len(&self) -> usize {
         self.codes.len()
@@ -905,34 +915,42 @@ impl<Z: Dz> Coded<'_, Z> {
 
     /// Entry e's row, rebuilt from its run (found by a binary search: the passes walk the runs,
     /// [`Coded::each_row`]).
-    fn row(&self, e: usize) -> Row<Z> {
-        self.runs[self.run_of(e)].row(e, self.codes[e])
+    fn row(&self, e: usize) -> RowAt<'a, Z> {
+        self.runs[self.run_of(e)].at(e, &self.codes[e])
     }
 
-    /// `f(e, row)` for each entry e of `range` in order, its row rebuilt from its run and its
-    /// codes: the first run found by a binary search, then each in turn.
+    /// `f(e, row, o)` for each entry e from `first` on in order, its row rebuilt from its run
+    /// and its codes, and `o` its value of `out` (one per entry, from `first`): the first run
+    /// found by a binary search, then each in turn.
     #[inline(always)]
-    fn each_row(&self, range: std::ops::Range<usize>, mut f: impl FnMut(usize, Row<Z>)) {
-        if range.is_empty() {
+    fn each_row_into<T>(&self, first: usize, out: &mut [T], mut f: impl FnMut(usize, RowAt<'a, Z>, &mut T)) {
+        if out.is_empty() {
             return;
         }
-        let (runs, codes) = (self.runs, &self.codes[..range.end]);
-        let mut i = self.run_of(range.start);
-        let mut e = range.start;
-        while e < range.end {
+        let (runs, codes) = (self.runs, &self.codes[first..first + out.len()]);
+        let mut i = self.run_of(first);
+        let mut t = 0;
+        while t < out.len() {
             let run = &runs[i];
-            let end = runs.get(i + 1).map_or(range.end, |r| (r.start as usize).min(range.end));
-            for (t, c) in codes[e..end].iter().enumerate() {
-                f(e + t, run.row(e + t, *c));
+            let end = runs.get(i + 1).map_or(out.len(), |r| (r.start as usize - first).min(out.len()));
+            for ((c, o), e) in codes[t..end].iter().zip(&mut out[t..end]).zip(first + t..) {
+                f(e, run.at(e, c), o);
             }
-            (e, i) = (end, i + 1);
+            (t, i) = (end, i + 1);
         }
+    }
+
+    /// `f(e, row)` for each entry e of `range` in order: [`Coded::each_row_into`].
+    #[inline(always)]
+    fn each_row(&self, range: std::ops::Range<usize>, mut f: impl FnMut(usize, RowAt<'a, Z>)) {
+        let mut none = vec![(); range.len()];
+        self.each_row_into(range.start, &mut none, |e, row, _| f(e, row));
     }
 
     /// The [`Operator`]'s unknown at entry `e` ([`PAD`] on the pads), whose row is `row`: the
     /// unknowns of its colour before it plus those of the other colour (its row's `base`).
     #[inline(always)]
-    fn unknown_of(&self, e: usize, row: &Row<Z>) -> u32 {
+    fn unknown_of(&self, e: usize, row: &RowAt<Z>) -> u32 {
         let black = self.red + 1;
         match e {
             _ if e == self.red || e + 1 == self.len() => PAD,
@@ -949,7 +967,7 @@ impl<Z: Dz> Coded<'_, Z> {
     /// Entry e's neighbours' entries (−x, +x, −y, +y, −z, +z; [`Row::neighbours`] of its row
     /// `row`, counted from the level's first entry).
     #[inline(always)]
-    fn neighbours(&self, e: usize, row: &Row<Z>) -> [u32; 6] {
+    fn neighbours(&self, e: usize, row: &RowAt<Z>) -> [u32; 6] {
         // The other colour's first entry and its pad, counted from it.
         let (other, pad) = if e <= self.red {
             (self.red + 1, self.len() - self.red - 2)
@@ -962,9 +980,9 @@ impl<Z: Dz> Coded<'_, Z> {
     /// The couplings of row `row` to its neighbours `nbr` (its [`Coded::neighbours`]; −x, +x,
     /// −y, +y, −z, +z; the −a ones are the −a neighbours' +a ones) and its decoded [`Row::own`].
     #[inline(always)]
-    fn couplings(&self, row: &Row<Z>, nbr: &[u32; 6]) -> ([Mg; 6], Mg) {
+    fn couplings(&self, row: &RowAt<Z>, nbr: &[u32; 6]) -> ([Mg; 6], Mg) {
         let codes = self.codes;
-        let mine = Scaled16::decode4([row.up[0], row.up[1], row.up[2], row.own], self.mine);
+        let mine = Scaled16::decode4([row.codes.up[0], row.codes.up[1], row.codes.up[2], row.codes.own], self.mine);
         let theirs = Scaled16::decode4(
             [
                 codes[nbr[0] as usize].up[0],
@@ -982,7 +1000,7 @@ impl<Z: Dz> Coded<'_, Z> {
     #[inline(always)]
     fn residual_red<const K: usize>(
         e: usize,
-        row: &Row<Z>,
+        row: &RowAt<Z>,
         xr: &[[Mg; K]],
         xb: &OtherColour<K>,
         b: &[[Mg; K]],
@@ -997,7 +1015,7 @@ impl<Z: Dz> Coded<'_, Z> {
     /// entries, its couplings to them (widened to f64) and its diagonal, the row's sum less
     /// those couplings in f64 (0 on the pads).
     #[inline(always)]
-    fn finest_row(&self, e: usize, row: &Row<Z>) -> ([u32; 6], [f64; 6], f64) {
+    fn finest_row(&self, e: usize, row: &RowAt<Z>) -> ([u32; 6], [f64; 6], f64) {
         let nbr = self.neighbours(e, row);
         let (c, own) = self.couplings(row, &nbr);
         let c = c.map(f64::from);
@@ -1012,7 +1030,7 @@ impl<Z: Dz> Coded<'_, Z> {
     /// one below ~2⁻²⁹ of the level's largest reads 0); the f64 couplings took 24 B per unknown,
     /// f32 ones and an f32 sum 16 B. 0 on the pads.
     #[inline(always)]
-    fn apply_row<X: Real, const K: usize>(&self, e: usize, row: &Row<Z>, x: &[[X; K]]) -> ([f64; K], f64) {
+    fn apply_row<X: Real, const K: usize>(&self, e: usize, row: &RowAt<Z>, x: &[[X; K]]) -> ([f64; K], f64) {
         let (nbr, c, d) = self.finest_row(e, row);
         let v = |q: usize, k: usize| c[q] * x[nbr[q] as usize][k].get();
         // A plain loop, not `array::from_fn`: the closure was not always inlined here (+0.35 G
@@ -1030,8 +1048,8 @@ impl Level {
     /// The level of operator `a` and each unknown's entry; with `row_sums` it holds the rows'
     /// sums, not their diagonals (the finest level: [`Level::row_sums`]). Its values are divided
     /// by 2^`unit` (by default [`unit_of`] its own largest value: the finest level's), and
-    /// coded at scales from `a`'s [`Maxima`] `m`. Its rows are 20 B where every ±z distance
-    /// fits in a u16, else 24 B ([`Rows`]; always 24 B with `narrow` false, for the tests).
+    /// coded at scales from `a`'s [`Maxima`] `m`. Its rows' ±z distances are u16 where every one
+    /// fits, else u32 ([`Rows`]; always u32 with `narrow` false, for the tests).
     fn from_stencils(a: &impl Stencils, row_sums: bool, narrow: bool, unit: Option<i32>, m: Maxima) -> (Level, Vec<u32>) {
         let n = a.len();
         let colour = |u: usize| a.ijk(u).iter().sum::<usize>() % 2;
@@ -1213,14 +1231,14 @@ impl Level {
         x[red..].par_chunks_mut(CHUNK).for_each(|xs| xs.fill([0.0; K]));
         with_rows!(self, |rows| x[..red].par_chunks_mut(CHUNK).enumerate().for_each(|(ci, xs)| {
             let first = ci * CHUNK;
-            rows.each_row(first..first + xs.len(), |e, row| {
+            rows.each_row_into(first, xs, |e, row, xv| {
                 let d = if self.row_sums {
                     let (c, own) = rows.couplings(&row, &rows.neighbours(e, &row));
                     less_couplings(own, c)
                 } else {
-                    row.own.decode(rows.mine[3])
+                    row.codes.own.decode(rows.mine[3])
                 };
-                xs[e - first] = b[e].map(|v| v / d);
+                *xv = b[e].map(|v| v / d);
             })
         }))
     }
@@ -1241,10 +1259,10 @@ impl Level {
             .for_each(|(ci, xs)| {
                 let start = first + ci * CHUNK;
                 let other = OtherColour::of(&coded, other, off);
-                coded.each_row(start..start + xs.len(), |e, row| {
+                coded.each_row_into(start, xs, |e, row, xv| {
                     let (s, c, own) = other.couple(&row);
                     let d = diag(own, &c);
-                    xs[e - start] = std::array::from_fn(|k| (b[e][k] - s[k]) / d);
+                    *xv = std::array::from_fn(|k| (b[e][k] - s[k]) / d);
                 })
             })))
     }
@@ -1478,7 +1496,7 @@ impl Hierarchy {
         Self::build_coded(a, coarse_cells, true)
     }
 
-    /// [`Hierarchy::build_with`], every level's rows 24 B unless `narrow` ([`Rows`]).
+    /// [`Hierarchy::build_with`], every level's ±z distances u32 unless `narrow` ([`Rows`]).
     fn build_coded(a: &impl Stencils, coarse_cells: usize, narrow: bool) -> Hierarchy {
         let mut first = (a.len() > coarse_cells && a.dims().iter().any(|d| *d > 1)).then(|| coarsen(a));
         let maxima = first.as_ref().map_or_else(|| Maxima::all(a), |c| c.2);
@@ -1575,10 +1593,9 @@ impl Hierarchy {
             .map(|(ci, qs)| {
                 let first = ci * CHUNK;
                 let mut sums = [[0.0; K]; 4];
-                fine.each_row(first..first + qs.len(), |e, row| {
+                fine.each_row_into(first, qs, |e, row, qv| {
                     let (ap, d) = fine.apply_row(e, &row, p);
                     let w = inverse(d);
-                    let qv = &mut qs[e - first];
                     for k in 0..K {
                         qv[k] = Mg::of(ap[k]);
                         let (rk, qk) = (r[e][k].get(), qv[k].get());
@@ -1610,13 +1627,13 @@ impl Hierarchy {
             .map(|(ci, rs)| {
                 let first = ci * CHUNK;
                 let mut rr = [0.0; K];
-                fine.each_row(first..first + rs.len(), |e, row| {
+                fine.each_row_into(first, rs, |e, row, rv| {
                     let (b, (ax, d)) = (be(fine.unknown_of(e, &row)), fine.apply_row(e, &row, x));
                     let w = inverse(d);
                     for k in 0..K {
                         if which[k] {
                             let v = b[k] - ax[k];
-                            rs[e - first][k] = Mg::of(v);
+                            rv[k] = Mg::of(v);
                             rr[k] += scaled_square(v, w);
                         }
                     }
@@ -1742,9 +1759,7 @@ impl Hierarchy {
         let rr = if cold {
             with_rows!(a, |fine| r.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, rs)| {
                 let first = ci * CHUNK;
-                fine.each_row(first..first + rs.len(), |e, row| {
-                    rs[e - first] = be(fine.unknown_of(e, &row)).map(Mg::of)
-                });
+                fine.each_row_into(first, rs, |e, row, rv| *rv = be(fine.unknown_of(e, &row)).map(Mg::of));
             }));
             bb
         } else {
@@ -2149,7 +2164,7 @@ mod operator_tests {
             for f in 0..fine.red {
                 let nbr = fine.neighbours(f);
                 let c = fine.couplings(f, &nbr).0.map(f64::from);
-                let own = f64::from(with_rows!(fine, |rows| rows.row(f).own.decode(rows.mine[3])));
+                let own = f64::from(with_rows!(fine, |rows| rows.row(f).codes.own.decode(rows.mine[3])));
                 let d = match fine.row_sums {
                     true => super::less_couplings(own, c),
                     false => own,
@@ -2331,7 +2346,8 @@ mod operator_tests {
 
     #[test]
     fn u16_and_u32_rows_solve_alike() {
-        // The same hierarchy with every level's rows 24 B: the same iterates, bit for bit.
+        // The same hierarchy with every level's ±z distances in u32: the same iterates, bit for
+        // bit.
         let (s, b) = sun_lit_system([15, 13, 11], 5, 0.99, 0.85, Vec3::new(0.3, 1.0, 0.2), 1);
         let [narrow, wide] = [true, false].map(|n| Hierarchy::build_coded(&s.rows(), 16, n));
         assert!(narrow.levels.iter().all(|l| matches!(l.rows, Rows::Narrow(_))));
