@@ -581,8 +581,10 @@ impl<Z: Dz> Run<Z> {
 }
 
 /// Entry e's row as the passes read it ([`Run::at`]): its `base` with the [`NO_MINUS_X`] flag,
-/// its run's link (for the distances) and its codes, read where they are stored (a [`Row`]
-/// rebuilt by value, its fields copied, took ~15 % more of the solve's instructions).
+/// its run's link (for the distances) and its codes, read where they are stored. Instructions of
+/// `full`'s diffusion solve at 100×80×60 (one thread): whole rows per entry 195 M, this 224 M,
+/// a [`Row`] rebuilt by value 228 M, the neighbours decoded once per run and advanced per
+/// entry 252 M (the coarse levels' runs are short).
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct RowAt<'a, Z> {
     base: u32,
