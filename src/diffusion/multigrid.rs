@@ -7,9 +7,10 @@
 //!   the density: the build then never holds the finest operator beside its level);
 //!   [`Hierarchy::build`] turns every level into a [`Level`] that stores its unknowns with their
 //!   six neighbours' coded entries, their +x, +y, +z couplings and their row sum (or diagonal),
-//!   the values in 16-bit codes ([`Row`], 20 B, or 24 B on a level whose z planes are too large
-//!   for u16 ±z distances: [`Rows`]; each −a coupling is read from the −a neighbour's row, so
-//!   each face's is stored once). Nothing is stored per cell of the box (the cloud fills about
+//!   the values in 16-bit codes ([`Row`]: its 8 B of codes per entry, its neighbours' coding once
+//!   per run of entries that share it, [`Runs`], 16 B, or 20 B on a level whose z planes are too
+//!   large for u16 ±z distances: [`Rows`]; each −a coupling is read from the −a neighbour's
+//!   codes, so each face's is stored once). Nothing is stored per cell of the box (the cloud fills about
 //!   half of its tight box), so the memory and the work scale with the unknowns. The whole
 //!   hierarchy is divided by one power of two ([`unit_of`], the right-hand sides alike), which
 //!   keeps every level's code scale a normal f32 whatever the voxel size.
@@ -386,7 +387,7 @@ type Mg = f32;
 
 /// One row of a [`Level`]: its couplings to its +x, +y, +z neighbours, its sum (or diagonal)
 /// and where the entries of the six neighbours (−x, +x, −y, +y, −z, +z) lie (20 B with `Z` =
-/// u16, 24 B with u32: [`Rows`]). The couplings and the sum are 16-bit codes ([`Scaled16`],
+/// u16, 24 B with u32; stored as [`Runs`]: its codes per entry, the rest per run). The couplings and the sum are 16-bit codes ([`Scaled16`],
 /// ≤ 2⁻¹² relative, under a power-of-two scale per level and field); in f32 beside 24 B rows
 /// they took 28 B per unknown. The −a couplings are read from the −a neighbours' rows (a
 /// separate array of couplings, 16 + 12 B, took as many instructions as 40 B rows with all six,
@@ -402,7 +403,7 @@ type Mg = f32;
 /// being 0 (any entry of the other colour would do, its value finite); a missing −a one reads
 /// the other colour's pad, whose value and couplings are 0, as its coupling is the neighbour's
 /// (the [`NO_MINUS_X`] flag, distance 0 for −y, and for −z [`Dz::missing_minus`]).
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct Row<Z> {
     /// The other colour's first entry after this unknown (its unknowns before this one), and
     /// the [`NO_MINUS_X`] flag.
@@ -424,7 +425,7 @@ struct Row<Z> {
 /// colour's entries between any cell and its ±z neighbours: every level of the clouds measured,
 /// up to 400×320×240), else u32. Each level picks once ([`Rows`]); the passes are compiled per
 /// type ([`with_rows`]).
-trait Dz: Copy + Default + Send + Sync + std::fmt::Debug + Into<u32> {
+trait Dz: Copy + Default + PartialEq + Send + Sync + std::fmt::Debug + Into<u32> {
     /// How a missing −z neighbour is coded, `base.wrapping_sub(pad)` in u32 (read back by the
     /// same subtraction as a present one: no select), 0 in u16 (the pad is too far, and a
     /// present −z neighbour lies at least 1 entry before `base`).
@@ -509,19 +510,102 @@ impl<Z: Dz> Row<Z> {
         })
     }
 
+    /// Its codes, stored per entry ([`Runs`]).
+    fn codes(&self) -> Codes {
+        Codes {
+            up: self.up,
+            own: self.own,
+        }
+    }
+
+    /// Its neighbours' coding, stored per run ([`Runs`]).
+    fn link(&self) -> Link<Z> {
+        Link {
+            base: self.base,
+            dy: self.dy,
+            dz: self.dz,
+        }
+    }
+}
+
+/// A [`Row`]'s codes: its +x, +y, +z couplings and its sum or diagonal (8 B, stored per entry:
+/// the other colour's rows read the −a couplings from them by entry).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Codes {
+    up: [Scaled16; 3],
+    own: Scaled16,
+}
+
+/// A [`Row`]'s neighbours' coding: [`Row::base`] with the [`NO_MINUS_X`] flag, ±y and ±z
+/// distances.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Link<Z> {
+    base: u32,
+    dy: [u16; 2],
+    dz: [Z; 2],
+}
+
+/// A maximal range of a level's consecutive entries whose rows' [`Link`]s are one: `link` at
+/// its first entry `start`, its `base` one more at each entry after (same distances and flag).
+/// Along a box row inside the cloud a colour's unknowns are every second cell, and the other
+/// colour's unknown between two of them advances `base` by one: the procedural cloud's finest
+/// level has ~12 unknowns per run (200×160×120: 30 387 runs for 356 296 unknowns). (A u32 row
+/// with no −z neighbour codes that distance from `base`, [`Dz::missing_minus`], so it ends a
+/// run: such rows are wide only where a plane is too large for u16 distances.)
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Run<Z> {
+    start: u32,
+    link: Link<Z>,
+}
+
+impl<Z: Dz> Run<Z> {
+    /// The link of entry `e` of the run (at or after `start`).
+    #[inline(always)]
+    fn link_at(&self, e: usize) -> Link<Z> {
+        // `base` < 2^31 at every entry (Row::encode): no carry into the flag.
+        Link {
+            base: self.link.base + (e as u32 - self.start),
+            ..self.link
+        }
+    }
+
+    /// The row of entry `e` of the run, whose codes are `c`.
+    #[inline(always)]
+    fn at<'a>(&'a self, e: usize, c: &'a Codes) -> RowAt<'a, Z> {
+        RowAt {
+            base: self.link_at(e).base,
+            link: &self.link,
+            codes: c,
+        }
+    }
+}
+
+/// Entry e's row as the passes read it ([`Run::at`]): its `base` with the [`NO_MINUS_X`] flag,
+/// its run's link (for the distances) and its codes, read where they are stored. Instructions of
+/// `full`'s diffusion solve at 100×80×60 (one thread): whole rows per entry 195 M, this 224 M,
+/// a [`Row`] rebuilt by value 228 M, the neighbours decoded once per run and advanced per
+/// entry 252 M (the coarse levels' runs are short).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct RowAt<'a, Z> {
+    base: u32,
+    link: &'a Link<Z>,
+    codes: &'a Codes,
+}
+
+impl<Z: Dz> RowAt<'_, Z> {
     /// The neighbours' entries (−x, +x, −y, +y, −z, +z), `pad` the other colour's pad: a missing
     /// −a one's is `pad`, a missing +a one's `base`.
     #[inline(always)]
     fn neighbours(&self, pad: u32) -> [u32; 6] {
         let base = self.base();
-        let minus_y = base.wrapping_sub(u32::from(self.dy[0]));
+        let minus_y = base.wrapping_sub(u32::from(self.link.dy[0]));
         [
             if self.base & NO_MINUS_X == 0 { base.wrapping_sub(1) } else { pad },
             base,
-            if self.dy[0] == 0 { pad } else { minus_y },
-            base + u32::from(self.dy[1]),
-            Z::minus(base, self.dz[0], pad),
-            base + self.dz[1].into(),
+            if self.link.dy[0] == 0 { pad } else { minus_y },
+            base + u32::from(self.link.dy[1]),
+            Z::minus(base, self.link.dz[0], pad),
+            base + self.link.dz[1].into(),
         ]
     }
 
@@ -532,32 +616,57 @@ impl<Z: Dz> Row<Z> {
     }
 }
 
+/// A level's rows: their codes per entry (8 B) and their links per [`Run`] (16 B with u16 ±z
+/// distances, 20 B with u32 ones), ~9.4 B per unknown on the procedural cloud's finest level
+/// against 20 B for whole rows per entry (−3.8 MB at 200×160×120). The passes rebuild each row
+/// from its run and its codes, walking the runs in order ([`Coded::each_row`]), so their inner
+/// loops read rows as before; the other colour's couplings are read from the codes by entry.
+#[derive(Clone, Debug)]
+struct Runs<Z> {
+    codes: Vec<Codes>,
+    /// In order of `start`, the first at entry 0.
+    runs: Vec<Run<Z>>,
+}
+
+impl<Z: Dz> Runs<Z> {
+    /// Appends entry `e`'s `link` (entries in order): to the last run if it continues it, else
+    /// as a new run.
+    fn push(runs: &mut Vec<Run<Z>>, e: usize, link: Link<Z>) {
+        match runs.last() {
+            Some(r) if r.link_at(e) == link => {}
+            _ => runs.push(Run { start: e as u32, link }),
+        }
+    }
+}
+
 /// A level's rows, their ±z distances in u16 where all fit, else in u32 ([`Dz`]). The narrow
-/// rows (then 24 B, against 28 B) lowered `full`'s peak heap at 200×160×120 by 1.6 MB (the
+/// rows (when stored whole per entry, 24 B against 28 B) lowered `full`'s peak heap at 200×160×120 by 1.6 MB (the
 /// solves', one thread) at the solve's instructions and speed (a −z select in u16, within 0.3 %
 /// of the wide rows').
 #[derive(Clone, Debug)]
 enum Rows {
-    Narrow(Vec<Row<u16>>),
-    Wide(Vec<Row<u32>>),
+    Narrow(Runs<u16>),
+    Wide(Runs<u32>),
 }
 
-const _: () = assert!(std::mem::size_of::<Row<u16>>() == 20 && std::mem::size_of::<Row<u32>>() == 24);
+const _: () = assert!(std::mem::size_of::<Codes>() == 8 && std::mem::size_of::<Run<u16>>() == 16 && std::mem::size_of::<Run<u32>>() == 20);
 
 impl Rows {
     fn len(&self) -> usize {
         match self {
-            Rows::Narrow(r) => r.len(),
-            Rows::Wide(r) => r.len(),
+            Rows::Narrow(r) => r.codes.len(),
+            Rows::Wide(r) => r.codes.len(),
         }
     }
 
     /// Bytes held.
     fn bytes(&self) -> usize {
-        match self {
-            Rows::Narrow(r) => r.len() * std::mem::size_of::<Row<u16>>(),
-            Rows::Wide(r) => r.len() * std::mem::size_of::<Row<u32>>(),
-        }
+        let codes = self.len() * std::mem::size_of::<Codes>();
+        codes
+            + match self {
+                Rows::Narrow(r) => r.runs.len() * std::mem::size_of::<Run<u16>>(),
+                Rows::Wide(r) => r.runs.len() * std::mem::size_of::<Run<u32>>(),
+            }
     }
 }
 
@@ -565,7 +674,8 @@ impl Rows {
 /// entries: what the passes read.
 struct Coded<'a, Z> {
     red: usize,
-    rows: &'a [Row<Z>],
+    codes: &'a [Codes],
+    runs: &'a [Run<Z>],
     /// The scales of a row's own codes (+x, +y, +z couplings and [`Row::own`]:
     /// [`Level::cpl_scale`] ×3, [`Level::own_scale`]) and of its −a neighbours' couplings (and
     /// a zero lane), as [`Scaled16::decode4`] takes them.
@@ -582,7 +692,8 @@ macro_rules! with_rows {
             Rows::Narrow(rows) => {
                 let $c = Coded {
                     red: level.red,
-                    rows,
+                    codes: &rows.codes,
+                    runs: &rows.runs,
                     mine: level.scales(),
                     theirs: [level.cpl_scale; 4],
                 };
@@ -591,7 +702,8 @@ macro_rules! with_rows {
             Rows::Wide(rows) => {
                 let $c = Coded {
                     red: level.red,
-                    rows,
+                    codes: &rows.codes,
+                    runs: &rows.runs,
                     mine: level.scales(),
                     theirs: [level.cpl_scale; 4],
                 };
@@ -667,22 +779,22 @@ fn row_sum(st: &Stencil) -> f64 {
 }
 
 /// The other colour's entries `off..off + x.len()` (its pad last) as the rows of one colour read
-/// them: their values and rows (for their +x, +y, +z couplings), and the couplings' scale.
-struct OtherColour<'a, Z, const K: usize> {
+/// them: their values and codes (for their +x, +y, +z couplings), and the couplings' scale.
+struct OtherColour<'a, const K: usize> {
     x: &'a [[Mg; K]],
-    rows: &'a [Row<Z>],
+    codes: &'a [Codes],
     /// [`Coded::mine`], [`Coded::theirs`].
     mine: [f32; 4],
     theirs: [f32; 4],
 }
 
-impl<'a, Z: Dz, const K: usize> OtherColour<'a, Z, K> {
+impl<'a, const K: usize> OtherColour<'a, K> {
     /// The other colour of the level of rows `level` whose values, from entry `off` on, are `x`.
-    fn of(level: &Coded<'a, Z>, x: &'a [[Mg; K]], off: usize) -> Self {
+    fn of<Z>(level: &Coded<'a, Z>, x: &'a [[Mg; K]], off: usize) -> Self {
         // Sliced to the length of `x`: one bounds check serves both reads of a neighbour.
         OtherColour {
             x,
-            rows: &level.rows[off..off + x.len()],
+            codes: &level.codes[off..off + x.len()],
             mine: level.mine,
             theirs: level.theirs,
         }
@@ -694,12 +806,12 @@ impl<'a, Z: Dz, const K: usize> OtherColour<'a, Z, K> {
     /// (Always inlined: it is the smoother's inner loop, and an outlined call costs ~10 % of the
     /// solve's instructions.)
     #[inline(always)]
-    fn couple(&self, row: &Row<Z>) -> ([Mg; K], [Mg; 6], Mg) {
+    fn couple<Z: Dz>(&self, row: &RowAt<Z>) -> ([Mg; K], [Mg; 6], Mg) {
         let [i0, i1, i2, i3, i4, i5] = row.neighbours((self.x.len() - 1) as u32).map(|v| v as usize);
-        let (up, rows) = (&row.up, self.rows);
+        let (up, codes) = (&row.codes.up, self.codes);
         // Four codes at a time (one vector shift and multiply where the target has them).
-        let mine = Scaled16::decode4([up[0], up[1], up[2], row.own], self.mine);
-        let theirs = Scaled16::decode4([rows[i0].up[0], rows[i2].up[1], rows[i4].up[2], Scaled16::ZERO], self.theirs);
+        let mine = Scaled16::decode4([up[0], up[1], up[2], row.codes.own], self.mine);
+        let theirs = Scaled16::decode4([codes[i0].up[0], codes[i2].up[1], codes[i4].up[2], Scaled16::ZERO], self.theirs);
         let c = [theirs[0], mine[0], theirs[1], mine[1], theirs[2], mine[2]];
         let (n0, n1, n2, n3, n4, n5) = (&self.x[i0], &self.x[i1], &self.x[i2], &self.x[i3], &self.x[i4], &self.x[i5]);
         let mut s = [0.0; K];
@@ -748,72 +860,136 @@ fn unit_of(max: f64) -> i32 {
 /// `base` and the other colour's pad.
 type Plain = ([f64; 3], f64, [u32; 6], u32, u32);
 
-/// The rows `plain(e, unk[e])` of each entry e with ±z distances in `Z`, their values divided by
+/// The row `plain(e, unk[e])` of entry e with ±z distances in `Z`, its values divided by
 /// 2^`unit` and coded at scale exponents `k` (couplings, sums or diagonals); `None` if a
-/// distance does not fit. (An indexed collect, written in place: one into `Option` is
-/// unindexed, and held its chunks besides the rows, +12.6 MB at 200×160×120.)
-fn code_rows<Z: Dz>(unk: &[u32], plain: &(impl Fn(usize, u32) -> Plain + Sync), unit: i32, k: [i32; 2]) -> Option<Vec<Row<Z>>> {
-    let fits = AtomicBool::new(true);
+/// distance does not fit.
+fn code_row<Z: Dz>(e: usize, unk: &[u32], plain: &impl Fn(usize, u32) -> Plain, unit: i32, k: [i32; 2]) -> Option<Row<Z>> {
     let to_unit = pow2(-unit);
-    let rows = unk
-        .par_iter()
-        .enumerate()
-        .map(|(e, u)| {
-            let (up, own, nbr, base, pad) = plain(e, *u);
-            debug_assert!(up.iter().all(|c| *c <= 0.0), "an M-matrix's couplings are ≤ 0");
-            let up = up.map(|c| Scaled16::encode(-c * to_unit, k[0]));
-            let own = Scaled16::encode(own * to_unit, k[1]);
-            Row::encode(up, own, nbr, base, pad).unwrap_or_else(|| {
-                fits.store(false, Ordering::Relaxed);
-                Row::default()
-            })
-        })
-        .collect();
-    fits.into_inner().then_some(rows)
+    let (up, own, nbr, base, pad) = plain(e, unk[e]);
+    debug_assert!(up.iter().all(|c| *c <= 0.0), "an M-matrix's couplings are ≤ 0");
+    let up = up.map(|c| Scaled16::encode(-c * to_unit, k[0]));
+    let own = Scaled16::encode(own * to_unit, k[1]);
+    Row::encode(up, own, nbr, base, pad)
 }
 
-impl<Z: Dz> Coded<'_, Z> {
+/// The rows of every entry ([`code_row`]) as [`Runs`]; `None` if a distance does not fit. The
+/// codes are written in place and each chunk's runs found by one task, joined in order (a
+/// chunk's first run merged into the one before when it continues it): the same runs at any
+/// thread count, and the whole rows never held.
+fn code_rows<Z: Dz>(unk: &[u32], plain: &(impl Fn(usize, u32) -> Plain + Sync), unit: i32, k: [i32; 2]) -> Option<Runs<Z>> {
+    let fits = AtomicBool::new(true);
+    let mut codes = vec![Codes::default(); unk.len()];
+    let parts: Vec<Vec<Run<Z>>> = codes
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .map(|(ci, cs)| {
+            let mut runs = Vec::new();
+            for (t, c) in cs.iter_mut().enumerate() {
+                let e = ci * CHUNK + t;
+                let row = code_row(e, unk, plain, unit, k).unwrap_or_else(|| {
+                    fits.store(false, Ordering::Relaxed);
+                    Row::default()
+                });
+                *c = row.codes();
+                Runs::push(&mut runs, e, row.link());
+            }
+            runs
+        })
+        .collect();
+    let mut runs = Vec::with_capacity(parts.iter().map(Vec::len).sum());
+    for r in parts.into_iter().flatten() {
+        Runs::push(&mut runs, r.start as usize, r.link);
+    }
+    runs.shrink_to_fit();
+    fits.into_inner().then_some(Runs { codes, runs })
+}
+
+impl<'a, Z: Dz> Coded<'a, Z> {
     /// Entries, pads included.
     fn len(&self) -> usize {
-        self.rows.len()
+        self.codes.len()
     }
 
-    /// The [`Operator`]'s unknown at entry `e` ([`PAD`] on the pads): the unknowns of its
-    /// colour before it plus those of the other colour (its row's `base`).
+    /// The run holding entry `e`.
+    fn run_of(&self, e: usize) -> usize {
+        self.runs.partition_point(|r| r.start as usize <= e) - 1
+    }
+
+    /// Entry e's row, rebuilt from its run (found by a binary search: the passes walk the runs,
+    /// [`Coded::each_row`]).
+    fn row(&self, e: usize) -> RowAt<'a, Z> {
+        self.runs[self.run_of(e)].at(e, &self.codes[e])
+    }
+
+    /// `f(e, row, o)` for each entry e from `first` on in order, its row rebuilt from its run
+    /// and its codes, and `o` its value of `out` (one per entry, from `first`): the first run
+    /// found by a binary search, then each in turn.
     #[inline(always)]
-    fn unknown(&self, e: usize) -> u32 {
-        let black = self.red + 1;
-        match e {
-            _ if e == self.red || e + 1 == self.len() => PAD,
-            _ if e < self.red => (e + self.rows[e].base() as usize) as u32,
-            _ => (e - black + self.rows[e].base() as usize) as u32,
+    fn each_row_into<T>(&self, first: usize, out: &mut [T], mut f: impl FnMut(usize, RowAt<'a, Z>, &mut T)) {
+        if out.is_empty() {
+            return;
+        }
+        let (runs, codes) = (self.runs, &self.codes[first..first + out.len()]);
+        let mut i = self.run_of(first);
+        let mut t = 0;
+        while t < out.len() {
+            let run = &runs[i];
+            let end = runs.get(i + 1).map_or(out.len(), |r| (r.start as usize - first).min(out.len()));
+            for ((c, o), e) in codes[t..end].iter().zip(&mut out[t..end]).zip(first + t..) {
+                f(e, run.at(e, c), o);
+            }
+            (t, i) = (end, i + 1);
         }
     }
 
-    /// Entry e's neighbours' entries (−x, +x, −y, +y, −z, +z; [`Row::neighbours`], counted from
-    /// the level's first entry).
+    /// `f(e, row)` for each entry e of `range` in order: [`Coded::each_row_into`].
     #[inline(always)]
-    fn neighbours(&self, e: usize) -> [u32; 6] {
+    fn each_row(&self, range: std::ops::Range<usize>, mut f: impl FnMut(usize, RowAt<'a, Z>)) {
+        let mut none = vec![(); range.len()];
+        self.each_row_into(range.start, &mut none, |e, row, _| f(e, row));
+    }
+
+    /// The [`Operator`]'s unknown at entry `e` ([`PAD`] on the pads), whose row is `row`: the
+    /// unknowns of its colour before it plus those of the other colour (its row's `base`).
+    #[inline(always)]
+    fn unknown_of(&self, e: usize, row: &RowAt<Z>) -> u32 {
+        let black = self.red + 1;
+        match e {
+            _ if e == self.red || e + 1 == self.len() => PAD,
+            _ if e < self.red => (e + row.base() as usize) as u32,
+            _ => (e - black + row.base() as usize) as u32,
+        }
+    }
+
+    /// The [`Operator`]'s unknown at entry `e`: [`Coded::unknown_of`].
+    fn unknown(&self, e: usize) -> u32 {
+        self.unknown_of(e, &self.row(e))
+    }
+
+    /// Entry e's neighbours' entries (−x, +x, −y, +y, −z, +z; [`Row::neighbours`] of its row
+    /// `row`, counted from the level's first entry).
+    #[inline(always)]
+    fn neighbours(&self, e: usize, row: &RowAt<Z>) -> [u32; 6] {
         // The other colour's first entry and its pad, counted from it.
         let (other, pad) = if e <= self.red {
             (self.red + 1, self.len() - self.red - 2)
         } else {
             (0, self.red)
         };
-        self.rows[e].neighbours(pad as u32).map(|v| v + other as u32)
+        row.neighbours(pad as u32).map(|v| v + other as u32)
     }
 
-    /// Entry e's couplings to its neighbours `nbr` (its [`Coded::neighbours`]; −x, +x, −y, +y,
-    /// −z, +z; the −a ones are the −a neighbours' +a ones) and its decoded [`Row::own`].
+    /// The couplings of row `row` to its neighbours `nbr` (its [`Coded::neighbours`]; −x, +x,
+    /// −y, +y, −z, +z; the −a ones are the −a neighbours' +a ones) and its decoded [`Row::own`].
     #[inline(always)]
-    fn couplings(&self, e: usize, nbr: &[u32; 6]) -> ([Mg; 6], Mg) {
-        let (rows, row) = (self.rows, &self.rows[e]);
-        let mine = Scaled16::decode4([row.up[0], row.up[1], row.up[2], row.own], self.mine);
+    fn couplings(&self, row: &RowAt<Z>, nbr: &[u32; 6]) -> ([Mg; 6], Mg) {
+        let codes = self.codes;
+        let mine = Scaled16::decode4([row.codes.up[0], row.codes.up[1], row.codes.up[2], row.codes.own], self.mine);
         let theirs = Scaled16::decode4(
             [
-                rows[nbr[0] as usize].up[0],
-                rows[nbr[2] as usize].up[1],
-                rows[nbr[4] as usize].up[2],
+                codes[nbr[0] as usize].up[0],
+                codes[nbr[2] as usize].up[1],
+                codes[nbr[4] as usize].up[2],
                 Scaled16::ZERO,
             ],
             self.theirs,
@@ -821,37 +997,31 @@ impl<Z: Dz> Coded<'_, Z> {
         ([theirs[0], mine[0], theirs[1], mine[1], theirs[2], mine[2]], mine[3])
     }
 
-    /// The residual b − A x at red entry e (of `x` split at the black entries into `xr` and
-    /// the black colour `xb`), `diag` the level's diagonal rule ([`with_diagonal`]).
+    /// The residual b − A x at red entry e of row `row` (of `x` split at the black entries into
+    /// `xr` and the black colour `xb`), `diag` the level's diagonal rule ([`with_diagonal`]).
     #[inline(always)]
     fn residual_red<const K: usize>(
-        &self,
         e: usize,
+        row: &RowAt<Z>,
         xr: &[[Mg; K]],
-        xb: &OtherColour<Z, K>,
+        xb: &OtherColour<K>,
         b: &[[Mg; K]],
         diag: &impl Fn(Mg, &[Mg; 6]) -> Mg,
     ) -> [Mg; K] {
-        let (s, c, own) = xb.couple(&self.rows[e]);
+        let (s, c, own) = xb.couple(row);
         let d = diag(own, &c);
         std::array::from_fn(|k| b[e][k] - (d * xr[e][k] + s[k]))
     }
 
-    /// Entry e of the finest level (which holds its rows' sums): its neighbours' entries, its
-    /// couplings to them (widened to f64) and its diagonal, the row's sum less those couplings
-    /// in f64 (0 on the pads).
+    /// Entry e of the finest level (which holds its rows' sums), of row `row`: its neighbours'
+    /// entries, its couplings to them (widened to f64) and its diagonal, the row's sum less
+    /// those couplings in f64 (0 on the pads).
     #[inline(always)]
-    fn finest_row(&self, e: usize) -> ([u32; 6], [f64; 6], f64) {
-        let nbr = self.neighbours(e);
-        let (c, own) = self.couplings(e, &nbr);
+    fn finest_row(&self, e: usize, row: &RowAt<Z>) -> ([u32; 6], [f64; 6], f64) {
+        let nbr = self.neighbours(e, row);
+        let (c, own) = self.couplings(row, &nbr);
         let c = c.map(f64::from);
         (nbr, c, less_couplings(f64::from(own), c))
-    }
-
-    /// Entry e's [`Row::own`], decoded: its row's sum (the finest level) or its diagonal.
-    #[inline(always)]
-    fn own(&self, e: usize) -> Mg {
-        self.rows[e].own.decode(self.mine[3])
     }
 
     /// Entry e of A x per system with the finest level's operator, summed in f64, and the
@@ -862,8 +1032,8 @@ impl<Z: Dz> Coded<'_, Z> {
     /// one below ~2⁻²⁹ of the level's largest reads 0); the f64 couplings took 24 B per unknown,
     /// f32 ones and an f32 sum 16 B. 0 on the pads.
     #[inline(always)]
-    fn apply_row<X: Real, const K: usize>(&self, e: usize, x: &[[X; K]]) -> ([f64; K], f64) {
-        let (nbr, c, d) = self.finest_row(e);
+    fn apply_row<X: Real, const K: usize>(&self, e: usize, row: &RowAt<Z>, x: &[[X; K]]) -> ([f64; K], f64) {
+        let (nbr, c, d) = self.finest_row(e, row);
         let v = |q: usize, k: usize| c[q] * x[nbr[q] as usize][k].get();
         // A plain loop, not `array::from_fn`: the closure was not always inlined here (+0.35 G
         // instructions in the solve, depending on how the crate was split).
@@ -880,8 +1050,8 @@ impl Level {
     /// The level of operator `a` and each unknown's entry; with `row_sums` it holds the rows'
     /// sums, not their diagonals (the finest level: [`Level::row_sums`]). Its values are divided
     /// by 2^`unit` (by default [`unit_of`] its own largest value: the finest level's), and
-    /// coded at scales from `a`'s [`Maxima`] `m`. Its rows are 20 B where every ±z distance
-    /// fits in a u16, else 24 B ([`Rows`]; always 24 B with `narrow` false, for the tests).
+    /// coded at scales from `a`'s [`Maxima`] `m`. Its rows' ±z distances are u16 where every one
+    /// fits, else u32 ([`Rows`]; always u32 with `narrow` false, for the tests).
     fn from_stencils(a: &impl Stencils, row_sums: bool, narrow: bool, unit: Option<i32>, m: Maxima) -> (Level, Vec<u32>) {
         let n = a.len();
         let colour = |u: usize| a.ijk(u).iter().sum::<usize>() % 2;
@@ -952,24 +1122,30 @@ impl Level {
         [c, c, c, self.own_scale]
     }
 
-    /// The [`Operator`]'s unknown at entry `e` ([`PAD`] on the pads): [`Coded::unknown`].
-    /// (Inlined: it gives the right-hand sides per entry in the solve's passes.)
-    #[inline(always)]
+    /// The [`Operator`]'s unknown at entry `e` ([`PAD`] on the pads): [`Coded::unknown`] (a
+    /// binary search over the runs: a pass over the entries takes [`Level::unknowns_in_order`]).
     fn unknown(&self, e: usize) -> u32 {
         with_rows!(self, |c| c.unknown(e))
+    }
+
+    /// Each entry's unknown ([`PAD`] on the pads), in order of the entries.
+    fn unknowns_in_order(&self) -> Vec<u32> {
+        let mut u = Vec::with_capacity(self.len());
+        with_rows!(self, |c| c.each_row(0..c.len(), |e, row| u.push(c.unknown_of(e, &row))));
+        u
     }
 
     /// Entry e's neighbours' entries: [`Coded::neighbours`].
     #[cfg(test)]
     fn neighbours(&self, e: usize) -> [u32; 6] {
-        with_rows!(self, |c| c.neighbours(e))
+        with_rows!(self, |c| c.neighbours(e, &c.row(e)))
     }
 
     /// Entry e's couplings to its neighbours `nbr` and its decoded [`Row::own`]:
     /// [`Coded::couplings`].
     #[cfg(test)]
     fn couplings(&self, e: usize, nbr: &[u32; 6]) -> ([Mg; 6], Mg) {
-        with_rows!(self, |c| c.couplings(e, nbr))
+        with_rows!(self, |c| c.couplings(&c.row(e), nbr))
     }
 
     /// Entries, pads included (the length of the level's vectors).
@@ -995,9 +1171,9 @@ impl Level {
             .collect();
         // Counts per plane (shifted by one), then their running sums from each range's start.
         let mut planes = vec![[0u32; 3]; op.dims[2] + 1];
-        for e in 0..self.red {
-            planes[plane(parent[self.unknown(e) as usize]) + 1][0] += 1;
-        }
+        with_rows!(self, |c| c.each_row(0..self.red, |e, row| {
+            planes[plane(parent[c.unknown_of(e, &row) as usize]) + 1][0] += 1;
+        }));
         for (cu, e) in coarse_entry.iter().enumerate() {
             planes[plane(cu as u32) + 1][1 + usize::from(*e as usize > coarse.red)] += 1;
         }
@@ -1034,8 +1210,8 @@ impl Level {
                 red.fill([0.0; K]);
                 black.fill([0.0; K]);
                 let xb = OtherColour::of(&rows, xb, fine.red + 1);
-                for f in start[0] as usize..end {
-                    let rf = rows.residual_red(f, xr, &xb, bf, &diag);
+                rows.each_row(start[0] as usize..end, |f, row| {
+                    let rf = Coded::residual_red(f, &row, xr, &xb, bf, &diag);
                     let p = fine.parent[f];
                     let v = if p < split {
                         &mut red[(p - start[1]) as usize]
@@ -1045,7 +1221,7 @@ impl Level {
                     for k in 0..K {
                         v[k] += rf[k];
                     }
-                }
+                })
             }
         )))
     }
@@ -1053,22 +1229,19 @@ impl Level {
     /// The first red pass from x = 0: x = b / diag on the red unknowns, 0 elsewhere (the finest
     /// level's diagonals from its rows' sums and couplings: this pass reads its rows).
     fn smooth_red_from_zero<const K: usize>(&self, x: &mut [[Mg; K]], b: &[[Mg; K]]) {
-        with_rows!(self, |rows| x.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, xs)| {
+        let red = self.red;
+        x[red..].par_chunks_mut(CHUNK).for_each(|xs| xs.fill([0.0; K]));
+        with_rows!(self, |rows| x[..red].par_chunks_mut(CHUNK).enumerate().for_each(|(ci, xs)| {
             let first = ci * CHUNK;
-            for (t, xv) in xs.iter_mut().enumerate() {
-                let e = first + t;
-                *xv = if e >= self.red {
-                    [0.0; K]
+            rows.each_row_into(first, xs, |e, row, xv| {
+                let d = if self.row_sums {
+                    let (c, own) = rows.couplings(&row, &rows.neighbours(e, &row));
+                    less_couplings(own, c)
                 } else {
-                    let d = if self.row_sums {
-                        let (c, own) = rows.couplings(e, &rows.neighbours(e));
-                        less_couplings(own, c)
-                    } else {
-                        rows.own(e)
-                    };
-                    b[e].map(|v| v / d)
+                    row.codes.own.decode(rows.mine[3])
                 };
-            }
+                *xv = b[e].map(|v| v / d);
+            })
         }))
     }
 
@@ -1088,12 +1261,11 @@ impl Level {
             .for_each(|(ci, xs)| {
                 let start = first + ci * CHUNK;
                 let other = OtherColour::of(&coded, other, off);
-                let rows = &coded.rows[start..start + xs.len()];
-                for (t, (xv, row)) in xs.iter_mut().zip(rows).enumerate() {
-                    let (s, c, own) = other.couple(row);
+                coded.each_row_into(start, xs, |e, row, xv| {
+                    let (s, c, own) = other.couple(&row);
                     let d = diag(own, &c);
-                    *xv = std::array::from_fn(|k| (b[start + t][k] - s[k]) / d);
-                }
+                    *xv = std::array::from_fn(|k| (b[e][k] - s[k]) / d);
+                })
             })))
     }
 
@@ -1326,7 +1498,7 @@ impl Hierarchy {
         Self::build_coded(a, coarse_cells, true)
     }
 
-    /// [`Hierarchy::build_with`], every level's rows 24 B unless `narrow` ([`Rows`]).
+    /// [`Hierarchy::build_with`], every level's ±z distances u32 unless `narrow` ([`Rows`]).
     fn build_coded(a: &impl Stencils, coarse_cells: usize, narrow: bool) -> Hierarchy {
         let mut first = (a.len() > coarse_cells && a.dims().iter().any(|d| *d > 1)).then(|| coarsen(a));
         let maxima = first.as_ref().map_or_else(|| Maxima::all(a), |c| c.2);
@@ -1423,9 +1595,8 @@ impl Hierarchy {
             .map(|(ci, qs)| {
                 let first = ci * CHUNK;
                 let mut sums = [[0.0; K]; 4];
-                for (t, qv) in qs.iter_mut().enumerate() {
-                    let e = first + t;
-                    let (ap, d) = fine.apply_row(e, p);
+                fine.each_row_into(first, qs, |e, row, qv| {
+                    let (ap, d) = fine.apply_row(e, &row, p);
                     let w = inverse(d);
                     for k in 0..K {
                         qv[k] = Mg::of(ap[k]);
@@ -1435,19 +1606,19 @@ impl Hierarchy {
                         sums[2][k] += rk * qk * w;
                         sums[3][k] += scaled_square(qk, w);
                     }
-                }
+                });
                 sums
             })
             .collect());
         std::array::from_fn(|i| sum_parts(&parts.iter().map(|s| s[i]).collect::<Vec<_>>()))
     }
 
-    /// The true residual b − A x in f64 (`be(e)` the right-hand sides at entry e, 0 on the
-    /// pads), stored into r for the systems in `which`; returns its scaled ‖D^-½ r‖² per system
-    /// (summed as [`dot`] does; 0 for the others).
+    /// The true residual b − A x in f64 (`be(u)` the right-hand sides of the unknown u at an
+    /// entry, 0 for [`PAD`]), stored into r for the systems in `which`; returns its scaled
+    /// ‖D^-½ r‖² per system (summed as [`dot`] does; 0 for the others).
     fn true_residual<const K: usize>(
         &self,
-        be: &(impl Fn(usize) -> [f64; K] + Sync),
+        be: &(impl Fn(u32) -> [f64; K] + Sync),
         x: &[[f64; K]],
         r: &mut [[Mg; K]],
         which: [bool; K],
@@ -1458,9 +1629,8 @@ impl Hierarchy {
             .map(|(ci, rs)| {
                 let first = ci * CHUNK;
                 let mut rr = [0.0; K];
-                for (t, rv) in rs.iter_mut().enumerate() {
-                    let e = first + t;
-                    let (b, (ax, d)) = (be(e), fine.apply_row(e, x));
+                fine.each_row_into(first, rs, |e, row, rv| {
+                    let (b, (ax, d)) = (be(fine.unknown_of(e, &row)), fine.apply_row(e, &row, x));
                     let w = inverse(d);
                     for k in 0..K {
                         if which[k] {
@@ -1469,7 +1639,7 @@ impl Hierarchy {
                             rr[k] += scaled_square(v, w);
                         }
                     }
-                }
+                });
                 rr
             })
             .collect());
@@ -1500,9 +1670,9 @@ impl Hierarchy {
         let mut x: Vec<[f64; K]> = match x0 {
             Some(x) => {
                 assert!(x.iter().all(|v| v.len() == a.unknowns()), "one value per unknown");
-                (0..a.len())
-                    .into_par_iter()
-                    .map(|e| match a.unknown(e) {
+                let unk = a.unknowns_in_order();
+                unk.par_iter()
+                    .map(|u| match *u {
                         PAD => [0.0; K],
                         u => x.map(|v| v[u as usize].into()),
                     })
@@ -1513,18 +1683,18 @@ impl Hierarchy {
         // The right-hand sides per entry, made where they are read (not held), divided by the
         // power of two that the operator is (exactly: the solution is the caller's).
         let to_unit = pow2(-a.unit);
-        let be = |e: usize| match a.unknown(e) {
+        let be = |u: u32| match u {
             PAD => [0.0; K],
             u => b.map(|v| v[u as usize].into() * to_unit),
         };
         let stats = self.solve_entries(&be, &mut x, x0.is_none(), tol, max_iter);
+        let unk = a.unknowns_in_order();
         let mut lane = 0;
         stats.map(|st| {
             let mut out = vec![0.0; a.unknowns()];
-            for (e, v) in x.iter().enumerate() {
-                let u = a.unknown(e);
-                if u != PAD {
-                    out[u as usize] = v[lane];
+            for (u, v) in unk.iter().zip(&x) {
+                if *u != PAD {
+                    out[*u as usize] = v[lane];
                 }
             }
             lane += 1;
@@ -1532,15 +1702,15 @@ impl Hierarchy {
         })
     }
 
-    /// MGPCG on A x = b (vectors on the finest level's entries, `be(e)` the right-hand sides at
-    /// entry e), each system stopping on its own when ‖D^-½ r‖ ≤ `tol` ‖D^-½ b‖. Mixed
+    /// MGPCG on A x = b (vectors on the finest level's entries, `be(u)` the right-hand sides of
+    /// the unknown u at an entry, 0 for [`PAD`]), each system stopping on its own when ‖D^-½ r‖ ≤ `tol` ‖D^-½ b‖. Mixed
     /// precision: the iterate x is f64, the residual, A p and the search direction are in the
     /// multigrid's precision (their dots summed in f64). When a system's recursive residual
     /// meets `tol`, its true residual is computed in f64; if that does not meet `tol` (the
     /// rounding of the recursion), CG restarts from it.
     fn solve_entries<const K: usize>(
         &self,
-        be: &(impl Fn(usize) -> [f64; K] + Sync),
+        be: &(impl Fn(u32) -> [f64; K] + Sync),
         x: &mut [[f64; K]],
         cold: bool,
         tol: f64,
@@ -1548,17 +1718,16 @@ impl Hierarchy {
     ) -> [SolveStats; K] {
         let a = &self.levels[0];
         let n = a.len();
-        let parts: Vec<[f64; K]> = with_rows!(a, |fine| (0..n)
+        let parts: Vec<[f64; K]> = with_rows!(a, |fine| (0..n.div_ceil(CHUNK))
             .into_par_iter()
-            .chunks(CHUNK)
-            .map(|es| {
+            .map(|ci| {
                 let mut s = [0.0; K];
-                for e in es {
-                    let (v, w) = (be(e), inverse(fine.finest_row(e).2));
+                fine.each_row(ci * CHUNK..n.min((ci + 1) * CHUNK), |e, row| {
+                    let (v, w) = (be(fine.unknown_of(e, &row)), inverse(fine.finest_row(e, &row).2));
                     for k in 0..K {
                         s[k] += scaled_square(v[k], w);
                     }
-                }
+                });
                 s
             })
             .collect());
@@ -1590,11 +1759,10 @@ impl Hierarchy {
         // bit: A 0 = 0 exactly, and the same chunks add in the same order).
         let mut r = vec![[0.0; K]; n];
         let rr = if cold {
-            r.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, rs)| {
-                for (t, rv) in rs.iter_mut().enumerate() {
-                    *rv = be(ci * CHUNK + t).map(Mg::of);
-                }
-            });
+            with_rows!(a, |fine| r.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, rs)| {
+                let first = ci * CHUNK;
+                fine.each_row_into(first, rs, |e, row, rv| *rv = be(fine.unknown_of(e, &row)).map(Mg::of));
+            }));
             bb
         } else {
             self.true_residual(be, x, &mut r, [true; K])
@@ -1702,7 +1870,7 @@ impl Hierarchy {
 /// (moved here from tests/ so the solver's internals need not be public).
 #[cfg(test)]
 mod operator_tests {
-    use super::{coarsen, Coded, Hierarchy, Level, Mg, Node, Operator, Rows, Stencils, Work, NONE, PAD};
+    use super::{coarsen, Coded, Hierarchy, Level, Mg, Node, Operator, Rows, Stencils, Work, CHUNK, NONE, PAD};
     use crate::diffusion::{assemble, BoundaryLight, Domain};
     use crate::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
     use crate::lighting::DirectionBins;
@@ -1776,7 +1944,7 @@ mod operator_tests {
         let mut a = vec![0.0; n * n];
         for e in (0..fine.len()).filter(|e| fine.unknown(*e) != PAD) {
             let u = fine.unknown(e) as usize;
-            let (nbr, c, d) = with_rows!(fine, |rows| rows.finest_row(e));
+            let (nbr, c, d) = with_rows!(fine, |rows| rows.finest_row(e, &rows.row(e)));
             a[u * n + u] = d * unit;
             for q in (0..6).filter(|q| c[*q] != 0.0) {
                 a[u * n + fine.unknown(nbr[q] as usize) as usize] = c[q] * unit;
@@ -1889,7 +2057,7 @@ mod operator_tests {
         for e in (0..fine.len()).filter(|e| fine.unknown(*e) != PAD) {
             let u = fine.unknown(e) as usize;
             let want: f64 = a[u * n..(u + 1) * n].iter().sum();
-            let got = with_rows!(fine, |c| c.apply_row(e, &ones).0[0]) * unit;
+            let got = with_rows!(fine, |c| c.apply_row(e, &c.row(e), &ones).0[0]) * unit;
             assert!(
                 (got - want).abs() <= 1e-12 * a[u * n + u] + want.abs() / 4096.0,
                 "row {u}: {got} vs {want}"
@@ -1899,7 +2067,7 @@ mod operator_tests {
         // Rows whose sum is far below their diagonal, where the difference shows.
         assert!(smallest < 1e-2, "{smallest}");
         // The pads' products are 0.
-        assert_eq!(with_rows!(fine, |c| c.apply_row(fine.red, &ones)), ([0.0], 0.0));
+        assert_eq!(with_rows!(fine, |c| c.apply_row(fine.red, &c.row(fine.red), &ones)), ([0.0], 0.0));
     }
 
     #[test]
@@ -1998,7 +2166,7 @@ mod operator_tests {
             for f in 0..fine.red {
                 let nbr = fine.neighbours(f);
                 let c = fine.couplings(f, &nbr).0.map(f64::from);
-                let own = f64::from(with_rows!(fine, |rows| rows.own(f)));
+                let own = f64::from(with_rows!(fine, |rows| rows.row(f).codes.own.decode(rows.mine[3])));
                 let d = match fine.row_sums {
                     true => super::less_couplings(own, c),
                     false => own,
@@ -2119,8 +2287,69 @@ mod operator_tests {
     }
 
     #[test]
+    fn runs_rebuild_every_row() {
+        // A box with a shaft through it and scattered holes, over three chunks of entries: each
+        // entry's row rebuilt from its run decodes to the operator's neighbours and couplings
+        // (u16 and u32 ±z distances); walking the runs from any entry (chunk boundaries
+        // included) rebuilds the rows a lookup does; the runs are maximal, and few.
+        let dims = [40, 30, 12];
+        let mut rng = Rng::new(5, 3);
+        let full: Vec<bool> = (0..dims.iter().product::<usize>())
+            .map(|c| {
+                let (i, j) = ((c % dims[0]) as i32, ((c / dims[0]) % dims[1]) as i32);
+                let shaft = (i - 20).pow(2) + (j - 15).pow(2) < 16;
+                !shaft && rng.uniform() > 0.01
+            })
+            .collect();
+        let cells: Vec<usize> = (0..full.len()).filter(|c| full[*c]).collect();
+        let mut unknown = vec![NONE; full.len()];
+        for (u, c) in cells.iter().enumerate() {
+            unknown[*c] = u as u32;
+        }
+        let nodes = cells
+            .iter()
+            .map(|&c| {
+                let ijk = [c % dims[0], (c / dims[0]) % dims[1], c / (dims[0] * dims[1])];
+                let mut nd = Node::at(c as u32);
+                nd.diag = 7.0;
+                for (ax, stride) in [1, dims[0], dims[0] * dims[1]].into_iter().enumerate() {
+                    if ijk[ax] + 1 < dims[ax] && full[c + stride] {
+                        (nd.up_nbr[ax], nd.up[ax]) = (unknown[c + stride], -1.0 - (c % 5) as f64 / 8.0);
+                    }
+                }
+                nd
+            })
+            .collect();
+        let s = Operator { dims, nodes };
+        assert!(s.nodes.len() > 3 * CHUNK);
+        for narrow in [true, false] {
+            let level = coded_rows_match(&s, narrow);
+            assert!(matches!(level.rows, Rows::Narrow(_)) == narrow);
+            with_rows!(&level, |c| {
+                assert_eq!(c.runs[0].start, 0);
+                for w in c.runs.windows(2) {
+                    assert!(w[0].start < w[1].start && w[0].link_at(w[1].start as usize) != w[1].link);
+                }
+                let rows: Vec<_> = (0..c.len()).map(|e| c.row(e)).collect();
+                let n = c.len();
+                for start in [0, 1, CHUNK - 1, CHUNK, CHUNK + 1, 2 * CHUNK, c.red, c.red + 1, n - 1, n] {
+                    let end = n.min(start + CHUNK + 3);
+                    let mut walked = Vec::new();
+                    c.each_row(start..end, |e, row| walked.push((e, row)));
+                    let looked_up: Vec<_> = (start..end).zip(rows[start..end].iter().copied()).collect();
+                    assert_eq!(walked, looked_up, "from {start}");
+                }
+                // u32 rows with no −z neighbour end their runs (the bottom plane, the holes).
+                let most = if narrow { n / 4 } else { n / 2 };
+                assert!(c.runs.len() < most, "{} runs for {n} entries", c.runs.len());
+            });
+        }
+    }
+
+    #[test]
     fn u16_and_u32_rows_solve_alike() {
-        // The same hierarchy with every level's rows 24 B: the same iterates, bit for bit.
+        // The same hierarchy with every level's ±z distances in u32: the same iterates, bit for
+        // bit.
         let (s, b) = sun_lit_system([15, 13, 11], 5, 0.99, 0.85, Vec3::new(0.3, 1.0, 0.2), 1);
         let [narrow, wide] = [true, false].map(|n| Hierarchy::build_coded(&s.rows(), 16, n));
         assert!(narrow.levels.iter().all(|l| matches!(l.rows, Rows::Narrow(_))));
