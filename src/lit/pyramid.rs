@@ -325,12 +325,8 @@ mod tests {
                 }
             }
         }
-        for a in 0..4 {
-            assert!(
-                worst[a] <= 1.0 / 4096.0 && worst[a] > 1.0 / 8192.0,
-                "channel {a}: relative error {}",
-                worst[a]
-            );
+        for (a, w) in worst[..4].iter().enumerate() {
+            assert!(*w <= 1.0 / 4096.0 && *w > 1.0 / 8192.0, "channel {a}: relative error {w}");
         }
         assert_eq!(worst[4], 0.0, "a channel of zeros");
         // Each channel's scale is its own: the code's top exponent at each channel's largest.
