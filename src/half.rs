@@ -312,7 +312,6 @@ const SCALED_SHIFT: u32 = 12;
 ///   the largest. Exponent field 0 (f32's subnormals, slow to multiply) is never coded but by 0.
 /// * **Zero** is code 0, decoded exactly (0·2^k).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[repr(transparent)]
 pub struct Scaled16(u16);
 
 impl Scaled16 {
@@ -384,32 +383,6 @@ impl Scaled16 {
         #[cfg(not(target_arch = "x86_64"))]
         {
             std::array::from_fn(|i| c[i].decode(scale[i]))
-        }
-    }
-
-    /// [`Self::decode4`] of four adjacent codes (the same values): on x86-64 one 8-byte load and
-    /// a widening unpack in place of four loads and inserts.
-    #[inline(always)]
-    pub fn decode4_adjacent(c: &[Scaled16; 4], scale: &[f32; 4]) -> [f32; 4] {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::x86_64::{
-                __m128i, _mm_castsi128_ps, _mm_loadl_epi64, _mm_loadu_ps, _mm_mul_ps, _mm_setzero_si128, _mm_slli_epi32, _mm_storeu_ps,
-                _mm_unpacklo_epi16,
-            };
-            let mut out = [0.0; 4];
-            // SAFETY: SSE2 is part of x86-64; `c` is 8 bytes (four u16, `repr(transparent)`),
-            // read unaligned by the 64-bit load; the other load and the store are of four f32.
-            unsafe {
-                let w = _mm_unpacklo_epi16(_mm_loadl_epi64(c.as_ptr().cast::<__m128i>()), _mm_setzero_si128());
-                let f = _mm_castsi128_ps(_mm_slli_epi32::<{ SCALED_SHIFT as i32 }>(w));
-                _mm_storeu_ps(out.as_mut_ptr(), _mm_mul_ps(f, _mm_loadu_ps(scale.as_ptr())));
-            }
-            out
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        {
-            Self::decode4(*c, *scale)
         }
     }
 }
@@ -668,10 +641,6 @@ mod tests {
         let (codes, scales) = ([3u16, 0, 0xf7ff, 0x1234].map(Scaled16), [0.5f32, -2.0, 8.0, -1e30]);
         let one_by_one: [f32; 4] = std::array::from_fn(|i| codes[i].decode(scales[i]));
         assert_eq!(Scaled16::decode4(codes, scales).map(f32::to_bits), one_by_one.map(f32::to_bits));
-        assert_eq!(
-            Scaled16::decode4_adjacent(&codes, &scales).map(f32::to_bits),
-            one_by_one.map(f32::to_bits)
-        );
         // Ties to even: 1 + 2⁻¹² lies half-way between 1 and 1 + 2⁻¹¹ (mantissa 0 is even).
         let k = Scaled16::exponent_for(1.5);
         assert_eq!(Scaled16::encode(1.0 + 1.0 / 4096.0, k).decode(Scaled16::scale(k)), 1.0);

@@ -24,14 +24,8 @@ pub const BLOCK: usize = 4;
 /// A cell's values (decoded): ρ, ρ·I0.r, ρ·I0.g, ρ·I0.b, ρ·T_sun.
 pub type Cell = [f32; 5];
 
-/// A cell as stored: each channel a [`Scaled16`] code under its channel's scale (10 B); the four
-/// decoded together adjacent.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-struct Code {
-    rho: Scaled16,
-    /// ρ·I0 (RGB), ρ·T_sun.
-    rest: [Scaled16; 4],
-}
+/// A cell as stored: each channel a [`Scaled16`] code under its channel's scale (10 B).
+type Code = [Scaled16; 5];
 
 /// Cells stored per full voxel in 16 bits a channel (10 B a cell, was 20 B in f32: the lit
 /// volume's cells are `full`'s largest field at its clear-air cubes and last stage), one
@@ -44,10 +38,8 @@ struct Code {
 #[derive(Clone, Debug)]
 pub struct Cells {
     codes: VoxelField<Code>,
-    /// 2^k of ρ ([`Scaled16::scale`]).
-    rho_scale: f32,
-    /// 2^k of ρ·I0 (RGB) and ρ·T_sun.
-    rest_scale: [f32; 4],
+    /// 2^k per channel ([`Scaled16::scale`]).
+    scale: [f32; 5],
 }
 
 impl Cells {
@@ -60,30 +52,21 @@ impl Cells {
             max = std::array::from_fn(|a| max[a].max(at(g)[a]));
         }
         let k = max.map(|m| Scaled16::exponent_for(f64::from(m)));
-        Cells::scaled(VoxelField::from_fn(index, Code::default(), |g| encode(at(g), k)), k)
+        let codes = VoxelField::from_fn(index, [Scaled16::ZERO; 5], |g| encode(at(g), k));
+        Cells {
+            codes,
+            scale: k.map(Scaled16::scale),
+        }
     }
 
     /// From every full voxel's cell in grid order (`cells.len()` = `index.count()`).
     fn from_packed(index: Arc<FullIndex>, cells: &[Cell]) -> Cells {
         let max = cells.iter().fold([0f32; 5], |m, c| std::array::from_fn(|a| m[a].max(c[a])));
         let k = max.map(|m| Scaled16::exponent_for(f64::from(m)));
-        Cells::scaled(VoxelField::new(index, Code::default(), cells.iter().map(|c| encode(*c, k))), k)
-    }
-
-    /// `codes` under the channels' scale exponents `k`.
-    fn scaled(codes: VoxelField<Code>, k: [i32; 5]) -> Cells {
         Cells {
-            codes,
-            rho_scale: Scaled16::scale(k[0]),
-            rest_scale: [1, 2, 3, 4].map(|a| Scaled16::scale(k[a])),
+            codes: VoxelField::new(index, [Scaled16::ZERO; 5], cells.iter().map(|c| encode(*c, k))),
+            scale: k.map(Scaled16::scale),
         }
-    }
-
-    /// 2^k per channel ([`Scaled16::scale`]).
-    #[cfg(test)]
-    fn scale(&self) -> [f32; 5] {
-        let r = self.rest_scale;
-        [self.rho_scale, r[0], r[1], r[2], r[3]]
     }
 
     /// `t` over the cells' slots ([`VoxelField::slots`]).
@@ -95,13 +78,15 @@ impl Cells {
     /// ρ in slot `s`.
     #[inline(always)]
     pub fn rho_at_slot(&self, s: usize) -> f32 {
-        self.codes.at_slot(s).rho.decode(self.rho_scale)
+        self.codes.at_slot(s)[0].decode(self.scale[0])
     }
 
     /// ρ·I0 (RGB) and ρ·T_sun in slot `s`, decoded at once.
     #[inline(always)]
     pub fn rest_at_slot(&self, s: usize) -> [f32; 4] {
-        Scaled16::decode4_adjacent(&self.codes.at_slot(s).rest, &self.rest_scale)
+        let c = self.codes.at_slot(s);
+        let sc = &self.scale;
+        Scaled16::decode4([c[1], c[2], c[3], c[4]], [sc[1], sc[2], sc[3], sc[4]])
     }
 
     /// The cell in slot `s` (from [`Self::slots`]).
@@ -137,11 +122,7 @@ impl Cells {
 /// `c` coded under the channels' scale exponents `k`.
 #[inline]
 fn encode(c: Cell, k: [i32; 5]) -> Code {
-    let e = |a: usize| Scaled16::encode(f64::from(c[a]), k[a]);
-    Code {
-        rho: e(0),
-        rest: [e(1), e(2), e(3), e(4)],
-    }
+    std::array::from_fn(|a| Scaled16::encode(f64::from(c[a]), k[a]))
 }
 
 /// One level of the pyramid.
@@ -351,7 +332,7 @@ mod tests {
         // Each channel's scale is its own: the code's top exponent at each channel's largest.
         for a in 0..4 {
             let k = Scaled16::exponent_for(f64::from(want.iter().map(|c| c[a]).fold(0.0, f32::max)));
-            assert_eq!(cells.scale()[a], Scaled16::scale(k), "channel {a}");
+            assert_eq!(cells.scale[a], Scaled16::scale(k), "channel {a}");
         }
     }
 }
