@@ -31,7 +31,7 @@ impl DualMask {
         for k in 0..n[2] {
             for j in 0..n[1] {
                 for i in 0..n[0] {
-                    if level.cells[i + n[0] * (j + n[1] * k)][0] <= 0.0 {
+                    if level.cells.get(i + n[0] * (j + n[1] * k))[0] <= 0.0 {
                         continue;
                     }
                     for c in k..=k + 1 {
@@ -104,14 +104,11 @@ impl DualMask {
             idx: std::array::from_fn(ix),
             f,
         });
-        let rho = t.blend(|s| level.cells.at_slot(s)[0]);
+        let rho = t.blend(|s| level.cells.rho_at_slot(s));
         if rho <= 1e-12 {
             return None;
         }
-        let c = t.blend(|s| {
-            let c = level.cells.at_slot(s);
-            Vec4::new(c[1], c[2], c[3], c[4])
-        });
+        let c = t.blend(|s| Vec4::from_array(level.cells.rest_at_slot(s)));
         Some(([rho, c.x, c.y, c.z, c.w], t))
     }
 }

@@ -30,9 +30,9 @@
 //! harmonics, the pyramid's coarser cells) is zero where ρ = 0 and is stored only at the full
 //! voxels ([`crate::medium::sparse`]), so a lit volume costs bytes per voxel of the cloud, not of
 //! its box; only the density and the sun transmittance (sampled beside the cloud too) are dense.
-//! ρ·I0 is stored once, in the lit volume's cells ([`pyramid::Cell`], 20 B per full voxel), which
-//! are also the pyramid's level 0 (the same allocation, not a copy): the gathers read ρ·I0 from
-//! their channels 1..4.
+//! ρ·I0 is stored once, in the lit volume's cells ([`pyramid::Cells`], five 16-bit codes, 10 B per
+//! full voxel, ≤ 2⁻¹² relative rounding), which are also the pyramid's level 0 (the same
+//! allocation, not a copy): the gathers read ρ·I0 from their channels 1..4, decoded.
 
 pub mod ground;
 pub mod pyramid;
@@ -42,11 +42,10 @@ use crate::diffusion::flux::FluxField;
 use crate::lighting::{Sky, Sun};
 use crate::math::{Rgb, Trilinear, Vec3};
 use crate::medium::march::{march, March};
-use crate::medium::sparse::VoxelField;
 use crate::medium::Medium;
 use crate::sunlight::SunGrid;
 use ground::LitGround;
-use pyramid::{Cell, LitPyramid};
+use pyramid::{Cells, LitPyramid};
 use sky_single::SkySingle;
 use std::sync::{Arc, OnceLock};
 
@@ -57,9 +56,10 @@ pub struct LitVolume {
     /// The medium (density, optics, box). The cells and the pyramid are built from it once: do
     /// not replace it.
     pub medium: Medium,
-    /// Per full voxel at voxel centres, [ρ, ρ·max(I0, 0) (RGB, W·m⁻²·sr⁻¹), ρ·T_sun]: the
-    /// density-weighted rule's ρ·I0 and the pyramid's level 0 (shared with it, one copy).
-    cells: Arc<VoxelField<Cell>>,
+    /// Per full voxel at voxel centres, [ρ, ρ·max(I0, 0) (RGB, W·m⁻²·sr⁻¹), ρ·T_sun] in 16-bit
+    /// codes: the density-weighted rule's ρ·I0 and the pyramid's level 0 (shared with it, one
+    /// copy).
+    cells: Arc<Cells>,
     /// Transmittance towards the sun at voxel centres (unitless), the density grid's dims. Private
     /// (read by [`Self::sun_t`]): the cells' ρ·T_sun is made from it once.
     sun_t: Arc<SunGrid>,
@@ -82,8 +82,8 @@ pub struct LitVolume {
 
 impl LitVolume {
     /// Assemble a lit volume from I0 per voxel (indexed by grid index i + nx(j + ny k): a dense
-    /// `Vec<Rgb>` or a [`VoxelField`]; W·m⁻²·sr⁻¹ per band; clamped at 0 here, read only at full
-    /// voxels) and the sun transmittance at voxel centres. Both must have the density grid's
+    /// `Vec<Rgb>` or a [`crate::medium::sparse::VoxelField`]; W·m⁻²·sr⁻¹ per band; clamped at 0
+    /// here, read only at full voxels) and the sun transmittance at voxel centres. Both must have the density grid's
     /// dimensions (an internal invariant: the caller builds them from the same medium).
     pub fn new(
         medium: Medium,
@@ -97,7 +97,7 @@ impl LitVolume {
         assert_eq!(sun_t.dims(), medium.dims(), "sun transmittance must have the density grid's dims");
         let rho = &*medium.density;
         let t = &*sun_t;
-        let cells = VoxelField::from_fn(medium.density.full_index(), [0.0; 5], |n| {
+        let cells = Cells::from_fn(medium.density.full_index(), |n| {
             let r = rho.at(n);
             let c = i0[n].max(Rgb::ZERO) * r;
             [r, c.x, c.y, c.z, r * t.at_index(n)]
@@ -139,10 +139,10 @@ impl LitVolume {
         self.medium.dims()
     }
 
-    /// The cells [ρ, ρ·I0 (RGB, W·m⁻²·sr⁻¹), ρ·T_sun] at voxel centres, stored per full voxel:
-    /// the pyramid's level 0.
+    /// The cells [ρ, ρ·I0 (RGB, W·m⁻²·sr⁻¹), ρ·T_sun] at voxel centres, stored per full voxel in
+    /// 16-bit codes: the pyramid's level 0.
     #[inline]
-    pub fn cells(&self) -> &Arc<VoxelField<Cell>> {
+    pub fn cells(&self) -> &Arc<Cells> {
         &self.cells
     }
 
@@ -165,7 +165,7 @@ impl LitVolume {
             return Rgb::ZERO;
         }
         let f = &*self.cells;
-        f.slots(&Trilinear::new(self.dims(), v.to_array())).blend(|s| rho_i0(f.at_slot(s))) / rho
+        f.slots(&Trilinear::new(self.dims(), v.to_array())).blend(|s| rho_i0(f, s)) / rho
     }
 
     /// The diffuse radiance scattered towards `to_eye` per unit albedo (W·m⁻²·sr⁻¹): I0, or
@@ -204,7 +204,7 @@ impl LitVolume {
     fn diffuse_corners(&self, v: Vec3, rho: f32, t: &Trilinear, to_eye: Vec3) -> Rgb {
         let f = &*self.cells;
         let slots = f.slots(t);
-        let i0 = slots.blend(|s| rho_i0(f.at_slot(s))) / rho;
+        let i0 = slots.blend(|s| rho_i0(f, s)) / rho;
         let shared = self.flux.as_ref().filter(|fl| Arc::ptr_eq(fl.rho_i1().index(), f.index()));
         self.diffuse_parts(v, rho, i0, shared.map(|_| &slots), to_eye)
     }
@@ -267,10 +267,11 @@ impl LitVolume {
     }
 }
 
-/// A cell's ρ·I0 (channels 1..4).
+/// ρ·I0 (channels 1..4) of the cells' slot `s`, decoded.
 #[inline(always)]
-fn rho_i0(c: &Cell) -> Rgb {
-    Rgb::new(c[1], c[2], c[3])
+fn rho_i0(f: &Cells, s: usize) -> Rgb {
+    let c = f.rest_at_slot(s);
+    Rgb::new(c[0], c[1], c[2])
 }
 
 #[cfg(test)]
@@ -278,8 +279,10 @@ mod tests {
     use super::*;
     use crate::medium::Grid3;
 
-    /// The pyramid's level 0 is the lit volume's cells (one allocation), and `i0` is the
-    /// density-weighted rule on ρ·max(I0, 0): trilinear(ρ·I0)/trilinear(ρ), bit for bit.
+    /// The pyramid's level 0 is the lit volume's cells (one allocation), the cells are
+    /// [ρ, ρ·max(I0, 0), ρ·T_sun] to their codes' rounding (≤ 2⁻¹² relative a channel), and `i0`
+    /// is the density-weighted rule on the decoded ρ·I0: trilinear(ρ·I0)/trilinear(ρ), bit for
+    /// bit.
     #[test]
     fn level0_is_the_cells_and_i0_is_the_rule() {
         let dims = [6, 5, 7];
@@ -303,15 +306,29 @@ mod tests {
         assert!(p.levels.len() >= 2);
         let rho = |k: usize| m.density.at(k);
         let st: Arc<SunGrid> = Arc::new(sun_t.into());
-        for (k, i) in i0.iter().enumerate() {
-            let c = lit.cells()[k];
-            let ri0 = i.max(Rgb::ZERO) * rho(k);
-            assert_eq!(
-                c.map(f32::to_bits),
-                [rho(k), ri0.x, ri0.y, ri0.z, rho(k) * st.at_index(k)].map(f32::to_bits)
-            );
+        let want = |k: usize| {
+            let ri0 = i0[k].max(Rgb::ZERO) * rho(k);
+            [rho(k), ri0.x, ri0.y, ri0.z, rho(k) * st.at_index(k)]
+        };
+        let max = (0..n).fold([0f32; 5], |m, k| std::array::from_fn(|a| m[a].max(want(k)[a])));
+        let mut zeros = 0;
+        for k in 0..n {
+            let c = lit.cells().get(k);
+            for (a, w) in want(k).into_iter().enumerate() {
+                // Below 2⁻²⁹ of the channel's largest (T_sun's floor 2⁻³¹ here) it may read 0.
+                let tol = w / 4096.0 + max[a] * 2f32.powi(-29);
+                assert!((c[a] - w).abs() <= tol, "voxel {k} channel {a}: {} vs {w}", c[a]);
+                assert!(w > 0.0 || c[a] == 0.0, "voxel {k} channel {a}: zero kept");
+            }
+            zeros += want(k).contains(&0.0) as usize;
         }
-        let dense: Vec<Rgb> = (0..n).map(|k| i0[k].max(Rgb::ZERO) * rho(k)).collect();
+        assert!(zeros > 10 && zeros < n, "{zeros}");
+        let dense: Vec<Rgb> = (0..n)
+            .map(|k| {
+                let c = lit.cells().get(k);
+                Rgb::new(c[1], c[2], c[3])
+            })
+            .collect();
         let mut checked = 0;
         for s in 0..200 {
             let v = Vec3::new(s as f32 * 0.037 % 6.0, s as f32 * 0.061 % 5.0, s as f32 * 0.023 % 7.0);

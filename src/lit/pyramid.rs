@@ -3,13 +3,15 @@
 //!
 //! Level 0 holds, per voxel, the pre-multiplied quantities (ρ, ρ·I0 (RGB), ρ·T_sun): it is the lit
 //! volume's own cells ([`LitVolume::cells`], the same allocation, not a copy); level l+1
-//! averages 2×2×2 blocks of level l, counting cells beyond the grid as empty, so every level keeps
-//! the cloud's total mass and the mass-weighted mean colour. A sample at level l interpolates
+//! averages 2×2×2 blocks of level l (decoded), counting cells beyond the grid as empty, so every
+//! level keeps the cloud's total mass and the mass-weighted mean colour (to the cells' rounding,
+//! [`Cells`]). A sample at level l interpolates
 //! trilinearly and divides by ρ to recover the colour, so empty space never darkens the colour.
 //! Each level has a block occupancy grid for empty-space skipping. Every level stores its cells
 //! only where ρ > 0 ([`crate::medium::sparse`]; level 0 shares the density grid's index).
 
 use super::LitVolume;
+use crate::half::Scaled16;
 use crate::math::{Trilinear, Vec3};
 use crate::medium::sparse::{FullIndex, VoxelField};
 use crate::medium::MajorantGrid;
@@ -19,8 +21,109 @@ use std::sync::Arc;
 /// Block edge (in the level's voxels) of each level's occupancy grid.
 pub const BLOCK: usize = 4;
 
-/// Values stored per voxel: ρ, ρ·I0.r, ρ·I0.g, ρ·I0.b, ρ·T_sun.
+/// A cell's values (decoded): ρ, ρ·I0.r, ρ·I0.g, ρ·I0.b, ρ·T_sun.
 pub type Cell = [f32; 5];
+
+/// A cell as stored: each channel a [`Scaled16`] code under its channel's scale (10 B).
+type Code = [Scaled16; 5];
+
+/// Cells stored per full voxel in 16 bits a channel (10 B a cell, was 20 B in f32: the lit
+/// volume's cells are `full`'s largest field at its clear-air cubes and last stage), one
+/// power-of-two scale per channel chosen from the channel's largest value. Every channel is ≥ 0
+/// (ρ, ρ·max(I0, 0), ρ·T_sun), which is what [`Scaled16`] codes. **Rounding:** every value from
+/// 2⁻²⁹ of its channel's largest up reads back within 2⁻¹² relative (round to nearest); smaller
+/// ones read 0 (an absolute error below 2⁻²⁹ of the largest); 0 reads exactly 0. Readers decode
+/// (a shift and a multiply a channel, the four colour channels in one SSE2 step) and keep their
+/// arithmetic in f32.
+#[derive(Clone, Debug)]
+pub struct Cells {
+    codes: VoxelField<Code>,
+    /// 2^k per channel ([`Scaled16::scale`]).
+    scale: [f32; 5],
+}
+
+impl Cells {
+    /// `at(grid index)` for every full voxel of `index` (each channel ≥ 0; it is called twice
+    /// per voxel: once for the channels' largest values, once to encode), zero elsewhere.
+    pub fn from_fn(index: Arc<FullIndex>, at: impl Fn(usize) -> Cell + Sync) -> Cells {
+        // max is exact and order-free: the same scales with any thread count.
+        let mut max = [0f32; 5];
+        for g in index.full_voxels() {
+            max = std::array::from_fn(|a| max[a].max(at(g)[a]));
+        }
+        let k = max.map(|m| Scaled16::exponent_for(f64::from(m)));
+        let codes = VoxelField::from_fn(index, [Scaled16::ZERO; 5], |g| encode(at(g), k));
+        Cells {
+            codes,
+            scale: k.map(Scaled16::scale),
+        }
+    }
+
+    /// From every full voxel's cell in grid order (`cells.len()` = `index.count()`).
+    fn from_packed(index: Arc<FullIndex>, cells: &[Cell]) -> Cells {
+        let max = cells.iter().fold([0f32; 5], |m, c| std::array::from_fn(|a| m[a].max(c[a])));
+        let k = max.map(|m| Scaled16::exponent_for(f64::from(m)));
+        Cells {
+            codes: VoxelField::new(index, [Scaled16::ZERO; 5], cells.iter().map(|c| encode(*c, k))),
+            scale: k.map(Scaled16::scale),
+        }
+    }
+
+    /// `t` over the cells' slots ([`VoxelField::slots`]).
+    #[inline]
+    pub fn slots(&self, t: &Trilinear) -> Trilinear {
+        self.codes.slots(t)
+    }
+
+    /// ρ in slot `s`.
+    #[inline(always)]
+    pub fn rho_at_slot(&self, s: usize) -> f32 {
+        self.codes.at_slot(s)[0].decode(self.scale[0])
+    }
+
+    /// ρ·I0 (RGB) and ρ·T_sun in slot `s`, decoded at once.
+    #[inline(always)]
+    pub fn rest_at_slot(&self, s: usize) -> [f32; 4] {
+        let c = self.codes.at_slot(s);
+        let sc = &self.scale;
+        Scaled16::decode4([c[1], c[2], c[3], c[4]], [sc[1], sc[2], sc[3], sc[4]])
+    }
+
+    /// The cell in slot `s` (from [`Self::slots`]).
+    #[inline(always)]
+    pub fn at_slot(&self, s: usize) -> Cell {
+        let r = self.rest_at_slot(s);
+        [self.rho_at_slot(s), r[0], r[1], r[2], r[3]]
+    }
+
+    /// The cell of grid voxel `g` (zero where empty).
+    #[inline]
+    pub fn get(&self, g: usize) -> Cell {
+        self.at_slot(self.codes.index().slot(g))
+    }
+
+    /// The full voxels' cells in grid order.
+    pub fn packed(&self) -> impl Iterator<Item = Cell> + '_ {
+        (1..=self.codes.index().count()).map(|s| self.at_slot(s))
+    }
+
+    /// The index the cells are addressed by.
+    #[inline]
+    pub fn index(&self) -> &Arc<FullIndex> {
+        self.codes.index()
+    }
+
+    /// Bytes held by the codes (the index is shared and counted apart).
+    pub fn bytes(&self) -> usize {
+        self.codes.bytes()
+    }
+}
+
+/// `c` coded under the channels' scale exponents `k`.
+#[inline]
+fn encode(c: Cell, k: [i32; 5]) -> Code {
+    std::array::from_fn(|a| Scaled16::encode(f64::from(c[a]), k[a]))
+}
 
 /// One level of the pyramid.
 #[derive(Clone, Debug)]
@@ -31,7 +134,7 @@ pub struct Level {
     pub voxel_size: Vec3,
     /// Pre-multiplied cells, x fastest, stored where ρ > 0 (zero elsewhere); level 0's are the
     /// lit volume's cells (shared).
-    pub cells: Arc<VoxelField<Cell>>,
+    pub cells: Arc<Cells>,
     /// Upper bounds of ρ per block of [`BLOCK`]³ cells (with a one-cell apron).
     pub occupancy: MajorantGrid,
 }
@@ -42,14 +145,11 @@ impl Level {
     #[inline]
     pub fn sample(&self, v: Vec3) -> Option<Cell> {
         let t = self.cells.slots(&Trilinear::new(self.dims, v.to_array()));
-        let rho = t.blend(|s| self.cells.at_slot(s)[0]);
+        let rho = t.blend(|s| self.cells.rho_at_slot(s));
         if rho <= 1e-12 {
             return None;
         }
-        let c = t.blend(|s| {
-            let c = self.cells.at_slot(s);
-            Vec4::new(c[1], c[2], c[3], c[4])
-        });
+        let c = t.blend(|s| Vec4::from_array(self.cells.rest_at_slot(s)));
         Some([rho, c.x, c.y, c.z, c.w])
     }
 }
@@ -100,11 +200,12 @@ pub fn children(d: [usize; 3], c: [usize; 3]) -> impl Iterator<Item = usize> {
     span(2).flat_map(move |kk| span(1).flat_map(move |jj| span(0).map(move |ii| ii + d[0] * (jj + d[1] * kk))))
 }
 
-/// Average 2×2×2 blocks; cells beyond the grid count as empty (mass-preserving). Walks the
-/// finer level's full cells only, in grid order, so each coarse cell adds its full children in
-/// the order of [`children`] (its empty ones add nothing): the coarse level is never held for
-/// every cell of its grid (20 B per coarse cell, the 200×160×120 cloud's `full` peak), only its
-/// ρ (4 B per coarse cell, for its index) while it is built.
+/// Average 2×2×2 blocks of the decoded cells, then code them ([`Cells`]); cells beyond the grid
+/// count as empty (mass-preserving). Walks the finer level's full cells only, in grid order, so
+/// each coarse cell adds its full children in the order of [`children`] (its empty ones add
+/// nothing): the coarse level is never held for every cell of its grid (20 B per coarse cell,
+/// the 200×160×120 cloud's `full` peak), only its ρ (4 B per coarse cell, for its index) while
+/// it is built, and its full cells in f32 until they are coded.
 fn downsample(l: &Level) -> Level {
     let d = l.dims;
     let nd = [d[0].div_ceil(2), d[1].div_ceil(2), d[2].div_ceil(2)];
@@ -132,10 +233,11 @@ fn downsample(l: &Level) -> Level {
         }
     }
     cells[1..].iter_mut().for_each(|c| *c = c.map(|x| x * 0.125));
+    let cells = Cells::from_packed(index, &cells[1..]);
     Level {
         dims: nd,
         voxel_size: l.voxel_size * 2.0,
-        cells: Arc::new(VoxelField::from_slots(index, cells)),
+        cells: Arc::new(cells),
         occupancy,
     }
 }
@@ -174,12 +276,63 @@ mod tests {
             }
             s
         };
+        // Level l averages level l − 1's decoded cells exactly (to f32) and codes them: every
+        // value ≥ 0 within 2⁻¹² of itself, so each level's total within 2⁻¹² of the one above.
         let t0 = total(&p.levels[0]);
-        for l in &p.levels[1..] {
+        for (li, l) in p.levels.iter().enumerate().skip(1) {
             let t = total(l);
             for a in 0..5 {
-                assert!((t[a] - t0[a]).abs() < 1e-4 * t0[a].max(1.0), "level {:?}: {t:?} vs {t0:?}", l.dims);
+                let tol = (li as f64 / 4096.0 + 1e-5) * t0[a];
+                assert!((t[a] - t0[a]).abs() <= tol, "level {:?}: {t:?} vs {t0:?}", l.dims);
             }
+        }
+    }
+
+    /// The cell codec: each channel under its own scale (magnitudes 10⁻⁶ to 10⁶ apart) reads
+    /// back within 2⁻¹² relative, zeros stay exactly 0, values far below their channel's largest
+    /// (< 2⁻³⁰ of it) read 0, a channel of zeros reads 0, and 10 B a cell.
+    #[test]
+    fn cells_round_trip_each_channel_under_its_own_scale() {
+        let n = 4000;
+        let dims = [n, 1, 1];
+        let index = Arc::new(FullIndex::build(dims, &vec![1.0; n], |r| r > 0.0));
+        let mut rng = crate::math::Rng::new(7, 3);
+        let mag = [3e-6f32, 1.0, 7e5, 0.02, 0.0];
+        let want: Vec<Cell> = (0..n)
+            .map(|g| {
+                let x = |a: usize| match g % 97 {
+                    // Zeros, and values far below the channel's largest.
+                    0 => 0.0,
+                    1 => mag[a] * 2f32.powi(-31),
+                    _ => mag[a] * (-20.0 * rng.uniform()).exp2(),
+                };
+                std::array::from_fn(x)
+            })
+            .collect();
+        let cells = Cells::from_fn(index, |g| want[g]);
+        assert_eq!(cells.bytes(), 10 * (n + 1));
+        let mut worst = [0f32; 5];
+        for (g, w) in want.iter().enumerate() {
+            let c = cells.get(g);
+            assert_eq!(c, cells.packed().nth(g).unwrap());
+            for a in 0..5 {
+                if g % 97 <= 1 {
+                    assert_eq!(c[a], 0.0, "voxel {g} channel {a}: {} → {}", w[a], c[a]);
+                } else if w[a] > 0.0 {
+                    worst[a] = worst[a].max((c[a] - w[a]).abs() / w[a]);
+                } else {
+                    assert_eq!(c[a], 0.0);
+                }
+            }
+        }
+        for (a, w) in worst[..4].iter().enumerate() {
+            assert!(*w <= 1.0 / 4096.0 && *w > 1.0 / 8192.0, "channel {a}: relative error {w}");
+        }
+        assert_eq!(worst[4], 0.0, "a channel of zeros");
+        // Each channel's scale is its own: the code's top exponent at each channel's largest.
+        for a in 0..4 {
+            let k = Scaled16::exponent_for(f64::from(want.iter().map(|c| c[a]).fold(0.0, f32::max)));
+            assert_eq!(cells.scale[a], Scaled16::scale(k), "channel {a}");
         }
     }
 }
