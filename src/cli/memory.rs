@@ -129,7 +129,12 @@ impl GridMemory {
 /// in the eighth round (15.0 and 66.0 MB), `full` in the ninth (the bands solved one by one, no
 /// assembled operator held, the border cubes reduced to face light: 15.3, 49.4 and 308 MB), then
 /// in the eleventh (the finest multigrid level unscaled with 24 B rows, the sun transmittance and
-/// I1 in 16 bits: 14.7, 42.9 and 258 MB). The estimates are 45–52 % above those (on the safe side). The index's 0.25 B per grid voxel is rounded up to 1 B. `single` and
+/// I1 in 16 bits: 14.7, 42.9 and 258 MB), then in the twelfth (the operator in 16-bit codes with
+/// its neighbour coding per run, I0, the re-solve's right-hand side and the lit cells in 16 bits:
+/// 11.9, 30.0 and 166 MB; `diffusion` 44.3 MB at 200×160×120). The per-full-voxel term of `full`,
+/// 60 B, stays above the measured increments (54–59 B per full voxel at the two larger clouds), so
+/// a cloud that fills its box is not under-estimated; the estimates are 65–75 % above the peaks
+/// (on the safe side). The index's 0.25 B per grid voxel is rounded up to 1 B. `single` and
 /// `reference` hold the density, a dense copy of its box and a majorant or transmittance grid
 /// (16 B per grid voxel, an upper bound).
 pub fn grid_memory(method: Method) -> GridMemory {
@@ -152,7 +157,7 @@ pub fn grid_memory(method: Method) -> GridMemory {
             fixed: 16 * MB,
             per_grid: 1,
             per_box: 10,
-            per_full: 95,
+            per_full: 60,
         },
     }
 }
