@@ -3,11 +3,11 @@
 
 use cloudgi::diffusion::flux::{diffuse_flux, FluxField};
 use cloudgi::diffusion::{solve_diffusion, BoundaryLight, DiffusionSettings, DiffusionSolution};
-use cloudgi::half::Field16;
 use cloudgi::incident::{compute, FirstScattering, IncidentLight, IncidentSettings, IncidentSources};
 use cloudgi::lighting::{DirectionBins, Sky, Sun};
 use cloudgi::lit::LitVolume;
 use cloudgi::math::{Rgb, Vec3};
+use cloudgi::medium::field16::Field16;
 use cloudgi::medium::sparse::VoxelField;
 use cloudgi::medium::{Grid3, Medium};
 use cloudgi::render::diffusion::i0_rgb;

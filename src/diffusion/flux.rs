@@ -22,7 +22,7 @@
 //! zero where ρ = 0, and is interpolated density-weighted like I0: trilinear(ρ I1)/trilinear(ρ).
 //!
 //! **I0 in 16 bits.** The solution keeps I0 rounded to ≤ 2⁻¹² relative
-//! ([`crate::half::Field16`]), and I1 is made of its differences: an interior face's
+//! ([`crate::medium::field16::Field16`]), and I1 is made of its differences: an interior face's
 //! −D_f (I_N − I_P)/h moves by at most D_f/h·2⁻¹²(|I_N| + |I_P|), i.e. I1 by about
 //! 2⁻¹¹·I0/τ_tr with τ_tr = ρσtr·h (floored at τ_min) the voxel's transport depth. That is small
 //! against I1 where the gradient is resolved, and can be a large part of it only where I0 is

@@ -84,9 +84,10 @@ pub use multigrid::MAX_BOX_ROW_CELLS;
 pub mod slab;
 
 use crate::error::{Error, Result};
-use crate::half::{Field16, Signed16};
+use crate::half::Signed16;
 use crate::incident::IncidentLight;
 use crate::math::Rgb;
+use crate::medium::field16::Field16;
 use crate::medium::sparse::FullIndex;
 use crate::medium::Medium;
 use boundary::face_index;

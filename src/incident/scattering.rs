@@ -18,8 +18,8 @@
 //! band.
 
 use super::Acc;
-use crate::half::Field16;
 use crate::math::{Rgb, Vec3};
+use crate::medium::field16::Field16;
 use crate::medium::sparse::{FullIndex, VoxelField};
 use crate::optics::ScaledOptics;
 use rayon::prelude::*;

@@ -11,6 +11,7 @@
 
 pub mod dda;
 pub mod density;
+pub mod field16;
 pub mod grid;
 pub mod loaders;
 pub mod majorant;

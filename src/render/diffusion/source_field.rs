@@ -12,9 +12,9 @@
 //! at the full voxels (an empty corner reads the zero record): the field costs 48 B per full
 //! voxel, not the 160 B per voxel of the cloud's box it took when every box voxel had a record.
 
-use crate::half::Field16;
 use crate::lighting::Sun;
 use crate::math::{Rgb, Trilinear, Vec3, SH_COEFFS};
+use crate::medium::field16::Field16;
 use crate::medium::sparse::{FullIndex, VoxelField};
 use crate::medium::Medium;
 use crate::optics::Optics;
