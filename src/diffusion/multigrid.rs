@@ -690,23 +690,11 @@ macro_rules! with_rows {
         let level: &Level = $level;
         match &level.rows {
             Rows::Narrow(rows) => {
-                let $c = Coded {
-                    red: level.red,
-                    codes: &rows.codes,
-                    runs: &rows.runs,
-                    mine: level.scales(),
-                    theirs: [level.cpl_scale; 4],
-                };
+                let $c = Coded::of(level, rows);
                 $pass
             }
             Rows::Wide(rows) => {
-                let $c = Coded {
-                    red: level.red,
-                    codes: &rows.codes,
-                    runs: &rows.runs,
-                    mine: level.scales(),
-                    theirs: [level.cpl_scale; 4],
-                };
+                let $c = Coded::of(level, rows);
                 $pass
             }
         }
@@ -905,6 +893,18 @@ fn code_rows<Z: Dz>(unk: &[u32], plain: &(impl Fn(usize, u32) -> Plain + Sync), 
 }
 
 impl<'a, Z: Dz> Coded<'a, Z> {
+    /// `level`'s passes' view of its `runs` (the level's own [`Rows`] variant).
+    #[inline(always)]
+    fn of(level: &'a Level, runs: &'a Runs<Z>) -> Coded<'a, Z> {
+        Coded {
+            red: level.red,
+            codes: &runs.codes,
+            runs: &runs.runs,
+            mine: level.scales(),
+            theirs: [level.cpl_scale; 4],
+        }
+    }
+
     /// Entries, pads included.
     fn len(&self) -> usize {
         self.codes.len()
