@@ -745,18 +745,22 @@ mod tests {
     use crate::math::{Rng, Vec3};
     use crate::medium::Grid3;
 
+    /// A 9×7×6 cloud whose voxels are full with probability `fill`, their densities
+    /// log-uniform over 10^`decades[0]` … 10^(`decades[0]` + `decades[1]`), voxel size `h` (m).
+    fn random_cloud(mut rng: Rng, fill: f32, decades: [f32; 2], h: Vec3) -> Medium {
+        let mut grid = Grid3::filled([9, 7, 6], 0.0);
+        for v in grid.data_mut() {
+            if rng.uniform() < fill {
+                *v = 10f32.powf(rng.uniform() * decades[1] + decades[0]);
+            }
+        }
+        Medium::new(grid, Vec3::ZERO, h, 1.0, Rgb::new(0.99, 0.9, 0.999), 0.85)
+    }
+
     #[test]
     fn rows_made_on_demand_are_the_assembled_ones() {
         // Full voxels touching the grid's sides too (neighbours beyond the grid read ρ = 0).
-        let d = [9, 7, 6];
-        let mut grid = Grid3::filled(d, 0.0);
-        let mut rng = Rng::new(5, 3);
-        for v in grid.data_mut() {
-            if rng.uniform() < 0.7 {
-                *v = 10f32.powf(rng.uniform() * 3.0 - 2.0);
-            }
-        }
-        let m = Medium::new(grid, Vec3::ZERO, Vec3::new(1.0, 2.0, 1.5), 1.0, Rgb::new(0.99, 0.9, 0.999), 0.85);
+        let m = random_cloud(Rng::new(5, 3), 0.7, [-2.0, 3.0], Vec3::new(1.0, 2.0, 1.5));
         let dom = Domain::of(&m).unwrap();
         let band = BandOperator::new(&m, 1, 1e-3, &dom);
         let a = band.assembled();
@@ -781,15 +785,7 @@ mod tests {
     fn a_start_gives_its_residual_and_the_solution_from_it_is_the_solution() {
         use crate::incident::{compute, IncidentSettings, IncidentSources};
         use crate::lighting::DirectionBins;
-        let d = [9, 7, 6];
-        let mut grid = Grid3::filled(d, 0.0);
-        let mut rng = Rng::new(8, 1);
-        for v in grid.data_mut() {
-            if rng.uniform() < 0.8 {
-                *v = 10f32.powf(rng.uniform() * 2.0 - 1.0);
-            }
-        }
-        let m = Medium::new(grid, Vec3::ZERO, Vec3::ONE, 1.0, Rgb::new(0.99, 0.9, 0.999), 0.85);
+        let m = random_cloud(Rng::new(8, 1), 0.8, [-1.0, 2.0], Vec3::ONE);
         let sources = IncidentSources {
             bin_radiance: vec![Rgb::ONE; 96],
             sun: Some((Vec3::new(0.3, 1.0, 0.2).normalize(), Rgb::splat(2.0))),
