@@ -90,13 +90,14 @@ impl Image {
     /// and every `NAME.R/G/B` triple as a layer.
     pub fn read_exr(path: &Path) -> Result<Image> {
         let name = path.display().to_string();
+        let bytes = crate::io::read_regular(path, "an OpenEXR image")?;
         let img = exr::prelude::read()
             .no_deep_data()
             .largest_resolution_level()
             .all_channels()
             .first_valid_layer()
             .all_attributes()
-            .from_file(path)
+            .from_buffered(std::io::Cursor::new(bytes))
             .map_err(|e| match e {
                 exr::error::Error::Io(io) => Error::io(path, io),
                 other => Error::format(&name, format!("not a readable OpenEXR image: {other}")),

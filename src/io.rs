@@ -1,19 +1,88 @@
-//! File output that never leaves a partial file: write beside the target, then rename.
+//! File input with a cap on what is read, and file output that never leaves a partial file:
+//! write a hidden temporary beside the target, then rename.
 
 use crate::error::{Error, Result};
-use std::io::Write;
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Mutex, MutexGuard};
 
-/// The temporary name used while writing `path`.
-fn temp_name(path: &Path) -> PathBuf {
-    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
-    name.push(format!(".tmp{}", std::process::id()));
-    path.with_file_name(name)
+/// Most bytes read from a text input (a scene file, a `.json` sidecar): 16 MiB, a thousand times
+/// the longest hand-written scene, so a path to an endless device (`/dev/zero`) or a huge file
+/// fails at once instead of filling memory.
+pub const MAX_TEXT_BYTES: u64 = 16 << 20;
+
+/// Read at most `max` bytes of `path`; more is an error that names `what` the file should be.
+pub fn read_capped(path: &Path, max: u64, what: &str) -> Result<Vec<u8>> {
+    let f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut bytes = Vec::new();
+    f.take(max + 1).read_to_end(&mut bytes).map_err(|e| Error::io(path, e))?;
+    if bytes.len() as u64 > max {
+        return Err(Error::format(
+            path.display().to_string(),
+            format!("more than {}: {what} is far smaller; check the path", size_text(max)),
+        ));
+    }
+    Ok(bytes)
 }
 
-/// Write `bytes` to the temporary name of `path`; on failure remove it.
+/// Read a binary input (a grid, an image): it must be a regular file, and no more than the
+/// size it had when opened is read, so a device or a file that grows cannot exhaust memory.
+pub fn read_regular(path: &Path, what: &str) -> Result<Vec<u8>> {
+    let f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let meta = f.metadata().map_err(|e| Error::io(path, e))?;
+    if !meta.is_file() {
+        return Err(Error::format(
+            path.display().to_string(),
+            format!("not a regular file (a device, pipe or folder); give the path of {what}"),
+        ));
+    }
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    f.take(meta.len()).read_to_end(&mut bytes).map_err(|e| Error::io(path, e))?;
+    Ok(bytes)
+}
+
+/// `n` bytes in the largest whole unit.
+fn size_text(n: u64) -> String {
+    if n >= 1 << 20 && n % (1 << 20) == 0 {
+        format!("{} MiB", n >> 20)
+    } else {
+        format!("{n} bytes")
+    }
+}
+
+/// The temporaries being written now; removed by [`remove_temporaries`] on an interrupt.
+static TEMPORARIES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+fn temporaries() -> MutexGuard<'static, Vec<PathBuf>> {
+    TEMPORARIES.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Remove every temporary file being written (called when the process is interrupted). It waits
+/// for a set of renames in progress, so the outputs are either all in place or none. Returns
+/// whether any was removed.
+pub fn remove_temporaries() -> bool {
+    let mut t = temporaries();
+    let any = !t.is_empty();
+    for p in t.drain(..) {
+        let _ = std::fs::remove_file(p);
+    }
+    any
+}
+
+/// A short hidden temporary name in the folder of `path`: it fits every file system's 255-byte
+/// name limit whatever the length of the target's name.
+fn temp_name(path: &Path) -> PathBuf {
+    static NEXT: AtomicUsize = AtomicUsize::new(0);
+    let n = NEXT.fetch_add(1, Ordering::Relaxed);
+    path.with_file_name(format!(".cloudgi-{}-{n}.tmp", std::process::id()))
+}
+
+/// Write `bytes` to a temporary beside `path` (registered for removal on an interrupt); on
+/// failure remove it.
 fn write_temp(path: &Path, bytes: &[u8]) -> Result<PathBuf> {
     let tmp = temp_name(path);
+    temporaries().push(tmp.clone());
     let result = (|| {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(bytes)?;
@@ -21,6 +90,7 @@ fn write_temp(path: &Path, bytes: &[u8]) -> Result<PathBuf> {
     })();
     result.map(|()| tmp.clone()).map_err(|e| {
         let _ = std::fs::remove_file(&tmp);
+        temporaries().retain(|t| t != &tmp);
         Error::io(path, e)
     })
 }
@@ -32,30 +102,43 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 
 /// Write several files as one: every file goes to its temporary name first, and only when all
 /// of them are written are they renamed into place, so a failure on one (a full disk, a folder
-/// in the way) leaves none of them behind.
+/// in the way) leaves none of them behind; a rename that fails removes the files already
+/// renamed.
 pub fn write_atomic_all(files: &[(&Path, &[u8])]) -> Result<()> {
     let mut temps: Vec<PathBuf> = Vec::with_capacity(files.len());
-    let cleanup = |temps: &[PathBuf]| {
-        for t in temps {
-            let _ = std::fs::remove_file(t);
+    let forget = |temps: &[PathBuf]| {
+        let mut t = temporaries();
+        for p in temps {
+            let _ = std::fs::remove_file(p);
+            t.retain(|x| x != p);
         }
     };
     for (path, bytes) in files {
         match write_temp(path, bytes) {
             Ok(t) => temps.push(t),
             Err(e) => {
-                cleanup(&temps);
+                forget(&temps);
                 return Err(e);
             }
         }
     }
+    // The lock keeps an interrupt from removing temporaries halfway through the renames.
+    let mut pending = temporaries();
+    let mut result = Ok(());
     for (i, ((path, _), tmp)) in files.iter().zip(&temps).enumerate() {
         if let Err(e) = std::fs::rename(tmp, path) {
-            cleanup(&temps[i..]);
-            return Err(Error::io(*path, e));
+            for (done, _) in &files[..i] {
+                let _ = std::fs::remove_file(done);
+            }
+            for t in &temps[i..] {
+                let _ = std::fs::remove_file(t);
+            }
+            result = Err(Error::io(*path, e));
+            break;
         }
     }
-    Ok(())
+    pending.retain(|x| !temps.contains(x));
+    result
 }
 
 #[cfg(test)]
@@ -73,5 +156,36 @@ mod tests {
         assert_eq!(std::fs::read(&a).unwrap(), b"1");
         assert_eq!(std::fs::read(&b).unwrap(), b"2");
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
+    }
+
+    #[test]
+    fn a_failing_rename_removes_the_files_already_renamed() {
+        let dir = tempfile::tempdir().unwrap();
+        let a = dir.path().join("a.exr");
+        // A non-empty folder where the second file goes: its temporary is written, its rename fails.
+        let b = dir.path().join("b.png");
+        std::fs::create_dir_all(b.join("inside")).unwrap();
+        assert!(write_atomic_all(&[(&a, b"1"), (&b, b"2")]).is_err());
+        let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(left, ["b.png"], "no a.exr, no temporary file");
+    }
+
+    #[test]
+    fn temporary_names_fit_any_file_system_and_long_targets_still_write() {
+        let dir = tempfile::tempdir().unwrap();
+        let long = dir.path().join(format!("{}.exr", "n".repeat(250)));
+        assert!(temp_name(&long).file_name().unwrap().len() < 40);
+        write_atomic(&long, b"x").unwrap();
+        assert_eq!(std::fs::read(&long).unwrap(), b"x");
+    }
+
+    #[test]
+    fn reading_is_capped() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("s.toml");
+        std::fs::write(&p, vec![b'#'; 2048]).unwrap();
+        assert_eq!(read_capped(&p, 2048, "a scene").unwrap().len(), 2048);
+        let e = read_capped(&p, 1024, "a scene").unwrap_err().to_string();
+        assert!(e.contains("s.toml") && e.contains("a scene"), "{e}");
     }
 }

@@ -10,8 +10,9 @@ fn main() {
     let args = cli::Cli::parse();
     match cli::run(args) {
         Ok(()) => {}
+        Err(e) if cli::console::is_broken_pipe(&e) => std::process::exit(cli::console::EXIT_BROKEN_PIPE),
         Err(e) => {
-            eprintln!("error: {e}");
+            cli::console::note(format_args!("error: {}", cli::shortened(&e.to_string())));
             std::process::exit(1);
         }
     }

@@ -197,15 +197,20 @@ pub const BUILTIN: &str = "built-in scene";
 impl SceneDesc {
     /// Parse TOML text; `file` names the source in error messages.
     pub fn from_toml(text: &str, file: &str) -> Result<Self> {
-        toml::from_str(text).map_err(|e| Error::Parse {
+        let desc = toml::from_str(text).map_err(|e| Error::Parse {
             file: file.to_string(),
             message: e.to_string().trim_end().to_string(),
-        })
+        })?;
+        // serde reads a `[T; 3]` from the first three items and ignores the rest.
+        if let Ok(table) = text.parse::<toml::Table>() {
+            check_array_lengths(&table, "", file)?;
+        }
+        Ok(desc)
     }
 
     /// Read and parse a scene file.
     pub fn from_file(path: &Path) -> Result<Self> {
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let bytes = crate::io::read_capped(path, crate::io::MAX_TEXT_BYTES, "a scene file")?;
         let text = String::from_utf8(bytes).map_err(|e| {
             Error::format(
                 path.display().to_string(),
@@ -222,6 +227,77 @@ impl SceneDesc {
     pub fn to_toml(&self) -> String {
         toml::to_string_pretty(self).unwrap_or_default()
     }
+}
+
+/// Largest light the scene may carry, in W/m² (sun irradiance) or W/(m²·sr) (sky radiance, an
+/// environment map's scale on its radiance): 1e30, the brightest sun every method is tested to
+/// render finitely (tests/nonnegative.rs). The methods multiply it by phase-function peaks (up to
+/// ~1e4 sr⁻¹) and sum it over orders and samples in f32, whose largest value is 3.4e38, so a
+/// brighter light overflows to inf or NaN; the real sun gives 1361 W/m².
+pub const MAX_LIGHT: f32 = 1e30;
+
+/// Largest distance from the world's origin of the medium's corner and the camera (m): 1e7, past
+/// the Earth's radius (6.4e6 m). An f32 position there resolves 1 m, a fraction of any voxel;
+/// much farther, ray–box intersections lose the voxels and the methods give NaN.
+pub const MAX_COORDINATE: f32 = 1e7;
+
+/// Largest extinction σt (m⁻¹): 1e9, an optical depth of 1 per nanometre, denser than any medium
+/// light crosses. The optical depths σt·ρ·length the methods form in f32 then stay below 1e30
+/// across any grid of at most 1e6-m voxels with densities up to 1e15.
+pub const MAX_SIGMA_T: f32 = 1e9;
+
+/// Largest |exposure| of the PNG preview (stops): 2^64 spans any radiance from 1e-19 to 1e19;
+/// past 2^127 the f32 scale factor itself overflows.
+pub const MAX_EXPOSURE: f32 = 64.0;
+
+/// Refuse finite magnitudes no f32 render can hold (the owners refuse NaN, inf and negatives).
+fn check_magnitudes(d: &SceneDesc, f: &str) -> Result<()> {
+    let light = format!("at most {MAX_LIGHT:e}; the sun gives 1361 W/m² (default 3), larger values overflow f32 in the methods");
+    let place = format!("each coordinate within ±{MAX_COORDINATE:e} m; move the scene near the origin");
+    let rows: [(&str, Vec<f32>, f32, &str); 7] = [
+        ("sun.irradiance", d.sun.irradiance.to_vec(), MAX_LIGHT, &light),
+        ("sky.radiance", d.sky.radiance.to_vec(), MAX_LIGHT, &light),
+        ("sky.scale", vec![d.sky.scale], MAX_LIGHT, &light),
+        (
+            "medium.sigma_t",
+            vec![d.medium.sigma_t],
+            MAX_SIGMA_T,
+            "at most 1e9 m⁻¹ (an optical depth of 1 per nanometre); clouds have 0.01–1 m⁻¹",
+        ),
+        ("medium.origin", d.medium.origin.to_vec(), MAX_COORDINATE, &place),
+        ("camera.position", d.camera.position.to_vec(), MAX_COORDINATE, &place),
+        ("camera.look_at", d.camera.look_at.to_vec(), MAX_COORDINATE, &place),
+    ];
+    for (key, values, max, what) in rows {
+        check(f, key, values.iter().all(|v| !v.is_finite() || v.abs() <= max), &values, what)?;
+    }
+    check(
+        f,
+        "render.exposure",
+        d.render.exposure.abs() <= MAX_EXPOSURE || !d.render.exposure.is_finite(),
+        d.render.exposure,
+        "at most ±64 stops; past 127 the preview's scale factor overflows f32",
+    )
+}
+
+/// Every array of a scene file holds three numbers (a colour, a position, a direction, a
+/// resolution): a longer one is refused, naming its key.
+fn check_array_lengths(table: &toml::Table, prefix: &str, file: &str) -> Result<()> {
+    for (key, value) in table {
+        let name = format!("{prefix}{key}");
+        match value {
+            toml::Value::Table(t) => check_array_lengths(t, &format!("{name}."), file)?,
+            toml::Value::Array(a) if a.len() > 3 => {
+                return Err(Error::invalid(
+                    file,
+                    name,
+                    format!("has {} items; give exactly 3, e.g. [1.0, 1.0, 1.0]", a.len()),
+                ))
+            }
+            _ => {}
+        }
+    }
+    Ok(())
 }
 
 /// Settings of the render itself (from `[render]` after validation): the output's own, and each
@@ -362,6 +438,7 @@ impl Scene {
             r.forward_fraction,
             "the δ-M forward fraction is in [0, 1), e.g. 0.43 (g⁸ for g = 0.9); 0 turns it off",
         )?;
+        check_magnitudes(&desc, f)?;
         // Each stage's settings from its keys, validated by the stage that owns them.
         let mut render = RenderSettings::default();
         r.apply(&mut render);

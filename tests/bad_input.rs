@@ -444,6 +444,283 @@ fn corrupt_npy_raw_and_vdb_files() {
     );
 }
 
+#[test]
+fn arrays_longer_than_three_and_magnitudes_no_f32_render_holds() {
+    scene_rows(&[
+        // serde would read the first three items and drop the rest.
+        (
+            "[medium]\nalbedo = [0.5, 0.5, 0.5, \"junk\"]\n",
+            &["s.toml", "medium.albedo", "4 items", "exactly 3"],
+        ),
+        (
+            "[medium]\nresolution = [40, 32, 24, 7]\n",
+            &["s.toml", "medium.resolution", "4 items"],
+        ),
+        ("[sun]\ndirection = [0.0, 1.0, 0.0, 1.0]\n", &["s.toml", "sun.direction", "4 items"]),
+        (
+            "[camera]\nposition = [0.0, 1.0, 0.0, 1.0, 2.0]\n",
+            &["s.toml", "camera.position", "5 items"],
+        ),
+        ("[sky]\nradiance = [0.1, 0.1, 0.1, 0.1]\n", &["s.toml", "sky.radiance", "4 items"]),
+        // Finite but past what f32 sums hold: named with the bound and its reason.
+        (
+            "[sun]\nirradiance = [1e38, 1e38, 1e38]\n",
+            &["s.toml", "sun.irradiance", "1e30", "1361"],
+        ),
+        ("[sun]\nirradiance = [3.0, inf, 3.0]\n", &["s.toml", "sun.irradiance"]),
+        ("[sun]\nirradiance = [nan, 3.0, 3.0]\n", &["s.toml", "sun.irradiance"]),
+        ("[sky]\nradiance = [1e35, 0.4, 0.8]\n", &["s.toml", "sky.radiance", "1e30"]),
+        ("[sky]\nradiance = [inf, 0.4, 0.8]\n", &["s.toml", "sky.radiance"]),
+        (
+            "[sky]\nmodel = \"envmap\"\npath = \"env.exr\"\nscale = 1e38\n",
+            &["s.toml", "sky.scale", "1e30"],
+        ),
+        ("[medium]\nsigma_t = 1e12\n", &["s.toml", "medium.sigma_t", "1e9"]),
+        ("[medium]\norigin = [1e12, 0.0, 0.0]\n", &["s.toml", "medium.origin", "1e7"]),
+        ("[camera]\nposition = [0.0, 1e11, 0.0]\n", &["s.toml", "camera.position", "1e7"]),
+        ("[camera]\nlook_at = [0.0, 0.0, -1e9]\n", &["s.toml", "camera.look_at", "1e7"]),
+        ("[render]\nexposure = 1e30\n", &["s.toml", "render.exposure", "64"]),
+        ("[render]\nexposure = inf\n", &["s.toml", "render.exposure"]),
+        // NaN, inf, negative and zero of the numeric keys not covered above.
+        ("[medium]\nvoxel_size = nan\n", &["s.toml", "medium.voxel_size"]),
+        ("[medium]\nvoxel_size = inf\n", &["s.toml", "medium.voxel_size"]),
+        ("[medium]\norigin = [0.0, inf, 0.0]\n", &["s.toml", "medium.origin"]),
+        ("[medium]\ng = inf\n", &["s.toml", "medium.g"]),
+        ("[medium]\nalbedo = [-0.1, 0.5, 0.5]\n", &["s.toml", "medium.albedo"]),
+        ("[sun]\nangular_diameter_deg = nan\n", &["s.toml", "sun.angular_diameter_deg"]),
+        ("[sky]\nmodel = \"atmosphere\"\naltitude_m = inf\n", &["s.toml", "sky.altitude_m"]),
+        ("[ground]\nheight = inf\n", &["s.toml", "ground.height"]),
+        ("[ground]\nalbedo = [nan, 0.3, 0.3]\n", &["s.toml", "ground.albedo"]),
+        ("[camera]\nfov_deg = nan\n", &["s.toml", "camera.fov_deg"]),
+        ("[camera]\nfov_deg = -10.0\n", &["s.toml", "camera.fov_deg"]),
+        ("[camera]\nlook_at = [nan, 0.0, 0.0]\n", &["s.toml", "camera.look_at"]),
+        ("[render]\nstep = nan\n", &["s.toml", "render.step"]),
+        ("[render]\ntime_limit = nan\n", &["s.toml", "render.time_limit"]),
+        ("[render]\ntime_limit = inf\n", &["s.toml", "render.time_limit"]),
+        ("[render]\nforward_fraction = nan\n", &["s.toml", "render.forward_fraction"]),
+        ("[render]\nforward_fraction = 1.0\n", &["s.toml", "render.forward_fraction"]),
+        ("[render]\nsolver_tolerance = nan\n", &["s.toml", "render.solver_tolerance"]),
+        (
+            "[render]\npropagation_tolerance = nan\n",
+            &["s.toml", "render.propagation_tolerance"],
+        ),
+        (
+            "[render]\nlow_density_threshold = nan\n",
+            &["s.toml", "render.low_density_threshold"],
+        ),
+        (
+            "[render]\nlow_density_threshold = inf\n",
+            &["s.toml", "render.low_density_threshold"],
+        ),
+        ("[render]\nsurface_depth = nan\n", &["s.toml", "render.surface_depth"]),
+        ("[render]\nsurface_depth = -1.0\n", &["s.toml", "render.surface_depth"]),
+        ("[render]\nsurface_band = 2.0\n", &["s.toml", "render.surface_band"]),
+    ]);
+    // σt times the grid's densest voxel is the extinction the methods use.
+    let dense = npy(
+        "{'descr': '<f4', 'fortran_order': False, 'shape': (1, 2, 2), }",
+        &f32s(&[1.0, 1.0, 1e30, 1.0]),
+    );
+    grid_fails("g.npy", &[("g.npy", dense)], &["s.toml", "medium.sigma_t", "largest density"]);
+}
+
+#[test]
+fn grid_files_that_mislead_or_say_two_things() {
+    let four = f32s(&[1.0; 4]);
+    let header = "{'descr': '<f4', 'fortran_order': False, 'shape': (1, 2, 2), }";
+    // NumPy takes the last of two keys: refuse rather than guess.
+    grid_fails(
+        "g.npy",
+        &[(
+            "g.npy",
+            npy(
+                "{'descr': '<f4', 'descr': '<f8', 'fortran_order': False, 'shape': (1, 2, 2), }",
+                &four,
+            ),
+        )],
+        &["g.npy", "'descr' more than once"],
+    );
+    let mut longer = four.clone();
+    longer.extend_from_slice(&[0, 0, 0]);
+    grid_fails("g.npy", &[("g.npy", npy(header, &longer))], &["g.npy", "3 bytes follow"]);
+    // The sidecar's scale is named, not the voxel it spoils.
+    let raw = |json: &str| vec![("g.raw", four.clone()), ("g.json", json.as_bytes().to_vec())];
+    for scale in ["-1.0", "0.0", "1e300"] {
+        grid_fails(
+            "g.raw",
+            &raw(&format!(
+                "{{\"resolution\": [1, 2, 2], \"dtype\": \"float32\", \"scale\": {scale}}}"
+            )),
+            &["g.raw", "sidecar field `scale`", "positive and finite"],
+        );
+    }
+    let big = f32s(&[1e30; 4]);
+    grid_fails(
+        "g.raw",
+        &[
+            ("g.raw", big),
+            (
+                "g.json",
+                b"{\"resolution\": [1, 2, 2], \"dtype\": \"float32\", \"scale\": 1e20}".to_vec(),
+            ),
+        ],
+        &["g.raw", "sidecar field `scale`", "overflows"],
+    );
+    // A .vdb's own transform times medium.scale: the key the user set is named.
+    let sphere = vdb_data("sphere64_blosc.vdb");
+    for scale in ["1e30", "3e38"] {
+        render_fails(
+            &format!("[medium]\ngrid = \"g.vdb\"\nscale = {scale}\n"),
+            &[("g.vdb", sphere.clone())],
+            &["s.toml", "field `medium.scale`", "metres per unit"],
+        );
+    }
+    // A 2 MB grid path is shown shortened.
+    let long = format!("[medium]\ngrid = \"{}.vol\"\n", "g".repeat(2 << 20));
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("s.toml"), long).unwrap();
+    let (code, _, err) = run_in(dir.path(), &["render", "s.toml", "-q"]);
+    assert_eq!(code, 1, "{}", &err[..200.min(err.len())]);
+    assert!(
+        err.len() < 3000 && err.contains("characters left out") && err.contains("medium.grid"),
+        "{} bytes",
+        err.len()
+    );
+}
+
+#[cfg(unix)]
+#[test]
+fn endless_inputs_are_cut_off() {
+    // A path to an endless device is refused at once, wherever a file is read.
+    let cases: [(&str, &[&str], &[&str]); 4] = [
+        ("s.toml", &["render", "s.toml", "-q"], &["s.toml", "16 MiB", "scene file"]),
+        ("g.json", &["render", "r.toml", "-q"], &["g.json", "16 MiB", "sidecar"]),
+        ("env.exr", &["render", "e.toml", "-q"], &["sky.path", "env.exr", "not a file"]),
+        ("a.exr", &["compare", "a.exr", "a.exr"], &["a.exr", "regular file"]),
+    ];
+    for (link, args, expect) in cases {
+        let dir = tempfile::tempdir().unwrap();
+        write_files(
+            dir.path(),
+            &[
+                ("r.toml", b"[medium]\ngrid = \"g.raw\"\n".to_vec()),
+                ("g.raw", f32s(&[1.0; 4])),
+                ("e.toml", b"[sky]\nmodel = \"envmap\"\npath = \"env.exr\"\n".to_vec()),
+            ],
+        );
+        std::os::unix::fs::symlink("/dev/zero", dir.path().join(link)).unwrap();
+        let before = listing(dir.path());
+        let (code, _, err) = run_in(dir.path(), args);
+        assert_eq!(code, 1, "{args:?}: {err}");
+        for e in expect {
+            assert!(err.contains(e), "{args:?}: `{}` should mention `{e}`", err.trim_end());
+        }
+        assert_eq!(listing(dir.path()), before);
+    }
+    grid_fails("g.vdb", &[], &["s.toml", "medium.grid", "g.vdb"]);
+}
+
+/// Run the binary in `dir` with its stdout and stderr sent to `/dev/full`.
+#[cfg(target_os = "linux")]
+fn run_full(dir: &Path, args: &[&str], stdout_full: bool) -> (i32, String) {
+    use std::process::Stdio;
+    let full = || std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_cloudgi"));
+    cmd.current_dir(dir).args(args);
+    if stdout_full {
+        cmd.stdout(full());
+    } else {
+        cmd.stdout(Stdio::null()).stderr(full());
+    }
+    let out = cmd.output().unwrap();
+    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).to_string())
+}
+
+#[cfg(target_os = "linux")]
+#[test]
+fn a_full_disk_or_a_closed_pipe_is_no_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("g.vdb"), vdb_data("sphere64_blosc.vdb")).unwrap();
+    std::fs::write(dir.path().join("s.toml"), SCENE).unwrap();
+    let (code, err) = run_full(
+        dir.path(),
+        &[
+            "render", "s.toml", "--method", "single", "-o", "a.exr", "--width", "8", "--height", "8",
+        ],
+        false,
+    );
+    assert_eq!(code, 0, "a full stderr loses only the notes: {err}");
+    assert!(dir.path().join("a.exr").is_file() && dir.path().join("a.png").is_file());
+    let commands: [&[&str]; 5] = [
+        &["info", "g.vdb", "--json"],
+        &["info", "g.vdb"],
+        &[
+            "slab",
+            "--thickness",
+            "1",
+            "--albedo",
+            "0.9",
+            "--g",
+            "0",
+            "--incidence",
+            "diffuse",
+            "--method",
+            "diffusion",
+        ],
+        &["compare", "a.exr", "a.exr"],
+        &["bench", "--methods", "single", "--sizes", "8x8x8", "--width", "8", "--height", "8"],
+    ];
+    for args in commands {
+        let (code, err) = run_full(dir.path(), args, true);
+        assert_eq!(code, 1, "{args:?}: {err}");
+        assert!(err.contains("standard output") && err.contains("No space left"), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
+    // A reader that closed the pipe before the command wrote: quiet, the shell's 128 + SIGPIPE.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_cloudgi"))
+        .current_dir(dir.path())
+        .args(["info", "g.vdb"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(141), "{err}");
+    assert!(err.is_empty(), "{err}");
+}
+
+#[cfg(unix)]
+#[test]
+fn an_interrupt_leaves_no_file_and_says_so() {
+    for (signal, code) in [("INT", 130), ("TERM", 143)] {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("s.toml"), SCENE).unwrap();
+        let child = Command::new(env!("CARGO_BIN_EXE_cloudgi"))
+            .current_dir(dir.path())
+            .args(["render", "s.toml", "--method", "reference", "--spp", "100000", "-q"])
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(500));
+        let killed = Command::new("kill")
+            .args([&format!("-{signal}"), &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(killed.success());
+        let out = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(code), "{err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(
+            err.contains(&format!("SIG{signal}")) && err.contains("no output written") || err.contains("no file in progress"),
+            "{err}"
+        );
+        assert_eq!(listing(dir.path()), [PathBuf::from("s.toml")]);
+    }
+}
+
 // --------------------------------------------------------------------- command-line arguments
 
 const SCENE: &str = "[medium]\nresolution = [8, 8, 8]\nvoxel_size = 100.0\n";
@@ -500,6 +777,12 @@ fn bad_render_arguments_and_outputs() {
         &["--output", "sky.path"],
     );
     fails(&[s()], &render(&["--threads", "0"]), &["--threads"]);
+    fails(&[s()], &render(&["--threads", "10000"]), &["--threads", "10000", "per core"]);
+    // Names that are no file, or that no file system accepts, fail before the render.
+    fails(&[s()], &render(&["-o", ".exr"]), &["--output", "no name before .exr"]);
+    fails(&[s()], &render(&["-o", "out.exr/"]), &["--output", "names a folder"]);
+    let long: &'static str = format!("{}.exr", "n".repeat(296)).leak();
+    fails(&[s()], &render(&["-o", long]), &["--output", "300 bytes", "at most 255"]);
     fails(&[s()], &render(&["--method", "magic"]), &["magic"]);
     fails(&[s()], &["render", "s.toml", "--width", "abc"], &["abc"]);
     fails(&[s()], &["render", "s.toml", "--width", "0", "-q"], &["camera.width"]);
@@ -783,6 +1066,19 @@ fn default_render_writes_exr_and_png() {
     let img = cloudgi::Image::read_exr(&dir.path().join("cloud.exr")).unwrap();
     assert_eq!((img.width, img.height), (32, 24));
     assert!(dir.path().join("cloud.png").exists());
+    // A 250-byte name is valid: the temporaries' own short names fit beside it.
+    let name = format!("{}.exr", "n".repeat(246));
+    let (code, _, err) = run_in(
+        dir.path(),
+        &["render", "--width", "8", "--height", "8", "--method", "single", "-q", "-o", &name],
+    );
+    assert_eq!(code, 0, "{err}");
+    let mut names: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().len())
+        .collect();
+    names.sort();
+    assert_eq!(names, [9, 9, 250, 250], "cloud.exr, cloud.png and the long pair; no temporary left");
 }
 
 #[test]

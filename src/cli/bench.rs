@@ -187,20 +187,20 @@ pub fn run(a: BenchArgs) -> Result<()> {
         }
     }
     let cam = &file.desc.camera;
-    println!(
-        "{}×{} pixels, {} threads\n",
+    let mut text = format!(
+        "{}×{} pixels, {} threads\n\n",
         a.width.unwrap_or(cam.width),
         a.height.unwrap_or(cam.height),
         rayon::current_num_threads()
     );
-    print!("{}", table(&rows));
+    text += &table(&rows);
     if !notes.is_empty() {
-        println!();
+        text.push('\n');
     }
     for n in notes {
-        println!("- {n}");
+        text += &format!("- {n}\n");
     }
-    Ok(())
+    super::console::print(&text)
 }
 
 #[cfg(test)]

@@ -97,6 +97,6 @@ pub fn run(a: CompareArgs) -> Result<()> {
         line.pop();
         line += &format!(",\"budget\":{}}}", serde_json::to_string(&b).map_err(json)?);
     }
-    println!("{line}");
+    super::console::print(&format!("{line}\n"))?;
     Ok(())
 }

@@ -36,7 +36,7 @@ pub fn run(a: ExportArgs, quiet: bool) -> Result<()> {
             let files = cloudgi::reference::mitsuba::export(&scene, &m.output)?;
             if !quiet {
                 for f in files {
-                    eprintln!("wrote {}", f.display());
+                    note!("wrote {}", f.display());
                 }
             }
             Ok(())

@@ -58,8 +58,8 @@ pub fn run(a: FiguresArgs, quiet: bool) -> Result<()> {
     let progress = super::progress::Bars::new(quiet);
     let report = run_figures(a.scene.as_deref(), &a.output, &opts, &progress)?;
     if !quiet {
-        eprint!("{}", table_markdown(&report));
-        eprintln!("→ {}", a.output.join("index.md").display());
+        note!("{}", table_markdown(&report).trim_end());
+        note!("→ {}", a.output.join("index.md").display());
     }
     Ok(())
 }

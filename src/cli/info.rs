@@ -1,7 +1,8 @@
 //! `cloudgi info FILE [--json]`: what a `.vdb` file holds and what a dense render of it needs.
 
+use super::console::print;
 use clap::Args;
-use cloudgi::error::Result;
+use cloudgi::error::{Error, Result};
 use cloudgi::medium::vdb::{read_vdb_info, VdbGridInfo};
 use std::path::PathBuf;
 
@@ -76,17 +77,18 @@ pub fn run(a: InfoArgs) -> Result<()> {
         struct Out<'a> {
             grids: &'a [VdbGridInfo],
         }
-        println!("{}", serde_json::to_string(&Out { grids: &grids }).expect("serialisable"));
+        let json = serde_json::to_string(&Out { grids: &grids }).map_err(|e| Error::format("<json>", e.to_string()))?;
+        print(&format!("{json}\n"))
     } else {
-        println!(
-            "{}: {} grid{}",
+        let mut text = format!(
+            "{}: {} grid{}\n",
             a.file.display(),
             grids.len(),
             if grids.len() == 1 { "" } else { "s" }
         );
         for g in &grids {
-            print!("{}", describe(g));
+            text += &describe(g);
         }
+        print(&text)
     }
-    Ok(())
 }

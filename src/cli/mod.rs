@@ -1,7 +1,15 @@
 //! Subcommands of the `cloudgi` binary.
 
+/// `eprintln!` that never panics (see [`console::note`]).
+macro_rules! note {
+    ($($t:tt)*) => {
+        $crate::cli::console::note(format_args!($($t)*))
+    };
+}
+
 mod bench;
 mod compare;
+pub mod console;
 mod export;
 mod figures;
 mod info;
@@ -123,12 +131,45 @@ struct RenderArgs {
     aov: bool,
 }
 
+/// Most characters of a message shown; a longer one (a 50 MB path pasted into a key) keeps its
+/// start and end around a count of what was left out.
+const MESSAGE_CHARS: usize = 1000;
+
+/// `message`, shortened to [`MESSAGE_CHARS`].
+pub fn shortened(message: &str) -> String {
+    let n = message.chars().count();
+    if n <= MESSAGE_CHARS {
+        return message.to_string();
+    }
+    let keep = MESSAGE_CHARS / 2;
+    let head: String = message.chars().take(keep).collect();
+    let tail: String = message.chars().skip(n - keep).collect();
+    format!("{head} … ({} characters left out) … {tail}", n - 2 * keep)
+}
+
+/// Most worker threads: 4 per core. More only adds scheduling and memory (each thread holds its
+/// own buffers), never speed, and tens of thousands make every method crawl.
+const THREADS_PER_CORE: usize = 4;
+
+/// Check `--threads` against the cores of this machine.
+fn check_threads(n: usize) -> Result<()> {
+    let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
+    let max = THREADS_PER_CORE * cores;
+    if n == 0 || n > max {
+        return Err(Error::invalid(
+            "command line",
+            "--threads",
+            format!("{n} is not allowed: give 1 to {max} ({THREADS_PER_CORE} per core on this machine's {cores} cores), or leave it out for one per core"),
+        ));
+    }
+    Ok(())
+}
+
 /// Run the parsed command.
 pub fn run(cli: Cli) -> Result<()> {
+    console::clean_up_on_interrupt()?;
     if let Some(n) = cli.threads {
-        if n == 0 {
-            return Err(Error::invalid("command line", "--threads", "must be at least 1"));
-        }
+        check_threads(n)?;
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build_global()
@@ -158,6 +199,18 @@ fn png_beside(exr: &Path) -> PathBuf {
 }
 
 fn check_exr_path(p: &Path, flag: &str) -> Result<()> {
+    output::check_file_name(p, flag)?;
+    let bare = p
+        .file_name()
+        .and_then(|n| n.to_str())
+        .is_some_and(|n| n.eq_ignore_ascii_case(".exr"));
+    if bare {
+        return Err(Error::invalid(
+            "command line",
+            flag,
+            format!("`{}` has no name before .exr; give one, e.g. cloud.exr", p.display()),
+        ));
+    }
     match p.extension().and_then(|e| e.to_str()) {
         Some(e) if e.eq_ignore_ascii_case("exr") => Ok(()),
         _ => Err(Error::invalid(
@@ -232,13 +285,13 @@ fn render(a: RenderArgs, quiet: bool) -> Result<()> {
     let scene = Scene::build(desc, &file.source, &file.base)?;
     memory::check_solver(&scene)?;
     for w in warnings::warnings(&file, &a.flags(), &scene) {
-        eprintln!("warning: {w}");
+        note!("warning: {w}");
     }
     let progress = progress::Bars::new(quiet);
     let out = cloudgi::render(&scene, &progress)?;
     write_exr_and_png(&out.image, &a.output, &png, scene.render.exposure)?;
     if !quiet {
-        eprintln!(
+        note!(
             "{} {}×{} → {} + {}",
             scene.render.method.name(),
             scene.camera.width,
@@ -246,7 +299,7 @@ fn render(a: RenderArgs, quiet: bool) -> Result<()> {
             a.output.display(),
             png.display()
         );
-        eprintln!("timings: {}", out.timings.summary());
+        note!("timings: {}", out.timings.summary());
     }
     Ok(())
 }

@@ -45,6 +45,34 @@ pub fn check_writable_folder(dir: &Path, flag: &str) -> Result<()> {
     }
 }
 
+/// Longest file name (bytes) Linux, macOS and Windows file systems accept.
+const NAME_MAX: usize = 255;
+
+/// `path` names a file a command can create: it does not end in a `/` (a folder) and its name
+/// fits the file system's limit of [`NAME_MAX`] bytes.
+pub fn check_file_name(path: &Path, flag: &str) -> Result<()> {
+    let text = path.as_os_str().as_encoded_bytes();
+    if text.ends_with(b"/") || text.ends_with(std::path::MAIN_SEPARATOR_STR.as_bytes()) {
+        return Err(Error::invalid(
+            "command line",
+            flag,
+            format!(
+                "`{}` ends in a path separator, so it names a folder; give a file name, e.g. cloud.exr",
+                path.display()
+            ),
+        ));
+    }
+    let len = path.file_name().map_or(0, |n| n.as_encoded_bytes().len());
+    if len > NAME_MAX {
+        return Err(Error::invalid(
+            "command line",
+            flag,
+            format!("the file name is {len} bytes long; file systems allow at most {NAME_MAX}: choose a shorter name"),
+        ));
+    }
+    Ok(())
+}
+
 /// `path` must not be one of `inputs` (path, the key or role that names it).
 fn check_not_input(path: &Path, flag: &str, inputs: &[(PathBuf, String)]) -> Result<()> {
     let Some(out) = resolved(path) else {
@@ -69,6 +97,7 @@ fn check_not_input(path: &Path, flag: &str, inputs: &[(PathBuf, String)]) -> Res
 /// and it is none of the scene's `inputs`. `flag` names the option the paths come from.
 pub fn check_files(files: &[&Path], flag: &str, inputs: &[(PathBuf, String)]) -> Result<()> {
     for f in files {
+        check_file_name(f, flag)?;
         if f.is_dir() {
             return Err(Error::invalid(
                 "command line",
@@ -137,6 +166,16 @@ mod tests {
         let e = check_files(&[&other], "--output", &inputs).unwrap_err().to_string();
         assert!(e.contains("sky.path"), "{e}");
         assert!(check_files(&[&dir.path().join("out.exr")], "--output", &inputs).is_ok());
+    }
+
+    #[test]
+    fn names_no_file_system_accepts_are_refused() {
+        let e = check_file_name(Path::new("out.exr/"), "--output").unwrap_err().to_string();
+        assert!(e.contains("names a folder"), "{e}");
+        let long = format!("{}.exr", "n".repeat(300));
+        let e = check_file_name(Path::new(&long), "--output").unwrap_err().to_string();
+        assert!(e.contains("304 bytes") && e.contains("shorter"), "{e}");
+        assert!(check_file_name(Path::new(&format!("{}.exr", "n".repeat(251))), "--output").is_ok());
     }
 
     #[test]

@@ -44,7 +44,7 @@ impl Lines {
             while !*finished {
                 let now = Instant::now();
                 if now >= next {
-                    eprintln!("{}", line(&stage, p.load(Ordering::Relaxed), total, start.elapsed()));
+                    note!("{}", line(&stage, p.load(Ordering::Relaxed), total, start.elapsed()));
                     next += interval;
                     continue;
                 }
@@ -92,7 +92,7 @@ impl Bars {
     fn println(&self, msg: &str) {
         match self.bar.lock().ok().and_then(|b| b.clone()) {
             Some(pb) if !pb.is_hidden() => pb.println(msg),
-            _ => eprintln!("{msg}"),
+            _ => note!("{msg}"),
         }
     }
 }

@@ -33,7 +33,11 @@ impl SceneFile {
         };
         let desc = SceneDesc::from_file(p)?;
         // The file parsed as a scene, so it is readable TOML text.
-        let table: toml::Table = std::fs::read_to_string(p).ok().and_then(|t| t.parse().ok()).unwrap_or_default();
+        let table: toml::Table = cloudgi::io::read_capped(p, cloudgi::io::MAX_TEXT_BYTES, "a scene file")
+            .ok()
+            .and_then(|b| String::from_utf8(b).ok())
+            .and_then(|t| t.parse().ok())
+            .unwrap_or_default();
         let mut keys = Vec::new();
         for (name, value) in &table {
             match value.as_table() {

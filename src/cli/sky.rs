@@ -42,7 +42,7 @@ pub fn run(a: SkyArgs, quiet: bool) -> Result<()> {
     let img = sky.to_image(a.width.map(|w| w as usize));
     super::write_exr_and_png(&img, &a.output, &png, desc.render.exposure)?;
     if !quiet {
-        eprintln!(
+        note!(
             "sky {}×{} → {} + {} ({:.3} s)",
             img.width,
             img.height,
@@ -50,7 +50,7 @@ pub fn run(a: SkyArgs, quiet: bool) -> Result<()> {
             png.display(),
             t.elapsed().as_secs_f64()
         );
-        eprintln!(
+        note!(
             "sun (not in the map): direction {:?}, irradiance {:?} W/m²; sky irradiance on the ground {:?} W/m²",
             sun.dir.to_array(),
             sun.irradiance.to_array(),

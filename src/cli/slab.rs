@@ -100,6 +100,6 @@ pub fn run(a: SlabArgs) -> Result<()> {
         }
     };
     let line = serde_json::to_string(&r).map_err(|e| Error::format("<json>", e.to_string()))?;
-    println!("{line}");
+    super::console::print(&format!("{line}\n"))?;
     Ok(())
 }

@@ -113,8 +113,8 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
         "vdb" => load_vdb(d, file, &read(&path)?, name),
         "raw" => {
             let sidecar = path.with_extension("json");
-            let text = std::fs::read_to_string(&sidecar).map_err(|e| Error::io(&sidecar, e))?;
-            let meta: RawMeta = serde_json::from_str(&text).map_err(|e| {
+            let text = crate::io::read_capped(&sidecar, crate::io::MAX_TEXT_BYTES, "a .json sidecar")?;
+            let meta: RawMeta = serde_json::from_slice(&text).map_err(|e| {
                 Error::format(
                     sidecar.display().to_string(),
                     format!("{e}; expected {{\"resolution\": [nx, ny, nz], \"dtype\": \"float32\"}}"),
@@ -145,17 +145,40 @@ fn load_vdb(d: &MediumDesc, file: &str, bytes: &[u8], name: String) -> Result<Lo
     )?;
     let v = super::vdb::read_vdb_dense_bytes(bytes, &name, Some(&d.grid_name), d.max_voxels, d.downsample)?;
     let s = d.scale as f64;
+    let (origin, voxel_size) = (v.origin.map(|x| x * s), v.voxel_size.map(|x| x * s));
+    let max = super::MAX_VOXEL_SIZE as f64;
+    let far = crate::scene::MAX_COORDINATE as f64;
+    let fault = if !voxel_size.iter().all(|&x| x > 0.0 && x <= max && (x as f32) > 0.0) {
+        Some(format!(
+            "the file's voxel size {:?} gives {voxel_size:?} m; a voxel must be positive and at most {max:e} m",
+            v.voxel_size
+        ))
+    } else if !origin.iter().all(|x| x.abs() <= far) {
+        Some(format!(
+            "the file's grid corner {:?} goes to {origin:?} m, beyond ±{far:e} m",
+            v.origin
+        ))
+    } else {
+        None
+    };
+    if let Some(f) = fault {
+        return Err(Error::invalid(
+            file,
+            "medium.scale",
+            format!("{} times {f}: set medium.scale to the file's metres per unit", d.scale),
+        ));
+    }
     Ok(Loaded {
         grid: v.grid,
-        origin: Vec3::from(v.origin.map(|x| (x * s) as f32)),
-        voxel_size: Vec3::from(v.voxel_size.map(|x| (x * s) as f32)),
+        origin: Vec3::from(origin.map(|x| x as f32)),
+        voxel_size: Vec3::from(voxel_size.map(|x| x as f32)),
         name,
         downsampled: true,
     })
 }
 
 fn read(path: &Path) -> Result<Vec<u8>> {
-    std::fs::read(path).map_err(|e| Error::io(path, e))
+    crate::io::read_regular(path, "a density grid")
 }
 
 /// Number of voxels of `dims`, refusing overflow and zero.
@@ -278,6 +301,14 @@ pub fn parse_npy(b: &[u8], name: &str) -> Result<Grid3> {
         .filter(|&e| e <= b.len())
         .ok_or_else(|| Error::format(name, "truncated .npy header"))?;
     let header = std::str::from_utf8(&b[hstart..hend]).map_err(|_| Error::format(name, ".npy header is not text"))?;
+    for key in ["descr", "fortran_order", "shape"] {
+        if header.matches(&format!("'{key}'")).count() > 1 {
+            return Err(Error::format(
+                name,
+                format!(".npy header gives '{key}' more than once; NumPy would take the last, write the file again with numpy.save"),
+            ));
+        }
+    }
     let field = |key: &str| -> Option<&str> {
         let at = header.find(&format!("'{key}'"))?;
         let rest = &header[at + key.len() + 2..];
@@ -317,6 +348,16 @@ pub fn parse_npy(b: &[u8], name: &str) -> Result<Grid3> {
     }
     let n = voxel_count([shape[2], shape[1], shape[0]], name)?;
     let body = &b[hend..];
+    let value_size = if descr.ends_with('8') { 8 } else { 4 };
+    if n.checked_mul(value_size).is_some_and(|need| body.len() > need) {
+        return Err(Error::format(
+            name,
+            format!(
+                "{} bytes follow the {n} values of shape ({shape_s}): a .npy holds its array and nothing after it; write the file again with numpy.save",
+                body.len() - n * value_size
+            ),
+        ));
+    }
     let data: Vec<f32> = match descr {
         "<f4" | "|f4" | ">f4" => {
             need(n, 4, body.len(), name, "float32")?;
@@ -412,7 +453,15 @@ pub fn parse_raw(b: &[u8], meta: &RawMeta, name: &str) -> Result<Grid3> {
             ))
         }
     };
-    let s = meta.scale;
+    if !(meta.scale.is_finite() && meta.scale > 0.0) {
+        return Err(Error::format(
+            name,
+            format!(
+                "sidecar field `scale` is {}: it multiplies every value, so it must be positive and finite (1, or e.g. 1/255 for uint8 data)",
+                meta.scale
+            ),
+        ));
+    }
     let size = match meta.dtype.as_str() {
         "float32" => 4,
         "float64" => 8,
@@ -437,13 +486,13 @@ pub fn parse_raw(b: &[u8], meta: &RawMeta, name: &str) -> Result<Grid3> {
             ),
         ));
     }
-    let data: Vec<f32> = match meta.dtype.as_str() {
+    let mut data: Vec<f32> = match meta.dtype.as_str() {
         "float32" => {
             need(n, 4, b.len(), name, "float32")?;
             b[..4 * n]
                 .chunks_exact(4)
                 .map(|c| {
-                    s * if be {
+                    if be {
                         f32::from_be_bytes([c[0], c[1], c[2], c[3]])
                     } else {
                         f32::from_le_bytes([c[0], c[1], c[2], c[3]])
@@ -457,24 +506,25 @@ pub fn parse_raw(b: &[u8], meta: &RawMeta, name: &str) -> Result<Grid3> {
                 .chunks_exact(8)
                 .map(|c| {
                     let a: [u8; 8] = c.try_into().expect("chunk of 8");
-                    s * (if be { f64::from_be_bytes(a) } else { f64::from_le_bytes(a) }) as f32
+                    (if be { f64::from_be_bytes(a) } else { f64::from_le_bytes(a) }) as f32
                 })
                 .collect()
         }
         "uint8" => {
             need(n, 1, b.len(), name, "uint8")?;
-            b[..n].iter().map(|&v| s * v as f32).collect()
+            b[..n].iter().map(|&v| v as f32).collect()
         }
         "uint16" => {
             need(n, 2, b.len(), name, "uint16")?;
             b[..2 * n]
                 .chunks_exact(2)
                 .map(|c| {
-                    s * if be {
+                    let v = if be {
                         u16::from_be_bytes([c[0], c[1]])
                     } else {
                         u16::from_le_bytes([c[0], c[1]])
-                    } as f32
+                    };
+                    v as f32
                 })
                 .collect()
         }
@@ -485,6 +535,7 @@ pub fn parse_raw(b: &[u8], meta: &RawMeta, name: &str) -> Result<Grid3> {
             ))
         }
     };
+    scale_values(&mut data, meta.scale, name)?;
     Grid3::from_vec(
         [
             meta.resolution[0] as usize,
@@ -494,6 +545,25 @@ pub fn parse_raw(b: &[u8], meta: &RawMeta, name: &str) -> Result<Grid3> {
         data,
         name,
     )
+}
+
+/// Multiply every value by the sidecar's `scale`; a finite value the product takes past f32's
+/// range is the scale's fault and named so.
+fn scale_values(data: &mut [f32], scale: f32, name: &str) -> Result<()> {
+    if scale == 1.0 {
+        return Ok(());
+    }
+    for v in data.iter_mut() {
+        let p = *v * scale;
+        if v.is_finite() && !p.is_finite() {
+            return Err(Error::format(
+                name,
+                format!("sidecar field `scale` = {scale:e} times the value {v:e} overflows float32; lower `scale`"),
+            ));
+        }
+        *v = p;
+    }
+    Ok(())
 }
 
 /// Write a float32 little-endian `.raw` and its `.json` sidecar.

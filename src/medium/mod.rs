@@ -189,6 +189,18 @@ impl Medium {
                 format!("density at voxel ({i}, {j}, {k}) is {v}: densities must be finite and non-negative"),
             ));
         }
+        let densest = grid.data().iter().fold(0.0f32, |m, &v| m.max(v));
+        let sigma_max = d.sigma_t as f64 * densest as f64;
+        check(
+            file,
+            "medium.sigma_t",
+            sigma_max <= crate::scene::MAX_SIGMA_T as f64,
+            d.sigma_t,
+            &format!(
+                "times the grid's largest density {densest:e} gives an extinction of {sigma_max:e} m⁻¹, more than {:e}; lower medium.sigma_t or the grid's densities",
+                crate::scene::MAX_SIGMA_T
+            ),
+        )?;
         check(
             &loaded.name,
             "medium.voxel_size",

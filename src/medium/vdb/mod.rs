@@ -256,7 +256,7 @@ pub fn read_vdb_info_bytes(bytes: &[u8], file: &str) -> Result<Vec<VdbGridInfo>>
 
 /// Describe every grid of a `.vdb` file.
 pub fn read_vdb_info(path: &Path) -> Result<Vec<VdbGridInfo>> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::io::read_regular(path, "an OpenVDB file")?;
     read_vdb_info_bytes(&bytes, &path.display().to_string())
 }
 
@@ -282,6 +282,6 @@ pub fn read_vdb_dense_bytes(bytes: &[u8], file: &str, grid_name: Option<&str>, m
 /// its active bounding box, averaging `downsample`³ blocks, refusing before any allocation a
 /// result of more than `max_voxels` voxels. Inactive voxels are 0.
 pub fn read_vdb_dense(path: &Path, grid_name: Option<&str>, max_voxels: u64, downsample: usize) -> Result<VdbDense> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::io::read_regular(path, "an OpenVDB file")?;
     read_vdb_dense_bytes(&bytes, &path.display().to_string(), grid_name, max_voxels, downsample)
 }

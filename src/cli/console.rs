@@ -1,0 +1,52 @@
+//! The terminal side of the command line: results on stdout as fallible writes (a full disk is
+//! an error, a closed pipe ends the command quietly), notes on stderr that never panic, and
+//! SIGINT/SIGTERM, which remove the temporary output files before the process exits.
+
+use cloudgi::error::{Error, Result};
+use std::io::Write;
+
+/// Exit status of a command whose reader closed stdout (the shell's 128 + SIGPIPE).
+pub const EXIT_BROKEN_PIPE: i32 = 141;
+
+/// Write `text` to stdout and flush it. A reader that closed the pipe is [`Error::Io`] of kind
+/// `BrokenPipe` (see [`is_broken_pipe`]); any other failure (a full disk) is an error naming
+/// standard output.
+pub fn print(text: &str) -> Result<()> {
+    let mut out = std::io::stdout().lock();
+    out.write_all(text.as_bytes())
+        .and_then(|()| out.flush())
+        .map_err(|e| Error::io("standard output", e))
+}
+
+/// Whether `e` is stdout's reader having gone away: the command ends quietly.
+pub fn is_broken_pipe(e: &Error) -> bool {
+    matches!(e, Error::Io { source, .. } if source.kind() == std::io::ErrorKind::BrokenPipe)
+}
+
+/// Write one line to stderr. A stderr that cannot be written (a full disk) drops the line: there
+/// is nowhere left to say so, and the command's own result does not depend on it.
+pub fn note(args: std::fmt::Arguments) {
+    let mut err = std::io::stderr().lock();
+    let _ = err.write_fmt(args).and_then(|()| err.write_all(b"\n"));
+}
+
+/// On SIGINT or SIGTERM: remove the output temporaries being written (waiting for renames in
+/// progress), say in one line whether anything was written, and exit with 128 + the signal.
+pub fn clean_up_on_interrupt() -> Result<()> {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM]).map_err(|e| Error::io("signal handlers", e))?;
+    std::thread::spawn(move || {
+        if let Some(sig) = signals.forever().next() {
+            let removed = cloudgi::io::remove_temporaries();
+            let name = if sig == SIGINT { "SIGINT" } else { "SIGTERM" };
+            let what = if removed {
+                "the files being written were removed, no output written"
+            } else {
+                "no file in progress; outputs already complete are kept"
+            };
+            note(format_args!("interrupted ({name}): {what}"));
+            std::process::exit(128 + sig);
+        }
+    });
+    Ok(())
+}
