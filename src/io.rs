@@ -54,6 +54,14 @@ fn size_text(n: u64) -> String {
 /// The temporaries being written now; removed by [`remove_temporaries`] on an interrupt.
 static TEMPORARIES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
+/// The files this process has written (renamed into place), for the interrupt's message.
+static WRITTEN: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// The files this process has written so far.
+pub fn written() -> Vec<PathBuf> {
+    WRITTEN.lock().unwrap_or_else(|e| e.into_inner()).clone()
+}
+
 fn temporaries() -> MutexGuard<'static, Vec<PathBuf>> {
     TEMPORARIES.lock().unwrap_or_else(|e| e.into_inner())
 }
@@ -138,6 +146,12 @@ pub fn write_atomic_all(files: &[(&Path, &[u8])]) -> Result<()> {
         }
     }
     pending.retain(|x| !temps.contains(x));
+    if result.is_ok() {
+        WRITTEN
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .extend(files.iter().map(|(p, _)| p.to_path_buf()));
+    }
     result
 }
 

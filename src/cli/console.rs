@@ -39,10 +39,14 @@ pub fn clean_up_on_interrupt() -> Result<()> {
         if let Some(sig) = signals.forever().next() {
             let removed = cloudgi::io::remove_temporaries();
             let name = if sig == SIGINT { "SIGINT" } else { "SIGTERM" };
-            let what = if removed {
-                "the files being written were removed, no output written"
-            } else {
-                "no file in progress; outputs already complete are kept"
+            let written = cloudgi::io::written();
+            let what = match (written.is_empty(), removed) {
+                (true, _) => "no output written".to_string(),
+                (false, removed) => format!(
+                    "wrote {}{}",
+                    written.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "),
+                    if removed { "; the files in progress were removed" } else { "" }
+                ),
             };
             note(format_args!("interrupted ({name}): {what}"));
             std::process::exit(128 + sig);

@@ -91,7 +91,7 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
     };
     match ext.as_str() {
         "vol" => {
-            let bytes = read(&path)?;
+            let bytes = read_dense(&path, d, file)?;
             let (grid, lo, hi) = parse_vol(&bytes, &name)?;
             let n = grid.dims();
             let size = (hi - lo) / Vec3::new(n[0] as f32, n[1] as f32, n[2] as f32);
@@ -109,7 +109,7 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
                 downsampled: false,
             })
         }
-        "npy" => placed(parse_npy(&read(&path)?, &name)?),
+        "npy" => placed(parse_npy(&read_dense(&path, d, file)?, &name)?),
         "vdb" => load_vdb(d, file, &read(&path)?, name),
         "raw" => {
             let sidecar = path.with_extension("json");
@@ -120,7 +120,7 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
                     format!("{e}; expected {{\"resolution\": [nx, ny, nz], \"dtype\": \"float32\"}}"),
                 )
             })?;
-            placed(parse_raw(&read(&path)?, &meta, &name)?)
+            placed(parse_raw(&read_dense(&path, d, file)?, &meta, &name)?)
         }
         _ => Err(Error::invalid(
             file,
@@ -179,6 +179,33 @@ fn load_vdb(d: &MediumDesc, file: &str, bytes: &[u8], name: String) -> Result<Lo
 
 fn read(path: &Path) -> Result<Vec<u8>> {
     crate::io::read_regular(path, "a density grid")
+}
+
+/// Most bytes of a dense grid file (`.vol`, `.npy`, `.raw`): `medium.max_voxels` values (times
+/// downsample³, which is applied after reading) of at most 8 bytes each, plus 1 MiB of header.
+fn dense_file_limit(d: &MediumDesc) -> u64 {
+    let factor = (d.downsample as u64).saturating_pow(3);
+    d.max_voxels.saturating_mul(factor).saturating_mul(8).saturating_add(1 << 20)
+}
+
+/// Read a dense grid file, refusing one larger than any grid `medium.max_voxels` allows before
+/// reading it.
+fn read_dense(path: &Path, d: &MediumDesc, file: &str) -> Result<Vec<u8>> {
+    let len = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
+    let limit = dense_file_limit(d);
+    if len > limit {
+        return Err(Error::invalid(
+            file,
+            "medium.max_voxels",
+            format!(
+                "`{}` is {len} bytes, more than a grid of medium.max_voxels = {} voxels (at downsample {}) can fill ({limit} bytes); raise medium.max_voxels or medium.downsample",
+                path.display(),
+                d.max_voxels,
+                d.downsample
+            ),
+        ));
+    }
+    read(path)
 }
 
 /// Number of voxels of `dims`, refusing overflow and zero.
