@@ -712,7 +712,8 @@ fn an_interrupt_leaves_no_file_and_says_so() {
             .stderr(std::process::Stdio::piped())
             .spawn()
             .unwrap();
-        std::thread::sleep(std::time::Duration::from_millis(500));
+        // Long enough for the handlers to be installed on a loaded machine.
+        std::thread::sleep(std::time::Duration::from_millis(2000));
         let killed = Command::new("kill")
             .args([&format!("-{signal}"), &child.id().to_string()])
             .status()
