@@ -305,7 +305,8 @@ mod tests {
                 .zip(&w)
                 .map(|(x, w)| 0.5 * w * sun_phase(&peak, &band, a, *x, t_sun, 1.0))
                 .sum();
-            assert!((norm - 1.0).abs() < 2e-3, "T′ {t_sun}: {norm}");
+            // (The clamp at p′'s negative lobes adds a few 10⁻³.)
+            assert!((norm - 1.0).abs() < 5e-3, "T′ {t_sun}: {norm}");
             assert!(sun_phase(&peak, &band, a, 1.0, t_sun, 1.0) < hg(1.0));
         }
         // A peak scattering on the eye's leg removes the peak's share: only the smooth part is left.
