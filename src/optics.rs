@@ -157,6 +157,28 @@ impl Optics {
         self.sun_single.0 * self.sun_single.1.eval(to_sun, to_eye)
     }
 
+    /// [`Self::sun_scatter`] split for a gather that marches this (δ-M) medium: (the smooth part
+    /// a p_{g′}(1 − f) σt/σt′, the truncated peak's part, k). δ-M carries every peak scattering on
+    /// in the beam, so scattering the whole beam through the exact p counts a path of several peak
+    /// scatterings once per scattering (the aureole too bright, docs/transport.md); the peak's
+    /// part is counted once when no peak scattering follows on the eye's leg: weight it by
+    /// T_eye^{af} = T′^k, T′ the marched δ-M transmittance from the eye, k = af/(1 − af) =
+    /// σt/σt′ − 1 (0 without the transform: the split changes nothing).
+    pub fn sun_scatter_split(&self, to_sun: Vec3, to_eye: Vec3) -> (Rgb, Rgb, f32) {
+        let (g, g_scaled) = (self.sun_single.1.mean_cosine(), self.phase.mean_cosine());
+        // g′ = (g − f)/(1 − f).
+        let f = if g_scaled < g {
+            ((g - g_scaled) / (1.0 - g_scaled)) as f32
+        } else {
+            0.0
+        };
+        let all = self.sun_scatter(to_sun, to_eye);
+        let smooth = self.sun_single.0 * ((1.0 - f) * self.phase.eval(to_sun, to_eye));
+        // σt/σt′ = 1 − a′ + a σt/σt′ (σa is kept), per band; the middle band's.
+        let ratio = 1.0 - self.albedo.y + self.sun_single.0.y;
+        (smooth, all - smooth, (ratio - 1.0).max(0.0))
+    }
+
     /// Scattering σs = a·σt per band at density 1 (m⁻¹).
     #[inline]
     pub fn sigma_s(&self) -> Rgb {
@@ -224,6 +246,21 @@ mod tests {
         assert_eq!(p.eval(sun, sun), p.eval_cos(-1.0));
         assert!(p.eval(sun, -sun) > p.eval(sun, sun));
         assert_eq!(p.order(2).mean_cosine(), 0.8f32 as f64 * 0.8f32 as f64);
+    }
+
+    #[test]
+    fn the_sun_scatter_split_sums_to_it_and_names_the_peaks_weight() {
+        let o = Optics::new(0.05, Rgb::splat(0.99), 0.9);
+        let (to_sun, to_eye) = (Vec3::Y, Vec3::new(0.1, -0.99, 0.0).normalize());
+        let (smooth, peak, k) = o.sun_scatter_split(to_sun, to_eye);
+        assert_eq!((peak, k), (Rgb::ZERO, 0.0));
+        assert_eq!(smooth, o.sun_scatter(to_sun, to_eye));
+        let t = o.delta_m(0.65);
+        let (smooth, peak, k) = t.sun_scatter_split(to_sun, to_eye);
+        let all = t.sun_scatter(to_sun, to_eye);
+        assert!(((smooth + peak).y - all.y).abs() < 1e-5 * all.y && peak.y > smooth.y);
+        // k = af/(1 − af).
+        assert!((k - 0.99 * 0.65 / (1.0 - 0.99 * 0.65)).abs() < 1e-4, "{k}");
     }
 
     #[test]

@@ -332,3 +332,54 @@ fn each_band_of_a_coloured_cloud_is_the_grey_solve_of_its_albedo() {
         );
     }
 }
+
+/// High-frequency energy of a ground image: the RMS of the 5-point Laplacian over the mean,
+/// sampled every `step` m on a square of `n`² points centred under the ball.
+fn ground_roughness(n: usize, step: f32, radiance: impl Fn(f32, f32) -> Rgb) -> f64 {
+    let l: Vec<f64> = (0..n * n)
+        .map(|c| {
+            let (i, k) = ((c % n) as f32 - n as f32 / 2.0, (c / n) as f32 - n as f32 / 2.0);
+            luminance(radiance(i * step, k * step)) as f64
+        })
+        .collect();
+    let mean = l.iter().sum::<f64>() / l.len() as f64;
+    let (mut sum, mut count) = (0.0, 0);
+    for k in 1..n - 1 {
+        for i in 1..n - 1 {
+            let c = i + n * k;
+            let lap = 4.0 * l[c] - l[c - 1] - l[c + 1] - l[c - n] - l[c + n];
+            sum += lap * lap;
+            count += 1;
+        }
+    }
+    (sum / count as f64).sqrt() / mean
+}
+
+#[test]
+fn the_ground_the_eye_sees_shows_no_ordinate_or_map_column() {
+    use cloudgi::lighting::Ground;
+    use cloudgi::render::transport_ground::EyeGround;
+    // The ball 40–160 m up under a sky only: the ground's light is the sky's less what the ball
+    // hides plus its glow, smooth on the scale of its height. The solver's map shows its columns
+    // (10 m) and where each ordinate lands; the eye's ground must not.
+    let mut s = scene(ball(0.2, 0.99), Method::Transport);
+    s.sun = Sun {
+        dir: Vec3::new(0.3, 0.8, 0.5).normalize(),
+        irradiance: Rgb::ZERO,
+    };
+    s.sky = Sky::constant(Rgb::new(0.3, 0.45, 0.8));
+    s.ground = Some(Ground {
+        height: 0.0,
+        albedo: Rgb::splat(0.3),
+    });
+    let settings = TransportSettings {
+        max_iterations: 4,
+        ..TransportSettings::default()
+    };
+    let f = solve(&s.medium, &s.sun, &s.sky, s.ground.as_ref(), &settings, &NoProgress);
+    let eye = EyeGround::new(&s, &f).expect("a ground");
+    let raw = ground_roughness(80, 2.5, |x, z| f.ground.at(x as f64, z as f64));
+    let seen = ground_roughness(80, 2.5, |x, z| eye.radiance(&s, Vec3::new(x, 0.0, z)));
+    eprintln!("roughness: map {raw:.2e}, eye {seen:.2e}");
+    assert!(seen < 0.2 * raw && seen < 2e-3, "map {raw:.2e}, eye {seen:.2e}");
+}

@@ -19,6 +19,10 @@ pub struct CompareArgs {
     /// Take the cloud mask (transmittance < 0.99) from this EXR's `transmittance` layer instead of REF's.
     #[arg(long)]
     mask: Option<PathBuf>,
+    /// Score every pixel (sky and ground too) instead of the cloud: for views where the ground
+    /// (a shadow, the light under a cloud) is what is judged.
+    #[arg(long, conflicts_with = "mask")]
+    all_pixels: bool,
     /// Add `budget` to the JSON: block-mean error and bias by part of TEST's AOVs (against REF's
     /// order/light layers) and by region of the cloud (lit, base, core, edges, haze), with REF's
     /// share of light per order and light (docs/budget.md).
@@ -83,7 +87,11 @@ pub fn run(a: CompareArgs) -> Result<()> {
             ));
         }
     }
-    let mask = choose_mask(&reference, mask_img.as_ref());
+    let mask = if a.all_pixels {
+        None
+    } else {
+        choose_mask(&reference, mask_img.as_ref())
+    };
     let metrics = compare(&test, &reference, mask.as_deref())?;
     if let Some(d) = &a.diff {
         write_diff_png(d, &test, &reference, mask.as_deref())?;

@@ -560,7 +560,8 @@ impl<'a> EdgeGather<'a> {
                 *x += s;
             }
         }
-        let sun_scatter = m.optics.sun_scatter(self.sun.dir, -d);
+        // The peak's part counted once: weighted by T_eye^{af} = T′^k (Optics::sun_scatter_split).
+        let (sun_smooth, sun_peak, peak_k) = m.optics.sun_scatter_split(self.sun.dir, -d);
         let to_eye = -d;
         let mut tr = 1.0f64;
         // Optical depth from the ray's start (the surface layer's coordinate).
@@ -604,7 +605,7 @@ impl<'a> EdgeGather<'a> {
                     aov.edge += f * (1.0 - w) * edge_src.get(k).copied().unwrap_or(Rgb::ZERO);
                 }
                 let sun = if n == 1 { plan.sun[k] } else { (self.sun.irradiance_at)(pos) };
-                aov.sun_single += f * sun * sun_scatter;
+                aov.sun_single += f * sun * (sun_smooth + sun_peak * (tr as f32).powf(peak_k));
                 tr *= 1.0 + em1;
                 if tr < crate::medium::march::T_CUTOFF as f64 {
                     tr = 0.0;

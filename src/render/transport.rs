@@ -20,14 +20,17 @@ use crate::medium::march::march;
 use crate::medium::Medium;
 use crate::pipeline::{render_rows, Progress, Timings};
 use crate::render::single::pixel_sample;
+use crate::render::transport_ground::EyeGround;
 use crate::scene::Scene;
 use crate::transport::solve::{solve, TransportField, TransportSettings};
 use crate::transport::TransportMemory;
 use glam::DVec3;
 use rayon::prelude::*;
+use std::f64::consts::PI;
 
 /// Source per unit scaled optical depth towards the eye, per voxel (zero where ρ = 0): the
-/// diffuse (multiple-scattering) part and the sun's exact single scattering.
+/// diffuse (multiple-scattering) part and the sun's single scattering with the forward peak that
+/// δ-M truncated put back ([`sun_phase`]).
 pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
     let m = &scene.medium;
     let [nx, ny, _] = m.dims();
@@ -35,6 +38,7 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
     let eye = scene.camera.position;
     let o = &f.optics;
     let (sun_dir, e_sun) = (scene.sun.dir, scene.sun.irradiance);
+    let peak = PeakSeries::new(o.g, f.order);
     (0..f.full.len())
         .into_par_iter()
         .map(|v| {
@@ -43,22 +47,111 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
                 return (Rgb::ZERO, Rgb::ZERO);
             }
             let (i, j, k) = (v % nx, (v / nx) % ny, v / (nx * ny));
-            let d = (m.voxel_center(i, j, k) - eye).normalize_or_zero();
+            let centre = m.voxel_center(i, j, k);
+            let to_voxel = centre - eye;
+            let d = to_voxel.normalize_or_zero();
             // Radiance towards the eye travels along −d.
             let mut y = vec![0.0; nsh];
             real_sh(f.order, -DVec3::new(d.x as f64, d.y as f64, d.z as f64), &mut y);
-            let p = m.optics.phase.eval(sun_dir, -d);
+            let cos_theta = (sun_dir.dot(d) as f64).clamp(-1.0, 1.0);
+            // Exact optical depth from the voxel's centre to the eye (or out of the grid).
+            let t_eye = m.transmittance(centre, -d, 0.0, to_voxel.length()) as f64;
             let (mut diffuse, mut sun) = ([0f32; 3], [0f32; 3]);
             for b in 0..3 {
                 let base = (fi as usize * 3 + b) * nsh;
                 let js = &f.diffuse_source[base..base + nsh];
                 diffuse[b] = js.iter().zip(&y).map(|(j, y)| *j as f64 * y).sum::<f64>().max(0.0) as f32;
-                let a = o.albedo[b];
-                sun[b] = (a / (1.0 - a * o.bands[b].f) * (e_sun[b] * p * f.sun_t[v][b]) as f64) as f32;
+                let (a, band) = (o.albedo[b], &o.bands[b]);
+                let t_sun = f.sun_t[v][b] as f64;
+                if t_sun > 0.0 {
+                    let p = sun_phase(&peak, band, a, cos_theta, t_sun, t_eye);
+                    sun[b] = (a / (1.0 - a * band.f) * e_sun[b] as f64 * p / (4.0 * PI) * t_sun) as f32;
+                }
             }
             (Rgb::from(diffuse), Rgb::from(sun))
         })
         .unzip()
+}
+
+/// The exact HG phase function's Legendre series beyond the δ-M order L, for the spread of the
+/// truncated forward peak: (2l + 1) g^l and g^{l−L−1} for L < l ≤ `last` (the rest below 10⁻⁶).
+struct PeakSeries {
+    order: usize,
+    /// (2l + 1) g^l, l = L + 1..=last.
+    weight: Vec<f64>,
+    /// g^{l−L−1}: the peak's own moments (the δ-M peak is the identity up to order L).
+    moment: Vec<f64>,
+    /// HG g.
+    g: f64,
+}
+
+impl PeakSeries {
+    fn new(g: f64, order: usize) -> PeakSeries {
+        let (mut weight, mut moment) = (Vec::new(), Vec::new());
+        let mut l = order + 1;
+        while l < 20_000 {
+            let w = (2 * l + 1) as f64 * g.powi(l as i32);
+            if w < 1e-6 && l > order + 8 {
+                break;
+            }
+            weight.push(w);
+            moment.push(g.powi((l - order - 1) as i32));
+            l += 1;
+        }
+        PeakSeries { order, weight, moment, g }
+    }
+
+    /// Σ_{l>L} (2l + 1) g^l (e^{−λ(1 − g^{l−L−1})} − 1) P_l(cos Θ): what λ further peak
+    /// scatterings (Poisson, on the sun's leg) take from the HG series (4π-normalised).
+    fn spread(&self, lambda: f64, cos_theta: f64) -> f64 {
+        if lambda <= 0.0 || self.weight.is_empty() {
+            return 0.0;
+        }
+        let (mut p0, mut p1) = (1.0, cos_theta);
+        for l in 2..=self.order + 1 {
+            let p2 = ((2 * l - 1) as f64 * cos_theta * p1 - (l - 1) as f64 * p0) / l as f64;
+            (p0, p1) = (p1, p2);
+        }
+        // p1 = P_{L+1}.
+        let mut sum = 0.0;
+        for (n, (w, m)) in self.weight.iter().zip(&self.moment).enumerate() {
+            let l = self.order + 1 + n;
+            if n > 0 {
+                let p2 = ((2 * l - 1) as f64 * cos_theta * p1 - (l - 1) as f64 * p0) / l as f64;
+                (p0, p1) = (p1, p2);
+            }
+            sum += w * ((-lambda * (1.0 - m)).exp() - 1.0) * p1;
+        }
+        sum
+    }
+}
+
+/// The sun's single-scattering phase function (4π-normalised) for the gather, from the δ-M
+/// solution's pieces. δ-M splits HG as p = (1 − f) p′ + f P (P the truncated peak) and carries
+/// every peak scattering on in the beam: the solver's sun beam T′ = T^{1 − af} holds the light
+/// peak-scattered on the sun's leg, and the march's T′ the light peak-scattered on the eye's leg.
+/// TMS (Nakajima & Tanaka 1988) scatters that whole beam through the exact p, which counts the
+/// peak-only paths several times and too sharply: a path with k + 1 peak scatterings and nothing
+/// else is counted k + 1 times (once per scattering taken as "the" one), all with P(Θ). The smooth
+/// part (1 − f) p′ is exact as TMS has it (P is the identity on orders ≤ L). The peak part is
+/// counted once by taking its scattering as the last one before the eye: no peak scattering on
+/// the eye's leg, weight T_eye^{af} on top of the march's T′ (so the exact T there), and the
+/// λ = af τ_sun peak scatterings before it spread its angle (moments g^{l−L−1} per scattering
+/// beyond order L). Only where nothing is on either leg is it TMS. No other stage changes:
+/// the solver, the march and the diffuse source keep δ-M's medium (σt′, a′, p′).
+fn sun_phase(peak: &PeakSeries, band: &crate::transport::BandOptics, albedo: f64, cos_theta: f64, t_sun: f64, t_eye: f64) -> f64 {
+    let hg = {
+        let g = peak.g;
+        let denom = 1.0 + g * g - 2.0 * g * cos_theta;
+        (1.0 - g * g) / (denom * denom.sqrt().max(1e-300))
+    };
+    let af = albedo * band.f;
+    let smooth = (1.0 - band.f) * band.phase(cos_theta);
+    // T′_sun = e^{−(1 − af) τ_sun}: the expected number of peak scatterings on the sun's leg.
+    let lambda = -af * t_sun.ln() / (1.0 - af);
+    let peak_part = hg - smooth + peak.spread(lambda, cos_theta);
+    // p′'s truncated series dips below 0 at some angles (as the solver's source, clamped there too).
+    (smooth + t_eye.powf(af) * peak_part).max(0.0)
 }
 
 /// Trilinear interpolation of `grid` at continuous voxel coordinates `v`, over full voxels only.
@@ -95,12 +188,10 @@ fn full_trilinear(m: &Medium, full: &[u32], grid: &[Rgb], v: Vec3) -> Rgb {
     }
 }
 
-/// The background along a ray: the ground with the solver's irradiance (shadowed sun and the
-/// cloud's diffuse light), or the sky.
-fn background(scene: &Scene, f: &TransportField, o: Vec3, d: Vec3) -> Rgb {
-    if let Some(t) = scene.ground.as_ref().and_then(|g| g.intersect(o, d)) {
-        let p = o + d * t;
-        return f.ground.at(p.x as f64, p.z as f64);
+/// The background along a ray: the ground as the eye sees it ([`EyeGround`]), or the sky.
+fn background(scene: &Scene, ground: Option<&EyeGround>, o: Vec3, d: Vec3) -> Rgb {
+    if let Some((g, t)) = ground.zip(scene.ground.as_ref().and_then(|g| g.intersect(o, d))) {
+        return g.radiance(scene, o + d * t);
     }
     scene.sky.radiance(d)
 }
@@ -149,6 +240,7 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
         progress.warn(&w);
     }
     let (diffuse, sun) = timings.time("eye source", || eye_source(scene, &field));
+    let ground = EyeGround::new(scene, &field);
     // March with the δ-M extinction of the middle band (the bands differ only by σt f Δa).
     let mut scaled = m.clone();
     scaled.optics.sigma_t = field.optics.bands[1].sigma_t as f32;
@@ -169,7 +261,7 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
                 });
                 let ss = march(&scaled, o, d, 0.0, t_max, step, xi, |v, _| full_trilinear(m, &field.full, &sun, v));
                 let bg = if ms.transmittance > 0.0 {
-                    background(scene, &field, o, d)
+                    background(scene, ground.as_ref(), o, d)
                 } else {
                     Rgb::ZERO
                 };
@@ -193,6 +285,35 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_sun_phase_is_tms_with_nothing_on_either_leg_and_keeps_the_peaks_energy_when_spread() {
+        let (g, order, a) = (0.9, 7, 0.999);
+        let band = crate::transport::BandOptics::delta_m(0.05, a, g, order);
+        let peak = PeakSeries::new(g, order);
+        let hg = |c: f64| (1.0 - g * g) / (1.0 + g * g - 2.0 * g * c).powf(1.5);
+        for c in [-1.0, -0.3, 0.2, 0.9, 0.99, 1.0] {
+            let p = sun_phase(&peak, &band, a, c, 1.0, 1.0);
+            assert!((p - hg(c)).abs() < 1e-6 * hg(c).max(1.0), "cos {c}: {p} vs {}", hg(c));
+        }
+        // Spread by peak scatterings on the sun's leg: the same light in all (½∫ p dμ = 1), less
+        // of it near the sun.
+        let (x, w) = crate::transport::gauss_legendre(400);
+        // (Past λ ≈ 0.5, T′ < 0.5 here, the spread δ-M peak's series has negative lobes that the
+        // clamp cuts: +0.4 % of the energy at λ = 1, +5 % at λ = 2.3, T′ = 0.05.)
+        for t_sun in [0.8, 0.5] {
+            let norm: f64 = x
+                .iter()
+                .zip(&w)
+                .map(|(x, w)| 0.5 * w * sun_phase(&peak, &band, a, *x, t_sun, 1.0))
+                .sum();
+            assert!((norm - 1.0).abs() < 1e-3, "T′ {t_sun}: {norm}");
+            assert!(sun_phase(&peak, &band, a, 1.0, t_sun, 1.0) < hg(1.0));
+        }
+        // A peak scattering on the eye's leg removes the peak's share: only the smooth part is left.
+        let smooth = (1.0 - band.f) * band.phase(0.95);
+        assert!((sun_phase(&peak, &band, a, 0.95, 0.5, 0.0) - smooth).abs() < 1e-9);
+    }
 
     #[test]
     fn only_an_iteration_stopped_by_its_cap_above_the_tolerance_is_warned_about() {

@@ -102,6 +102,9 @@ pub struct GroundMap {
     pub dims: [usize; 2],
     /// Per column, x fastest.
     pub radiance: Vec<Rgb>,
+    /// Per column, the part of `radiance` from the sky's and the cloud's diffuse light
+    /// (ρ_g/π E_down; the rest is the shadowed sun), for the gather to filter.
+    pub diffuse: Vec<Rgb>,
     /// Beyond the map.
     pub clear: Rgb,
     /// World x, z of the grid's minimum corner (m) and the column size (m).
@@ -994,23 +997,26 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         .collect();
     let sky_down = [sky.irradiance_up.x as f64, sky.irradiance_up.y as f64, sky.irradiance_up.z as f64];
     let ground_of = |e_down: Option<&[[f64; 3]]>| -> GroundMap {
-        let radiance = match ground {
+        let (radiance, diffuse) = match ground {
             Some(g) => {
                 let mu_s = sun.dir.y.max(0.0) as f64;
                 (0..gdims[0] * gdims[1])
                     .map(|c| {
                         let de = e_down.map_or([0.0; 3], |e| e[c]);
                         let e = [0, 1, 2].map(|b| (sky_down[b] + de[b]).max(0.0));
-                        Rgb::from([0, 1, 2].map(|b| (g.albedo[b] as f64 / PI * (e_sun[b] * mu_s * ground_t[c][b] + e[b])) as f32))
+                        let total = [0, 1, 2].map(|b| (g.albedo[b] as f64 / PI * (e_sun[b] * mu_s * ground_t[c][b] + e[b])) as f32);
+                        let diffuse = [0, 1, 2].map(|b| (g.albedo[b] as f64 / PI * e[b]) as f32);
+                        (Rgb::from(total), Rgb::from(diffuse))
                     })
-                    .collect()
+                    .unzip()
             }
-            None => vec![Rgb::ZERO; gdims[0] * gdims[1]],
+            None => (vec![Rgb::ZERO; gdims[0] * gdims[1]], vec![Rgb::ZERO; gdims[0] * gdims[1]]),
         };
         GroundMap {
             margin,
             dims: gdims,
             radiance,
+            diffuse,
             clear: ground.map_or(Rgb::ZERO, |g| g.radiance(Vec3::ZERO, sun, sky, 1.0)),
             origin: [m.origin.x as f64, m.origin.z as f64],
             h: [hx, hz],
@@ -1197,6 +1203,7 @@ mod tests {
             margin: 0,
             dims: [dims[0], dims[2]],
             radiance: vec![Rgb::ZERO; dims[0] * dims[2]],
+            diffuse: vec![Rgb::ZERO; dims[0] * dims[2]],
             clear: Rgb::ZERO,
             origin: [0.0; 2],
             h: [10.0, 12.0],

@@ -1,0 +1,126 @@
+//! The ground as the eye sees it in `--method transport`. The solver's ground map
+//! ([`GroundMap`]) is a column per voxel with the sun's transmittance at the column's centre and
+//! the cloud's diffuse light splatted per ordinate: good enough for the light the ground sends back
+//! into the cloud, but seen directly it shows the columns (a blocky shadow) and the ordinates (each
+//! one lands in its own band: stripes and hatching). For the eye, the ground's radiance is
+//! ρ_g/π (E μ_⊙ T′_⊙(p) + E_down(p)) with
+//! - the sun's transmittance T′ marched from the ground point itself (the δ-M scaled T′ = T^{σt′/σt}
+//!   the solver uses, per band), so the shadow is exact;
+//! - E_down, the map's sky and cloud light, box-filtered over the distance between neighbouring
+//!   ordinates' landing points there (so no ordinate is visible) and bilinear between columns.
+
+use crate::math::{Rgb, Vec3};
+use crate::scene::Scene;
+use crate::transport::solve::{GroundMap, TransportField};
+
+/// The ground's radiance for the eye (W·m⁻²·sr⁻¹).
+pub struct EyeGround {
+    /// Filtered ρ_g/π E_down per map column, x fastest.
+    diffuse: Vec<Rgb>,
+    /// Beyond the map: the clear sky's ρ_g/π E_sky.
+    clear: Rgb,
+    dims: [usize; 2],
+    /// World x, z of column (0, 0)'s centre (m).
+    first: [f64; 2],
+    /// Column size (m).
+    h: [f64; 2],
+    /// ρ_g/π E μ_⊙ per band (W·m⁻²·sr⁻¹), to be multiplied by the marched T′.
+    sun: Rgb,
+    /// σt′/σt per band: T′ = T^{this}.
+    scale: [f64; 3],
+}
+
+impl EyeGround {
+    /// From the solved field; `None` without a ground.
+    pub fn new(scene: &Scene, f: &TransportField) -> Option<EyeGround> {
+        let g = scene.ground.as_ref()?;
+        let m = &scene.medium;
+        let map = &f.ground;
+        let mu_s = scene.sun.dir.y.max(0.0);
+        let sun = g.albedo * scene.sun.irradiance * (mu_s / std::f32::consts::PI);
+        let clear = g.albedo * scene.sky.irradiance_up / std::f32::consts::PI;
+        let scale = [0, 1, 2].map(|b| f.optics.bands[b].sigma_t / f.optics.sigma_t);
+        let first = [0, 1].map(|a| map.origin[a] + (0.5 - map.margin as f64) * map.h[a]);
+        // Where the ordinates leave the cloud: the box of full voxels, and its bottom's height
+        // above the ground (at least a voxel).
+        let (lo, hi) = m.active_box(0).unwrap_or(([0; 3], [0; 3]));
+        let (o, vs) = (m.origin, m.voxel_size);
+        let foot = [
+            [o.x as f64 + lo[0] as f64 * vs.x as f64, o.x as f64 + hi[0] as f64 * vs.x as f64],
+            [o.z as f64 + lo[2] as f64 * vs.z as f64, o.z as f64 + hi[2] as f64 * vs.z as f64],
+        ];
+        let height = ((o.y + lo[1] as f32 * vs.y - g.height) as f64).max(vs.y as f64);
+        // Neighbouring ordinates are π/n_μ apart in angle (polar and azimuthal).
+        let spacing = std::f64::consts::PI / scene.render.transport.n_mu as f64;
+        let diffuse = filtered(map, first, |x, z| {
+            let dx = (foot[0][0] - x).max(x - foot[0][1]).max(0.0);
+            let dz = (foot[1][0] - z).max(z - foot[1][1]).max(0.0);
+            // Two ordinates a polar step apart, leaving the cloud's bottom at height H, land
+            // (H² + X²)/H Δθ apart at horizontal distance X (and X Δφ apart sideways, less).
+            let x2 = dx * dx + dz * dz;
+            (height * height + x2) / height * spacing
+        });
+        Some(EyeGround {
+            diffuse,
+            clear,
+            dims: map.dims,
+            first,
+            h: map.h,
+            sun,
+            scale,
+        })
+    }
+
+    /// Radiance of the ground point `p` (on the plane) towards the eye.
+    pub fn radiance(&self, scene: &Scene, p: Vec3) -> Rgb {
+        let t = scene.medium.transmittance(p, scene.sun.dir, 0.0, f32::INFINITY) as f64;
+        let t_scaled = Rgb::from(self.scale.map(|s| t.powf(s) as f32));
+        self.sun * t_scaled + self.diffuse_at(p.x as f64, p.z as f64)
+    }
+
+    /// Bilinear in the filtered columns; the clear sky's beyond the map.
+    fn diffuse_at(&self, x: f64, z: f64) -> Rgb {
+        let u = (x - self.first[0]) / self.h[0];
+        let v = (z - self.first[1]) / self.h[1];
+        let (n, m) = (self.dims[0] as f64, self.dims[1] as f64);
+        if u < -0.5 || v < -0.5 || u > n - 0.5 || v > m - 0.5 {
+            return self.clear;
+        }
+        let (u, v) = (u.clamp(0.0, n - 1.0), v.clamp(0.0, m - 1.0));
+        let (i, k) = (
+            (u.floor() as usize).min(self.dims[0].saturating_sub(2)),
+            (v.floor() as usize).min(self.dims[1].saturating_sub(2)),
+        );
+        let (tu, tv) = ((u - i as f64) as f32, (v - k as f64) as f32);
+        let at = |i: usize, k: usize| self.diffuse[i.min(self.dims[0] - 1) + self.dims[0] * k.min(self.dims[1] - 1)];
+        (at(i, k) * (1.0 - tu) + at(i + 1, k) * tu) * (1.0 - tv) + (at(i, k + 1) * (1.0 - tu) + at(i + 1, k + 1) * tu) * tv
+    }
+}
+
+/// The map's diffuse part, each column the mean over the square of half-width `width(x, z)` (m)
+/// around it (clipped to the map), by a summed-area table.
+fn filtered(map: &GroundMap, first: [f64; 2], width: impl Fn(f64, f64) -> f64) -> Vec<Rgb> {
+    let [nx, nz] = map.dims;
+    let mut sat = vec![[0f64; 3]; (nx + 1) * (nz + 1)];
+    for k in 0..nz {
+        for i in 0..nx {
+            let c = map.diffuse[i + nx * k];
+            let s = |i: usize, k: usize| sat[i + (nx + 1) * k];
+            let (a, b, d) = (s(i, k + 1), s(i + 1, k), s(i, k));
+            sat[i + 1 + (nx + 1) * (k + 1)] = [0, 1, 2].map(|band| c[band] as f64 + a[band] + b[band] - d[band]);
+        }
+    }
+    (0..nx * nz)
+        .map(|c| {
+            let (i, k) = (c % nx, c / nx);
+            let (x, z) = (first[0] + i as f64 * map.h[0], first[1] + k as f64 * map.h[1]);
+            let w = width(x, z);
+            let r = [0, 1].map(|a| (w / map.h[a]).round().clamp(0.0, 4096.0) as usize);
+            let (i0, i1) = (i.saturating_sub(r[0]), (i + r[0] + 1).min(nx));
+            let (k0, k1) = (k.saturating_sub(r[1]), (k + r[1] + 1).min(nz));
+            let s = |i: usize, k: usize| sat[i + (nx + 1) * k];
+            let area = ((i1 - i0) * (k1 - k0)) as f64;
+            Rgb::from([0, 1, 2].map(|b| ((s(i1, k1)[b] - s(i0, k1)[b] - s(i1, k0)[b] + s(i0, k0)[b]) / area) as f32))
+        })
+        .collect()
+}
