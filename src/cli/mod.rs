@@ -235,8 +235,13 @@ fn render(a: RenderArgs, quiet: bool) -> Result<()> {
         eprintln!("warning: {w}");
     }
     let progress = progress::Bars::new(quiet);
-    let out = cloudgi::render(&scene, &progress)?;
-    write_exr_and_png(&out.image, &a.output, &png, scene.render.exposure)?;
+    let options = cloudgi::Options {
+        progress: Some(&progress),
+        cancel: None,
+    };
+    let out = cloudgi::render(&scene, scene.render.method, &options)?;
+    let timings = out.stats.timings.summary();
+    write_exr_and_png(&out.into_image(), &a.output, &png, scene.render.exposure)?;
     if !quiet {
         eprintln!(
             "{} {}×{} → {} + {}",
@@ -246,7 +251,7 @@ fn render(a: RenderArgs, quiet: bool) -> Result<()> {
             a.output.display(),
             png.display()
         );
-        eprintln!("timings: {}", out.timings.summary());
+        eprintln!("timings: {timings}");
     }
     Ok(())
 }
