@@ -19,8 +19,7 @@
 //! that the integration tests in `tests/` can check them one by one; they are not a stable API.
 
 mod api;
-#[doc(hidden)]
-pub mod camera;
+pub(crate) mod camera;
 #[doc(hidden)]
 pub mod compare;
 #[doc(hidden)]
@@ -32,8 +31,7 @@ pub mod edges;
 pub mod error;
 #[doc(hidden)]
 pub mod figures;
-#[doc(hidden)]
-pub mod half;
+pub(crate) mod half;
 #[doc(hidden)]
 pub mod image;
 #[doc(hidden)]
@@ -50,10 +48,8 @@ pub mod math;
 pub mod medium;
 #[doc(hidden)]
 pub mod optics;
-#[doc(hidden)]
-pub mod orders;
-#[doc(hidden)]
-pub mod pipeline;
+pub(crate) mod orders;
+pub(crate) mod pipeline;
 #[doc(hidden)]
 pub mod reference;
 #[doc(hidden)]
