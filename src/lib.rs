@@ -16,7 +16,8 @@
 //! ```
 //!
 //! The modules below the API (hidden from these docs) are the renderer's stages, public only so
-//! that the integration tests in `tests/` can check them one by one; they are not a stable API.
+//! that the command line (`src/cli/`) and the integration tests in `tests/` can reach them; they
+//! are not a stable API.
 
 mod api;
 pub(crate) mod camera;
