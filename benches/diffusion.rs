@@ -29,7 +29,7 @@ fn diffusion(c: &mut Criterion) {
     });
     scene.render.method = Method::Diffusion;
     g.bench_function("render default scene 480x360", |b| {
-        b.iter(|| cloudgi::render(&scene, &NoProgress).unwrap())
+        b.iter(|| cloudgi::render::render(&scene, &NoProgress).unwrap())
     });
     g.finish();
 }

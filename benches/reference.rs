@@ -17,7 +17,7 @@ fn reference(c: &mut Criterion) {
     let mut g = c.benchmark_group("reference");
     g.sample_size(10);
     g.bench_function("default scene 96x72 1 spp", |b| {
-        b.iter(|| cloudgi::render(&scene, &NoProgress).unwrap())
+        b.iter(|| cloudgi::render::render(&scene, &NoProgress).unwrap())
     });
     let p = SlabParams {
         thickness: 10.0,

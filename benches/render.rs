@@ -9,7 +9,7 @@ fn single(c: &mut Criterion) {
     let mut g = c.benchmark_group("single");
     g.sample_size(10);
     g.bench_function("default scene 480x360", |b| {
-        b.iter(|| cloudgi::render(&scene, &NoProgress).unwrap())
+        b.iter(|| cloudgi::render::render(&scene, &NoProgress).unwrap())
     });
     g.bench_function("sun transmittance grid", |b| {
         b.iter(|| SunTransmittance::compute(&scene.medium, scene.sun.dir))

@@ -52,6 +52,9 @@ pub enum Error {
         /// What happened and what to try.
         message: String,
     },
+    /// The caller cancelled the render ([`crate::Options::cancel`]); nothing was produced.
+    #[error("render cancelled")]
+    Cancelled,
 }
 
 impl Error {

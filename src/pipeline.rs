@@ -19,6 +19,11 @@ pub trait Progress: Sync {
     fn warn(&self, msg: &str) {
         self.log(msg)
     }
+    /// Whether the caller asked the render to stop ([`crate::Options::cancel`]); polled between
+    /// rows, passes and solver iterations, which then skip their remaining work. False by default.
+    fn cancelled(&self) -> bool {
+        false
+    }
 }
 
 /// Progress sink that ignores everything.
@@ -76,6 +81,9 @@ pub fn render_rows<T: Clone + Default + Send>(
     progress.begin(stage, height as u64);
     let mut px = vec![T::default(); width as usize * height as usize];
     px.par_chunks_mut(width as usize).enumerate().for_each(|(y, row)| {
+        if progress.cancelled() {
+            return;
+        }
         for (x, p) in row.iter_mut().enumerate() {
             *p = shade(x as u32, y as u32);
         }

@@ -398,6 +398,11 @@ impl Scene {
     /// Validate a description and load what it refers to. `source` names it in messages;
     /// relative grid paths resolve against `base_dir`.
     pub fn build(desc: SceneDesc, source: &str, base_dir: &Path) -> Result<Scene> {
+        Scene::build_with(desc, source, base_dir, None)
+    }
+
+    /// [`Scene::build`] with the density grid given in memory instead of `medium.grid`'s.
+    pub fn build_with(desc: SceneDesc, source: &str, base_dir: &Path, density: Option<crate::Density>) -> Result<Scene> {
         let f = source;
         let r = &desc.render;
         check(f, "render.spp", r.spp >= 1, r.spp, "samples per pixel must be at least 1")?;
@@ -456,7 +461,7 @@ impl Scene {
             Some(_) => None,
             None => None,
         };
-        let medium = Medium::from_desc(&desc.medium, f, base_dir)?;
+        let medium = Medium::from_desc_with(&desc.medium, f, base_dir, density.map(crate::Density::into_loaded))?;
         render.edges.step_m = render.step_voxels * medium.min_voxel();
         Ok(Scene {
             source: source.to_string(),

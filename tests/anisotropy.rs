@@ -11,7 +11,7 @@ use cloudgi::medium::field16::Field16;
 use cloudgi::medium::sparse::VoxelField;
 use cloudgi::medium::{Grid3, Medium};
 use cloudgi::render::diffusion::i0_rgb;
-use cloudgi::{render, Method, NoProgress, Scene};
+use cloudgi::{render::render, Method, NoProgress, Scene};
 
 const TAU_MIN: f64 = cloudgi::diffusion::DEFAULT_MIN_OPTICAL_DEPTH;
 

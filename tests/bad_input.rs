@@ -1111,7 +1111,7 @@ fn small(text: &str) -> String {
 fn render_as(s: &cloudgi::Scene, m: cloudgi::scene::Method) -> cloudgi::Image {
     let mut t = s.clone();
     t.render.method = m;
-    cloudgi::render(&t, &cloudgi::NoProgress).unwrap().image
+    cloudgi::render::render(&t, &cloudgi::NoProgress).unwrap().image
 }
 
 #[test]

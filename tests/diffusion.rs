@@ -402,9 +402,9 @@ fn deterministic_at_any_thread_count_and_hook_replaces_radiance() {
 fn diffusion_render_is_brighter_than_single_scattering() {
     let mut scene = default_small();
     scene.render.method = Method::Diffusion;
-    let d = cloudgi::render(&scene, &NoProgress).unwrap();
+    let d = cloudgi::render::render(&scene, &NoProgress).unwrap();
     scene.render.method = Method::Single;
-    let s = cloudgi::render(&scene, &NoProgress).unwrap();
+    let s = cloudgi::render::render(&scene, &NoProgress).unwrap();
     assert!(d.timings.stages.iter().any(|(n, _)| n == "diffusion solve"));
     // Pixels where the cloud is: compare the mean luminance over the image centre.
     let lum = |img: &cloudgi::Image| -> f64 {

@@ -173,7 +173,7 @@ fn single_render_is_identical_with_any_thread_count() {
     .unwrap();
     let run = |n: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
-        pool.install(|| cloudgi::render(&scene, &cloudgi::NoProgress).unwrap().image)
+        pool.install(|| cloudgi::render::render(&scene, &cloudgi::NoProgress).unwrap().image)
     };
     let (a, b) = (run(1), run(2));
     assert_eq!(a.pixels, b.pixels);

@@ -201,7 +201,7 @@ fn full_render_is_deterministic_and_aovs_add_up() {
             .num_threads(threads)
             .build()
             .unwrap()
-            .install(|| cloudgi::render(&s, &NoProgress).unwrap().image)
+            .install(|| cloudgi::render::render(&s, &NoProgress).unwrap().image)
     };
     let a = run(1);
     let b = run(2);

@@ -31,7 +31,7 @@ fn scene(method: Method, w: u32, h: u32, edit: impl FnOnce(&mut SceneDesc)) -> S
 }
 
 fn render(s: &Scene) -> Image {
-    cloudgi::render(s, &NoProgress).unwrap().image
+    cloudgi::render::render(s, &NoProgress).unwrap().image
 }
 
 fn rel(a: f32, b: f32) -> f32 {

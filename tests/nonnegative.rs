@@ -29,7 +29,7 @@ fn scene(example: Option<&str>, method: Method, edit: impl Fn(&mut SceneDesc)) -
 }
 
 fn assert_nonnegative(label: &str, s: &Scene) {
-    let out = cloudgi::render(s, &NoProgress).unwrap();
+    let out = cloudgi::render::render(s, &NoProgress).unwrap();
     let img = out.image;
     let mut layers = vec![("rgb".to_string(), img.pixels.clone())];
     layers.extend(img.layers.iter().cloned());

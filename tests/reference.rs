@@ -155,7 +155,7 @@ fn single_scattering_matches_the_single_method() {
     let mut ss = s.clone();
     ss.render.method = Method::Single;
     ss.render.spp = 16;
-    let single = cloudgi::render(&ss, &NoProgress).unwrap().image;
+    let single = cloudgi::render::render(&ss, &NoProgress).unwrap().image;
     let se = rf.layer(STDERR_LAYER).unwrap();
     for (i, ((&a, &b), &e)) in rf.pixels.iter().zip(&single.pixels).zip(se).enumerate() {
         assert!(b.min_element() > 0.0);

@@ -7,7 +7,7 @@ use cloudgi::lighting::{Sky, Sun};
 use cloudgi::math::{luminance, Rgb, Vec3};
 use cloudgi::medium::{Grid3, Medium};
 use cloudgi::transport::solve::{solve, TransportSettings};
-use cloudgi::{render, Method, NoProgress, Scene};
+use cloudgi::{render::render, Method, NoProgress, Scene};
 
 /// A ball of cloud, 12³ voxels of 10 m, density falling from 1 at the centre to 0 at radius 5.5.
 fn ball(sigma_t: f32, albedo: f32) -> Medium {

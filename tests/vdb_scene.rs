@@ -104,7 +104,7 @@ fn a_vdb_cloud_renders_end_to_end() {
     let dir = tempfile::tempdir().unwrap();
     // No [ground] table, so no ground; pixel (0, 0) sees the sky.
     let s = scene(dir.path(), "sphere64_half_blosc.vdb", VIEW, "").unwrap();
-    let out = cloudgi::render(&s, &NoProgress).unwrap();
+    let out = cloudgi::render::render(&s, &NoProgress).unwrap();
     let img = out.image;
     assert!(
         img.pixels.iter().all(|p| p.is_finite() && p.min_element() >= 0.0),

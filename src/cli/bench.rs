@@ -174,7 +174,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
             let scene = Scene::build(desc, &file.source, &file.base)?;
             super::memory::check_solver(&scene)?;
             let log = Log(Mutex::new(Vec::new()));
-            let out = cloudgi::render(&scene, &log)?;
+            let out = cloudgi::render::render(&scene, &log)?;
             for l in log.0.into_inner().unwrap_or_default() {
                 notes.push(format!("{} {}: {l}", name(size), method.name()));
             }

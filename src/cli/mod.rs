@@ -288,8 +288,13 @@ fn render(a: RenderArgs, quiet: bool) -> Result<()> {
         note!("warning: {w}");
     }
     let progress = progress::Bars::new(quiet);
-    let out = cloudgi::render(&scene, &progress)?;
-    write_exr_and_png(&out.image, &a.output, &png, scene.render.exposure)?;
+    let options = cloudgi::Options {
+        progress: Some(&progress),
+        cancel: None,
+    };
+    let out = cloudgi::render(&scene, scene.render.method, &options)?;
+    let timings = out.stats.timings.summary();
+    write_exr_and_png(&out.into_image(), &a.output, &png, scene.render.exposure)?;
     if !quiet {
         note!(
             "{} {}×{} → {} + {}",
@@ -299,7 +304,7 @@ fn render(a: RenderArgs, quiet: bool) -> Result<()> {
             a.output.display(),
             png.display()
         );
-        note!("timings: {}", out.timings.summary());
+        note!("timings: {timings}");
     }
     Ok(())
 }

@@ -134,6 +134,12 @@ impl Medium {
 
     /// Build from `[medium]`: validate the optical properties, load the grid, check its values.
     pub fn from_desc(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Medium> {
+        Medium::from_desc_with(d, file, base_dir, None)
+    }
+
+    /// [`Medium::from_desc`] with the grid `given` in memory instead of `medium.grid`'s (the
+    /// library's [`crate::Density`]); it is checked like a loaded one.
+    pub fn from_desc_with(d: &MediumDesc, file: &str, base_dir: &Path, given: Option<loaders::Loaded>) -> Result<Medium> {
         check(
             file,
             "medium.sigma_t",
@@ -163,7 +169,10 @@ impl Medium {
             "must be an integer from 1 (off) to 64",
         )?;
         check(file, "medium.max_voxels", d.max_voxels >= 1, d.max_voxels, "must be at least 1")?;
-        let loaded = loaders::load(d, file, base_dir)?;
+        let loaded = match given {
+            Some(loaded) => loaded,
+            None => loaders::load(d, file, base_dir)?,
+        };
         let mut grid = loaded.grid;
         let mut voxel = loaded.voxel_size;
         if d.downsample > 1 && !loaded.downsampled {

@@ -149,7 +149,7 @@ pub fn render_with_stats(scene: &Scene, progress: &dyn Progress, timings: &mut T
             let s = passes;
             acc.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
                 for (x, a) in row.iter_mut().enumerate() {
-                    if stop.load(Ordering::Relaxed) || deadline.is_some_and(|t| Instant::now() >= t) {
+                    if stop.load(Ordering::Relaxed) || deadline.is_some_and(|t| Instant::now() >= t) || progress.cancelled() {
                         stop.store(true, Ordering::Relaxed);
                         return;
                     }

@@ -96,6 +96,9 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
     let mut ca = Some(timings.time("clear-air cubes", || cubes(&sol)));
     let mut ground = ca.as_ref().and_then(|c| c.lit.ground.clone());
     for it in 0..iterations {
+        if progress.cancelled() {
+            break;
+        }
         let c = match ca.take() {
             Some(c) => c,
             None => timings.time("clear-air cubes", || cubes(&sol)),
@@ -340,6 +343,9 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
     let mut sum = vec![[Rgb::ZERO; 4]; n];
     progress.begin("final gather", spp as u64);
     for s in 0..spp {
+        if progress.cancelled() {
+            break;
+        }
         let ray = |x: u32, y: u32| {
             let (px, py, _) = pixel_sample(scene, x, y, s, spp);
             let r = cam.ray(px, py);

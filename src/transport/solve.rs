@@ -1070,6 +1070,9 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
     progress.begin("transport iterations", s.max_iterations as u64);
     // An empty medium has nothing to iterate: the sky and ground pass unchanged.
     for _ in 0..if nfull == 0 { 0 } else { s.max_iterations } {
+        if progress.cancelled() {
+            break;
+        }
         let e_down = sweep(&ctx, &q, &tables, &moments, &mut next, &ground_map);
         if !hier.is_empty() {
             accelerate(&ctx, &full_vox, &hier, bands, &moments, &mut next);

@@ -1,0 +1,206 @@
+"""cloudgi: physically based cloud rendering (Max et al. 2004) from Python.
+
+Numpy in, images out::
+
+    import cloudgi
+    images = cloudgi.render("examples/default.toml", width=160, height=120)
+    images["rgb"].shape            # (120, 160, 3), float32, linear radiance
+    cloudgi.write_exr("cloud.exr", images)
+
+A scene is a path to a scene file, TOML text, or a dict in the scene file's schema
+(``{"camera": {"width": 64}, "medium": {"sigma_t": 0.1}}``); every key the file allows, with the
+same defaults and the same error messages as the ``cloudgi`` command line. ``density`` (a numpy
+array indexed ``[z][y][x]``, like a ``.npy`` file) replaces ``medium.grid``. Frames on a Dask
+cluster: :func:`cloudgi.dask.render_frames`.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+from typing import Any, Callable, Dict, Mapping, Optional, Sequence, Union
+
+import numpy as np
+
+from . import _cloudgi
+from ._cloudgi import (
+    CancelledError,
+    CloudgiError,
+    FileError,
+    FormatError,
+    SceneError,
+    SolverError,
+)
+
+__version__: str = _cloudgi.__version__
+
+__all__ = [
+    "__version__",
+    "render",
+    "write_exr",
+    "load_vdb",
+    "scene_toml",
+    "METHODS",
+    "CloudgiError",
+    "SceneError",
+    "FormatError",
+    "FileError",
+    "SolverError",
+    "CancelledError",
+]
+
+#: The rendering methods, as ``render(method=...)`` and the scene's ``render.method`` name them.
+METHODS = ("single", "diffusion", "full", "transport", "reference")
+
+SceneLike = Union[str, "os.PathLike[str]", Mapping[str, Any]]
+ProgressCallback = Callable[[str, int, int], Any]
+
+
+def _scene_input(scene: Optional[SceneLike]) -> "tuple[str, str]":
+    """(kind, payload) of a scene: the built-in one, a path, TOML text or a dict (sent as JSON)."""
+    if scene is None:
+        return "builtin", ""
+    if isinstance(scene, Mapping):
+        return "dict", json.dumps(scene)
+    if isinstance(scene, os.PathLike):
+        return "path", os.fspath(scene)
+    if isinstance(scene, str):
+        # TOML text has a newline, a `=` or a `[`; a path has none of them (or names a file).
+        looks_like_toml = any(c in scene for c in "\n=[") or scene == ""
+        if looks_like_toml and not os.path.isfile(scene):
+            return "toml", scene
+        return "path", scene
+    raise TypeError(f"scene must be a path, TOML text or a dict, not {type(scene).__name__}")
+
+
+def _overrides(method: Optional[str], width: Optional[int], height: Optional[int],
+               spp: Optional[int], seed: Optional[int], aov: Optional[bool],
+               extra: Optional[Mapping[str, Mapping[str, Any]]] = None) -> str:
+    """The keyword arguments as scene keys (checked by the scene file's own parser)."""
+    over: Dict[str, Dict[str, Any]] = {}
+    for table, keys in (extra or {}).items():
+        if not isinstance(keys, Mapping):
+            raise SceneError(f"overrides: `{table}` must be a dict of keys (a table of the scene file)")
+        over.setdefault(table, {}).update(keys)
+    for table, key, value in (
+        ("render", "method", method),
+        ("camera", "width", width),
+        ("camera", "height", height),
+        ("render", "spp", spp),
+        ("render", "seed", seed),
+        ("render", "aov", aov),
+    ):
+        if value is not None:
+            over.setdefault(table, {})[key] = value
+    return json.dumps(over)
+
+
+def _npy_bytes(density: Any) -> bytes:
+    """The bytes of ``density`` as a ``.npy`` file, so the grid is checked exactly as one."""
+    if not isinstance(density, np.ndarray):
+        raise TypeError(f"density must be a numpy.ndarray, not {type(density).__name__}")
+    buf = io.BytesIO()
+    np.save(buf, np.ascontiguousarray(density), allow_pickle=False)
+    return buf.getvalue()
+
+
+def _images(width: int, height: int, layers: Sequence["tuple[str, bytearray]"]) -> Dict[str, np.ndarray]:
+    return {name: np.frombuffer(data, dtype="<f4").reshape(height, width, 3) for name, data in layers}
+
+
+def render(
+    scene: Optional[SceneLike] = None,
+    method: Optional[str] = None,
+    density: Optional[np.ndarray] = None,
+    width: Optional[int] = None,
+    height: Optional[int] = None,
+    *,
+    spp: Optional[int] = None,
+    seed: Optional[int] = None,
+    aov: Optional[bool] = None,
+    voxel_size: Optional[float] = None,
+    origin: Optional[Sequence[float]] = None,
+    overrides: Optional[Mapping[str, Mapping[str, Any]]] = None,
+    progress: Optional[ProgressCallback] = None,
+) -> Dict[str, np.ndarray]:
+    """Render a scene; returns ``{"rgb": array, <aov>: array, ...}``, float32 ``(H, W, 3)``.
+
+    ``scene``: a path to a scene file, TOML text, or a dict in the scene file's schema (tables
+    and keys it leaves out take the defaults, and no ``ground`` table means no ground, as in a
+    scene file); ``None``: the built-in default scene (the command line without a scene file). ``method`` (``"transport"``, ``"single"``,
+    ``"diffusion"``, ``"full"``, ``"reference"``; default: the scene's ``render.method``),
+    ``width``, ``height``, ``spp``, ``seed`` and ``aov`` override the scene's keys, and so does
+    ``overrides``, a dict of tables in the scene file's schema (``{"sun": {"elevation_deg": 30}}``),
+    applied on top of the scene after the scene itself is checked.
+
+    ``density``: float32 or float64 array indexed ``[z][y][x]`` (as a ``.npy`` file), replacing
+    ``medium.grid``; its voxels are ``voxel_size`` metres (default ``medium.voxel_size``) with
+    the minimum corner at ``origin`` (default ``medium.origin``).
+
+    ``progress(stage, done, total)`` is called from this thread while the render runs (at most
+    every 50 ms, on change), e.g. to drive a tqdm bar. The GIL is released during the render;
+    Ctrl-C cancels it (KeyboardInterrupt). Solver warnings are issued as RuntimeWarning.
+
+    Raises :class:`SceneError` (bad scene or argument), :class:`FormatError` (bad grid data),
+    :class:`FileError`, :class:`SolverError`, each with the command line's message.
+    """
+    kind, payload = _scene_input(scene)
+    npy = None if density is None else _npy_bytes(density)
+    if origin is not None:
+        origin = [float(v) for v in origin]
+    w, h, layers = _cloudgi.render(
+        kind,
+        payload,
+        _overrides(method, width, height, spp, seed, aov, overrides),
+        npy,
+        None if voxel_size is None else float(voxel_size),
+        origin,
+        progress,
+    )
+    return _images(w, h, layers)
+
+
+def write_exr(path: Union[str, "os.PathLike[str]"], images: Mapping[str, np.ndarray]) -> None:
+    """Write ``images`` (``"rgb"`` and any AOVs, each ``(H, W, 3)``) as one OpenEXR file,
+    atomically: RGB as the R, G, B channels and each AOV as ``NAME.R/G/B``, exactly as the
+    command line writes a render."""
+    if "rgb" not in images:
+        raise SceneError(f"{os.fspath(path)}: images need an \"rgb\" entry (got {sorted(images)})")
+    shape = np.shape(images["rgb"])
+    layers = []
+    for name, img in images.items():
+        arr = np.asarray(img)
+        if arr.ndim != 3 or arr.shape[2] != 3 or arr.shape != shape:
+            raise FormatError(
+                f"{os.fspath(path)}: image `{name}` has shape {arr.shape}; every image must be (H, W, 3) like rgb's {shape}"
+            )
+        layers.append((name, np.ascontiguousarray(arr, dtype="<f4").tobytes()))
+    _cloudgi.write_exr(os.fspath(path), shape[1], shape[0], layers)
+
+
+def load_vdb(path: Union[str, "os.PathLike[str]"], grid: str = "density") -> np.ndarray:
+    """Read grid ``grid`` of an OpenVDB file densely over its active voxels: a float32 array
+    indexed ``[z][y][x]``, ready for ``render(density=...)`` (its voxel size and origin are the
+    file's transform; see :func:`load_grid` for them)."""
+    return load_grid(path, grid)[0]
+
+
+def load_grid(path: Union[str, "os.PathLike[str]"], grid: str = "density"):
+    """Read a grid file (``.vdb``, ``.npy``, ``.raw`` with its ``.json``, ``.vol``) as the scene's
+    ``medium.grid`` would be read: ``(array [z][y][x] float32, voxel_size (m, x y z), origin (m))``."""
+    dims, data, voxel, origin = _cloudgi.load_grid(os.fspath(path), grid)
+    nx, ny, nz = dims
+    return np.frombuffer(data, dtype="<f4").reshape(nz, ny, nx), tuple(voxel), tuple(origin)
+
+
+def scene_toml(scene: Optional[SceneLike] = None, **overrides: Any) -> str:
+    """The scene ``render`` would use, as scene-file TOML with every default filled in."""
+    kind, payload = _scene_input(scene)
+    over = _overrides(overrides.pop("method", None), overrides.pop("width", None),
+                      overrides.pop("height", None), overrides.pop("spp", None),
+                      overrides.pop("seed", None), overrides.pop("aov", None),
+                      overrides.pop("overrides", None))
+    if overrides:
+        raise TypeError(f"unknown keyword arguments: {sorted(overrides)}")
+    return _cloudgi.scene_toml(kind, payload, over)

@@ -1,0 +1,93 @@
+"""Frames on a Dask cluster: one task per frame, each written atomically, failed frames retried.
+
+::
+
+    from dask.distributed import Client, LocalCluster
+    import cloudgi.dask
+
+    client = Client(LocalCluster(n_workers=2))
+    frames = [{"sun": {"elevation_deg": e}} for e in (10, 20, 30, 40)]
+    paths = cloudgi.dask.render_frames("scene.toml", frames, client, "out/cloud_{frame:04d}.exr")
+
+A frame is a dict of scene keys applied on top of ``scene`` (``{}``: the scene as it is), a
+scene of its own (a path or TOML text), or a ``(scene, overrides)`` pair.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from typing import Any, Iterable, List, Mapping, Optional, Tuple, Union
+
+import cloudgi
+
+Frame = Union[Mapping[str, Any], str, "os.PathLike[str]", Tuple[Any, Mapping[str, Any]]]
+
+
+def frame_path(out_pattern: str, frame: int) -> str:
+    """The output of frame number ``frame``: ``{frame}`` in the pattern formatted
+    (``cloud_{frame:04d}.exr``), or else its run of ``#`` replaced by the zero-padded number
+    (``cloud_####.exr``)."""
+    if "{" in out_pattern:
+        return out_pattern.format(frame=frame)
+    runs = list(re.finditer(r"#+", out_pattern))
+    if not runs:
+        raise ValueError(f"out_pattern `{out_pattern}` has no `{{frame}}` or `#` for the frame number")
+    r = runs[-1]
+    return out_pattern[: r.start()] + str(frame).zfill(len(r.group())) + out_pattern[r.end():]
+
+
+def _split(scene: Any, frame: Frame) -> Tuple[Any, Optional[Mapping[str, Any]]]:
+    """(scene, overrides) of one frame."""
+    if isinstance(frame, tuple):
+        own, overrides = frame
+        return own, overrides
+    if isinstance(frame, Mapping):
+        return scene, frame
+    return frame, None
+
+
+def render_frame(scene: Any, overrides: Optional[Mapping[str, Any]], path: str, options: Mapping[str, Any]) -> str:
+    """Render one frame and write it to ``path`` atomically (a temporary file in the same folder,
+    renamed when complete, so a killed worker never leaves a partial frame). The task each frame
+    of :func:`render_frames` runs."""
+    images = cloudgi.render(scene, overrides=overrides, **options)
+    cloudgi.write_exr(path, images)
+    return path
+
+
+def render_frames(
+    scene: Any,
+    frames: Iterable[Frame],
+    client: Any,
+    out_pattern: str,
+    *,
+    start: int = 0,
+    retries: int = 2,
+    **options: Any,
+) -> List[str]:
+    """Render ``frames`` on the Dask ``client``'s cluster, one task per frame; returns the
+    output paths in frame order once every frame is written.
+
+    Frame ``i`` (numbered from ``start``) is written to ``frame_path(out_pattern, i)``.
+    ``options`` are :func:`cloudgi.render`'s keyword arguments (``method``, ``width``, ...).
+    A frame whose task raises is tried again up to ``retries`` times; a frame on a worker that
+    dies is rescheduled by Dask on another. Folders are checked before anything is submitted.
+    """
+    jobs = []
+    for i, frame in enumerate(frames, start=start):
+        own, overrides = _split(scene, frame)
+        jobs.append((own, overrides, frame_path(out_pattern, i)))
+    paths = [j[2] for j in jobs]
+    if len(set(paths)) != len(paths):
+        raise ValueError(f"out_pattern `{out_pattern}` gives several frames the same file; put {{frame}} in it")
+    for p in paths:
+        folder = os.path.dirname(os.path.abspath(p))
+        if not os.path.isdir(folder):
+            raise cloudgi.FileError(f"{p}: the folder `{folder}` does not exist; create it first")
+    futures = [
+        client.submit(render_frame, own, overrides, path, options, retries=retries, pure=False,
+                      key=f"cloudgi-frame-{os.path.basename(path)}-{os.urandom(4).hex()}")
+        for own, overrides, path in jobs
+    ]
+    return list(client.gather(futures))

@@ -1,0 +1,108 @@
+//! A scene as Python gives it — a file path, TOML text or a dict (as JSON) — with the
+//! overrides of `render()`'s keyword arguments (a JSON object of tables), turned into a
+//! [`SceneDesc`] through the scene file's own parser, so every message is the command line's.
+
+use cloudgi::error::{Error, Result};
+use cloudgi::scene::BUILTIN;
+use cloudgi::SceneDesc;
+use std::path::{Path, PathBuf};
+
+/// Name of a scene given as a dict, in messages.
+const DICT_SOURCE: &str = "scene dict";
+
+/// Where the scene comes from.
+enum Source {
+    Builtin,
+    Path(PathBuf),
+    Toml(String),
+    Dict(String),
+}
+
+/// A scene as given, not yet parsed.
+pub struct SceneInput {
+    source: Source,
+    overrides: toml::Table,
+}
+
+impl SceneInput {
+    /// `kind` is `builtin`, `path`, `toml` or `dict` (then `payload` is JSON); `overrides` a JSON object
+    /// `{table: {key: value}}`.
+    pub fn new(kind: &str, payload: &str, overrides: &str) -> Result<SceneInput> {
+        let source = match kind {
+            "builtin" => Source::Builtin,
+            "path" => Source::Path(PathBuf::from(payload)),
+            "toml" => Source::Toml(payload.to_string()),
+            "dict" => Source::Dict(payload.to_string()),
+            other => return Err(Error::invalid("cloudgi.render", "scene", format!("unknown scene kind `{other}`"))),
+        };
+        let overrides: toml::Table =
+            serde_json::from_str(overrides).map_err(|e| Error::invalid("cloudgi.render", "keyword arguments", e.to_string()))?;
+        Ok(SceneInput { source, overrides })
+    }
+
+    /// The description, the name of its source for messages, and the folder its relative paths
+    /// resolve against.
+    pub fn desc(&self) -> Result<(SceneDesc, String, PathBuf)> {
+        let (text, name, base) = match &self.source {
+            Source::Builtin => {
+                let desc = SceneDesc::default();
+                if self.overrides.is_empty() {
+                    return Ok((desc, BUILTIN.to_string(), PathBuf::from(".")));
+                }
+                (desc.to_toml(), BUILTIN.to_string(), PathBuf::from("."))
+            }
+            Source::Path(p) => {
+                // The file alone first: its errors read exactly as the command line's.
+                let desc = SceneDesc::from_file(p)?;
+                let name = p.display().to_string();
+                let base = p
+                    .parent()
+                    .filter(|b| !b.as_os_str().is_empty())
+                    .unwrap_or(Path::new("."))
+                    .to_path_buf();
+                if self.overrides.is_empty() {
+                    return Ok((desc, name, base));
+                }
+                (std::fs::read_to_string(p).map_err(|e| Error::io(p, e))?, name, base)
+            }
+            Source::Toml(t) => (t.clone(), cloudgi::TOML_SOURCE.to_string(), PathBuf::from(".")),
+            Source::Dict(json) => {
+                let value: toml::Table = serde_json::from_str(json).map_err(|e| Error::Parse {
+                    file: DICT_SOURCE.to_string(),
+                    message: format!("{e} (values must be strings, numbers, booleans, lists or dicts; no None)"),
+                })?;
+                let text = toml::to_string(&value).map_err(|e| Error::Parse {
+                    file: DICT_SOURCE.to_string(),
+                    message: e.to_string(),
+                })?;
+                (text, DICT_SOURCE.to_string(), PathBuf::from("."))
+            }
+        };
+        let desc = SceneDesc::from_toml(&text, &name)?;
+        if self.overrides.is_empty() {
+            return Ok((desc, name, base));
+        }
+        let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| Error::Parse {
+            file: name.clone(),
+            message: e.to_string(),
+        })?;
+        merge(&mut table, &self.overrides);
+        let merged = toml::to_string(&table).map_err(|e| Error::Parse {
+            file: name.clone(),
+            message: e.to_string(),
+        })?;
+        Ok((SceneDesc::from_toml(&merged, &name)?, name, base))
+    }
+}
+
+/// Set every `table.key` of `over` in `base`, keeping the table's other keys.
+fn merge(base: &mut toml::Table, over: &toml::Table) {
+    for (k, v) in over {
+        match (base.get_mut(k), v) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o),
+            _ => {
+                base.insert(k.clone(), v.clone());
+            }
+        }
+    }
+}

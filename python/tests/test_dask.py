@@ -1,0 +1,90 @@
+"""Frames on a real Dask cluster (LocalCluster with worker processes): identical to local
+renders, and a worker killed mid-run loses no frame."""
+
+import os
+import signal
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import cloudgi
+import cloudgi.dask
+from conftest import tiny_scene
+
+distributed = pytest.importorskip("distributed")
+
+
+@pytest.fixture(scope="module")
+def client():
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    c = distributed.Client(cluster)
+    yield c
+    c.close()
+    cluster.close()
+
+
+FRAMES = [{"sun": {"elevation_deg": e}} for e in (20.0, 35.0, 50.0, 65.0)]
+
+
+def local_bytes(tmp_path, scene, frame, **options) -> bytes:
+    path = tmp_path / "local.exr"
+    cloudgi.write_exr(path, cloudgi.render(scene, overrides=frame, **options))
+    return path.read_bytes()
+
+
+def test_frame_paths():
+    assert cloudgi.dask.frame_path("out/c_{frame:04d}.exr", 7) == "out/c_0007.exr"
+    assert cloudgi.dask.frame_path("out/c_###.exr", 7) == "out/c_007.exr"
+    with pytest.raises(ValueError):
+        cloudgi.dask.frame_path("out/c.exr", 7)
+
+
+def test_four_frames_equal_local_renders(client, tmp_path):
+    scene = tiny_scene()
+    paths = cloudgi.dask.render_frames(scene, FRAMES, client, str(tmp_path / "f_{frame}.exr"), method="transport")
+    assert paths == [str(tmp_path / f"f_{i}.exr") for i in range(4)]
+    for frame, path in zip(FRAMES, paths):
+        assert open(path, "rb").read() == local_bytes(tmp_path, scene, frame, method="transport")
+    assert not [p for p in os.listdir(tmp_path) if ".tmp" in p]
+
+
+def test_a_killed_worker_loses_no_frame(client, tmp_path):
+    # Frames of about a second each, so one is running when its worker is killed.
+    scene = tiny_scene(width=48, height=36)
+    options = {"method": "reference", "spp": 24}
+    result = {}
+
+    def run():
+        result["paths"] = cloudgi.dask.render_frames(scene, FRAMES, client, str(tmp_path / "k_{frame}.exr"), **options)
+
+    t = threading.Thread(target=run)
+    t.start()
+    pids = client.run(os.getpid)
+    victim = None
+    deadline = time.monotonic() + 60
+    while victim is None and time.monotonic() < deadline:
+        busy = [w for w, keys in client.processing().items() if keys]
+        if busy:
+            victim = busy[0]
+        else:
+            time.sleep(0.05)
+    assert victim is not None, "no frame ever started"
+    os.kill(pids[victim], signal.SIGKILL)
+    t.join(timeout=240)
+    assert not t.is_alive()
+    assert result["paths"] == [str(tmp_path / f"k_{i}.exr") for i in range(4)]
+    for frame, path in zip(FRAMES, result["paths"]):
+        assert open(path, "rb").read() == local_bytes(tmp_path, scene, frame, **options)
+
+
+def test_a_failing_frame_raises_after_its_retries(client, tmp_path):
+    with pytest.raises(cloudgi.SceneError, match="wdith"):
+        cloudgi.dask.render_frames(tiny_scene(), [{"camera": {"wdith": 3}}], client, str(tmp_path / "e_{frame}.exr"), retries=1)
+    assert not os.listdir(tmp_path)
+
+
+def test_a_missing_folder_is_found_before_submitting(client, tmp_path):
+    with pytest.raises(cloudgi.FileError, match="does not exist"):
+        cloudgi.dask.render_frames(tiny_scene(), FRAMES, client, str(tmp_path / "no" / "f_{frame}.exr"))

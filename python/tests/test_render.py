@@ -1,0 +1,211 @@
+"""cloudgi from Python against the command line: same images, same messages."""
+
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+import pytest
+
+import cloudgi
+from conftest import cli_error, run_cli, tiny_scene
+
+
+def test_version_is_the_crates():
+    assert cloudgi.__version__ == "0.1.0"
+
+
+def test_default_scene_equals_the_cli_exr_bit_for_bit(tmp_path):
+    r = run_cli("render", "--quiet", "--width", 64, "--height", 48, "-o", tmp_path / "cli.exr")
+    assert r.returncode == 0, r.stderr
+    images = cloudgi.render(width=64, height=48)
+    assert list(images) == ["rgb"]
+    assert images["rgb"].shape == (48, 64, 3) and images["rgb"].dtype == np.float32
+    cloudgi.write_exr(tmp_path / "py.exr", images)
+    assert (tmp_path / "py.exr").read_bytes() == (tmp_path / "cli.exr").read_bytes()
+
+
+def test_a_scene_file_with_aovs_equals_the_cli(tmp_path):
+    scene = tmp_path / "s.toml"
+    scene.write_text("[camera]\nwidth = 24\nheight = 16\n[medium]\nresolution = [30, 24, 18]\n[render]\nmethod = \"reference\"\nspp = 2\nstderr = true\n")
+    r = run_cli("render", "--quiet", scene, "-o", tmp_path / "cli.exr")
+    assert r.returncode == 0, r.stderr
+    images = cloudgi.render(scene)
+    assert list(images)[0] == "rgb" and "stderr" in images
+    cloudgi.write_exr(tmp_path / "py.exr", images)
+    assert (tmp_path / "py.exr").read_bytes() == (tmp_path / "cli.exr").read_bytes()
+
+
+def test_a_path_a_toml_string_and_a_dict_are_the_same_scene(tmp_path):
+    text = "[camera]\nwidth = 20\nheight = 12\n[medium]\nresolution = [30, 24, 18]\n"
+    (tmp_path / "s.toml").write_text(text)
+    from_path = cloudgi.render(str(tmp_path / "s.toml"), method="single")["rgb"]
+    from_text = cloudgi.render(text, method="single")["rgb"]
+    from_dict = cloudgi.render({"camera": {"width": 20, "height": 12}, "medium": {"resolution": [30, 24, 18]}}, method="single")["rgb"]
+    assert np.array_equal(from_path, from_text) and np.array_equal(from_path, from_dict)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_a_numpy_density_equals_the_same_npy_file(tmp_path, dtype):
+    rng = np.random.default_rng(7)
+    density = (rng.random((12, 16, 20)) * 2.0).astype(dtype)  # [z][y][x]
+    np.save(tmp_path / "grid.npy", density)
+    scene = tiny_scene()
+    scene["medium"].update({"voxel_size": 40.0, "origin": [-400.0, 50.0, -240.0]})
+    from_array = cloudgi.render(scene, density=density)["rgb"]
+    scene["medium"]["grid"] = str(tmp_path / "grid.npy")
+    from_file = cloudgi.render(scene)["rgb"]
+    assert np.array_equal(from_array, from_file)
+    assert from_array.max() > 0
+
+
+def test_voxel_size_and_origin_arguments_place_the_density():
+    density = np.ones((4, 4, 4), np.float32)
+    a = cloudgi.render(tiny_scene(), method="single", density=density, voxel_size=100.0, origin=[-200, 100, -200])["rgb"]
+    scene = tiny_scene()
+    scene["medium"].update({"voxel_size": 100.0, "origin": [-200.0, 100.0, -200.0]})
+    b = cloudgi.render(scene, method="single", density=density)["rgb"]
+    assert np.array_equal(a, b)
+
+
+def npy_message(tmp_path, array) -> str:
+    """The command line's message for `array` saved as medium.grid, without the file name."""
+    np.save(tmp_path / "bad.npy", array)
+    (tmp_path / "bad.toml").write_text('[medium]\ngrid = "bad.npy"\n')
+    msg = cli_error("render", tmp_path / "bad.toml", "-o", tmp_path / "x.exr")
+    prefix = f"{tmp_path / 'bad.npy'}: "
+    assert msg.startswith(prefix), msg
+    return msg[len(prefix):]
+
+
+@pytest.mark.parametrize(
+    "array",
+    [
+        np.ones((4, 4, 4), np.int32),  # wrong dtype
+        np.ones((4, 4), np.float32),  # 2-D
+        np.where(np.arange(64).reshape(4, 4, 4) == 21, np.nan, 1.0).astype(np.float32),  # NaN
+    ],
+    ids=["dtype", "2d", "nan"],
+)
+def test_a_bad_density_raises_format_error_with_the_cli_message(tmp_path, array):
+    with pytest.raises(cloudgi.FormatError) as e:
+        cloudgi.render(tiny_scene(), density=array)
+    assert str(e.value) == "in-memory density: " + npy_message(tmp_path, array)
+    assert isinstance(e.value, cloudgi.CloudgiError)
+
+
+def test_an_unknown_dict_key_raises_scene_error_with_the_cli_message(tmp_path):
+    (tmp_path / "s.toml").write_text("[camera]\nwdith = 5\n")
+    cli = cli_error("render", tmp_path / "s.toml", "-o", tmp_path / "x.exr")
+    with pytest.raises(cloudgi.SceneError) as e:
+        cloudgi.render({"camera": {"wdith": 5}})
+    assert str(e.value) == cli.replace(str(tmp_path / "s.toml"), "scene dict")
+    assert "unknown field `wdith`" in str(e.value)
+
+
+def test_a_negative_width_raises_scene_error_with_the_cli_message(tmp_path):
+    (tmp_path / "s.toml").write_text("[camera]\nwidth = -5\n")
+    cli = cli_error("render", tmp_path / "s.toml", "-o", tmp_path / "x.exr")
+    with pytest.raises(cloudgi.SceneError) as e:
+        cloudgi.render(width=-5)
+    # The same parser's message; the line it points at is in the merged scene, not the file.
+    assert str(e.value).splitlines()[-1] == cli.splitlines()[-1] == "invalid value: integer `-5`, expected u32"
+    with pytest.raises(cloudgi.SceneError) as e:
+        cloudgi.render("[camera]\nwidth = -5\n")
+    assert str(e.value) == cli.replace(str(tmp_path / "s.toml"), "TOML string")
+
+
+def test_an_out_of_range_value_names_the_field(tmp_path):
+    (tmp_path / "s.toml").write_text("[camera]\nwidth = 0\n")
+    cli = cli_error("render", tmp_path / "s.toml", "-o", tmp_path / "x.exr")
+    with pytest.raises(cloudgi.SceneError) as e:
+        cloudgi.render(str(tmp_path / "s.toml"))
+    assert str(e.value) == cli
+
+
+def test_a_missing_scene_file_is_the_cli_message(tmp_path):
+    missing = tmp_path / "missing.toml"
+    cli = cli_error("render", missing, "-o", tmp_path / "x.exr")
+    with pytest.raises(cloudgi.CloudgiError) as e:
+        cloudgi.render(missing)
+    assert str(e.value) == cli
+
+
+def test_progress_is_reported_on_the_calling_thread():
+    import threading
+
+    calls = []
+    caller = threading.get_ident()
+
+    def progress(stage, done, total):
+        assert threading.get_ident() == caller
+        calls.append((stage, done, total))
+
+    cloudgi.render(tiny_scene(width=64, height=48), method="reference", spp=64, progress=progress)
+    assert calls, "the progress callback was never called"
+    assert all(0 <= d <= t for _, d, t in calls)
+    assert calls[-1] == ("reference", 64 * 64 * 48, 64 * 64 * 48)
+
+
+def test_an_exception_in_the_progress_callback_cancels_the_render():
+    def progress(stage, done, total):
+        raise ValueError("stop here")
+
+    t = time.monotonic()
+    with pytest.raises(ValueError, match="stop here"):
+        cloudgi.render(tiny_scene(width=160, height=120), method="reference", spp=100000, progress=progress)
+    assert time.monotonic() - t < 30
+
+
+def test_ctrl_c_raises_keyboard_interrupt_promptly():
+    script = textwrap.dedent(
+        """
+        import sys, time, cloudgi
+        started = []
+        def progress(stage, done, total):
+            if not started:
+                started.append(1)
+                print("started", flush=True)
+        t = None
+        try:
+            cloudgi.render({"camera": {"width": 160, "height": 120}}, method="reference", spp=100000, progress=progress)
+        except KeyboardInterrupt:
+            print("interrupted", flush=True)
+            sys.exit(3)
+        """
+    )
+    p = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert p.stdout.readline().strip() == "started"
+    time.sleep(0.3)
+    sent = time.monotonic()
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=60)
+    waited = time.monotonic() - sent
+    assert p.returncode == 3, (p.returncode, out, err)
+    assert "interrupted" in out
+    assert waited < 10, f"the render stopped {waited:.1f} s after Ctrl-C"
+
+
+def test_write_exr_checks_shapes(tmp_path):
+    with pytest.raises(cloudgi.FormatError):
+        cloudgi.write_exr(tmp_path / "x.exr", {"rgb": np.zeros((4, 5, 3), np.float32), "aov": np.zeros((4, 4, 3))})
+    with pytest.raises(cloudgi.SceneError):
+        cloudgi.write_exr(tmp_path / "x.exr", {"aov": np.zeros((4, 4, 3))})
+    assert not (tmp_path / "x.exr").exists()
+
+
+def test_load_vdb_reads_the_grid_the_scene_renders(tmp_path):
+    from conftest import ROOT
+
+    vdb = ROOT / "tests" / "data" / "vdb" / "multi_grid_blosc.vdb"
+    density, voxel, origin = cloudgi.load_grid(vdb)
+    assert np.array_equal(cloudgi.load_vdb(vdb), density)
+    assert density.dtype == np.float32 and density.ndim == 3 and density.max() > 0
+    scene = tiny_scene()
+    scene["medium"] = {"grid": str(vdb)}
+    a = cloudgi.render(scene, method="single")["rgb"]
+    assert voxel[0] == voxel[1] == voxel[2]
+    b = cloudgi.render(tiny_scene(), method="single", density=density, voxel_size=voxel[0], origin=origin)["rgb"]
+    assert np.array_equal(a, b)

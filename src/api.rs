@@ -1,0 +1,432 @@
+//! The library's front door: a [`Scene`] from a file, a TOML string or a [`SceneDesc`] built in
+//! code, an optional in-memory [`Density`], and [`render`] with [`Options`] (progress,
+//! cancellation) giving a [`Render`]. The command line and the Python package both use it.
+
+use crate::error::{Error, Result};
+use crate::image::Image;
+use crate::math::{Rgb, Vec3};
+use crate::medium::loaders::Loaded;
+use crate::medium::Grid3;
+use crate::pipeline::{NoProgress, Progress, Timings};
+use crate::scene::{Method, Scene, SceneDesc};
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+/// Name of a scene given as TOML text, in messages.
+pub const TOML_SOURCE: &str = "TOML string";
+
+/// Name of an in-memory density grid, in messages.
+pub const DENSITY_SOURCE: &str = "in-memory density";
+
+impl Scene {
+    /// Read, validate and load a scene file; relative paths in it resolve against its folder.
+    ///
+    /// ```
+    /// let dir = tempfile::tempdir().unwrap();
+    /// let path = dir.path().join("tiny.toml");
+    /// std::fs::write(&path, "[camera]\nwidth = 8\nheight = 6\n").unwrap();
+    /// let scene = cloudgi::Scene::from_file(&path).unwrap();
+    /// assert_eq!(scene.camera.width, 8);
+    /// ```
+    pub fn from_file(path: impl AsRef<Path>) -> Result<Scene> {
+        Scene::load(Some(path.as_ref()), |_| {})
+    }
+
+    /// Parse and validate a scene given as TOML text (named [`TOML_SOURCE`] in messages);
+    /// relative paths resolve against the current folder. Missing keys take the default scene's.
+    ///
+    /// ```
+    /// let scene = cloudgi::Scene::from_toml("[render]\nmethod = \"single\"").unwrap();
+    /// assert_eq!(scene.render.method, cloudgi::Method::Single);
+    /// let err = cloudgi::Scene::from_toml("[camera]\nwdith = 8").unwrap_err();
+    /// assert!(err.to_string().contains("unknown field `wdith`"));
+    /// ```
+    pub fn from_toml(text: &str) -> Result<Scene> {
+        Scene::build(SceneDesc::from_toml(text, TOML_SOURCE)?, TOML_SOURCE, Path::new("."))
+    }
+
+    /// Validate a description built in code (named "built-in scene" in messages); relative
+    /// paths resolve against the current folder.
+    ///
+    /// ```
+    /// let mut desc = cloudgi::SceneDesc::default();
+    /// desc.camera.width = 8;
+    /// desc.camera.height = 6;
+    /// let scene = cloudgi::Scene::from_desc(desc).unwrap();
+    /// assert_eq!(scene.camera.height, 6);
+    /// ```
+    pub fn from_desc(desc: SceneDesc) -> Result<Scene> {
+        Scene::build(desc, crate::scene::BUILTIN, Path::new("."))
+    }
+}
+
+/// A density grid in memory: it replaces `medium.grid` (see [`Scene::build_with`]); the scene's
+/// `medium.downsample`, `max_voxels` and optical properties still apply.
+#[derive(Clone, Debug)]
+pub struct Density {
+    grid: Grid3,
+    voxel_size: [f32; 3],
+    origin: [f32; 3],
+}
+
+impl Density {
+    /// `values` indexed `[z][y][x]` (x fastest, the order of a C-ordered `.npy` file) for a grid
+    /// of `dims = [nx, ny, nz]` voxels of `voxel_size` metres, its minimum corner at `origin`
+    /// (m). Sizes are checked here; values (finite, ≥ 0), voxel size and origin when the scene
+    /// is built.
+    ///
+    /// ```
+    /// use cloudgi::{Density, Scene, SceneDesc};
+    /// let mut desc = SceneDesc::default();
+    /// desc.camera.width = 8;
+    /// desc.camera.height = 6;
+    /// let density = Density::new([4, 3, 2], vec![0.5; 24], 100.0, [-200.0, 0.0, -100.0]).unwrap();
+    /// let scene = Scene::build_with(desc, "example", ".".as_ref(), Some(density)).unwrap();
+    /// assert_eq!(scene.medium.dims(), [4, 3, 2]);
+    /// assert!(Density::new([4, 3, 2], vec![0.5; 23], 100.0, [0.0; 3]).is_err());
+    /// ```
+    pub fn new(dims: [usize; 3], values: Vec<f32>, voxel_size: f32, origin: [f32; 3]) -> Result<Density> {
+        Ok(Density {
+            grid: Grid3::from_vec(dims, values, DENSITY_SOURCE)?,
+            voxel_size: [voxel_size; 3],
+            origin,
+        })
+    }
+
+    /// A density from the bytes of a `.npy` file (float32 or float64, C order, shape
+    /// `(nz, ny, nx)`), checked like a `.npy` grid file named [`DENSITY_SOURCE`].
+    ///
+    /// ```
+    /// let mut npy = b"\x93NUMPY\x01\x00".to_vec();
+    /// let header = "{'descr': '<f4', 'fortran_order': False, 'shape': (1, 1, 2), }";
+    /// npy.extend((header.len() as u16).to_le_bytes());
+    /// npy.extend(header.as_bytes());
+    /// npy.extend([0.5f32, 1.0].iter().flat_map(|v| v.to_le_bytes()));
+    /// let d = cloudgi::Density::from_npy(&npy, 10.0, [0.0; 3]).unwrap();
+    /// assert_eq!(d.dims(), [2, 1, 1]);
+    /// ```
+    pub fn from_npy(bytes: &[u8], voxel_size: f32, origin: [f32; 3]) -> Result<Density> {
+        Ok(Density {
+            grid: crate::medium::loaders::parse_npy(bytes, DENSITY_SOURCE)?,
+            voxel_size: [voxel_size; 3],
+            origin,
+        })
+    }
+
+    /// Read grid `grid_name` of a grid file as a scene's `medium.grid` would be read (`.vdb`
+    /// placed by its own transform; `.npy`, `.raw`, `.vol` as their formats say), without
+    /// `medium.downsample`.
+    ///
+    /// ```
+    /// let dir = tempfile::tempdir().unwrap();
+    /// let path = dir.path().join("missing.vdb");
+    /// let err = cloudgi::Density::load(&path, "density").unwrap_err();
+    /// assert!(err.to_string().contains("is not a file"));
+    /// ```
+    pub fn load(path: impl AsRef<Path>, grid_name: &str) -> Result<Density> {
+        let path = path.as_ref();
+        let desc = crate::medium::MediumDesc {
+            grid: path.display().to_string(),
+            grid_name: grid_name.to_string(),
+            ..Default::default()
+        };
+        let loaded = crate::medium::loaders::load(&desc, &desc.grid, Path::new("."))?;
+        Ok(Density {
+            grid: loaded.grid,
+            voxel_size: loaded.voxel_size.to_array(),
+            origin: loaded.origin.to_array(),
+        })
+    }
+
+    /// The values, `[z][y][x]` (x fastest).
+    pub fn values(&self) -> &[f32] {
+        self.grid.data()
+    }
+
+    /// Voxel edge lengths (m) along x, y, z.
+    pub fn voxel_size(&self) -> [f32; 3] {
+        self.voxel_size
+    }
+
+    /// Minimum corner (m).
+    pub fn origin(&self) -> [f32; 3] {
+        self.origin
+    }
+
+    /// Resolution `[nx, ny, nz]`.
+    pub fn dims(&self) -> [usize; 3] {
+        self.grid.dims()
+    }
+
+    /// The grid as the medium's loader gives it.
+    pub(crate) fn into_loaded(self) -> Loaded {
+        Loaded {
+            grid: self.grid,
+            origin: Vec3::from(self.origin),
+            voxel_size: Vec3::from(self.voxel_size),
+            name: DENSITY_SOURCE.to_string(),
+            downsampled: false,
+        }
+    }
+}
+
+/// How [`render`] reports and stops: both optional.
+#[derive(Clone, Copy, Default)]
+pub struct Options<'a> {
+    /// Receives stage begins, progress, log lines and warnings (e.g. [`FnProgress`] around a
+    /// closure); none: silent.
+    pub progress: Option<&'a dyn Progress>,
+    /// Set it (from any thread) to stop the render: it is polled between stages, rows, passes
+    /// and solver iterations, and the render then returns [`Error::Cancelled`].
+    pub cancel: Option<&'a AtomicBool>,
+}
+
+/// A finished render.
+#[derive(Clone, Debug)]
+pub struct Render {
+    /// The radiance image (linear HDR, W·m⁻²·sr⁻¹ per band, row 0 at the top), without layers.
+    pub image: Image,
+    /// The method's extra layers (`render.aov`, `render.stderr`), by name, in the image's size.
+    pub aovs: Vec<(String, Vec<Rgb>)>,
+    /// What the render did and how long it took.
+    pub stats: Stats,
+}
+
+impl Render {
+    /// One image with the AOVs as its layers: what the command line writes to EXR.
+    ///
+    /// ```
+    /// let scene = cloudgi::Scene::from_toml("[camera]\nwidth = 4\nheight = 3\n[medium]\nresolution = [8, 6, 4]").unwrap();
+    /// let out = cloudgi::render(&scene, cloudgi::Method::Single, &Default::default()).unwrap();
+    /// assert_eq!(out.into_image().pixels.len(), 12);
+    /// ```
+    pub fn into_image(self) -> Image {
+        let mut image = self.image;
+        image.layers = self.aovs;
+        image
+    }
+}
+
+/// What a render did.
+#[derive(Clone, Debug)]
+pub struct Stats {
+    /// The method used.
+    pub method: Method,
+    /// Wall-clock seconds of each stage.
+    pub timings: Timings,
+    /// Wall-clock seconds of the whole render.
+    pub seconds: f64,
+}
+
+/// Render `scene` with `method` (instead of its `render.method`).
+///
+/// ```
+/// use cloudgi::{render, Method, Options, Scene};
+/// let scene = Scene::from_toml("[camera]\nwidth = 8\nheight = 6\n[medium]\nresolution = [10, 8, 6]").unwrap();
+/// let out = render(&scene, Method::Transport, &Options::default()).unwrap();
+/// assert_eq!((out.image.width, out.image.height), (8, 6));
+/// assert!(out.image.pixels.iter().all(|p| p.is_finite() && p.min_element() >= 0.0));
+/// println!("{}", out.stats.timings.summary());
+/// ```
+pub fn render(scene: &Scene, method: Method, options: &Options) -> Result<Render> {
+    let start = Instant::now();
+    let cancelled = || options.cancel.is_some_and(|c| c.load(Ordering::Relaxed));
+    if cancelled() {
+        return Err(Error::Cancelled);
+    }
+    let progress = Watched {
+        inner: options.progress.unwrap_or(&NoProgress),
+        cancel: options.cancel,
+    };
+    let chosen;
+    let scene = if scene.render.method == method {
+        scene
+    } else {
+        let mut s = scene.clone();
+        s.render.method = method;
+        chosen = s;
+        &chosen
+    };
+    let out = crate::render::render(scene, &progress)?;
+    if cancelled() {
+        return Err(Error::Cancelled);
+    }
+    let mut image = out.image;
+    let aovs = std::mem::take(&mut image.layers);
+    Ok(Render {
+        image,
+        aovs,
+        stats: Stats {
+            method,
+            timings: out.timings,
+            seconds: start.elapsed().as_secs_f64(),
+        },
+    })
+}
+
+/// The caller's progress sink with the cancel flag as its [`Progress::cancelled`].
+struct Watched<'a> {
+    inner: &'a dyn Progress,
+    cancel: Option<&'a AtomicBool>,
+}
+
+impl Progress for Watched<'_> {
+    fn begin(&self, stage: &str, total: u64) {
+        self.inner.begin(stage, total)
+    }
+    fn advance(&self, n: u64) {
+        self.inner.advance(n)
+    }
+    fn end(&self) {
+        self.inner.end()
+    }
+    fn log(&self, msg: &str) {
+        self.inner.log(msg)
+    }
+    fn warn(&self, msg: &str) {
+        self.inner.warn(msg)
+    }
+    fn cancelled(&self) -> bool {
+        self.cancel.is_some_and(|c| c.load(Ordering::Relaxed)) || self.inner.cancelled()
+    }
+}
+
+/// One thing a render reports to an [`FnProgress`] closure.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Event<'a> {
+    /// Stage `stage` has done `done` of `total` units of work (`done == 0`: it begins;
+    /// `done == total`: it ended).
+    Stage {
+        /// The stage, e.g. `transport iterations`.
+        stage: &'a str,
+        /// Units done.
+        done: u64,
+        /// Units in all.
+        total: u64,
+    },
+    /// A line of information (e.g. solver convergence).
+    Log(&'a str),
+    /// A warning the user must see (e.g. a solver stopped at its iteration cap).
+    Warning(&'a str),
+}
+
+/// A [`Progress`] that calls a closure with each [`Event`]; the closure is called from the
+/// render's worker threads, one call at a time.
+///
+/// ```
+/// use cloudgi::{render, Event, FnProgress, Method, Options, Scene};
+/// use std::sync::atomic::{AtomicU64, Ordering};
+/// let scene = Scene::from_toml("[camera]\nwidth = 4\nheight = 3\n[medium]\nresolution = [8, 6, 4]").unwrap();
+/// let rows = AtomicU64::new(0);
+/// let progress = FnProgress::new(|e| {
+///     if let Event::Stage { stage: "single scattering", done, .. } = e {
+///         rows.fetch_max(done, Ordering::Relaxed);
+///     }
+/// });
+/// render(&scene, Method::Single, &Options { progress: Some(&progress), ..Default::default() }).unwrap();
+/// assert_eq!(rows.load(Ordering::Relaxed), 3);
+/// ```
+pub struct FnProgress<F> {
+    f: F,
+    state: std::sync::Mutex<(String, u64, u64)>,
+}
+
+impl<F: Fn(Event) + Sync> FnProgress<F> {
+    /// Wrap `f`.
+    pub fn new(f: F) -> Self {
+        FnProgress {
+            f,
+            state: std::sync::Mutex::new((String::new(), 0, 0)),
+        }
+    }
+
+    fn update(&self, change: impl FnOnce(&mut (String, u64, u64))) {
+        if let Ok(mut s) = self.state.lock() {
+            change(&mut s);
+            (self.f)(Event::Stage {
+                stage: &s.0,
+                done: s.1,
+                total: s.2,
+            });
+        }
+    }
+}
+
+impl<F: Fn(Event) + Sync> Progress for FnProgress<F> {
+    fn begin(&self, stage: &str, total: u64) {
+        self.update(|s| *s = (stage.to_string(), 0, total));
+    }
+    fn advance(&self, n: u64) {
+        self.update(|s| s.1 = (s.1 + n).min(s.2));
+    }
+    fn end(&self) {
+        self.update(|s| s.1 = s.2);
+    }
+    fn log(&self, msg: &str) {
+        (self.f)(Event::Log(msg))
+    }
+    fn warn(&self, msg: &str) {
+        (self.f)(Event::Warning(msg))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tiny() -> Scene {
+        Scene::from_toml("[camera]\nwidth = 6\nheight = 4\n[medium]\nresolution = [10, 8, 6]").unwrap()
+    }
+
+    #[test]
+    fn a_set_flag_cancels_every_method() {
+        let flag = AtomicBool::new(true);
+        let opts = Options {
+            cancel: Some(&flag),
+            ..Default::default()
+        };
+        for m in [Method::Single, Method::Transport, Method::Reference] {
+            assert!(matches!(render(&tiny(), m, &opts), Err(Error::Cancelled)));
+        }
+    }
+
+    #[test]
+    fn a_flag_set_during_the_render_cancels_it() {
+        let flag = AtomicBool::new(false);
+        let progress = FnProgress::new(|e| {
+            if matches!(e, Event::Stage { done: 1, .. }) {
+                flag.store(true, Ordering::Relaxed);
+            }
+        });
+        let opts = Options {
+            progress: Some(&progress),
+            cancel: Some(&flag),
+        };
+        assert!(matches!(render(&tiny(), Method::Transport, &opts), Err(Error::Cancelled)));
+    }
+
+    #[test]
+    fn the_method_argument_wins_and_output_matches_the_plain_dispatch() {
+        let s = tiny();
+        let api = render(&s, Method::Transport, &Options::default()).unwrap();
+        let plain = crate::render::render(&s, &NoProgress).unwrap();
+        assert_eq!(api.into_image(), plain.image);
+        assert_eq!(
+            render(&s, Method::Single, &Options::default()).unwrap().stats.method,
+            Method::Single
+        );
+    }
+
+    #[test]
+    fn an_in_memory_density_is_checked_like_a_file() {
+        let mut v = vec![0.5; 24];
+        v[5] = f32::NAN;
+        let d = Density::new([4, 3, 2], v, 10.0, [0.0; 3]).unwrap();
+        let e = Scene::build_with(SceneDesc::default(), "x", Path::new("."), Some(d)).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "in-memory density: density at voxel (1, 1, 0) is NaN: densities must be finite and non-negative"
+        );
+    }
+}
