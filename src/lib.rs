@@ -25,6 +25,7 @@ pub mod pipeline;
 pub mod reference;
 pub mod render;
 pub mod scene;
+pub mod sequence;
 pub mod sunlight;
 pub mod transport;
 
