@@ -4,6 +4,7 @@ mod bench;
 mod compare;
 mod export;
 mod figures;
+mod frames;
 mod info;
 mod memory;
 mod output;
@@ -121,6 +122,8 @@ struct RenderArgs {
     /// Set render.aov (full: write diffusion, low_density, sun_single, background as EXR layers).
     #[arg(long)]
     aov: bool,
+    #[command(flatten)]
+    frames: frames::FrameArgs,
 }
 
 /// Run the parsed command.
@@ -224,6 +227,9 @@ impl RenderArgs {
 fn render(a: RenderArgs, quiet: bool) -> Result<()> {
     check_exr_path(&a.output, "--output")?;
     let file = SceneFile::read(a.scene.as_deref())?;
+    if frames::is_sequence(&a, &file) {
+        return frames::render(&a, &file, quiet);
+    }
     let mut desc = file.desc.clone();
     a.apply(&mut desc);
     let png = png_beside(&a.output);
