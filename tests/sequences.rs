@@ -64,13 +64,17 @@ fn a_grid_sequence_renders_each_frame_and_frames_may_change_size() {
     let scene = "[medium]\ngrid = \"c.$F4.npy\"\nvoxel_size = 60.0\norigin = [-300.0, 100.0, -300.0]\n\
         [camera]\nwidth = 20\nheight = 16\n";
     std::fs::write(d.join("s.toml"), scene).unwrap();
-    let err = cloudgi(d, &["render", "s.toml", "--frames", "1-2", "-o", "sun.%04d.exr"]);
+    let err = cloudgi(d, &["render", "s.toml", "--frames", "1-2", "-o", "sun.%04d.exr", "--cold"]);
     assert!(err.contains("frame 2 (2 of 2)"), "a line per frame: {err}");
-    // Each frame is the still render of its grid file.
+    // Each cold frame is the still render of its grid file.
     std::fs::write(d.join("still.toml"), scene.replace("c.$F4.npy", "c.0002.npy")).unwrap();
     cloudgi(d, &["render", "still.toml", "-o", "still.exr", "-q"]);
     assert!(bytes(&d.join("still.exr")) == bytes(&d.join("sun.0002.exr")));
     assert!(bytes(&d.join("sun.0001.exr")) != bytes(&d.join("sun.0002.exr")));
+    // The warm start maps the first frame's solution onto the larger grid.
+    let err = cloudgi(d, &["render", "s.toml", "--frames", "1-2", "-o", "warm.####.exr"]);
+    assert!(err.contains("iterations (warm)"), "{err}");
+    assert!(block_error(d, "warm.0002.exr", "sun.0002.exr") < 5e-3);
 }
 
 #[test]
@@ -79,22 +83,11 @@ fn chunks_write_the_bits_of_the_whole_range_and_skip_existing_resumes() {
     for d in [whole.path(), chunks.path()] {
         std::fs::write(d.join("s.toml"), SUNSET).unwrap();
     }
-    cloudgi(whole.path(), &["render", "s.toml", "-o", "sun.####.exr", "-q"]);
+    // Cold frames: the same bits however the range is split.
+    let cold = ["render", "s.toml", "-o", "sun.####.exr", "--cold", "-q"];
+    cloudgi(whole.path(), &cold);
     for i in ["0", "1", "2"] {
-        cloudgi(
-            chunks.path(),
-            &[
-                "render",
-                "s.toml",
-                "-o",
-                "sun.####.exr",
-                "--task-index",
-                i,
-                "--task-count",
-                "3",
-                "-q",
-            ],
-        );
+        cloudgi(chunks.path(), &[&cold[..], &["--task-index", i, "--task-count", "3"]].concat());
     }
     same_frames(whole.path(), chunks.path(), 1..=8);
     // The sun sets: the last frame differs from the first.
@@ -103,9 +96,55 @@ fn chunks_write_the_bits_of_the_whole_range_and_skip_existing_resumes() {
     for f in ["sun.0003.exr", "sun.0006.png"] {
         std::fs::remove_file(chunks.path().join(f)).unwrap();
     }
-    let err = cloudgi(chunks.path(), &["render", "s.toml", "-o", "sun.####.exr", "--skip-existing"]);
+    let err = cloudgi(
+        chunks.path(),
+        &["render", "s.toml", "-o", "sun.####.exr", "--cold", "--skip-existing"],
+    );
     assert!(err.contains("2 to render, 6 skipped"), "{err}");
     same_frames(whole.path(), chunks.path(), 1..=8);
+}
+
+/// `cloudgi compare`'s block mean relative error of `test` against `reference`.
+fn block_error(dir: &Path, test: &str, reference: &str) -> f64 {
+    let out = Command::new(BIN)
+        .current_dir(dir)
+        .args(["compare", test, reference])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let m: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    m["block_mean_relative_error"].as_f64().unwrap()
+}
+
+/// The iterations of each frame's solve, from the per-frame lines.
+fn iterations(err: &str) -> Vec<usize> {
+    err.lines()
+        .filter(|l| l.starts_with("frame "))
+        .filter_map(|l| {
+            l.split(" · ")
+                .find_map(|p| p.strip_suffix(" iterations (warm)").or(p.strip_suffix(" iterations (cold)")))
+        })
+        .map(|n| n.parse().unwrap())
+        .collect()
+}
+
+/// The farm contract for warm starts: a warm frame matches the cold one within a block mean
+/// relative error of `render.transport_tolerance` (docs/sequences.md), in fewer iterations.
+#[test]
+fn warm_frames_match_cold_frames_within_the_tolerance_in_fewer_iterations() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("s.toml"), SUNSET.replace("frames = \"1-8\"", "frames = \"1-8x2\"")).unwrap();
+    let warm = iterations(&cloudgi(d, &["render", "s.toml", "-o", "warm.####.exr"]));
+    let cold = iterations(&cloudgi(d, &["render", "s.toml", "-o", "cold.####.exr", "--cold"]));
+    assert_eq!((warm.len(), cold.len()), (4, 4));
+    assert_eq!(warm[0], cold[0], "the first frame is cold");
+    assert!(warm[1..].iter().zip(&cold[1..]).all(|(w, c)| w < c), "warm {warm:?}, cold {cold:?}");
+    let tolerance = 5e-3; // render.transport_tolerance's default
+    for f in [1, 3, 5, 7] {
+        let e = block_error(d, &format!("warm.{f:04}.exr"), &format!("cold.{f:04}.exr"));
+        assert!(e < tolerance, "frame {f}: warm against cold {e:.2e}");
+    }
 }
 
 /// Why Slurm cannot run here, or None once ci/slurm/start.sh has it up.
@@ -168,8 +207,12 @@ fn a_slurm_array_job_renders_the_frames_of_a_local_render() {
     for d in [local.path(), farm.path()] {
         std::fs::write(d.join("s.toml"), SUNSET).unwrap();
     }
-    cloudgi(local.path(), &["render", "s.toml", "--frames", "1-8", "-o", "sun.####.exr", "-q"]);
-    // 8 frames in 4 array elements; element 2 (frames 5-6) is cancelled before it runs.
+    // Warm starts (the default) restart cold at each chunk's first frame: the local render of
+    // each task's range is the farm's bits.
+    for range in ["1-2", "3-4", "5-6", "7-8"] {
+        cloudgi(local.path(), &["render", "s.toml", "--frames", range, "-o", "sun.####.exr", "-q"]);
+    }
+    // 8 frames in 4 array elements (2 each); element 2 (frames 5-6) is cancelled before it runs.
     let job = submit(farm.path(), "0-3", "4", &[]);
     slurm("scancel", &[&format!("{job}_2")]);
     slurm("scontrol", &["release", &job]);

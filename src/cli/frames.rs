@@ -9,7 +9,8 @@ use super::{memory, output, png_beside, progress, warnings, write_exr_and_png, R
 use clap::Args;
 use cloudgi::camera::Camera;
 use cloudgi::error::{Error, Result};
-use cloudgi::scene::{Scene, SceneDesc};
+use cloudgi::render::warm::{render_warm, Warm};
+use cloudgi::scene::{Method, Scene, SceneDesc};
 use cloudgi::sequence::{FrameList, FramePattern, Sequence};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -30,6 +31,11 @@ pub struct FrameArgs {
     /// Leave every frame whose EXR and PNG both exist (resumes an interrupted sequence).
     #[arg(long)]
     skip_existing: bool,
+    /// Solve every frame from nothing. By default `transport` starts each frame from the
+    /// previous frame's solution (a chunk's first frame is cold); warm frames match cold ones
+    /// within the stated tolerance, cold frames are the same bits however the range is split.
+    #[arg(long)]
+    cold: bool,
 }
 
 /// Whether `render` runs as a sequence: a frame flag, a frame pattern in `-o`, or an animated
@@ -159,6 +165,7 @@ pub fn render(a: &RenderArgs, file: &SceneFile, quiet: bool) -> Result<()> {
         eprintln!("{task}frames {frames} of {all}: {} to render{skip}", todo.len());
     }
     let start = Instant::now();
+    let mut warm = Warm::new(!a.frames.cold);
     for (i, frame) in todo.iter().enumerate() {
         let t = Instant::now();
         let scene = Scene::build(frame.desc.clone(), &file.source, &file.base).map_err(|e| at_frame(e, frame.number))?;
@@ -168,14 +175,19 @@ pub fn render(a: &RenderArgs, file: &SceneFile, quiet: bool) -> Result<()> {
                 eprintln!("warning: {w}");
             }
         }
-        let out = cloudgi::render(&scene, &progress::Bars::new(quiet))?;
+        let was_warm = warm.transport.is_some();
+        let out = render_warm(&scene, &progress::Bars::new(quiet), &mut warm)?;
         write_exr_and_png(&out.image, &frame.exr, &frame.png, scene.render.exposure)?;
         if !quiet {
             let done = i + 1;
             let elapsed = start.elapsed().as_secs_f64();
             let eta = elapsed / done as f64 * (todo.len() - done) as f64;
+            let solve = match warm.iterations.filter(|_| scene.render.method == Method::Transport) {
+                Some(n) => format!(" · {n} iterations{}", if was_warm { " (warm)" } else { " (cold)" }),
+                None => String::new(),
+            };
             eprintln!(
-                "frame {} ({done} of {}): {} {}×{} → {} + {} · {:.2} s · sequence {elapsed:.1} s, eta {eta:.0} s",
+                "frame {} ({done} of {}): {} {}×{} → {} + {} · {:.2} s{solve} · sequence {elapsed:.1} s, eta {eta:.0} s",
                 frame.number,
                 todo.len(),
                 scene.render.method.name(),

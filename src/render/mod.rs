@@ -6,6 +6,7 @@ pub mod empty;
 pub mod full;
 pub mod single;
 pub mod transport;
+pub mod warm;
 
 use crate::error::Result;
 use crate::image::Image;
