@@ -58,6 +58,8 @@ pub mod render;
 #[doc(hidden)]
 pub mod scene;
 #[doc(hidden)]
+pub mod sequence;
+#[doc(hidden)]
 pub mod sunlight;
 #[doc(hidden)]
 pub mod transport;

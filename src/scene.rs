@@ -175,6 +175,9 @@ pub struct SceneDesc {
     pub camera: CameraDesc,
     /// `[render]`.
     pub render: RenderDesc,
+    /// `[animation]`: frames and keyframes (src/sequence); absent for a still.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub animation: Option<crate::sequence::AnimationDesc>,
 }
 
 impl Default for SceneDesc {
@@ -187,6 +190,7 @@ impl Default for SceneDesc {
             ground: Some(GroundDesc::default()),
             camera: CameraDesc::default(),
             render: RenderDesc::default(),
+            animation: None,
         }
     }
 }

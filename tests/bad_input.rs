@@ -810,6 +810,117 @@ fn bad_render_arguments_and_outputs() {
     );
 }
 
+/// A valid 2×2×2 `.npy` grid (one sequence frame).
+fn npy_frame() -> Vec<u8> {
+    npy("{'descr': '<f4', 'fortran_order': False, 'shape': (2, 2, 2), }", &f32s(&[1.0; 8]))
+}
+
+#[test]
+fn bad_frames_patterns_keys_and_tasks() {
+    let render = |extra: &[&'static str]| -> Vec<&'static str> {
+        let mut a = vec!["render", "s.toml", "-o", "out.####.exr", "--width", "8", "--height", "8", "-q"];
+        a.extend_from_slice(extra);
+        a
+    };
+    let seq = "[medium]\ngrid = \"c.####.npy\"\n";
+    let frames: Vec<File> = vec![("s.toml", seq.into()), ("c.0001.npy", npy_frame()), ("c.0002.npy", npy_frame())];
+    let rows: &[(&[&str], &[&str])] = &[
+        // A missing frame fails before any frame renders (frames 1 and 2 exist).
+        (&["--frames", "1-3"], &["s.toml", "medium.grid", "frame 3", "c.0003.npy"]),
+        (&["--frames", ""], &["--frames", "empty"]),
+        (&["--frames", "2-1"], &["--frames", "backwards", "1-2"]),
+        (&["--frames", "1-2x0"], &["--frames", "step"]),
+        (&["--frames", "1-two"], &["--frames", "two", "1-240"]),
+        (&["--frames", "1,1-2"], &["--frames", "twice"]),
+        (&[], &["--frames", "animated", "animation.frames"]),
+        (
+            &["--frames", "1-2", "--task-index", "2", "--task-count", "2"],
+            &["--task-index", "0 to 1"],
+        ),
+        (
+            &["--frames", "1-2", "--task-index", "0", "--task-count", "0"],
+            &["--task-count", "at least 1"],
+        ),
+        (&["--frames", "1-2", "--task-index", "0"], &["--task-count"]),
+    ];
+    for (extra, expect) in rows {
+        fails(&frames, &render(extra), expect);
+    }
+    // Several frames need a frame pattern in --output; a bad one is named.
+    fails(
+        &frames,
+        &["render", "s.toml", "--frames", "1-2", "-o", "out.exr", "-q"],
+        &["--output", "no frame pattern", "out.####.exr"],
+    );
+    fails(
+        &frames,
+        &["render", "s.toml", "--frames", "1-2", "-o", "out.%4d.exr", "-q"],
+        &["--output", "not a frame pattern"],
+    );
+    // Bad grid patterns, animation tables and keys.
+    scene_rows(&[
+        ("[medium]\ngrid = \"c.%s.npy\"\n", &["s.toml", "medium.grid", "not a frame pattern"]),
+        ("[medium]\ngrid = \"c.####.$F4.npy\"\n", &["s.toml", "medium.grid", "more than one"]),
+        ("[medium]\ngrid = \"c.#@.npy\"\n", &["s.toml", "medium.grid", "mixes"]),
+        ("[animation]\nframes = \"9-3\"\n", &["s.toml", "animation.frames", "backwards"]),
+        ("[animation]\nframes = \"\"\n", &["s.toml", "animation.frames", "empty"]),
+        ("[animation]\nfps = 24\n", &["s.toml", "fps"]),
+        ("[[animation.key]]\nframe = -1\n", &["s.toml", "frame"]),
+        ("[[animation.key]]\nsun.elevation_deg = 5.0\n", &["s.toml", "frame"]),
+        ("[[animation.key]]\nframe = 1\nsun.height = 5.0\n", &["s.toml", "height"]),
+        ("[[animation.key]]\nframe = 1\nmedium.g = 0.5\n", &["s.toml", "`g`"]),
+        (
+            "[animation]\nframes = \"1\"\n[[animation.key]]\nframe = 1\nmedium.sigma_t = -0.1\n",
+            &["s.toml", "animation.key[0].medium.sigma_t", "non-negative"],
+        ),
+        (
+            "[[animation.key]]\nframe = 1\nsun.irradiance = [nan, 1.0, 1.0]\n",
+            &["s.toml", "animation.key[0].sun.irradiance"],
+        ),
+        (
+            "[[animation.key]]\nframe = 1\ncamera.fov_deg = 200.0\n",
+            &["s.toml", "animation.key[0].camera.fov_deg"],
+        ),
+        (
+            "[[animation.key]]\nframe = 1\nsun.elevation_deg = 95.0\n",
+            &["s.toml", "sun.elevation_deg", "[-90, 90]"],
+        ),
+        (
+            "[[animation.key]]\nframe = 1\ncamera.position = [inf, 0.0, 0.0]\n",
+            &["s.toml", "animation.key[0].camera.position"],
+        ),
+        (
+            "[[animation.key]]\nframe = 1\ncamera.look_at = [0.0, nan, 0.0]\n",
+            &["s.toml", "animation.key[0].camera.look_at"],
+        ),
+        (
+            "[[animation.key]]\nframe = 2\n[[animation.key]]\nframe = 2\n",
+            &["s.toml", "animation.key", "two keys for frame 2"],
+        ),
+        (
+            "[animation]\nframes = \"1-3\"\n[[animation.key]]\nframe = 1\nsun.elevation_deg = 10.0\n",
+            &["s.toml", "animation.key.sun.elevation_deg", "sun.azimuth_deg"],
+        ),
+        (
+            "[animation]\nframes = \"1-3\"\n[[animation.key]]\nframe = 1\nsun.azimuth_deg = 10.0\n",
+            &["s.toml", "animation.key.sun.azimuth_deg", "sun.elevation_deg"],
+        ),
+        (
+            "[sun]\nfrom_atmosphere = true\n[[animation.key]]\nframe = 1\nsun.irradiance = [1.0, 1.0, 1.0]\n",
+            &["s.toml", "animation.key.sun.irradiance", "from_atmosphere"],
+        ),
+    ]);
+    // A keyed camera that passes through its look-at point mid-sequence names the frame.
+    let through = "[camera]\nlook_at = [0.0, 330.0, 0.0]\n[animation]\nframes = \"1-3\"\n\
+        [[animation.key]]\nframe = 1\ncamera.position = [0.0, 330.0, 100.0]\n\
+        [[animation.key]]\nframe = 3\ncamera.position = [0.0, 330.0, -100.0]\n";
+    fails(
+        &[("s.toml", through.into())],
+        &render(&[]),
+        &["s.toml", "camera.look_at", "frame 2"],
+    );
+}
+
 #[test]
 fn bad_arguments_of_the_other_commands() {
     let s = || ("s.toml", SCENE.as_bytes().to_vec());

@@ -12,6 +12,7 @@ mod compare;
 pub mod console;
 mod export;
 mod figures;
+mod frames;
 mod info;
 mod memory;
 mod output;
@@ -129,6 +130,8 @@ struct RenderArgs {
     /// Set render.aov (full: write diffusion, low_density, sun_single, background as EXR layers).
     #[arg(long)]
     aov: bool,
+    #[command(flatten)]
+    frames: frames::FrameArgs,
 }
 
 /// Most characters of a message shown; a longer one (a 50 MB path pasted into a key) keeps its
@@ -277,6 +280,9 @@ impl RenderArgs {
 fn render(a: RenderArgs, quiet: bool) -> Result<()> {
     check_exr_path(&a.output, "--output")?;
     let file = SceneFile::read(a.scene.as_deref())?;
+    if frames::is_sequence(&a, &file) {
+        return frames::render(&a, &file, quiet);
+    }
     let mut desc = file.desc.clone();
     a.apply(&mut desc);
     let png = png_beside(&a.output);

@@ -7,6 +7,7 @@ pub mod full;
 pub mod single;
 pub mod transport;
 pub mod transport_ground;
+pub mod warm;
 
 use crate::error::Result;
 use crate::image::Image;

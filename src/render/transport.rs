@@ -21,8 +21,9 @@ use crate::medium::Medium;
 use crate::pipeline::{render_rows, Progress, Timings};
 use crate::render::single::pixel_sample;
 use crate::render::transport_ground::EyeGround;
+use crate::render::warm::Warm;
 use crate::scene::Scene;
-use crate::transport::solve::{solve, TransportField, TransportSettings};
+use crate::transport::solve::{solve_warm, TransportField, TransportSettings};
 use crate::transport::TransportMemory;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -217,14 +218,26 @@ fn unconverged(source: &str, history: &[f64], s: &TransportSettings) -> Option<S
 
 /// Render with `--method transport` and the scene's `render.transport_*` settings.
 pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
+    render_with(scene, progress, timings, None)
+}
+
+/// [`render`] as a frame of a sequence: the solve starts from `warm`'s state (when enabled) and
+/// leaves its own there, with its iteration count (src/render/warm.rs).
+pub fn render_with(scene: &Scene, progress: &dyn Progress, timings: &mut Timings, warm: Option<&mut Warm>) -> Result<Image> {
     let m = &scene.medium;
     let s = &scene.render.transport;
     // Refuse, with the fix, a cloud whose arrays would not fit (rather than abort).
     let memory = TransportMemory::of(m, s);
     memory.check(&scene.source, MAX_BYTES, "the library's limit")?;
-    let field = timings.time("transport solve", || {
-        solve(m, &scene.sun, &scene.sky, scene.ground.as_ref(), s, progress)
+    let keep = warm.as_ref().is_some_and(|w| w.enabled);
+    let start = warm.as_ref().and_then(|w| w.transport.as_ref()).filter(|_| keep);
+    let (field, state) = timings.time("transport solve", || {
+        solve_warm(m, &scene.sun, &scene.sky, scene.ground.as_ref(), s, progress, start, keep)
     });
+    if let Some(w) = warm {
+        w.transport = state;
+        w.iterations = Some(field.iterations());
+    }
     let last = field.history.last().copied().unwrap_or(0.0);
     progress.log(&format!(
         "transport: {} ordinates, order {}, {} iterations (last change {last:.1e}); memory ≈ {:.0} MB: \

@@ -10,6 +10,7 @@
 pub mod slab;
 pub mod solve;
 pub mod sphere;
+pub mod warm;
 
 use crate::error::{check, Error, Result};
 use crate::medium::Medium;

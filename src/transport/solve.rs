@@ -21,6 +21,7 @@
 //! correction's P1 current (Fick's law) goes into the first moments ([`accelerate`]).
 
 use super::sphere::Quadrature;
+use super::warm::{TransportState, WARM_MIN_ITERATIONS};
 use super::{BandOptics, Optics};
 use crate::diffusion::multigrid::Hierarchy;
 use crate::diffusion::{interior_coupling, BandOperator, Domain, DEFAULT_MIN_OPTICAL_DEPTH};
@@ -937,6 +938,23 @@ fn dominant_mode_step(history: &[f64], last: usize) -> Option<f32> {
 
 /// Solve the transport problem for the scene's medium, sun, sky and ground.
 pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &TransportSettings, progress: &dyn Progress) -> TransportField {
+    solve_warm(m, sun, sky, ground, s, progress, None, false).0
+}
+
+/// [`solve`] from `start` (a previous frame's converged state, mapped onto this grid; None: the
+/// cold start), iterated to the same tolerance; with `keep`, also the converged state for the
+/// next frame (src/transport/warm.rs).
+#[allow(clippy::too_many_arguments)]
+pub fn solve_warm(
+    m: &Medium,
+    sun: &Sun,
+    sky: &Sky,
+    ground: Option<&Ground>,
+    s: &TransportSettings,
+    progress: &dyn Progress,
+    start: Option<&TransportState>,
+    keep: bool,
+) -> (TransportField, Option<TransportState>) {
     let optics = Optics::from_medium(m, s.order);
     let dims = m.dims();
     let [nx, _, nz] = dims;
@@ -1063,7 +1081,11 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
             .collect(),
         _ => Vec::new(),
     };
-    let mut moments = vec![0f32; nfull * 3 * nsh];
+    let warm = start.and_then(|st| st.start(m, s.order, &full_vox, 3 * nsh));
+    // A warm start's error is mostly the slow modes the dominant-mode step removes, which needs
+    // three iterations to see (src/transport/warm.rs).
+    let min_iterations = if warm.is_some() { WARM_MIN_ITERATIONS } else { 1 };
+    let mut moments = warm.unwrap_or_else(|| vec![0f32; nfull * 3 * nsh]);
     let mut next = vec![0f32; moments.len()];
     let mut history = Vec::new();
     let mut extrapolated = 0;
@@ -1096,7 +1118,7 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
             "transport: iteration {}, relative change of I0 {change:.2e}",
             history.len()
         ));
-        if change < s.tolerance {
+        if change < s.tolerance && history.len() >= min_iterations {
             break;
         }
     }
@@ -1115,8 +1137,8 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
                 }
             }
         });
-    drop(moments);
-    TransportField {
+    let state = keep.then(|| TransportState::new(m, s.order, full.clone(), moments, 3 * nsh));
+    let field = TransportField {
         optics: optics.clone(),
         order: s.order,
         full,
@@ -1126,7 +1148,8 @@ pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &Tran
         history,
         full_voxels: nfull,
         ordinates: q.dirs.len(),
-    }
+    };
+    (field, state)
 }
 
 #[cfg(test)]
