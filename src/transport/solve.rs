@@ -579,6 +579,14 @@ unsafe fn bilinear_avx(w: &[f32; 4], n: [&[f32; 8]; 4]) -> [f32; 8] {
     out
 }
 
+/// Upwind density below which a cell's back source is its own instead of the density-weighted
+/// mean of its upwind neighbours. The mean ρ·J/ρ loses its bits where ρ·J is subnormal (f32 has
+/// 24 bits down to 1.2e-38; the Disney cloud holds densities of 1.7e-37, and the bilinear
+/// weights make them smaller still) and 1/ρ overflows to inf below 2.9e-39, so it would be
+/// NaN or inf; a density of 1e-30 puts an optical depth below 1e-30·σt·h into the step, which no
+/// image can show.
+const RHO_WEIGHT_MIN: f32 = 1e-30;
+
 /// One cell's step along a sweep (module docs) from its upwind record `acc` ([`bilinear`]),
 /// its density, its source `sc` (0 where empty; `full`: ρ > 0) and the step length `s` (m): its
 /// radiance and its record for the next plane.
@@ -589,7 +597,7 @@ fn cell(c: &Ctx, acc: [f32; 8], rho: f32, sc: [f32; 3], full: bool, s: f32) -> (
     let mut out = ib_;
     let rm = 0.5 * (rb + rho) * s;
     if rm > 0.0 {
-        let sb = if rb > 0.0 { sbw.map(|x| x * (1.0 / rb)) } else { sc };
+        let sb = if rb > RHO_WEIGHT_MIN { sbw.map(|x| x * (1.0 / rb)) } else { sc };
         let se = if full { sc } else { sb };
         let mut wgt = step_weights(c.sigma_t[0] * rm);
         for band in 0..3 {
@@ -629,7 +637,11 @@ unsafe fn cell_grey_avx(
     let rb = _mm_cvtss_f32(_mm_shuffle_ps::<0xff>(lo, lo));
     let rm = 0.5 * (rb + rho) * s;
     let out = if rm > 0.0 {
-        let sb = if rb > 0.0 { _mm_mul_ps(hi, _mm_set1_ps(1.0 / rb)) } else { sc4 };
+        let sb = if rb > RHO_WEIGHT_MIN {
+            _mm_mul_ps(hi, _mm_set1_ps(1.0 / rb))
+        } else {
+            sc4
+        };
         let se = if full { sc4 } else { sb };
         let (e, wi, wo) = step_weights(sigma_t * rm);
         let ie = _mm_mul_ps(lo, _mm_set1_ps(e));
