@@ -76,7 +76,7 @@ fn furnace_conservative_cloud_under_uniform_sky_is_invisible() {
         max_iterations: 100,
         ..TransportSettings::default()
     };
-    let f = solve(&s.medium, &s.sun, &s.sky, None, &tight, &NoProgress);
+    let f = solve(&s.medium, &s.sun, &s.sky, None, &tight, &NoProgress).unwrap();
     let y00 = 1.0 / (4.0 * std::f32::consts::PI).sqrt();
     let nsh = f.diffuse_source.len() / (3 * f.full_voxels);
     let wt = f
@@ -91,7 +91,7 @@ fn furnace_conservative_cloud_under_uniform_sky_is_invisible() {
         max_iterations: 2,
         ..tight
     };
-    assert_eq!(solve(&s.medium, &s.sun, &s.sky, None, &ties, &NoProgress).iterations(), 2);
+    assert_eq!(solve(&s.medium, &s.sun, &s.sky, None, &ties, &NoProgress).unwrap().iterations(), 2);
     eprintln!("furnace: worst pixel error {w:.4} (default tolerance), worst voxel I0 error {wt:.2e} (tolerance 1e-5)");
     assert!(w < 0.02 && wt < 1e-3, "{w} {wt}");
 }
@@ -104,7 +104,7 @@ fn acceleration_keeps_iterations_flat_in_optical_thickness() {
         max_iterations: 80,
         ..TransportSettings::default()
     };
-    let iters = |st: f32, s: TransportSettings| solve(&ball(st, 0.999), &sun, &sky, None, &s, &NoProgress).iterations();
+    let iters = |st: f32, s: TransportSettings| solve(&ball(st, 0.999), &sun, &sky, None, &s, &NoProgress).unwrap().iterations();
     // Voxel optical depths up to 1, 2, 4, 8 at the centre.
     let dsa: Vec<usize> = [0.1, 0.2, 0.4, 0.8].iter().map(|st| iters(*st, s)).collect();
     // Without DSA the thickest ball is far from converged after 3× as many sweeps.
@@ -293,7 +293,7 @@ fn the_clouds_shadow_reaches_the_ground_beyond_the_grid() {
         max_iterations: 3,
         ..TransportSettings::default()
     };
-    let f = solve(&ball(0.2, 0.99), &sun, &sky, Some(&ground), &s, &NoProgress);
+    let f = solve(&ball(0.2, 0.99), &sun, &sky, Some(&ground), &s, &NoProgress).unwrap();
     let shadow = f.ground.at(-173.0, 0.0);
     assert!(
         luminance(shadow) < 0.75 * luminance(f.ground.clear),
@@ -316,10 +316,10 @@ fn each_band_of_a_coloured_cloud_is_the_grey_solve_of_its_albedo() {
     let albedo = [0.999f32, 0.9, 0.6];
     let mut coloured = ball(0.2, 0.5);
     coloured.optics.albedo = Rgb::from(albedo);
-    let c = solve(&coloured, &sun, &sky, None, &s, &NoProgress);
+    let c = solve(&coloured, &sun, &sky, None, &s, &NoProgress).unwrap();
     let nsh = c.diffuse_source.len() / (3 * c.full_voxels);
     for (band, a) in albedo.iter().enumerate() {
-        let g = solve(&ball(0.2, *a), &sun, &sky, None, &s, &NoProgress);
+        let g = solve(&ball(0.2, *a), &sun, &sky, None, &s, &NoProgress).unwrap();
         let i00 = |f: &cloudgi::transport::solve::TransportField| -> Vec<f32> {
             (0..f.full_voxels).map(|v| f.diffuse_source[(v * 3 + band) * nsh]).collect()
         };

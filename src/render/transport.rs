@@ -133,7 +133,7 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
     memory.check(&scene.source, MAX_BYTES, "the library's limit")?;
     let field = timings.time("transport solve", || {
         solve(m, &scene.sun, &scene.sky, scene.ground.as_ref(), s, progress)
-    });
+    })?;
     let last = field.history.last().copied().unwrap_or(0.0);
     progress.log(&format!(
         "transport: {} ordinates, order {}, {} iterations (last change {last:.1e}); memory ≈ {:.0} MB: \
