@@ -20,7 +20,8 @@
 //! are not a stable API.
 
 mod api;
-pub(crate) mod camera;
+#[doc(hidden)]
+pub mod camera;
 #[doc(hidden)]
 pub mod compare;
 #[doc(hidden)]

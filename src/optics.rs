@@ -32,20 +32,28 @@ impl Hg {
         self.g
     }
 
-    /// p(θ) = (1 − g²) / (4π (1 − 2g cosθ + g²)^{3/2}) in sr⁻¹, from cos θ (see the module docs).
+    /// p(θ) = (1 − g²) / (4π (1 − 2g cosθ + g²)^{3/2}) in sr⁻¹, from cos θ (see the module docs);
+    /// evaluated in f64 ([`Self::eval_cos_f64`]): in f32, 1 + g² − 2g cancels to 0 or below for
+    /// |g| ≥ 0.9999 and the peak came out as inf or NaN.
     #[inline]
     pub fn eval_cos(&self, cos_theta: f32) -> f32 {
-        let g = self.g as f32;
-        let denom = 1.0 + g * g - 2.0 * g * cos_theta;
-        (1.0 - g * g) / (4.0 * PI * denom * denom.sqrt().max(1e-12))
+        self.eval_cos_f64(cos_theta as f64) as f32
     }
 
-    /// [`Self::eval_cos`] in f64, for quadratures and the order kernels.
+    /// [`Self::eval_cos`] in f64, for quadratures and the order kernels. The denominator's
+    /// 1 + g² − 2g cos θ is written as a sum of non-negative terms, (1 − g)² + 2g(1 − cos θ) for
+    /// g ≥ 0 and (1 + g)² + 2|g|(1 + cos θ) for g < 0, so it is never below (1 − |g|)² > 0: finite
+    /// and positive for every |g| < 1 (the peak (1 + |g|)/(4π(1 − |g|)²) is 4.4·10¹³ sr⁻¹ for the
+    /// f32 closest to 1, inside f32).
     #[inline]
     pub fn eval_cos_f64(&self, cos_theta: f64) -> f64 {
-        let g = self.g;
-        let denom = 1.0 + g * g - 2.0 * g * cos_theta;
-        (1.0 - g * g) / (4.0 * std::f64::consts::PI * denom * denom.sqrt().max(1e-300))
+        let (g, c) = (self.g, cos_theta.clamp(-1.0, 1.0));
+        let denom = if g >= 0.0 {
+            (1.0 - g) * (1.0 - g) + 2.0 * g * (1.0 - c)
+        } else {
+            (1.0 + g) * (1.0 + g) - 2.0 * g * (1.0 + c)
+        };
+        (1.0 - g) * (1.0 + g) / (4.0 * std::f64::consts::PI * denom * denom.sqrt())
     }
 
     /// p for light arriving from `to_light` (unit, towards the light) and leaving along `to_eye`
@@ -55,23 +63,37 @@ impl Hg {
         self.eval_cos((-to_light).dot(to_eye))
     }
 
+    /// (1 − cos θ, 1 + cos θ) of a sample with density p (inverse CDF; exact, also for g = 0)
+    /// from a uniform `u`, in f64 and each without cancellation: with s = (1 − g²)/(1 − g + 2gu),
+    /// cos θ = (1 + g² − s²)/(2g), so 1 − cos θ = (s² − (1 − g)²)/(2g) and
+    /// 1 + cos θ = ((1 + g)² − s²)/(2g). For |g| → 1 the lobe is narrower than f32 resolves near
+    /// cos θ = ±1; these keep sin θ = √((1 − cos θ)(1 + cos θ)) exact there.
+    #[inline]
+    fn sample_one_minus_plus(&self, u: f32) -> (f64, f64) {
+        let (g, u) = (self.g, u as f64);
+        if g.abs() < 1e-3 {
+            return (2.0 * u, 2.0 - 2.0 * u);
+        }
+        let s = (1.0 - g) * (1.0 + g) / (1.0 - g + 2.0 * g * u);
+        let omc = ((s - (1.0 - g)) * (s + (1.0 - g)) / (2.0 * g)).clamp(0.0, 2.0);
+        let opc = (((1.0 + g) - s) * ((1.0 + g) + s) / (2.0 * g)).clamp(0.0, 2.0);
+        (omc, opc)
+    }
+
     /// Sample cos θ with density p (inverse CDF; exact, also for g = 0) from a uniform `u`.
     #[inline]
     pub fn sample_cos(&self, u: f32) -> f32 {
-        let g = self.g as f32;
-        if g.abs() < 1e-3 {
-            return 1.0 - 2.0 * u;
-        }
-        let s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u);
-        ((1.0 + g * g - s * s) / (2.0 * g)).clamp(-1.0, 1.0)
+        let (omc, opc) = self.sample_one_minus_plus(u);
+        (if omc < opc { 1.0 - omc } else { opc - 1.0 }) as f32
     }
 
     /// Sample a new propagation direction after scattering from propagation direction `dir`
     /// (unit), using two uniforms; its density is `eval_cos(dir·new)`.
     #[inline]
     pub fn sample(&self, dir: Vec3, u1: f32, u2: f32) -> Vec3 {
-        let cos_t = self.sample_cos(u1);
-        let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+        let (omc, opc) = self.sample_one_minus_plus(u1);
+        let cos_t = (if omc < opc { 1.0 - omc } else { opc - 1.0 }) as f32;
+        let sin_t = (omc * opc).sqrt() as f32;
         let phi = 2.0 * PI * u2;
         Frame::from_normal(dir)
             .to_world(Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t))
@@ -234,6 +256,43 @@ mod tests {
             }
             assert!((total - 1.0).abs() < 1e-4, "g={g} total={total}");
             assert!((mean - g as f64).abs() < 1e-4, "g={g} mean={mean}");
+        }
+    }
+
+    #[test]
+    fn hg_near_one_is_finite_positive_and_samples_its_mean_cosine() {
+        // The f32 closest to 1 and the |g| ≥ 0.9999 that gave NaN (f32 cancellation).
+        let closest = f32::from_bits(1.0f32.to_bits() - 1);
+        for &g in &[0.9999f32, 0.999999, -0.99999, closest, -closest] {
+            let p = Hg::new(g);
+            for &c in &[-1.0f32, -0.5, 0.0, 0.999, 1.0] {
+                let v = p.eval_cos(c);
+                assert!(v.is_finite() && v > 0.0, "g={g} cos={c}: p={v}");
+            }
+            // Normalised: ∫p dΩ = 2π ∫ p d(cos θ), in the variable t = ln(1 ∓ cos θ) that
+            // resolves the narrow peak.
+            let n = 200_000;
+            let (lo, hi) = (1e-22f64.ln(), 2f64.ln());
+            let total: f64 = (0..n)
+                .map(|i| {
+                    let t = lo + (i as f64 + 0.5) * (hi - lo) / n as f64;
+                    let x = t.exp();
+                    let c = if g > 0.0 { 1.0 - x } else { x - 1.0 };
+                    p.eval_cos_f64(c) * x * (hi - lo) / n as f64
+                })
+                .sum::<f64>()
+                * 2.0
+                * std::f64::consts::PI;
+            assert!((total - 1.0).abs() < 1e-3, "g={g}: ∫p = {total}");
+            let m = 20_000;
+            let mut mean = 0.0;
+            for i in 0..m {
+                let u = (i as f32 + 0.5) / m as f32;
+                let d = p.sample(Vec3::Z, u, 0.3);
+                assert!(d.is_finite() && (d.length() - 1.0).abs() < 1e-5, "g={g} u={u}: {d}");
+                mean += d.z as f64 / m as f64;
+            }
+            assert!((mean - g as f64).abs() < 1e-3, "g={g}: sampled mean cosine {mean}");
         }
     }
 

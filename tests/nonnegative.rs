@@ -29,7 +29,20 @@ fn scene(example: Option<&str>, method: Method, edit: impl Fn(&mut SceneDesc)) -
 }
 
 fn assert_nonnegative(label: &str, s: &Scene) {
-    let out = cloudgi::render::render(s, &NoProgress).unwrap();
+    let out = match cloudgi::render::render(s, &NoProgress) {
+        Ok(out) => out,
+        // Transport on voxels thousands of optical depths thick: its acceleration diverges and
+        // plain source iteration cannot converge; it refuses, naming the stage (docs/transport.md,
+        // "Robustness"), rather than writing an unconverged image.
+        Err(cloudgi::Error::Numerical { stage, message }) if s.render.method == Method::Transport && s.medium.optics.sigma_t >= 100.0 => {
+            assert!(
+                stage == "transport solve" && message.contains("--method full"),
+                "{label}: {message}"
+            );
+            return;
+        }
+        Err(e) => panic!("{label}: {e}"),
+    };
     let img = out.image;
     let mut layers = vec![("rgb".to_string(), img.pixels.clone())];
     layers.extend(img.layers.iter().cloned());

@@ -76,7 +76,7 @@ fn furnace_conservative_cloud_under_uniform_sky_is_invisible() {
         max_iterations: 100,
         ..TransportSettings::default()
     };
-    let f = solve(&s.medium, &s.sun, &s.sky, None, &tight, &NoProgress);
+    let f = solve(&s.medium, &s.sun, &s.sky, None, &tight, &NoProgress).unwrap();
     let y00 = 1.0 / (4.0 * std::f32::consts::PI).sqrt();
     let nsh = f.diffuse_source.len() / (3 * f.full_voxels);
     let wt = f
@@ -91,7 +91,7 @@ fn furnace_conservative_cloud_under_uniform_sky_is_invisible() {
         max_iterations: 2,
         ..tight
     };
-    assert_eq!(solve(&s.medium, &s.sun, &s.sky, None, &ties, &NoProgress).iterations(), 2);
+    assert_eq!(solve(&s.medium, &s.sun, &s.sky, None, &ties, &NoProgress).unwrap().iterations(), 2);
     eprintln!("furnace: worst pixel error {w:.4} (default tolerance), worst voxel I0 error {wt:.2e} (tolerance 1e-5)");
     assert!(w < 0.02 && wt < 1e-3, "{w} {wt}");
 }
@@ -104,7 +104,7 @@ fn acceleration_keeps_iterations_flat_in_optical_thickness() {
         max_iterations: 80,
         ..TransportSettings::default()
     };
-    let iters = |st: f32, s: TransportSettings| solve(&ball(st, 0.999), &sun, &sky, None, &s, &NoProgress).iterations();
+    let iters = |st: f32, s: TransportSettings| solve(&ball(st, 0.999), &sun, &sky, None, &s, &NoProgress).unwrap().iterations();
     // Voxel optical depths up to 1, 2, 4, 8 at the centre.
     let dsa: Vec<usize> = [0.1, 0.2, 0.4, 0.8].iter().map(|st| iters(*st, s)).collect();
     // Without DSA the thickest ball is far from converged after 3× as many sweeps.
@@ -293,7 +293,7 @@ fn the_clouds_shadow_reaches_the_ground_beyond_the_grid() {
         max_iterations: 3,
         ..TransportSettings::default()
     };
-    let f = solve(&ball(0.2, 0.99), &sun, &sky, Some(&ground), &s, &NoProgress);
+    let f = solve(&ball(0.2, 0.99), &sun, &sky, Some(&ground), &s, &NoProgress).unwrap();
     let shadow = f.ground.at(-173.0, 0.0);
     assert!(
         luminance(shadow) < 0.75 * luminance(f.ground.clear),
@@ -316,10 +316,10 @@ fn each_band_of_a_coloured_cloud_is_the_grey_solve_of_its_albedo() {
     let albedo = [0.999f32, 0.9, 0.6];
     let mut coloured = ball(0.2, 0.5);
     coloured.optics.albedo = Rgb::from(albedo);
-    let c = solve(&coloured, &sun, &sky, None, &s, &NoProgress);
+    let c = solve(&coloured, &sun, &sky, None, &s, &NoProgress).unwrap();
     let nsh = c.diffuse_source.len() / (3 * c.full_voxels);
     for (band, a) in albedo.iter().enumerate() {
-        let g = solve(&ball(0.2, *a), &sun, &sky, None, &s, &NoProgress);
+        let g = solve(&ball(0.2, *a), &sun, &sky, None, &s, &NoProgress).unwrap();
         let i00 = |f: &cloudgi::transport::solve::TransportField| -> Vec<f32> {
             (0..f.full_voxels).map(|v| f.diffuse_source[(v * 3 + band) * nsh]).collect()
         };
@@ -376,10 +376,27 @@ fn the_ground_the_eye_sees_shows_no_ordinate_or_map_column() {
         max_iterations: 4,
         ..TransportSettings::default()
     };
-    let f = solve(&s.medium, &s.sun, &s.sky, s.ground.as_ref(), &settings, &NoProgress);
+    let f = solve(&s.medium, &s.sun, &s.sky, s.ground.as_ref(), &settings, &NoProgress).unwrap();
     let eye = EyeGround::new(&s, &f).expect("a ground");
     let raw = ground_roughness(80, 2.5, |x, z| f.ground.at(x as f64, z as f64));
     let seen = ground_roughness(80, 2.5, |x, z| eye.radiance(&s, Vec3::new(x, 0.0, z)));
     eprintln!("roughness: map {raw:.2e}, eye {seen:.2e}");
     assert!(seen < 0.2 * raw && seen < 2e-3, "map {raw:.2e}, eye {seen:.2e}");
+}
+
+#[test]
+fn back_scattering_converges_and_thick_voxels_fail_with_the_stage_named() {
+    let (sun, sky) = high_sun_and_blue_sky();
+    let s = TransportSettings::default();
+    // g = −0.9: the δ-M transform truncates no back peak, DSA is halved, no extrapolation.
+    // (With f = g⁸ = 0.43 the first moment's scattering factor was −2.3: 10³⁵ after 60 sweeps.)
+    let mut m = ball(0.2, 1.0);
+    m.optics = cloudgi::optics::Optics::new(0.2, Rgb::splat(1.0), -0.9);
+    let f = solve(&m, &sun, &sky, None, &s, &NoProgress).unwrap();
+    assert!(f.iterations() < s.max_iterations, "{:?}", f.history);
+    assert!(f.diffuse_source.iter().all(|x| x.is_finite()));
+    // Voxels 10⁵ optical depths thick: the acceleration diverges, plain source iteration cannot
+    // converge in the budget, and the solve says so instead of returning 10³² W·m⁻²·sr⁻¹.
+    let e = solve(&ball(1e4, 1.0), &sun, &sky, None, &s, &NoProgress).unwrap_err().to_string();
+    assert!(e.starts_with("transport solve:") && e.contains("--method full"), "{e}");
 }

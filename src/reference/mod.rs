@@ -109,6 +109,17 @@ pub struct ReferenceStats {
 /// Render `scene` with the reference method (settings from `scene.render`: spp, seed, max_depth,
 /// time_limit, stderr).
 pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
+    let rs = &scene.render;
+    let order = mean_scattering_order(&scene.medium);
+    if rs.time_limit.is_none() && rs.max_depth.is_none() && order > LONG_PATH_ORDER {
+        progress.warn(&format!(
+            "{}: paths in this medium scatter about {order:.1e} times each (optical depth up to ~{:.1e}, no \
+             depth cap), so the render may take hours or more: set render.time_limit (--time-limit S) to \
+             stop it in time, or render.max_depth (biased low)",
+            scene.source,
+            order.sqrt()
+        ));
+    }
     let (img, stats) = render_with_stats(scene, progress, timings);
     let spp = if stats.min_spp == stats.spp {
         format!("{} spp", stats.spp)
@@ -117,6 +128,22 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
     };
     progress.log(&format!("reference: {spp} in {:.2} s", stats.seconds));
     Ok(img)
+}
+
+/// Estimated scatterings per path above which `render` warns that it may not finish without a
+/// time limit (about 0.1 s of CPU per path).
+const LONG_PATH_ORDER: f64 = 1e6;
+
+/// A path's mean number of scatterings, estimated up front: about τ² for a thick medium of
+/// optical thickness τ (a random walk's steps to cross it), capped by 1/(1 − a) where albedo a < 1
+/// ends the walk first. τ is the densest voxel's extinction across the grid's thinnest extent.
+fn mean_scattering_order(m: &crate::medium::Medium) -> f64 {
+    let rho = m.density.full_voxels().fold(0.0f64, |a, (_, v)| a.max(v as f64));
+    let d = m.dims();
+    let extent = (0..3).map(|a| d[a] as f64 * m.voxel_size[a] as f64).fold(f64::INFINITY, f64::min);
+    let tau = rho * m.optics.sigma_t as f64 * extent;
+    let a = m.optics.albedo.max_element() as f64;
+    (tau * tau).min(if a < 1.0 { 1.0 / (1.0 - a) } else { f64::INFINITY })
 }
 
 /// [`render`], also returning how many samples were taken.

@@ -233,7 +233,7 @@ pub fn render_with(scene: &Scene, progress: &dyn Progress, timings: &mut Timings
     let start = warm.as_ref().and_then(|w| w.transport.as_ref()).filter(|_| keep);
     let (field, state) = timings.time("transport solve", || {
         solve_warm(m, &scene.sun, &scene.sky, scene.ground.as_ref(), s, progress, start, keep)
-    });
+    })?;
     if let Some(w) = warm {
         w.transport = state;
         w.iterations = Some(field.iterations());

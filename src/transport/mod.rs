@@ -135,7 +135,11 @@ impl TransportMemory {
 
 /// One band's optics after the δ-M transform of a Henyey–Greenstein phase function truncated
 /// after Legendre order `L`: the forward fraction f = g^{L+1} moves into the unscattered beam,
-/// σt′ = σt(1 − a f), a′ = a(1 − f)/(1 − a f), χ′_l = (g^l − f)/(1 − f) for l ≤ L.
+/// σt′ = σt(1 − a f), a′ = a(1 − f)/(1 − a f), χ′_l = (g^l − f)/(1 − f) for l ≤ L. A
+/// back-scattering phase function (g < 0) has no forward peak to truncate: f = 0 there (g^{L+1}
+/// of a negative g is ±|g|^{L+1}, and with f = 0.43 for g = −0.9 at L = 7 the scaled moment
+/// χ′_1 = −2.3 made the scattering operator amplify the first moment: source iteration diverged).
+/// So |χ′_l| ≤ 1 for every g.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BandOptics {
     /// Scaled extinction σt′ per unit density (m⁻¹, or per unit optical depth on a slab).
@@ -151,7 +155,7 @@ pub struct BandOptics {
 impl BandOptics {
     /// δ-M transform of (σt, a, HG g) truncated after order `order`.
     pub fn delta_m(sigma_t: f64, albedo: f64, g: f64, order: usize) -> BandOptics {
-        let f = g.powi(order as i32 + 1);
+        let f = g.max(0.0).powi(order as i32 + 1);
         let chi = (0..=order).map(|l| (g.powi(l as i32) - f) / (1.0 - f)).collect();
         BandOptics {
             sigma_t: sigma_t * (1.0 - albedo * f),

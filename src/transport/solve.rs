@@ -25,6 +25,7 @@ use super::warm::{TransportState, WARM_MIN_ITERATIONS};
 use super::{BandOptics, Optics};
 use crate::diffusion::multigrid::Hierarchy;
 use crate::diffusion::{interior_coupling, BandOperator, Domain, DEFAULT_MIN_OPTICAL_DEPTH};
+use crate::error::{Error, Result};
 use crate::lighting::{Ground, Sky, Sun};
 use crate::math::{real_sh, sh_count};
 use crate::math::{Rgb, Vec3};
@@ -583,6 +584,14 @@ unsafe fn bilinear_avx(w: &[f32; 4], n: [&[f32; 8]; 4]) -> [f32; 8] {
     out
 }
 
+/// Upwind density below which a cell's back source is its own instead of the density-weighted
+/// mean of its upwind neighbours. The mean ρ·J/ρ loses its bits where ρ·J is subnormal (f32 has
+/// 24 bits down to 1.2e-38; the Disney cloud holds densities of 1.7e-37, and the bilinear
+/// weights make them smaller still) and 1/ρ overflows to inf below 2.9e-39, so it would be
+/// NaN or inf; a density of 1e-30 puts an optical depth below 1e-30·σt·h into the step, which no
+/// image can show.
+const RHO_WEIGHT_MIN: f32 = 1e-30;
+
 /// One cell's step along a sweep (module docs) from its upwind record `acc` ([`bilinear`]),
 /// its density, its source `sc` (0 where empty; `full`: ρ > 0) and the step length `s` (m): its
 /// radiance and its record for the next plane.
@@ -593,7 +602,7 @@ fn cell(c: &Ctx, acc: [f32; 8], rho: f32, sc: [f32; 3], full: bool, s: f32) -> (
     let mut out = ib_;
     let rm = 0.5 * (rb + rho) * s;
     if rm > 0.0 {
-        let sb = if rb > 0.0 { sbw.map(|x| x * (1.0 / rb)) } else { sc };
+        let sb = if rb > RHO_WEIGHT_MIN { sbw.map(|x| x * (1.0 / rb)) } else { sc };
         let se = if full { sc } else { sb };
         let mut wgt = step_weights(c.sigma_t[0] * rm);
         for band in 0..3 {
@@ -633,7 +642,11 @@ unsafe fn cell_grey_avx(
     let rb = _mm_cvtss_f32(_mm_shuffle_ps::<0xff>(lo, lo));
     let rm = 0.5 * (rb + rho) * s;
     let out = if rm > 0.0 {
-        let sb = if rb > 0.0 { _mm_mul_ps(hi, _mm_set1_ps(1.0 / rb)) } else { sc4 };
+        let sb = if rb > RHO_WEIGHT_MIN {
+            _mm_mul_ps(hi, _mm_set1_ps(1.0 / rb))
+        } else {
+            sc4
+        };
         let se = if full { sc4 } else { sb };
         let (e, wi, wo) = step_weights(sigma_t * rm);
         let ie = _mm_mul_ps(lo, _mm_set1_ps(e));
@@ -848,14 +861,20 @@ fn accelerate(c: &Ctx, voxels: &[usize], hier: &[Hierarchy], bands: &[BandOptics
     // The correction need only be as good as the iteration's tolerance: 1e-2 instead of 1e-4
     // changed the dense cloud's image by 3e-6 and halved the time of the solve.
     let (tol, cap) = (1e-2, 100);
-    let deltas: Vec<Vec<f64>> = if let [h] = hier {
+    let mut deltas: Vec<Vec<f64>> = if let [h] = hier {
         h.solve_many([&rhs[0][..], &rhs[1][..], &rhs[2][..]], None, tol, cap)
             .map(|(d, _)| d)
             .into()
     } else {
         hier.iter().zip(&rhs).map(|(h, r)| h.solve(r, None, tol, cap).0).collect()
     };
-    for (b, delta) in deltas.iter().enumerate() {
+    for (b, delta) in deltas.iter_mut().enumerate() {
+        // With back-scattering (χ′_1 < 0) the error's current alternates from sweep to sweep and
+        // the full correction overshoots it (g = −0.9 diverged, with or without the first
+        // moments); half of it converges (the default cloud at g = −0.9: 14 iterations).
+        if bands[b].chi.get(1).is_some_and(|&c| c < 0.0) {
+            delta.iter_mut().for_each(|d| *d *= 0.5);
+        }
         dsa_apply(c, voxels, &bands[b], b, delta, next);
     }
 }
@@ -936,9 +955,51 @@ fn dominant_mode_step(history: &[f64], last: usize) -> Option<f32> {
     (r1 > 0.3 && r1 < 0.9 && (r1 - r0).abs() < 0.1).then(|| (r1 / (1.0 - r1)) as f32)
 }
 
+/// A change of I_00 this many times the smallest since the iteration (re)started means the
+/// acceleration amplifies: a converging iteration's change falls (erratically by at most ~2 on the
+/// evaluation scenes), a diverging one's grows by orders of magnitude within a few iterations.
+const DIVERGENCE_FACTOR: f64 = 4.0;
+
+/// (max |ΔI_00|, max |I_00|) over the full voxels and bands (W·m⁻²·sr⁻¹): inf for the first
+/// when either iterate holds a non-finite value (so a NaN is never read as "no change").
+fn i00_change(next: &[f32], moments: &[f32], nsh: usize) -> (f64, f64) {
+    next.iter()
+        .step_by(nsh)
+        .zip(moments.iter().step_by(nsh))
+        .fold((0.0f64, 1e-30f64), |(c, m), (x, y)| {
+            let d = (x - y).abs() as f64;
+            (if d.is_finite() { c.max(d) } else { f64::INFINITY }, m.max(x.abs() as f64))
+        })
+}
+
+/// Whether plain source iteration (after the acceleration was given up) has converged: its
+/// change falls by r per iteration with r → 1 on thick media, so the error left is about
+/// r/(1 − r) times the last change, not the change itself (a change of 4.9·10⁻³ at r = 0.957
+/// left 22 times that). `changes`: the relative changes since the restart.
+fn plain_converged(changes: &[f64], tolerance: f64) -> bool {
+    match changes {
+        [.., a, b] if b < a => b * (b / (a - b)).max(1.0) < tolerance,
+        _ => false,
+    }
+}
+
+/// The largest scaled optical depth of a full voxel along its thinnest axis, max ρ σt′ h.
+fn max_voxel_optical_depth(c: &Ctx, voxels: &[usize], bands: &[BandOptics]) -> f64 {
+    let rho = voxels.iter().fold(0.0f64, |a, &v| a.max(c.rho.at(v) as f64));
+    let st = bands.iter().fold(0.0f64, |a, b| a.max(b.sigma_t));
+    rho * st * c.h.iter().copied().fold(f64::INFINITY, f64::min)
+}
+
 /// Solve the transport problem for the scene's medium, sun, sky and ground.
-pub fn solve(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&Ground>, s: &TransportSettings, progress: &dyn Progress) -> TransportField {
-    solve_warm(m, sun, sky, ground, s, progress, None, false).0
+pub fn solve(
+    m: &Medium,
+    sun: &Sun,
+    sky: &Sky,
+    ground: Option<&Ground>,
+    s: &TransportSettings,
+    progress: &dyn Progress,
+) -> Result<TransportField> {
+    Ok(solve_warm(m, sun, sky, ground, s, progress, None, false)?.0)
 }
 
 /// [`solve`] from `start` (a previous frame's converged state, mapped onto this grid; None: the
@@ -954,7 +1015,7 @@ pub fn solve_warm(
     progress: &dyn Progress,
     start: Option<&TransportState>,
     keep: bool,
-) -> (TransportField, Option<TransportState>) {
+) -> Result<(TransportField, Option<TransportState>)> {
     let optics = Optics::from_medium(m, s.order);
     let dims = m.dims();
     let [nx, _, nz] = dims;
@@ -1089,6 +1150,15 @@ pub fn solve_warm(
     let mut next = vec![0f32; moments.len()];
     let mut history = Vec::new();
     let mut extrapolated = 0;
+    // The acceleration's guard (module docs, "When the acceleration diverges"): the largest
+    // change of I_00 since the iteration (re)started, its smallest value so far, and the
+    // iteration at which the acceleration was given up.
+    let (mut accelerated, mut smallest, mut since_start, mut given_up) = (s.acceleration, f64::INFINITY, 0usize, None);
+    // The extrapolation assumes the slowest error mode keeps its sign (a ratio r > 0). With a
+    // back-scattering phase function the odd moments' scattering eigenvalues a′χ′_l are negative:
+    // their error alternates, and adding the last step r/(1 − r) times amplified it (g = −0.9
+    // diverged). Not done there.
+    let extrapolate = bands.iter().all(|b| b.chi.iter().all(|&c| c >= 0.0));
     progress.begin("transport iterations", s.max_iterations as u64);
     // An empty medium has nothing to iterate: the sky and ground pass unchanged.
     for _ in 0..if nfull == 0 { 0 } else { s.max_iterations } {
@@ -1096,18 +1166,47 @@ pub fn solve_warm(
             break;
         }
         let e_down = sweep(&ctx, &q, &tables, &moments, &mut next, &ground_map);
-        if !hier.is_empty() {
+        if accelerated && !hier.is_empty() {
             accelerate(&ctx, &full_vox, &hier, bands, &moments, &mut next);
         }
-        let scale = next.iter().step_by(nsh).fold(1e-30f64, |a, x| a.max(x.abs() as f64));
-        let change = next
-            .iter()
-            .step_by(nsh)
-            .zip(moments.iter().step_by(nsh))
-            .fold(0.0f64, |a, (x, y)| a.max((x - y).abs() as f64))
-            / scale;
+        let (change_abs, scale) = i00_change(&next, &moments, nsh);
+        since_start += 1;
+        let diverging = !change_abs.is_finite() || (since_start >= 2 && change_abs > DIVERGENCE_FACTOR * smallest);
+        if diverging && accelerated {
+            // DSA's diffusion operator is not the sweeps' own diffusion limit, and on voxels many
+            // mean free paths thick the mismatch amplifies: start again from zero with plain
+            // source iteration (positive, and a contraction for a′ ≤ 1).
+            accelerated = false;
+            given_up = Some(history.len() + 1);
+            moments.fill(0.0);
+            next.fill(0.0);
+            (smallest, since_start) = (f64::INFINITY, 0);
+            ground_map = ground_of(None);
+            history.push(1.0);
+            progress.advance(1);
+            progress.log(&format!(
+                "transport: iteration {}, the acceleration diverged (change of I0 {change_abs:.2e} W·m⁻²·sr⁻¹, smallest before {:.2e}); plain source iteration from zero",
+                history.len(),
+                smallest
+            ));
+            continue;
+        }
+        if diverging {
+            return Err(Error::Numerical {
+                stage: "transport solve".into(),
+                message: format!(
+                    "plain source iteration diverged at iteration {} (change of I0 {change_abs:.2e}); this is a bug: please report the scene, and render it with --method full or reference meanwhile",
+                    history.len() + 1
+                ),
+            });
+        }
+        smallest = smallest.min(change_abs);
+        let change = change_abs / scale;
         history.push(change);
-        if let Some(k) = s.acceleration.then(|| dominant_mode_step(&history, extrapolated)).flatten() {
+        if let Some(k) = (accelerated && extrapolate)
+            .then(|| dominant_mode_step(&history, extrapolated))
+            .flatten()
+        {
             next.par_iter_mut().zip(moments.par_iter()).for_each(|(x, o)| *x += k * (*x - o));
             extrapolated = history.len();
         }
@@ -1118,9 +1217,28 @@ pub fn solve_warm(
             "transport: iteration {}, relative change of I0 {change:.2e}",
             history.len()
         ));
-        if change < s.tolerance && history.len() >= min_iterations {
+        if change < s.tolerance
+            && history.len() >= min_iterations
+            && (accelerated || plain_converged(&history[history.len() - since_start..], s.tolerance))
+        {
             break;
         }
+    }
+    let last = history.last().copied().unwrap_or(0.0);
+    if let Some(at) = given_up.filter(|_| !plain_converged(&history[history.len() - since_start..], s.tolerance)) {
+        let tau = max_voxel_optical_depth(&ctx, &full_vox, bands);
+        return Err(Error::Numerical {
+            stage: "transport solve".into(),
+            message: format!(
+                "the diffusion acceleration diverged at iteration {at} (voxels up to {tau:.3e} optical depths \
+                 thick), and plain source iteration, which needs of the order of (optical depth)² sweeps, had not \
+                 converged after render.transport_max_iterations = {} (last change of I0 {last:.1e}, error left \
+                 estimated above render.transport_tolerance = {:.1e}); render this medium with --method full or \
+                 reference, or give it voxels of at most a few optical depths (a smaller medium.voxel_size or \
+                 medium.sigma_t)",
+                s.max_iterations, s.tolerance
+            ),
+        });
     }
     progress.end();
     drop(next);
@@ -1149,7 +1267,7 @@ pub fn solve_warm(
         full_voxels: nfull,
         ordinates: q.dirs.len(),
     };
-    (field, state)
+    Ok((field, state))
 }
 
 #[cfg(test)]
