@@ -197,10 +197,16 @@ pub const BUILTIN: &str = "built-in scene";
 impl SceneDesc {
     /// Parse TOML text; `file` names the source in error messages.
     pub fn from_toml(text: &str, file: &str) -> Result<Self> {
-        toml::from_str(text).map_err(|e| Error::Parse {
+        let mut desc: SceneDesc = toml::from_str(text).map_err(|e| Error::Parse {
             file: file.to_string(),
             message: e.to_string().trim_end().to_string(),
-        })
+        })?;
+        // A file without a `[camera]` table frames its cloud (camera.fit).
+        let table: toml::Table = text.parse().unwrap_or_default();
+        if !table.contains_key("camera") {
+            desc.camera.fit = true;
+        }
+        Ok(desc)
     }
 
     /// Read and parse a scene file.
@@ -380,6 +386,10 @@ impl Scene {
             None => None,
         };
         let medium = Medium::from_desc(&desc.medium, f, base_dir)?;
+        let (desc, camera) = match desc.camera.fit {
+            true => crate::camera::fit::apply(desc, &medium, f)?,
+            false => (desc, camera),
+        };
         render.edges.step_m = render.step_voxels * medium.min_voxel();
         Ok(Scene {
             source: source.to_string(),

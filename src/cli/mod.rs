@@ -1,9 +1,11 @@
 //! Subcommands of the `cloudgi` binary.
 
 mod bench;
+mod cloud_size;
 mod compare;
 mod export;
 mod figures;
+mod grid_scene;
 mod info;
 mod memory;
 mod output;
@@ -83,7 +85,8 @@ enum Command {
 
 #[derive(Args, Debug)]
 struct RenderArgs {
-    /// Scene file (TOML). Without it, the built-in default scene.
+    /// Scene file (TOML), or a grid file (.vdb, .npy, .vol, .raw) to render framed under the
+    /// default sun and sky. Without it, the built-in default scene.
     scene: Option<PathBuf>,
     /// Output EXR; the PNG preview is written beside it.
     #[arg(short, long, default_value = "cloud.exr")]
