@@ -10,6 +10,7 @@ pub mod cube;
 pub mod diffusion;
 pub mod edges;
 pub mod error;
+pub mod exposure;
 pub mod figures;
 pub mod half;
 pub mod image;

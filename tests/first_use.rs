@@ -74,11 +74,75 @@ fn bad_first_use_input_is_refused_before_any_output() {
         ),
         (vec!["render", "bad.vdb"], "bad.vdb"),
         (vec!["render", "fit.toml"], "expected a boolean"),
+        (vec!["render", "--exposure", "nan"], "--exposure"),
+        (vec!["render", "-o", "out.jpg"], "must end in .exr or .png"),
+        (vec!["tonemap", "missing.exr", "-o", "t.png"], "missing.exr"),
+        (vec!["tonemap", "fit.toml", "-o", "t.png"], "fit.toml"),
+        (vec!["tonemap", "missing.exr", "-o", "t.exr"], "must end in .png"),
+        (vec!["tonemap", "missing.exr", "-o", "t.png", "--exposure", "inf"], "--exposure"),
     ] {
         let out = cloudgi(d, &args);
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success() && err.contains(want), "{args:?}: {err}");
         let left: Vec<_> = std::fs::read_dir(d).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(left.len(), 2, "{args:?} wrote nothing: {left:?}");
+    }
+}
+
+/// The exposed luminance (radiance × 2^stops) of the median cloud pixel (transmittance < 0.99).
+fn cloud_median(img: &Image, stops: f32) -> f32 {
+    let t = img.layer(cloudgi::reference::TRANSMITTANCE_LAYER).unwrap();
+    let mut lum: Vec<f32> = img
+        .pixels
+        .iter()
+        .zip(t)
+        .filter(|(_, t)| t.x < 0.99)
+        .map(|(p, _)| cloudgi::exposure::luminance(*p) * stops.exp2())
+        .collect();
+    lum.sort_by(f32::total_cmp);
+    lum[lum.len() / 2]
+}
+
+#[test]
+fn automatic_exposure_and_tonemap_remake_the_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::copy(data("sphere64_blosc.vdb"), d.join("cloud.vdb")).unwrap();
+    // The sphere made 290 m across: an optically thick cloud under the default sun and sky.
+    std::fs::write(d.join("s.toml"), "[medium]\ngrid = \"cloud.vdb\"\nscale = 100.0\n").unwrap();
+    // `-o out.png` writes out.exr beside it.
+    let mut args = vec!["render", "s.toml", "-o", "out.png", "--spp", "4"];
+    args.extend(&QUICK[..2]);
+    args.extend(&QUICK[4..]);
+    let err = ok(d, &args);
+    assert!(err.contains("automatic"), "{err}");
+    let img = Image::read_exr(&d.join("out.exr")).unwrap();
+    let stops = cloudgi::exposure::auto_stops(&img);
+    // The rule maps the 99th percentile of luminance to 1; the cloud's median lands at 0.74
+    // (+0.68 stops): a bright cloud below white.
+    let median = cloud_median(&img, stops);
+    assert!((0.4..0.9).contains(&median), "cloud median {median} at {stops} stops");
+    // `tonemap` re-makes the PNG byte for byte; --exposure overrides both.
+    ok(d, &["tonemap", "out.exr", "-o", "again.png"]);
+    let png = std::fs::read(d.join("out.png")).unwrap();
+    assert_eq!(std::fs::read(d.join("again.png")).unwrap(), png);
+    ok(d, &["tonemap", "out.exr", "-o", "dark.png", "--exposure", "-3"]);
+    assert_eq!(std::fs::read(d.join("dark.png")).unwrap(), img.to_png_bytes(-3.0).unwrap());
+    // render.exposure in the scene file wins over the automatic rule; --exposure over both.
+    std::fs::write(
+        d.join("fixed.toml"),
+        "[medium]\ngrid = \"cloud.vdb\"\nscale = 100.0\n[render]\nexposure = -1.0\n",
+    )
+    .unwrap();
+    for (extra, want) in [(None, -1.0), (Some("2"), 2.0)] {
+        let mut args = vec!["render", "fixed.toml", "-o", "fixed.exr", "--spp", "4"];
+        args.extend(&QUICK[..2]);
+        args.extend(&QUICK[4..]);
+        if let Some(e) = extra {
+            args.extend(["--exposure", e]);
+        }
+        ok(d, &args);
+        let fixed = Image::read_exr(&d.join("fixed.exr")).unwrap();
+        assert_eq!(std::fs::read(d.join("fixed.png")).unwrap(), fixed.to_png_bytes(want).unwrap());
     }
 }

@@ -13,6 +13,7 @@ mod progress;
 mod scene_file;
 mod sky;
 mod slab;
+mod tonemap;
 mod warnings;
 
 use clap::{Args, Parser, Subcommand};
@@ -81,6 +82,8 @@ enum Command {
     Figures(figures::FiguresArgs),
     /// Time every stage of the chosen methods on three sizes of the procedural cloud: a markdown table.
     Bench(bench::BenchArgs),
+    /// Re-make a render's PNG preview from its EXR (the same automatic exposure, or --exposure).
+    Tonemap(tonemap::TonemapArgs),
 }
 
 #[derive(Args, Debug)]
@@ -88,9 +91,13 @@ struct RenderArgs {
     /// Scene file (TOML), or a grid file (.vdb, .npy, .vol, .raw) to render framed under the
     /// default sun and sky. Without it, the built-in default scene.
     scene: Option<PathBuf>,
-    /// Output EXR; the PNG preview is written beside it.
+    /// Output EXR or PNG; both are written: OUT.exr and its preview OUT.png.
     #[arg(short, long, default_value = "cloud.exr")]
     output: PathBuf,
+    /// PNG exposure in stops (default: render.exposure if the scene file sets it, else automatic;
+    /// docs/first_use.md). The EXR is never scaled.
+    #[arg(long, allow_hyphen_values = true)]
+    exposure: Option<f32>,
     /// Override render.method (default: full).
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
@@ -146,6 +153,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Export(a) => export::run(a, cli.quiet),
         Command::Figures(a) => figures::run(a, cli.quiet),
         Command::Bench(a) => bench::run(a),
+        Command::Tonemap(a) => tonemap::run(a, cli.quiet),
     }
 }
 
@@ -225,12 +233,12 @@ impl RenderArgs {
 }
 
 fn render(a: RenderArgs, quiet: bool) -> Result<()> {
-    check_exr_path(&a.output, "--output")?;
+    let (exr, png) = tonemap::outputs(&a.output)?;
+    tonemap::check_flag(a.exposure)?;
     let file = SceneFile::read(a.scene.as_deref())?;
     let mut desc = file.desc.clone();
     a.apply(&mut desc);
-    let png = png_beside(&a.output);
-    output::check_files(&[&a.output, &png], "--output", &file.inputs(&desc))?;
+    output::check_files(&[&exr, &png], "--output", &file.inputs(&desc))?;
     memory::check_image(&desc, &file.source)?;
     let scene = Scene::build(desc, &file.source, &file.base)?;
     memory::check_solver(&scene)?;
@@ -239,14 +247,15 @@ fn render(a: RenderArgs, quiet: bool) -> Result<()> {
     }
     let progress = progress::Bars::new(quiet);
     let out = cloudgi::render(&scene, &progress)?;
-    write_exr_and_png(&out.image, &a.output, &png, scene.render.exposure)?;
+    let (stops, why) = tonemap::stops(a.exposure, Some(&file), &out.image);
+    write_exr_and_png(&out.image, &exr, &png, stops)?;
     if !quiet {
         eprintln!(
-            "{} {}×{} → {} + {}",
+            "{} {}×{} → {} + {} (exposure {stops:+.2} stops, {why})",
             scene.render.method.name(),
             scene.camera.width,
             scene.camera.height,
-            a.output.display(),
+            exr.display(),
             png.display()
         );
         eprintln!("timings: {}", out.timings.summary());
