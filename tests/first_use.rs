@@ -146,3 +146,67 @@ fn automatic_exposure_and_tonemap_remake_the_png() {
         assert_eq!(std::fs::read(d.join("fixed.png")).unwrap(), fixed.to_png_bytes(want).unwrap());
     }
 }
+
+#[test]
+fn a_z_up_file_renders_as_the_same_file_turned_y_up() {
+    use cloudgi::math::Vec3;
+    use cloudgi::medium::{loaders, Grid3};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A lopsided blob, 12 × 8 × 6 voxels of 20 m (z-up: 6 voxels tall), and the same voxels
+    // turned y-up by hand: (x, y, z) → (x, z, −y).
+    let [nx, ny, nz] = [12, 8, 6];
+    let rho = |i: usize, j: usize, k: usize| ((i * 7 + j * 3 + k * 5) % 11) as f32 * 0.1 * (i as f32 / nx as f32);
+    let mut z_up = Grid3::filled([nx, ny, nz], 0.0);
+    let mut y_up = Grid3::filled([nx, nz, ny], 0.0);
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                z_up.set(i, j, k, rho(i, j, k));
+                y_up.set(i, k, ny - 1 - j, rho(i, j, k));
+            }
+        }
+    }
+    loaders::write_npy(&d.join("z.npy"), &z_up).unwrap();
+    loaders::write_npy(&d.join("y.npy"), &y_up).unwrap();
+    let origin = Vec3::new(-120.0, -80.0, 10.0);
+    let turned = Vec3::new(origin.x, origin.z, -(origin.y + 20.0 * ny as f32));
+    let camera = "[camera]\nposition = [50.0, 300.0, 600.0]\nlook_at = [0.0, 60.0, 0.0]\nwidth = 32\nheight = 24\n";
+    let medium = "[medium]\nvoxel_size = 20.0\nsigma_t = 0.02\n";
+    std::fs::write(
+        d.join("z.toml"),
+        format!(
+            "{medium}grid = \"z.npy\"\nup_axis = \"z\"\norigin = {:?}\n{camera}",
+            origin.to_array()
+        ),
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("y.toml"),
+        format!("{medium}grid = \"y.npy\"\norigin = {:?}\n{camera}", turned.to_array()),
+    )
+    .unwrap();
+    for s in ["z", "y"] {
+        ok(
+            d,
+            &["render", &format!("{s}.toml"), "-o", &format!("{s}.exr"), "--method", "single"],
+        );
+    }
+    let (z, y) = (
+        Image::read_exr(&d.join("z.exr")).unwrap(),
+        Image::read_exr(&d.join("y.exr")).unwrap(),
+    );
+    assert_eq!(z.pixels, y.pixels);
+    assert!(
+        z.pixels.iter().any(|p| (*p - z.pixels[0]).abs().max_element() > 1e-3),
+        "the cloud is in view"
+    );
+    // A bad value names the key and the choices.
+    std::fs::write(d.join("bad.toml"), "[medium]\nup_axis = \"x\"\n").unwrap();
+    let out = cloudgi(d, &["render", "bad.toml", "-o", "bad.exr"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("up_axis") && err.contains("expected `y` or `z`"),
+        "{err}"
+    );
+}
