@@ -210,3 +210,27 @@ fn a_z_up_file_renders_as_the_same_file_turned_y_up() {
         "{err}"
     );
 }
+
+#[test]
+fn compare_says_when_it_compares_every_pixel() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::copy(data("sphere64_blosc.vdb"), d.join("cloud.vdb")).unwrap();
+    ok(
+        d,
+        &[
+            "render",
+            "cloud.vdb",
+            "-o",
+            "a.exr",
+            "--method",
+            "single",
+            "--width",
+            "16",
+            "--height",
+            "12",
+        ],
+    );
+    let err = ok(d, &["compare", "a.exr", "a.exr"]);
+    assert!(err.contains("no `transmittance` layer, so every pixel is compared"), "{err}");
+}

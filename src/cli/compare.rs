@@ -84,6 +84,13 @@ pub fn run(a: CompareArgs) -> Result<()> {
         }
     }
     let mask = choose_mask(&reference, mask_img.as_ref());
+    if mask.is_none() {
+        eprintln!(
+            "note: {} has no `transmittance` layer, so every pixel is compared (sky and ground too); \
+             pass --mask with a reference render's EXR to compare the cloud's pixels only",
+            a.reference.display()
+        );
+    }
     let metrics = compare(&test, &reference, mask.as_deref())?;
     if let Some(d) = &a.diff {
         write_diff_png(d, &test, &reference, mask.as_deref())?;
