@@ -14,6 +14,9 @@ pub trait Progress: Sync {
     fn end(&self);
     /// A one-line message (e.g. solver convergence).
     fn log(&self, _msg: &str) {}
+    /// An iterative stage's measure of change after an iteration, against the `tolerance` that
+    /// ends it (both unitless): progress is how far the change has come down, on a log scale.
+    fn converge(&self, _change: f64, _tolerance: f64) {}
     /// A one-line warning the user must see even when progress is quiet (e.g. a solver stopped
     /// at its iteration cap); by default a [`Progress::log`] line.
     fn warn(&self, msg: &str) {
