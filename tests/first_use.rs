@@ -234,3 +234,96 @@ fn compare_says_when_it_compares_every_pixel() {
     let err = ok(d, &["compare", "a.exr", "a.exr"]);
     assert!(err.contains("no `transmittance` layer, so every pixel is compared"), "{err}");
 }
+
+/// Packets (type, payload) of tev's protocol: a little-endian u32 length (itself included), a
+/// type byte, the payload.
+fn tev_packets(bytes: &[u8]) -> Vec<(u8, &[u8])> {
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i + 5 <= bytes.len() {
+        let len = u32::from_le_bytes(bytes[i..i + 4].try_into().unwrap()) as usize;
+        assert!(len >= 5 && i + len <= bytes.len(), "packet at {i} of length {len}");
+        out.push((bytes[i + 4], &bytes[i + 5..i + len]));
+        i += len;
+    }
+    assert_eq!(i, bytes.len(), "whole packets");
+    out
+}
+
+#[test]
+fn display_server_streams_every_pass_to_a_tev_listener() {
+    use std::io::Read;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::copy(data("sphere64_blosc.vdb"), d.join("cloud.vdb")).unwrap();
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap().to_string();
+    let reader = std::thread::spawn(move || {
+        let (mut s, _) = listener.accept().unwrap();
+        let mut bytes = Vec::new();
+        s.read_to_end(&mut bytes).unwrap();
+        bytes
+    });
+    let args = [
+        "render",
+        "cloud.vdb",
+        "-o",
+        "live.exr",
+        "--method",
+        "reference",
+        "--spp",
+        "3",
+        "--width",
+        "16",
+        "--height",
+        "12",
+    ];
+    let mut with_view = args.to_vec();
+    with_view.extend(["--display-server", &addr]);
+    ok(d, &with_view);
+    let bytes = reader.join().unwrap();
+    let packets = tev_packets(&bytes);
+    // CreateImage (4) once, then UpdateImageV3 (6) after each of the 3 passes and the final image.
+    let types: Vec<u8> = packets.iter().map(|p| p.0).collect();
+    assert_eq!(types, [4, 6, 6, 6, 6]);
+    let create = packets[0].1;
+    let name_end = 1 + create[1..].iter().position(|&b| b == 0).unwrap();
+    assert_eq!(&create[1..name_end], b"live.exr");
+    let size = &create[name_end + 1..name_end + 9];
+    assert_eq!(
+        (
+            u32::from_le_bytes(size[..4].try_into().unwrap()),
+            u32::from_le_bytes(size[4..].try_into().unwrap())
+        ),
+        (16, 12)
+    );
+    // The last update carries the final image's pixels, as f32 RGB at its end.
+    let last = packets[4].1;
+    let img = Image::read_exr(&d.join("live.exr")).unwrap();
+    let floats: Vec<f32> = last[last.len() - 16 * 12 * 12..]
+        .chunks(4)
+        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    let want: Vec<f32> = img.pixels.iter().flat_map(|p| p.to_array()).collect();
+    assert_eq!(floats, want);
+    // No viewer listening: a warning, and the render still succeeds.
+    let closed = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .to_string();
+    let mut no_view = args.to_vec();
+    no_view.extend(["--display-server", &closed]);
+    let err = ok(d, &no_view);
+    assert!(err.contains("cannot reach a tev viewer"), "{err}");
+    // A malformed address is refused before any work.
+    let mut bad = args.to_vec();
+    bad[3] = "bad.exr";
+    bad.extend(["--display-server", "nowhere"]);
+    let out = cloudgi(d, &bad);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("--display-server") && !d.join("bad.exr").exists(),
+        "{err}"
+    );
+}

@@ -3,6 +3,7 @@
 mod bench;
 mod cloud_size;
 mod compare;
+mod display;
 mod export;
 mod figures;
 mod grid_scene;
@@ -98,6 +99,10 @@ struct RenderArgs {
     /// docs/first_use.md). The EXR is never scaled.
     #[arg(long, allow_hyphen_values = true)]
     exposure: Option<f32>,
+    /// Stream the image to the tev HDR viewer at HOST:PORT while rendering (reference: every
+    /// pass; every method: the final image). No viewer there: a warning, the render goes on.
+    #[arg(long, value_name = "HOST:PORT")]
+    display_server: Option<String>,
     /// Override render.method (default: full).
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
@@ -235,6 +240,7 @@ impl RenderArgs {
 fn render(a: RenderArgs, quiet: bool) -> Result<()> {
     let (exr, png) = tonemap::outputs(&a.output)?;
     tonemap::check_flag(a.exposure)?;
+    let viewer = a.display_server.as_deref().map(display::parse).transpose()?;
     let file = SceneFile::read(a.scene.as_deref())?;
     let mut desc = file.desc.clone();
     a.apply(&mut desc);
@@ -245,8 +251,10 @@ fn render(a: RenderArgs, quiet: bool) -> Result<()> {
     for w in warnings::warnings(&file, &a.flags(), &scene) {
         eprintln!("warning: {w}");
     }
-    let progress = progress::Bars::new(quiet);
+    let live = viewer.and_then(|v| display::Display::connect(v, &exr.display().to_string()));
+    let progress = progress::Bars::new(quiet).with_display(live);
     let out = cloudgi::render(&scene, &progress)?;
+    cloudgi::Progress::image(&progress, &out.image);
     let (stops, why) = tonemap::stops(a.exposure, Some(&file), &out.image);
     write_exr_and_png(&out.image, &exr, &png, stops)?;
     if !quiet {

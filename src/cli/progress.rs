@@ -20,6 +20,7 @@ pub struct Bars {
     bar: Mutex<Option<ProgressBar>>,
     lines: Mutex<Option<Lines>>,
     convergence: Mutex<Option<Convergence>>,
+    display: Option<super::display::Display>,
 }
 
 /// The line printer of one stage: a thread that wakes every [`LINE_INTERVAL`] (or when the
@@ -148,7 +149,14 @@ impl Bars {
             bar: Mutex::new(None),
             lines: Mutex::new(None),
             convergence: Mutex::new(None),
+            display: None,
         }
+    }
+
+    /// Also stream the images to a live view (`--display-server`).
+    pub fn with_display(mut self, display: Option<super::display::Display>) -> Self {
+        self.display = display;
+        self
     }
 
     /// One line on stderr, above the bar if one is drawn.
@@ -243,6 +251,16 @@ impl Progress for Bars {
             if let Some(pb) = b.take() {
                 pb.finish_and_clear();
             }
+        }
+    }
+
+    fn wants_images(&self) -> bool {
+        self.display.is_some()
+    }
+
+    fn image(&self, img: &cloudgi::Image) {
+        if let Some(d) = &self.display {
+            d.show(img);
         }
     }
 

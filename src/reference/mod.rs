@@ -172,6 +172,11 @@ pub fn render_with_stats(scene: &Scene, progress: &dyn Progress, timings: &mut T
                 }
             });
             passes += 1;
+            if progress.wants_images() {
+                let mut live = Image::new(cam.width, cam.height);
+                live.pixels = acc.iter().map(|a| a.sum.map(|s| (s / a.n.max(1) as f64) as f32).into()).collect();
+                progress.image(&live);
+            }
         }
         progress.end();
     });
