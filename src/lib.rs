@@ -32,6 +32,8 @@ pub mod diffusion;
 pub mod edges;
 pub mod error;
 #[doc(hidden)]
+pub mod exposure;
+#[doc(hidden)]
 pub mod figures;
 pub(crate) mod half;
 #[doc(hidden)]

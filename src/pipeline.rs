@@ -14,6 +14,15 @@ pub trait Progress: Sync {
     fn end(&self);
     /// A one-line message (e.g. solver convergence).
     fn log(&self, _msg: &str) {}
+    /// An iterative stage's measure of change after an iteration, against the `tolerance` that
+    /// ends it (both unitless): progress is how far the change has come down, on a log scale.
+    fn converge(&self, _change: f64, _tolerance: f64) {}
+    /// Whether [`Progress::image`] shows anything (a stage builds its image so far only then).
+    fn wants_images(&self) -> bool {
+        false
+    }
+    /// The image so far (`reference`: after each pass), for a live view.
+    fn image(&self, _img: &crate::image::Image) {}
     /// A one-line warning the user must see even when progress is quiet (e.g. a solver stopped
     /// at its iteration cap); by default a [`Progress::log`] line.
     fn warn(&self, msg: &str) {

@@ -201,13 +201,17 @@ pub const BUILTIN: &str = "built-in scene";
 impl SceneDesc {
     /// Parse TOML text; `file` names the source in error messages.
     pub fn from_toml(text: &str, file: &str) -> Result<Self> {
-        let desc = toml::from_str(text).map_err(|e| Error::Parse {
+        let mut desc: SceneDesc = toml::from_str(text).map_err(|e| Error::Parse {
             file: file.to_string(),
             message: e.to_string().trim_end().to_string(),
         })?;
         // serde reads a `[T; 3]` from the first three items and ignores the rest.
         if let Ok(table) = text.parse::<toml::Table>() {
             check_array_lengths(&table, "", file)?;
+            // A file without a `[camera]` table frames its cloud (camera.fit).
+            if !table.contains_key("camera") {
+                desc.camera.fit = true;
+            }
         }
         Ok(desc)
     }
@@ -466,6 +470,10 @@ impl Scene {
             None => None,
         };
         let medium = Medium::from_desc_with(&desc.medium, f, base_dir, density.map(crate::Density::into_loaded))?;
+        let (desc, camera) = match desc.camera.fit {
+            true => crate::camera::fit::apply(desc, &medium, f)?,
+            false => (desc, camera),
+        };
         render.edges.step_m = render.step_voxels * medium.min_voxel();
         Ok(Scene {
             source: source.to_string(),

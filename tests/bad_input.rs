@@ -742,7 +742,7 @@ fn bad_render_arguments_and_outputs() {
         v.extend_from_slice(&small);
         v
     };
-    fails(&[s()], &render(&["-o", "out.png"]), &["--output", ".exr"]);
+    fails(&[s()], &render(&["-o", "out.jpg"]), &["--output", ".exr or .png"]);
     // The output folder is checked before any work.
     fails(
         &[s()],
@@ -1129,9 +1129,11 @@ fn settings_that_do_not_apply_are_named() {
     let mut vdb = vec![("g.vdb", vdb_data("sphere64_blosc.vdb"))];
     vdb.push((
         "s.toml",
-        b"[medium]\ngrid = \"g.vdb\"\nvoxel_size = 7.0\norigin = [0.0, 0.0, 0.0]\nresolution = [4, 4, 4]\n".to_vec(),
+        b"[medium]\ngrid = \"g.vdb\"\nvoxel_size = 7.0\norigin = [0.0, 0.0, 0.0]\nresolution = [4, 4, 4]\n[camera]\nfov_deg = 40.0\n"
+            .to_vec(),
     ));
-    // The sphere is about 3 m across, 1500 m from the default camera: less than a pixel.
+    // The sphere is about 3 m across, 1500 m from the default camera (a [camera] table, so not
+    // fitted): less than a pixel, and too small for a cloud.
     warns(
         &vdb,
         &single,
@@ -1141,10 +1143,14 @@ fn settings_that_do_not_apply_are_named() {
             "`medium.resolution`",
             ".vdb",
             "less than one pixel",
+            "medium.scale = 100",
         ],
     );
     let mut vol_scene = vec![("g.vol", vol([2, 2, 2], &[1.0; 8], 0))];
-    vol_scene.push(("s.toml", b"[medium]\ngrid = \"g.vol\"\nscale = 2.0\ngrid_name = \"d\"\n".to_vec()));
+    vol_scene.push((
+        "s.toml",
+        b"[medium]\ngrid = \"g.vol\"\nscale = 2.0\ngrid_name = \"d\"\n[camera]\nfov_deg = 40.0\n".to_vec(),
+    ));
     warns(
         &vol_scene,
         &single,

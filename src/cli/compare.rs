@@ -90,7 +90,15 @@ pub fn run(a: CompareArgs) -> Result<()> {
     let mask = if a.all_pixels {
         None
     } else {
-        choose_mask(&reference, mask_img.as_ref())
+        let mask = choose_mask(&reference, mask_img.as_ref());
+        if mask.is_none() {
+            note!(
+                "note: {} has no `transmittance` layer, so every pixel is compared (sky and ground too); \
+                 pass --mask with a reference render's EXR to compare the cloud's pixels only, or --all-pixels",
+                a.reference.display()
+            );
+        }
+        mask
     };
     let metrics = compare(&test, &reference, mask.as_deref())?;
     if let Some(d) = &a.diff {

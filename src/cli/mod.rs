@@ -8,11 +8,14 @@ macro_rules! note {
 }
 
 mod bench;
+mod cloud_size;
 mod compare;
 pub mod console;
+mod display;
 mod export;
 mod figures;
 mod frames;
+mod grid_scene;
 mod info;
 mod memory;
 mod output;
@@ -20,6 +23,7 @@ mod progress;
 mod scene_file;
 mod sky;
 mod slab;
+mod tonemap;
 mod warnings;
 
 use clap::{Args, Parser, Subcommand};
@@ -88,15 +92,26 @@ enum Command {
     Figures(figures::FiguresArgs),
     /// Time every stage of the chosen methods on three sizes of the procedural cloud: a markdown table.
     Bench(bench::BenchArgs),
+    /// Re-make a render's PNG preview from its EXR (the same automatic exposure, or --exposure).
+    Tonemap(tonemap::TonemapArgs),
 }
 
 #[derive(Args, Debug)]
 struct RenderArgs {
-    /// Scene file (TOML). Without it, the built-in default scene.
+    /// Scene file (TOML), or a grid file (.vdb, .npy, .vol, .raw) to render framed under the
+    /// default sun and sky. Without it, the built-in default scene.
     scene: Option<PathBuf>,
-    /// Output EXR; the PNG preview is written beside it.
+    /// Output EXR or PNG; both are written: OUT.exr and its preview OUT.png.
     #[arg(short, long, default_value = "cloud.exr")]
     output: PathBuf,
+    /// PNG exposure in stops (default: render.exposure if the scene file sets it, else automatic;
+    /// docs/first_use.md). The EXR is never scaled.
+    #[arg(long, allow_hyphen_values = true)]
+    exposure: Option<f32>,
+    /// Stream the image to the tev HDR viewer at HOST:PORT while rendering (reference: every
+    /// pass; every method: the final image). No viewer there: a warning, the render goes on.
+    #[arg(long, value_name = "HOST:PORT")]
+    display_server: Option<String>,
     /// Override render.method (default: full).
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
@@ -187,6 +202,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Export(a) => export::run(a, cli.quiet),
         Command::Figures(a) => figures::run(a, cli.quiet),
         Command::Bench(a) => bench::run(a),
+        Command::Tonemap(a) => tonemap::run(a, cli.quiet),
     }
 }
 
@@ -202,18 +218,7 @@ fn png_beside(exr: &Path) -> PathBuf {
 }
 
 fn check_exr_path(p: &Path, flag: &str) -> Result<()> {
-    output::check_file_name(p, flag)?;
-    let bare = p
-        .file_name()
-        .and_then(|n| n.to_str())
-        .is_some_and(|n| n.eq_ignore_ascii_case(".exr"));
-    if bare {
-        return Err(Error::invalid(
-            "command line",
-            flag,
-            format!("`{}` has no name before .exr; give one, e.g. cloud.exr", p.display()),
-        ));
-    }
+    check_output_name(p, flag)?;
     match p.extension().and_then(|e| e.to_str()) {
         Some(e) if e.eq_ignore_ascii_case("exr") => Ok(()),
         _ => Err(Error::invalid(
@@ -221,6 +226,23 @@ fn check_exr_path(p: &Path, flag: &str) -> Result<()> {
             flag,
             format!("`{}` must end in .exr (the PNG preview is written beside it)", p.display()),
         )),
+    }
+}
+
+/// An output's file name: one the file system takes, and a name before `.exr` / `.png`.
+fn check_output_name(p: &Path, flag: &str) -> Result<()> {
+    output::check_file_name(p, flag)?;
+    let bare = p
+        .file_name()
+        .and_then(|n| n.to_str())
+        .filter(|n| n.eq_ignore_ascii_case(".exr") || n.eq_ignore_ascii_case(".png"));
+    match bare {
+        Some(n) => Err(Error::invalid(
+            "command line",
+            flag,
+            format!("`{}` has no name before {n}; give one, e.g. cloud{n}", p.display()),
+        )),
+        None => Ok(()),
     }
 }
 
@@ -278,36 +300,42 @@ impl RenderArgs {
 }
 
 fn render(a: RenderArgs, quiet: bool) -> Result<()> {
-    check_exr_path(&a.output, "--output")?;
+    check_output_name(&a.output, "--output")?;
+    let (exr, png) = tonemap::outputs(&a.output)?;
+    tonemap::check_flag(a.exposure)?;
+    let viewer = a.display_server.as_deref().map(display::parse).transpose()?;
     let file = SceneFile::read(a.scene.as_deref())?;
     if frames::is_sequence(&a, &file) {
         return frames::render(&a, &file, quiet);
     }
     let mut desc = file.desc.clone();
     a.apply(&mut desc);
-    let png = png_beside(&a.output);
-    output::check_files(&[&a.output, &png], "--output", &file.inputs(&desc))?;
+    output::check_files(&[&exr, &png], "--output", &file.inputs(&desc))?;
     memory::check_image(&desc, &file.source)?;
     let scene = Scene::build(desc, &file.source, &file.base)?;
     memory::check_solver(&scene)?;
     for w in warnings::warnings(&file, &a.flags(), &scene) {
         note!("warning: {w}");
     }
-    let progress = progress::Bars::new(quiet);
+    let live = viewer.and_then(|v| display::Display::connect(v, &exr.display().to_string()));
+    let progress = progress::Bars::new(quiet).with_display(live);
     let options = cloudgi::Options {
         progress: Some(&progress),
         cancel: None,
     };
     let out = cloudgi::render(&scene, scene.render.method, &options)?;
     let timings = out.stats.timings.summary();
-    write_exr_and_png(&out.into_image(), &a.output, &png, scene.render.exposure)?;
+    let image = out.into_image();
+    cloudgi::Progress::image(&progress, &image);
+    let (stops, why) = tonemap::stops(a.exposure, Some(&file), &image);
+    write_exr_and_png(&image, &exr, &png, stops)?;
     if !quiet {
         note!(
-            "{} {}×{} → {} + {}",
+            "{} {}×{} → {} + {} (exposure {stops:+.2} stops, {why})",
             scene.render.method.name(),
             scene.camera.width,
             scene.camera.height,
-            a.output.display(),
+            exr.display(),
             png.display()
         );
         note!("timings: {timings}");

@@ -19,6 +19,8 @@ pub struct Bars {
     terminal: bool,
     bar: Mutex<Option<ProgressBar>>,
     lines: Mutex<Option<Lines>>,
+    convergence: Mutex<Option<Convergence>>,
+    display: Option<super::display::Display>,
 }
 
 /// The line printer of one stage: a thread that wakes every [`LINE_INTERVAL`] (or when the
@@ -66,16 +68,77 @@ impl Lines {
     }
 }
 
-/// `stage: 1200/19200 (6.2 %), 10 s, eta 150 s`.
+/// No estimate before this share of the work is done *and* this much time has passed: the first
+/// units of a stage (threads starting, caches filling) are not its pace.
+const ETA_AFTER: (f64, Duration) = (0.01, Duration::from_secs(2));
+
+/// Seconds left at the average pace so far, once [`ETA_AFTER`] allows an estimate.
+fn eta_s(pos: u64, total: u64, elapsed: Duration) -> Option<f64> {
+    let frac = if total > 0 { pos as f64 / total as f64 } else { 0.0 };
+    (pos > 0 && (frac >= ETA_AFTER.0 || elapsed >= ETA_AFTER.1)).then(|| elapsed.as_secs_f64() * (1.0 - frac) / frac)
+}
+
+/// `12 s`, `4.5 min`, `2.1 h`.
+fn duration_text(s: f64) -> String {
+    match s {
+        s if s < 90.0 => format!("{s:.0} s"),
+        s if s < 5400.0 => format!("{:.1} min", s / 60.0),
+        s => format!("{:.1} h", s / 3600.0),
+    }
+}
+
+/// `stage: 1200/19200 (6.2 %), 10 s, eta 2.5 min`.
 fn line(stage: &str, pos: u64, total: u64, elapsed: Duration) -> String {
     let t = elapsed.as_secs_f64();
     let frac = if total > 0 { pos as f64 / total as f64 } else { 0.0 };
-    let eta = if pos > 0 {
-        format!("eta {:.0} s", t * (1.0 - frac) / frac)
-    } else {
-        "eta unknown".into()
+    let eta = match eta_s(pos, total, elapsed) {
+        Some(e) => format!("eta {}", duration_text(e)),
+        None => "eta unknown".into(),
     };
     format!("{stage}: {pos}/{total} ({:.1} %), {t:.0} s, {eta}", 100.0 * frac)
+}
+
+/// An iteration towards a tolerance: the first change seen, the last, how many iterations.
+struct Convergence {
+    first: f64,
+    last: f64,
+    iterations: u32,
+    start: Instant,
+}
+
+/// Steps of the convergence bar (log-scale progress from the first change to the tolerance).
+const CONVERGENCE_STEPS: u64 = 1000;
+
+impl Convergence {
+    /// Share of the way, on a log scale, from the first change down to `tol` (0 to 1).
+    fn fraction(&self, tol: f64) -> f64 {
+        if self.first <= tol || self.last <= tol {
+            return 1.0;
+        }
+        ((self.first / self.last).ln() / (self.first / tol).ln()).clamp(0.0, 1.0)
+    }
+
+    /// Seconds left if the change keeps falling at its mean rate per iteration so far (None
+    /// after one iteration, or while it does not fall).
+    fn eta_s(&self, tol: f64, elapsed: Duration) -> Option<f64> {
+        if self.last <= tol {
+            return Some(0.0);
+        }
+        let rate = (self.first / self.last).ln() / self.iterations.saturating_sub(1) as f64;
+        (self.iterations >= 2 && rate > 0.0).then(|| {
+            let left = (self.last / tol).ln() / rate;
+            left * elapsed.as_secs_f64() / self.iterations as f64
+        })
+    }
+
+    /// `change 1.4e-2 → 5.0e-3, iteration 3, eta 4 s`.
+    fn text(&self, tol: f64) -> String {
+        let eta = match self.eta_s(tol, self.start.elapsed()) {
+            Some(e) => format!("eta {}", duration_text(e)),
+            None => "eta unknown".into(),
+        };
+        format!("change {:.1e} → {tol:.1e}, iteration {}, {eta}", self.last, self.iterations)
+    }
 }
 
 impl Bars {
@@ -85,7 +148,15 @@ impl Bars {
             terminal: std::io::stderr().is_terminal(),
             bar: Mutex::new(None),
             lines: Mutex::new(None),
+            convergence: Mutex::new(None),
+            display: None,
         }
+    }
+
+    /// Also stream the images to a live view (`--display-server`).
+    pub fn with_display(mut self, display: Option<super::display::Display>) -> Self {
+        self.display = display;
+        self
     }
 
     /// One line on stderr, above the bar if one is drawn.
@@ -102,6 +173,9 @@ impl Progress for Bars {
         if self.quiet {
             return;
         }
+        if let Ok(mut c) = self.convergence.lock() {
+            *c = None;
+        }
         if !self.terminal {
             if let Ok(mut l) = self.lines.lock() {
                 if let Some(old) = l.replace(Lines::start(stage.to_string(), total, LINE_INTERVAL)) {
@@ -112,8 +186,14 @@ impl Progress for Bars {
         }
         let pb = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
         pb.set_style(
-            ProgressStyle::with_template("{msg:>20} [{bar:40}] {pos}/{len} {elapsed_precise} eta {eta}")
+            ProgressStyle::with_template("{msg:>20} [{bar:40}] {human_pos}/{human_len} {elapsed_precise} {honest_eta}")
                 .expect("valid template")
+                .with_key("honest_eta", |s: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+                    let _ = match eta_s(s.pos(), s.len().unwrap_or(0), s.elapsed()) {
+                        Some(e) => write!(w, "eta {}", duration_text(e)),
+                        None => write!(w, "eta unknown"),
+                    };
+                })
                 .progress_chars("=> "),
         );
         pb.set_message(stage.to_string());
@@ -136,6 +216,33 @@ impl Progress for Bars {
         }
     }
 
+    /// The bar becomes log-scale progress from the first change to the tolerance, with the
+    /// change, the iteration and an ETA from the mean rate of fall (the iteration cap is only a cap).
+    fn converge(&self, change: f64, tolerance: f64) {
+        let Ok(mut c) = self.convergence.lock() else { return };
+        let state = c.get_or_insert(Convergence {
+            first: change,
+            last: change,
+            iterations: 0,
+            start: Instant::now(),
+        });
+        state.last = change;
+        state.iterations += 1;
+        if let Some(pb) = self.bar.lock().ok().and_then(|b| b.clone()) {
+            if state.iterations == 1 {
+                pb.set_style(
+                    ProgressStyle::with_template("{prefix:>20} [{bar:40}] {msg}")
+                        .expect("valid template")
+                        .progress_chars("=> "),
+                );
+                pb.set_prefix("transport");
+                pb.set_length(CONVERGENCE_STEPS);
+            }
+            pb.set_position((state.fraction(tolerance) * CONVERGENCE_STEPS as f64) as u64);
+            pb.set_message(state.text(tolerance));
+        }
+    }
+
     fn end(&self) {
         if let Some(l) = self.lines.lock().ok().and_then(|mut l| l.take()) {
             l.finish();
@@ -144,6 +251,16 @@ impl Progress for Bars {
             if let Some(pb) = b.take() {
                 pb.finish_and_clear();
             }
+        }
+    }
+
+    fn wants_images(&self) -> bool {
+        self.display.is_some()
+    }
+
+    fn image(&self, img: &cloudgi::Image) {
+        if let Some(d) = &self.display {
+            d.show(img);
         }
     }
 
@@ -168,9 +285,18 @@ mod tests {
     fn lines_say_where_a_stage_is() {
         assert_eq!(
             line("reference", 1200, 19200, Duration::from_secs(10)),
-            "reference: 1200/19200 (6.2 %), 10 s, eta 150 s"
+            "reference: 1200/19200 (6.2 %), 10 s, eta 2.5 min"
         );
         assert_eq!(line("x", 0, 0, Duration::ZERO), "x: 0/0 (0.0 %), 0 s, eta unknown");
+        // No estimate from the first 1 % in the first 2 s; hours and minutes in their units.
+        assert_eq!(
+            line("reference paths", 50, 19200, Duration::from_secs(1)),
+            "reference paths: 50/19200 (0.3 %), 1 s, eta unknown"
+        );
+        assert_eq!(
+            line("reference paths", 50, 19200, Duration::from_secs(60)),
+            "reference paths: 50/19200 (0.3 %), 60 s, eta 6.4 h"
+        );
         // The printer stops at once when the stage ends, without waiting out its interval,
         // whether it ends before or after the thread first waits.
         for pause in [0, 50] {
@@ -180,5 +306,25 @@ mod tests {
             l.finish();
             assert!(t.elapsed() < Duration::from_secs(5));
         }
+    }
+
+    #[test]
+    fn convergence_counts_towards_the_tolerance_not_the_cap() {
+        // 1e-1, 1e-2, 1e-3 in 3 iterations of 1 s: a decade per iteration, one more to 1e-4.
+        let c = Convergence {
+            first: 1e-1,
+            last: 1e-3,
+            iterations: 3,
+            start: Instant::now(),
+        };
+        assert!((c.fraction(1e-4) - 2.0 / 3.0).abs() < 1e-12);
+        let eta = c.eta_s(1e-4, Duration::from_secs(3)).unwrap();
+        assert!((eta - 1.0).abs() < 1e-9, "{eta}");
+        let one = Convergence {
+            iterations: 1,
+            last: 1e-1,
+            ..c
+        };
+        assert_eq!((one.fraction(1e-4), one.eta_s(1e-4, Duration::from_secs(1))), (0.0, None));
     }
 }

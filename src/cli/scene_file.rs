@@ -20,7 +20,7 @@ pub struct SceneFile {
 }
 
 impl SceneFile {
-    /// Read `path` (None: the built-in default scene).
+    /// Read `path` (None: the built-in default scene; a grid file: [`super::grid_scene::scene_of`] it).
     pub fn read(path: Option<&Path>) -> Result<SceneFile> {
         let Some(p) = path else {
             return Ok(SceneFile {
@@ -31,6 +31,16 @@ impl SceneFile {
                 keys: Vec::new(),
             });
         };
+        let base = p.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
+        if super::grid_scene::is_grid_file(p) {
+            return Ok(SceneFile {
+                desc: super::grid_scene::scene_of(&p.file_name().unwrap_or_default().to_string_lossy()),
+                source: p.display().to_string(),
+                base,
+                path: None,
+                keys: vec!["medium.grid".to_string()],
+            });
+        }
         let desc = SceneDesc::from_file(p)?;
         // The file parsed as a scene, so it is readable TOML text.
         let table: toml::Table = cloudgi::io::read_capped(p, cloudgi::io::MAX_TEXT_BYTES, "a scene file")
@@ -48,7 +58,7 @@ impl SceneFile {
         Ok(SceneFile {
             desc,
             source: p.display().to_string(),
-            base: p.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from(".")),
+            base,
             path: Some(p.to_path_buf()),
             keys,
         })

@@ -175,6 +175,7 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
         ));
     }
 
+    out.extend(super::cloud_size::warning(scene));
     out.extend(frame_warning(scene));
     out
 }

@@ -19,6 +19,7 @@ pub mod march;
 pub mod procedural;
 pub mod sparse;
 pub mod subgrid;
+pub mod up_axis;
 pub mod vdb;
 
 use crate::error::{check, finite3, rgb_in_unit};
@@ -35,6 +36,7 @@ pub use density::Density;
 pub use grid::Grid3;
 pub use majorant::MajorantGrid;
 pub use subgrid::SubGrid;
+pub use up_axis::UpAxis;
 
 /// Largest voxel edge accepted (m): beyond about 1e15 m the diffusion solve's squared voxel
 /// sizes overflow f32; no cloud has voxels of 1000 km.
@@ -71,6 +73,8 @@ pub struct MediumDesc {
     pub max_voxels: u64,
     /// Average N×N×N blocks after loading (1 = off).
     pub downsample: usize,
+    /// The grid file's up axis: `"y"` (this program, Houdini) or `"z"` (Blender), turned to y-up.
+    pub up_axis: UpAxis,
 }
 
 impl Default for MediumDesc {
@@ -88,6 +92,7 @@ impl Default for MediumDesc {
             scale: 1.0,
             max_voxels: 200_000_000,
             downsample: 1,
+            up_axis: UpAxis::Y,
         }
     }
 }
@@ -179,6 +184,7 @@ impl Medium {
             grid = grid.downsample(d.downsample);
             voxel *= d.downsample as f32;
         }
+        let (grid, origin, voxel) = up_axis::to_y_up(d.up_axis, (grid, loaded.origin, voxel));
         let n = grid.len() as u64;
         check(
             &loaded.name,
@@ -220,11 +226,11 @@ impl Medium {
         check(
             &loaded.name,
             "medium.origin",
-            finite3(loaded.origin.to_array()),
-            loaded.origin,
+            finite3(origin.to_array()),
+            origin,
             "origin must be finite (m)",
         )?;
-        Ok(Medium::new(grid, loaded.origin, voxel, d.sigma_t, Rgb::from(d.albedo), d.g))
+        Ok(Medium::new(grid, origin, voxel, d.sigma_t, Rgb::from(d.albedo), d.g))
     }
 
     /// Grid resolution.

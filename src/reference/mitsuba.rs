@@ -155,13 +155,15 @@ fn xml_escape(s: &str) -> String {
 }
 
 /// Write `scene.xml` and `density.vol` into `dir` (created if missing); returns the paths written.
+/// A scene Mitsuba cannot take is refused before anything is created.
 pub fn export(scene: &Scene, dir: &Path) -> Result<Vec<PathBuf>> {
+    let text = scene_xml(scene, "density.vol")?;
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let vol = dir.join("density.vol");
     let xml = dir.join("scene.xml");
     let (lo, hi) = scene.medium.bbox();
     write_vol(&vol, &scene.medium.density.to_grid(), lo, hi)?;
-    crate::io::write_atomic(&xml, scene_xml(scene, "density.vol")?.as_bytes())?;
+    crate::io::write_atomic(&xml, text.as_bytes())?;
     Ok(vec![xml, vol])
 }
 
@@ -207,5 +209,19 @@ mod tests {
         assert_eq!((lo, hi), scene.medium.bbox());
         // Balanced tags.
         assert_eq!(xml.matches("<shape").count(), xml.matches("</shape>").count());
+    }
+
+    #[test]
+    fn a_scene_mitsuba_cannot_take_writes_nothing() {
+        let mut d = SceneDesc::default();
+        d.medium.resolution = [6, 5, 4];
+        d.sky.model = crate::scene::SkyModel::Atmosphere;
+        d.sky.map_width = 16;
+        let scene = Scene::build(d, "t.toml", Path::new(".")).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let e = export(&scene, &out).unwrap_err().to_string();
+        assert!(e.contains("sky.model"), "{e}");
+        assert!(!out.exists(), "no folder and no density.vol");
     }
 }

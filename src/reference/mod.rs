@@ -171,7 +171,7 @@ pub fn render_with_stats(scene: &Scene, progress: &dyn Progress, timings: &mut T
             // The progress counts towards `spp`; the limit usually ends the render first.
             progress.log(&format!("reference: time limit {t} s"));
         }
-        progress.begin("reference", rs.spp as u64 * (w * h) as u64);
+        progress.begin("reference paths", rs.spp as u64 * (w * h) as u64);
         while passes < rs.spp && !stop.load(Ordering::Relaxed) {
             let s = passes;
             acc.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
@@ -199,6 +199,11 @@ pub fn render_with_stats(scene: &Scene, progress: &dyn Progress, timings: &mut T
                 }
             });
             passes += 1;
+            if progress.wants_images() {
+                let mut live = Image::new(cam.width, cam.height);
+                live.pixels = acc.iter().map(|a| a.sum.map(|s| (s / a.n.max(1) as f64) as f32).into()).collect();
+                progress.image(&live);
+            }
         }
         progress.end();
     });

@@ -1212,10 +1212,12 @@ pub fn solve_warm(
         }
         std::mem::swap(&mut moments, &mut next);
         ground_map = ground_of(Some(&e_down));
+        progress.converge(change, s.tolerance);
         progress.advance(1);
         progress.log(&format!(
-            "transport: iteration {}, relative change of I0 {change:.2e}",
-            history.len()
+            "transport: iteration {}, relative change of I0 {change:.2e} (stops below {:.1e})",
+            history.len(),
+            s.tolerance
         ));
         if change < s.tolerance
             && history.len() >= min_iterations

@@ -1,5 +1,7 @@
 //! Pinhole camera. The image's right is normalize(cross(forward, up)); pixel rows run top to bottom.
 
+pub mod fit;
+
 use crate::error::Result;
 use crate::error::{check, finite3};
 use crate::math::{Ray, Vec3};
@@ -21,6 +23,10 @@ pub struct CameraDesc {
     pub width: u32,
     /// Image height (pixels).
     pub height: u32,
+    /// Place the camera to frame the cloud's box ([`fit::framed`]): it keeps the direction from
+    /// `look_at` to `position` and the field of view, looks at the box's centre and moves to the
+    /// distance where the box fills the frame. A scene file without a `[camera]` table sets it.
+    pub fit: bool,
 }
 
 impl Default for CameraDesc {
@@ -32,6 +38,7 @@ impl Default for CameraDesc {
             fov_deg: 40.0,
             width: 480,
             height: 360,
+            fit: false,
         }
     }
 }

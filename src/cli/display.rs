@@ -1,0 +1,96 @@
+//! `--display-server HOST:PORT`: the image streamed to the tev HDR viewer while it renders
+//! (`reference` after every pass, every method's final image), over tev's TCP protocol through the
+//! `tev_client` crate. A viewer that is not listening, or that goes away, is a warning: the render
+//! goes on without it.
+
+use cloudgi::error::{Error, Result};
+use cloudgi::Image;
+use std::net::{SocketAddr, TcpStream, ToSocketAddrs};
+use std::sync::Mutex;
+use std::time::Duration;
+use tev_client::{PacketCreateImage, PacketUpdateImage, TevClient};
+
+/// How long to wait for the viewer to accept the connection.
+const CONNECT_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// The channels sent: the image's RGB.
+const CHANNELS: [&str; 3] = ["R", "G", "B"];
+
+/// A connection to tev, or none once it failed.
+pub struct Display {
+    client: Mutex<Option<TevClient>>,
+    /// The image's name in tev.
+    name: String,
+    /// The size tev's image was created with.
+    created: Mutex<Option<(u32, u32)>>,
+}
+
+/// The address `--display-server` names; an error names the flag and the form.
+pub fn parse(addr: &str) -> Result<SocketAddr> {
+    addr.to_socket_addrs().ok().and_then(|mut a| a.next()).ok_or_else(|| {
+        Error::invalid(
+            "command line",
+            "--display-server",
+            format!("`{addr}` is not HOST:PORT of a tev viewer (e.g. 127.0.0.1:14158, tev's default)"),
+        )
+    })
+}
+
+impl Display {
+    /// Connect to tev at `addr`, naming the image `name`; None (with a warning on stderr) when
+    /// nothing listens there.
+    pub fn connect(addr: SocketAddr, name: &str) -> Option<Display> {
+        match TcpStream::connect_timeout(&addr, CONNECT_TIMEOUT) {
+            Ok(socket) => Some(Display {
+                client: Mutex::new(Some(TevClient::wrap(socket))),
+                name: name.to_string(),
+                created: Mutex::new(None),
+            }),
+            Err(e) => {
+                eprintln!(
+                    "warning: --display-server {addr}: cannot reach a tev viewer ({e}); rendering without the live view \
+                     (start one with `tev --hostname {addr}`)"
+                );
+                None
+            }
+        }
+    }
+
+    /// Send `img` (creating tev's image on the first call or a new size).
+    pub fn show(&self, img: &Image) {
+        let Ok(mut client) = self.client.lock() else { return };
+        let Some(c) = client.as_mut() else { return };
+        let Ok(mut created) = self.created.lock() else { return };
+        let size = (img.width, img.height);
+        let data: Vec<f32> = img.pixels.iter().flat_map(|p| p.to_array()).collect();
+        let mut sent = Ok(());
+        if *created != Some(size) {
+            sent = c.send(PacketCreateImage {
+                image_name: &self.name,
+                grab_focus: true,
+                width: img.width,
+                height: img.height,
+                channel_names: &CHANNELS,
+            });
+            *created = Some(size);
+        }
+        if sent.is_ok() && !data.is_empty() {
+            sent = c.send(PacketUpdateImage {
+                image_name: &self.name,
+                grab_focus: false,
+                channel_names: &CHANNELS,
+                channel_offsets: &[0, 1, 2],
+                channel_strides: &[3, 3, 3],
+                x: 0,
+                y: 0,
+                width: img.width,
+                height: img.height,
+                data: &data,
+            });
+        }
+        if let Err(e) = sent {
+            eprintln!("warning: --display-server: the tev viewer went away ({e}); rendering goes on without it");
+            *client = None;
+        }
+    }
+}

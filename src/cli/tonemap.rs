@@ -1,0 +1,102 @@
+//! The PNG preview's exposure and `cloudgi tonemap IN.exr -o OUT.png [--exposure S]`, which
+//! re-makes a render's PNG from its EXR (byte for byte, with the same exposure rule).
+//!
+//! Precedence: `--exposure S` on the command line, then `render.exposure` when the scene file sets
+//! it, then the automatic exposure of [`cloudgi::exposure`] (a function of the pixels alone).
+
+use super::scene_file::SceneFile;
+use clap::Args;
+use cloudgi::error::{Error, Result};
+use cloudgi::Image;
+use std::path::{Path, PathBuf};
+
+#[derive(Args, Debug)]
+pub struct TonemapArgs {
+    /// The render's EXR.
+    input: PathBuf,
+    /// The PNG to write.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Exposure in stops (default: automatic, the rule `render` uses).
+    #[arg(long, allow_hyphen_values = true)]
+    exposure: Option<f32>,
+}
+
+/// `--exposure` must be a finite number of stops.
+pub fn check_flag(exposure: Option<f32>) -> Result<()> {
+    match exposure {
+        Some(s) if !s.is_finite() => Err(Error::invalid(
+            "command line",
+            "--exposure",
+            format!("{s} is not a finite number of stops (e.g. --exposure -2.5)"),
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// The PNG's exposure in stops and where it came from, by the precedence above (`file`: None for
+/// `tonemap`, which has no scene).
+pub fn stops(flag: Option<f32>, file: Option<&SceneFile>, img: &Image) -> (f32, &'static str) {
+    if let Some(s) = flag {
+        return (s, "--exposure");
+    }
+    if let Some(f) = file.filter(|f| f.sets("render.exposure")) {
+        return (f.desc.render.exposure, "render.exposure");
+    }
+    (cloudgi::exposure::auto_stops(img), "automatic")
+}
+
+/// The EXR and PNG a render writes for `-o PATH`: `OUT.exr` gives `OUT.png` beside it; `OUT.png`
+/// gives `OUT.exr` beside it (the EXR is the render; the PNG only its preview).
+pub fn outputs(output: &Path) -> Result<(PathBuf, PathBuf)> {
+    let ext = output.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("exr") => Ok((output.to_path_buf(), output.with_extension("png"))),
+        Some("png") => Ok((output.with_extension("exr"), output.to_path_buf())),
+        _ => Err(Error::invalid(
+            "command line",
+            "--output",
+            format!(
+                "`{}` must end in .exr or .png (both are written: OUT.exr and the preview OUT.png)",
+                output.display()
+            ),
+        )),
+    }
+}
+
+pub fn run(a: TonemapArgs, quiet: bool) -> Result<()> {
+    check_flag(a.exposure)?;
+    if !a
+        .output
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+    {
+        return Err(Error::invalid(
+            "command line",
+            "--output",
+            format!("`{}` must end in .png", a.output.display()),
+        ));
+    }
+    super::output::check_files(&[&a.output], "--output", &[(a.input.clone(), "IN".to_string())])?;
+    let img = Image::read_exr(&a.input)?;
+    let (s, why) = stops(a.exposure, None, &img);
+    img.write_png(&a.output, s)?;
+    if !quiet {
+        eprintln!("{} → {} (exposure {s:+.2} stops, {why})", a.input.display(), a.output.display());
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn either_output_names_both_files() {
+        let both = (PathBuf::from("a/b.exr"), PathBuf::from("a/b.png"));
+        assert_eq!(outputs(Path::new("a/b.exr")).unwrap(), both);
+        assert_eq!(outputs(Path::new("a/b.png")).unwrap(), both);
+        assert!(outputs(Path::new("b.jpg")).is_err() && outputs(Path::new("b")).is_err());
+    }
+}
