@@ -44,7 +44,7 @@ fn the_disney_cloud_renders_near_reference_with_every_method() {
             d.render.aov = m == Method::Full || m == Method::Transport;
         })
         .unwrap();
-        cloudgi::render(&s, &NoProgress).unwrap().image
+        cloudgi::render::render(&s, &NoProgress).unwrap().image
     };
     let reference = render(Method::Reference);
     let mask = cloudgi::compare::choose_mask(&reference, None);
@@ -126,7 +126,7 @@ fn every_method_is_finite_on_extreme_media() {
                         d.render.spp = if m == Method::Reference { 2 } else { 1 };
                     })
                     .unwrap();
-                    match cloudgi::render(&s, &NoProgress) {
+                    match cloudgi::render::render(&s, &NoProgress) {
                         Ok(out) => assert_finite_nonnegative(&label, &out.image),
                         // The one allowed refusal: transport's solve on voxels too thick for its
                         // acceleration, with what to do.
