@@ -284,6 +284,15 @@ impl Progress for Watched<'_> {
     fn log(&self, msg: &str) {
         self.inner.log(msg)
     }
+    fn converge(&self, change: f64, tolerance: f64) {
+        self.inner.converge(change, tolerance)
+    }
+    fn wants_images(&self) -> bool {
+        self.inner.wants_images()
+    }
+    fn image(&self, img: &crate::image::Image) {
+        self.inner.image(img)
+    }
     fn warn(&self, msg: &str) {
         self.inner.warn(msg)
     }
