@@ -146,7 +146,7 @@ def test_progress_is_reported_on_the_calling_thread():
     cloudgi.render(tiny_scene(width=64, height=48), method="reference", spp=64, progress=progress)
     assert calls, "the progress callback was never called"
     assert all(0 <= d <= t for _, d, t in calls)
-    assert calls[-1] == ("reference", 64 * 64 * 48, 64 * 64 * 48)
+    assert calls[-1] == ("reference paths", 64 * 64 * 48, 64 * 64 * 48)
 
 
 def test_an_exception_in_the_progress_callback_cancels_the_render():
