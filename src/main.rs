@@ -21,11 +21,9 @@ fn main() {
 /// Every allocation of 1 MiB or more gets its own mapping, returned to the system when freed.
 /// By default glibc raises its mapping threshold to the size of each freed mapping (up to
 /// 32 MiB), after which the stages' large arrays come from the heap, whose freed ranges stay
-/// resident. 16 MiB (the seventh round) left the per-band arrays of 4–16 MiB on the heap; 4 MiB
-/// (the eighth) took `full`'s peak from 81 to 73 MB at 200×160×120. Since the ninth round's
-/// per-band and per-stage arrays (1–4 MiB at 200×160×120) are what the peak holds, 1 MiB takes it
-/// from 71 to 55 MB there (its live heap is 42 MB), for ~0.06 s more system time in a 1.6 s run
-/// (docs/performance.md, "Memory of `full`, ninth round").
+/// resident. The per-band and per-stage arrays (1–4 MiB at 200×160×120) are what `full`'s peak
+/// holds, so a fixed 1 MiB threshold keeps that peak near its live heap for a little more system
+/// time (docs/performance.md, "Memory of `full`").
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 fn large_arrays_mapped() {
     extern "C" {

@@ -22,8 +22,7 @@ pub struct BenchArgs {
     #[arg(long, value_delimiter = ',', default_value = "50x40x30,100x80x60,200x160x120")]
     sizes: Vec<String>,
     /// Skip a method on a cloud when its time there, predicted from its previous cloud's time
-    /// scaled by the voxel count, exceeds this many seconds (transport at 200×160×120 takes
-    /// minutes); a note names the skipped runs.
+    /// scaled by the voxel count, exceeds this many seconds; a note names the skipped runs.
     #[arg(long, default_value_t = 120.0)]
     max_seconds: f64,
     /// Override camera.width (pixels).

@@ -119,24 +119,15 @@ impl GridMemory {
     }
 }
 
-/// The memory model of each grid method (docs/performance.md, "The memory guard"). Fitted to the
-/// peak resident memory of 8×6-pixel renders on the development sandbox (`/usr/bin/time -f %M`):
-/// first (fifth round) to four clouds — the procedural cumulus at 50×40×30, 100×80×60 and
-/// 200×160×120 (5.5 k, 44 k and 356 k full voxels, 9 % of the grid, 47 % of their box) and two
-/// spheres in opposite corners of a 200×160×120 grid (89 k full voxels, 3 % of their box of
-/// 2.6 M), which set the fixed and per-box terms; the per-full-voxel terms refitted to the cumulus
-/// at 100×80×60, 200×160×120 and 400×320×240 (2.85 M full voxels, at 160×120 pixels): `diffusion`
-/// in the eighth round (15.0 and 66.0 MB), `full` in the ninth (the bands solved one by one, no
-/// assembled operator held, the border cubes reduced to face light: 15.3, 49.4 and 308 MB), then
-/// in the eleventh (the finest multigrid level unscaled with 24 B rows, the sun transmittance and
-/// I1 in 16 bits: 14.7, 42.9 and 258 MB), then in the twelfth (the operator in 16-bit codes with
-/// its neighbour coding per run, I0, the re-solve's right-hand side and the lit cells in 16 bits:
-/// 11.9, 30.0 and 166 MB; `diffusion` 44.3 MB at 200×160×120). The per-full-voxel term of `full`,
-/// 60 B, stays above the measured increments (54–59 B per full voxel at the two larger clouds), so
-/// a cloud that fills its box is not under-estimated; the estimates are 65–75 % above the peaks
-/// (on the safe side). The index's 0.25 B per grid voxel is rounded up to 1 B. `single` and
-/// `reference` hold the density, a dense copy of its box and a majorant or transmittance grid
-/// (16 B per grid voxel, an upper bound).
+/// The memory model of each grid method (docs/performance.md, "The memory guard"): fixed, per
+/// grid voxel, per voxel of the full voxels' box and per full voxel terms, fitted to the peak
+/// resident memory (`/usr/bin/time -f %M`) of 8×6-pixel renders of the procedural cumulus at
+/// 50×40×30, 100×80×60, 200×160×120 and 400×320×240 and of two spheres in opposite corners of a
+/// 200×160×120 grid (the fixed and per-box terms). Each term is kept above the measured
+/// increments, so a cloud that fills its box is not under-estimated; the estimates err on the
+/// safe side (docs/performance.md has the measured peaks and estimates). The index's 0.25 B per
+/// grid voxel is rounded up to 1 B. `single` and `reference` hold the density, a dense copy of
+/// its box and a majorant or transmittance grid (16 B per grid voxel, an upper bound).
 pub fn grid_memory(method: Method) -> GridMemory {
     const MB: u64 = 1 << 20;
     match method {

@@ -112,7 +112,7 @@ struct RenderArgs {
     /// pass; every method: the final image). No viewer there: a warning, the render goes on.
     #[arg(long, value_name = "HOST:PORT")]
     display_server: Option<String>,
-    /// Override render.method (default: full).
+    /// Override render.method (default: transport).
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
     /// Override camera.width (pixels).
@@ -124,7 +124,7 @@ struct RenderArgs {
     /// Override render.spp (reference: paths per pixel).
     #[arg(long)]
     spp: Option<u32>,
-    /// Override render.aa_samples (single, diffusion, full: anti-aliasing samples per pixel).
+    /// Override render.aa_samples (single, diffusion, full, transport: anti-aliasing samples per pixel).
     #[arg(long)]
     aa_samples: Option<u32>,
     /// Override render.seed.
@@ -142,7 +142,9 @@ struct RenderArgs {
     /// Override render.iterations (full: clear-air propagation iterations, 0 = paper Fig. 6).
     #[arg(long)]
     iterations: Option<usize>,
-    /// Set render.aov (full: write diffusion, low_density, sun_single, background as EXR layers).
+    /// Set render.aov: write the method's components as EXR layers (full: diffusion, low_density,
+    /// sun_single, background; transport: diffuse, sun_single, background; reference: orders,
+    /// light sources, transmittance; docs/reference.md and docs/transport.md).
     #[arg(long)]
     aov: bool,
     #[command(flatten)]

@@ -49,8 +49,7 @@ pub const COARSE_CELLS: usize = 800;
 /// energy and the correction comes out too small), so the correction is scaled up (Braess 1995).
 /// Measured on the procedural cloud (iterations per band at 50×40×30, 100×80×60, 200×160×120, to
 /// 1e-6): 1.0 → 14–15/12/10–11, 1.2 → 13–14/11/8–9, 1.3 → 12–13/11/8, 1.5 → 16–18/13–14/10–11;
-/// to 1e-4, 1.1–1.4 all give 9/8/6 ±1. (With the coarse space piecewise constant in the scaled unknowns, before
-/// `Level::weight`, the best was 1.5 → 28/32/38 to 1e-6.)
+/// to 1e-4, 1.1–1.4 all give 9/8/6 ±1.
 pub const OVER_CORRECTION: f64 = 1.3;
 
 /// Rows per parallel task (and per partial sum of the reductions: fixed, so sums do not depend

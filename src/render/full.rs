@@ -169,7 +169,7 @@ pub struct GatherCubes<'a> {
     /// [`CubeSource::render_cube`] below); measured on the default scene: the rear faces made the
     /// gather 31 % faster, image within 1.1·10⁻⁵ mean relative difference of full-resolution
     /// cubes; the ring 25 % fewer traces per cube, images within 6.4·10⁻⁴ block MRE
-    /// (docs/performance.md, "Speed: the final gather, sixth round").
+    /// (docs/performance.md, "Speed: the final gather").
     pub rear_half_resolution: bool,
     /// Cone width (rad) of each pixel of a face at `cone_res` pixels per edge (the scene's cube
     /// resolution): the same for every cube, so computed once (four `atan` per pixel).
@@ -313,7 +313,7 @@ fn block_pixels(bi: usize, bj: usize) -> [(usize, usize); 4] {
 /// Shortest compositing step of the final gather (voxels): above a dual cell's diagonal (√3), so
 /// each profile piece (at most one dual cell) is one step with its own Simpson depth and midpoint
 /// density, no further look-ups. Measured against `render.step` (0.5): block MRE ≤ 5·10⁻⁶ on the
-/// default scene, the composite's instructions ÷2.8 (docs/performance.md, fifth round).
+/// default scene, the composite's instructions ÷2.8 (docs/performance.md).
 const GATHER_STEP_VOXELS: f32 = 2.0;
 
 /// Final gather over a propagated scene: the image, with AOV layers when `render.aov` is set.

@@ -83,10 +83,8 @@ impl TransportMemory {
     /// δ-M sun transmittance per band (12), rounded up to the fit of the measurements (the
     /// gather's eye-source grids, 24 B, come after the solve has freed its sweep arrays).
     pub const GRID_BYTES: u64 = 24;
-    /// Bytes per voxel of the tight box of full voxels, as fitted when the acceleration's
-    /// multigrid stencils lay on the box. They lie on the unknowns since (issue 16), and the
-    /// measured peaks did not move (148 MB at 100×80×60, order 7, against 148 MB estimated), so
-    /// the term is kept as the margin it has become.
+    /// Bytes per voxel of the tight box of full voxels: the acceleration's box-sized arrays and a
+    /// margin that keeps the estimate at or above the measured peaks (148 MB at 100×80×60, order 7).
     pub const DOMAIN_BYTES: u64 = 200;
 
     /// Bytes per full voxel: at a sweep's peak two spherical-harmonic arrays (the moments and the
