@@ -155,6 +155,18 @@ pub fn write_atomic_all(files: &[(&Path, &[u8])]) -> Result<()> {
     result
 }
 
+/// A byte count for messages, in binary units with one decimal: `1536` → `1.5 KiB`.
+pub fn format_bytes(b: u128) -> String {
+    const UNITS: [&str; 7] = ["B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"];
+    let mut v = b as f64;
+    let mut u = 0;
+    while v >= 1024.0 && u + 1 < UNITS.len() {
+        v /= 1024.0;
+        u += 1;
+    }
+    format!("{v:.1} {}", UNITS[u])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -201,5 +213,12 @@ mod tests {
         assert_eq!(read_capped(&p, 2048, "a scene").unwrap().len(), 2048);
         let e = read_capped(&p, 1024, "a scene").unwrap_err().to_string();
         assert!(e.contains("s.toml") && e.contains("a scene"), "{e}");
+    }
+
+    #[test]
+    fn byte_counts_read_in_binary_units() {
+        assert_eq!(format_bytes(0), "0.0 B");
+        assert_eq!(format_bytes(1536), "1.5 KiB");
+        assert_eq!(format_bytes(3 << 30), "3.0 GiB");
     }
 }

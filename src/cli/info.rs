@@ -3,6 +3,7 @@
 use super::console::print;
 use clap::Args;
 use cloudgi::error::{Error, Result};
+use cloudgi::io::format_bytes;
 use cloudgi::medium::vdb::{read_vdb_info, VdbGridInfo};
 use std::path::PathBuf;
 
@@ -29,17 +30,6 @@ fn grouped(n: u64) -> String {
     out
 }
 
-fn bytes(b: u64) -> String {
-    let units = ["B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"];
-    let mut v = b as f64;
-    let mut u = 0;
-    while v >= 1024.0 && u + 1 < units.len() {
-        v /= 1024.0;
-        u += 1;
-    }
-    format!("{v:.1} {}", units[u])
-}
-
 fn describe(g: &VdbGridInfo) -> String {
     let mut s = format!("  {}: {}", g.name, g.value_type);
     if g.half {
@@ -59,7 +49,7 @@ fn describe(g: &VdbGridInfo) -> String {
     if let (Some(lo), Some(hi)) = (g.bbox_min, g.bbox_max) {
         let d = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
         s += &format!("    index bbox     {lo:?} .. {hi:?} ({}×{}×{} voxels)\n", d[0], d[1], d[2]);
-        s += &format!("    dense render   {} as float32\n", bytes(g.dense_bytes));
+        s += &format!("    dense render   {} as float32\n", format_bytes(g.dense_bytes as u128));
     }
     s += &format!(
         "    transform      {}: voxel size {:?}, translation {:?}\n",

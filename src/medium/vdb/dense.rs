@@ -11,18 +11,6 @@ fn count(dims: [u64; 3], n: u64) -> u128 {
     dims.iter().map(|&d| d.div_ceil(n) as u128).product()
 }
 
-/// Human-readable bytes.
-pub(crate) fn fmt_bytes(b: u128) -> String {
-    let units = ["B", "KiB", "MiB", "GiB", "TiB", "PiB"];
-    let mut v = b as f64;
-    let mut u = 0;
-    while v >= 1024.0 && u + 1 < units.len() {
-        v /= 1024.0;
-        u += 1;
-    }
-    format!("{v:.1} {}", units[u])
-}
-
 /// Densify `tree` over its active bbox, averaging `n`³ blocks. Returns the grid (x fastest).
 /// Refuses (before allocating) when the result would exceed `max_voxels`.
 pub(crate) fn densify(tree: &SparseTree, file: &str, grid: &str, max_voxels: u64, n: usize) -> Result<Grid3> {
@@ -65,7 +53,7 @@ pub(crate) fn densify(tree: &SparseTree, file: &str, grid: &str, max_voxels: u64
                 d[0],
                 d[1],
                 d[2],
-                fmt_bytes(want * 4),
+                crate::io::format_bytes(want * 4),
             ),
         ));
     }
