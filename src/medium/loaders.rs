@@ -48,20 +48,7 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
                 d.max_voxels
             ),
         )?;
-        check(
-            file,
-            "medium.voxel_size",
-            d.voxel_size.is_finite() && d.voxel_size > 0.0,
-            d.voxel_size,
-            "voxel size must be positive (m)",
-        )?;
-        return Ok(Loaded {
-            grid: procedural::cumulus(r, d.seed),
-            origin: Vec3::from(d.origin),
-            voxel_size: Vec3::splat(d.voxel_size),
-            name: file.to_string(),
-            downsampled: false,
-        });
+        return placed(d, file, file.to_string(), || Ok(procedural::cumulus(r, d.seed)));
     }
     let path: PathBuf = base_dir.join(&d.grid);
     let name = path.display().to_string();
@@ -73,22 +60,6 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
         ));
     }
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    let placed = |grid: Grid3| -> Result<Loaded> {
-        check(
-            file,
-            "medium.voxel_size",
-            d.voxel_size.is_finite() && d.voxel_size > 0.0,
-            d.voxel_size,
-            "voxel size must be positive (m)",
-        )?;
-        Ok(Loaded {
-            grid,
-            origin: Vec3::from(d.origin),
-            voxel_size: Vec3::splat(d.voxel_size),
-            name: name.clone(),
-            downsampled: false,
-        })
-    };
     match ext.as_str() {
         "vol" => {
             let bytes = read_dense(&path, d, file)?;
@@ -109,7 +80,7 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
                 downsampled: false,
             })
         }
-        "npy" => placed(parse_npy(&read_dense(&path, d, file)?, &name)?),
+        "npy" => placed(d, file, name.clone(), || parse_npy(&read_dense(&path, d, file)?, &name)),
         "vdb" => load_vdb(d, file, &read(&path)?, name),
         "raw" => {
             let sidecar = path.with_extension("json");
@@ -120,7 +91,7 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
                     format!("{e}; expected {{\"resolution\": [nx, ny, nz], \"dtype\": \"float32\"}}"),
                 )
             })?;
-            placed(parse_raw(&read_dense(&path, d, file)?, &meta, &name)?)
+            placed(d, file, name.clone(), || parse_raw(&read_dense(&path, d, file)?, &meta, &name))
         }
         _ => Err(Error::invalid(
             file,
@@ -131,6 +102,25 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
             ),
         )),
     }
+}
+
+/// A grid placed by `medium.origin` and `medium.voxel_size` (the procedural cloud, `.npy` and
+/// `.raw`): the voxel size is checked before `grid` reads or builds anything.
+fn placed(d: &MediumDesc, file: &str, name: String, grid: impl FnOnce() -> Result<Grid3>) -> Result<Loaded> {
+    check(
+        file,
+        "medium.voxel_size",
+        d.voxel_size.is_finite() && d.voxel_size > 0.0,
+        d.voxel_size,
+        "voxel size must be positive (m)",
+    )?;
+    Ok(Loaded {
+        grid: grid()?,
+        origin: Vec3::from(d.origin),
+        voxel_size: Vec3::splat(d.voxel_size),
+        name,
+        downsampled: false,
+    })
 }
 
 /// A `.vdb` grid: placed by the file's own transform (times `medium.scale`), densified over its
