@@ -194,3 +194,38 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
     img.pixels = px;
     Ok(img)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::medium::sparse::FullIndex;
+    use std::sync::Arc;
+
+    /// Stage 1's light on a 2×1×1 grid of full voxels, in the sun's form with Q0 per unit ρT̄ `q0`.
+    fn sun_only(q0: f64) -> IncidentLight {
+        let index = Arc::new(FullIndex::build([2, 1, 1], &[1.0, 1.0], |r| r > 0.0));
+        let mut inc = IncidentLight {
+            dims: [2, 1, 1],
+            scattering: FirstScattering::zero(index),
+            sun_irradiance: Rgb::splat(3.0),
+            bin_radiance: vec![Rgb::splat(0.1); 4],
+            sky_sh: None,
+            rays: 0,
+        };
+        if let FirstScattering::Sun { q0_per_rho_t, .. } = &mut inc.scattering {
+            q0_per_rho_t[1] = q0;
+        }
+        inc
+    }
+
+    #[test]
+    fn a_non_finite_stage_1_value_is_an_error_naming_the_stage() {
+        assert!(check_incident(&sun_only(0.25)).is_ok());
+        let e = check_incident(&sun_only(f64::NAN)).unwrap_err().to_string();
+        assert!(e.starts_with("incident light:") && e.contains("Q0"), "{e}");
+        let mut inc = sun_only(0.25);
+        inc.bin_radiance[2] = Rgb::new(0.0, 0.0, f32::INFINITY);
+        let e = check_incident(&inc).unwrap_err().to_string();
+        assert!(e.starts_with("incident light:") && e.contains("bin radiance"), "{e}");
+    }
+}
