@@ -245,6 +245,14 @@ fn bad_lights_ground_camera_and_render_keys() {
         &[("env.exr", b"not an image".to_vec())],
         &["env.exr"],
     );
+    // Each factor within the light bound, their product past it: named with the file and the fix.
+    let mut bright = cloudgi::Image::new(4, 2);
+    bright.pixels.fill(cloudgi::math::Rgb::splat(1e20));
+    render_fails(
+        "[sky]\nmodel = \"envmap\"\npath = \"env.exr\"\nscale = 1e20\n",
+        &[("env.exr", bright.to_exr_bytes().unwrap())],
+        &["s.toml", "sky.scale", "env.exr", "1e30"],
+    );
 }
 
 // ------------------------------------------------------------------------------- grid files

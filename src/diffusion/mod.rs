@@ -632,6 +632,7 @@ fn solve_bands(
                     let x0 = i0[c].take();
                     let (x, st) = solve_from(&h, rhs(c, x0.as_ref()), x0.as_ref(), tol, max);
                     converged(c, &st, settings)?;
+                    finite_i0(c, &x)?;
                     // Coded before the next band's vectors exist.
                     i0[c] = Some(store(&index, x0.as_ref(), &x, &mut change, &mut norm));
                     (stats[c], done[c]) = (st, true);
@@ -653,6 +654,7 @@ fn solve_bands(
                 drop((bs, starts));
                 for ((&c, (sol, st)), old) in group.iter().zip(res).zip(&x0s) {
                     converged(c, &st, settings)?;
+                    finite_i0(c, &sol)?;
                     i0[c] = Some(store(&index, old.as_ref(), &sol, &mut change, &mut norm));
                     (stats[c], done[c]) = (st, true);
                 }
@@ -709,6 +711,12 @@ fn converged(c: usize, st: &SolveStats, settings: &DiffusionSettings) -> Result<
         });
     }
     Ok(())
+}
+
+/// An error unless band `c`'s solution `x` is finite in f32, as it is stored (the 16-bit coding
+/// would otherwise turn a NaN into a number).
+fn finite_i0(c: usize, x: &[f64]) -> Result<()> {
+    crate::render::check_finite_field("diffusion solver", &format!("band {c}'s I0"), x.iter().map(|&v| v as f32))
 }
 
 /// The solution `x` (per full voxel of `index`) in 16 bits, adding Σ (new⁺ − old⁺)² to `change`

@@ -17,7 +17,6 @@ use crate::image::Image;
 use crate::math::{luminance, Rgb, Vec3};
 use glam::Vec2;
 use std::f32::consts::PI;
-use std::path::Path;
 
 /// An equirectangular radiance map with its sampling distribution.
 #[derive(Clone)]
@@ -123,12 +122,6 @@ impl EnvMap {
             img.height as usize,
             img.pixels.iter().map(|p| *p * scale).collect(),
         ))
-    }
-
-    /// Load an equirectangular OpenEXR file, radiance multiplied by `scale`.
-    pub fn load(path: &Path, scale: f32) -> Result<EnvMap> {
-        let img = Image::read_exr(path)?;
-        EnvMap::from_image(&img, scale, &path.display().to_string())
     }
 
     /// The map as an image (same pixels, same convention).

@@ -238,7 +238,26 @@ impl Sky {
                         format!("`{}` is not a file (paths are relative to the scene file)", path.display()),
                     ));
                 }
-                Ok(Sky::from_envmap(EnvMap::load(&path, d.scale)?))
+                let img = crate::image::Image::read_exr(&path)?;
+                let map = EnvMap::from_image(&img, d.scale, &path.display().to_string())?;
+                // The scaled radiance obeys the scene's light bound (scene::MAX_LIGHT), in f64 so
+                // that the product itself cannot overflow.
+                let brightest = img.pixels.iter().map(|p| p.max_element()).fold(0.0_f32, f32::max);
+                let scaled = f64::from(brightest) * f64::from(d.scale);
+                if scaled > f64::from(crate::scene::MAX_LIGHT) {
+                    return Err(crate::Error::invalid(
+                        file,
+                        "sky.scale",
+                        format!(
+                            "{} times the brightest pixel of `{}` ({brightest:e}) is {scaled:e}, above the light bound \
+                             {:e} (larger values overflow f32 in the methods); lower sky.scale",
+                            d.scale,
+                            path.display(),
+                            crate::scene::MAX_LIGHT
+                        ),
+                    ));
+                }
+                Ok(Sky::from_envmap(map))
             }
         }
     }

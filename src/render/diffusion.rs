@@ -6,12 +6,14 @@
 
 pub mod source_field;
 
+use super::check_finite_field;
 use super::single::{background, pixel_sample};
 use super::{render_rows, Progress, Timings};
 use crate::diffusion::flux::{diffuse_flux, FluxField};
 use crate::diffusion::{solve_diffusion, BoundaryLight, DiffusionSolution};
 use crate::error::Result;
 use crate::image::Image;
+use crate::incident::FirstScattering;
 use crate::incident::{compute, EntryRadiance, IncidentLight, IncidentSources};
 use crate::lighting::bins::DirectionBins;
 use crate::lit::ground::LitGround;
@@ -36,6 +38,37 @@ pub fn compute_incident(scene: &Scene, entry: Option<&EntryRadiance<'_>>) -> Inc
         settings.sky_single = false;
     }
     compute(&scene.medium, &bins, &sources, &settings, entry)
+}
+
+/// Refuse stage 1's output holding a non-finite value (Q0, Q1, the propagated bins, the sky's
+/// projection): an error naming `incident light`. One pass over the stored values.
+pub fn check_incident(inc: &IncidentLight) -> Result<()> {
+    let stage = "incident light";
+    match &inc.scattering {
+        FirstScattering::General { q0, q1 } => {
+            check_finite_field(stage, "Q0 (eq. 5)", q0.packed().iter().flat_map(|c| c.to_array()))?;
+            for f in q1 {
+                check_finite_field(stage, "Q1 (eq. 6)", f.packed().iter().flat_map(|c| c.to_array()))?;
+            }
+        }
+        FirstScattering::Sun {
+            rho_t,
+            q0_per_rho_t,
+            q1_per_q0,
+        } => {
+            let scales = q0_per_rho_t.iter().chain(q1_per_q0).map(|&v| v as f32);
+            check_finite_field(stage, "the sun's Q0 and Q1 (eqs. 5, 6)", scales.chain([rho_t.scale()]))?;
+        }
+    }
+    check_finite_field(
+        stage,
+        "the propagated bin radiance",
+        inc.bin_radiance.iter().flat_map(|c| c.to_array()),
+    )?;
+    if let Some(sh) = &inc.sky_sh {
+        check_finite_field(stage, "the sky's projection", sh.packed().iter().flatten().copied())?;
+    }
+    Ok(())
 }
 
 /// The light entering the diffusion through its boundary faces: with `render.sky_boundary`, the
@@ -110,6 +143,7 @@ fn source_field(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution, sun
 /// Render the image.
 pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
     let inc = timings.time("incident light", || compute_incident(scene, None));
+    check_incident(&inc)?;
     let sol = timings.time("diffusion solve", || {
         solve_diffusion(&scene.medium, &inc, &boundary_light(scene), None, &scene.render.solver)
     })?;
@@ -159,4 +193,39 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
     let mut img = Image::new(cam.width, cam.height);
     img.pixels = px;
     Ok(img)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::medium::sparse::FullIndex;
+    use std::sync::Arc;
+
+    /// Stage 1's light on a 2×1×1 grid of full voxels, in the sun's form with Q0 per unit ρT̄ `q0`.
+    fn sun_only(q0: f64) -> IncidentLight {
+        let index = Arc::new(FullIndex::build([2, 1, 1], &[1.0, 1.0], |r| r > 0.0));
+        let mut inc = IncidentLight {
+            dims: [2, 1, 1],
+            scattering: FirstScattering::zero(index),
+            sun_irradiance: Rgb::splat(3.0),
+            bin_radiance: vec![Rgb::splat(0.1); 4],
+            sky_sh: None,
+            rays: 0,
+        };
+        if let FirstScattering::Sun { q0_per_rho_t, .. } = &mut inc.scattering {
+            q0_per_rho_t[1] = q0;
+        }
+        inc
+    }
+
+    #[test]
+    fn a_non_finite_stage_1_value_is_an_error_naming_the_stage() {
+        assert!(check_incident(&sun_only(0.25)).is_ok());
+        let e = check_incident(&sun_only(f64::NAN)).unwrap_err().to_string();
+        assert!(e.starts_with("incident light:") && e.contains("Q0"), "{e}");
+        let mut inc = sun_only(0.25);
+        inc.bin_radiance[2] = Rgb::new(0.0, 0.0, f32::INFINITY);
+        let e = check_incident(&inc).unwrap_err().to_string();
+        assert!(e.starts_with("incident light:") && e.contains("bin radiance"), "{e}");
+    }
 }

@@ -16,7 +16,8 @@
 //! With `iterations = 0` this is the paper's Figure 6 (diffusion plus the low-density edges, the
 //! ground still lit by its hemicubes).
 
-use super::diffusion::{boundary_light, compute_incident, i0_rgb, scene_lit_volume, solved_lit_volume};
+use super::check_finite_field;
+use super::diffusion::{boundary_light, check_incident, compute_incident, i0_rgb, scene_lit_volume, solved_lit_volume};
 use super::single::pixel_sample;
 use super::{Progress, Timings};
 use crate::cube::{clear_air, BorderKeep, BorderLight, ClearAir, CubeImage, CubeOptions, CubeRenderer};
@@ -53,6 +54,7 @@ const FIRST_SOLVE_TOLERANCE: f64 = 1e-2;
 pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Propagation> {
     let settings = &scene.render.solver;
     let mut inc = timings.time("incident light", || compute_incident(scene, None));
+    check_incident(&inc)?;
     let unoccluded = boundary_light(scene);
     // The first solution only lights the clear-air cubes when a clear-air iteration follows
     // (their light moves I0 by a few per cent, and the re-solve meets the full tolerance): it
@@ -108,6 +110,7 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         ground = lit.ground.clone();
         drop(lit);
         let n_cubes = border.cubes();
+        check_border(&border)?;
         // Stage 1 asks with bin b = the direction the light comes from (its rays flow along −ω_b),
         // which is the cube's own bin b ("radiance arriving from ω_b").
         // With `render.sky_boundary` the cubes' light enters through the boundary condition and
@@ -118,6 +121,7 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
                 drop(inc);
                 let hook = cubes.hook();
                 inc = timings.time("incident light", || compute_incident(scene, Some(&hook)));
+                check_incident(&inc)?;
                 BoundaryLight::none()
             }
         };
@@ -158,6 +162,19 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         incident: inc,
         changes,
     })
+}
+
+/// Refuse clear-air cubes holding a non-finite radiance: an error naming `clear-air cubes`.
+fn check_border(border: &BorderLight) -> Result<()> {
+    let stage = "clear-air cubes";
+    match border {
+        BorderLight::Bins(cubes) => check_finite_field(stage, "the border cubes' bins", cubes.radiance.iter().flat_map(|c| c.to_array())),
+        BorderLight::FaceLight(_, light) => check_finite_field(
+            stage,
+            "the light through the border faces",
+            light.iter().flat_map(|(_, _, c)| c.to_array()),
+        ),
+    }
 }
 
 /// View-aligned cubes for the edge gather, rendered through the clear-air cube renderer.
