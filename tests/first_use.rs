@@ -273,7 +273,7 @@ fn update_pixels(payload: &[u8], w: usize, h: usize) -> Vec<f32> {
 }
 
 #[test]
-fn display_server_streams_each_transport_iteration() {
+fn display_server_streams_each_transport_iteration_and_full_sample() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     std::fs::copy(data("sphere64_blosc.vdb"), d.join("cloud.vdb")).unwrap();
@@ -322,6 +322,30 @@ fn display_server_streams_each_transport_iteration() {
     );
     let plain = Image::read_exr(&d.join("plain.exr")).unwrap();
     assert_eq!(plain.pixels, img.pixels);
+    // `full`: an update after each antialiasing sample but the last, then the final image.
+    let (addr, reader) = tev_listener();
+    ok(
+        d,
+        &[
+            "render",
+            "cloud.vdb",
+            "-o",
+            "f.exr",
+            "--method",
+            "full",
+            "--aa-samples",
+            "3",
+            "--width",
+            "16",
+            "--height",
+            "12",
+            "--display-server",
+            &addr,
+        ],
+    );
+    let bytes = reader.join().unwrap();
+    let types: Vec<u8> = tev_packets(&bytes).iter().map(|p| p.0).collect();
+    assert_eq!(types, [4, 6, 6, 6]);
 }
 
 #[test]
