@@ -202,7 +202,7 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
             "the reference needs at least 1 sample per pixel",
         ));
     }
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    crate::io::create_output_dir(dir)?;
     let base = Scene::load(scene_path, |d| {
         d.camera.width = opts.width;
         d.camera.height = opts.height;

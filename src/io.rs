@@ -57,6 +57,35 @@ static TEMPORARIES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 /// The files this process has written (renamed into place), for the interrupt's message.
 static WRITTEN: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
+/// The output folders this process created (innermost first), for removal while still empty.
+static CREATED_DIRS: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+fn created_dirs() -> MutexGuard<'static, Vec<PathBuf>> {
+    CREATED_DIRS.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Create the output folder `dir` and its missing parents, each registered for
+/// [`remove_created_empty_dirs`], so an error or interrupt before anything is written in it
+/// leaves no empty folder behind.
+pub fn create_output_dir(dir: &Path) -> Result<()> {
+    let missing: Vec<PathBuf> = dir
+        .ancestors()
+        .take_while(|d| !d.as_os_str().is_empty() && !d.exists())
+        .map(Path::to_path_buf)
+        .collect();
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    created_dirs().extend(missing);
+    Ok(())
+}
+
+/// Remove the folders [`create_output_dir`] created that are still empty, innermost first (a
+/// folder that holds written output stays).
+pub fn remove_created_empty_dirs() {
+    for d in created_dirs().drain(..) {
+        let _ = std::fs::remove_dir(d);
+    }
+}
+
 /// The files this process has written so far.
 pub fn written() -> Vec<PathBuf> {
     WRITTEN.lock().unwrap_or_else(|e| e.into_inner()).clone()

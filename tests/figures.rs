@@ -130,6 +130,19 @@ fn bad_arguments_are_reported() {
 }
 
 #[test]
+fn a_run_that_fails_leaves_no_output_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // The grid file is read only when the scene is built, after the folder would be made.
+    std::fs::write(d.join("s.toml"), "[medium]\ngrid = \"bad.vol\"\n").unwrap();
+    std::fs::write(d.join("bad.vol"), b"not a volume").unwrap();
+    let out = cloudgi(&["figures", "s.toml", "-o", "out/figs", "-q"], d);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("bad.vol"));
+    assert!(!d.join("out").exists(), "no folder left behind");
+}
+
+#[test]
 fn masks_and_sunset() {
     use cloudgi::figures::{edge_mask, sunset_desc, SUNSET_ELEVATION_DEG};
     use cloudgi::math::Rgb;

@@ -250,12 +250,9 @@ fn tev_packets(bytes: &[u8]) -> Vec<(u8, &[u8])> {
     out
 }
 
-#[test]
-fn display_server_streams_every_pass_to_a_tev_listener() {
+/// A loopback listener standing in for tev: its address, and the bytes of its one connection.
+fn tev_listener() -> (String, std::thread::JoinHandle<Vec<u8>>) {
     use std::io::Read;
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
-    std::fs::copy(data("sphere64_blosc.vdb"), d.join("cloud.vdb")).unwrap();
     let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let addr = listener.local_addr().unwrap().to_string();
     let reader = std::thread::spawn(move || {
@@ -264,6 +261,99 @@ fn display_server_streams_every_pass_to_a_tev_listener() {
         s.read_to_end(&mut bytes).unwrap();
         bytes
     });
+    (addr, reader)
+}
+
+/// The f32 RGB pixels at the end of an UpdateImageV3 payload of a `w`×`h` image.
+fn update_pixels(payload: &[u8], w: usize, h: usize) -> Vec<f32> {
+    payload[payload.len() - w * h * 12..]
+        .chunks(4)
+        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+        .collect()
+}
+
+#[test]
+fn display_server_streams_each_transport_iteration_and_full_sample() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::copy(data("sphere64_blosc.vdb"), d.join("cloud.vdb")).unwrap();
+    let (addr, reader) = tev_listener();
+    let args = [
+        "render",
+        "cloud.vdb",
+        "-o",
+        "t.exr",
+        "--method",
+        "transport",
+        "--width",
+        "16",
+        "--height",
+        "12",
+    ];
+    let mut with_view = args.to_vec();
+    with_view.extend(["--display-server", &addr]);
+    ok(d, &with_view);
+    let bytes = reader.join().unwrap();
+    let packets = tev_packets(&bytes);
+    // CreateImage once, then an update per iteration (at least 2) and the final image.
+    let updates: Vec<&[u8]> = packets.iter().filter(|p| p.0 == 6).map(|p| p.1).collect();
+    assert_eq!(packets[0].0, 4);
+    assert!(updates.len() >= 3, "{} updates", updates.len());
+    let img = Image::read_exr(&d.join("t.exr")).unwrap();
+    let want: Vec<f32> = img.pixels.iter().flat_map(|p| p.to_array()).collect();
+    // The last iteration's live image is the gather of the converged field: the final image.
+    assert_eq!(update_pixels(updates[updates.len() - 2], 16, 12), want);
+    assert_eq!(update_pixels(updates[updates.len() - 1], 16, 12), want);
+    // Without a viewer the image is the same, bit for bit.
+    ok(
+        d,
+        &[
+            "render",
+            "cloud.vdb",
+            "-o",
+            "plain.exr",
+            "--method",
+            "transport",
+            "--width",
+            "16",
+            "--height",
+            "12",
+        ],
+    );
+    let plain = Image::read_exr(&d.join("plain.exr")).unwrap();
+    assert_eq!(plain.pixels, img.pixels);
+    // `full`: an update after each antialiasing sample but the last, then the final image.
+    let (addr, reader) = tev_listener();
+    ok(
+        d,
+        &[
+            "render",
+            "cloud.vdb",
+            "-o",
+            "f.exr",
+            "--method",
+            "full",
+            "--aa-samples",
+            "3",
+            "--width",
+            "16",
+            "--height",
+            "12",
+            "--display-server",
+            &addr,
+        ],
+    );
+    let bytes = reader.join().unwrap();
+    let types: Vec<u8> = tev_packets(&bytes).iter().map(|p| p.0).collect();
+    assert_eq!(types, [4, 6, 6, 6]);
+}
+
+#[test]
+fn display_server_streams_every_pass_to_a_tev_listener() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::copy(data("sphere64_blosc.vdb"), d.join("cloud.vdb")).unwrap();
+    let (addr, reader) = tev_listener();
     let args = [
         "render",
         "cloud.vdb",
@@ -298,12 +388,8 @@ fn display_server_streams_every_pass_to_a_tev_listener() {
         (16, 12)
     );
     // The last update carries the final image's pixels, as f32 RGB at its end.
-    let last = packets[4].1;
     let img = Image::read_exr(&d.join("live.exr")).unwrap();
-    let floats: Vec<f32> = last[last.len() - 16 * 12 * 12..]
-        .chunks(4)
-        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
-        .collect();
+    let floats = update_pixels(packets[4].1, 16, 12);
     let want: Vec<f32> = img.pixels.iter().flat_map(|p| p.to_array()).collect();
     assert_eq!(floats, want);
     // No viewer listening: a warning, and the render still succeeds.

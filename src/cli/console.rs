@@ -31,13 +31,14 @@ pub fn note(args: std::fmt::Arguments) {
 }
 
 /// On SIGINT or SIGTERM: remove the output temporaries being written (waiting for renames in
-/// progress), say in one line whether anything was written, and exit with 128 + the signal.
+/// progress) and the output folders created that are still empty, say in one line whether anything was written, and exit with 128 + the signal.
 pub fn clean_up_on_interrupt() -> Result<()> {
     use signal_hook::consts::{SIGINT, SIGTERM};
     let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM]).map_err(|e| Error::io("signal handlers", e))?;
     std::thread::spawn(move || {
         if let Some(sig) = signals.forever().next() {
             let removed = cloudgi::io::remove_temporaries();
+            cloudgi::io::remove_created_empty_dirs();
             let name = if sig == SIGINT { "SIGINT" } else { "SIGTERM" };
             let written = cloudgi::io::written();
             let what = match (written.is_empty(), removed) {

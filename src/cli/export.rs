@@ -13,7 +13,8 @@ pub struct ExportArgs {
 
 #[derive(Subcommand, Debug)]
 enum Target {
-    /// Mitsuba 3: DIR/scene.xml (volpath, heterogeneous medium, sun, sky, ground, camera) + DIR/density.vol.
+    /// Mitsuba 3: DIR/scene.xml (volpath, heterogeneous medium, sun, sky, ground, camera) + DIR/density.vol
+    /// (+ DIR/sky.exr for an atmosphere or envmap sky).
     Mitsuba(MitsubaArgs),
 }
 
@@ -30,7 +31,10 @@ pub fn run(a: ExportArgs, quiet: bool) -> Result<()> {
     match a.target {
         Target::Mitsuba(m) => {
             let file = super::SceneFile::read(m.scene.as_deref())?;
-            let ours = |p: &std::path::Path| p.file_name().is_some_and(|n| n == "scene.xml" || n == "density.vol");
+            let ours = |p: &std::path::Path| {
+                p.file_name()
+                    .is_some_and(|n| n == "scene.xml" || n == "density.vol" || n == cloudgi::reference::mitsuba::SKY_FILE)
+            };
             super::output::check_folder(&m.output, "--output", &file.inputs(&file.desc), ours)?;
             let scene = Scene::build(file.desc, &file.source, &file.base)?;
             let files = cloudgi::reference::mitsuba::export(&scene, &m.output)?;

@@ -56,7 +56,8 @@ pub fn run(a: FiguresArgs, quiet: bool) -> Result<()> {
         super::memory::check_image(&d, "command line")?;
     }
     let progress = super::progress::Bars::new(quiet);
-    let report = run_figures(a.scene.as_deref(), &a.output, &opts, &progress)?;
+    // A run that fails leaves no empty output folder (an interrupt: src/cli/console.rs).
+    let report = run_figures(a.scene.as_deref(), &a.output, &opts, &progress).inspect_err(|_| cloudgi::io::remove_created_empty_dirs())?;
     if !quiet {
         note!("{}", table_markdown(&report).trim_end());
         note!("→ {}", a.output.join("index.md").display());

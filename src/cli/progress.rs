@@ -24,9 +24,11 @@ pub struct Bars {
 }
 
 /// The line printer of one stage: a thread that wakes every [`LINE_INTERVAL`] (or when the
-/// stage ends) and prints the count.
+/// stage ends) and prints the count, or for an iteration towards a tolerance the convergence
+/// ([`Convergence::text`], as the terminal bar shows it).
 struct Lines {
     pos: Arc<AtomicU64>,
+    convergence: Arc<Mutex<Option<String>>>,
     done: Arc<(Mutex<bool>, Condvar)>,
     thread: JoinHandle<()>,
 }
@@ -34,8 +36,9 @@ struct Lines {
 impl Lines {
     fn start(stage: String, total: u64, interval: Duration) -> Lines {
         let pos = Arc::new(AtomicU64::new(0));
+        let convergence = Arc::new(Mutex::new(None::<String>));
         let done = Arc::new((Mutex::new(false), Condvar::new()));
-        let (p, d) = (pos.clone(), done.clone());
+        let (p, c, d) = (pos.clone(), convergence.clone(), done.clone());
         let thread = std::thread::spawn(move || {
             let start = Instant::now();
             let (lock, cv) = &*d;
@@ -46,7 +49,10 @@ impl Lines {
             while !*finished {
                 let now = Instant::now();
                 if now >= next {
-                    note!("{}", line(&stage, p.load(Ordering::Relaxed), total, start.elapsed()));
+                    match c.lock().ok().and_then(|c| c.clone()) {
+                        Some(text) => note!("{stage}: {text}"),
+                        None => note!("{}", line(&stage, p.load(Ordering::Relaxed), total, start.elapsed())),
+                    }
                     next += interval;
                     continue;
                 }
@@ -56,7 +62,12 @@ impl Lines {
                 finished = g;
             }
         });
-        Lines { pos, done, thread }
+        Lines {
+            pos,
+            convergence,
+            done,
+            thread,
+        }
     }
 
     fn finish(self) {
@@ -228,6 +239,11 @@ impl Progress for Bars {
         });
         state.last = change;
         state.iterations += 1;
+        if let Some(l) = self.lines.lock().ok().as_ref().and_then(|l| l.as_ref()) {
+            if let Ok(mut text) = l.convergence.lock() {
+                *text = Some(state.text(tolerance));
+            }
+        }
         if let Some(pb) = self.bar.lock().ok().and_then(|b| b.clone()) {
             if state.iterations == 1 {
                 pb.set_style(
@@ -306,6 +322,24 @@ mod tests {
             l.finish();
             assert!(t.elapsed() < Duration::from_secs(5));
         }
+    }
+
+    #[test]
+    fn the_line_printer_shows_the_convergence_not_the_cap() {
+        let mut bars = Bars::new(false);
+        bars.terminal = false;
+        bars.begin("transport iterations", 60);
+        bars.converge(1e-1, 1e-4);
+        bars.converge(1e-2, 1e-4);
+        let text = bars
+            .lines
+            .lock()
+            .unwrap()
+            .as_ref()
+            .and_then(|l| l.convergence.lock().unwrap().clone());
+        let text = text.expect("the line printer holds the convergence");
+        assert!(text.starts_with("change 1.0e-2 → 1.0e-4, iteration 2, eta "), "{text}");
+        bars.end();
     }
 
     #[test]

@@ -7,7 +7,9 @@
 //!   `medium.sigma_t`, `albedo` as RGB and an `hg` phase function;
 //! * sun → `directional` emitter (Mitsuba's `direction` is the direction the light travels, i.e.
 //!   minus ours) with the same irradiance;
-//! * constant sky → `constant` emitter with the same radiance;
+//! * constant sky → `constant` emitter with the same radiance; any other sky (atmosphere,
+//!   envmap) → `envmap` emitter reading `sky.exr`, the map `cloudgi sky` writes, rotated from our
+//!   u convention to Mitsuba's ([`ENVMAP_TO_WORLD`]);
 //! * ground → a `rectangle` of half-size [`GROUND_HALF_SIZE`] facing up with a `diffuse` BSDF. When
 //!   the ground lies within [`ground_offset`] of the grid's floor it is lowered to that distance
 //!   below it: Mitsuba pushes new rays off a surface by about 5e-6 × the coordinates' magnitude
@@ -26,6 +28,14 @@ use crate::medium::loaders::write_vol;
 use crate::scene::Scene;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+
+/// The sky map written beside `scene.xml` for a sky that is not constant.
+pub const SKY_FILE: &str = "sky.exr";
+
+/// Mitsuba's `envmap` reads u = atan2(x, −z)/2π in its local frame, ours u = atan2(z, x)/2π
+/// (both v = acos(y)/π, row 0 = +y): local = (z, y, −x) of world, so `to_world` (4×4, row
+/// major) maps local (x, y, z) to world (−z, y, x).
+const ENVMAP_TO_WORLD: &str = "0 0 -1 0  0 1 0 0  1 0 0 0  0 0 0 1";
 
 /// Half-size (m) of the ground rectangle.
 pub const GROUND_HALF_SIZE: f32 = 1.0e6;
@@ -82,7 +92,6 @@ pub fn scene_xml(scene: &Scene, vol_name: &str) -> Result<String> {
         let _ = writeln!(w, "        <rgb name=\"irradiance\" value=\"{}\"/>", v3(scene.sun.irradiance));
         let _ = writeln!(w, "    </emitter>");
     }
-    #[allow(unreachable_patterns)]
     match &scene.sky.kind {
         SkyKind::Constant(l) => {
             if l.max_element() > 0.0 {
@@ -91,12 +100,15 @@ pub fn scene_xml(scene: &Scene, vol_name: &str) -> Result<String> {
                 let _ = writeln!(w, "    </emitter>");
             }
         }
+        // The map holds the radiance already multiplied by `sky.scale`, so Mitsuba's scale is 1.
         _ => {
-            return Err(Error::invalid(
-                &scene.source,
-                "sky.model",
-                "only the constant sky can be exported to Mitsuba so far",
-            ))
+            let _ = writeln!(w, "    <emitter type=\"envmap\">");
+            let _ = writeln!(w, "        <string name=\"filename\" value=\"{}\"/>", xml_escape(SKY_FILE));
+            let _ = writeln!(w, "        <float name=\"scale\" value=\"1\"/>");
+            let _ = writeln!(w, "        <transform name=\"to_world\">");
+            let _ = writeln!(w, "            <matrix value=\"{ENVMAP_TO_WORLD}\"/>");
+            let _ = writeln!(w, "        </transform>");
+            let _ = writeln!(w, "    </emitter>");
         }
     }
     let centre = (lo + hi) * 0.5;
@@ -154,8 +166,9 @@ fn xml_escape(s: &str) -> String {
         .replace('"', "&quot;")
 }
 
-/// Write `scene.xml` and `density.vol` into `dir` (created if missing); returns the paths written.
-/// A scene Mitsuba cannot take is refused before anything is created.
+/// Write `scene.xml`, `density.vol` and, for a sky that is not constant, [`SKY_FILE`] (the
+/// sky's own map, as `cloudgi sky` writes it) into `dir` (created if missing); returns the paths
+/// written. A scene Mitsuba cannot take is refused before anything is created.
 pub fn export(scene: &Scene, dir: &Path) -> Result<Vec<PathBuf>> {
     let text = scene_xml(scene, "density.vol")?;
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
@@ -163,8 +176,14 @@ pub fn export(scene: &Scene, dir: &Path) -> Result<Vec<PathBuf>> {
     let xml = dir.join("scene.xml");
     let (lo, hi) = scene.medium.bbox();
     write_vol(&vol, &scene.medium.density.to_grid(), lo, hi)?;
+    let mut files = vec![xml.clone(), vol];
+    if !matches!(scene.sky.kind, SkyKind::Constant(_)) {
+        let sky = dir.join(SKY_FILE);
+        scene.sky.to_image(None).write_exr(&sky)?;
+        files.push(sky);
+    }
     crate::io::write_atomic(&xml, text.as_bytes())?;
-    Ok(vec![xml, vol])
+    Ok(files)
 }
 
 #[cfg(test)]
@@ -212,16 +231,48 @@ mod tests {
     }
 
     #[test]
-    fn a_scene_mitsuba_cannot_take_writes_nothing() {
+    fn an_atmosphere_sky_is_an_envmap_emitter_with_the_sky_commands_map() {
         let mut d = SceneDesc::default();
         d.medium.resolution = [6, 5, 4];
         d.sky.model = crate::scene::SkyModel::Atmosphere;
         d.sky.map_width = 16;
         let scene = Scene::build(d, "t.toml", Path::new(".")).unwrap();
         let dir = tempfile::tempdir().unwrap();
-        let out = dir.path().join("out");
-        let e = export(&scene, &out).unwrap_err().to_string();
-        assert!(e.contains("sky.model"), "{e}");
-        assert!(!out.exists(), "no folder and no density.vol");
+        let files = export(&scene, dir.path()).unwrap();
+        let xml = std::fs::read_to_string(&files[0]).unwrap();
+        for needle in [
+            "<emitter type=\"envmap\">",
+            "<string name=\"filename\" value=\"sky.exr\"/>",
+            &format!("<matrix value=\"{ENVMAP_TO_WORLD}\"/>"),
+        ] {
+            assert!(xml.contains(needle), "missing {needle} in\n{xml}");
+        }
+        assert!(!xml.contains("type=\"constant\""));
+        let map = crate::image::Image::read_exr(&dir.path().join(SKY_FILE)).unwrap();
+        assert_eq!(map.pixels, scene.sky.to_image(None).pixels);
+    }
+
+    /// Mitsuba's envmap lookup of a world direction through `to_world` (its inverse, the
+    /// transpose, takes world to local) reads the same u, v as ours.
+    #[test]
+    fn the_envmap_rotation_turns_our_u_into_mitsubas() {
+        let m: Vec<f32> = ENVMAP_TO_WORLD.split_whitespace().map(|x| x.parse().unwrap()).collect();
+        let to_world = |r: usize, c: usize| m[4 * r + c];
+        for d in [
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, 1.0),
+            Vec3::new(-1.0, 0.2, 0.0),
+            Vec3::new(0.3, 0.5, -0.8),
+            Vec3::new(-0.6, -0.3, 0.7),
+        ] {
+            let d = d.normalize();
+            let local: Vec<f32> = (0..3).map(|c| (0..3).map(|r| to_world(r, c) * d[r]).sum()).collect();
+            let mut u_mitsuba = local[0].atan2(-local[2]) / (2.0 * std::f32::consts::PI);
+            u_mitsuba -= u_mitsuba.floor();
+            let v_mitsuba = local[1].clamp(-1.0, 1.0).acos() / std::f32::consts::PI;
+            let (u, v) = crate::lighting::envmap::uv(d);
+            let du = (u - u_mitsuba).abs();
+            assert!(du.min(1.0 - du) < 1e-6 && (v - v_mitsuba).abs() < 1e-6, "{d:?}: {u} {u_mitsuba}");
+        }
     }
 }

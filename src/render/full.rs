@@ -386,6 +386,14 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
             acc[3] += a.background;
         }
         progress.advance(1);
+        // A live view sees the mean of the samples so far (no extra work: the gather is the
+        // pipeline's only image).
+        if progress.wants_images() && s + 1 < spp {
+            let mut live = Image::new(cam.width, cam.height);
+            let k = 1.0 / (s + 1) as f32;
+            live.pixels = sum.iter().map(|a| (a[0] + a[1] + a[2] + a[3]) * k).collect();
+            progress.image(&live);
+        }
     }
     let k = 1.0 / spp as f32;
     let mut img = Image::new(cam.width, cam.height);

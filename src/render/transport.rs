@@ -18,7 +18,7 @@ use crate::math::{real_sh, sh_count};
 use crate::math::{Rgb, Vec3};
 use crate::medium::march::march;
 use crate::medium::Medium;
-use crate::pipeline::{render_rows, Progress, Timings};
+use crate::pipeline::{render_rows, NoProgress, Progress, Timings};
 use crate::render::single::pixel_sample;
 use crate::render::transport_ground::EyeGround;
 use crate::render::warm::Warm;
@@ -231,8 +231,16 @@ pub fn render_with(scene: &Scene, progress: &dyn Progress, timings: &mut Timings
     memory.check(&scene.source, MAX_BYTES, "the library's limit")?;
     let keep = warm.as_ref().is_some_and(|w| w.enabled);
     let start = warm.as_ref().and_then(|w| w.transport.as_ref()).filter(|_| keep);
+    // A live view sees each iteration's iterate through the same gather (without its bar).
+    let show = |f: &TransportField| {
+        let mut t = Timings::default();
+        if let Ok(img) = gather(scene, f, &NoProgress, &mut t) {
+            progress.image(&img);
+        }
+    };
+    let live: Option<&dyn Fn(&TransportField)> = progress.wants_images().then_some(&show);
     let (field, state) = timings.time("transport solve", || {
-        solve_warm(m, &scene.sun, &scene.sky, scene.ground.as_ref(), s, progress, start, keep)
+        solve_warm(m, &scene.sun, &scene.sky, scene.ground.as_ref(), s, progress, start, keep, live)
     })?;
     if let Some(w) = warm {
         w.transport = state;
@@ -252,8 +260,15 @@ pub fn render_with(scene: &Scene, progress: &dyn Progress, timings: &mut Timings
     if let Some(w) = unconverged(&scene.source, &field.history, s) {
         progress.warn(&w);
     }
-    let (diffuse, sun) = timings.time("eye source", || eye_source(scene, &field));
-    let ground = EyeGround::new(scene, &field);
+    gather(scene, &field, progress, timings)
+}
+
+/// The image of a solved (or, for a live view, partly solved) field: the eye source and the
+/// march per pixel.
+fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
+    let m = &scene.medium;
+    let (diffuse, sun) = timings.time("eye source", || eye_source(scene, field));
+    let ground = EyeGround::new(scene, field);
     // March with the δ-M extinction of the middle band (the bands differ only by σt f Δa).
     let mut scaled = m.clone();
     scaled.optics.sigma_t = field.optics.bands[1].sigma_t as f32;

@@ -999,12 +999,13 @@ pub fn solve(
     s: &TransportSettings,
     progress: &dyn Progress,
 ) -> Result<TransportField> {
-    Ok(solve_warm(m, sun, sky, ground, s, progress, None, false)?.0)
+    Ok(solve_warm(m, sun, sky, ground, s, progress, None, false, None)?.0)
 }
 
 /// [`solve`] from `start` (a previous frame's converged state, mapped onto this grid; None: the
 /// cold start), iterated to the same tolerance; with `keep`, also the converged state for the
-/// next frame (src/transport/warm.rs).
+/// next frame (src/transport/warm.rs). With `live`, each iteration's iterate is also handed to
+/// it as a field (for a live view; built only then, so the solve without it is unchanged).
 #[allow(clippy::too_many_arguments)]
 pub fn solve_warm(
     m: &Medium,
@@ -1015,6 +1016,7 @@ pub fn solve_warm(
     progress: &dyn Progress,
     start: Option<&TransportState>,
     keep: bool,
+    live: Option<&dyn Fn(&TransportField)>,
 ) -> Result<(TransportField, Option<TransportState>)> {
     let optics = Optics::from_medium(m, s.order);
     let dims = m.dims();
@@ -1219,6 +1221,19 @@ pub fn solve_warm(
             history.len(),
             s.tolerance
         ));
+        if let Some(show) = live {
+            show(&TransportField {
+                optics: optics.clone(),
+                order: s.order,
+                full: full.clone(),
+                diffuse_source: diffuse_source_of(&moments, bands, &perm, nsh),
+                sun_t: sun_t.clone(),
+                ground: ground_map.clone(),
+                history: history.clone(),
+                full_voxels: nfull,
+                ordinates: q.dirs.len(),
+            });
+        }
         if change < s.tolerance
             && history.len() >= min_iterations
             && (accelerated || plain_converged(&history[history.len() - since_start..], s.tolerance))
@@ -1244,19 +1259,7 @@ pub fn solve_warm(
     }
     progress.end();
     drop(next);
-    // The diffuse source a′χ′_l I_lm in real_sh's order for the gather.
-    let mut diffuse_source = vec![0f32; moments.len()];
-    diffuse_source
-        .par_chunks_mut(3 * nsh)
-        .zip(moments.par_chunks(3 * nsh))
-        .for_each(|(o, mf)| {
-            for (band, bo) in bands.iter().enumerate() {
-                for (i, k) in perm.iter().enumerate() {
-                    let l = (*k as f64).sqrt().floor() as usize;
-                    o[band * nsh + k] = (bo.albedo * bo.chi[l] * mf[band * nsh + i] as f64) as f32;
-                }
-            }
-        });
+    let diffuse_source = diffuse_source_of(&moments, bands, &perm, nsh);
     let state = keep.then(|| TransportState::new(m, s.order, full.clone(), moments, 3 * nsh));
     let field = TransportField {
         optics: optics.clone(),
@@ -1270,6 +1273,24 @@ pub fn solve_warm(
         ordinates: q.dirs.len(),
     };
     Ok((field, state))
+}
+
+/// The diffuse source a′χ′_l I_lm in real_sh's order for the gather, from the solver's
+/// moments (in `perm`'s parity order), per full voxel, band, lm.
+fn diffuse_source_of(moments: &[f32], bands: &[BandOptics], perm: &[usize], nsh: usize) -> Vec<f32> {
+    let mut diffuse_source = vec![0f32; moments.len()];
+    diffuse_source
+        .par_chunks_mut(3 * nsh)
+        .zip(moments.par_chunks(3 * nsh))
+        .for_each(|(o, mf)| {
+            for (band, bo) in bands.iter().enumerate() {
+                for (i, k) in perm.iter().enumerate() {
+                    let l = (*k as f64).sqrt().floor() as usize;
+                    o[band * nsh + k] = (bo.albedo * bo.chi[l] * mf[band * nsh + i] as f64) as f32;
+                }
+            }
+        });
+    diffuse_source
 }
 
 #[cfg(test)]
