@@ -45,6 +45,8 @@ pub mod io;
 #[doc(hidden)]
 pub mod lighting;
 #[doc(hidden)]
+pub mod limits;
+#[doc(hidden)]
 pub mod lit;
 #[doc(hidden)]
 pub mod math;

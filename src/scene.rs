@@ -177,7 +177,7 @@ pub struct SceneDesc {
     pub render: RenderDesc,
     /// `[animation]`: frames and keyframes (src/sequence); absent for a still.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub animation: Option<crate::sequence::AnimationDesc>,
+    pub animation: Option<AnimationDesc>,
 }
 
 impl Default for SceneDesc {
@@ -237,26 +237,7 @@ impl SceneDesc {
     }
 }
 
-/// Largest light the scene may carry, in W/m² (sun irradiance) or W/(m²·sr) (sky radiance, an
-/// environment map's scale on its radiance): 1e30, the brightest sun every method is tested to
-/// render finitely (tests/nonnegative.rs). The methods multiply it by phase-function peaks (up to
-/// ~1e4 sr⁻¹) and sum it over orders and samples in f32, whose largest value is 3.4e38, so a
-/// brighter light overflows to inf or NaN; the real sun gives 1361 W/m².
-pub const MAX_LIGHT: f32 = 1e30;
-
-/// Largest distance from the world's origin of the medium's corner and the camera (m): 1e7, past
-/// the Earth's radius (6.4e6 m). An f32 position there resolves 1 m, a fraction of any voxel;
-/// much farther, ray–box intersections lose the voxels and the methods give NaN.
-pub const MAX_COORDINATE: f32 = 1e7;
-
-/// Largest extinction σt (m⁻¹): 1e9, an optical depth of 1 per nanometre, denser than any medium
-/// light crosses. The optical depths σt·ρ·length the methods form in f32 then stay below 1e30
-/// across any grid of at most 1e6-m voxels with densities up to 1e15.
-pub const MAX_SIGMA_T: f32 = 1e9;
-
-/// Largest |exposure| of the PNG preview (stops): 2^64 spans any radiance from 1e-19 to 1e19;
-/// past 2^127 the f32 scale factor itself overflows.
-pub const MAX_EXPOSURE: f32 = 64.0;
+pub use crate::limits::{MAX_COORDINATE, MAX_EXPOSURE, MAX_LIGHT, MAX_SIGMA_T};
 
 /// Refuse finite magnitudes no f32 render can hold (the owners refuse NaN, inf and negatives).
 fn check_magnitudes(d: &SceneDesc, f: &str) -> Result<()> {
@@ -470,8 +451,15 @@ impl Scene {
             None => None,
         };
         let medium = Medium::from_desc_with(&desc.medium, f, base_dir, density.map(crate::Density::into_loaded))?;
+        // camera.fit: the camera moved to frame the cloud's box (src/camera/fit.rs).
         let (desc, camera) = match desc.camera.fit {
-            true => crate::camera::fit::apply(desc, &medium, f)?,
+            true => {
+                let (lo, hi) = medium.cloud_box();
+                let mut desc = desc;
+                desc.camera = crate::camera::fit::framed(&desc.camera, lo, hi);
+                let camera = Camera::from_desc(&desc.camera, f)?;
+                (desc, camera)
+            }
             false => (desc, camera),
         };
         render.edges.step_m = render.step_voxels * medium.min_voxel();
@@ -518,4 +506,65 @@ impl Scene {
         }
         self.sky.radiance(dir)
     }
+}
+
+/// The `[animation]` table's description (src/sequence/animation.rs interpolates it).
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct AnimationDesc {
+    /// The scene's frames (`1-240`, `1-240x2`, `1,5,9-12`); `--frames` overrides it.
+    #[serde(default)]
+    pub frames: Option<String>,
+    /// The keyframes (`[[animation.key]]`), in any order.
+    #[serde(default)]
+    pub key: Vec<KeyDesc>,
+}
+
+/// One keyframe: its frame and the channels it sets.
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct KeyDesc {
+    /// The frame number.
+    pub frame: u32,
+    /// `sun.elevation_deg`, `sun.azimuth_deg` (degrees), `sun.irradiance` (W/m² per band).
+    #[serde(default)]
+    pub sun: SunKey,
+    /// `camera.position`, `camera.look_at` (m), `camera.fov_deg` (degrees, vertical).
+    #[serde(default)]
+    pub camera: CameraKey,
+    /// `medium.sigma_t` (m⁻¹ at density 1).
+    #[serde(default)]
+    pub medium: MediumKey,
+}
+
+/// The sun's keyable values.
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SunKey {
+    /// Degrees above the horizon.
+    pub elevation_deg: Option<f32>,
+    /// Degrees from +x towards +z (interpolated as numbers: 350 → 10 turns the long way round).
+    pub azimuth_deg: Option<f32>,
+    /// W/m² per band.
+    pub irradiance: Option<[f32; 3]>,
+}
+
+/// The camera's keyable values.
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CameraKey {
+    /// Eye position (m).
+    pub position: Option<[f32; 3]>,
+    /// Point looked at (m).
+    pub look_at: Option<[f32; 3]>,
+    /// Vertical field of view (degrees).
+    pub fov_deg: Option<f32>,
+}
+
+/// The medium's keyable values.
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MediumKey {
+    /// Extinction at density 1 (m⁻¹).
+    pub sigma_t: Option<f32>,
 }

@@ -6,11 +6,8 @@
 //! project inside the central [`FILL`] of the frame on both axes (so the box touches that margin on
 //! one axis and lies within it on the other).
 
-use super::{Camera, CameraDesc};
-use crate::error::Result;
+use super::CameraDesc;
 use crate::math::Vec3;
-use crate::medium::Medium;
-use crate::scene::SceneDesc;
 
 /// Share of the frame's half-width and half-height the box may reach (unitless).
 pub const FILL: f32 = 0.9;
@@ -46,27 +43,6 @@ pub fn framed(d: &CameraDesc, lo: Vec3, hi: Vec3) -> CameraDesc {
         look_at: centre.to_array(),
         ..d.clone()
     }
-}
-
-/// The box (m) of the medium's voxels that hold density (the whole grid if none do): what the
-/// camera frames.
-pub fn cloud_box(medium: &Medium) -> (Vec3, Vec3) {
-    match medium.active_box(0) {
-        Some((lo, hi)) => {
-            let at = |i: [usize; 3]| medium.origin + medium.voxel_size * Vec3::new(i[0] as f32, i[1] as f32, i[2] as f32);
-            (at(lo), at(hi))
-        }
-        None => medium.bbox(),
-    }
-}
-
-/// `desc` with its camera framed on `medium` ([`framed`]), and that camera; `file` names the
-/// scene in messages.
-pub fn apply(mut desc: SceneDesc, medium: &Medium, file: &str) -> Result<(SceneDesc, Camera)> {
-    let (lo, hi) = cloud_box(medium);
-    desc.camera = framed(&desc.camera, lo, hi);
-    let camera = Camera::from_desc(&desc.camera, file)?;
-    Ok((desc, camera))
 }
 
 #[cfg(test)]

@@ -2,7 +2,6 @@
 //! probably not the metre (a .vdb in centimetres, a Blender object of a few metres), and the
 //! warning names the key that rescales it.
 
-use cloudgi::camera::fit::cloud_box;
 use cloudgi::scene::Scene;
 
 /// Clouds smaller than this across (m) are reported.
@@ -12,7 +11,7 @@ pub const LARGEST_M: f32 = 100_000.0;
 
 /// The warning for `scene`'s cloud, if its largest extent is outside [`SMALLEST_M`, `LARGEST_M`].
 pub fn warning(scene: &Scene) -> Option<String> {
-    let (lo, hi) = cloud_box(&scene.medium);
+    let (lo, hi) = scene.medium.cloud_box();
     let across = (hi - lo).max_element();
     if (SMALLEST_M..=LARGEST_M).contains(&across) {
         return None;

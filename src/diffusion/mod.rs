@@ -716,7 +716,7 @@ fn converged(c: usize, st: &SolveStats, settings: &DiffusionSettings) -> Result<
 /// An error unless band `c`'s solution `x` is finite in f32, as it is stored (the 16-bit coding
 /// would otherwise turn a NaN into a number).
 fn finite_i0(c: usize, x: &[f64]) -> Result<()> {
-    crate::render::check_finite_field("diffusion solver", &format!("band {c}'s I0"), x.iter().map(|&v| v as f32))
+    crate::error::check_finite_field("diffusion solver", &format!("band {c}'s I0"), x.iter().map(|&v| v as f32))
 }
 
 /// The solution `x` (per full voxel of `index`) in 16 bits, adding Σ (new⁺ − old⁺)² to `change`

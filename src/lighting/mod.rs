@@ -240,11 +240,11 @@ impl Sky {
                 }
                 let img = crate::image::Image::read_exr(&path)?;
                 let map = EnvMap::from_image(&img, d.scale, &path.display().to_string())?;
-                // The scaled radiance obeys the scene's light bound (scene::MAX_LIGHT), in f64 so
+                // The scaled radiance obeys the scene's light bound (limits::MAX_LIGHT), in f64 so
                 // that the product itself cannot overflow.
                 let brightest = img.pixels.iter().map(|p| p.max_element()).fold(0.0_f32, f32::max);
                 let scaled = f64::from(brightest) * f64::from(d.scale);
-                if scaled > f64::from(crate::scene::MAX_LIGHT) {
+                if scaled > f64::from(crate::limits::MAX_LIGHT) {
                     return Err(crate::Error::invalid(
                         file,
                         "sky.scale",
@@ -253,7 +253,7 @@ impl Sky {
                              {:e} (larger values overflow f32 in the methods); lower sky.scale",
                             d.scale,
                             path.display(),
-                            crate::scene::MAX_LIGHT
+                            crate::limits::MAX_LIGHT
                         ),
                     ));
                 }

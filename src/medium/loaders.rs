@@ -137,7 +137,7 @@ fn load_vdb(d: &MediumDesc, file: &str, bytes: &[u8], name: String) -> Result<Lo
     let s = d.scale as f64;
     let (origin, voxel_size) = (v.origin.map(|x| x * s), v.voxel_size.map(|x| x * s));
     let max = super::MAX_VOXEL_SIZE as f64;
-    let far = crate::scene::MAX_COORDINATE as f64;
+    let far = crate::limits::MAX_COORDINATE as f64;
     let fault = if !voxel_size.iter().all(|&x| x > 0.0 && x <= max && (x as f32) > 0.0) {
         Some(format!(
             "the file's voxel size {:?} gives {voxel_size:?} m; a voxel must be positive and at most {max:e} m",

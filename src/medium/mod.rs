@@ -209,11 +209,11 @@ impl Medium {
         check(
             file,
             "medium.sigma_t",
-            sigma_max <= crate::scene::MAX_SIGMA_T as f64,
+            sigma_max <= crate::limits::MAX_SIGMA_T as f64,
             d.sigma_t,
             &format!(
                 "times the grid's largest density {densest:e} gives an extinction of {sigma_max:e} m⁻¹, more than {:e}; lower medium.sigma_t or the grid's densities",
-                crate::scene::MAX_SIGMA_T
+                crate::limits::MAX_SIGMA_T
             ),
         )?;
         check(
@@ -237,6 +237,18 @@ impl Medium {
     #[inline]
     pub fn dims(&self) -> [usize; 3] {
         self.density.dims()
+    }
+
+    /// The box (m) of the voxels that hold density (the whole grid if none do): what
+    /// `camera.fit` frames.
+    pub fn cloud_box(&self) -> (Vec3, Vec3) {
+        match self.active_box(0) {
+            Some((lo, hi)) => {
+                let at = |i: [usize; 3]| self.origin + self.voxel_size * Vec3::new(i[0] as f32, i[1] as f32, i[2] as f32);
+                (at(lo), at(hi))
+            }
+            None => self.bbox(),
+        }
     }
 
     /// The box [min, max] (m).

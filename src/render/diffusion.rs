@@ -6,11 +6,11 @@
 
 pub mod source_field;
 
-use super::check_finite_field;
 use super::single::{background, pixel_sample};
 use super::{render_rows, Progress, Timings};
 use crate::diffusion::flux::{diffuse_flux, FluxField};
 use crate::diffusion::{solve_diffusion, BoundaryLight, DiffusionSolution};
+use crate::error::check_finite_field;
 use crate::error::Result;
 use crate::image::Image;
 use crate::incident::FirstScattering;

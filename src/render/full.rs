@@ -16,7 +16,6 @@
 //! With `iterations = 0` this is the paper's Figure 6 (diffusion plus the low-density edges, the
 //! ground still lit by its hemicubes).
 
-use super::check_finite_field;
 use super::diffusion::{boundary_light, check_incident, compute_incident, i0_rgb, scene_lit_volume, solved_lit_volume};
 use super::single::pixel_sample;
 use super::{Progress, Timings};
@@ -24,6 +23,7 @@ use crate::cube::{clear_air, BorderKeep, BorderLight, ClearAir, CubeImage, CubeO
 use crate::diffusion::{solve_diffusion_lean, BoundaryLight, DiffusionSettings, DiffusionSolution};
 use crate::edges::gather::{CubeRequest, CubeSource, EdgeGather, SunInput};
 use crate::edges::sparse::{gather_image, PixelRay, SparseSettings};
+use crate::error::check_finite_field;
 use crate::error::Result;
 use crate::image::Image;
 use crate::incident::IncidentLight;

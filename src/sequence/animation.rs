@@ -17,69 +17,7 @@
 //! channel no key sets keeps the scene's value.
 
 use crate::error::{Error, Result};
-use crate::scene::SceneDesc;
-use serde::{Deserialize, Serialize};
-
-/// The `[animation]` table.
-#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct AnimationDesc {
-    /// The scene's frames (`1-240`, `1-240x2`, `1,5,9-12`); `--frames` overrides it.
-    #[serde(default)]
-    pub frames: Option<String>,
-    /// The keyframes (`[[animation.key]]`), in any order.
-    #[serde(default)]
-    pub key: Vec<KeyDesc>,
-}
-
-/// One keyframe: its frame and the channels it sets.
-#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct KeyDesc {
-    /// The frame number.
-    pub frame: u32,
-    /// `sun.elevation_deg`, `sun.azimuth_deg` (degrees), `sun.irradiance` (W/m² per band).
-    #[serde(default)]
-    pub sun: SunKey,
-    /// `camera.position`, `camera.look_at` (m), `camera.fov_deg` (degrees, vertical).
-    #[serde(default)]
-    pub camera: CameraKey,
-    /// `medium.sigma_t` (m⁻¹ at density 1).
-    #[serde(default)]
-    pub medium: MediumKey,
-}
-
-/// The sun's keyable values.
-#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct SunKey {
-    /// Degrees above the horizon.
-    pub elevation_deg: Option<f32>,
-    /// Degrees from +x towards +z (interpolated as numbers: 350 → 10 turns the long way round).
-    pub azimuth_deg: Option<f32>,
-    /// W/m² per band.
-    pub irradiance: Option<[f32; 3]>,
-}
-
-/// The camera's keyable values.
-#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct CameraKey {
-    /// Eye position (m).
-    pub position: Option<[f32; 3]>,
-    /// Point looked at (m).
-    pub look_at: Option<[f32; 3]>,
-    /// Vertical field of view (degrees).
-    pub fov_deg: Option<f32>,
-}
-
-/// The medium's keyable values.
-#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct MediumKey {
-    /// Extinction at density 1 (m⁻¹).
-    pub sigma_t: Option<f32>,
-}
+use crate::scene::{AnimationDesc, KeyDesc, SceneDesc};
 
 /// A keyable channel: its scene key, how a key reads it, and the values it may take.
 struct Channel<const N: usize> {

@@ -1,0 +1,23 @@
+//! The magnitudes a scene may hold: past them f32 arithmetic in the methods overflows or loses
+//! the voxels. Scene validation, the loaders and the lighting check against them.
+
+/// Largest light the scene may carry, in W/m² (sun irradiance) or W/(m²·sr) (sky radiance, an
+/// environment map's scale on its radiance): 1e30, the brightest sun every method is tested to
+/// render finitely (tests/nonnegative.rs). The methods multiply it by phase-function peaks (up to
+/// ~1e4 sr⁻¹) and sum it over orders and samples in f32, whose largest value is 3.4e38, so a
+/// brighter light overflows to inf or NaN; the real sun gives 1361 W/m².
+pub const MAX_LIGHT: f32 = 1e30;
+
+/// Largest distance from the world's origin of the medium's corner and the camera (m): 1e7, past
+/// the Earth's radius (6.4e6 m). An f32 position there resolves 1 m, a fraction of any voxel;
+/// much farther, ray–box intersections lose the voxels and the methods give NaN.
+pub const MAX_COORDINATE: f32 = 1e7;
+
+/// Largest extinction σt (m⁻¹): 1e9, an optical depth of 1 per nanometre, denser than any medium
+/// light crosses. The optical depths σt·ρ·length the methods form in f32 then stay below 1e30
+/// across any grid of at most 1e6-m voxels with densities up to 1e15.
+pub const MAX_SIGMA_T: f32 = 1e9;
+
+/// Largest |exposure| of the PNG preview (stops): 2^64 spans any radiance from 1e-19 to 1e19;
+/// past 2^127 the f32 scale factor itself overflows.
+pub const MAX_EXPOSURE: f32 = 64.0;
