@@ -272,28 +272,33 @@ fn update_pixels(payload: &[u8], w: usize, h: usize) -> Vec<f32> {
         .collect()
 }
 
+/// A temporary folder holding the test sphere as `cloud.vdb`.
+fn sphere_dir() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(data("sphere64_blosc.vdb"), dir.path().join("cloud.vdb")).unwrap();
+    dir
+}
+
+/// Render `cloud.vdb` in `d` to `out` at 16×12 with `extra` flags; with `live`, streamed to a
+/// loopback tev listener, whose received bytes are returned.
+fn render_small(d: &Path, out: &str, extra: &[&str], live: bool) -> Vec<u8> {
+    let mut args = vec!["render", "cloud.vdb", "-o", out, "--width", "16", "--height", "12"];
+    args.extend(extra);
+    if !live {
+        ok(d, &args);
+        return Vec::new();
+    }
+    let (addr, reader) = tev_listener();
+    args.extend(["--display-server", &addr]);
+    ok(d, &args);
+    reader.join().unwrap()
+}
+
 #[test]
 fn display_server_streams_each_transport_iteration_and_full_sample() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = sphere_dir();
     let d = dir.path();
-    std::fs::copy(data("sphere64_blosc.vdb"), d.join("cloud.vdb")).unwrap();
-    let (addr, reader) = tev_listener();
-    let args = [
-        "render",
-        "cloud.vdb",
-        "-o",
-        "t.exr",
-        "--method",
-        "transport",
-        "--width",
-        "16",
-        "--height",
-        "12",
-    ];
-    let mut with_view = args.to_vec();
-    with_view.extend(["--display-server", &addr]);
-    ok(d, &with_view);
-    let bytes = reader.join().unwrap();
+    let bytes = render_small(d, "t.exr", &["--method", "transport"], true);
     let packets = tev_packets(&bytes);
     // CreateImage once, then an update per iteration (at least 2) and the final image.
     let updates: Vec<&[u8]> = packets.iter().filter(|p| p.0 == 6).map(|p| p.1).collect();
@@ -305,73 +310,20 @@ fn display_server_streams_each_transport_iteration_and_full_sample() {
     assert_eq!(update_pixels(updates[updates.len() - 2], 16, 12), want);
     assert_eq!(update_pixels(updates[updates.len() - 1], 16, 12), want);
     // Without a viewer the image is the same, bit for bit.
-    ok(
-        d,
-        &[
-            "render",
-            "cloud.vdb",
-            "-o",
-            "plain.exr",
-            "--method",
-            "transport",
-            "--width",
-            "16",
-            "--height",
-            "12",
-        ],
-    );
+    render_small(d, "plain.exr", &["--method", "transport"], false);
     let plain = Image::read_exr(&d.join("plain.exr")).unwrap();
     assert_eq!(plain.pixels, img.pixels);
     // `full`: an update after each antialiasing sample but the last, then the final image.
-    let (addr, reader) = tev_listener();
-    ok(
-        d,
-        &[
-            "render",
-            "cloud.vdb",
-            "-o",
-            "f.exr",
-            "--method",
-            "full",
-            "--aa-samples",
-            "3",
-            "--width",
-            "16",
-            "--height",
-            "12",
-            "--display-server",
-            &addr,
-        ],
-    );
-    let bytes = reader.join().unwrap();
+    let bytes = render_small(d, "f.exr", &["--method", "full", "--aa-samples", "3"], true);
     let types: Vec<u8> = tev_packets(&bytes).iter().map(|p| p.0).collect();
     assert_eq!(types, [4, 6, 6, 6]);
 }
 
 #[test]
 fn display_server_streams_every_pass_to_a_tev_listener() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = sphere_dir();
     let d = dir.path();
-    std::fs::copy(data("sphere64_blosc.vdb"), d.join("cloud.vdb")).unwrap();
-    let (addr, reader) = tev_listener();
-    let args = [
-        "render",
-        "cloud.vdb",
-        "-o",
-        "live.exr",
-        "--method",
-        "reference",
-        "--spp",
-        "3",
-        "--width",
-        "16",
-        "--height",
-        "12",
-    ];
-    let mut with_view = args.to_vec();
-    with_view.extend(["--display-server", &addr]);
-    ok(d, &with_view);
-    let bytes = reader.join().unwrap();
+    let bytes = render_small(d, "live.exr", &["--method", "reference", "--spp", "3"], true);
     let packets = tev_packets(&bytes);
     // CreateImage (4) once, then UpdateImageV3 (6) after each of the 3 passes and the final image.
     let types: Vec<u8> = packets.iter().map(|p| p.0).collect();
@@ -393,6 +345,20 @@ fn display_server_streams_every_pass_to_a_tev_listener() {
     let want: Vec<f32> = img.pixels.iter().flat_map(|p| p.to_array()).collect();
     assert_eq!(floats, want);
     // No viewer listening: a warning, and the render still succeeds.
+    let args = [
+        "render",
+        "cloud.vdb",
+        "-o",
+        "live.exr",
+        "--method",
+        "reference",
+        "--spp",
+        "3",
+        "--width",
+        "16",
+        "--height",
+        "12",
+    ];
     let closed = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
