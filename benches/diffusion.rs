@@ -2,7 +2,7 @@
 //! `diffusion` render at 480×360, with the convergence history of the solve printed first; and
 //! group `solver`: the three-band MGPCG solve to the default tolerance (1e-4) at three resolutions of the same cloud
 //! (50×40×30, 100×80×60 and 200×160×120, voxels scaled to keep its extent), whose ratios are the
-//! solver's scaling (issue 16's target: 200×160×120 in at most 9× the time of 100×80×60).
+//! solver's scaling (the target: 200×160×120 in at most 9× the time of 100×80×60).
 
 use cloudgi::diffusion::{solve_diffusion, DiffusionSettings};
 use cloudgi::render::diffusion::{boundary_light, compute_incident};

@@ -1,4 +1,4 @@
-//! 16-bit storage codes for fields that live through a whole render (memory of `full`, issue 16):
+//! 16-bit storage codes for fields that live through a whole render (docs/performance.md):
 //!
 //! - [`Bf16`]: the upper half of an f32 (sign, 8-bit exponent, 7 stored mantissa bits), rounded
 //!   to nearest, ties to even. f32's whole range, so robust to any irradiance scale (a scene in

@@ -810,7 +810,7 @@ pub fn compute(
     };
     // With the sun the only source and one extinction for every band, Q0 and Q1 follow from
     // ρT̄ (4 B per full voxel instead of 48), and the sweep accumulates Σ0 of one band only: 8 B
-    // per full voxel instead of 96 (the accumulators were `full`'s peak at 200×160×120).
+    // per full voxel instead of 96 (all twelve sums would be `full`'s peak at 200×160×120).
     let grey = sw.atten.iter().all(|&a| a == sw.atten[0]);
     let sun_only = grey && sw.sources.iter().all(|s| s.bin.is_none());
     let (dir, e) = sources.sun.unwrap_or((Vec3::Y, Rgb::ZERO));

@@ -23,7 +23,7 @@ fn main() {
 /// 32 MiB), after which the stages' large arrays come from the heap, whose freed ranges stay
 /// resident. The per-band and per-stage arrays (1–4 MiB at 200×160×120) are what `full`'s peak
 /// holds, so a fixed 1 MiB threshold keeps that peak near its live heap for a little more system
-/// time (docs/performance.md, "Memory of `full`").
+/// time (docs/performance.md, "The solver on its unknowns").
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 fn large_arrays_mapped() {
     extern "C" {

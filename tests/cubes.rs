@@ -1,4 +1,4 @@
-//! Viewing cubes, border cubes and ground hemicubes (issue 6, rendering parts): exact cases
+//! Viewing cubes, border cubes and ground hemicubes: exact cases
 //! (empty scene = sky bins, furnace, hemicube irradiance, opaque slab shadow), the pyramid
 //! renderer against the brute-force march, border-voxel detection and the stage-1 sign convention.
 

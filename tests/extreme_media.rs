@@ -1,4 +1,4 @@
-//! Every method on media at the edges of the valid range (issue 30): a real production cloud full
+//! Every method on media at the edges of the valid range: a real production cloud full
 //! of tiny densities, and a family of small media with optical depths per voxel 0.001–1000, HG g
 //! −0.95…0.99, albedo 0 and 1, and densities down to 1e-38. Each render is finite and
 //! non-negative, or (the transport solve that cannot converge on voxels 1000 optical depths

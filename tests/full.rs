@@ -125,8 +125,7 @@ fn the_sky_through_the_boundary_keeps_a_furnace_exact() {
     let scale = std::f64::consts::PI * l as f64 * boundary_area(&s.medium);
     assert!((out.x as f64).abs() < 1e-3 * scale, "net outflow {} against π·L·A = {scale}", out.x);
     // The first change is the first solve's error: it stops at a relative residual of 1e-2
-    // (render::full's FIRST_SOLVE_TOLERANCE), which the multigrid since its seventh round reaches in
-    // 3–4 iterations: the re-solve changes I0 by 1.4e-3 here; the iteration after it has nothing
+    // (render::full's FIRST_SOLVE_TOLERANCE), which the multigrid reaches in 3–4 iterations: the re-solve changes I0 by 1.4e-3 here; the iteration after it has nothing
     // left to change.
     assert!(p.changes[0] < 3e-3, "changes {:?}", p.changes);
     assert!(p.changes[1..].iter().all(|c| *c < 1e-3), "changes {:?}", p.changes);

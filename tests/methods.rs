@@ -81,7 +81,7 @@ fn furnace() {
             Method::Reference => (0.15, 0.012),
             // With the sky through the boundary condition (`render.sky_boundary`, the default)
             // I0 = L exactly: measured 1.3e-7 worst for both (f32 rounding). The paper's split
-            // (sky through stage 1) was −7.7 % / −7.4 % mean, −55 % worst at the thin rims.
+            // (sky through stage 1) is −7.7 % / −7.4 % mean, −55 % worst at the thin rims.
             Method::Diffusion | Method::Full => (1e-4, 1e-5),
             // Measured 0.42 % worst, 0.033 % mean: the converged transport solution keeps the
             // furnace up to its sweep discretisation.

@@ -1,5 +1,5 @@
-//! No method may write a negative or non-finite radiance (issue 13 item 1): every method and every
-//! EXR layer is finite and ≥ 0 on scenes that used to drive `full` negative — the noon example
+//! No method may write a negative or non-finite radiance: every method and every EXR layer is
+//! finite and ≥ 0 on scenes that drive the paper's I0 negative or overflow f32 — the noon example
 //! (sunlit tops: navy rims), an optically very thick conservative cloud (albedo 1, σt = 100 m⁻¹)
 //! and an absurdly bright sun (1e30 W/m²). Tiny images on a coarse grid keep it fast.
 
@@ -18,7 +18,7 @@ fn scene(example: Option<&str>, method: Method, edit: impl Fn(&mut SceneDesc)) -
         d.render.method = method;
         d.render.aov = true;
         d.render.stderr = true;
-        // The dense scene's paths would scatter ~10⁸ times (issue 13 item 3); a cap keeps it short
+        // The dense scene's paths would scatter ~10⁸ times; a cap keeps it short
         // and the estimate (then biased low) must still be non-negative.
         d.render.max_depth = Some(16);
         // Two samples: the reference's standard error of one sample is undefined (written as inf).

@@ -306,7 +306,7 @@ fn time_limit_holds_inside_a_pass_on_a_dense_medium() {
     assert!(stats.min_spp == 0 && stats.spp <= 1, "{stats:?}");
     assert!(img.pixels.iter().all(|p| p.is_finite() && p.min_element() >= 0.0));
     assert!(img.layer(SAMPLES_LAYER).is_some());
-    // σt = 1e6 at albedo 0.999 (the case), and --max-depth bounding a path without a limit.
+    // σt = 1e6 at albedo 0.999, and --max-depth bounding a path without a limit.
     let mut d = scene(ball(1e6, 0.999, 0.9), Rgb::splat(2.0), Rgb::splat(0.3), 40.0, 30.0, (6, 4), 1);
     d.render.time_limit = Some(0.5);
     let t = std::time::Instant::now();

@@ -389,7 +389,7 @@ fn back_scattering_converges_and_thick_voxels_fail_with_the_stage_named() {
     let (sun, sky) = high_sun_and_blue_sky();
     let s = TransportSettings::default();
     // g = −0.9: the δ-M transform truncates no back peak, DSA is halved, no extrapolation.
-    // (With f = g⁸ = 0.43 the first moment's scattering factor was −2.3: 10³⁵ after 60 sweeps.)
+    // (With f = g⁸ = 0.43 the first moment's scattering factor would be −2.3: 10³⁵ after 60 sweeps.)
     let mut m = ball(0.2, 1.0);
     m.optics = cloudgi::optics::Optics::new(0.2, Rgb::splat(1.0), -0.9);
     let f = solve(&m, &sun, &sky, None, &s, &NoProgress).unwrap();

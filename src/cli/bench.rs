@@ -1,6 +1,6 @@
 //! `cloudgi bench`: every stage's time (the `Timings` the renderer collects) for the
-//! chosen methods on three sizes of the procedural cloud, as a markdown table (the README's
-//! performance table is this command's output).
+//! chosen methods on three sizes of the procedural cloud, as a markdown table (the table in
+//! docs/performance.md, "Time per stage", is this command's output).
 
 use super::scene_file::SceneFile;
 use super::MethodArg;

@@ -335,9 +335,9 @@ fn render_each(
     };
     // Groups in batches, each batch's bins scattered into the packed array before the next is
     // rendered: the per-voxel vectors of only one batch are alive at a time (all of them at once
-    // were 2× the packed bins, 41 MB at 200×160×120). Eight groups per thread keep every thread
-    // busy to a batch's end; 64 groups held 3.75 MB of them at 200×160×120 on two threads, the
-    // largest item at `full`'s clear-air peak after the lit cells. The result does not depend
+    // would be 2× the packed bins, 41 MB at 200×160×120). Eight groups per thread keep every
+    // thread busy to a batch's end; 64 groups would hold 3.75 MB of them at 200×160×120 on two
+    // threads, the largest item at `full`'s clear-air peak after the lit cells. The result does not depend
     // on the batch size (scattered in order).
     let batch_groups = 8 * rayon::current_num_threads().max(1);
     for batch in groups.chunks(batch_groups) {

@@ -8,7 +8,7 @@
 //! under a uniform sky of radiance 1 (the exact radiance is 1 everywhere), the P1 field of the
 //! split gives I0(τ) = 1 − (3/2)E₄(τ) and Ī_ri = E₂(τ)/2, so the mean radiance I0 + Ī_ri is 1 at the
 //! surface and deep inside but 0.87 at τ = 0.5 and 0.94 at τ = 1 (Eₙ the exponential integrals),
-//! and the gather's images were 12–14 % too dark in the furnace (docs/budget.md).
+//! and with that split the gather's images are 12–14 % too dark in the furnace (docs/budget.md).
 //!
 //! # What
 //!

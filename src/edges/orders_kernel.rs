@@ -100,7 +100,7 @@ fn quadrants(r: Rect) -> [Rect; 4] {
 /// Largest optical depth the Poisson weights are evaluated at (see [`segment_orders`]).
 pub const MAX_DEPTH: f64 = 500.0;
 
-/// Default bound on the omitted Poisson tail (the 10⁻⁴).
+/// Default bound on the omitted Poisson tail Σ q_i beyond the last order kept (eq. 8).
 pub const DEFAULT_TAIL: f64 = 1e-4;
 
 /// Precomputed per-pixel weights w_i for orders i = 1..=`max_order` at one cube resolution and g.

@@ -577,7 +577,7 @@ mod tests {
                 let v = (o.as_dvec3() + d.as_dvec3() * (0.5 * (a + b)) - m.origin.as_dvec3()) / m.voxel_size.as_dvec3();
                 assert!((0..3).all(|k| (v[k] + 0.5).floor() as usize == c[k]), "{c:?} at {v:?}");
             }
-            // No cell twice in a row: a block face no longer cuts a cell in two.
+            // No cell twice in a row: a block face does not cut a cell in two.
             assert!(runs.windows(2).all(|w| w[0].0 != w[1].0));
             merged += blocks.len() - runs.len();
         }

@@ -27,7 +27,7 @@ pub type Cell = [f32; 5];
 /// A cell as stored: each channel a [`Scaled16`] code under its channel's scale (10 B).
 type Code = [Scaled16; 5];
 
-/// Cells stored per full voxel in 16 bits a channel (10 B a cell, was 20 B in f32: the lit
+/// Cells stored per full voxel in 16 bits a channel (10 B a cell against 20 B in f32: the lit
 /// volume's cells are `full`'s largest field at its clear-air cubes and last stage), one
 /// power-of-two scale per channel chosen from the channel's largest value. Every channel is ≥ 0
 /// (ρ, ρ·max(I0, 0), ρ·T_sun), which is what [`Scaled16`] codes. **Rounding:** every value from

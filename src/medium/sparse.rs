@@ -213,11 +213,11 @@ impl<T: Copy + Send + Sync> VoxelField<T> {
 
     /// `at(grid index)` for every full voxel, in parallel; `empty` elsewhere.
     pub fn from_fn(index: Arc<FullIndex>, empty: T, at: impl Fn(usize) -> T + Sync) -> VoxelField<T> {
-        // Sized up front: a collected list grew to twice its length.
+        // Sized up front: a collected list would grow to twice its length.
         let mut data = Vec::with_capacity(index.count() + 1);
         data.push(empty);
         // The full voxels' grid indices a batch at a time: all of them (8 B per full voxel)
-        // were the largest transient at `full`'s last stage (2.85 MB at 200×160×120).
+        // would be the largest transient at `full`'s last stage (2.85 MB at 200×160×120).
         const BATCH: usize = 1 << 15;
         let mut batch = Vec::with_capacity(BATCH.min(index.count()));
         let mut voxels = index.full_voxels();

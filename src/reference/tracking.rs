@@ -191,8 +191,8 @@ mod tests {
     #[test]
     fn dense_walk_far_from_the_origin_neither_stalls_nor_outlasts_its_deadline() {
         // σt = 1e6 m⁻¹: steps of ~1e-6 m, below half an f32 ulp of t ≈ 1000 m. The first 0.9 m
-        // inside the grid have zero density under a majorant of 1; before the f64 fallback the
-        // walk stood still there forever.
+        // inside the grid have zero density under a majorant of 1; without the f64 fallback the
+        // walk would stand still there forever.
         let mut g = Grid3::filled([8, 1, 1], 0.0);
         for i in 4..8 {
             g.set(i, 0, 0, 1.0);

@@ -186,7 +186,7 @@ pub struct GatherCubes<'a> {
     /// [`CubeSource::render_cube`] below); measured on the default scene: the rear faces made the
     /// gather 31 % faster, image within 1.1·10⁻⁵ mean relative difference of full-resolution
     /// cubes; the ring 25 % fewer traces per cube, images within 6.4·10⁻⁴ block MRE
-    /// (docs/performance.md, "Speed: the final gather").
+    /// (docs/performance.md, "Approximations made for speed").
     pub rear_half_resolution: bool,
     /// Cone width (rad) of each pixel of a face at `cone_res` pixels per edge (the scene's cube
     /// resolution): the same for every cube, so computed once (four `atan` per pixel).

@@ -90,7 +90,7 @@ impl TransportMemory {
     /// Bytes per full voxel: at a sweep's peak two spherical-harmonic arrays (the moments and the
     /// sweep's new moments; the source is evaluated from the moments, not stored) of 3 bands ×
     /// (L + 1)² f32, plus a batch of ordinates' sources and radiances (2 × 12 B each): 1,920 B at
-    /// order 7 (2,688 B with a stored source array; measured peak at 100×80×60 116 MB, was 147 MB).
+    /// order 7 (a stored source array would add 768 B).
     pub fn bytes_per_full_voxel(order: usize) -> u64 {
         2 * 3 * 4 * crate::math::sh_count(order) as u64 + 2 * 12 * solve::ORDINATE_BATCH as u64
     }
