@@ -88,8 +88,8 @@ render_table! {
     seed: u64 => seed;
     /// `reference`: samples (paths) per pixel.
     spp: u32 => spp;
-    /// `single`, `diffusion`, `full`: anti-aliasing samples per pixel (stratified positions, one
-    /// whole gather each); independent of the path tracer's `spp`.
+    /// `single`, `diffusion`, `full`, `transport`: anti-aliasing samples per pixel (stratified
+    /// positions, one whole gather each); independent of the path tracer's `spp`.
     aa_samples: u32 => aa_samples;
     /// Exposure of the PNG preview, in stops (the EXR is never scaled).
     exposure: f32 => exposure;
