@@ -5,9 +5,9 @@
 use cloudgi::cube::border::{find_border_voxels, render_border_cubes_with};
 use cloudgi::cube::ground::render_ground;
 use cloudgi::cube::render::{BinMask, CubeRenderer};
+use cloudgi::lit::sunlight::SunTransmittance;
 use cloudgi::math::{Rgb, Vec3};
 use cloudgi::render::diffusion::scene_lit_volume;
-use cloudgi::sunlight::SunTransmittance;
 use cloudgi::{NoProgress, Scene};
 use criterion::{criterion_group, criterion_main, Criterion};
 

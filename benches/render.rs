@@ -1,6 +1,6 @@
 //! Foundation benchmarks: the default `single` render at 480×360, and the sun-transmittance precompute.
 
-use cloudgi::sunlight::SunTransmittance;
+use cloudgi::lit::sunlight::SunTransmittance;
 use cloudgi::{NoProgress, Scene};
 use criterion::{criterion_group, criterion_main, Criterion};
 

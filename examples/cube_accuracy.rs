@@ -10,9 +10,9 @@
 use cloudgi::cube::border::{find_border_voxels, render_border_cubes};
 use cloudgi::cube::ground::render_ground;
 use cloudgi::cube::render::{render_cube_brute, BinMask, CubeOptions, CubeRenderer};
+use cloudgi::lit::sunlight::SunTransmittance;
 use cloudgi::math::Rgb;
 use cloudgi::render::diffusion::scene_lit_volume;
-use cloudgi::sunlight::SunTransmittance;
 use cloudgi::{NoProgress, Scene};
 use std::time::Instant;
 

@@ -11,10 +11,10 @@
 
 use cloudgi::cube::CubeImage;
 use cloudgi::edges::{gather_image, CubeRequest, CubeSource, EdgeAov, EdgeGather, EdgeSettings, PixelRay, SparseSettings, SunInput};
+use cloudgi::lit::sunlight::SunTransmittance;
 use cloudgi::math::{luminance, Rgb, Vec3};
 use cloudgi::render::single;
 use cloudgi::scene::Scene;
-use cloudgi::sunlight::SunTransmittance;
 use std::time::Instant;
 
 struct MarchCubes<'a> {

@@ -10,12 +10,12 @@
 //!
 //! `cargo run --release --example warm_start [FRAMES] [WIDTH]` (defaults 8 and 80; 4:3 images)
 
-use cloudgi::compare::compare;
 use cloudgi::math::Vec3;
 use cloudgi::medium::procedural::cumulus;
 use cloudgi::medium::Medium;
 use cloudgi::render::warm::{render_warm, Warm};
 use cloudgi::scene::{Scene, SceneDesc};
+use cloudgi::tools::compare::compare;
 use cloudgi::{Image, NoProgress};
 use std::path::Path;
 

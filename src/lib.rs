@@ -23,7 +23,7 @@ mod api;
 #[doc(hidden)]
 pub mod camera;
 #[doc(hidden)]
-pub mod compare;
+pub mod cli;
 #[doc(hidden)]
 pub mod cube;
 #[doc(hidden)]
@@ -33,8 +33,6 @@ pub mod edges;
 pub mod error;
 #[doc(hidden)]
 pub mod exposure;
-#[doc(hidden)]
-pub mod figures;
 pub(crate) mod half;
 #[doc(hidden)]
 pub mod image;
@@ -54,7 +52,6 @@ pub mod math;
 pub mod medium;
 #[doc(hidden)]
 pub mod optics;
-pub(crate) mod orders;
 pub(crate) mod pipeline;
 #[doc(hidden)]
 pub mod reference;
@@ -65,7 +62,7 @@ pub mod scene;
 #[doc(hidden)]
 pub mod sequence;
 #[doc(hidden)]
-pub mod sunlight;
+pub mod tools;
 #[doc(hidden)]
 pub mod transport;
 

@@ -145,7 +145,7 @@ fn slab_lit_from_above_is_brighter_below_darker_above() {
         dir: Vec3::Y,
         irradiance: inc.sun_irradiance,
     };
-    let sun_t = cloudgi::sunlight::SunTransmittance::compute(&m, Vec3::Y).grid;
+    let sun_t = cloudgi::lit::sunlight::SunTransmittance::compute(&m, Vec3::Y).grid;
     let off = LitVolume::new(m.clone(), i0_rgb(&sol), sun_t, sun, Sky::constant(Rgb::ZERO), None);
     let on = off.clone().with_flux(FluxField::new(&m, &i1));
     for j in 2..8 {

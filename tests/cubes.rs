@@ -205,7 +205,7 @@ fn pyramid_cube_bins_match_a_fine_brute_force_cube() {
         })
         .collect();
     let s = sun(Vec3::new(0.5, 0.7, 0.2), 3.0);
-    let sun_t = cloudgi::sunlight::SunTransmittance::compute(&m, s.dir).grid;
+    let sun_t = cloudgi::lit::sunlight::SunTransmittance::compute(&m, s.dir).grid;
     let sky = Sky::constant(Rgb::new(0.2, 0.3, 0.5));
     let ground = Ground {
         height: -3.0,
@@ -505,7 +505,7 @@ fn clear_air_on_a_small_scene_lights_the_ground_and_fills_every_needed_bin() {
     desc.medium.voxel_size = 40.0;
     desc.render.ground_samples = 8;
     let scene = cloudgi::Scene::build(desc, "small", std::path::Path::new(".")).unwrap();
-    let sun_t = cloudgi::sunlight::SunTransmittance::compute(&scene.medium, scene.sun.dir);
+    let sun_t = cloudgi::lit::sunlight::SunTransmittance::compute(&scene.medium, scene.sun.dir);
     let n = scene.medium.density.len();
     let l = scene.sky.radiance(Vec3::Y);
     let lit = cloudgi::render::diffusion::scene_lit_volume(&scene, vec![l; n], &sun_t);

@@ -47,7 +47,7 @@ fn the_disney_cloud_renders_near_reference_with_every_method() {
         cloudgi::render::render(&s, &NoProgress).unwrap().image
     };
     let reference = render(Method::Reference);
-    let mask = cloudgi::compare::choose_mask(&reference, None);
+    let mask = cloudgi::tools::compare::choose_mask(&reference, None);
     for (m, bound) in [
         (Method::Transport, 0.04),
         (Method::Full, 0.09),
@@ -56,7 +56,7 @@ fn the_disney_cloud_renders_near_reference_with_every_method() {
     ] {
         let img = render(m);
         assert_finite_nonnegative(m.name(), &img);
-        let metrics = cloudgi::compare::compare(&img, &reference, mask.as_deref()).unwrap();
+        let metrics = cloudgi::tools::compare::compare(&img, &reference, mask.as_deref()).unwrap();
         let mre = metrics.block_mean_relative_error.unwrap();
         assert!(mre < bound, "{}: block MRE {mre:.3} against reference (bound {bound})", m.name());
         // Not black: the cloud's mean luminance is a real fraction of the reference's (the

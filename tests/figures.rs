@@ -144,8 +144,8 @@ fn a_run_that_fails_leaves_no_output_folder() {
 
 #[test]
 fn masks_and_sunset() {
-    use cloudgi::figures::{edge_mask, sunset_desc, SUNSET_ELEVATION_DEG};
     use cloudgi::math::Rgb;
+    use cloudgi::tools::figures::{edge_mask, sunset_desc, SUNSET_ELEVATION_DEG};
     let t: Vec<Rgb> = [0.0, 0.04, 0.05, 0.5, 0.9, 0.95, 1.0].iter().map(|&v| Rgb::splat(v)).collect();
     assert_eq!(edge_mask(&t), vec![false, false, true, true, true, false, false]);
     // The default sun (0.3, 0.8, 0.5) keeps its azimuth atan2(0.5, 0.3) and drops to 4°.

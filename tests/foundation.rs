@@ -1,12 +1,12 @@
 //! Foundation checks: analytic transport cases, loaders, determinism and the procedural cloud.
 
 use cloudgi::lighting::{Sky, Sun};
+use cloudgi::lit::sunlight::SunTransmittance;
 use cloudgi::math::{Rgb, Vec3};
 use cloudgi::medium::{loaders, Grid3, Medium};
 use cloudgi::optics::Hg;
 use cloudgi::render::single;
 use cloudgi::scene::{Scene, SceneDesc};
-use cloudgi::sunlight::SunTransmittance;
 use std::path::Path;
 
 /// A scene around a homogeneous 10 m cube of density 1 at the origin, no ground.

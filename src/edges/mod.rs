@@ -4,6 +4,7 @@
 //! them with the dense (diffusion) solution. See `docs/edges.md`.
 
 pub mod gather;
+pub(crate) mod orders;
 pub mod orders_kernel;
 pub mod segments;
 pub mod sparse;

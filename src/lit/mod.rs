@@ -37,13 +37,14 @@
 pub mod ground;
 pub mod pyramid;
 pub mod sky_single;
+pub mod sunlight;
 
 use crate::diffusion::flux::FluxField;
 use crate::lighting::{Sky, Sun};
+use crate::lit::sunlight::SunGrid;
 use crate::math::{Rgb, Trilinear, Vec3};
 use crate::medium::march::{march, March};
 use crate::medium::Medium;
-use crate::sunlight::SunGrid;
 use ground::LitGround;
 use pyramid::{Cells, LitPyramid};
 use sky_single::SkySingle;

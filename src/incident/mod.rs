@@ -41,7 +41,7 @@
 //! **Sun.** The sun is traced apart, as one more parallel-ray direction without jitter, carrying
 //! its irradiance; it adds ρσs/(4π)·E·T̄ to Q0 and ρσs g/(4π)·E·T̄·(−sun dir) to Q1, with T̄ the
 //! voxel-mean transmittance. The reduced sun radiance for the gather's exact single scattering is
-//! not part of stage 1: it is kept at voxel centres by [`crate::sunlight::SunTransmittance`]
+//! not part of stage 1: it is kept at voxel centres by [`crate::lit::sunlight::SunTransmittance`]
 //! (exact optical depth of the trilinear field), which the renderers compute where it is read.
 //!
 //! **Clear-air hook** ([`EntryRadiance`]). When a sky-bin ray steps from an empty voxel X_e into a

@@ -18,12 +18,12 @@ use crate::incident::{compute, EntryRadiance, IncidentLight, IncidentSources};
 use crate::lighting::bins::DirectionBins;
 use crate::lit::ground::LitGround;
 use crate::lit::sky_single::SkySingle;
+use crate::lit::sunlight::SunTransmittance;
 use crate::lit::LitVolume;
 use crate::math::Rgb;
 use crate::medium::march::march_with;
 use crate::medium::sparse::VoxelField;
 use crate::scene::Scene;
-use crate::sunlight::SunTransmittance;
 use source_field::SourceField;
 
 /// Stage 1 for a scene with default sampling (seed from `render.seed`), the clear-air hook

@@ -14,11 +14,11 @@
 //! * `reference` of the scene (and of the sunset scene), the unbiased path tracer.
 //!
 //! Writes `DIR/<id>.exr` + `.png` per render, `DIR/diff-<id>.png` (relative luminance difference
-//! against the reference, see [`crate::compare`]), `DIR/index.md` (images side by side with the
+//! against the reference, see [`crate::tools::compare`]), `DIR/index.md` (images side by side with the
 //! error table) and `DIR/results.json`.
 //!
 //! **Masks.** Each method is measured twice:
-//! * *cloud*: reference transmittance < 0.99 ([`crate::compare::CLOUD_T`]), every pixel that
+//! * *cloud*: reference transmittance < 0.99 ([`crate::tools::compare::CLOUD_T`]), every pixel that
 //!   shows cloud;
 //! * *edge*: reference transmittance in [[`EDGE_T_MIN`], [`EDGE_T_MAX`]] = [0.05, 0.9]: the thin
 //!   rims where the camera ray's optical depth is between about 0.1 and 3. Below 0.05 the ray
@@ -26,12 +26,12 @@
 //!   the background and the relative error is dominated by the background, which every method
 //!   gets right. This band is where the paper's low-density treatment (section 4) acts.
 
-use crate::compare::{compare, write_diff_png, Metrics};
 use crate::error::{Error, Result};
 use crate::image::Image;
 use crate::pipeline::{Progress, Timings};
 use crate::reference::TRANSMITTANCE_LAYER;
 use crate::scene::{Method, Scene, SceneDesc, SkyModel};
+use crate::tools::compare::{compare, write_diff_png, Metrics};
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -174,7 +174,7 @@ fn masks(reference: &Image) -> Result<Masks> {
         .layer(TRANSMITTANCE_LAYER)
         .ok_or_else(|| Error::format("<reference render>", "no transmittance layer"))?;
     Ok(Masks {
-        cloud: crate::compare::mask_from_transmittance(t),
+        cloud: crate::tools::compare::mask_from_transmittance(t),
         edge: edge_mask(t),
     })
 }
@@ -318,7 +318,7 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
         width: opts.width,
         height: opts.height,
         threads: rayon::current_num_threads(),
-        cloud_mask: format!("reference transmittance < {}", crate::compare::CLOUD_T),
+        cloud_mask: format!("reference transmittance < {}", crate::tools::compare::CLOUD_T),
         edge_mask: edge_mask_name(),
         references,
         figures,
