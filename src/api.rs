@@ -61,6 +61,22 @@ impl Scene {
     }
 }
 
+impl Image {
+    /// The exposure (stops) the command line gives a PNG preview when neither `--exposure` nor
+    /// `render.exposure` sets one: −log2 L, L the 99th percentile of the finite luminances (it maps
+    /// to 1, which the filmic curve takes to 0.80);
+    /// 0 for an image without a positive one. Use it with [`Image::to_png_bytes`].
+    ///
+    /// ```
+    /// let mut img = cloudgi::Image::new(2, 1);
+    /// img.pixels.fill(cloudgi::Rgb::splat(3.2));
+    /// assert!((img.auto_exposure() + 3.2f32.log2()).abs() < 1e-5);
+    /// ```
+    pub fn auto_exposure(&self) -> f32 {
+        crate::exposure::auto_stops(self)
+    }
+}
+
 /// A density grid in memory: it replaces `medium.grid` (see [`Scene::build_with`]); the scene's
 /// `medium.downsample`, `max_voxels` and optical properties still apply.
 #[derive(Clone, Debug)]

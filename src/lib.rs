@@ -66,8 +66,12 @@ pub mod tools;
 #[doc(hidden)]
 pub mod transport;
 
+#[cfg(test)]
+mod tests;
+
 pub use api::{render, Density, Event, FnProgress, Options, Render, Stats, DENSITY_SOURCE, TOML_SOURCE};
 pub use error::{Error, Result};
 pub use image::Image;
+pub use math::Rgb;
 pub use pipeline::{NoProgress, Progress, Timings};
 pub use scene::{Method, Scene, SceneDesc};

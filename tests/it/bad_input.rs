@@ -4,6 +4,7 @@
 //! written. Most rows fail before any rendering, in milliseconds. The warnings for settings that
 //! do not apply (the render still runs) and the first-use defaults are checked at the end.
 
+use crate::common::{data, f32s, npy, BIN};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -12,11 +13,7 @@ type File = (&'static str, Vec<u8>);
 
 /// Run the binary in `dir`: (exit code, stdout, stderr).
 fn run_in(dir: &Path, args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_cloudgi"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .unwrap();
+    let out = Command::new(BIN).current_dir(dir).args(args).output().unwrap();
     (
         out.status.code().unwrap_or(-1),
         String::from_utf8_lossy(&out.stdout).to_string(),
@@ -247,7 +244,7 @@ fn bad_lights_ground_camera_and_render_keys() {
     );
     // Each factor within the light bound, their product past it: named with the file and the fix.
     let mut bright = cloudgi::Image::new(4, 2);
-    bright.pixels.fill(cloudgi::math::Rgb::splat(1e20));
+    bright.pixels.fill(cloudgi::Rgb::splat(1e20));
     render_fails(
         "[sky]\nmodel = \"envmap\"\npath = \"env.exr\"\nscale = 1e20\n",
         &[("env.exr", bright.to_exr_bytes().unwrap())],
@@ -275,30 +272,12 @@ fn vol(dims: [i32; 3], values: &[f32], truncate: usize) -> Vec<u8> {
     vol_full(3, 1, dims, 1, [0.0, 0.0, 0.0, 1.0, 1.0, 1.0], values, truncate)
 }
 
-/// A .npy with header dict `header` and `data` bytes.
-fn npy(header: &str, data: &[u8]) -> Vec<u8> {
-    let mut h = header.to_string();
-    while (10 + h.len() + 1) % 64 != 0 {
-        h.push(' ');
-    }
-    h.push('\n');
-    let mut b = b"\x93NUMPY\x01\x00".to_vec();
-    b.extend_from_slice(&(h.len() as u16).to_le_bytes());
-    b.extend_from_slice(h.as_bytes());
-    b.extend_from_slice(data);
-    b
-}
-
-fn f32s(v: &[f32]) -> Vec<u8> {
-    v.iter().flat_map(|x| x.to_le_bytes()).collect()
-}
-
 fn grid_fails(grid: &str, files: &[File], expect: &[&str]) {
     render_fails(&format!("[medium]\ngrid = \"{grid}\"\n"), files, expect);
 }
 
 fn vdb_data(name: &str) -> Vec<u8> {
-    std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/vdb").join(name)).unwrap()
+    std::fs::read(data("vdb").join(name)).unwrap()
 }
 
 #[test]
@@ -642,7 +621,7 @@ fn endless_inputs_are_cut_off() {
 fn run_full(dir: &Path, args: &[&str], stdout_full: bool) -> (i32, String) {
     use std::process::Stdio;
     let full = || std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_cloudgi"));
+    let mut cmd = Command::new(BIN);
     cmd.current_dir(dir).args(args);
     if stdout_full {
         cmd.stdout(full());
@@ -694,7 +673,7 @@ fn a_full_disk_or_a_closed_pipe_is_no_panic() {
         assert!(!err.contains("panicked"), "{args:?}: {err}");
     }
     // A reader that closed the pipe before the command wrote: quiet, the shell's 128 + SIGPIPE.
-    let mut child = Command::new(env!("CARGO_BIN_EXE_cloudgi"))
+    let mut child = Command::new(BIN)
         .current_dir(dir.path())
         .args(["info", "g.vdb"])
         .stdout(std::process::Stdio::piped())
@@ -714,7 +693,7 @@ fn an_interrupt_leaves_no_file_and_says_so() {
     for (signal, code) in [("INT", 130), ("TERM", 143)] {
         let dir = tempfile::tempdir().unwrap();
         std::fs::write(dir.path().join("s.toml"), SCENE).unwrap();
-        let child = Command::new(env!("CARGO_BIN_EXE_cloudgi"))
+        let child = Command::new(BIN)
             .current_dir(dir.path())
             .args(["render", "s.toml", "--method", "reference", "--spp", "100000", "-q"])
             .stderr(std::process::Stdio::piped())
@@ -1216,86 +1195,7 @@ fn default_render_writes_exr_and_png() {
 #[test]
 fn the_default_method_is_transport_and_default_toml_is_the_default_scene() {
     let d = cloudgi::SceneDesc::default();
-    assert_eq!(d.render.method, cloudgi::scene::Method::Transport);
-    let text = include_str!("../examples/default.toml");
+    assert_eq!(d.render.method, cloudgi::Method::Transport);
+    let text = include_str!("../../examples/default.toml");
     assert_eq!(cloudgi::SceneDesc::from_toml(text, "default.toml").unwrap(), d);
-}
-
-// --------------------------------------------------------------- valid scenes at the edges
-
-fn build(text: &str) -> cloudgi::Scene {
-    let desc = cloudgi::SceneDesc::from_toml(text, "s.toml").unwrap();
-    cloudgi::Scene::build(desc, "s.toml", Path::new(".")).unwrap()
-}
-
-/// `text` with a small camera looking down at the cloud's foot, so the ground fills the lower rows.
-fn small(text: &str) -> String {
-    format!("{text}[camera]\nwidth = 12\nheight = 9\nlook_at = [0.0, 0.0, 0.0]\n")
-}
-
-fn render_as(s: &cloudgi::Scene, m: cloudgi::scene::Method) -> cloudgi::Image {
-    let mut t = s.clone();
-    t.render.method = m;
-    cloudgi::render::render(&t, &cloudgi::NoProgress).unwrap().image
-}
-
-#[test]
-fn a_scene_without_ground_table_or_with_enabled_false_has_no_ground() {
-    use cloudgi::scene::Method;
-    assert!(cloudgi::Scene::default_scene().unwrap().ground.is_some());
-    assert!(build(SCENE).ground.is_none(), "no [ground] table: no ground");
-    assert!(build(&format!("{SCENE}[ground]\nenabled = false\n")).ground.is_none());
-    let g = build(&format!("{SCENE}[ground]\nheight = 5.0\n"))
-        .ground
-        .expect("a [ground] table: a ground");
-    assert_eq!(g.height, 5.0);
-    // And the image shows it: the bottom row sees the ground, or the sky without one.
-    let none = render_as(&build(&small(SCENE)), Method::Single);
-    let off = render_as(&build(&small(&format!("{SCENE}[ground]\nenabled = false\n"))), Method::Single);
-    let on = render_as(&build(&small(&format!("{SCENE}[ground]\n"))), Method::Single);
-    assert_eq!(none, off);
-    assert_ne!(none.get(6, 8), on.get(6, 8));
-}
-
-#[test]
-fn a_transparent_medium_renders_sky_and_ground_without_a_solve() {
-    use cloudgi::scene::Method;
-    let dir = tempfile::tempdir().unwrap();
-    std::fs::write(dir.path().join("g.vol"), vol([2, 2, 2], &[0.0; 8], 0)).unwrap();
-    let zero_grid = format!(
-        "[medium]\ngrid = \"{}\"\n[ground]\n[render]\naov = true\n",
-        dir.path().join("g.vol").display().to_string().replace('\\', "/")
-    );
-    for text in [format!("{SCENE}sigma_t = 0.0\n[ground]\n[render]\naov = true\n"), zero_grid] {
-        let s = build(&small(&text));
-        let single = render_as(&s, Method::Single);
-        // Every pixel is the background seen through nothing.
-        for y in 0..9 {
-            for x in 0..12 {
-                let r = s.camera.ray(x as f32 + 0.5, y as f32 + 0.5);
-                assert_eq!(single.get(x, y), s.background(r.origin, r.dir, |_| 1.0), "pixel ({x}, {y})");
-            }
-        }
-        assert_eq!(render_as(&s, Method::Diffusion).pixels, single.pixels, "{text}");
-        let full = render_as(&s, Method::Full);
-        assert_eq!(full.pixels, single.pixels, "{text}");
-        assert_eq!(full.layer("background").unwrap(), &single.pixels[..]);
-        assert!(full.layer("diffusion").unwrap().iter().all(|p| *p == cloudgi::math::Rgb::ZERO));
-    }
-}
-
-#[test]
-fn spp_does_not_multiply_the_deterministic_methods() {
-    use cloudgi::scene::Method;
-    let s = build(&small(SCENE));
-    for m in [Method::Single, Method::Full] {
-        let img = |spp: u32, aa: u32| {
-            let mut t = s.clone();
-            (t.render.spp, t.render.aa_samples) = (spp, aa);
-            render_as(&t, m)
-        };
-        let base = img(1, 1);
-        assert_eq!(img(16, 1), base, "{m:?}: render.spp must not change a deterministic image");
-        assert_ne!(img(1, 4), base, "{m:?}: render.aa_samples anti-aliases");
-    }
 }

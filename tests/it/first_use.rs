@@ -1,35 +1,26 @@
 //! First use, end to end through the binary: a grid file as the scene, framed and lit; z-up
 //! files; the PNG's automatic exposure and `tonemap`; the live view to a tev listener.
 
+use crate::common::{cloudgi, npy_grid, ok};
 use cloudgi::Image;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 fn data(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/vdb").join(name)
+    crate::common::data("vdb").join(name)
 }
 
-fn cloudgi(dir: &Path, args: &[&str]) -> Output {
-    let out = Command::new(env!("CARGO_BIN_EXE_cloudgi"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(!String::from_utf8_lossy(&out.stderr).contains("panicked"));
-    out
-}
+/// The reference's transmittance layer.
+const TRANSMITTANCE: &str = "transmittance";
 
-fn ok(dir: &Path, args: &[&str]) -> String {
-    let out = cloudgi(dir, args);
-    let err = String::from_utf8_lossy(&out.stderr).to_string();
-    assert!(out.status.success(), "{args:?}: {err}");
-    err
+/// Rec. 709 luminance, the automatic exposure's.
+fn luminance(p: cloudgi::Rgb) -> f32 {
+    0.2126 * p.x + 0.7152 * p.y + 0.0722 * p.z
 }
 
 /// Share of the pixels whose camera ray crosses some cloud (the reference's transmittance layer
 /// below 1).
 fn cloud_share(img: &Image) -> f32 {
-    let t = img.layer(cloudgi::reference::TRANSMITTANCE_LAYER).unwrap();
+    let t = img.layer(TRANSMITTANCE).unwrap();
     t.iter().filter(|p| p.x < 1.0).count() as f32 / t.len() as f32
 }
 
@@ -91,13 +82,13 @@ fn bad_first_use_input_is_refused_before_any_output() {
 
 /// The exposed luminance (radiance × 2^stops) of the median cloud pixel (transmittance < 0.99).
 fn cloud_median(img: &Image, stops: f32) -> f32 {
-    let t = img.layer(cloudgi::reference::TRANSMITTANCE_LAYER).unwrap();
+    let t = img.layer(TRANSMITTANCE).unwrap();
     let mut lum: Vec<f32> = img
         .pixels
         .iter()
         .zip(t)
         .filter(|(_, t)| t.x < 0.99)
-        .map(|(p, _)| cloudgi::exposure::luminance(*p) * stops.exp2())
+        .map(|(p, _)| luminance(*p) * stops.exp2())
         .collect();
     lum.sort_by(f32::total_cmp);
     lum[lum.len() / 2]
@@ -117,7 +108,7 @@ fn automatic_exposure_and_tonemap_remake_the_png() {
     let err = ok(d, &args);
     assert!(err.contains("automatic"), "{err}");
     let img = Image::read_exr(&d.join("out.exr")).unwrap();
-    let stops = cloudgi::exposure::auto_stops(&img);
+    let stops = img.auto_exposure();
     // The rule maps the 99th percentile of luminance to 1; the cloud's median lands at 0.74
     // (+0.68 stops): a bright cloud below white.
     let median = cloud_median(&img, stops);
@@ -149,41 +140,26 @@ fn automatic_exposure_and_tonemap_remake_the_png() {
 
 #[test]
 fn a_z_up_file_renders_as_the_same_file_turned_y_up() {
-    use cloudgi::math::Vec3;
-    use cloudgi::medium::{loaders, Grid3};
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     // A lopsided blob, 12 × 8 × 6 voxels of 20 m (z-up: 6 voxels tall), and the same voxels
     // turned y-up by hand: (x, y, z) → (x, z, −y).
     let [nx, ny, nz] = [12, 8, 6];
     let rho = |i: usize, j: usize, k: usize| ((i * 7 + j * 3 + k * 5) % 11) as f32 * 0.1 * (i as f32 / nx as f32);
-    let mut z_up = Grid3::filled([nx, ny, nz], 0.0);
-    let mut y_up = Grid3::filled([nx, nz, ny], 0.0);
-    for k in 0..nz {
-        for j in 0..ny {
-            for i in 0..nx {
-                z_up.set(i, j, k, rho(i, j, k));
-                y_up.set(i, k, ny - 1 - j, rho(i, j, k));
-            }
-        }
-    }
-    loaders::write_npy(&d.join("z.npy"), &z_up).unwrap();
-    loaders::write_npy(&d.join("y.npy"), &y_up).unwrap();
-    let origin = Vec3::new(-120.0, -80.0, 10.0);
-    let turned = Vec3::new(origin.x, origin.z, -(origin.y + 20.0 * ny as f32));
+    std::fs::write(d.join("z.npy"), npy_grid([nx, ny, nz], rho)).unwrap();
+    std::fs::write(d.join("y.npy"), npy_grid([nx, nz, ny], |i, k, j| rho(i, ny - 1 - j, k))).unwrap();
+    let origin = [-120.0f32, -80.0, 10.0];
+    let turned = [origin[0], origin[2], -(origin[1] + 20.0 * ny as f32)];
     let camera = "[camera]\nposition = [50.0, 300.0, 600.0]\nlook_at = [0.0, 60.0, 0.0]\nwidth = 32\nheight = 24\n";
     let medium = "[medium]\nvoxel_size = 20.0\nsigma_t = 0.02\n";
     std::fs::write(
         d.join("z.toml"),
-        format!(
-            "{medium}grid = \"z.npy\"\nup_axis = \"z\"\norigin = {:?}\n{camera}",
-            origin.to_array()
-        ),
+        format!("{medium}grid = \"z.npy\"\nup_axis = \"z\"\norigin = {:?}\n{camera}", origin),
     )
     .unwrap();
     std::fs::write(
         d.join("y.toml"),
-        format!("{medium}grid = \"y.npy\"\norigin = {:?}\n{camera}", turned.to_array()),
+        format!("{medium}grid = \"y.npy\"\norigin = {:?}\n{camera}", turned),
     )
     .unwrap();
     for s in ["z", "y"] {

@@ -2,8 +2,8 @@
 //! goodness-of-fit test of sampled directions against the density integrated over a grid of
 //! (cosθ, φ) cells, plus the sample mean cosine against g.
 
-use cloudgi::math::{Frame, Rng, Vec3};
-use cloudgi::optics::Hg;
+use crate::math::{Frame, Rng, Vec3};
+use crate::optics::Hg;
 
 /// ln Γ(x) (Lanczos, g = 7), accurate to ~1e-14 for x > 0.
 fn ln_gamma(x: f64) -> f64 {

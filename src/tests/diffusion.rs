@@ -1,14 +1,14 @@
 //! Stage 1 (incident light), stage 2 (diffusion operator and MGPCG solver), the slab check, and
 //! the diffusion render.
 
-use cloudgi::diffusion::slab::{default_cells, slab_forward_fraction, solve_slab, solve_slab_similar, Incidence};
-use cloudgi::diffusion::{boundary_outflow, solve_diffusion, solve_diffusion_lean, BoundaryLight, DiffusionSettings};
-use cloudgi::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
-use cloudgi::lighting::DirectionBins;
-use cloudgi::math::{Rgb, Vec3};
-use cloudgi::medium::{Grid3, Medium};
-use cloudgi::render::diffusion::{boundary_light, compute_incident};
-use cloudgi::{Error, Method, NoProgress, Scene};
+use crate::diffusion::slab::{default_cells, slab_forward_fraction, solve_slab, solve_slab_similar, Incidence};
+use crate::diffusion::{boundary_outflow, solve_diffusion, solve_diffusion_lean, BoundaryLight, DiffusionSettings};
+use crate::incident::{compute, IncidentLight, IncidentSettings, IncidentSources};
+use crate::lighting::DirectionBins;
+use crate::math::{Rgb, Vec3};
+use crate::medium::{Grid3, Medium};
+use crate::render::diffusion::{boundary_light, compute_incident};
+use crate::{Error, Method, NoProgress, Scene};
 use std::f64::consts::PI;
 
 /// Analytic solution of the 1-D eq. 4 with eq. 7 for a slab under a normal beam (E = 1):
@@ -69,7 +69,7 @@ fn slab_against_adding_doubling() {
     // Diffusion is accurate for thick, highly scattering slabs. Rows with reduced optical depth
     // (1 − g)τ ≥ 5 and albedo ≥ 0.99: R and T within 0.04 absolute (measured worst ~0.03, see
     // docs/accuracy.md). Thin or absorbing slabs are not expected to agree and are not tested.
-    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/slab_adding_doubling.csv")).unwrap();
+    let text = super::common::SLAB_TABLE;
     let mut checked = 0;
     for line in text.lines().skip(1) {
         let v: Vec<f64> = line.split(',').map(|x| x.trim().parse().unwrap()).collect();
@@ -91,7 +91,7 @@ fn slab_against_adding_doubling() {
 fn delta_m_slab_against_adding_doubling() {
     // With the δ-M transform (f = g²) every row of reduced optical depth (1 − g)τ ≥ 1, absorbing
     // rows included: R and T within 0.03 absolute, never negative (measured worst: docs/budget.md).
-    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/slab_adding_doubling.csv")).unwrap();
+    let text = super::common::SLAB_TABLE;
     let mut checked = 0;
     let mut worst: f64 = 0.0;
     for line in text.lines().skip(1) {
@@ -402,18 +402,18 @@ fn deterministic_at_any_thread_count_and_hook_replaces_radiance() {
 fn diffusion_render_is_brighter_than_single_scattering() {
     let mut scene = default_small();
     scene.render.method = Method::Diffusion;
-    let d = cloudgi::render::render(&scene, &NoProgress).unwrap();
+    let d = crate::render::render(&scene, &NoProgress).unwrap();
     scene.render.method = Method::Single;
-    let s = cloudgi::render::render(&scene, &NoProgress).unwrap();
+    let s = crate::render::render(&scene, &NoProgress).unwrap();
     assert!(d.timings.stages.iter().any(|(n, _)| n == "diffusion solve"));
     // Pixels where the cloud is: compare the mean luminance over the image centre.
-    let lum = |img: &cloudgi::Image| -> f64 {
+    let lum = |img: &crate::Image| -> f64 {
         let mut sum = 0.0;
         for y in 16..32 {
             for x in 20..44 {
                 let p = img.pixels[(y * 64 + x) as usize];
                 assert!(p.is_finite() && p.min_element() >= 0.0);
-                sum += cloudgi::math::luminance(p) as f64;
+                sum += crate::math::luminance(p) as f64;
             }
         }
         sum
@@ -427,15 +427,15 @@ fn bad_solver_settings_name_the_field() {
     for (field, edit) in [
         (
             "render.solver_tolerance",
-            Box::new(|d: &mut cloudgi::SceneDesc| d.render.solver_tolerance = 0.0) as Box<dyn Fn(&mut cloudgi::SceneDesc)>,
+            Box::new(|d: &mut crate::SceneDesc| d.render.solver_tolerance = 0.0) as Box<dyn Fn(&mut crate::SceneDesc)>,
         ),
         (
             "render.solver_tolerance",
-            Box::new(|d: &mut cloudgi::SceneDesc| d.render.solver_tolerance = f64::NAN),
+            Box::new(|d: &mut crate::SceneDesc| d.render.solver_tolerance = f64::NAN),
         ),
         (
             "render.solver_max_iterations",
-            Box::new(|d: &mut cloudgi::SceneDesc| d.render.solver_max_iterations = 0),
+            Box::new(|d: &mut crate::SceneDesc| d.render.solver_max_iterations = 0),
         ),
     ] {
         let err = Scene::load(None, |d| edit(d)).unwrap_err();
@@ -478,31 +478,4 @@ fn jittered_direction_strata_keep_the_bin_power() {
             assert!((got - q1).length() < 0.02 * q1.length(), "{got} vs {q1}");
         }
     }
-}
-
-#[test]
-fn bench_prints_a_row_per_cloud_and_method_with_the_solver_summary() {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_cloudgi"))
-        .args(["bench", "--methods", "single,diffusion", "--sizes", "10x8x6,20x16x12"])
-        .args(["--width", "16", "--height", "12"])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let text = String::from_utf8_lossy(&out.stdout);
-    let rows: Vec<&str> = text
-        .lines()
-        .filter(|l| l.starts_with("| 10×8×6") || l.starts_with("| 20×16×12"))
-        .collect();
-    assert_eq!(rows.len(), 4, "{text}");
-    assert!(rows[1].contains("| diffusion |") && text.contains("| diffusion solve |"), "{text}");
-    assert!(
-        text.contains("20×16×12 diffusion: diffusion:") && text.contains("iterations"),
-        "{text}"
-    );
-    let bad = std::process::Command::new(env!("CARGO_BIN_EXE_cloudgi"))
-        .args(["bench", "--sizes", "10x8"])
-        .output()
-        .unwrap();
-    assert!(!bad.status.success());
-    assert!(String::from_utf8_lossy(&bad.stderr).contains("--sizes"));
 }

@@ -1,11 +1,11 @@
 //! Edge treatment (paper section 4 + section 6 fixes): furnace, thin slab against Monte Carlo,
 //! threshold 0 against the pure dense gather, smooth merging of segments, determinism.
 
-use cloudgi::cube::CubeImage;
-use cloudgi::edges::{CubeRequest, CubeSource, EdgeGather, EdgeSettings, SunInput};
-use cloudgi::math::{Rgb, Rng, Vec3};
-use cloudgi::medium::{procedural, Grid3, Medium};
-use cloudgi::optics::Hg;
+use crate::cube::CubeImage;
+use crate::edges::{CubeRequest, CubeSource, EdgeGather, EdgeSettings, SunInput};
+use crate::math::{Rgb, Rng, Vec3};
+use crate::medium::{procedural, Grid3, Medium};
+use crate::optics::Hg;
 use rayon::prelude::*;
 
 /// A cube filled with one radiance.
@@ -50,7 +50,7 @@ impl CubeSource for NoCubes {
 /// orders ≥ 2 per unit irradiance (sr⁻¹).
 fn sun_orders_from_2(depth: f64, a: f32, g: f32, cos: f64) -> f64 {
     // q[k] is the weight of order k + 1.
-    let q = cloudgi::edges::segment_orders(depth, 1e-4);
+    let q = crate::edges::segment_orders(depth, 1e-4);
     (1..q.len())
         .map(|k| q[k] * (a as f64).powi(k as i32 + 1) * Hg::new(g).order(k + 1).eval_cos_f64(cos))
         .sum()
@@ -319,27 +319,34 @@ fn thin_slab_under_sky_matches_monte_carlo() {
     }
 }
 
+/// A row of voxels along x with densities `vals`, 3 × 3 voxels across, 10 m voxels (σt 0.5 m⁻¹,
+/// albedo 1, g 0.9).
+fn x_profile(vals: &[f32]) -> Medium {
+    let mut grid = Grid3::filled([vals.len(), 3, 3], 0.0);
+    for k in 0..3 {
+        for j in 0..3 {
+            for (i, v) in vals.iter().enumerate() {
+                grid.set(i, j, k, *v);
+            }
+        }
+    }
+    Medium::new(grid, Vec3::ZERO, Vec3::splat(10.0), 0.5, Rgb::ONE, 0.9)
+}
+
+/// The edge part (red) along the axis of an [`x_profile`], lit from the side and front (higher
+/// orders, scattering more, see more of the side) with a dense source of 0.8.
+fn side_lit_edge(m: &Medium, settings: EdgeSettings) -> f32 {
+    let cubes = Directional(|w: Vec3| Rgb::splat(if w.x > 0.9 { 4.0 } else { 0.5 + w.y.max(0.0) }));
+    let dense = |_: Vec3, _: Vec3| Rgb::splat(0.8);
+    let g = unlit_gather(m, settings, &cubes, &dense);
+    g.radiance(Vec3::new(-5.0, 15.0, 15.0), Vec3::X, f32::INFINITY, Rgb::ZERO).total().x
+}
+
 #[test]
 fn merging_segments_is_continuous_with_the_fix_and_jumps_without() {
     // A ray along x through ρ = 0.1 | bump of peak b | 0.1. As b rises through T = 0.3 the two
     // segments join into one. The edge part must change continuously with the fix.
-    let profile = |b: f32| {
-        let vals = [0.0, 0.1, 0.1, 0.1, 0.1, b, 0.1, 0.1, 0.1, 0.1, 0.0];
-        let mut grid = Grid3::filled([vals.len(), 3, 3], 0.0);
-        for k in 0..3 {
-            for j in 0..3 {
-                for (i, v) in vals.iter().enumerate() {
-                    grid.set(i, j, k, *v);
-                }
-            }
-        }
-        Medium::new(grid, Vec3::ZERO, Vec3::splat(10.0), 0.5, Rgb::ONE, 0.9)
-    };
-    // Light from the side and front: higher orders (more scattering) see more of the side.
-    let cubes = Directional(|w: Vec3| Rgb::splat(if w.x > 0.9 { 4.0 } else { 0.5 + w.y.max(0.0) }));
-    let dense = |_: Vec3, _: Vec3| Rgb::splat(0.8);
     let edge_at = |b: f32, fix: bool| {
-        let m = profile(b);
         let settings = EdgeSettings {
             threshold: 0.3,
             band: 0.5,
@@ -348,8 +355,7 @@ fn merging_segments_is_continuous_with_the_fix_and_jumps_without() {
             surface_depth: 0.0,
             ..Default::default()
         };
-        let g = unlit_gather(&m, settings, &cubes, &dense);
-        g.radiance(Vec3::new(-5.0, 15.0, 15.0), Vec3::X, f32::INFINITY, Rgb::ZERO).total().x
+        side_lit_edge(&x_profile(&[0.0, 0.1, 0.1, 0.1, 0.1, b, 0.1, 0.1, 0.1, 0.1, 0.0]), settings)
     };
     let eps = 1e-4;
     let jump = |fix: bool| (edge_at(0.3 + eps, fix) - edge_at(0.3 - eps, fix)).abs();
@@ -366,22 +372,7 @@ fn merging_segments_is_continuous_with_the_fix_and_jumps_without() {
 fn wisps_joining_across_clear_air_leave_no_seam() {
     // ρ = 0.1 | two voxels of b | 0.1 along x: at b = 0 a dual cell is empty and the paper has two
     // segments; at b > 0 one. With the near-gap weight the edge part is continuous at b = 0.
-    let profile = |b: f32| {
-        let vals = [0.0, 0.1, 0.1, 0.1, 0.1, b, b, 0.1, 0.1, 0.1, 0.1, 0.0];
-        let mut grid = Grid3::filled([vals.len(), 3, 3], 0.0);
-        for k in 0..3 {
-            for j in 0..3 {
-                for (i, v) in vals.iter().enumerate() {
-                    grid.set(i, j, k, *v);
-                }
-            }
-        }
-        Medium::new(grid, Vec3::ZERO, Vec3::splat(10.0), 0.5, Rgb::ONE, 0.9)
-    };
-    let cubes = Directional(|w: Vec3| Rgb::splat(if w.x > 0.9 { 4.0 } else { 0.5 + w.y.max(0.0) }));
-    let dense = |_: Vec3, _: Vec3| Rgb::splat(0.8);
     let edge_at = |b: f32, fix: bool| {
-        let m = profile(b);
         let settings = EdgeSettings {
             threshold: 0.3,
             cube_res: 8,
@@ -389,8 +380,7 @@ fn wisps_joining_across_clear_air_leave_no_seam() {
             surface_depth: 0.0,
             ..Default::default()
         };
-        let g = unlit_gather(&m, settings, &cubes, &dense);
-        g.radiance(Vec3::new(-5.0, 15.0, 15.0), Vec3::X, f32::INFINITY, Rgb::ZERO).total().x
+        side_lit_edge(&x_profile(&[0.0, 0.1, 0.1, 0.1, 0.1, b, b, 0.1, 0.1, 0.1, 0.1, 0.0]), settings)
     };
     let (with_fix, without) = (
         (edge_at(1e-5, true) - edge_at(0.0, true)).abs(),
@@ -405,15 +395,15 @@ fn wisps_joining_across_clear_air_leave_no_seam() {
 fn bad_threshold_is_a_clear_error() {
     for bad in ["-0.1", "nan", "inf"] {
         let text = format!("[render]\nlow_density_threshold = {bad}\n");
-        let desc = cloudgi::scene::SceneDesc::from_toml(&text, "s.toml").unwrap();
-        let err = cloudgi::scene::Scene::build(desc, "s.toml", std::path::Path::new("."))
+        let desc = crate::scene::SceneDesc::from_toml(&text, "s.toml").unwrap();
+        let err = crate::scene::Scene::build(desc, "s.toml", std::path::Path::new("."))
             .unwrap_err()
             .to_string();
         assert!(err.contains("s.toml") && err.contains("render.low_density_threshold"), "{err}");
     }
-    let desc = cloudgi::scene::SceneDesc::from_toml("[render]\nlow_density_threshold = 0.2\n", "s.toml").unwrap();
+    let desc = crate::scene::SceneDesc::from_toml("[render]\nlow_density_threshold = 0.2\n", "s.toml").unwrap();
     assert_eq!(desc.render.low_density_threshold, 0.2);
-    assert_eq!(cloudgi::scene::SceneDesc::default().render.low_density_threshold, 0.3);
+    assert_eq!(crate::scene::SceneDesc::default().render.low_density_threshold, 0.3);
 }
 
 #[test]
@@ -421,7 +411,7 @@ fn sparse_gather_matches_per_pixel_cubes_on_a_smooth_scene() {
     // A cube radiance that varies smoothly in space: interpolating K across pixels must agree with
     // one cube per segment to well under 1 %, while rendering fewer cubes; with a depth tolerance
     // of 0 m it must reproduce the reference.
-    use cloudgi::edges::{gather_image, PixelRay, SparseSettings};
+    use crate::edges::{gather_image, PixelRay, SparseSettings};
     struct Smooth;
     impl CubeSource for Smooth {
         fn render_cube(&self, req: &CubeRequest) -> CubeImage {

@@ -4,8 +4,8 @@
 //! reproducer; an unbounded allocation would abort it. Bounded iterations (a few seconds in
 //! release on 2 cores), fixed seed, so CI runs it every time.
 
-use cloudgi::medium::loaders::{parse_npy, parse_vol};
-use cloudgi::medium::vdb::{read_vdb_dense_bytes, read_vdb_info_bytes};
+use crate::medium::loaders::{parse_npy, parse_vol};
+use crate::medium::vdb::{read_vdb_dense_bytes, read_vdb_info_bytes};
 use std::path::PathBuf;
 
 struct Rng(u64);

@@ -1,12 +1,12 @@
 //! Foundation checks: analytic transport cases, loaders, determinism and the procedural cloud.
 
-use cloudgi::lighting::{Sky, Sun};
-use cloudgi::lit::sunlight::SunTransmittance;
-use cloudgi::math::{Rgb, Vec3};
-use cloudgi::medium::{loaders, Grid3, Medium};
-use cloudgi::optics::Hg;
-use cloudgi::render::single;
-use cloudgi::scene::{Scene, SceneDesc};
+use crate::lighting::{Sky, Sun};
+use crate::lit::sunlight::SunTransmittance;
+use crate::math::{Rgb, Vec3};
+use crate::medium::{loaders, Grid3, Medium};
+use crate::optics::Hg;
+use crate::render::single;
+use crate::scene::{Scene, SceneDesc};
 use std::path::Path;
 
 /// A scene around a homogeneous 10 m cube of density 1 at the origin, no ground.
@@ -81,7 +81,7 @@ fn single_scattering_in_thin_box_matches_analytic() {
     assert!(((mean - expect) / expect).abs().max_element() < 1e-3);
 }
 
-fn scene_with_grid(dir: &Path, grid_file: &str) -> cloudgi::Result<Scene> {
+fn scene_with_grid(dir: &Path, grid_file: &str) -> crate::Result<Scene> {
     let text = format!("[medium]\ngrid = \"{grid_file}\"\nvoxel_size = 2.0\norigin = [1.0, 2.0, 3.0]\n");
     let path = dir.join("scene.toml");
     std::fs::write(&path, text).unwrap();
@@ -167,13 +167,13 @@ fn single_render_is_identical_with_any_thread_count() {
     let scene = Scene::load(None, |d| {
         d.camera.width = 64;
         d.camera.height = 48;
-        d.render.method = cloudgi::Method::Single;
+        d.render.method = crate::Method::Single;
         d.render.aa_samples = 2;
     })
     .unwrap();
     let run = |n: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
-        pool.install(|| cloudgi::render::render(&scene, &cloudgi::NoProgress).unwrap().image)
+        pool.install(|| crate::render::render(&scene, &crate::NoProgress).unwrap().image)
     };
     let (a, b) = (run(1), run(2));
     assert_eq!(a.pixels, b.pixels);

@@ -1,19 +1,19 @@
 //! `render.diffuse_anisotropy`: the first moment I1 of the diffuse field (src/diffusion/flux.rs)
 //! and the a·(I0 + g·I1·ω) gather source it gives.
 
-use cloudgi::diffusion::flux::{diffuse_flux, FluxField};
-use cloudgi::diffusion::{solve_diffusion, BoundaryLight, DiffusionSettings, DiffusionSolution};
-use cloudgi::incident::{compute, FirstScattering, IncidentLight, IncidentSettings, IncidentSources};
-use cloudgi::lighting::{DirectionBins, Sky, Sun};
-use cloudgi::lit::LitVolume;
-use cloudgi::math::{Rgb, Vec3};
-use cloudgi::medium::field16::Field16;
-use cloudgi::medium::sparse::VoxelField;
-use cloudgi::medium::{Grid3, Medium};
-use cloudgi::render::diffusion::i0_rgb;
-use cloudgi::{render::render, Method, NoProgress, Scene};
+use crate::diffusion::flux::{diffuse_flux, FluxField};
+use crate::diffusion::{solve_diffusion, BoundaryLight, DiffusionSettings, DiffusionSolution};
+use crate::incident::{compute, FirstScattering, IncidentLight, IncidentSettings, IncidentSources};
+use crate::lighting::{DirectionBins, Sky, Sun};
+use crate::lit::LitVolume;
+use crate::math::{Rgb, Vec3};
+use crate::medium::field16::Field16;
+use crate::medium::sparse::VoxelField;
+use crate::medium::{Grid3, Medium};
+use crate::render::diffusion::i0_rgb;
+use crate::{render::render, Method, NoProgress, Scene};
 
-const TAU_MIN: f64 = cloudgi::diffusion::DEFAULT_MIN_OPTICAL_DEPTH;
+const TAU_MIN: f64 = crate::diffusion::DEFAULT_MIN_OPTICAL_DEPTH;
 
 /// A uniform cube of n³ voxels, ρ = 1, σt = 1 m⁻¹, 1 m voxels.
 fn cube(n: usize, albedo: f32, g: f32) -> Medium {
@@ -145,7 +145,7 @@ fn slab_lit_from_above_is_brighter_below_darker_above() {
         dir: Vec3::Y,
         irradiance: inc.sun_irradiance,
     };
-    let sun_t = cloudgi::lit::sunlight::SunTransmittance::compute(&m, Vec3::Y).grid;
+    let sun_t = crate::lit::sunlight::SunTransmittance::compute(&m, Vec3::Y).grid;
     let off = LitVolume::new(m.clone(), i0_rgb(&sol), sun_t, sun, Sky::constant(Rgb::ZERO), None);
     let on = off.clone().with_flux(FluxField::new(&m, &i1));
     for j in 2..8 {

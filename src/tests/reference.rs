@@ -2,13 +2,13 @@
 //! transmittance, single scattering against the `single` method, determinism across thread counts,
 //! the time limit and the extra EXR layers.
 
-use cloudgi::lighting::{Sky, Sun};
-use cloudgi::math::{Rgb, Vec3};
-use cloudgi::medium::{Grid3, Medium};
-use cloudgi::reference::{render_with_stats, LIGHT_LAYERS, ORDER_LAYERS, SAMPLES_LAYER, SINGLE_LAYERS, STDERR_LAYER, TRANSMITTANCE_LAYER};
-use cloudgi::render::Timings;
-use cloudgi::scene::{Method, Scene, SceneDesc};
-use cloudgi::{Image, NoProgress};
+use crate::lighting::{Sky, Sun};
+use crate::math::{Rgb, Vec3};
+use crate::medium::{Grid3, Medium};
+use crate::reference::{render_with_stats, LIGHT_LAYERS, ORDER_LAYERS, SAMPLES_LAYER, SINGLE_LAYERS, STDERR_LAYER, TRANSMITTANCE_LAYER};
+use crate::render::Timings;
+use crate::scene::{Method, Scene, SceneDesc};
+use crate::{Image, NoProgress};
 use std::path::Path;
 
 /// A small scene: no ground, sun and sky as given, camera at (0, 0, `dist`) looking at the origin.
@@ -79,7 +79,7 @@ fn furnace_with(sigma_t: f32, g: f32, spp: u32, envmap: bool) {
     let l = Rgb::new(0.5, 1.0, 2.0);
     let mut s = scene(ball(sigma_t, 1.0, g), Rgb::ZERO, l, 40.0, 30.0, (8, 6), spp);
     if envmap {
-        s.sky = Sky::from_envmap(cloudgi::lighting::envmap::EnvMap::new(32, 16, vec![l; 32 * 16]));
+        s.sky = Sky::from_envmap(crate::lighting::envmap::EnvMap::new(32, 16, vec![l; 32 * 16]));
     }
     let (img, _) = render(&s);
     let se = img.layer(STDERR_LAYER).unwrap();
@@ -155,7 +155,7 @@ fn single_scattering_matches_the_single_method() {
     let mut ss = s.clone();
     ss.render.method = Method::Single;
     ss.render.spp = 16;
-    let single = cloudgi::render::render(&ss, &NoProgress).unwrap().image;
+    let single = crate::render::render(&ss, &NoProgress).unwrap().image;
     let se = rf.layer(STDERR_LAYER).unwrap();
     for (i, ((&a, &b), &e)) in rf.pixels.iter().zip(&single.pixels).zip(se).enumerate() {
         assert!(b.min_element() > 0.0);
@@ -169,7 +169,7 @@ fn single_scattering_matches_the_single_method() {
     }
     // With every bounce allowed the image must be brighter (multiple scattering adds light).
     s.render.max_depth = None;
-    let full = cloudgi::reference::render_image(&s, 32);
+    let full = crate::reference::render_image(&s, 32);
     let sum = |im: &Image| im.pixels.iter().map(|p| p.x).sum::<f32>();
     assert!(sum(&full) > 1.05 * sum(&rf));
 }
@@ -185,7 +185,7 @@ fn identical_with_any_thread_count() {
         (7, 5),
         4,
     );
-    s.ground = Some(cloudgi::lighting::Ground {
+    s.ground = Some(crate::lighting::Ground {
         height: -9.0,
         albedo: Rgb::splat(0.4),
     });
@@ -245,7 +245,7 @@ fn order_and_light_layers_sum_to_the_image() {
         (8, 6),
         8,
     );
-    s.ground = Some(cloudgi::lighting::Ground {
+    s.ground = Some(crate::lighting::Ground {
         height: -7.5,
         albedo: Rgb::splat(0.4),
     });

@@ -3,18 +3,11 @@
 //! Each method has its stated tolerance; the deterministic methods' are what their physics
 //! allows (diffusion is an approximation), not rounding.
 
-use cloudgi::math::{Rgb, Vec3};
-use cloudgi::medium::{Grid3, Medium};
-use cloudgi::optics::Hg;
-use cloudgi::{Image, Method, NoProgress, Scene, SceneDesc};
-
-const METHODS: [Method; 5] = [
-    Method::Single,
-    Method::Diffusion,
-    Method::Full,
-    Method::Transport,
-    Method::Reference,
-];
+use super::common::METHODS;
+use crate::math::{Rgb, Vec3};
+use crate::medium::{Grid3, Medium};
+use crate::optics::Hg;
+use crate::{Image, Method, NoProgress, Scene, SceneDesc};
 
 /// A small scene: the built-in one on a coarse grid, a tiny image, no ground, `method`.
 fn scene(method: Method, w: u32, h: u32, edit: impl FnOnce(&mut SceneDesc)) -> Scene {
@@ -31,7 +24,7 @@ fn scene(method: Method, w: u32, h: u32, edit: impl FnOnce(&mut SceneDesc)) -> S
 }
 
 fn render(s: &Scene) -> Image {
-    cloudgi::render::render(s, &NoProgress).unwrap().image
+    crate::render::render(s, &NoProgress).unwrap().image
 }
 
 fn rel(a: f32, b: f32) -> f32 {

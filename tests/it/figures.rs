@@ -2,16 +2,7 @@
 //! that the numbers are finite. About 10 s in release on 2 cores (a coarse 40×32×24 cloud, 48×36
 //! pixels, 4 reference spp).
 
-use std::path::Path;
-use std::process::Command;
-
-fn cloudgi(args: &[&str], dir: &Path) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_cloudgi"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .unwrap()
-}
+use crate::common::cloudgi;
 
 // The default cloud on a coarser grid (same extent), so the test stays fast.
 const SCENE: &str = r#"
@@ -38,6 +29,7 @@ fn figure_series_writes_everything() {
     let d = dir.path();
     std::fs::write(d.join("scene.toml"), SCENE).unwrap();
     let out = cloudgi(
+        d,
         &[
             "-q",
             "--threads",
@@ -53,7 +45,6 @@ fn figure_series_writes_everything() {
             "--reference-spp",
             "4",
         ],
-        d,
     );
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let f = d.join("figs");
@@ -121,10 +112,10 @@ fn figure_series_writes_everything() {
 #[test]
 fn bad_arguments_are_reported() {
     let dir = tempfile::tempdir().unwrap();
-    let out = cloudgi(&["figures", "-o", "x", "--width", "0"], dir.path());
+    let out = cloudgi(dir.path(), &["figures", "-o", "x", "--width", "0"]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--width"));
-    let out = cloudgi(&["figures", "-o", "x", "--reference-spp", "0"], dir.path());
+    let out = cloudgi(dir.path(), &["figures", "-o", "x", "--reference-spp", "0"]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--reference-spp"));
 }
@@ -136,23 +127,8 @@ fn a_run_that_fails_leaves_no_output_folder() {
     // The grid file is read only when the scene is built, after the folder would be made.
     std::fs::write(d.join("s.toml"), "[medium]\ngrid = \"bad.vol\"\n").unwrap();
     std::fs::write(d.join("bad.vol"), b"not a volume").unwrap();
-    let out = cloudgi(&["figures", "s.toml", "-o", "out/figs", "-q"], d);
+    let out = cloudgi(d, &["figures", "s.toml", "-o", "out/figs", "-q"]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("bad.vol"));
     assert!(!d.join("out").exists(), "no folder left behind");
-}
-
-#[test]
-fn masks_and_sunset() {
-    use cloudgi::math::Rgb;
-    use cloudgi::tools::figures::{edge_mask, sunset_desc, SUNSET_ELEVATION_DEG};
-    let t: Vec<Rgb> = [0.0, 0.04, 0.05, 0.5, 0.9, 0.95, 1.0].iter().map(|&v| Rgb::splat(v)).collect();
-    assert_eq!(edge_mask(&t), vec![false, false, true, true, true, false, false]);
-    // The default sun (0.3, 0.8, 0.5) keeps its azimuth atan2(0.5, 0.3) and drops to 4°.
-    let d = sunset_desc(&cloudgi::SceneDesc::default());
-    assert_eq!(d.sun.elevation_deg, Some(SUNSET_ELEVATION_DEG));
-    assert!((d.sun.azimuth_deg.unwrap() - 0.5f32.atan2(0.3).to_degrees()).abs() < 1e-4);
-    assert!(d.sun.direction.is_none() && d.sun.from_atmosphere);
-    assert_eq!(d.sky.model, cloudgi::scene::SkyModel::Atmosphere);
-    cloudgi::Scene::build(d, "sunset", Path::new(".")).unwrap();
 }

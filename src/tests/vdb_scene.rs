@@ -1,17 +1,17 @@
 //! `.vdb` in a scene: placement from the file's transform, `medium.scale`, `medium.downsample`
 //! on every grid source, the memory guard, an end-to-end render, and `cloudgi info`.
 
-use cloudgi::math::Vec3;
-use cloudgi::medium::{loaders, Grid3};
-use cloudgi::{NoProgress, Scene};
+use crate::math::Vec3;
+use crate::medium::{loaders, Grid3};
+use crate::{NoProgress, Scene};
 use std::path::{Path, PathBuf};
 
 fn data(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/vdb").join(name)
+    super::common::data("vdb").join(name)
 }
 
 /// A scene in `dir` whose `[medium]` is `medium` (TOML lines); the .vdb is copied beside it.
-fn scene(dir: &Path, vdb: &str, medium: &str, rest: &str) -> cloudgi::Result<Scene> {
+fn scene(dir: &Path, vdb: &str, medium: &str, rest: &str) -> crate::Result<Scene> {
     std::fs::copy(data(vdb), dir.join("cloud.vdb")).unwrap();
     let path = dir.join("scene.toml");
     std::fs::write(&path, format!("[medium]\ngrid = \"cloud.vdb\"\n{medium}\n{rest}")).unwrap();
@@ -104,7 +104,7 @@ fn a_vdb_cloud_renders_end_to_end() {
     let dir = tempfile::tempdir().unwrap();
     // No [ground] table, so no ground; pixel (0, 0) sees the sky.
     let s = scene(dir.path(), "sphere64_half_blosc.vdb", VIEW, "").unwrap();
-    let out = cloudgi::render::render(&s, &NoProgress).unwrap();
+    let out = crate::render::render(&s, &NoProgress).unwrap();
     let img = out.image;
     assert!(
         img.pixels.iter().all(|p| p.is_finite() && p.min_element() >= 0.0),
@@ -119,58 +119,4 @@ fn a_vdb_cloud_renders_end_to_end() {
     let covered = img.pixels.iter().filter(|p| (**p - sky).abs().max_element() > 1e-3).count();
     let frac = covered as f32 / img.pixels.len() as f32;
     assert!((0.2..0.7).contains(&frac), "cloud covers {frac} of the image");
-}
-
-#[test]
-fn info_cli_prints_the_issue_json() {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_cloudgi"))
-        .args(["info", data("tiles_blosc.vdb").to_str().unwrap(), "--json"])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let text = String::from_utf8(out.stdout).unwrap();
-    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let g = &v["grids"][0];
-    assert_eq!(g["name"], "density");
-    assert_eq!(g["type"], "float");
-    assert_eq!(g["active_voxels"], 2_102_816);
-    assert_eq!(g["bbox_min"], serde_json::json!([-63, -63, -63]));
-    assert_eq!(g["bbox_max"], serde_json::json!([271, 127, 127]));
-    assert_eq!(g["voxel_size"], serde_json::json!([1.0, 1.0, 1.0]));
-    assert_eq!(g["translation"], serde_json::json!([0.0, 0.0, 0.0]));
-    assert_eq!(g["dense_bytes"], 4 * 335 * 191 * 191);
-    assert!((g["sum"].as_f64().unwrap() - 1_050_174.267_848_443_2).abs() < 1e-5);
-    // Keys in the documented order, and nothing else.
-    let keys: Vec<&str> = [
-        "name",
-        "type",
-        "active_voxels",
-        "sum",
-        "bbox_min",
-        "bbox_max",
-        "voxel_size",
-        "translation",
-        "dense_bytes",
-    ]
-    .to_vec();
-    let pos: Vec<usize> = keys.iter().map(|k| text.find(&format!("\"{k}\"")).unwrap()).collect();
-    assert!(pos.windows(2).all(|w| w[0] < w[1]), "key order {pos:?}");
-    assert_eq!(g.as_object().unwrap().len(), keys.len());
-    // Text form and a clean failure on a non-VDB file.
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_cloudgi"))
-        .args(["info", data("README.md").to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("not an OpenVDB file") && !err.contains("panicked"), "{err}");
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_cloudgi"))
-        .args(["info", data("multi_grid_blosc.vdb").to_str().unwrap()])
-        .output()
-        .unwrap();
-    let text = String::from_utf8(out.stdout).unwrap();
-    assert!(
-        text.contains("3 grids") && text.contains("vel: vec3s") && text.contains("100,024"),
-        "{text}"
-    );
 }

@@ -2,13 +2,13 @@
 //! reference.json read back by OpenVDB), plus robustness against truncated, corrupted and
 //! hostile files.
 
-use cloudgi::medium::vdb::{read_vdb_dense_bytes, read_vdb_grids_bytes, read_vdb_info, read_vdb_info_bytes};
-use cloudgi::Error;
+use crate::medium::vdb::{read_vdb_dense_bytes, read_vdb_grids_bytes, read_vdb_info, read_vdb_info_bytes};
+use crate::Error;
 use serde_json::Value;
 use std::path::PathBuf;
 
 fn data(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/vdb").join(name)
+    super::common::data("vdb").join(name)
 }
 
 fn reference() -> Value {

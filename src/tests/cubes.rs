@@ -2,16 +2,16 @@
 //! (empty scene = sky bins, furnace, hemicube irradiance, opaque slab shadow), the pyramid
 //! renderer against the brute-force march, border-voxel detection and the stage-1 sign convention.
 
-use cloudgi::cube::border::{find_border_voxels, render_border_cubes};
-use cloudgi::cube::ground::{hemicube_irradiance, hemicube_weights, render_ground, LitGround};
-use cloudgi::cube::render::{opposite_bin, render_cube_brute, BinMask, CubeOptions, CubeRenderer};
-use cloudgi::cube::{clear_air, BorderKeep, BorderLight};
-use cloudgi::diffusion::boundary::hemisphere_radiance;
-use cloudgi::lighting::{DirectionBins, Ground, Sky, Sun, CUBE_FACES};
-use cloudgi::lit::LitVolume;
-use cloudgi::math::{Rgb, Vec3};
-use cloudgi::medium::{Density, Grid3, Medium};
-use cloudgi::NoProgress;
+use crate::cube::border::{find_border_voxels, render_border_cubes};
+use crate::cube::ground::{hemicube_irradiance, hemicube_weights, render_ground, LitGround};
+use crate::cube::render::{opposite_bin, render_cube_brute, BinMask, CubeOptions, CubeRenderer};
+use crate::cube::{clear_air, BorderKeep, BorderLight};
+use crate::diffusion::boundary::hemisphere_radiance;
+use crate::lighting::{DirectionBins, Ground, Sky, Sun, CUBE_FACES};
+use crate::lit::LitVolume;
+use crate::math::{Rgb, Vec3};
+use crate::medium::{Density, Grid3, Medium};
+use crate::NoProgress;
 use std::f64::consts::PI;
 
 fn sun(dir: Vec3, e: f32) -> Sun {
@@ -61,14 +61,10 @@ fn blob(dims: [usize; 3], radius: f32) -> Grid3 {
     g
 }
 
-fn rel(a: Rgb, b: Rgb) -> f32 {
-    ((a - b).abs() / b.abs().max(Rgb::splat(1e-6))).max_element()
-}
-
-#[test]
-fn empty_scene_cube_reproduces_the_sky_bins() {
-    let l = Rgb::new(0.3, 0.45, 0.8);
-    let v = lit(
+/// [`lit`] on an empty 4³ grid (σt 1, albedo 1, g 0.8, I0 1, T_sun 1) under `sun` and a constant
+/// sky `sky`.
+fn empty_lit(sun: Sun, sky: Rgb, ground: Option<Ground>) -> LitVolume {
+    lit(
         Grid3::filled([4, 4, 4], 0.0),
         Vec3::ZERO,
         1.0,
@@ -76,10 +72,27 @@ fn empty_scene_cube_reproduces_the_sky_bins() {
         0.8,
         Rgb::ONE,
         1.0,
-        sun(Vec3::Y, 3.0),
-        l,
-        None,
-    );
+        sun,
+        sky,
+        ground,
+    )
+}
+
+/// [`lit`] on a [`blob`] of radius 3 in a `dims` grid at (−7, 0, −6): σt 1.5, albedo 0.9,
+/// T_sun 0.7, the sun from (0.4, 0.8, 0.3) at 3 W/m².
+fn blob_lit(dims: [usize; 3], g: f32, i0: Rgb, sky: Rgb, ground: Option<Ground>) -> LitVolume {
+    let sun = sun(Vec3::new(0.4, 0.8, 0.3), 3.0);
+    lit(blob(dims, 3.0), Vec3::new(-7.0, 0.0, -6.0), 1.5, 0.9, g, i0, 0.7, sun, sky, ground)
+}
+
+fn rel(a: Rgb, b: Rgb) -> f32 {
+    ((a - b).abs() / b.abs().max(Rgb::splat(1e-6))).max_element()
+}
+
+#[test]
+fn empty_scene_cube_reproduces_the_sky_bins() {
+    let l = Rgb::new(0.3, 0.45, 0.8);
+    let v = empty_lit(sun(Vec3::Y, 3.0), l, None);
     let bins = DirectionBins::new();
     let sky = bins.integrate(8, |d| v.sky.radiance(d));
     for res in [4, 16] {
@@ -106,18 +119,7 @@ fn empty_scene_with_ground_sees_the_ground_below_the_horizon() {
         height: -5.0,
         albedo: Rgb::new(0.2, 0.4, 0.6),
     };
-    let v = lit(
-        Grid3::filled([4, 4, 4], 0.0),
-        Vec3::ZERO,
-        1.0,
-        1.0,
-        0.8,
-        Rgb::ONE,
-        1.0,
-        s.clone(),
-        l,
-        Some(ground.clone()),
-    );
+    let v = empty_lit(s.clone(), l, Some(ground.clone()));
     let r = CubeRenderer::new(&v, &CubeOptions::default());
     let got = r.bin_radiance(Vec3::new(1.0, 1.0, 1.0), BinMask::ALL);
     // Unshadowed Lambertian ground: albedo·(πL + E_sun·cosθ)/π.
@@ -161,18 +163,7 @@ fn pyramid_without_level_of_detail_matches_the_brute_force_march() {
         height: -2.0,
         albedo: Rgb::splat(0.5),
     };
-    let v = lit(
-        blob(dims, 3.0),
-        Vec3::new(-7.0, 0.0, -6.0),
-        1.5,
-        0.9,
-        0.8,
-        Rgb::new(1.0, 0.8, 0.6),
-        0.7,
-        sun(Vec3::new(0.4, 0.8, 0.3), 3.0),
-        Rgb::new(0.2, 0.3, 0.5),
-        Some(ground),
-    );
+    let v = blob_lit(dims, 0.8, Rgb::new(1.0, 0.8, 0.6), Rgb::new(0.2, 0.3, 0.5), Some(ground));
     let opts = CubeOptions {
         res: 8,
         max_levels: 1,
@@ -205,7 +196,7 @@ fn pyramid_cube_bins_match_a_fine_brute_force_cube() {
         })
         .collect();
     let s = sun(Vec3::new(0.5, 0.7, 0.2), 3.0);
-    let sun_t = cloudgi::lit::sunlight::SunTransmittance::compute(&m, s.dir).grid;
+    let sun_t = crate::lit::sunlight::SunTransmittance::compute(&m, s.dir).grid;
     let sky = Sky::constant(Rgb::new(0.2, 0.3, 0.5));
     let ground = Ground {
         height: -3.0,
@@ -318,7 +309,7 @@ fn entry_radiance_is_the_radiance_arriving_from_behind_the_ray() {
     );
     // Stage 1's hook is asked with the source bin, the opposite of the travel bin.
     let hook = cubes.hook();
-    assert_eq!(hook(e, cloudgi::cube::opposite_bin(travel)), Some(got));
+    assert_eq!(hook(e, crate::cube::opposite_bin(travel)), Some(got));
 }
 
 #[test]
@@ -362,18 +353,7 @@ fn hemicube_irradiance_without_cloud_is_sky_plus_sun() {
     let w = hemicube_weights(CubeOptions::default().res);
     let l = Rgb::new(0.3, 0.45, 0.8);
     let s = sun(Vec3::new(0.3, 0.8, 0.5), 3.0);
-    let v = lit(
-        Grid3::filled([4, 4, 4], 0.0),
-        Vec3::ZERO,
-        1.0,
-        1.0,
-        0.8,
-        Rgb::ONE,
-        1.0,
-        s.clone(),
-        l,
-        None,
-    );
+    let v = empty_lit(s.clone(), l, None);
     let r = CubeRenderer::new(&v, &CubeOptions::default());
     let e = hemicube_irradiance(&r, &w, Vec3::new(10.0, -3.0, 2.0));
     let exact = l * std::f32::consts::PI + s.irradiance * s.dir.y;
@@ -479,36 +459,36 @@ fn ground_under_an_opaque_slab_is_shadowed() {
 
 #[test]
 fn bad_cube_keys_are_rejected_with_the_field_named() {
-    let mut desc = cloudgi::SceneDesc::default();
+    let mut desc = crate::SceneDesc::default();
     desc.render.cube_resolution = 10;
-    let e = cloudgi::Scene::build(desc, "s.toml", std::path::Path::new("."))
+    let e = crate::Scene::build(desc, "s.toml", std::path::Path::new("."))
         .unwrap_err()
         .to_string();
     assert!(
         e.contains("s.toml") && e.contains("render.cube_resolution") && e.contains("multiple of 4"),
         "{e}"
     );
-    let mut desc = cloudgi::SceneDesc::default();
+    let mut desc = crate::SceneDesc::default();
     desc.render.ground_samples = 0;
-    let e = cloudgi::Scene::build(desc, "s.toml", std::path::Path::new("."))
+    let e = crate::Scene::build(desc, "s.toml", std::path::Path::new("."))
         .unwrap_err()
         .to_string();
     assert!(e.contains("render.ground_samples"), "{e}");
-    let d = cloudgi::SceneDesc::from_toml("[render]\ncube_resolution = 32\nground_samples = 16\n", "t.toml").unwrap();
+    let d = crate::SceneDesc::from_toml("[render]\ncube_resolution = 32\nground_samples = 16\n", "t.toml").unwrap();
     assert_eq!((d.render.cube_resolution, d.render.ground_samples), (32, 16));
 }
 
 #[test]
 fn clear_air_on_a_small_scene_lights_the_ground_and_fills_every_needed_bin() {
-    let mut desc = cloudgi::SceneDesc::default();
+    let mut desc = crate::SceneDesc::default();
     desc.medium.resolution = [25, 20, 15];
     desc.medium.voxel_size = 40.0;
     desc.render.ground_samples = 8;
-    let scene = cloudgi::Scene::build(desc, "small", std::path::Path::new(".")).unwrap();
-    let sun_t = cloudgi::lit::sunlight::SunTransmittance::compute(&scene.medium, scene.sun.dir);
+    let scene = crate::Scene::build(desc, "small", std::path::Path::new(".")).unwrap();
+    let sun_t = crate::lit::sunlight::SunTransmittance::compute(&scene.medium, scene.sun.dir);
     let n = scene.medium.density.len();
     let l = scene.sky.radiance(Vec3::Y);
-    let lit = cloudgi::render::diffusion::scene_lit_volume(&scene, vec![l; n], &sun_t);
+    let lit = crate::render::diffusion::scene_lit_volume(&scene, vec![l; n], &sun_t);
     let out = clear_air(
         lit.clone(),
         scene.ground.as_ref(),
@@ -566,21 +546,10 @@ fn gather_source_cubes_see_the_gathers_own_diffuse_term() {
     // With the reduced sky's single scattering attached to the lit volume, a cube with
     // `gather_source` (one level, so no level of detail) matches the brute-force march of the
     // gather's own source J = a·diffuse + sun; the paper's cube (I0 only) does not.
-    use cloudgi::lit::sky_single::SkySingle;
-    use cloudgi::medium::sparse::VoxelField;
+    use crate::lit::sky_single::SkySingle;
+    use crate::medium::sparse::VoxelField;
     let dims = [14, 10, 12];
-    let v = lit(
-        blob(dims, 3.0),
-        Vec3::new(-7.0, 0.0, -6.0),
-        1.5,
-        0.9,
-        0.8,
-        Rgb::new(1.0, 0.8, 0.6),
-        0.7,
-        sun(Vec3::new(0.4, 0.8, 0.3), 3.0),
-        Rgb::new(0.2, 0.3, 0.5),
-        None,
-    );
+    let v = blob_lit(dims, 0.8, Rgb::new(1.0, 0.8, 0.6), Rgb::new(0.2, 0.3, 0.5), None);
     let mut sh = [0f32; 27];
     for b in 0..3 {
         sh[b * 9] = 0.8 + 0.1 * b as f32;
@@ -644,18 +613,7 @@ fn transformed_sun_cubes_use_the_delta_m_albedo_and_phase() {
     // (a·σt/σt′, HG(g)) without: the former equals a cube over a medium whose sun pair is (a′, g′).
     let dims = [14, 10, 12];
     let make = |tms: bool| {
-        let mut v = lit(
-            blob(dims, 3.0),
-            Vec3::new(-7.0, 0.0, -6.0),
-            1.5,
-            0.9,
-            0.9,
-            Rgb::new(0.1, 0.1, 0.1),
-            0.7,
-            sun(Vec3::new(0.4, 0.8, 0.3), 3.0),
-            Rgb::ZERO,
-            None,
-        );
+        let mut v = blob_lit(dims, 0.9, Rgb::new(0.1, 0.1, 0.1), Rgb::ZERO, None);
         let mut m = v.medium.clone();
         m.optics = m.optics.delta_m(0.7);
         if !tms {

@@ -1,13 +1,13 @@
 //! Method `full`: the clear-air propagation loop (paper section 3) and the final gather with the
 //! low-density edges (section 4), end to end.
 
-use cloudgi::diffusion::boundary_outflow;
-use cloudgi::lighting::Sky;
-use cloudgi::math::{Rgb, Vec3};
-use cloudgi::medium::{Grid3, Medium};
-use cloudgi::render::full::propagate;
-use cloudgi::render::Timings;
-use cloudgi::{Method, NoProgress, Scene};
+use crate::diffusion::boundary_outflow;
+use crate::lighting::Sky;
+use crate::math::{Rgb, Vec3};
+use crate::medium::{Grid3, Medium};
+use crate::render::full::propagate;
+use crate::render::Timings;
+use crate::{Method, NoProgress, Scene};
 
 /// Two boxes of cloud facing each other across 4 voxels of clear air, so that light one reflects
 /// reaches the other only through the border cubes.
@@ -25,7 +25,7 @@ fn two_blocks(albedo: f32) -> Medium {
     Medium::new(g, Vec3::new(-140.0, 0.0, -60.0), Vec3::splat(10.0), 0.08, Rgb::splat(albedo), 0.85)
 }
 
-fn scene_with(m: Medium, edit: impl FnOnce(&mut cloudgi::SceneDesc)) -> Scene {
+fn scene_with(m: Medium, edit: impl FnOnce(&mut crate::SceneDesc)) -> Scene {
     let mut s = Scene::load(None, |d| {
         d.medium.resolution = [20, 12, 10];
         d.camera.width = 40;
@@ -78,7 +78,7 @@ fn propagation_in_a_furnace_creates_no_energy_and_converges_geometrically() {
     s.sky = Sky::constant(Rgb::splat(l));
     let mut t = Timings::default();
     let p = propagate(&s, &NoProgress, &mut t).unwrap();
-    let out = boundary_outflow(&s.medium, &p.incident, &p.solution, cloudgi::diffusion::DEFAULT_MIN_OPTICAL_DEPTH);
+    let out = boundary_outflow(&s.medium, &p.incident, &p.solution, crate::diffusion::DEFAULT_MIN_OPTICAL_DEPTH);
     let bound = std::f64::consts::PI * l as f64 * boundary_area(&s.medium);
     // 0.5 % slack: f32 storage and the solver tolerance 1e-6 are far below it; a doubled hook
     // radiance or a sign error in the entry direction exceeds it by tens of per cent.
@@ -121,7 +121,7 @@ fn the_sky_through_the_boundary_keeps_a_furnace_exact() {
     // drops at most 1 % of the light behind; before the iteration it is 1e-6 (f32, the solver's
     // 1e-6 residual). The paper's split is 10–40 % low at the surface here.
     assert!(worst < 1e-3, "I0 off the furnace radiance by {worst}");
-    let out = boundary_outflow(&s.medium, &p.incident, &p.solution, cloudgi::diffusion::DEFAULT_MIN_OPTICAL_DEPTH);
+    let out = boundary_outflow(&s.medium, &p.incident, &p.solution, crate::diffusion::DEFAULT_MIN_OPTICAL_DEPTH);
     let scale = std::f64::consts::PI * l as f64 * boundary_area(&s.medium);
     assert!((out.x as f64).abs() < 1e-3 * scale, "net outflow {} against π·L·A = {scale}", out.x);
     // The first change is the first solve's error: it stops at a relative residual of 1e-2
@@ -165,7 +165,7 @@ fn light_crosses_clear_air_between_cloud_parts() {
     s.sun.dir = Vec3::X;
     s.sky = Sky::constant(Rgb::ZERO);
     // The stages run on the δ-M medium, as `render` hands it to them.
-    let s = cloudgi::render::delta_m(&s).into_owned();
+    let s = crate::render::delta_m(&s).into_owned();
     let mut before = s.clone();
     before.render.clear_air.iterations = 0;
     let mut t = Timings::default();
@@ -201,7 +201,7 @@ fn full_render_is_deterministic_and_aovs_add_up() {
             .num_threads(threads)
             .build()
             .unwrap()
-            .install(|| cloudgi::render::render(&s, &NoProgress).unwrap().image)
+            .install(|| crate::render::render(&s, &NoProgress).unwrap().image)
     };
     let a = run(1);
     let b = run(2);
@@ -224,7 +224,7 @@ fn full_render_is_deterministic_and_aovs_add_up() {
 fn bad_propagation_settings_name_the_field() {
     for (key, value) in [("iterations", "100"), ("propagation_tolerance", "-1.0")] {
         let text = format!("[render]\nmethod = \"full\"\n{key} = {value}\n");
-        let desc = cloudgi::SceneDesc::from_toml(&text, "bad.toml").unwrap();
+        let desc = crate::SceneDesc::from_toml(&text, "bad.toml").unwrap();
         let err = Scene::build(desc, "bad.toml", std::path::Path::new(".")).unwrap_err().to_string();
         assert!(err.contains(&format!("render.{key}")) && err.contains("bad.toml"), "{err}");
     }

@@ -3,13 +3,10 @@
 //! time-lapse, and a real Slurm array job (ci/slurm/start.sh; skipped with a message where Slurm
 //! cannot start, a failure under CI=true).
 
-use cloudgi::medium::loaders::write_npy;
-use cloudgi::medium::Grid3;
+use crate::common::{npy_grid, ok as cloudgi, BIN};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
-
-const BIN: &str = env!("CARGO_BIN_EXE_cloudgi");
 
 /// A small procedural cloud whose sun sets over the frames (one scene file, one command).
 const SUNSET: &str = "[medium]\nresolution = [20, 16, 12]\nvoxel_size = 50.0\n\
@@ -17,14 +14,6 @@ const SUNSET: &str = "[medium]\nresolution = [20, 16, 12]\nvoxel_size = 50.0\n\
     [animation]\nframes = \"1-8\"\n\
     [[animation.key]]\nframe = 1\nsun.elevation_deg = 60.0\nsun.azimuth_deg = 40.0\n\
     [[animation.key]]\nframe = 8\nsun.elevation_deg = 5.0\nsun.azimuth_deg = 80.0\nmedium.sigma_t = 0.03\n";
-
-/// Run cloudgi in `dir`; panics with its stderr unless it succeeds. Returns stderr.
-fn cloudgi(dir: &Path, args: &[&str]) -> String {
-    let out = Command::new(BIN).current_dir(dir).args(args).output().unwrap();
-    let err = String::from_utf8_lossy(&out.stderr).to_string();
-    assert!(out.status.success(), "cloudgi {args:?} failed: {err}");
-    err
-}
 
 fn bytes(p: &Path) -> Vec<u8> {
     std::fs::read(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
@@ -40,18 +29,13 @@ fn same_frames(dir: &Path, other: &Path, frames: impl IntoIterator<Item = u32>) 
     }
 }
 
-fn blob(dims: [usize; 3], centre: [f32; 3], radius: f32) -> Grid3 {
-    let mut g = Grid3::filled(dims, 0.0);
-    for k in 0..dims[2] {
-        for j in 0..dims[1] {
-            for i in 0..dims[0] {
-                let d = [i as f32 - centre[0], j as f32 - centre[1], k as f32 - centre[2]];
-                let r = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                g.set(i, j, k, (1.0 - r / radius).max(0.0));
-            }
-        }
-    }
-    g
+/// A float32 `.npy` of a ball of density falling from 1 at `centre` to 0 at `radius` (voxels).
+fn blob(dims: [usize; 3], centre: [f32; 3], radius: f32) -> Vec<u8> {
+    npy_grid(dims, |i, j, k| {
+        let d = [i as f32 - centre[0], j as f32 - centre[1], k as f32 - centre[2]];
+        let r = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        (1.0 - r / radius).max(0.0)
+    })
 }
 
 #[test]
@@ -59,8 +43,8 @@ fn a_grid_sequence_renders_each_frame_and_frames_may_change_size() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     // A growing cloud: the second frame's grid is larger (simulations grow their box).
-    write_npy(&d.join("c.0001.npy"), &blob([8, 8, 8], [3.5, 3.5, 3.5], 3.0)).unwrap();
-    write_npy(&d.join("c.0002.npy"), &blob([12, 10, 9], [5.5, 4.5, 4.0], 4.5)).unwrap();
+    std::fs::write(d.join("c.0001.npy"), blob([8, 8, 8], [3.5, 3.5, 3.5], 3.0)).unwrap();
+    std::fs::write(d.join("c.0002.npy"), blob([12, 10, 9], [5.5, 4.5, 4.0], 4.5)).unwrap();
     let scene = "[medium]\ngrid = \"c.$F4.npy\"\nvoxel_size = 60.0\norigin = [-300.0, 100.0, -300.0]\n\
         [camera]\nwidth = 20\nheight = 16\n";
     std::fs::write(d.join("s.toml"), scene).unwrap();

@@ -4,31 +4,10 @@
 //! non-negative, or (the transport solve that cannot converge on voxels 1000 optical depths
 //! thick) an error naming the stage. Tiny grids and images keep it fast.
 
-use cloudgi::error::Error;
-use cloudgi::{Method, NoProgress, Scene, SceneDesc};
+use super::common::{assert_finite_nonnegative, data, METHODS};
+use crate::error::Error;
+use crate::{Method, NoProgress, Scene, SceneDesc};
 use std::path::Path;
-
-const METHODS: [Method; 5] = [
-    Method::Single,
-    Method::Diffusion,
-    Method::Full,
-    Method::Transport,
-    Method::Reference,
-];
-
-fn assert_finite_nonnegative(label: &str, img: &cloudgi::image::Image) {
-    let mut layers = vec![("rgb".to_string(), img.pixels.clone())];
-    layers.extend(img.layers.iter().filter(|(n, _)| n != "stderr").cloned());
-    for (name, px) in &layers {
-        for (k, p) in px.iter().enumerate() {
-            let a = p.to_array();
-            assert!(
-                a.iter().all(|x| x.is_finite() && *x >= 0.0),
-                "{label}, layer {name}, pixel {k}: {a:?}"
-            );
-        }
-    }
-}
 
 /// The Disney cloud (tests/data/clouds, CC BY-SA 3.0) at a quarter of its 1/16 resolution,
 /// 48×36 pixels. Block MRE against a 256-spp `reference` of the same view, measured with
@@ -36,7 +15,7 @@ fn assert_finite_nonnegative(label: &str, img: &cloudgi::image::Image) {
 /// single 0.88 (sun single scattering alone). The bounds leave room for the reference's noise.
 #[test]
 fn the_disney_cloud_renders_near_reference_with_every_method() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/clouds/wdas.toml");
+    let path = data("clouds/wdas.toml");
     let render = |m: Method| {
         let s = Scene::load(Some(&path), |d: &mut SceneDesc| {
             d.render.method = m;
@@ -44,10 +23,10 @@ fn the_disney_cloud_renders_near_reference_with_every_method() {
             d.render.aov = m == Method::Full || m == Method::Transport;
         })
         .unwrap();
-        cloudgi::render::render(&s, &NoProgress).unwrap().image
+        crate::render::render(&s, &NoProgress).unwrap().image
     };
     let reference = render(Method::Reference);
-    let mask = cloudgi::tools::compare::choose_mask(&reference, None);
+    let mask = crate::tools::compare::choose_mask(&reference, None);
     for (m, bound) in [
         (Method::Transport, 0.04),
         (Method::Full, 0.09),
@@ -55,8 +34,8 @@ fn the_disney_cloud_renders_near_reference_with_every_method() {
         (Method::Single, 0.95),
     ] {
         let img = render(m);
-        assert_finite_nonnegative(m.name(), &img);
-        let metrics = cloudgi::tools::compare::compare(&img, &reference, mask.as_deref()).unwrap();
+        assert_finite_nonnegative(m.name(), &img, &["stderr"]);
+        let metrics = crate::tools::compare::compare(&img, &reference, mask.as_deref()).unwrap();
         let mre = metrics.block_mean_relative_error.unwrap();
         assert!(mre < bound, "{}: block MRE {mre:.3} against reference (bound {bound})", m.name());
         // Not black: the cloud's mean luminance is a real fraction of the reference's (the
@@ -126,8 +105,8 @@ fn every_method_is_finite_on_extreme_media() {
                         d.render.spp = if m == Method::Reference { 2 } else { 1 };
                     })
                     .unwrap();
-                    match cloudgi::render::render(&s, &NoProgress) {
-                        Ok(out) => assert_finite_nonnegative(&label, &out.image),
+                    match crate::render::render(&s, &NoProgress) {
+                        Ok(out) => assert_finite_nonnegative(&label, &out.image, &["stderr"]),
                         // The one allowed refusal: transport's solve on voxels too thick for its
                         // acceleration, with what to do.
                         Err(Error::Numerical { stage, message }) if m == Method::Transport && tau >= 1e3 => {

@@ -7,7 +7,7 @@
 //! (g = 0.9 treated as isotropic moves R by 0.1 or more at τ = 1), a missing unscattered beam or a
 //! wrong diffuse-incidence distribution, while the whole table runs in a few seconds.
 
-use cloudgi::reference::slab::{slab, Incidence, SlabParams};
+use crate::reference::slab::{slab, Incidence, SlabParams};
 use rayon::prelude::*;
 
 const PHOTONS: u64 = 50_000;
@@ -23,7 +23,7 @@ struct Row {
 }
 
 fn rows() -> Vec<Row> {
-    let text = include_str!("data/slab_adding_doubling.csv");
+    let text = super::common::SLAB_TABLE;
     let mut lines = text.lines();
     assert_eq!(lines.next().unwrap().trim(), "optical_thickness,albedo,g,UR1,UT1,URU,UTU");
     lines
@@ -104,40 +104,4 @@ fn slab_is_deterministic_and_rejects_bad_input() {
         assert!(slab(&bad, 100, 0).is_err());
     }
     assert!(slab(&p, 1, 0).is_err());
-}
-
-#[test]
-fn cli_prints_one_json_line() {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_cloudgi"))
-        .args([
-            "slab",
-            "--thickness",
-            "1",
-            "--albedo",
-            "0.8",
-            "--g",
-            "0",
-            "--incidence",
-            "collimated",
-        ])
-        .args(["--samples", "20000", "--seed", "5"])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let text = String::from_utf8(out.stdout).unwrap();
-    assert_eq!(text.lines().count(), 1);
-    let v: serde_json::Value = serde_json::from_str(text.trim()).unwrap();
-    for k in ["R", "T", "R_stderr", "T_stderr"] {
-        assert!(v[k].is_f64(), "{k} missing in {text}");
-    }
-    // Row τ=1, a=0.8, g=0: UR1 = 0.210847, UT1 = 0.541400.
-    assert!((v["R"].as_f64().unwrap() - 0.210847).abs() < 3.0 * v["R_stderr"].as_f64().unwrap() + 0.002);
-    assert!((v["T"].as_f64().unwrap() - 0.541400).abs() < 3.0 * v["T_stderr"].as_f64().unwrap() + 0.002);
-    let bad = std::process::Command::new(env!("CARGO_BIN_EXE_cloudgi"))
-        .args(["slab", "--thickness", "1", "--albedo", "2", "--g", "0", "--incidence", "diffuse"])
-        .output()
-        .unwrap();
-    assert!(!bad.status.success());
-    let msg = String::from_utf8_lossy(&bad.stderr);
-    assert!(msg.contains("--albedo") && msg.contains("[0, 1]"), "{msg}");
 }
