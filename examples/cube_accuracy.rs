@@ -13,12 +13,12 @@ use cloudgi::cube::render::{render_cube_brute, BinMask, CubeOptions, CubeRendere
 use cloudgi::lit::sunlight::SunTransmittance;
 use cloudgi::math::Rgb;
 use cloudgi::render::diffusion::scene_lit_volume;
-use cloudgi::{NoProgress, Scene};
+use cloudgi::{NoProgress, Scene, SceneDesc};
 use std::time::Instant;
 
 fn main() {
     let every: usize = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(200);
-    let scene = Scene::default_scene().expect("default scene");
+    let scene = Scene::from_desc(SceneDesc::default()).expect("default scene");
     let t = Instant::now();
     let sun_t = SunTransmittance::compute(&scene.medium, scene.sun.dir);
     let l_sky = scene.sky.radiance(cloudgi::math::Vec3::Y);

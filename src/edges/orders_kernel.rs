@@ -108,8 +108,6 @@ pub const DEFAULT_TAIL: f64 = 1e-4;
 pub struct OrderKernel {
     /// Pixels per face edge.
     pub res: usize,
-    /// The phase function of one scattering event.
-    pub phase: Hg,
     /// Highest order tabulated.
     pub max_order: usize,
     /// w[(i − 1)·6res² + pixel], f32, each order sums to 1.
@@ -136,7 +134,6 @@ impl OrderKernel {
         }
         OrderKernel {
             res,
-            phase,
             max_order,
             weights,
         }

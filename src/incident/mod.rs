@@ -148,8 +148,6 @@ pub struct IncidentLight {
     /// bins, not the sun) projected onto the real spherical harmonics of degree ≤ 2 of the flow
     /// direction, L_lm = Σ_b Δω_b Ī_b Y_lm(ω_b), `[band * 9 + lm]` (W·m⁻²·sr⁻¹); zero where ρ = 0.
     pub sky_sh: Option<VoxelField<[f32; 3 * SH_COEFFS]>>,
-    /// Rays that crossed the medium's active box (all bins and the sun).
-    pub rays: u64,
 }
 
 impl IncidentLight {
@@ -270,8 +268,6 @@ struct Family {
     nru: usize,
     /// Radiance each ray carries (W·m⁻²·sr⁻¹ per band).
     l: Vec<Rgb>,
-    /// Whether each ray has crossed a full voxel.
-    hit: Vec<bool>,
     /// Σ w∫I ds per band over the current plane's voxels (index cv·nu + cu).
     sums: Vec<[f32; 3]>,
 }
@@ -371,7 +367,6 @@ impl Family {
             v0,
             nru,
             l: vec![radiance; nru * nrv],
-            hit: vec![false; nru * nrv],
             sums: vec![[0.0; 3]; lay.nu * lay.nv],
         }
     }
@@ -469,7 +464,6 @@ impl Family {
                     s[1] += w * li.y;
                     s[2] += w * li.z;
                     self.l[ri] = l * Rgb::from_array(e);
-                    self.hit[ri] = true;
                 }
             }
         }
@@ -582,8 +576,8 @@ struct Swept<'a> {
 
 impl Swept<'_> {
     /// Sweep every family, accumulating lanes `lanes` of [`Acc`] per full voxel (in grid order);
-    /// also the sky SH (in its field's slots, when asked for) and the rays that hit the cloud.
-    fn sweep<const L: usize>(&self, lanes: &[usize; L]) -> (Vec<[f64; L]>, Vec<[f32; 3 * SH_COEFFS]>, u64) {
+    /// also the sky SH (in its field's slots, when asked for).
+    fn sweep<const L: usize>(&self, lanes: &[usize; L]) -> (Vec<[f64; L]>, Vec<[f32; 3 * SH_COEFFS]>) {
         let (rho, bd, h, plan, sw) = (self.rho, self.bd, self.h, self.plan, self.sw);
         // Accumulators per full voxel in box order (= grid order: they are the fields' packed
         // storage), split into rows (y, z) for the parallel reduction.
@@ -593,7 +587,6 @@ impl Swept<'_> {
         let mut acc: Vec<[f64; L]> = vec![[0.0; L]; full];
         // The sky SH in its field's slots (slot 0 the empty voxels' zero), filled in place.
         let mut sh = vec![[0f32; 3 * SH_COEFFS]; if self.sky_single { full + 1 } else { 0 }];
-        let mut rays = 0u64;
         {
             let mut rows: Vec<Row<L>> = Vec::with_capacity(row_len.len());
             let (mut rest, mut rest_sh) = (&mut acc[..], sh.get_mut(1..).unwrap_or_default());
@@ -667,11 +660,10 @@ impl Swept<'_> {
                             }),
                         }
                     }
-                    rays += fams.iter().map(|f| f.hit.iter().filter(|h| **h).count() as u64).sum::<u64>();
                 }
             }
         }
-        (acc, sh, rays)
+        (acc, sh)
     }
 }
 
@@ -783,7 +775,6 @@ pub fn compute(
             sun_irradiance: sun_e,
             bin_radiance: sources.bin_radiance.clone(),
             sky_sh: None,
-            rays: 0,
         };
     };
     let bd = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
@@ -825,14 +816,14 @@ pub fn compute(
     };
     // ρ of the full voxels in box order, the accumulators' order (the box is dropped first).
     let pack = |rho: Vec<f32>| -> Vec<f32> { rho.into_iter().filter(|&r| r > 0.0).collect() };
-    let (scattering, sh, rays) = if sun_only {
-        let (acc, sh, rays) = swept.sweep(&[FirstScattering::sun_band(e)]);
+    let (scattering, sh) = if sun_only {
+        let (acc, sh) = swept.sweep(&[FirstScattering::sun_band(e)]);
         let packed_rho = pack(rho);
-        (FirstScattering::sun(index.clone(), &optics, &acc, &packed_rho, dir, e), sh, rays)
+        (FirstScattering::sun(index.clone(), &optics, &acc, &packed_rho, dir, e), sh)
     } else {
-        let (acc, sh, rays) = swept.sweep(&ALL_LANES);
+        let (acc, sh) = swept.sweep(&ALL_LANES);
         let packed_rho = pack(rho);
-        (FirstScattering::general(index.clone(), &optics, &acc, &packed_rho), sh, rays)
+        (FirstScattering::general(index.clone(), &optics, &acc, &packed_rho), sh)
     };
     IncidentLight {
         dims,
@@ -840,7 +831,6 @@ pub fn compute(
         sun_irradiance: sun_e,
         bin_radiance: sources.bin_radiance.clone(),
         sky_sh: settings.sky_single.then(|| VoxelField::from_slots(index, sh)),
-        rays,
     }
 }
 

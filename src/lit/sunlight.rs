@@ -33,8 +33,6 @@ pub struct SunTransmittance {
     /// Transmittance towards the sun at each voxel centre (unitless), stored on the full voxels'
     /// box grown by one voxel; 1 elsewhere.
     pub grid: Arc<SunGrid>,
-    /// Unit direction towards the sun.
-    pub dir: Vec3,
 }
 
 impl SunTransmittance {
@@ -76,7 +74,6 @@ impl SunTransmittance {
         }
         SunTransmittance {
             grid: Arc::new(grid),
-            dir: sun_dir,
         }
     }
 

@@ -210,7 +210,6 @@ mod tests {
             sun_irradiance: Rgb::splat(3.0),
             bin_radiance: vec![Rgb::splat(0.1); 4],
             sky_sh: None,
-            rays: 0,
         };
         if let FirstScattering::Sun { q0_per_rho_t, .. } = &mut inc.scattering {
             q0_per_rho_t[1] = q0;
