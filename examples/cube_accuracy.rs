@@ -1,7 +1,7 @@
 //! Measure the border cubes on the default scene: how many, how long at each cube resolution,
 //! and their bin error against brute-force cubes (res 32, steps of 0.25 voxel) on a sample.
 //!
-//! `cargo run --release --example cube_accuracy [sample_every]`
+//! `cargo run --release --features internals --example cube_accuracy [sample_every]`
 //!
 //! I0 is a stand-in (this measures the renderer, not the diffusion solution): the sky radiance
 //! plus the sun's irradiance scaled by the transmittance towards it, which gives the lit/shadowed

@@ -1,7 +1,7 @@
 //! Measures the sparse (interpolated) edge gather against one cube per segment on the default
 //! scene, and prints the default cloud's density statistics behind `render.low_density_threshold`.
 //!
-//! `cargo run --release --example edges_sparse [WIDTH] [CUBE_RES] [REFERENCE_CUBE_RES]`
+//! `cargo run --release --features internals --example edges_sparse [WIDTH] [CUBE_RES] [REFERENCE_CUBE_RES]`
 //!
 //! With a reference resolution, errors are measured against one cube per segment at that finer
 //! resolution, and the per-segment gather at CUBE_RES is listed too (time against error).

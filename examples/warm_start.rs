@@ -8,7 +8,7 @@
 //! of the warm image against the cold one, and of the cold image against a solve to 1e-5 (the
 //! tolerance's own effect on the image).
 //!
-//! `cargo run --release --example warm_start [FRAMES] [WIDTH]` (defaults 8 and 80; 4:3 images)
+//! `cargo run --release --features internals --example warm_start [FRAMES] [WIDTH]` (defaults 8 and 80; 4:3 images)
 
 use cloudgi::math::Vec3;
 use cloudgi::medium::procedural::cumulus;

@@ -18,8 +18,20 @@ pub fn data(path: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(path)
 }
 
-/// The table of the adding-doubling slab (tests/data/slab_adding_doubling.csv).
-pub const SLAB_TABLE: &str = include_str!("../../tests/data/slab_adding_doubling.csv");
+/// The rows of the adding-doubling slab table (tests/data/slab_adding_doubling.csv): optical
+/// thickness, albedo, g, UR1, UT1, URU, UTU.
+pub fn slab_rows() -> Vec<[f64; 7]> {
+    let text = include_str!("../../tests/data/slab_adding_doubling.csv");
+    let mut lines = text.lines();
+    assert_eq!(lines.next().unwrap().trim(), "optical_thickness,albedo,g,UR1,UT1,URU,UTU");
+    lines
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|x| x.trim().parse().unwrap()).collect();
+            [v[0], v[1], v[2], v[3], v[4], v[5], v[6]]
+        })
+        .collect()
+}
 
 /// Every pixel of the image and of its layers (but those named in `skip`) is finite and ≥ 0.
 pub fn assert_finite_nonnegative(label: &str, img: &Image, skip: &[&str]) {

@@ -69,10 +69,8 @@ fn slab_against_adding_doubling() {
     // Diffusion is accurate for thick, highly scattering slabs. Rows with reduced optical depth
     // (1 − g)τ ≥ 5 and albedo ≥ 0.99: R and T within 0.04 absolute (measured worst ~0.03, see
     // docs/accuracy.md). Thin or absorbing slabs are not expected to agree and are not tested.
-    let text = super::common::SLAB_TABLE;
     let mut checked = 0;
-    for line in text.lines().skip(1) {
-        let v: Vec<f64> = line.split(',').map(|x| x.trim().parse().unwrap()).collect();
+    for v in super::common::slab_rows() {
         let (tau, a, g) = (v[0], v[1], v[2]);
         if (1.0 - g) * tau < 5.0 || a < 0.99 {
             continue;
@@ -91,11 +89,9 @@ fn slab_against_adding_doubling() {
 fn delta_m_slab_against_adding_doubling() {
     // With the δ-M transform (f = g²) every row of reduced optical depth (1 − g)τ ≥ 1, absorbing
     // rows included: R and T within 0.03 absolute, never negative (measured worst: docs/budget.md).
-    let text = super::common::SLAB_TABLE;
     let mut checked = 0;
     let mut worst: f64 = 0.0;
-    for line in text.lines().skip(1) {
-        let v: Vec<f64> = line.split(',').map(|x| x.trim().parse().unwrap()).collect();
+    for v in super::common::slab_rows() {
         let (tau, a, g) = (v[0], v[1], v[2]);
         let f = slab_forward_fraction(g);
         let n = solve_slab_similar(tau, a, g, f, Incidence::Normal);

@@ -60,6 +60,22 @@ fn no_sun(_: Vec3) -> Rgb {
     Rgb::ZERO
 }
 
+/// A gather with the sun towards `sun_dir` giving `sun` (W/m² at a point).
+fn sunlit_gather<'a>(
+    m: &'a Medium,
+    settings: EdgeSettings,
+    cubes: &'a dyn CubeSource,
+    sun_dir: Vec3,
+    sun: &'a (dyn Fn(Vec3) -> Rgb + Sync),
+    dense: &'a (dyn Fn(Vec3, Vec3) -> Rgb + Sync),
+) -> EdgeGather<'a> {
+    let sun = SunInput {
+        dir: sun_dir,
+        irradiance_at: sun,
+    };
+    EdgeGather::new(m, settings, cubes, sun, dense)
+}
+
 /// A gather without sun.
 fn unlit_gather<'a>(
     m: &'a Medium,
@@ -67,16 +83,7 @@ fn unlit_gather<'a>(
     cubes: &'a dyn CubeSource,
     dense: &'a (dyn Fn(Vec3, Vec3) -> Rgb + Sync),
 ) -> EdgeGather<'a> {
-    EdgeGather::new(
-        m,
-        settings,
-        cubes,
-        SunInput {
-            dir: Vec3::Y,
-            irradiance_at: &no_sun,
-        },
-        dense,
-    )
+    sunlit_gather(m, settings, cubes, Vec3::Y, &no_sun, dense)
 }
 
 fn cumulus_medium(albedo: f32, g: f32) -> Medium {
@@ -159,16 +166,7 @@ fn threshold_zero_is_the_pure_dense_gather() {
         surface_depth: 0.0,
         ..Default::default()
     };
-    let gather = EdgeGather::new(
-        &m,
-        settings,
-        &NoCubes,
-        SunInput {
-            dir: sun_dir,
-            irradiance_at: &sun,
-        },
-        &dense,
-    );
+    let gather = sunlit_gather(&m, settings, &NoCubes, sun_dir, &sun, &dense);
     let bg = Rgb::new(0.2, 0.3, 0.6);
     for (o, d) in rays(25, 2) {
         let a = gather.radiance(o, d, f32::INFINITY, bg);
@@ -212,16 +210,7 @@ fn deterministic_at_any_thread_count() {
         surface_depth: 0.0,
         ..Default::default()
     };
-    let gather = EdgeGather::new(
-        &m,
-        settings,
-        &cubes,
-        SunInput {
-            dir: Vec3::Y,
-            irradiance_at: &sun,
-        },
-        &dense,
-    );
+    let gather = sunlit_gather(&m, settings, &cubes, Vec3::Y, &sun, &dense);
     let rs = rays(60, 4);
     let seq: Vec<_> = rs.iter().map(|(o, d)| gather.radiance(*o, *d, f32::INFINITY, Rgb::ONE)).collect();
     let par: Vec<_> = rs
@@ -507,16 +496,7 @@ fn sun_orders_are_not_double_counted_and_cube_request_is_the_segment() {
         surface_depth: 0.0,
         ..Default::default()
     };
-    let gather = EdgeGather::new(
-        &m,
-        settings,
-        &cubes,
-        SunInput {
-            dir: sun_dir,
-            irradiance_at: &sun,
-        },
-        &dense,
-    );
+    let gather = sunlit_gather(&m, settings, &cubes, sun_dir, &sun, &dense);
     let (o, d) = (Vec3::new(-1.0, 3.0, 3.0), Vec3::X);
     let aov = gather.radiance(o, d, f32::INFINITY, Rgb::ZERO);
     let depth = (sigma_t * 0.1 * 6.0) as f64;
@@ -630,16 +610,7 @@ fn surface_layer_sun_orders_start_from_the_layers_mean_sun() {
         surface_band: 0.0,
         ..Default::default()
     };
-    let gather = EdgeGather::new(
-        &m,
-        settings,
-        &cubes,
-        SunInput {
-            dir: sun_dir,
-            irradiance_at: &sun,
-        },
-        &dense,
-    );
+    let gather = sunlit_gather(&m, settings, &cubes, sun_dir, &sun, &dense);
     let u = Vec3::new(0.5, 3f32.sqrt() / 2.0, 0.0);
     let px = gather.radiance(Vec3::new(0.0, -1.0, 0.0), u, f32::INFINITY, Rgb::ZERO);
     let top = (ds * u.y as f64 / sigma_t as f64) as f32;

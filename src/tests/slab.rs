@@ -23,22 +23,16 @@ struct Row {
 }
 
 fn rows() -> Vec<Row> {
-    let text = super::common::SLAB_TABLE;
-    let mut lines = text.lines();
-    assert_eq!(lines.next().unwrap().trim(), "optical_thickness,albedo,g,UR1,UT1,URU,UTU");
-    lines
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| {
-            let v: Vec<f64> = l.split(',').map(|x| x.trim().parse().unwrap()).collect();
-            Row {
-                tau: v[0],
-                albedo: v[1],
-                g: v[2],
-                ur1: v[3],
-                ut1: v[4],
-                uru: v[5],
-                utu: v[6],
-            }
+    super::common::slab_rows()
+        .into_iter()
+        .map(|v| Row {
+            tau: v[0],
+            albedo: v[1],
+            g: v[2],
+            ur1: v[3],
+            ut1: v[4],
+            uru: v[5],
+            utu: v[6],
         })
         .collect()
 }

@@ -3,25 +3,13 @@
 //! incidences, R and T within 0.005 absolute — a converged 1-D transport solution is nearly exact,
 //! so this catches a wrong δ-M transform, quadrature, beam source or acceleration.
 
+use super::common::slab_rows;
 use crate::transport::slab::{solve_slab, Incidence, SlabSettings};
 use rayon::prelude::*;
 
-fn rows() -> Vec<[f64; 7]> {
-    let text = super::common::SLAB_TABLE;
-    let mut lines = text.lines();
-    assert_eq!(lines.next().unwrap().trim(), "optical_thickness,albedo,g,UR1,UT1,URU,UTU");
-    lines
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| {
-            let v: Vec<f64> = l.split(',').map(|x| x.trim().parse().unwrap()).collect();
-            [v[0], v[1], v[2], v[3], v[4], v[5], v[6]]
-        })
-        .collect()
-}
-
 #[test]
 fn every_adding_doubling_row_within_0_005() {
-    let rows = rows();
+    let rows = slab_rows();
     assert_eq!(rows.len(), 105);
     let s = SlabSettings::default();
     let results: Vec<(String, f64, usize)> = rows
