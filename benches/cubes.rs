@@ -5,14 +5,14 @@
 use cloudgi::cube::border::{find_border_voxels, render_border_cubes_with};
 use cloudgi::cube::ground::render_ground;
 use cloudgi::cube::render::{BinMask, CubeRenderer};
+use cloudgi::lit::sunlight::SunTransmittance;
 use cloudgi::math::{Rgb, Vec3};
 use cloudgi::render::diffusion::scene_lit_volume;
-use cloudgi::sunlight::SunTransmittance;
-use cloudgi::{NoProgress, Scene};
+use cloudgi::{NoProgress, Scene, SceneDesc};
 use criterion::{criterion_group, criterion_main, Criterion};
 
 fn cubes(c: &mut Criterion) {
-    let scene = Scene::default_scene().unwrap();
+    let scene = Scene::from_desc(SceneDesc::default()).unwrap();
     let sun_t = SunTransmittance::compute(&scene.medium, scene.sun.dir);
     let l_sky = scene.sky.radiance(Vec3::Y);
     let i0: Vec<Rgb> = sun_t

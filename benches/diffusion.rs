@@ -6,11 +6,11 @@
 
 use cloudgi::diffusion::{solve_diffusion, DiffusionSettings};
 use cloudgi::render::diffusion::{boundary_light, compute_incident};
-use cloudgi::{Method, NoProgress, Scene};
+use cloudgi::{Method, NoProgress, Scene, SceneDesc};
 use criterion::{criterion_group, criterion_main, Criterion};
 
 fn diffusion(c: &mut Criterion) {
-    let mut scene = Scene::default_scene().unwrap();
+    let mut scene = Scene::from_desc(SceneDesc::default()).unwrap();
     let inc = compute_incident(&scene, None);
     let sol = solve_diffusion(&scene.medium, &inc, &boundary_light(&scene), None, &DiffusionSettings::default()).unwrap();
     println!("{}", sol.summary());
@@ -38,9 +38,11 @@ fn solver(c: &mut Criterion) {
     let mut g = c.benchmark_group("solver");
     g.sample_size(10);
     for (r, h) in [([50, 40, 30], 20.0), ([100, 80, 60], 10.0), ([200, 160, 120], 5.0)] {
-        let scene = Scene::load(None, |d| {
+        let scene = Scene::from_desc({
+            let mut d = SceneDesc::default();
             d.medium.resolution = r;
             d.medium.voxel_size = h;
+            d
         })
         .unwrap();
         let inc = compute_incident(&scene, None);

@@ -3,15 +3,17 @@
 
 use cloudgi::reference::slab::{slab, Incidence, SlabParams};
 use cloudgi::scene::Method;
-use cloudgi::{NoProgress, Scene};
+use cloudgi::{NoProgress, Scene, SceneDesc};
 use criterion::{criterion_group, criterion_main, Criterion};
 
 fn reference(c: &mut Criterion) {
-    let scene = Scene::load(None, |d| {
+    let scene = Scene::from_desc({
+        let mut d = SceneDesc::default();
         d.render.method = Method::Reference;
         d.camera.width = 96;
         d.camera.height = 72;
         d.render.spp = 1;
+        d
     })
     .unwrap();
     let mut g = c.benchmark_group("reference");

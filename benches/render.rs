@@ -1,11 +1,11 @@
 //! Foundation benchmarks: the default `single` render at 480×360, and the sun-transmittance precompute.
 
-use cloudgi::sunlight::SunTransmittance;
-use cloudgi::{NoProgress, Scene};
+use cloudgi::lit::sunlight::SunTransmittance;
+use cloudgi::{NoProgress, Scene, SceneDesc};
 use criterion::{criterion_group, criterion_main, Criterion};
 
 fn single(c: &mut Criterion) {
-    let scene = Scene::default_scene().unwrap();
+    let scene = Scene::from_desc(SceneDesc::default()).unwrap();
     let mut g = c.benchmark_group("single");
     g.sample_size(10);
     g.bench_function("default scene 480x360", |b| {

@@ -1,7 +1,7 @@
 //! Measure the border cubes on the default scene: how many, how long at each cube resolution,
 //! and their bin error against brute-force cubes (res 32, steps of 0.25 voxel) on a sample.
 //!
-//! `cargo run --release --example cube_accuracy [sample_every]`
+//! `cargo run --release --features internals --example cube_accuracy [sample_every]`
 //!
 //! I0 is a stand-in (this measures the renderer, not the diffusion solution): the sky radiance
 //! plus the sun's irradiance scaled by the transmittance towards it, which gives the lit/shadowed
@@ -10,15 +10,15 @@
 use cloudgi::cube::border::{find_border_voxels, render_border_cubes};
 use cloudgi::cube::ground::render_ground;
 use cloudgi::cube::render::{render_cube_brute, BinMask, CubeOptions, CubeRenderer};
+use cloudgi::lit::sunlight::SunTransmittance;
 use cloudgi::math::Rgb;
 use cloudgi::render::diffusion::scene_lit_volume;
-use cloudgi::sunlight::SunTransmittance;
-use cloudgi::{NoProgress, Scene};
+use cloudgi::{NoProgress, Scene, SceneDesc};
 use std::time::Instant;
 
 fn main() {
     let every: usize = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(200);
-    let scene = Scene::default_scene().expect("default scene");
+    let scene = Scene::from_desc(SceneDesc::default()).expect("default scene");
     let t = Instant::now();
     let sun_t = SunTransmittance::compute(&scene.medium, scene.sun.dir);
     let l_sky = scene.sky.radiance(cloudgi::math::Vec3::Y);

@@ -1,7 +1,7 @@
 //! Measures the sparse (interpolated) edge gather against one cube per segment on the default
 //! scene, and prints the default cloud's density statistics behind `render.low_density_threshold`.
 //!
-//! `cargo run --release --example edges_sparse [WIDTH] [CUBE_RES] [REFERENCE_CUBE_RES]`
+//! `cargo run --release --features internals --example edges_sparse [WIDTH] [CUBE_RES] [REFERENCE_CUBE_RES]`
 //!
 //! With a reference resolution, errors are measured against one cube per segment at that finer
 //! resolution, and the per-segment gather at CUBE_RES is listed too (time against error).
@@ -10,11 +10,12 @@
 //! pixel), a stand-in for the full cube renderer with a realistic cost per cube.
 
 use cloudgi::cube::CubeImage;
-use cloudgi::edges::{gather_image, CubeRequest, CubeSource, EdgeAov, EdgeGather, EdgeSettings, PixelRay, SparseSettings, SunInput};
+use cloudgi::edges::gather::EdgeAov;
+use cloudgi::edges::{gather_image, CubeRequest, CubeSource, EdgeGather, EdgeSettings, PixelRay, SparseSettings, SunInput};
+use cloudgi::lit::sunlight::SunTransmittance;
 use cloudgi::math::{luminance, Rgb, Vec3};
 use cloudgi::render::single;
-use cloudgi::scene::Scene;
-use cloudgi::sunlight::SunTransmittance;
+use cloudgi::scene::{Scene, SceneDesc};
 use std::time::Instant;
 
 struct MarchCubes<'a> {
@@ -43,9 +44,11 @@ fn main() {
     let width: u32 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(96);
     let res: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(8);
     let ref_res: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(res);
-    let scene = Scene::load(None, |d| {
+    let scene = Scene::from_desc({
+        let mut d = SceneDesc::default();
         d.camera.height = d.camera.height * width / d.camera.width;
         d.camera.width = width;
+        d
     })
     .expect("default scene");
     let m = &scene.medium;

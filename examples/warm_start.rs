@@ -8,14 +8,14 @@
 //! of the warm image against the cold one, and of the cold image against a solve to 1e-5 (the
 //! tolerance's own effect on the image).
 //!
-//! `cargo run --release --example warm_start [FRAMES] [WIDTH]` (defaults 8 and 80; 4:3 images)
+//! `cargo run --release --features internals --example warm_start [FRAMES] [WIDTH]` (defaults 8 and 80; 4:3 images)
 
-use cloudgi::compare::compare;
 use cloudgi::math::Vec3;
 use cloudgi::medium::procedural::cumulus;
 use cloudgi::medium::Medium;
 use cloudgi::render::warm::{render_warm, Warm};
 use cloudgi::scene::{Scene, SceneDesc};
+use cloudgi::tools::compare::compare;
 use cloudgi::{Image, NoProgress};
 use std::path::Path;
 

@@ -27,7 +27,7 @@ impl Scene {
     /// let path = dir.path().join("tiny.toml");
     /// std::fs::write(&path, "[camera]\nwidth = 8\nheight = 6\n").unwrap();
     /// let scene = cloudgi::Scene::from_file(&path).unwrap();
-    /// assert_eq!(scene.camera.width, 8);
+    /// assert_eq!(scene.desc.camera.width, 8);
     /// ```
     pub fn from_file(path: impl AsRef<Path>) -> Result<Scene> {
         Scene::load(Some(path.as_ref()), |_| {})
@@ -38,7 +38,7 @@ impl Scene {
     ///
     /// ```
     /// let scene = cloudgi::Scene::from_toml("[render]\nmethod = \"single\"").unwrap();
-    /// assert_eq!(scene.render.method, cloudgi::Method::Single);
+    /// assert_eq!(scene.desc.render.method, cloudgi::Method::Single);
     /// let err = cloudgi::Scene::from_toml("[camera]\nwdith = 8").unwrap_err();
     /// assert!(err.to_string().contains("unknown field `wdith`"));
     /// ```
@@ -54,10 +54,36 @@ impl Scene {
     /// desc.camera.width = 8;
     /// desc.camera.height = 6;
     /// let scene = cloudgi::Scene::from_desc(desc).unwrap();
-    /// assert_eq!(scene.camera.height, 6);
+    /// assert_eq!(scene.desc.camera.height, 6);
     /// ```
     pub fn from_desc(desc: SceneDesc) -> Result<Scene> {
         Scene::build(desc, crate::scene::BUILTIN, Path::new("."))
+    }
+
+    /// Resolution `[nx, ny, nz]` of the density grid as loaded (after `medium.downsample`).
+    ///
+    /// ```
+    /// let scene = cloudgi::Scene::from_toml("[medium]\nresolution = [10, 8, 6]").unwrap();
+    /// assert_eq!(scene.grid_dims(), [10, 8, 6]);
+    /// ```
+    pub fn grid_dims(&self) -> [usize; 3] {
+        self.medium.dims()
+    }
+}
+
+impl Image {
+    /// The exposure (stops) the command line gives a PNG preview when neither `--exposure` nor
+    /// `render.exposure` sets one: −log2 L, L the 99th percentile of the finite luminances (it maps
+    /// to 1, which the filmic curve takes to 0.80);
+    /// 0 for an image without a positive one. Use it with [`Image::to_png_bytes`].
+    ///
+    /// ```
+    /// let mut img = cloudgi::Image::new(2, 1);
+    /// img.pixels.fill(cloudgi::Rgb::splat(3.2));
+    /// assert!((img.auto_exposure() + 3.2f32.log2()).abs() < 1e-5);
+    /// ```
+    pub fn auto_exposure(&self) -> f32 {
+        crate::exposure::auto_stops(self)
     }
 }
 
@@ -83,7 +109,7 @@ impl Density {
     /// desc.camera.height = 6;
     /// let density = Density::new([4, 3, 2], vec![0.5; 24], 100.0, [-200.0, 0.0, -100.0]).unwrap();
     /// let scene = Scene::build_with(desc, "example", ".".as_ref(), Some(density)).unwrap();
-    /// assert_eq!(scene.medium.dims(), [4, 3, 2]);
+    /// assert_eq!(scene.grid_dims(), [4, 3, 2]);
     /// assert!(Density::new([4, 3, 2], vec![0.5; 23], 100.0, [0.0; 3]).is_err());
     /// ```
     pub fn new(dims: [usize; 3], values: Vec<f32>, voxel_size: f32, origin: [f32; 3]) -> Result<Density> {

@@ -8,7 +8,7 @@
 //! - [`Unit16`]: an unsigned float for values in [0, 1] (5-bit exponent, 11-bit mantissa) covering
 //!   [2⁻³¹, 1]; relative rounding ≤ 2⁻¹² ≈ 0.024 %, values below 2⁻³¹ ≈ 4.7e-10 read 2⁻³¹;
 //!   decoding is a shift and an integer add. Used for the sun transmittance
-//!   ([`crate::sunlight::SunTransmittance`]).
+//!   ([`crate::lit::sunlight::SunTransmittance`]).
 //! - [`Signed16`]: a signed float for values relative to a power-of-two scale, |y| < 2 (sign,
 //!   4-bit exponent, 11-bit mantissa, with subnormals): relative rounding ≤ 2⁻¹² for
 //!   |y| ≥ 2⁻¹⁴, absolute ≤ 2⁻²⁶ below; decoding is a shift, an or of the sign and a multiply by

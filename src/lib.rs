@@ -15,62 +15,49 @@
 //! # Ok::<(), cloudgi::Error>(())
 //! ```
 //!
-//! The modules below the API (hidden from these docs) are the renderer's stages, public only so
-//! that the command line (`src/cli/`) and the integration tests in `tests/` can reach them; they
-//! are not a stable API.
+//! Everything else is crate-private: the renderer's stages (one module each), the command line
+//! (`src/cli/`, whose only public item is the binary's entry point) and the tools over the
+//! renderer (`src/tools/`). The `internals` feature makes the stage modules public (hidden,
+//! unstable) for the stage benches, the measurement examples and the fuzz targets.
+
+// Some crate-private items serve only the tests (brute-force references such as
+// `render_cube_brute`, accessors the checks read): dead code is what neither the renderer nor a
+// test uses, so the lint runs on the test build (`cargo clippy --all-targets`).
+#![cfg_attr(not(test), allow(dead_code, unused_imports))]
+
+/// Declares the renderer's stage modules: crate-private, or public (hidden from the docs, no
+/// API) with the `internals` feature.
+macro_rules! stages {
+    ($($name:ident),* $(,)?) => {$(
+        #[cfg(feature = "internals")]
+        #[doc(hidden)]
+        pub mod $name;
+        #[cfg(not(feature = "internals"))]
+        pub(crate) mod $name;
+    )*};
+}
+
+stages!(
+    camera, cube, diffusion, edges, exposure, half, image, incident, io, lighting, limits, lit, math, medium, optics, pipeline, reference,
+    render, scene, sequence, tools, transport,
+);
 
 mod api;
 #[doc(hidden)]
-pub mod camera;
-#[doc(hidden)]
-pub mod compare;
-#[doc(hidden)]
-pub mod cube;
-#[doc(hidden)]
-pub mod diffusion;
-#[doc(hidden)]
-pub mod edges;
-pub mod error;
-#[doc(hidden)]
-pub mod exposure;
-#[doc(hidden)]
-pub mod figures;
-pub(crate) mod half;
-#[doc(hidden)]
-pub mod image;
-#[doc(hidden)]
-pub mod incident;
-#[doc(hidden)]
-pub mod io;
-#[doc(hidden)]
-pub mod lighting;
-#[doc(hidden)]
-pub mod limits;
-#[doc(hidden)]
-pub mod lit;
-#[doc(hidden)]
-pub mod math;
-#[doc(hidden)]
-pub mod medium;
-#[doc(hidden)]
-pub mod optics;
-pub(crate) mod orders;
-pub(crate) mod pipeline;
-#[doc(hidden)]
-pub mod reference;
-#[doc(hidden)]
-pub mod render;
-#[doc(hidden)]
-pub mod scene;
-#[doc(hidden)]
-pub mod sequence;
-#[doc(hidden)]
-pub mod sunlight;
-#[doc(hidden)]
-pub mod transport;
+pub mod cli;
+mod error;
 
-pub use api::{render, Density, Event, FnProgress, Options, Render, Stats, DENSITY_SOURCE, TOML_SOURCE};
-pub use error::{Error, Result};
-pub use image::Image;
-pub use pipeline::{NoProgress, Progress, Timings};
-pub use scene::{Method, Scene, SceneDesc};
+#[cfg(test)]
+mod tests;
+
+pub use crate::api::{render, Density, Event, FnProgress, Options, Render, Stats, DENSITY_SOURCE, TOML_SOURCE};
+pub use crate::camera::CameraDesc;
+pub use crate::error::{Error, Result};
+pub use crate::image::Image;
+pub use crate::lighting::{GroundDesc, SkyDesc, SkyModel, SunDesc};
+pub use crate::math::Rgb;
+pub use crate::medium::{MediumDesc, UpAxis};
+pub use crate::pipeline::{NoProgress, Progress, Timings};
+pub use crate::scene::{
+    AnimationDesc, CameraKey, KeyDesc, MediumKey, Method, RenderDesc, Scene, SceneDesc, SunKey, BUILTIN as BUILTIN_SOURCE,
+};

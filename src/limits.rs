@@ -3,7 +3,7 @@
 
 /// Largest light the scene may carry, in W/m² (sun irradiance) or W/(m²·sr) (sky radiance, an
 /// environment map's scale on its radiance): 1e30, the brightest sun every method is tested to
-/// render finitely (tests/nonnegative.rs). The methods multiply it by phase-function peaks (up to
+/// render finitely (src/tests/nonnegative.rs). The methods multiply it by phase-function peaks (up to
 /// ~1e4 sr⁻¹) and sum it over orders and samples in f32, whose largest value is 3.4e38, so a
 /// brighter light overflows to inf or NaN; the real sun gives 1361 W/m².
 pub const MAX_LIGHT: f32 = 1e30;

@@ -1,41 +1,5 @@
-//! The `cloudgi` command line: argument parsing, progress bars and files. All rendering lives in
-//! the library.
-
-mod cli;
-
-use clap::Parser;
+//! The `cloudgi` binary: the command line lives in the library (`src/cli/`).
 
 fn main() {
-    large_arrays_mapped();
-    let args = cli::Cli::parse();
-    match cli::run(args) {
-        Ok(()) => {}
-        Err(e) if cli::console::is_broken_pipe(&e) => std::process::exit(cli::console::EXIT_BROKEN_PIPE),
-        Err(e) => {
-            cli::console::note(format_args!("error: {}", cli::shortened(&e.to_string())));
-            std::process::exit(1);
-        }
-    }
+    cloudgi::cli::main();
 }
-
-/// Every allocation of 1 MiB or more gets its own mapping, returned to the system when freed.
-/// By default glibc raises its mapping threshold to the size of each freed mapping (up to
-/// 32 MiB), after which the stages' large arrays come from the heap, whose freed ranges stay
-/// resident. The per-band and per-stage arrays (1–4 MiB at 200×160×120) are what `full`'s peak
-/// holds, so a fixed 1 MiB threshold keeps that peak near its live heap for a little more system
-/// time (docs/performance.md, "The solver on its unknowns").
-#[cfg(all(target_os = "linux", target_env = "gnu"))]
-fn large_arrays_mapped() {
-    extern "C" {
-        fn mallopt(param: i32, value: i32) -> i32;
-    }
-    const M_MMAP_THRESHOLD: i32 = -3;
-    // SAFETY: sets one allocator parameter (a fixed threshold also stops its adjustment), before
-    // any other thread exists; a failure (0) leaves the default, which is only less frugal.
-    unsafe {
-        mallopt(M_MMAP_THRESHOLD, 1 << 20);
-    }
-}
-
-#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-fn large_arrays_mapped() {}

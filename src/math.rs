@@ -24,12 +24,6 @@ impl Ray {
             dir: dir.normalize(),
         }
     }
-
-    /// The point at distance `t` (m).
-    #[inline]
-    pub fn at(&self, t: f32) -> Vec3 {
-        self.origin + self.dir * t
-    }
 }
 
 /// An orthonormal frame (t, b, n) with `n` given; used to turn local directions into world ones.
@@ -57,7 +51,7 @@ impl Frame {
 
     /// Local (x, y, z) → world, z along `n`.
     #[inline]
-    pub fn to_world(&self, v: Vec3) -> Vec3 {
+    pub fn to_world(self, v: Vec3) -> Vec3 {
         self.t * v.x + self.b * v.y + self.n * v.z
     }
 }

@@ -57,7 +57,7 @@ impl Method {
 /// key and line in type errors and cannot be combined with `deny_unknown_fields`.)
 macro_rules! render_table {
     ($( $(#[$doc:meta])* $key:ident : $ty:ty => $($path:ident).+ ; )*) => {
-        /// `[render]`: the flat table of the scene file (see [`RenderSettings`] for where each
+        /// `[render]`: the flat table of the scene file (see `RenderSettings` for where each
         /// key goes).
         #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
         #[serde(deny_unknown_fields, default)]
@@ -362,7 +362,8 @@ impl Default for RenderSettings {
     }
 }
 
-/// A validated scene, ready to render.
+/// A validated scene, ready to render: its [`SceneDesc`] and what that loads (the medium, the
+/// lights, the camera; crate-private, public with the `internals` feature).
 #[derive(Clone, Debug)]
 pub struct Scene {
     /// Where it came from (file path or [`BUILTIN`]), for messages.
@@ -370,17 +371,35 @@ pub struct Scene {
     /// The description it was built from.
     pub desc: SceneDesc,
     /// The medium, loaded.
+    #[cfg(feature = "internals")]
     pub medium: Medium,
+    #[cfg(not(feature = "internals"))]
+    pub(crate) medium: Medium,
     /// The sun.
+    #[cfg(feature = "internals")]
     pub sun: Sun,
+    #[cfg(not(feature = "internals"))]
+    pub(crate) sun: Sun,
     /// The sky.
+    #[cfg(feature = "internals")]
     pub sky: Sky,
+    #[cfg(not(feature = "internals"))]
+    pub(crate) sky: Sky,
     /// The ground, if any.
+    #[cfg(feature = "internals")]
     pub ground: Option<Ground>,
+    #[cfg(not(feature = "internals"))]
+    pub(crate) ground: Option<Ground>,
     /// The camera.
+    #[cfg(feature = "internals")]
     pub camera: Camera,
+    #[cfg(not(feature = "internals"))]
+    pub(crate) camera: Camera,
     /// Render settings.
+    #[cfg(feature = "internals")]
     pub render: RenderSettings,
+    #[cfg(not(feature = "internals"))]
+    pub(crate) render: RenderSettings,
 }
 
 impl Scene {
@@ -476,12 +495,12 @@ impl Scene {
     }
 
     /// The built-in default scene.
-    pub fn default_scene() -> Result<Scene> {
+    pub(crate) fn default_scene() -> Result<Scene> {
         Scene::build(SceneDesc::default(), BUILTIN, Path::new("."))
     }
 
     /// Load a scene file (None: the built-in default scene), applying `edit` to the description first.
-    pub fn load(path: Option<&Path>, edit: impl FnOnce(&mut SceneDesc)) -> Result<Scene> {
+    pub(crate) fn load(path: Option<&Path>, edit: impl FnOnce(&mut SceneDesc)) -> Result<Scene> {
         let (mut desc, source, base) = match path {
             Some(p) => (
                 SceneDesc::from_file(p)?,
@@ -497,7 +516,7 @@ impl Scene {
     /// Radiance arriving along a ray that leaves the medium's box without further scattering:
     /// the ground (lit by sun and sky, sun shadowed by the cloud) or the sky. The sun's disc is
     /// not included (a point sun is never seen directly).
-    pub fn background(&self, origin: Vec3, dir: Vec3, sun_visibility: impl Fn(Vec3) -> f32) -> Rgb {
+    pub(crate) fn background(&self, origin: Vec3, dir: Vec3, sun_visibility: impl Fn(Vec3) -> f32) -> Rgb {
         if let Some(g) = &self.ground {
             if let Some(t) = g.intersect(origin, dir) {
                 let p = origin + dir * t;

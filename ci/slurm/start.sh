@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Start a one-node Slurm on this machine (munged, slurmctld, slurmd on 127.0.0.1, 2 CPUs) for the
-# farm test (tests/sequences.rs). Needs root and Debian's slurm-wlm + munge (.ci/run installs
+# farm test (tests/it/sequences.rs). Needs root and Debian's slurm-wlm + munge (.ci/run installs
 # them). Idempotent: a running cluster is left as it is. Exits non-zero with a message when
 # Slurm cannot start. State, logs and the config live under $SLURM_STATE (default /tmp/cloudgi-slurm).
 set -euo pipefail

@@ -88,7 +88,7 @@ type Layers = Vec<(String, Vec<u8>)>;
 /// [`Layers`] as Python byte arrays (writable, for numpy), with the width and height.
 type PyImages<'py> = (u32, u32, Vec<(String, Bound<'py, PyByteArray>)>);
 
-fn layer_bytes(px: &[cloudgi::math::Rgb]) -> Vec<u8> {
+fn layer_bytes(px: &[cloudgi::Rgb]) -> Vec<u8> {
     px.iter().flat_map(|p| p.to_array()).flat_map(f32::to_le_bytes).collect()
 }
 
@@ -126,7 +126,7 @@ fn render<'py>(
             progress: Some(&reported),
             cancel: Some(&cancel),
         };
-        let out = cloudgi::render(&scene, scene.render.method, &options)?;
+        let out = cloudgi::render(&scene, scene.desc.render.method, &options)?;
         let mut layers = vec![("rgb".to_string(), layer_bytes(&out.image.pixels))];
         layers.extend(out.aovs.iter().map(|(n, px)| (n.clone(), layer_bytes(px))));
         Ok((out.image.width, out.image.height, layers))
@@ -203,7 +203,7 @@ fn write_exr(py: Python<'_>, path: std::path::PathBuf, width: u32, height: u32, 
             .chunks_exact(12)
             .map(|c| {
                 let f = |i: usize| f32::from_le_bytes([c[i], c[i + 1], c[i + 2], c[i + 3]]);
-                cloudgi::math::Rgb::new(f(0), f(4), f(8))
+                cloudgi::Rgb::new(f(0), f(4), f(8))
             })
             .collect();
         if name == "rgb" {

@@ -2,9 +2,9 @@
 //! overrides of `render()`'s keyword arguments (a JSON object of tables), turned into a
 //! [`SceneDesc`] through the scene file's own parser, so every message is the command line's.
 
-use cloudgi::error::{Error, Result};
-use cloudgi::scene::BUILTIN;
 use cloudgi::SceneDesc;
+use cloudgi::BUILTIN_SOURCE as BUILTIN;
+use cloudgi::{Error, Result};
 use std::path::{Path, PathBuf};
 
 /// Name of a scene given as a dict, in messages.

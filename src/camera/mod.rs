@@ -23,7 +23,7 @@ pub struct CameraDesc {
     pub width: u32,
     /// Image height (pixels).
     pub height: u32,
-    /// Place the camera to frame the cloud's box ([`fit::framed`]): it keeps the direction from
+    /// Place the camera to frame the cloud's box (`camera::fit::framed`): it keeps the direction from
     /// `look_at` to `position` and the field of view, looks at the box's centre and moves to the
     /// distance where the box fills the frame. A scene file without a `[camera]` table sets it.
     pub fit: bool,

@@ -4,10 +4,10 @@
 
 use super::scene_file::SceneFile;
 use super::MethodArg;
+use crate::error::{Error, Result};
+use crate::scene::{Method, Scene};
+use crate::Progress;
 use clap::Args;
-use cloudgi::error::{Error, Result};
-use cloudgi::scene::{Method, Scene};
-use cloudgi::Progress;
 use std::path::PathBuf;
 use std::sync::Mutex;
 
@@ -173,7 +173,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
             let scene = Scene::build(desc, &file.source, &file.base)?;
             super::memory::check_solver(&scene)?;
             let log = Log(Mutex::new(Vec::new()));
-            let out = cloudgi::render::render(&scene, &log)?;
+            let out = crate::render::render(&scene, &log)?;
             for l in log.0.into_inner().unwrap_or_default() {
                 notes.push(format!("{} {}: {l}", name(size), method.name()));
             }

@@ -2,7 +2,7 @@
 //! probably not the metre (a .vdb in centimetres, a Blender object of a few metres), and the
 //! warning names the key that rescales it.
 
-use cloudgi::scene::Scene;
+use crate::scene::Scene;
 
 /// Clouds smaller than this across (m) are reported.
 pub const SMALLEST_M: f32 = 10.0;
@@ -44,7 +44,7 @@ pub fn warning(scene: &Scene) -> Option<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use cloudgi::scene::SceneDesc;
+    use crate::scene::SceneDesc;
     use std::path::Path;
 
     fn warning_for(voxel_size: f32) -> Option<String> {

@@ -1,10 +1,10 @@
 //! `cloudgi compare TEST.exr REF.exr`: error metrics over the cloud pixels as one JSON line, and
-//! an optional false-colour difference PNG (see `cloudgi::compare` for the mask and metrics).
+//! an optional false-colour difference PNG (see `crate::tools::compare` for the mask and metrics).
 
+use crate::error::{Error, Result};
+use crate::tools::compare::{budget, choose_mask, compare, write_diff_png};
+use crate::Image;
 use clap::Args;
-use cloudgi::compare::{budget, choose_mask, compare, write_diff_png};
-use cloudgi::error::{Error, Result};
-use cloudgi::Image;
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -65,7 +65,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
         };
         reference.pixels = px.to_vec();
         // The standard errors are the image's, not the layer's.
-        reference.layers.retain(|l| l.0 != cloudgi::reference::STDERR_LAYER);
+        reference.layers.retain(|l| l.0 != crate::reference::STDERR_LAYER);
     }
     let mask_img = match &a.mask {
         Some(p) => Some(Image::read_exr(p)?),

@@ -2,7 +2,7 @@
 //! an error, a closed pipe ends the command quietly), notes on stderr that never panic, and
 //! SIGINT/SIGTERM, which remove the temporary output files before the process exits.
 
-use cloudgi::error::{Error, Result};
+use crate::error::{Error, Result};
 use std::io::Write;
 
 /// Exit status of a command whose reader closed stdout (the shell's 128 + SIGPIPE).
@@ -37,10 +37,10 @@ pub fn clean_up_on_interrupt() -> Result<()> {
     let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM]).map_err(|e| Error::io("signal handlers", e))?;
     std::thread::spawn(move || {
         if let Some(sig) = signals.forever().next() {
-            let removed = cloudgi::io::remove_temporaries();
-            cloudgi::io::remove_created_empty_dirs();
+            let removed = crate::io::remove_temporaries();
+            crate::io::remove_created_empty_dirs();
             let name = if sig == SIGINT { "SIGINT" } else { "SIGTERM" };
-            let written = cloudgi::io::written();
+            let written = crate::io::written();
             let what = match (written.is_empty(), removed) {
                 (true, _) => "no output written".to_string(),
                 (false, removed) => format!(

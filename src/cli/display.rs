@@ -3,8 +3,8 @@
 //! `tev_client` crate. A viewer that is not listening, or that goes away, is a warning: the render
 //! goes on without it.
 
-use cloudgi::error::{Error, Result};
-use cloudgi::Image;
+use crate::error::{Error, Result};
+use crate::Image;
 use std::net::{SocketAddr, TcpStream, ToSocketAddrs};
 use std::sync::Mutex;
 use std::time::Duration;

@@ -1,8 +1,8 @@
 //! `cloudgi export mitsuba [SCENE] -o DIR`: write the scene for an independent renderer.
 
+use crate::error::Result;
+use crate::scene::Scene;
 use clap::{Args, Subcommand};
-use cloudgi::error::Result;
-use cloudgi::scene::Scene;
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -33,11 +33,11 @@ pub fn run(a: ExportArgs, quiet: bool) -> Result<()> {
             let file = super::SceneFile::read(m.scene.as_deref())?;
             let ours = |p: &std::path::Path| {
                 p.file_name()
-                    .is_some_and(|n| n == "scene.xml" || n == "density.vol" || n == cloudgi::reference::mitsuba::SKY_FILE)
+                    .is_some_and(|n| n == "scene.xml" || n == "density.vol" || n == crate::reference::mitsuba::SKY_FILE)
             };
             super::output::check_folder(&m.output, "--output", &file.inputs(&file.desc), ours)?;
             let scene = Scene::build(file.desc, &file.source, &file.base)?;
-            let files = cloudgi::reference::mitsuba::export(&scene, &m.output)?;
+            let files = crate::reference::mitsuba::export(&scene, &m.output)?;
             if !quiet {
                 for f in files {
                     note!("wrote {}", f.display());

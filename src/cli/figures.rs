@@ -1,10 +1,10 @@
 //! `cloudgi figures [SCENE] -o DIR`: the paper's figure series (Figs. 4–8) with the reference,
-//! difference images, `index.md` and `results.json` (see `cloudgi::figures`).
+//! difference images, `index.md` and `results.json` (see `crate::tools::figures`).
 
+use crate::error::Result;
+use crate::scene::Method;
+use crate::tools::figures::{run as run_figures, table_markdown, FigureOptions};
 use clap::Args;
-use cloudgi::error::Result;
-use cloudgi::figures::{run as run_figures, table_markdown, FigureOptions};
-use cloudgi::scene::Method;
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -36,7 +36,7 @@ pub fn run(a: FiguresArgs, quiet: bool) -> Result<()> {
         reference_time: (a.reference_time > 0.0).then_some(a.reference_time),
     };
     if !(a.reference_time.is_finite() && a.reference_time >= 0.0) {
-        return Err(cloudgi::Error::invalid(
+        return Err(crate::Error::invalid(
             "command line",
             "--reference-time",
             "the time limit is a number of seconds ≥ 0 (0 = none)",
@@ -57,7 +57,7 @@ pub fn run(a: FiguresArgs, quiet: bool) -> Result<()> {
     }
     let progress = super::progress::Bars::new(quiet);
     // A run that fails leaves no empty output folder (an interrupt: src/cli/console.rs).
-    let report = run_figures(a.scene.as_deref(), &a.output, &opts, &progress).inspect_err(|_| cloudgi::io::remove_created_empty_dirs())?;
+    let report = run_figures(a.scene.as_deref(), &a.output, &opts, &progress).inspect_err(|_| crate::io::remove_created_empty_dirs())?;
     if !quiet {
         note!("{}", table_markdown(&report).trim_end());
         note!("→ {}", a.output.join("index.md").display());

@@ -2,16 +2,16 @@
 //! `-o out.####.exr` and `--skip-existing`. Every frame's inputs and outputs are checked before
 //! the first renders; each frame's EXR and PNG are written atomically, so an interrupted sequence
 //! resumes with `--skip-existing`. The sequence itself (patterns, lists, keyframes) is
-//! [`cloudgi::sequence`].
+//! [`crate::sequence`].
 
 use super::scene_file::SceneFile;
 use super::{memory, output, png_beside, progress, warnings, write_exr_and_png, RenderArgs};
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::render::warm::{render_warm, Warm};
+use crate::scene::{Method, Scene, SceneDesc};
+use crate::sequence::{FrameList, FramePattern, Sequence};
 use clap::Args;
-use cloudgi::camera::Camera;
-use cloudgi::error::{Error, Result};
-use cloudgi::render::warm::{render_warm, Warm};
-use cloudgi::scene::{Method, Scene, SceneDesc};
-use cloudgi::sequence::{FrameList, FramePattern, Sequence};
 use std::path::PathBuf;
 use std::time::Instant;
 

@@ -1,7 +1,7 @@
 //! A grid file given where a scene file goes (`cloudgi render cloud.vdb`): the default scene's sun
 //! and sky, no ground, and the camera framing the cloud (`camera.fit`).
 
-use cloudgi::scene::SceneDesc;
+use crate::scene::SceneDesc;
 use std::path::Path;
 
 /// The grid file types a scene's `medium.grid` reads.

@@ -1,10 +1,10 @@
 //! `cloudgi info FILE [--json]`: what a `.vdb` file holds and what a dense render of it needs.
 
 use super::console::print;
+use crate::error::{Error, Result};
+use crate::io::format_bytes;
+use crate::medium::vdb::{read_vdb_info, VdbGridInfo};
 use clap::Args;
-use cloudgi::error::{Error, Result};
-use cloudgi::io::format_bytes;
-use cloudgi::medium::vdb::{read_vdb_info, VdbGridInfo};
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]

@@ -1,11 +1,11 @@
 //! Refuse an image too large for this machine's memory before any work, instead of letting the
 //! allocator abort mid-render.
 
-use cloudgi::diffusion::MAX_BOX_ROW_CELLS;
-use cloudgi::error::{Error, Result};
-use cloudgi::medium::Density;
-use cloudgi::scene::{Method, Scene, SceneDesc};
-use cloudgi::transport::TransportMemory;
+use crate::diffusion::MAX_BOX_ROW_CELLS;
+use crate::error::{Error, Result};
+use crate::medium::Density;
+use crate::scene::{Method, Scene, SceneDesc};
+use crate::transport::TransportMemory;
 
 /// Bytes per pixel a render holds at its peak: the method's accumulators, the image, its layers
 /// and their EXR/PNG encodings. Peak resident memory of 1500×1000 renders of an 8³ grid on the
@@ -233,7 +233,7 @@ pub fn check_solver(scene: &Scene) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use cloudgi::medium::{Grid3, Medium};
+    use crate::medium::{Grid3, Medium};
 
     #[test]
     fn a_huge_image_is_refused_with_what_it_needs() {

@@ -1,4 +1,5 @@
-//! Subcommands of the `cloudgi` binary.
+//! The `cloudgi` command line: argument parsing, progress bars, files and the subcommands. The
+//! binary (`src/main.rs`) only calls [`main`]; all rendering is the library's.
 
 /// `eprintln!` that never panics (see [`console::note`]).
 macro_rules! note {
@@ -7,10 +8,11 @@ macro_rules! note {
     };
 }
 
+mod allocator;
 mod bench;
 mod cloud_size;
 mod compare;
-pub mod console;
+mod console;
 mod display;
 mod export;
 mod figures;
@@ -26,9 +28,9 @@ mod slab;
 mod tonemap;
 mod warnings;
 
+use crate::error::{Error, Result};
+use crate::scene::{Method, Scene};
 use clap::{Args, Parser, Subcommand};
-use cloudgi::error::{Error, Result};
-use cloudgi::scene::{Method, Scene};
 use scene_file::SceneFile;
 use std::path::{Path, PathBuf};
 
@@ -63,7 +65,7 @@ impl From<MethodArg> for Method {
 /// Physically based cloud renderer (Max et al. 2004: diffusion and multiple anisotropic scattering).
 #[derive(Parser, Debug)]
 #[command(name = "cloudgi", version, about)]
-pub struct Cli {
+struct Cli {
     #[command(subcommand)]
     command: Command,
     /// Worker threads (default: all cores). Every output is identical for any count.
@@ -156,7 +158,7 @@ struct RenderArgs {
 const MESSAGE_CHARS: usize = 1000;
 
 /// `message`, shortened to [`MESSAGE_CHARS`].
-pub fn shortened(message: &str) -> String {
+fn shortened(message: &str) -> String {
     let n = message.chars().count();
     if n <= MESSAGE_CHARS {
         return message.to_string();
@@ -165,6 +167,22 @@ pub fn shortened(message: &str) -> String {
     let head: String = message.chars().take(keep).collect();
     let tail: String = message.chars().skip(n - keep).collect();
     format!("{head} … ({} characters left out) … {tail}", n - 2 * keep)
+}
+
+/// The `cloudgi` program: parse the process's arguments, run the subcommand, and give the exit
+/// status (0; 1 after an error, printed shortened to stderr; 141 when stdout's reader has gone).
+/// Public only for `src/main.rs`; not part of the library's API.
+#[doc(hidden)]
+pub fn main() {
+    allocator::large_arrays_mapped();
+    match run(Cli::parse()) {
+        Ok(()) => {}
+        Err(e) if console::is_broken_pipe(&e) => std::process::exit(console::EXIT_BROKEN_PIPE),
+        Err(e) => {
+            console::note(format_args!("error: {}", shortened(&e.to_string())));
+            std::process::exit(1);
+        }
+    }
 }
 
 /// Most worker threads: 4 per core. More only adds scheduling and memory (each thread holds its
@@ -186,7 +204,7 @@ fn check_threads(n: usize) -> Result<()> {
 }
 
 /// Run the parsed command.
-pub fn run(cli: Cli) -> Result<()> {
+fn run(cli: Cli) -> Result<()> {
     console::clean_up_on_interrupt()?;
     if let Some(n) = cli.threads {
         check_threads(n)?;
@@ -209,9 +227,9 @@ pub fn run(cli: Cli) -> Result<()> {
 }
 
 /// Write an image's EXR and PNG preview together: both or neither.
-fn write_exr_and_png(img: &cloudgi::Image, exr: &Path, png: &Path, exposure: f32) -> Result<()> {
+fn write_exr_and_png(img: &crate::Image, exr: &Path, png: &Path, exposure: f32) -> Result<()> {
     let (e, p) = (img.to_exr_bytes()?, img.to_png_bytes(exposure)?);
-    cloudgi::io::write_atomic_all(&[(exr, &e), (png, &p)])
+    crate::io::write_atomic_all(&[(exr, &e), (png, &p)])
 }
 
 /// The PNG written beside an EXR.
@@ -264,7 +282,7 @@ impl RenderArgs {
     }
 
     /// Apply the overrides to a scene description.
-    fn apply(&self, d: &mut cloudgi::SceneDesc) {
+    fn apply(&self, d: &mut crate::SceneDesc) {
         if let Some(m) = self.method {
             d.render.method = m.into();
         }
@@ -321,14 +339,14 @@ fn render(a: RenderArgs, quiet: bool) -> Result<()> {
     }
     let live = viewer.and_then(|v| display::Display::connect(v, &exr.display().to_string()));
     let progress = progress::Bars::new(quiet).with_display(live);
-    let options = cloudgi::Options {
+    let options = crate::Options {
         progress: Some(&progress),
         cancel: None,
     };
-    let out = cloudgi::render(&scene, scene.render.method, &options)?;
+    let out = crate::render(&scene, scene.render.method, &options)?;
     let timings = out.stats.timings.summary();
     let image = out.into_image();
-    cloudgi::Progress::image(&progress, &image);
+    crate::Progress::image(&progress, &image);
     let (stops, why) = tonemap::stops(a.exposure, Some(&file), &image);
     write_exr_and_png(&image, &exr, &png, stops)?;
     if !quiet {

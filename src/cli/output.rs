@@ -2,7 +2,7 @@
 //! writable, no output is a folder, and no output is one of the scene's own input files (which
 //! the atomic rename would replace).
 
-use cloudgi::error::{Error, Result};
+use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};
 
 /// The folder a file path lives in (`.` for a bare name).

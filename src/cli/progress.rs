@@ -2,7 +2,7 @@
 //! plain line every [`LINE_INTERVAL`] while a stage runs, so long renders show they are alive.
 //! Nothing with --quiet.
 
-use cloudgi::Progress;
+use crate::Progress;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -274,7 +274,7 @@ impl Progress for Bars {
         self.display.is_some()
     }
 
-    fn image(&self, img: &cloudgi::Image) {
+    fn image(&self, img: &crate::Image) {
         if let Some(d) = &self.display {
             d.show(img);
         }

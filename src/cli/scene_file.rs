@@ -1,8 +1,8 @@
 //! The scene file as the command line reads it: the description, where it came from, and which
 //! keys the file really sets (for the "does not apply" warnings, which must not fire on defaults).
 
-use cloudgi::error::Result;
-use cloudgi::scene::{SceneDesc, SkyModel, BUILTIN};
+use crate::error::Result;
+use crate::scene::{SceneDesc, SkyModel, BUILTIN};
 use std::path::{Path, PathBuf};
 
 /// A scene file read but not yet built.
@@ -43,7 +43,7 @@ impl SceneFile {
         }
         let desc = SceneDesc::from_file(p)?;
         // The file parsed as a scene, so it is readable TOML text.
-        let table: toml::Table = cloudgi::io::read_capped(p, cloudgi::io::MAX_TEXT_BYTES, "a scene file")
+        let table: toml::Table = crate::io::read_capped(p, crate::io::MAX_TEXT_BYTES, "a scene file")
             .ok()
             .and_then(|b| String::from_utf8(b).ok())
             .and_then(|t| t.parse().ok())

@@ -2,9 +2,9 @@
 //! EXR (row 0 = +y, u = atan2(z, x)/2π; see docs/sky.md) plus a tone-mapped PNG beside it. The
 //! sun is not in the map (it is carried separately); its direction and irradiance are printed.
 
+use crate::error::{Error, Result};
+use crate::lighting::sun_and_sky;
 use clap::Args;
-use cloudgi::error::{Error, Result};
-use cloudgi::lighting::sun_and_sky;
 use std::path::PathBuf;
 
 /// Arguments of `cloudgi sky`.

@@ -1,13 +1,13 @@
 //! `cloudgi slab`: reflectance and transmittance of a plane-parallel slab, as one JSON line, by
 //! the reference transport (Monte Carlo, with standard errors) or by the diffusion discretisation
-//! of eq. 4 with eq. 7 ([`cloudgi::diffusion::slab`], by default after the δ-M transform with
+//! of eq. 4 with eq. 7 ([`crate::diffusion::slab`], by default after the δ-M transform with
 //! f = g², `--forward-fraction 0`: the paper's scheme) or discrete-ordinates transport
-//! ([`cloudgi::transport::slab`]), both deterministic: standard errors 0.
+//! ([`crate::transport::slab`]), both deterministic: standard errors 0.
 
+use crate::diffusion::slab::{slab_forward_fraction, solve_slab_similar, Incidence as DiffusionIncidence};
+use crate::error::{Error, Result};
+use crate::reference::slab::{slab, Incidence, SlabParams, SlabResult};
 use clap::{Args, ValueEnum};
-use cloudgi::diffusion::slab::{slab_forward_fraction, solve_slab_similar, Incidence as DiffusionIncidence};
-use cloudgi::error::{Error, Result};
-use cloudgi::reference::slab::{slab, Incidence, SlabParams, SlabResult};
 
 /// `--incidence`: clap's view of [`Incidence`] (clap stays in the CLI).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -77,9 +77,9 @@ pub fn run(a: SlabArgs) -> Result<()> {
                 IncidenceArg::Diffuse => DiffusionIncidence::Diffuse,
             };
             let d = if a.method == SlabMethod::Transport {
-                let s = cloudgi::transport::slab::SlabSettings::default();
-                let x = cloudgi::transport::slab::solve_slab(a.thickness, a.albedo, a.g, inc, &s);
-                cloudgi::diffusion::slab::SlabResult { r: x.r, t: x.t }
+                let s = crate::transport::slab::SlabSettings::default();
+                let x = crate::transport::slab::solve_slab(a.thickness, a.albedo, a.g, inc, &s);
+                crate::diffusion::slab::SlabResult { r: x.r, t: x.t }
             } else {
                 let f = a.forward_fraction.unwrap_or_else(|| slab_forward_fraction(a.g));
                 if !(0.0..1.0).contains(&f) {

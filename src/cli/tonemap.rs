@@ -2,12 +2,12 @@
 //! re-makes a render's PNG from its EXR (byte for byte, with the same exposure rule).
 //!
 //! Precedence: `--exposure S` on the command line, then `render.exposure` when the scene file sets
-//! it, then the automatic exposure of [`cloudgi::exposure`] (a function of the pixels alone).
+//! it, then the automatic exposure of [`crate::exposure`] (a function of the pixels alone).
 
 use super::scene_file::SceneFile;
+use crate::error::{Error, Result};
+use crate::Image;
 use clap::Args;
-use cloudgi::error::{Error, Result};
-use cloudgi::Image;
 use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
@@ -43,7 +43,7 @@ pub fn stops(flag: Option<f32>, file: Option<&SceneFile>, img: &Image) -> (f32, 
     if let Some(f) = file.filter(|f| f.sets("render.exposure")) {
         return (f.desc.render.exposure, "render.exposure");
     }
-    (cloudgi::exposure::auto_stops(img), "automatic")
+    (crate::exposure::auto_stops(img), "automatic")
 }
 
 /// The EXR and PNG a render writes for `-o PATH`: `OUT.exr` gives `OUT.png` beside it; `OUT.png`

@@ -2,8 +2,8 @@
 //! ignored) and for a cloud the camera cannot see. Printed on stderr; the render still runs.
 
 use super::scene_file::SceneFile;
-use cloudgi::math::Vec3;
-use cloudgi::scene::{Method, Scene, SkyModel};
+use crate::math::Vec3;
+use crate::scene::{Method, Scene, SkyModel};
 
 /// What kind of grid `medium.grid` names.
 #[derive(Clone, Copy, PartialEq, Eq)]

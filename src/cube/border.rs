@@ -70,8 +70,6 @@ pub fn find_border_voxels(density: &Density) -> Vec<([usize; 3], u8)> {
 /// surface, not the grid.
 #[derive(Clone, Debug)]
 pub struct BorderCubes {
-    /// Grid dims the voxel indices refer to.
-    pub dims: [usize; 3],
     /// Border voxels, in memory order.
     pub voxels: Vec<[usize; 3]>,
     /// Faces with a full neighbour, per voxel (bit f = [`FACE_OFFSETS`]`[f]`).
@@ -198,7 +196,6 @@ pub fn render_border_cubes_with(renderer: &CubeRenderer<'_>, progress: &dyn Prog
         radiance[offsets[n]..offsets[n + 1]].copy_from_slice(bins);
     });
     BorderCubes {
-        dims: renderer.lit.dims(),
         voxels: found.iter().map(|(v, _)| *v).collect(),
         faces: found.iter().map(|(_, f)| *f).collect(),
         needed,

@@ -44,18 +44,6 @@ impl CubeImage {
         Self::with_axes(res, Mat3::from_cols(x_axis, f.t, f.b))
     }
 
-    /// Number of pixels (6·res²).
-    #[inline]
-    pub fn len(&self) -> usize {
-        self.pixels.len()
-    }
-
-    /// Always false: a cube has at least six pixels.
-    #[inline]
-    pub fn is_empty(&self) -> bool {
-        self.pixels.is_empty()
-    }
-
     /// Index of pixel (i, j) on `face`.
     #[inline]
     pub fn index(&self, face: usize, i: usize, j: usize) -> usize {
@@ -150,18 +138,6 @@ impl CubeImage {
         sum.iter()
             .zip(&area)
             .map(|(s, a)| Rgb::new((s[0] / a) as f32, (s[1] / a) as f32, (s[2] / a) as f32))
-            .collect()
-    }
-}
-
-impl CubeImage {
-    /// [`Self::bin_averages`] for the bins in `needed` only (None elsewhere): the averages of a
-    /// partially rendered cube.
-    pub fn bin_averages_masked(&self, needed: super::render::BinMask) -> Vec<Option<Rgb>> {
-        self.bin_averages()
-            .into_iter()
-            .enumerate()
-            .map(|(b, l)| needed.contains(b).then_some(l))
             .collect()
     }
 }

@@ -11,10 +11,9 @@ pub mod refine;
 pub mod render;
 pub mod skip;
 
-pub use border::{find_border_voxels, render_border_cubes, BorderCubes};
-pub use ground::{render_ground, LitGround};
+pub use border::BorderCubes;
 pub use image::CubeImage;
-pub use render::{opposite_bin, render_cube_brute, BinMask, CubeOptions, CubeRenderer, LevelTables};
+pub use render::{opposite_bin, CubeOptions, CubeRenderer, LevelTables};
 
 use crate::error::{check, Result};
 use crate::lighting::Ground;

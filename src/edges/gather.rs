@@ -248,14 +248,10 @@ impl<'a> EdgeGather<'a> {
         }
     }
 
-    /// The tabulated kernel.
+    /// The tabulated kernel (read by examples/edges_sparse.rs).
+    #[cfg_attr(not(feature = "internals"), allow(dead_code))]
     pub fn kernel(&self) -> &OrderKernel {
         &self.kernel
-    }
-
-    /// The medium.
-    pub fn medium(&self) -> &Medium {
-        self.medium
     }
 
     /// The profile of `o + t·d`, t ∈ [0, `t_max`], cut at `levels`, walked only where ρ > 0.

@@ -4,11 +4,11 @@
 //! them with the dense (diffusion) solution. See `docs/edges.md`.
 
 pub mod gather;
+pub(crate) mod orders;
 pub mod orders_kernel;
 pub mod segments;
 pub mod sparse;
 
-pub use gather::{CubeRequest, CubeSource, EdgeAov, EdgeGather, EdgeJob, EdgeSettings, PixelPlan, SunInput};
-pub use orders_kernel::{edge_radiance, segment_orders, OrderKernel};
-pub use segments::{low_density_segments, LowSegment, RayProfile};
-pub use sparse::{gather_image, GatherStats, PixelRay, SparseSettings};
+pub use gather::{CubeRequest, CubeSource, EdgeGather, EdgeSettings, SunInput};
+pub use orders_kernel::segment_orders;
+pub use sparse::{gather_image, PixelRay, SparseSettings};

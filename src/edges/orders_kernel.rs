@@ -7,7 +7,7 @@
 //! The forward peak of the phase function therefore sits on the +x face: the part of the scene
 //! behind the segment (seen through it) — the silver lining when the sun is behind the cloud.
 //!
-//! **Weights.** For order i the i-fold phase function is HG(g^i) (see [`crate::orders`]). The
+//! **Weights.** For order i the i-fold phase function is HG(g^i) (see [`crate::edges::orders`]). The
 //! table holds w_i(pixel) = ∫_pixel HG(g^i, ω_x) dω, integrated adaptively (the forward peak of
 //! g = 0.9 is narrower than a pixel) and then normalised so Σ_pixels w_i = 1 exactly (so a uniform
 //! cube gives K_i = L exactly: the furnace property; the raw sum is within 1e-4 of 1).
@@ -21,10 +21,10 @@
 //! is not part of E: the gather composites what lies behind the segment attenuated by e^{−D}.
 
 use crate::cube::CubeImage;
+use crate::edges::orders::poisson_weights;
 use crate::lighting::bins::{rect_solid_angle, CUBE_FACES};
 use crate::math::Rgb;
 use crate::optics::Hg;
-use crate::orders::poisson_weights;
 use rayon::prelude::*;
 
 /// Sub-pixels per rectangle edge in one step of the adaptive pixel integration.
@@ -108,8 +108,6 @@ pub const DEFAULT_TAIL: f64 = 1e-4;
 pub struct OrderKernel {
     /// Pixels per face edge.
     pub res: usize,
-    /// The phase function of one scattering event.
-    pub phase: Hg,
     /// Highest order tabulated.
     pub max_order: usize,
     /// w[(i − 1)·6res² + pixel], f32, each order sums to 1.
@@ -136,7 +134,6 @@ impl OrderKernel {
         }
         OrderKernel {
             res,
-            phase,
             max_order,
             weights,
         }

@@ -335,11 +335,6 @@ impl RayProfile {
         prof
     }
 
-    /// Ray origin and direction the profile was traced along.
-    pub fn ray(&self) -> (DVec3, DVec3) {
-        (self.o, self.d)
-    }
-
     /// Total optical depth.
     pub fn depth(&self) -> f64 {
         self.pieces.iter().map(|p| p.tau).sum()

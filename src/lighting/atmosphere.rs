@@ -61,7 +61,7 @@ const TRANS_H: usize = 64;
 const MS_W: usize = 32;
 const MS_H: usize = 32;
 /// Directions per multiple-scattering texel: a 12 × 12 stratified sphere (Hillaire 2020 uses 64;
-/// 144 halves the error against a Monte Carlo reference, see tests/sky.rs).
+/// 144 halves the error against a Monte Carlo reference, see src/tests/sky.rs).
 const MS_DIRS: usize = 12;
 /// Ray-march segments per multiple-scattering direction (Hillaire 2020: 20).
 const MS_STEPS: usize = 20;
@@ -407,13 +407,6 @@ impl Atmosphere {
     #[inline]
     fn ms_at(&self, c: &Radial, mu_s: f64) -> DVec3 {
         self.ms.get((mu_s.clamp(-1.0, 1.0) + 1.0) * 0.5 * (MS_W - 1) as f64, c.ms_y)
-    }
-
-    /// Hillaire's Ψ_ms (per band, per unit solar irradiance, sr⁻¹) at radius `r` and sun zenith
-    /// cosine `mu_s`: radiance of all orders ≥ 2 per unit scattering coefficient.
-    #[inline]
-    pub fn multiple_scattering(&self, r: f64, mu_s: f64) -> DVec3 {
-        self.ms_at(&self.radial(r), mu_s)
     }
 
     /// One altitude row of the multiple-scattering LUT (Hillaire 2020, eq. 5–10, isotropic

@@ -136,10 +136,6 @@ fn rect_first_moment(u0: f64, u1: f64, v0: f64, v1: f64) -> [f64; 3] {
 pub struct Bin {
     /// Face index into [`CUBE_FACES`].
     pub face: usize,
-    /// Bin column on the face (u).
-    pub bu: usize,
-    /// Bin row on the face (v).
-    pub bv: usize,
     /// Unit direction through the bin's centre on the cube.
     pub center: Vec3,
     /// Mean direction ∫ω dω / Δω (length < 1: it carries the bin's spread).
@@ -193,8 +189,6 @@ impl DirectionBins {
                     let center = (f.n + f.tu * uc + f.tv * vc).normalize();
                     bins.push(Bin {
                         face,
-                        bu,
-                        bv,
                         center,
                         mean_dir: mean,
                         solid_angle: sa,

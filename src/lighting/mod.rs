@@ -377,23 +377,6 @@ impl Sky {
             },
         }
     }
-
-    /// Numerically integrate the cosine-weighted upper hemisphere (for models without a closed form).
-    pub fn integrate_irradiance_up(&self) -> Rgb {
-        let (nt, np) = (64, 128);
-        let mut e = Rgb::ZERO;
-        for i in 0..nt {
-            // Integrate over μ = cosθ ∈ [0, 1]; dω = dμ dφ.
-            let mu = (i as f32 + 0.5) / nt as f32;
-            let s = (1.0 - mu * mu).sqrt();
-            for j in 0..np {
-                let phi = (j as f32 + 0.5) / np as f32 * 2.0 * PI;
-                let dir = Vec3::new(s * phi.cos(), mu, s * phi.sin());
-                e += self.radiance(dir) * mu;
-            }
-        }
-        e * (2.0 * PI / (nt * np) as f32)
-    }
 }
 
 /// The ground: the infinite Lambertian plane y = height.

@@ -37,13 +37,13 @@
 pub mod ground;
 pub mod pyramid;
 pub mod sky_single;
+pub mod sunlight;
 
 use crate::diffusion::flux::FluxField;
 use crate::lighting::{Sky, Sun};
+use crate::lit::sunlight::SunGrid;
 use crate::math::{Rgb, Trilinear, Vec3};
-use crate::medium::march::{march, March};
 use crate::medium::Medium;
-use crate::sunlight::SunGrid;
 use ground::LitGround;
 use pyramid::{Cells, LitPyramid};
 use sky_single::SkySingle;
@@ -224,16 +224,6 @@ impl LitVolume {
         }
     }
 
-    /// [`Self::diffuse`] less I0: the first moment's and the reduced sky's single scattering
-    /// terms, where attached (W·m⁻²·sr⁻¹ per unit albedo; zero without them).
-    #[inline]
-    pub fn diffuse_beyond_i0(&self, v: Vec3, rho: f32, to_eye: Vec3) -> Rgb {
-        if self.flux.is_none() && self.sky_single.is_none() {
-            return Rgb::ZERO;
-        }
-        self.diffuse(v, rho, to_eye) - self.i0(v, rho)
-    }
-
     /// The source J per unit extinction (W·m⁻²·sr⁻¹) at continuous voxel coordinates `v` with
     /// trilinear density `rho`, leaving towards the eye along `to_eye` (unit); module docs.
     #[inline]
@@ -241,13 +231,6 @@ impl LitVolume {
         let optics = &self.medium.optics;
         let sun = self.sun.irradiance * optics.sun_scatter(self.sun.dir, to_eye) * self.sun_t.trilinear(v.to_array());
         optics.albedo * self.diffuse(v, rho, to_eye) + sun
-    }
-
-    /// Front-to-back march of `o + t·d`, t ∈ [t_min, t_max], steps of at most `step_m` m, sample
-    /// offset `xi` ∈ [0, 1): radiance from the cloud and the transmittance through it.
-    #[inline]
-    pub fn march(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32, step_m: f32, xi: f32) -> March {
-        march(&self.medium, o, d, t_min, t_max, step_m, xi, |v, rho| self.source(v, rho, -d))
     }
 
     /// Radiance arriving at `o` from direction `d` beyond the medium: the lit ground where the

@@ -26,12 +26,6 @@ impl Segment {
     pub fn len(&self) -> f64 {
         self.t1 - self.t0
     }
-
-    /// True for a zero-length segment.
-    #[inline]
-    pub fn is_empty(&self) -> bool {
-        self.t1 <= self.t0
-    }
 }
 
 /// Iterator over the cells of a lattice crossed by a ray.

@@ -62,16 +62,11 @@ impl Density {
         self.values.index().dims()
     }
 
-    /// Grid voxels (full and empty).
+    /// Grid voxels (full and empty); never 0 (a grid has at least one voxel).
     #[inline]
+    #[cfg_attr(feature = "internals", allow(clippy::len_without_is_empty))]
     pub fn len(&self) -> usize {
         self.values.len()
-    }
-
-    /// True when the grid holds no voxel (never, for a validated grid).
-    #[inline]
-    pub fn is_empty(&self) -> bool {
-        self.values.is_empty()
     }
 
     /// Linear index of (i, j, k).

@@ -4,7 +4,6 @@
 
 use super::{Dda, Density, Medium};
 use crate::math::Vec3;
-use glam::DVec3;
 
 /// Per-block upper bounds of ρ.
 #[derive(Clone, Debug)]
@@ -74,11 +73,6 @@ impl MajorantGrid {
                 break;
             }
         }
-    }
-
-    /// Origin-independent helper: lattice cell size (m) for a medium.
-    pub fn cell_size(&self, m: &Medium) -> DVec3 {
-        m.voxel_size.as_dvec3() * self.block as f64
     }
 }
 

@@ -31,7 +31,7 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 use std::sync::{Arc, OnceLock};
 
-pub use dda::{ray_box, Dda, Segment};
+pub use dda::{ray_box, Dda};
 pub use density::Density;
 pub use grid::Grid3;
 pub use majorant::MajorantGrid;
@@ -135,11 +135,6 @@ impl Medium {
             majorant: Arc::new(majorant),
             dense_box: OnceLock::new(),
         }
-    }
-
-    /// Build from `[medium]`: validate the optical properties, load the grid, check its values.
-    pub fn from_desc(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Medium> {
-        Medium::from_desc_with(d, file, base_dir, None)
     }
 
     /// [`Medium::from_desc`] with the grid `given` in memory instead of `medium.grid`'s (the

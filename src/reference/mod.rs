@@ -28,7 +28,6 @@ pub mod slab;
 pub mod tracking;
 
 pub use integrator::{radiance, Light, PathOptions};
-pub use sky::SkySampler;
 
 use crate::error::Result;
 use crate::image::Image;

@@ -27,10 +27,10 @@ use crate::error::check_finite_field;
 use crate::error::Result;
 use crate::image::Image;
 use crate::incident::IncidentLight;
+use crate::lit::sunlight::SunTransmittance;
 use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
 use crate::scene::Scene;
-use crate::sunlight::SunTransmittance;
 
 /// The lit scene after the clear-air iterations.
 pub struct Propagation {

@@ -11,7 +11,7 @@ pub mod warm;
 
 use crate::error::{Error, Result};
 use crate::image::Image;
-pub use crate::pipeline::{render_rows, NoProgress, Progress, Timings};
+pub use crate::pipeline::{render_rows, Progress, Timings};
 use crate::scene::{Method, Scene};
 
 /// A finished render.

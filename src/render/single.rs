@@ -5,10 +5,10 @@
 use super::{render_rows, Progress, Timings};
 use crate::error::Result;
 use crate::image::Image;
+use crate::lit::sunlight::SunTransmittance;
 use crate::math::{Rgb, Rng, Vec3};
 use crate::medium::march::march_with;
 use crate::scene::Scene;
-use crate::sunlight::SunTransmittance;
 
 /// Image-plane sample position for sample `s` of `spp` (pixel centre for one sample, else
 /// stratified jitter on a √spp grid), and a march offset in [0, 1).

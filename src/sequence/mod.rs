@@ -6,7 +6,6 @@ pub mod animation;
 pub mod frames;
 pub mod pattern;
 
-pub use crate::scene::AnimationDesc;
 pub use animation::Animation;
 pub use frames::FrameList;
 pub use pattern::FramePattern;

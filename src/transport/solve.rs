@@ -1033,7 +1033,7 @@ pub fn solve_warm(
     let q = Quadrature::product(s.n_mu, 2 * s.n_mu);
     let bands = &optics.bands;
     // δ-M sun transmittance T′ = T^{1 − a f} at the voxel centres.
-    let exact_t = crate::sunlight::SunTransmittance::compute(m, sun.dir);
+    let exact_t = crate::lit::sunlight::SunTransmittance::compute(m, sun.dir);
     let sun_t: Vec<[f32; 3]> = exact_t
         .grid
         .values()

@@ -277,11 +277,3 @@ pub fn read_vdb_dense_bytes(bytes: &[u8], file: &str, grid_name: Option<&str>, m
         index_min: lo,
     })
 }
-
-/// Densify grid `grid_name` (None: `density`, else the first scalar grid) of a `.vdb` file over
-/// its active bounding box, averaging `downsample`³ blocks, refusing before any allocation a
-/// result of more than `max_voxels` voxels. Inactive voxels are 0.
-pub fn read_vdb_dense(path: &Path, grid_name: Option<&str>, max_voxels: u64, downsample: usize) -> Result<VdbDense> {
-    let bytes = crate::io::read_regular(path, "an OpenVDB file")?;
-    read_vdb_dense_bytes(&bytes, &path.display().to_string(), grid_name, max_voxels, downsample)
-}

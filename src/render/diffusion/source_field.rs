@@ -13,12 +13,12 @@
 //! voxel, not the 160 B per voxel of the cloud's box it took when every box voxel had a record.
 
 use crate::lighting::Sun;
+use crate::lit::sunlight::SunGrid;
 use crate::math::{Rgb, Trilinear, Vec3, SH_COEFFS};
 use crate::medium::field16::Field16;
 use crate::medium::sparse::{FullIndex, VoxelField};
 use crate::medium::Medium;
 use crate::optics::Optics;
-use crate::sunlight::SunGrid;
 use rayon::prelude::*;
 use std::sync::Arc;
 

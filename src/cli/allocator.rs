@@ -1,0 +1,23 @@
+//! The allocator setting of the `cloudgi` process.
+
+/// Every allocation of 1 MiB or more gets its own mapping, returned to the system when freed.
+/// By default glibc raises its mapping threshold to the size of each freed mapping (up to
+/// 32 MiB), after which the stages' large arrays come from the heap, whose freed ranges stay
+/// resident. The per-band and per-stage arrays (1–4 MiB at 200×160×120) are what `full`'s peak
+/// holds, so a fixed 1 MiB threshold keeps that peak near its live heap for a little more system
+/// time (docs/performance.md, "Memory of `full`").
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+pub(super) fn large_arrays_mapped() {
+    extern "C" {
+        fn mallopt(param: i32, value: i32) -> i32;
+    }
+    const M_MMAP_THRESHOLD: i32 = -3;
+    // SAFETY: sets one allocator parameter (a fixed threshold also stops its adjustment), before
+    // any other thread exists; a failure (0) leaves the default, which is only less frugal.
+    unsafe {
+        mallopt(M_MMAP_THRESHOLD, 1 << 20);
+    }
+}
+
+#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+pub(super) fn large_arrays_mapped() {}

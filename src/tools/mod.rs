@@ -1,0 +1,4 @@
+//! Tools over the renderer: comparing a render with a reference and the paper's figure series.
+
+pub mod compare;
+pub mod figures;
