@@ -55,6 +55,7 @@ pub mod medium;
 #[doc(hidden)]
 pub mod optics;
 pub(crate) mod orders;
+pub(crate) mod peak;
 pub(crate) mod pipeline;
 #[doc(hidden)]
 pub mod reference;
