@@ -594,7 +594,7 @@ impl<'a> EdgeGather<'a> {
             match &spread {
                 Some((s, legendre, e, a)) if sun.y > 0.0 && *e > 0.0 => {
                     let lambda = peak_k as f64 * -(sun.y as f64 / *e as f64).min(1.0).ln();
-                    (sun_peak + *a * s.spread_with(lambda, legendre) as f32).max(Rgb::ZERO)
+                    sun_peak + *a * s.spread_with(lambda, legendre) as f32
                 }
                 _ => sun_peak,
             }
@@ -642,7 +642,8 @@ impl<'a> EdgeGather<'a> {
                     aov.edge += f * (1.0 - w) * edge_src.get(k).copied().unwrap_or(Rgb::ZERO);
                 }
                 let sun = if n == 1 { plan.sun[k] } else { (self.sun.irradiance_at)(pos) };
-                aov.sun_single += f * sun * (sun_smooth + peak_at(sun) * (tr as f32).powf(peak_k));
+                // The spread series dips below 0 in places (as transport's sun_phase): clamped there.
+                aov.sun_single += f * sun * (sun_smooth + peak_at(sun) * (tr as f32).powf(peak_k)).max(Rgb::ZERO);
                 tr *= 1.0 + em1;
                 if tr < crate::medium::march::T_CUTOFF as f64 {
                     tr = 0.0;

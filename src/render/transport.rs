@@ -333,6 +333,30 @@ mod tests {
     }
 
     #[test]
+    fn only_pixels_beside_an_edge_are_reshaded() {
+        // 5×3, a step between columns 1 and 2 (luminance 1 → 2), and a 5 % ripple at (4, 0).
+        let (w, h) = (5u32, 3u32);
+        let mut px: Vec<[Rgb; 3]> = (0..w * h)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                let v = if x < 2 {
+                    1.0
+                } else if (x, y) == (4, 0) {
+                    2.1
+                } else {
+                    2.0
+                };
+                [Rgb::splat(v), Rgb::ZERO, Rgb::ZERO]
+            })
+            .collect();
+        refine_edges(&mut px, w, |_, _| [Rgb::splat(-1.0), Rgb::ZERO, Rgb::ZERO]);
+        for (i, p) in px.iter().enumerate() {
+            let x = i as u32 % w;
+            assert_eq!(p[0].x == -1.0, x == 1 || x == 2, "pixel {i}: {:?}", p[0]);
+        }
+    }
+
+    #[test]
     fn only_an_iteration_stopped_by_its_cap_above_the_tolerance_is_warned_about() {
         let s = TransportSettings {
             max_iterations: 3,

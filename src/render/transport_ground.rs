@@ -147,3 +147,30 @@ fn filtered(map: &GroundMap, first: [f64; 2], width: impl Fn(f64, f64) -> f64) -
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 4×4 map of 10-m columns whose diffuse light is 0.5 above a clear 0.2: inside it reads the
+    /// map, at its edge the same, beyond it falls towards the clear value, never past it.
+    #[test]
+    fn the_ground_beyond_the_map_continues_its_edge_and_falls_to_the_clear_value() {
+        let g = EyeGround {
+            diffuse: vec![Rgb::splat(0.5); 16],
+            clear: Rgb::splat(0.2),
+            dims: [4, 4],
+            first: [5.0, 5.0],
+            h: [10.0, 10.0],
+            sun: Rgb::ZERO,
+            scale: [1.0; 3],
+            cloud: [20.0, 20.0, 100.0],
+        };
+        let at = |x: f64| g.diffuse_at(x, 20.0).x;
+        assert!((at(20.0) - 0.5).abs() < 1e-6);
+        // The map ends at x = 40 (column 3's centre 35 plus half a column).
+        assert!((at(40.0) - 0.5).abs() < 1e-6 && (at(40.001) - 0.5).abs() < 1e-4);
+        let (near, far) = (at(100.0), at(1000.0));
+        assert!(near < 0.5 && far < near && far > 0.2 && far < 0.21, "{near} {far}");
+    }
+}
