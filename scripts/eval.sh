@@ -8,16 +8,16 @@
 #
 # Environment: CLOUDGI the binary (default target/release/cloudgi), COMPARE the binary that scores
 # (default CLOUDGI; to score an older build's renders), METHODS (default
-# "transport full"), SCENES (default every examples/eval/glare/*.toml), REF_SPP (6144), REF2_SPP
-# (2048). References already in OUT_DIR are reused: delete them after changing a scene or `reference`.
+# "transport full"), SCENES (default every examples/eval/glare/*.toml), REF_SPP (a scene's
+# `# reference_spp = N` line, else 6144), REF2_SPP (a third of it), REFS_ONLY=1 (render the missing
+# references and stop). References already in OUT_DIR are reused: delete them after changing a scene
+# or `reference`.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 out=${1:-eval-out}
 bin=${CLOUDGI:-$root/target/release/cloudgi}
 cmp=${COMPARE:-$bin}
 methods=${METHODS:-transport full}
-ref_spp=${REF_SPP:-6144}
-ref2_spp=${REF2_SPP:-2048}
 scenes=${SCENES:-$(ls "$root"/examples/eval/glare/*.toml)}
 for tool in jq /usr/bin/time; do
     command -v "$tool" >/dev/null || { echo "scripts/eval.sh: needs $tool" >&2; exit 2; }
@@ -34,14 +34,17 @@ for m in $methods; do
     header+=" $m: cloud | $m: frame | $m CPU s |"
     rule+="---|---|---|"
 done
-echo "$header"
-echo "$rule"
+[ -n "${REFS_ONLY:-}" ] || { echo "$header"; echo "$rule"; }
 for scene in $scenes; do
     name=$(basename "$scene" .toml)
     ref="$out/$name-reference.exr"
     ref2="$out/$name-reference-seed2.exr"
+    scene_spp=$(sed -n 's/^# reference_spp = \([0-9]*\).*/\1/p' "$scene")
+    ref_spp=${REF_SPP:-${scene_spp:-6144}}
+    ref2_spp=${REF2_SPP:-$((ref_spp / 3))}
     [ -f "$ref" ] || nice "$bin" render "$scene" --method reference --spp "$ref_spp" --seed 1 --stderr -o "$ref" -q
     [ -f "$ref2" ] || nice "$bin" render "$scene" --method reference --spp "$ref2_spp" --seed 2 -o "$ref2" -q
+    [ -z "${REFS_ONLY:-}" ] || continue
     noise=$("$cmp" compare "$ref" "$ref" | jq -r '.reference_block_noise * 1000 | round / 10 | tostring')
     seeds=$("$cmp" compare "$ref2" "$ref" | pct)
     row="| $name | $noise % | $seeds % |"

@@ -38,7 +38,7 @@ macro_rules! stages {
 }
 
 stages!(
-    camera, cube, diffusion, edges, exposure, half, image, incident, io, lighting, limits, lit, math, medium, optics, pipeline, reference,
+    camera, cube, diffusion, edges, exposure, half, image, incident, io, lighting, limits, lit, math, medium, optics, peak, pipeline, reference,
     render, scene, sequence, tools, transport,
 );
 

@@ -38,6 +38,7 @@ use super::segments::{density_bounds, depth_from_samples, LowSegment, RayProfile
 use crate::cube::CubeImage;
 use crate::math::{Rgb, Vec3};
 use crate::medium::Medium;
+use crate::peak::PeakSpread;
 
 /// Bridges are resolved recursively at most this deep (2^depth sub-segments at worst).
 pub const MAX_BRIDGE_DEPTH: usize = 3;
@@ -185,6 +186,9 @@ pub struct EdgeGather<'a> {
     dense: &'a (dyn Fn(Vec3, Vec3) -> Rgb + Sync),
     /// Where ρ > 0 ([`density_bounds`]): the eye rays' profiles start there.
     bounds: (Vec3, Vec3),
+    /// The δ-M peak's spread on the sun's leg and the sun's irradiance above the medium (W m⁻²
+    /// per band), when set ([`EdgeGather::with_peak_spread`]).
+    peak: Option<(PeakSpread, Rgb)>,
 }
 
 /// One low-density segment (or a bridge's merged/split variant) whose E is needed for a pixel.
@@ -245,7 +249,22 @@ impl<'a> EdgeGather<'a> {
             sun,
             dense,
             bounds: density_bounds(medium).unwrap_or((Vec3::ZERO, Vec3::ZERO)),
+            peak: None,
         }
+    }
+
+    /// Spread the sun's peak part by the peak scatterings on the sun's leg
+    /// ([`crate::peak::PeakSpread`]): λ = af τ_⊙ = k (−ln T′_⊙), T′_⊙ = E_⊙(p)/`sun_irradiance`
+    /// (the unattenuated sun, W m⁻² per band). Without it the peak keeps HG's sharp shape
+    /// however deep the point lies.
+    pub fn with_peak_spread(mut self, sun_irradiance: Rgb) -> Self {
+        let o = &self.medium.optics;
+        let (g, g_scaled) = (o.sun_single.1.mean_cosine(), o.phase.mean_cosine());
+        if g_scaled < g {
+            let f = (g - g_scaled) / (1.0 - g_scaled);
+            self.peak = Some((PeakSpread::similarity(g, f), sun_irradiance));
+        }
+        self
     }
 
     /// The tabulated kernel (read by examples/edges_sparse.rs).
@@ -558,6 +577,24 @@ impl<'a> EdgeGather<'a> {
         }
         // The peak's part counted once: weighted by T_eye^{af} = T′^k (Optics::sun_scatter_split).
         let (sun_smooth, sun_peak, peak_k) = m.optics.sun_scatter_split(self.sun.dir, -d);
+        // The peak spread on the sun's leg (4π-normalised series, per band's albedo factor).
+        let spread = self.peak.as_ref().map(|(s, e)| {
+            (
+                s,
+                s.legendre(self.sun.dir.dot(d) as f64),
+                e.y,
+                m.optics.sun_single.0 / (4.0 * std::f32::consts::PI),
+            )
+        });
+        let peak_at = |sun: Rgb| -> Rgb {
+            match &spread {
+                Some((s, legendre, e, a)) if sun.y > 0.0 && *e > 0.0 => {
+                    let lambda = peak_k as f64 * -(sun.y as f64 / *e as f64).min(1.0).ln();
+                    sun_peak + *a * s.spread_with(lambda, legendre) as f32
+                }
+                _ => sun_peak,
+            }
+        };
         let to_eye = -d;
         let mut tr = 1.0f64;
         // Optical depth from the ray's start (the surface layer's coordinate).
@@ -601,7 +638,8 @@ impl<'a> EdgeGather<'a> {
                     aov.edge += f * (1.0 - w) * edge_src.get(k).copied().unwrap_or(Rgb::ZERO);
                 }
                 let sun = if n == 1 { plan.sun[k] } else { (self.sun.irradiance_at)(pos) };
-                aov.sun_single += f * sun * (sun_smooth + sun_peak * (tr as f32).powf(peak_k));
+                // The spread series dips below 0 in places (as transport's sun_phase): clamped there.
+                aov.sun_single += f * sun * (sun_smooth + peak_at(sun) * (tr as f32).powf(peak_k)).max(Rgb::ZERO);
                 tr *= 1.0 + em1;
                 if tr < crate::medium::march::T_CUTOFF as f64 {
                     tr = 0.0;

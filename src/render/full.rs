@@ -353,7 +353,7 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
     };
     let mut settings = scene.render.edges;
     settings.step_m = settings.step_m.max(GATHER_STEP_VOXELS * m.min_voxel());
-    let edge = EdgeGather::new(m, settings, &cubes, sun, &dense);
+    let edge = EdgeGather::new(m, settings, &cubes, sun, &dense).with_peak_spread(sun_e);
     let cam = &scene.camera;
     let spp = scene.render.aa_samples;
     let n = cam.width as usize * cam.height as usize;

@@ -18,6 +18,7 @@ use crate::math::{real_sh, sh_count};
 use crate::math::{Rgb, Vec3};
 use crate::medium::march::march;
 use crate::medium::Medium;
+use crate::peak::PeakSpread;
 use crate::pipeline::{render_rows, NoProgress, Progress, Timings};
 use crate::render::single::pixel_sample;
 use crate::render::transport_ground::EyeGround;
@@ -39,7 +40,7 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
     let eye = scene.camera.position;
     let o = &f.optics;
     let (sun_dir, e_sun) = (scene.sun.dir, scene.sun.irradiance);
-    let peak = PeakSeries::new(o.g, f.order);
+    let peak = PeakSpread::truncated(o.g, f.order);
     (0..f.full.len())
         .into_par_iter()
         .map(|v| {
@@ -65,66 +66,13 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
                 let (a, band) = (o.albedo[b], &o.bands[b]);
                 let t_sun = f.sun_t[v][b] as f64;
                 if t_sun > 0.0 {
-                    let p = sun_phase(&peak, band, a, cos_theta, t_sun, t_eye);
+                    let p = sun_phase(&peak, o.g, band, a, cos_theta, t_sun, t_eye);
                     sun[b] = (a / (1.0 - a * band.f) * e_sun[b] as f64 * p / (4.0 * PI) * t_sun) as f32;
                 }
             }
             (Rgb::from(diffuse), Rgb::from(sun))
         })
         .unzip()
-}
-
-/// The exact HG phase function's Legendre series beyond the δ-M order L, for the spread of the
-/// truncated forward peak: (2l + 1) g^l and g^{l−L−1} for L < l ≤ `last` (the rest below 10⁻⁶).
-struct PeakSeries {
-    order: usize,
-    /// (2l + 1) g^l, l = L + 1..=last.
-    weight: Vec<f64>,
-    /// g^{l−L−1}: the peak's own moments (the δ-M peak is the identity up to order L).
-    moment: Vec<f64>,
-    /// HG g.
-    g: f64,
-}
-
-impl PeakSeries {
-    fn new(g: f64, order: usize) -> PeakSeries {
-        let (mut weight, mut moment) = (Vec::new(), Vec::new());
-        let mut l = order + 1;
-        while l < 20_000 {
-            let w = (2 * l + 1) as f64 * g.powi(l as i32);
-            if w < 1e-6 && l > order + 8 {
-                break;
-            }
-            weight.push(w);
-            moment.push(g.powi((l - order - 1) as i32));
-            l += 1;
-        }
-        PeakSeries { order, weight, moment, g }
-    }
-
-    /// Σ_{l>L} (2l + 1) g^l (e^{−λ(1 − g^{l−L−1})} − 1) P_l(cos Θ): what λ further peak
-    /// scatterings (Poisson, on the sun's leg) take from the HG series (4π-normalised).
-    fn spread(&self, lambda: f64, cos_theta: f64) -> f64 {
-        if lambda <= 0.0 || self.weight.is_empty() {
-            return 0.0;
-        }
-        let (mut p0, mut p1) = (1.0, cos_theta);
-        for l in 2..=self.order + 1 {
-            let p2 = ((2 * l - 1) as f64 * cos_theta * p1 - (l - 1) as f64 * p0) / l as f64;
-            (p0, p1) = (p1, p2);
-        }
-        // p1 = P_{L+1}.
-        let mut sum = 0.0;
-        for (n, (w, m)) in self.weight.iter().zip(&self.moment).enumerate() {
-            let l = self.order + 1 + n;
-            if n > 0 {
-                let p2 = ((2 * l - 1) as f64 * cos_theta * p1 - (l - 1) as f64 * p0) / l as f64;
-                (p0, p1) = (p1, p2);
-            }
-            sum += w * ((-lambda * (1.0 - m)).exp() - 1.0) * p1;
-        }
-        sum
-    }
 }
 
 /// The sun's single-scattering phase function (4π-normalised) for the gather, from the δ-M
@@ -140,9 +88,8 @@ impl PeakSeries {
 /// λ = af τ_sun peak scatterings before it spread its angle (moments g^{l−L−1} per scattering
 /// beyond order L). Only where nothing is on either leg is it TMS. No other stage changes:
 /// the solver, the march and the diffuse source keep δ-M's medium (σt′, a′, p′).
-fn sun_phase(peak: &PeakSeries, band: &crate::transport::BandOptics, albedo: f64, cos_theta: f64, t_sun: f64, t_eye: f64) -> f64 {
+fn sun_phase(peak: &PeakSpread, g: f64, band: &crate::transport::BandOptics, albedo: f64, cos_theta: f64, t_sun: f64, t_eye: f64) -> f64 {
     let hg = {
-        let g = peak.g;
         let denom = 1.0 + g * g - 2.0 * g * cos_theta;
         (1.0 - g * g) / (denom * denom.sqrt().max(1e-300))
     };
@@ -195,6 +142,42 @@ fn background(scene: &Scene, ground: Option<&EyeGround>, o: Vec3, d: Vec3) -> Rg
         return g.radiance(scene, o + d * t);
     }
     scene.sky.radiance(d)
+}
+
+/// Samples per pixel where a one-sample image has an edge ([`refine_edges`]).
+const EDGE_SAMPLES: u32 = 16;
+
+/// Relative luminance step between neighbouring pixels above which both are re-rendered with
+/// [`EDGE_SAMPLES`].
+const EDGE_CONTRAST: f32 = 0.1;
+
+/// Anti-alias the edges of a one-sample image: a pixel whose luminance differs from one of its
+/// eight neighbours' by more than [`EDGE_CONTRAST`] of the larger is re-shaded by `shade` (the
+/// pixel's mean over a stratified grid, as `reference` integrates the pixel's box). A point
+/// sample on an edge is the wrong estimate of the pixel's mean: at `sunset` the cloud's sunlit
+/// base meets the ground inside one pixel row, and its centre sample read the bright base
+/// (+45 % on that row, +2.6 % over the cloud).
+fn refine_edges(px: &mut [[Rgb; 3]], width: u32, shade: impl Fn(u32, u32) -> [Rgb; 3] + Sync) {
+    let (w, h) = (width as usize, px.len() / width.max(1) as usize);
+    let lum: Vec<f32> = px
+        .iter()
+        .map(|p| (p[0] + p[1] + p[2]).dot(Rgb::new(0.2126, 0.7152, 0.0722)))
+        .collect();
+    let edge = |i: usize| {
+        let (x, y) = ((i % w) as i64, (i / w) as i64);
+        (-1..=1).flat_map(|dy| (-1..=1).map(move |dx| (x + dx, y + dy))).any(|(nx, ny)| {
+            if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+                return false;
+            }
+            let (a, b) = (lum[i], lum[nx as usize + w * ny as usize]);
+            (a - b).abs() > EDGE_CONTRAST * a.max(b)
+        })
+    };
+    let edges: Vec<usize> = (0..px.len()).filter(|&i| edge(i)).collect();
+    let shaded: Vec<[Rgb; 3]> = edges.par_iter().map(|&i| shade((i % w) as u32, (i / w) as u32)).collect();
+    for (i, p) in edges.into_iter().zip(shaded) {
+        px[i] = p;
+    }
 }
 
 /// Most memory a transport render may ask for (bytes), whatever the machine has; the CLI also
@@ -276,30 +259,36 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
     let spp = scene.render.aa_samples;
     let step = scene.render.step_voxels * m.min_voxel();
     // Per pixel: [diffuse source, sun single scattering, background]; the image is their sum.
-    let px = timings.time("gather", || {
-        render_rows(cam.width, cam.height, progress, "transport gather", |x, y| {
-            let mut sum = [Rgb::ZERO; 3];
-            for smp in 0..spp {
-                let (px, py, xi) = pixel_sample(scene, x, y, smp, spp);
-                let ray = cam.ray(px, py);
-                let (o, d) = (ray.origin, ray.dir);
-                let t_max = scene.ground.as_ref().and_then(|g| g.intersect(o, d)).unwrap_or(f32::INFINITY);
-                let ms = march(&scaled, o, d, 0.0, t_max, step, xi, |v, _| {
-                    full_trilinear(m, &field.full, &diffuse, v)
-                });
-                let ss = march(&scaled, o, d, 0.0, t_max, step, xi, |v, _| full_trilinear(m, &field.full, &sun, v));
-                let bg = if ms.transmittance > 0.0 {
-                    background(scene, ground.as_ref(), o, d)
-                } else {
-                    Rgb::ZERO
-                };
-                sum[0] += ms.radiance;
-                sum[1] += ss.radiance;
-                sum[2] += bg * ms.transmittance;
-            }
-            sum.map(|c| (c / spp as f32).max(Rgb::ZERO))
-        })
+    let shade = |x: u32, y: u32, spp: u32| {
+        let mut sum = [Rgb::ZERO; 3];
+        for smp in 0..spp {
+            let (px, py, xi) = pixel_sample(scene, x, y, smp, spp);
+            let ray = cam.ray(px, py);
+            let (o, d) = (ray.origin, ray.dir);
+            let t_max = scene.ground.as_ref().and_then(|g| g.intersect(o, d)).unwrap_or(f32::INFINITY);
+            let ms = march(&scaled, o, d, 0.0, t_max, step, xi, |v, _| {
+                full_trilinear(m, &field.full, &diffuse, v)
+            });
+            let ss = march(&scaled, o, d, 0.0, t_max, step, xi, |v, _| full_trilinear(m, &field.full, &sun, v));
+            let bg = if ms.transmittance > 0.0 {
+                background(scene, ground.as_ref(), o, d)
+            } else {
+                Rgb::ZERO
+            };
+            sum[0] += ms.radiance;
+            sum[1] += ss.radiance;
+            sum[2] += bg * ms.transmittance;
+        }
+        sum.map(|c| (c / spp as f32).max(Rgb::ZERO))
+    };
+    let mut px = timings.time("gather", || {
+        render_rows(cam.width, cam.height, progress, "transport gather", |x, y| shade(x, y, spp))
     });
+    if spp == 1 {
+        timings.time("gather: edges", || {
+            refine_edges(&mut px, cam.width, |x, y| shade(x, y, EDGE_SAMPLES))
+        });
+    }
     let mut img = Image::new(cam.width, cam.height);
     img.pixels = px.iter().map(|p| p[0] + p[1] + p[2]).collect();
     if scene.render.aov {
@@ -318,10 +307,10 @@ mod tests {
     fn the_sun_phase_is_tms_with_nothing_on_either_leg_and_keeps_the_peaks_energy_when_spread() {
         let (g, order, a) = (0.9, 7, 0.999);
         let band = crate::transport::BandOptics::delta_m(0.05, a, g, order);
-        let peak = PeakSeries::new(g, order);
+        let peak = PeakSpread::truncated(g, order);
         let hg = |c: f64| (1.0 - g * g) / (1.0 + g * g - 2.0 * g * c).powf(1.5);
         for c in [-1.0, -0.3, 0.2, 0.9, 0.99, 1.0] {
-            let p = sun_phase(&peak, &band, a, c, 1.0, 1.0);
+            let p = sun_phase(&peak, g, &band, a, c, 1.0, 1.0);
             assert!((p - hg(c)).abs() < 1e-6 * hg(c).max(1.0), "cos {c}: {p} vs {}", hg(c));
         }
         // Spread by peak scatterings on the sun's leg: the same light in all (½∫ p dμ = 1), less
@@ -333,14 +322,38 @@ mod tests {
             let norm: f64 = x
                 .iter()
                 .zip(&w)
-                .map(|(x, w)| 0.5 * w * sun_phase(&peak, &band, a, *x, t_sun, 1.0))
+                .map(|(x, w)| 0.5 * w * sun_phase(&peak, g, &band, a, *x, t_sun, 1.0))
                 .sum();
             assert!((norm - 1.0).abs() < 1e-3, "T′ {t_sun}: {norm}");
-            assert!(sun_phase(&peak, &band, a, 1.0, t_sun, 1.0) < hg(1.0));
+            assert!(sun_phase(&peak, g, &band, a, 1.0, t_sun, 1.0) < hg(1.0));
         }
         // A peak scattering on the eye's leg removes the peak's share: only the smooth part is left.
         let smooth = (1.0 - band.f) * band.phase(0.95);
-        assert!((sun_phase(&peak, &band, a, 0.95, 0.5, 0.0) - smooth).abs() < 1e-9);
+        assert!((sun_phase(&peak, g, &band, a, 0.95, 0.5, 0.0) - smooth).abs() < 1e-9);
+    }
+
+    #[test]
+    fn only_pixels_beside_an_edge_are_reshaded() {
+        // 5×3, a step between columns 1 and 2 (luminance 1 → 2), and a 5 % ripple at (4, 0).
+        let (w, h) = (5u32, 3u32);
+        let mut px: Vec<[Rgb; 3]> = (0..w * h)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                let v = if x < 2 {
+                    1.0
+                } else if (x, y) == (4, 0) {
+                    2.1
+                } else {
+                    2.0
+                };
+                [Rgb::splat(v), Rgb::ZERO, Rgb::ZERO]
+            })
+            .collect();
+        refine_edges(&mut px, w, |_, _| [Rgb::splat(-1.0), Rgb::ZERO, Rgb::ZERO]);
+        for (i, p) in px.iter().enumerate() {
+            let x = i as u32 % w;
+            assert_eq!(p[0].x == -1.0, x == 1 || x == 2, "pixel {i}: {:?}", p[0]);
+        }
     }
 
     #[test]

@@ -7,7 +7,9 @@
 //! - the sun's transmittance T′ marched from the ground point itself (the δ-M scaled T′ = T^{σt′/σt}
 //!   the solver uses, per band), so the shadow is exact;
 //! - E_down, the map's sky and cloud light, box-filtered over the distance between neighbouring
-//!   ordinates' landing points there (so no ordinate is visible) and bilinear between columns.
+//!   ordinates' landing points there (so no ordinate is visible) and bilinear between columns;
+//!   beyond the map (which reaches as far as the cloud's shadow) the cloud's light on the ground
+//!   falls off from the map's edge as a distant source's does, so the edge leaves no seam.
 
 use crate::math::{Rgb, Vec3};
 use crate::scene::Scene;
@@ -28,6 +30,9 @@ pub struct EyeGround {
     sun: Rgb,
     /// σt′/σt per band: T′ = T^{this}.
     scale: [f64; 3],
+    /// The cloud's centre, world x, z (m), and height above the ground (m): where its light on
+    /// the ground beyond the map seems to come from.
+    cloud: [f64; 3],
 }
 
 impl EyeGround {
@@ -50,6 +55,8 @@ impl EyeGround {
             [o.z as f64 + lo[2] as f64 * vs.z as f64, o.z as f64 + hi[2] as f64 * vs.z as f64],
         ];
         let height = ((o.y + lo[1] as f32 * vs.y - g.height) as f64).max(vs.y as f64);
+        let centre_height = ((o.y + 0.5 * (lo[1] + hi[1]) as f32 * vs.y - g.height) as f64).max(vs.y as f64);
+        let cloud = [0.5 * (foot[0][0] + foot[0][1]), 0.5 * (foot[1][0] + foot[1][1]), centre_height];
         // Neighbouring ordinates are π/n_μ apart in angle (polar and azimuthal).
         let spacing = std::f64::consts::PI / scene.render.transport.n_mu as f64;
         let diffuse = filtered(map, first, |x, z| {
@@ -68,6 +75,7 @@ impl EyeGround {
             h: map.h,
             sun,
             scale,
+            cloud,
         })
     }
 
@@ -78,14 +86,29 @@ impl EyeGround {
         self.sun * t_scaled + self.diffuse_at(p.x as f64, p.z as f64)
     }
 
-    /// Bilinear in the filtered columns; the clear sky's beyond the map.
+    /// Bilinear in the filtered columns. Beyond the map: the clear sky's plus the map's nearest
+    /// edge's excess over it, scaled by the irradiance ratio of a small source at the cloud's
+    /// centre, (H² + r_e²)^{3/2}/(H² + r²)^{3/2} (cos θ/distance², H its height, r and r_e the
+    /// horizontal distances of the point and of the edge from it).
     fn diffuse_at(&self, x: f64, z: f64) -> Rgb {
         let u = (x - self.first[0]) / self.h[0];
         let v = (z - self.first[1]) / self.h[1];
         let (n, m) = (self.dims[0] as f64, self.dims[1] as f64);
-        if u < -0.5 || v < -0.5 || u > n - 0.5 || v > m - 0.5 {
-            return self.clear;
+        let (uc, vc) = (u.clamp(-0.5, n - 0.5), v.clamp(-0.5, m - 0.5));
+        if (uc, vc) == (u, v) {
+            return self.bilinear(u, v);
         }
+        let edge = self.bilinear(uc, vc);
+        let (xe, ze) = (self.first[0] + uc * self.h[0], self.first[1] + vc * self.h[1]);
+        let h2 = self.cloud[2] * self.cloud[2];
+        let r2 = |x: f64, z: f64| (x - self.cloud[0]).powi(2) + (z - self.cloud[1]).powi(2);
+        let falloff = ((h2 + r2(xe, ze)) / (h2 + r2(x, z))).powf(1.5).min(1.0) as f32;
+        self.clear + (edge - self.clear) * falloff
+    }
+
+    /// Bilinear in the filtered columns at column coordinates (u, v), clamped to the map.
+    fn bilinear(&self, u: f64, v: f64) -> Rgb {
+        let (n, m) = (self.dims[0] as f64, self.dims[1] as f64);
         let (u, v) = (u.clamp(0.0, n - 1.0), v.clamp(0.0, m - 1.0));
         let (i, k) = (
             (u.floor() as usize).min(self.dims[0].saturating_sub(2)),
@@ -123,4 +146,31 @@ fn filtered(map: &GroundMap, first: [f64; 2], width: impl Fn(f64, f64) -> f64) -
             Rgb::from([0, 1, 2].map(|b| ((s(i1, k1)[b] - s(i0, k1)[b] - s(i1, k0)[b] + s(i0, k0)[b]) / area) as f32))
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 4×4 map of 10-m columns whose diffuse light is 0.5 above a clear 0.2: inside it reads the
+    /// map, at its edge the same, beyond it falls towards the clear value, never past it.
+    #[test]
+    fn the_ground_beyond_the_map_continues_its_edge_and_falls_to_the_clear_value() {
+        let g = EyeGround {
+            diffuse: vec![Rgb::splat(0.5); 16],
+            clear: Rgb::splat(0.2),
+            dims: [4, 4],
+            first: [5.0, 5.0],
+            h: [10.0, 10.0],
+            sun: Rgb::ZERO,
+            scale: [1.0; 3],
+            cloud: [20.0, 20.0, 100.0],
+        };
+        let at = |x: f64| g.diffuse_at(x, 20.0).x;
+        assert!((at(20.0) - 0.5).abs() < 1e-6);
+        // The map ends at x = 40 (column 3's centre 35 plus half a column).
+        assert!((at(40.0) - 0.5).abs() < 1e-6 && (at(40.001) - 0.5).abs() < 1e-4);
+        let (near, far) = (at(100.0), at(1000.0));
+        assert!(near < 0.5 && far < near && far > 0.2 && far < 0.21, "{near} {far}");
+    }
 }

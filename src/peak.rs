@@ -1,0 +1,141 @@
+//! The forward peak that a δ-M (similarity) transform takes out of the phase function, spread by
+//! the peak scatterings on the sun's leg. δ-M writes HG as p = (1 − f) p′ + f P and carries the
+//! peak P on in the beam, as if unscattered: the beam T′ = T^{1 − af} reaching a point holds the
+//! light peak-scattered k times on its way, k Poisson with mean λ = af τ (τ the true optical
+//! depth along the leg). Each peak scattering multiplies the light's Legendre moments by P's
+//! moments χ_l, so the peak's scattering towards the eye, counted once as the last one, has the
+//! moments f χ_l e^{−λ(1 − χ_l)} (the mean of χ_l^{k+1} under Poisson weights, with T′'s e^{λ}).
+//! [`PeakSpread::spread`] is what that takes from f P = p − (1 − f) p′ at a given λ. Two
+//! transforms use it: `transport`'s δ-M truncated after order L (χ_l = 1 for l ≤ L, g^{l−L−1}
+//! beyond) and `full`'s forward fraction f with HG(g′) (χ_l = (g^l − (1 − f) g′^l)/f).
+
+/// The Legendre series of a δ-M peak beyond the orders its transform keeps exactly.
+pub struct PeakSpread {
+    /// First order with χ_l < 1.
+    first: usize,
+    /// (2l + 1) f χ_l for l = first.. (the peak's own part of the 4π-normalised series).
+    weight: Vec<f64>,
+    /// χ_l for l = first...
+    moment: Vec<f64>,
+}
+
+impl PeakSpread {
+    /// `transport`'s δ-M of HG(g) truncated after order `order` (f = g^{L+1}).
+    pub fn truncated(g: f64, order: usize) -> PeakSpread {
+        // f χ_l = g^l, χ_l = g^{l−L−1} beyond L.
+        Self::from_moments(g, order + 1, |l| g.powi(l as i32), |l| g.powi((l - order - 1) as i32))
+    }
+
+    /// `full`'s similarity transform: forward fraction `f`, HG(g′) with g′ = (g − f)/(1 − f) for
+    /// what is left (f = 0: no peak).
+    pub fn similarity(g: f64, f: f64) -> PeakSpread {
+        if f <= 0.0 {
+            return PeakSpread {
+                first: 0,
+                weight: Vec::new(),
+                moment: Vec::new(),
+            };
+        }
+        let gp = (g - f) / (1.0 - f);
+        let f_chi = move |l: usize| g.powi(l as i32) - (1.0 - f) * gp.powi(l as i32);
+        // χ_0 = χ_1 = 1 (δ-M keeps the normalisation and the mean cosine).
+        Self::from_moments(g, 2, f_chi, move |l| f_chi(l) / f)
+    }
+
+    /// Orders from `first` until (2l + 1) g^l < 10⁻⁶ (at least 8 of them).
+    fn from_moments(g: f64, first: usize, f_chi: impl Fn(usize) -> f64, chi: impl Fn(usize) -> f64) -> PeakSpread {
+        let (mut weight, mut moment) = (Vec::new(), Vec::new());
+        let mut l = first;
+        while l < 20_000 {
+            if (2 * l + 1) as f64 * g.abs().powi(l as i32) < 1e-6 && l >= first + 8 {
+                break;
+            }
+            weight.push((2 * l + 1) as f64 * f_chi(l));
+            moment.push(chi(l));
+            l += 1;
+        }
+        PeakSpread { first, weight, moment }
+    }
+
+    /// The Legendre polynomials P_l(cos Θ) of this series' orders, for [`Self::spread_with`]
+    /// (one ray, many points).
+    pub fn legendre(&self, cos_theta: f64) -> Vec<f64> {
+        let (mut p0, mut p1) = (1.0, cos_theta);
+        let mut out = Vec::with_capacity(self.weight.len());
+        for l in 0..self.first + self.weight.len() {
+            let p = match l {
+                0 => 1.0,
+                1 => cos_theta,
+                _ => {
+                    let p2 = ((2 * l - 1) as f64 * cos_theta * p1 - (l - 1) as f64 * p0) / l as f64;
+                    (p0, p1) = (p1, p2);
+                    p2
+                }
+            };
+            if l >= self.first {
+                out.push(p);
+            }
+        }
+        out
+    }
+
+    /// Σ_l (2l + 1) f χ_l (e^{−λ(1 − χ_l)} − 1) P_l(cos Θ) (4π-normalised): what λ peak
+    /// scatterings on the sun's leg take from the peak f P.
+    pub fn spread(&self, lambda: f64, cos_theta: f64) -> f64 {
+        if lambda <= 0.0 || self.weight.is_empty() {
+            return 0.0;
+        }
+        self.spread_with(lambda, &self.legendre(cos_theta))
+    }
+
+    /// [`Self::spread`] with the P_l already evaluated ([`Self::legendre`]).
+    pub fn spread_with(&self, lambda: f64, legendre: &[f64]) -> f64 {
+        if lambda <= 0.0 {
+            return 0.0;
+        }
+        self.weight
+            .iter()
+            .zip(&self.moment)
+            .zip(legendre)
+            .map(|((w, m), p)| w * ((-lambda * (1.0 - m)).exp() - 1.0) * p)
+            .sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// ½∫ Σ (2l+1) c_l P_l dμ = c_0: a spread moves the peak's light in angle but keeps it (its
+    /// orders start at 2), and the mean cosine (orders ≥ 2 have no first moment either).
+    #[test]
+    fn a_spread_keeps_the_peaks_energy_and_mean_cosine_and_flattens_it() {
+        let (x, w) = crate::transport::gauss_legendre(600);
+        for s in [PeakSpread::truncated(0.9, 7), PeakSpread::similarity(0.9, 0.65)] {
+            for lambda in [0.1, 1.0, 4.0] {
+                let e: f64 = x.iter().zip(&w).map(|(x, w)| 0.5 * w * s.spread(lambda, *x)).sum();
+                let mu: f64 = x.iter().zip(&w).map(|(x, w)| 0.5 * w * x * s.spread(lambda, *x)).sum();
+                assert!(e.abs() < 1e-9 && mu.abs() < 1e-9, "λ {lambda}: {e} {mu}");
+                // Less light straight ahead, more the further λ spreads it.
+                assert!(s.spread(lambda, 1.0) < 0.0);
+                assert!(s.spread(2.0 * lambda, 1.0) < s.spread(lambda, 1.0));
+            }
+            assert_eq!(s.spread(0.0, 0.7), 0.0);
+        }
+    }
+
+    /// The similarity transform's peak, p − (1 − f) HG(g′), is its series' sum at λ → ∞ taken
+    /// away: f χ_l (e^{−∞} − 1) leaves only orders 0 and 1 of f P, i.e. f (1 + 3 μ).
+    #[test]
+    fn a_fully_spread_similarity_peak_keeps_only_its_first_two_orders() {
+        let (g, f) = (0.9f64, 0.65f64);
+        let gp = (g - f) / (1.0 - f);
+        let hg = |g: f64, c: f64| (1.0 - g * g) / (1.0 + g * g - 2.0 * g * c).powf(1.5);
+        let s = PeakSpread::similarity(g, f);
+        for c in [-0.9, 0.0, 0.5, 0.9] {
+            let peak = hg(g, c) - (1.0 - f) * hg(gp, c);
+            let left = peak + s.spread(1e4, c);
+            assert!((left - f * (1.0 + 3.0 * c)).abs() < 1e-5, "cos {c}: {left}");
+        }
+    }
+}
