@@ -7,6 +7,7 @@
 //! - [`slab`]: the solver on a plane-parallel column (checked against adding-doubling).
 //! - [`solve`]: the 3-D solver (SH source per full voxel, sweeps, DSA); the gather is `crate::render::transport`.
 
+mod accel;
 pub mod slab;
 pub mod solve;
 pub mod sphere;

@@ -24,7 +24,8 @@ use super::sphere::Quadrature;
 use super::warm::{TransportState, WARM_MIN_ITERATIONS};
 use super::{BandOptics, Optics};
 use crate::diffusion::multigrid::Hierarchy;
-use crate::diffusion::{interior_coupling, BandOperator, Domain, DEFAULT_MIN_OPTICAL_DEPTH};
+use super::accel::{DsaOperator, SweepDiffusion};
+use crate::diffusion::{interior_coupling, Domain, DEFAULT_MIN_OPTICAL_DEPTH};
 use crate::error::{Error, Result};
 use crate::lighting::{Ground, Sky, Sun};
 use crate::math::{real_sh, sh_count};
@@ -1130,16 +1131,22 @@ pub fn solve_warm(
         (Some(dom), true) => (0..distinct)
             .map(|b| {
                 let bo = &bands[b];
-                // The DSA operator: the diffusion operator with the δ-M coefficients.
+                // The DSA operator: the diffusion operator with the δ-M coefficients and the
+                // sweeps' own diffusion (src/transport/accel.rs).
                 let chi1 = bo.chi.get(1).copied().unwrap_or(0.0);
                 let (sigma_a, sigma_tr) = (bo.sigma_t * (1.0 - bo.albedo), bo.sigma_t * (1.0 - bo.albedo * chi1));
-                Hierarchy::build(&BandOperator::with_coefficients(
-                    m,
-                    dom,
+                Hierarchy::build(&DsaOperator {
+                    grid: dims,
+                    rho,
+                    full: &full,
+                    voxels: &full_vox,
+                    dom: *dom,
+                    h: ctx.h,
                     sigma_a,
                     sigma_tr,
-                    DEFAULT_MIN_OPTICAL_DEPTH,
-                ))
+                    tau_min: DEFAULT_MIN_OPTICAL_DEPTH,
+                    sweep: SweepDiffusion::new(bo.sigma_t, &q, ctx.h),
+                })
             })
             .collect(),
         _ => Vec::new(),
