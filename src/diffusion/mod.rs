@@ -82,6 +82,7 @@ pub(crate) mod multigrid;
 
 pub use multigrid::MAX_BOX_ROW_CELLS;
 pub mod slab;
+pub mod surface;
 
 use crate::error::{Error, Result};
 use crate::half::Signed16;

@@ -9,6 +9,7 @@ pub mod source_field;
 use super::single::{background, pixel_sample};
 use super::{render_rows, Progress, Timings};
 use crate::diffusion::flux::{diffuse_flux, FluxField};
+use crate::diffusion::surface::visible_i0;
 use crate::diffusion::{solve_diffusion, BoundaryLight, DiffusionSolution};
 use crate::error::check_finite_field;
 use crate::error::Result;
@@ -112,11 +113,21 @@ pub fn i0_rgb(sol: &DiffusionSolution) -> VoxelField<Rgb> {
     })
 }
 
-/// The lit volume of a solved scene (`sun_t` its medium's sun transmittance), with the first
-/// moment attached when `render.diffuse_anisotropy` is on and the sky and ground single
-/// scattering when stage 1 projected it (`render.sky_single_scattering`).
+/// I0 per voxel as RGB as the eye sees it: thick boundary voxels show their value one optical
+/// depth inside the surface, not their centre's ([`visible_i0`]).
+pub fn visible_i0_rgb(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution) -> VoxelField<Rgb> {
+    let i0 = visible_i0(&scene.medium, inc, sol, scene.render.solver.min_optical_depth);
+    VoxelField::from_fn(i0[0].index().clone(), Rgb::ZERO, |k| {
+        Rgb::new(i0[0].get(k), i0[1].get(k), i0[2].get(k))
+    })
+}
+
+/// The lit volume of a solved scene (`sun_t` its medium's sun transmittance), I0 as the eye sees
+/// it ([`visible_i0_rgb`]), with the first moment attached when `render.diffuse_anisotropy` is on
+/// and the sky and ground single scattering when stage 1 projected it
+/// (`render.sky_single_scattering`).
 pub fn solved_lit_volume(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution, sun_t: &SunTransmittance) -> LitVolume {
-    let mut lit = scene_lit_volume(scene, i0_rgb(sol), sun_t);
+    let mut lit = scene_lit_volume(scene, visible_i0_rgb(scene, inc, sol), sun_t);
     if scene.render.diffuse_anisotropy {
         let i1 = diffuse_flux(&scene.medium, inc, sol, scene.render.solver.min_optical_depth);
         lit = lit.with_flux(FluxField::new(&scene.medium, i1));
@@ -132,7 +143,7 @@ fn source_field(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution, sun
     let i1 = diffuse_flux(&scene.medium, inc, sol, scene.render.solver.min_optical_depth);
     SourceField::new(
         &scene.medium,
-        &sol.i0,
+        &visible_i0(&scene.medium, inc, sol, scene.render.solver.min_optical_depth),
         scene.render.diffuse_anisotropy.then_some(&i1),
         inc.sky_sh.as_ref(),
         &sun_t.grid,
@@ -151,6 +162,7 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
     // Only the source field reads the sun transmittance: computed after the solve, not held
     // through it.
     let sun_t = timings.time("sun transmittance", || SunTransmittance::compute(&scene.medium, scene.sun.dir));
+    sun_t.check_finite()?;
     let field = timings.time("source field", || source_field(scene, &inc, &sol, &sun_t));
     drop((inc, sun_t));
     let cam = &scene.camera;
