@@ -956,6 +956,12 @@ fn dominant_mode_step(history: &[f64], last: usize) -> Option<f32> {
     (r1 > 0.3 && r1 < 0.9 && (r1 - r0).abs() < 0.1).then(|| (r1 / (1.0 - r1)) as f32)
 }
 
+/// Most optical depth per voxel (ρσt′ h, thinnest axis) the solve accepts. The acceleration
+/// multiplies a sweep's change of I0 by about the voxels' optical depth τ, and with it the sweeps'
+/// f32 rounding (relative 6·10⁻⁸): beyond ~10⁵ that exceeds the tolerance. Measured (albedo 1,
+/// g = 0, 40-m voxels): τ = 60 converges in 12 iterations, 6·10³ in 43, 6·10⁵ diverges.
+pub const MAX_VOXEL_OPTICAL_DEPTH: f64 = 1e4;
+
 /// A change of I_00 this many times the smallest since the iteration (re)started means the
 /// acceleration amplifies: a converging iteration's change falls (erratically by at most ~2 on the
 /// evaluation scenes), a diverging one's grows by orders of magnitude within a few iterations.
@@ -1020,6 +1026,20 @@ pub fn solve_warm(
     live: Option<&dyn Fn(&TransportField)>,
 ) -> Result<(TransportField, Option<TransportState>)> {
     let optics = Optics::from_medium(m, s.order);
+    let h_min = m.voxel_size.x.min(m.voxel_size.y).min(m.voxel_size.z) as f64;
+    let tau_max = m.density.max_value() as f64 * optics.bands.iter().fold(0.0f64, |a, b| a.max(b.sigma_t)) * h_min;
+    if tau_max > MAX_VOXEL_OPTICAL_DEPTH {
+        return Err(Error::Numerical {
+            stage: "transport solve".into(),
+            message: format!(
+                "voxels up to {tau_max:.1e} optical depths thick (medium.sigma_t × density × medium.voxel_size, δ-M \
+                 scaled), above the {MAX_VOXEL_OPTICAL_DEPTH:.0e} to which the solve converges (the sweeps' f32 \
+                 rounding, amplified about τ times by the acceleration, exceeds render.transport_tolerance beyond); \
+                 render it with --method diffusion, or give it thinner voxels (a smaller medium.voxel_size or \
+                 medium.sigma_t)"
+            ),
+        });
+    }
     let dims = m.dims();
     let [nx, _, nz] = dims;
     let rho = &*m.density;
