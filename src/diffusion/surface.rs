@@ -37,7 +37,13 @@ const HIDDEN_DEPTH: f64 = 20.0;
 /// gather's coarser step, a clear-air cube's trilinear blend) would show their I0, which grows
 /// as (3/2)τ times the surface's. `slot(g)`: the 1-based full-voxel index of grid voxel g, 0 if
 /// empty; `full`: the full voxels' grid indices.
-fn fill_hidden(values: &[f32], full: &[usize], gd: [usize; 3], kept: impl Fn(usize) -> bool + Sync, slot: impl Fn(usize) -> usize) -> Vec<f32> {
+fn fill_hidden(
+    values: &[f32],
+    full: &[usize],
+    gd: [usize; 3],
+    kept: impl Fn(usize) -> bool + Sync,
+    slot: impl Fn(usize) -> usize,
+) -> Vec<f32> {
     let mut out = values.to_vec();
     let mut done: Vec<bool> = (0..full.len()).into_par_iter().map(&kept).collect();
     let neighbours = |r: usize| {
@@ -178,22 +184,69 @@ pub fn visible_i0(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, tau_
                 }
             })
             .collect();
-        let packed = fill_hidden(&packed, &full, gd, |r| {
-            let idx = full[r];
-            let boundary = (0..3).any(|a| {
-                let c = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])][a];
-                [-1i64, 1].iter().any(|side| {
-                    let nc = c as i64 + side;
-                    !(nc >= 0 && nc < gd[a] as i64) || index.slot((idx as i64 + side * gstride[a] as i64) as usize) == 0
-                })
-            });
-            boundary || packed[r] != first[r] || (rho.at_slot(r + 1) as f64) * sigma_t * h_min <= HIDDEN_DEPTH
-        }, |g| index.slot(g));
-        let same = packed.iter().enumerate().all(|(r, v)| v.to_bits() == sol.i0[c].packed_at(r).to_bits());
+        let packed = fill_hidden(
+            &packed,
+            &full,
+            gd,
+            |r| {
+                let idx = full[r];
+                let boundary = (0..3).any(|a| {
+                    let c = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])][a];
+                    [-1i64, 1].iter().any(|side| {
+                        let nc = c as i64 + side;
+                        !(nc >= 0 && nc < gd[a] as i64) || index.slot((idx as i64 + side * gstride[a] as i64) as usize) == 0
+                    })
+                });
+                boundary || packed[r] != first[r] || (rho.at_slot(r + 1) as f64) * sigma_t * h_min <= HIDDEN_DEPTH
+            },
+            |g| index.slot(g),
+        );
+        let same = packed
+            .iter()
+            .enumerate()
+            .all(|(r, v)| v.to_bits() == sol.i0[c].packed_at(r).to_bits());
         if same {
             sol.i0[c].clone()
         } else {
             Field16::new(index.clone(), &packed)
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::pipeline::NoProgress;
+    use crate::scene::{Method, Scene, SceneDesc};
+
+    /// The procedural cloud in 40-m voxels of 10⁶ m⁻¹ (some 10⁷ optical depths each), albedo 1,
+    /// g = 0, under a sun of 3 W/m² and a sky of at most 0.8 W·m⁻²·sr⁻¹.
+    fn thick_scene(method: Method) -> Scene {
+        let text = "[medium]\ngrid = \"procedural\"\nresolution = [12, 10, 8]\nvoxel_size = 40.0\n\
+                    origin = [-240.0, 100.0, -160.0]\nsigma_t = 1e6\nalbedo = [1.0, 1.0, 1.0]\ng = 0.0\n\
+                    [sun]\ndirection = [0.3, 0.8, 0.5]\nirradiance = [3.0, 3.0, 3.0]\n\
+                    [sky]\nmodel = \"constant\"\nradiance = [0.3, 0.45, 0.8]\n\
+                    [camera]\nposition = [0.0, 350.0, 1500.0]\nlook_at = [0.0, 300.0, 0.0]\nfov_deg = 30.0\nwidth = 24\nheight = 18\n";
+        let desc = SceneDesc::from_toml(text, "thick.toml").unwrap();
+        let mut scene = Scene::build(desc, "thick.toml", std::path::Path::new(".")).unwrap();
+        scene.render.method = method;
+        scene
+    }
+
+    #[test]
+    fn a_cloud_of_very_thick_voxels_is_no_brighter_than_its_light_allows() {
+        // A conservative surface sends back what it receives: its exitance is at most
+        // E + π L_sky, and no direction of a diffuse surface is more than ~2.5 times brighter than
+        // the mean (the Eddington profile's 1 + (3/2)μ). The centres' I0 ((3/2)τ times the
+        // surface's) gave 10⁷ here.
+        let bound = 2.5 * (3.0 / std::f32::consts::PI + 0.8);
+        for method in [Method::Diffusion, Method::Full] {
+            let out = crate::render::render(&thick_scene(method), &NoProgress).unwrap();
+            let max = out.image.pixels.iter().map(|p| p.max_element()).fold(0f32, f32::max);
+            let cloud = out.image.pixels.iter().filter(|p| p.max_element() > 0.9).count();
+            assert!(
+                max <= bound && cloud > 0,
+                "{method:?}: max pixel {max} (bound {bound}), {cloud} bright pixels"
+            );
+        }
+    }
 }

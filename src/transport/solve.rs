@@ -16,15 +16,16 @@
 //! radiance's moments; the δ-M reduced sun E T′_sun = E T^{1 − a f} is exact and apart.
 //!
 //! **Acceleration.** After a sweep the isotropic change ΔI0 drives the diffusion equation
-//! −∇·(∇δ/(3ρσtr′)) + ρσa′ δ = ρσs′ ΔI0 (the diffusion module's face couplings and Marshak
-//! boundary, δ-M coefficients), solved by multigrid-preconditioned CG; I_00 += √(4π) δ, and the
+//! −∇·(D∇δ) + ρσa′ δ = ρσs′ ΔI0 with D = 1/(3ρσtr′) plus the sweeps' own numerical diffusion
+//! (δ-M coefficients, Marshak boundary; [`super::accel`]: consistent with the sweeps on thick
+//! voxels), solved by multigrid-preconditioned CG; I_00 += √(4π) δ, and the
 //! correction's P1 current (Fick's law) goes into the first moments ([`accelerate`]).
 
+use super::accel::{DsaOperator, SweepDiffusion};
 use super::sphere::Quadrature;
 use super::warm::{TransportState, WARM_MIN_ITERATIONS};
 use super::{BandOptics, Optics};
 use crate::diffusion::multigrid::Hierarchy;
-use super::accel::{DsaOperator, SweepDiffusion};
 use crate::diffusion::{interior_coupling, Domain, DEFAULT_MIN_OPTICAL_DEPTH};
 use crate::error::{Error, Result};
 use crate::lighting::{Ground, Sky, Sun};
