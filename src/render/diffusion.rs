@@ -211,6 +211,8 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
 mod tests {
     use super::*;
     use crate::medium::sparse::FullIndex;
+    use crate::pipeline::NoProgress;
+    use crate::scene::{Method, SceneDesc};
     use std::sync::Arc;
 
     /// Stage 1's light on a 2×1×1 grid of full voxels, in the sun's form with Q0 per unit ρT̄ `q0`.
@@ -239,5 +241,37 @@ mod tests {
         inc.bin_radiance[2] = Rgb::new(0.0, 0.0, f32::INFINITY);
         let e = check_incident(&inc).unwrap_err().to_string();
         assert!(e.starts_with("incident light:") && e.contains("bin radiance"), "{e}");
+    }
+
+    /// The procedural cloud in 40-m voxels of 10⁶ m⁻¹ (some 10⁷ optical depths each), albedo 1,
+    /// g = 0, under a sun of 3 W/m² and a sky of at most 0.8 W·m⁻²·sr⁻¹.
+    fn thick_scene(method: Method) -> Scene {
+        let text = "[medium]\ngrid = \"procedural\"\nresolution = [12, 10, 8]\nvoxel_size = 40.0\n\
+                    origin = [-240.0, 100.0, -160.0]\nsigma_t = 1e6\nalbedo = [1.0, 1.0, 1.0]\ng = 0.0\n\
+                    [sun]\ndirection = [0.3, 0.8, 0.5]\nirradiance = [3.0, 3.0, 3.0]\n\
+                    [sky]\nmodel = \"constant\"\nradiance = [0.3, 0.45, 0.8]\n\
+                    [camera]\nposition = [0.0, 350.0, 1500.0]\nlook_at = [0.0, 300.0, 0.0]\nfov_deg = 30.0\nwidth = 24\nheight = 18\n";
+        let desc = SceneDesc::from_toml(text, "thick.toml").unwrap();
+        let mut scene = Scene::build(desc, "thick.toml", std::path::Path::new(".")).unwrap();
+        scene.render.method = method;
+        scene
+    }
+
+    #[test]
+    fn a_cloud_of_very_thick_voxels_is_no_brighter_than_its_light_allows() {
+        // A conservative surface sends back what it receives: its exitance is at most
+        // E + π L_sky, and no direction of a diffuse surface is more than ~2.5 times brighter than
+        // the mean (the Eddington profile's 1 + (3/2)μ). The centres' I0 ((3/2)τ times the
+        // surface's) gave 10⁷ here.
+        let bound = 2.5 * (3.0 / std::f32::consts::PI + 0.8);
+        for method in [Method::Diffusion, Method::Full] {
+            let out = crate::render::render(&thick_scene(method), &NoProgress).unwrap();
+            let max = out.image.pixels.iter().map(|p| p.max_element()).fold(0f32, f32::max);
+            let cloud = out.image.pixels.iter().filter(|p| p.max_element() > 0.9).count();
+            assert!(
+                max <= bound && cloud > 0,
+                "{method:?}: max pixel {max} (bound {bound}), {cloud} bright pixels"
+            );
+        }
     }
 }

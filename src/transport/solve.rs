@@ -153,7 +153,7 @@ pub fn solve_warm(
                 "voxels up to {tau_max:.1e} optical depths thick (medium.sigma_t × density × medium.voxel_size, δ-M \
                  scaled), above the {MAX_VOXEL_OPTICAL_DEPTH:.0e} to which the solve converges (the sweeps' f32 \
                  rounding, amplified about τ times by the acceleration, exceeds render.transport_tolerance beyond); \
-                 render it with --method diffusion, or give it thinner voxels (a smaller medium.voxel_size or \
+                 render it with --method full or --method diffusion, or give it thinner voxels (a smaller medium.voxel_size or \
                  medium.sigma_t)"
             ),
         });
