@@ -82,6 +82,7 @@ pub(crate) mod multigrid;
 
 pub use multigrid::MAX_BOX_ROW_CELLS;
 pub mod slab;
+pub mod surface;
 
 use crate::error::{Error, Result};
 use crate::half::Signed16;
@@ -303,7 +304,7 @@ impl<'a> BandOperator<'a> {
     }
 
     /// Absorption and transport coefficients `sigma_a`, `sigma_tr` at density 1 (m⁻¹) of the
-    /// caller's choosing (the transport's DSA: its δ-M ones).
+    /// caller's choosing.
     pub(crate) fn with_coefficients(m: &'a Medium, dom: &Domain, sigma_a: f64, sigma_tr: f64, tau_min: f64) -> BandOperator<'a> {
         let index = m.density.full_index();
         let gd = m.dims();

@@ -22,6 +22,7 @@ use crate::math::Vec3;
 use crate::medium::{Medium, SubGrid};
 use glam::DVec3;
 use rayon::prelude::*;
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
 /// The sun transmittance's grid: 16-bit codes (module docs).
@@ -33,6 +34,9 @@ pub struct SunTransmittance {
     /// Transmittance towards the sun at each voxel centre (unitless), stored on the full voxels'
     /// box grown by one voxel; 1 elsewhere.
     pub grid: Arc<SunGrid>,
+    /// The bits of a non-finite transmittance met while computing (stored values are clamped to
+    /// [0, 1] by their 16-bit code, so it is kept here for [`SunTransmittance::check_finite`]).
+    non_finite: Option<u32>,
 }
 
 impl SunTransmittance {
@@ -45,6 +49,8 @@ impl SunTransmittance {
         let rho = m.density.box_copy(lo, hi);
         let mut grid = SunGrid::filled(d, lo, hi, 1.0, 1.0);
         let (_, [nx, ny, _]) = grid.bounds();
+        // The first non-finite value's bits (u32::MAX: none seen; a NaN's bits are never that).
+        let bad = std::sync::atomic::AtomicU32::new(u32::MAX);
         if nx * ny > 0 {
             grid.box_values_mut().par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
                 let k = k + lo[2];
@@ -66,7 +72,11 @@ impl SunTransmittance {
                         }
                         if near {
                             let p = m.voxel_center(i, j, k);
-                            slab[i - lo[0] + nx * (j - lo[1])] = Unit16::from_f32(transmittance(m, &rho, p, sun_dir));
+                            let t = transmittance(m, &rho, p, sun_dir);
+                            if !t.is_finite() {
+                                let _ = bad.compare_exchange(u32::MAX, t.to_bits(), Ordering::Relaxed, Ordering::Relaxed);
+                            }
+                            slab[i - lo[0] + nx * (j - lo[1])] = Unit16::from_f32(t);
                         }
                     }
                 }
@@ -74,7 +84,15 @@ impl SunTransmittance {
         }
         SunTransmittance {
             grid: Arc::new(grid),
+            non_finite: Some(bad.into_inner()).filter(|b| *b != u32::MAX),
         }
+    }
+
+    /// Refuse a transmittance that was non-finite at some voxel centre (before its 16-bit code
+    /// clamped it): an error naming the stage `sun transmittance`.
+    pub fn check_finite(&self) -> crate::error::Result<()> {
+        let bad = self.non_finite.map(f32::from_bits);
+        crate::error::check_finite_field("sun transmittance", "T_sun at the voxel centres", bad)
     }
 
     /// Interpolated transmittance at a point inside the medium's box.

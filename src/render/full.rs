@@ -16,7 +16,7 @@
 //! With `iterations = 0` this is the paper's Figure 6 (diffusion plus the low-density edges, the
 //! ground still lit by its hemicubes).
 
-use super::diffusion::{boundary_light, check_incident, compute_incident, i0_rgb, scene_lit_volume, solved_lit_volume};
+use super::diffusion::{boundary_light, check_incident, compute_incident, scene_lit_volume, solved_lit_volume, visible_i0_rgb};
 use super::single::pixel_sample;
 use super::{Progress, Timings};
 use crate::cube::{clear_air, BorderKeep, BorderLight, ClearAir, CubeImage, CubeOptions, CubeRenderer};
@@ -27,6 +27,7 @@ use crate::error::check_finite_field;
 use crate::error::Result;
 use crate::image::Image;
 use crate::incident::IncidentLight;
+use crate::lit::ground::LitGround;
 use crate::lit::sunlight::SunTransmittance;
 use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
@@ -75,6 +76,7 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
     // The sun transmittance depends only on the medium and the sun: once per run, after the
     // first solve (only the lit volumes read it), so that solve does not hold it.
     let sun_t = timings.time("sun transmittance", || SunTransmittance::compute(&scene.medium, scene.sun.dir));
+    sun_t.check_finite()?;
     let mut changes = Vec::new();
     let opts = &scene.render.cubes;
     // With `render.sky_boundary` the cubes' light enters through the boundary condition, and
@@ -84,9 +86,9 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
     } else {
         BorderKeep::Bins
     };
-    let cubes = |sol: &DiffusionSolution| {
+    let cubes = |sol: &DiffusionSolution, inc: &IncidentLight| {
         clear_air(
-            scene_lit_volume(scene, i0_rgb(sol), &sun_t),
+            scene_lit_volume(scene, visible_i0_rgb(scene, inc, sol), &sun_t),
             scene.ground.as_ref(),
             opts,
             keep,
@@ -95,19 +97,21 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
     };
     // Memory: each iteration's cubes, and the old stage-1 light, are dropped once the new stage-1
     // light no longer needs them; only the cubes' lit ground is kept.
-    let mut ca = Some(timings.time("clear-air cubes", || cubes(&sol)));
+    let mut ca = Some(timings.time("clear-air cubes", || cubes(&sol, &inc)));
     let mut ground = ca.as_ref().and_then(|c| c.lit.ground.clone());
+    check_ground(ground.as_ref())?;
     for it in 0..iterations {
         if progress.cancelled() {
             break;
         }
         let c = match ca.take() {
             Some(c) => c,
-            None => timings.time("clear-air cubes", || cubes(&sol)),
+            None => timings.time("clear-air cubes", || cubes(&sol, &inc)),
         };
         // The lit volume (its I0 and pyramid) is dropped before the re-solve.
         let ClearAir { lit, border } = c;
         ground = lit.ground.clone();
+        check_ground(ground.as_ref())?;
         drop(lit);
         let n_cubes = border.cubes();
         check_border(&border)?;
@@ -162,6 +166,16 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         incident: inc,
         changes,
     })
+}
+
+/// Refuse a lit ground whose hemicube irradiance is non-finite: an error naming `ground hemicubes`.
+fn check_ground(ground: Option<&LitGround>) -> Result<()> {
+    let grid = ground.and_then(|g| g.grid.as_ref());
+    check_finite_field(
+        "ground hemicubes",
+        "the ground's irradiance",
+        grid.into_iter().flat_map(|g| g.irradiance.iter().flat_map(|c| c.to_array())),
+    )
 }
 
 /// Refuse clear-air cubes holding a non-finite radiance: an error naming `clear-air cubes`.

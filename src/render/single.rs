@@ -64,6 +64,7 @@ pub fn radiance(scene: &Scene, sun_t: &SunTransmittance, o: Vec3, d: Vec3, xi: f
 /// Render the image.
 pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
     let sun_t = timings.time("sun transmittance", || SunTransmittance::compute(&scene.medium, scene.sun.dir));
+    sun_t.check_finite()?;
     let cam = &scene.camera;
     let spp = scene.render.aa_samples;
     let px = timings.time("gather", || {

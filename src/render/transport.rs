@@ -24,7 +24,7 @@ use crate::render::single::pixel_sample;
 use crate::render::transport_ground::EyeGround;
 use crate::render::warm::Warm;
 use crate::scene::Scene;
-use crate::transport::solve::{solve_warm, TransportField, TransportSettings};
+use crate::transport::solve::{solve_warm, SolveOptions, TransportField, TransportSettings};
 use crate::transport::TransportMemory;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -223,7 +223,8 @@ pub fn render_with(scene: &Scene, progress: &dyn Progress, timings: &mut Timings
     };
     let live: Option<&dyn Fn(&TransportField)> = progress.wants_images().then_some(&show);
     let (field, state) = timings.time("transport solve", || {
-        solve_warm(m, &scene.sun, &scene.sky, scene.ground.as_ref(), s, progress, start, keep, live)
+        let opts = SolveOptions { start, keep, live };
+        solve_warm(m, &scene.sun, &scene.sky, scene.ground.as_ref(), s, progress, opts)
     })?;
     if let Some(w) = warm {
         w.transport = state;

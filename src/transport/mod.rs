@@ -5,11 +5,21 @@
 //! - [`Optics`]: the medium's optics after the δ-M similarity transform (Wiscombe 1977), the one
 //!   place the transport solver reads σt, albedo and g.
 //! - [`slab`]: the solver on a plane-parallel column (checked against adding-doubling).
-//! - [`solve`]: the 3-D solver (SH source per full voxel, sweeps, DSA); the gather is `crate::render::transport`.
+//! - [`solve`]: the 3-D solver (SH source per full voxel, sweeps, DSA); its stages are the private
+//!   modules `sweep`, `source`, `dsa` (its operator in `accel`), `ground`, `grid` and `convergence`. The gather is
+//!   `crate::render::transport`.
 
+mod accel;
+mod convergence;
+mod dsa;
+mod grid;
+mod ground;
+mod simd;
 pub mod slab;
 pub mod solve;
+mod source;
 pub mod sphere;
+mod sweep;
 pub mod warm;
 
 use crate::error::{check, Error, Result};
@@ -92,7 +102,7 @@ impl TransportMemory {
     /// (L + 1)² f32, plus a batch of ordinates' sources and radiances (2 × 12 B each): 1,920 B at
     /// order 7 (a stored source array would add 768 B).
     pub fn bytes_per_full_voxel(order: usize) -> u64 {
-        2 * 3 * 4 * crate::math::sh_count(order) as u64 + 2 * 12 * solve::ORDINATE_BATCH as u64
+        2 * 3 * 4 * crate::math::sh_count(order) as u64 + 2 * 12 * source::ORDINATE_BATCH as u64
     }
 
     /// The estimate for medium `m` solved with `s`.
@@ -161,6 +171,12 @@ impl BandOptics {
             f,
             chi,
         }
+    }
+
+    /// Scaled transport extinction σtr′ = σt′(1 − a′χ′_1) per unit density (m⁻¹): the
+    /// diffusion coefficient's 1/(3σtr′) and Fick's law of the acceleration.
+    pub fn sigma_tr(&self) -> f64 {
+        self.sigma_t * (1.0 - self.albedo * self.chi.get(1).copied().unwrap_or(0.0))
     }
 
     /// The truncated phase function p′(cos Θ) = Σ (2l+1) χ′_l P_l(cos Θ) (normalised to 4π over

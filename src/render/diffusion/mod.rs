@@ -9,6 +9,7 @@ pub mod source_field;
 use super::single::{background, pixel_sample};
 use super::{render_rows, Progress, Timings};
 use crate::diffusion::flux::{diffuse_flux, FluxField};
+use crate::diffusion::surface::visible_i0;
 use crate::diffusion::{solve_diffusion, BoundaryLight, DiffusionSolution};
 use crate::error::check_finite_field;
 use crate::error::Result;
@@ -112,11 +113,21 @@ pub fn i0_rgb(sol: &DiffusionSolution) -> VoxelField<Rgb> {
     })
 }
 
-/// The lit volume of a solved scene (`sun_t` its medium's sun transmittance), with the first
-/// moment attached when `render.diffuse_anisotropy` is on and the sky and ground single
-/// scattering when stage 1 projected it (`render.sky_single_scattering`).
+/// I0 per voxel as RGB as the eye sees it: thick boundary voxels show their value one optical
+/// depth inside the surface, not their centre's ([`visible_i0`]).
+pub fn visible_i0_rgb(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution) -> VoxelField<Rgb> {
+    let i0 = visible_i0(&scene.medium, inc, sol, scene.render.solver.min_optical_depth);
+    VoxelField::from_fn(i0[0].index().clone(), Rgb::ZERO, |k| {
+        Rgb::new(i0[0].get(k), i0[1].get(k), i0[2].get(k))
+    })
+}
+
+/// The lit volume of a solved scene (`sun_t` its medium's sun transmittance), I0 as the eye sees
+/// it ([`visible_i0_rgb`]), with the first moment attached when `render.diffuse_anisotropy` is on
+/// and the sky and ground single scattering when stage 1 projected it
+/// (`render.sky_single_scattering`).
 pub fn solved_lit_volume(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution, sun_t: &SunTransmittance) -> LitVolume {
-    let mut lit = scene_lit_volume(scene, i0_rgb(sol), sun_t);
+    let mut lit = scene_lit_volume(scene, visible_i0_rgb(scene, inc, sol), sun_t);
     if scene.render.diffuse_anisotropy {
         let i1 = diffuse_flux(&scene.medium, inc, sol, scene.render.solver.min_optical_depth);
         lit = lit.with_flux(FluxField::new(&scene.medium, i1));
@@ -132,7 +143,7 @@ fn source_field(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution, sun
     let i1 = diffuse_flux(&scene.medium, inc, sol, scene.render.solver.min_optical_depth);
     SourceField::new(
         &scene.medium,
-        &sol.i0,
+        &visible_i0(&scene.medium, inc, sol, scene.render.solver.min_optical_depth),
         scene.render.diffuse_anisotropy.then_some(&i1),
         inc.sky_sh.as_ref(),
         &sun_t.grid,
@@ -151,6 +162,7 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
     // Only the source field reads the sun transmittance: computed after the solve, not held
     // through it.
     let sun_t = timings.time("sun transmittance", || SunTransmittance::compute(&scene.medium, scene.sun.dir));
+    sun_t.check_finite()?;
     let field = timings.time("source field", || source_field(scene, &inc, &sol, &sun_t));
     drop((inc, sun_t));
     let cam = &scene.camera;
@@ -199,6 +211,8 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
 mod tests {
     use super::*;
     use crate::medium::sparse::FullIndex;
+    use crate::pipeline::NoProgress;
+    use crate::scene::{Method, SceneDesc};
     use std::sync::Arc;
 
     /// Stage 1's light on a 2×1×1 grid of full voxels, in the sun's form with Q0 per unit ρT̄ `q0`.
@@ -226,5 +240,37 @@ mod tests {
         inc.bin_radiance[2] = Rgb::new(0.0, 0.0, f32::INFINITY);
         let e = check_incident(&inc).unwrap_err().to_string();
         assert!(e.starts_with("incident light:") && e.contains("bin radiance"), "{e}");
+    }
+
+    /// The procedural cloud in 40-m voxels of 10⁶ m⁻¹ (some 10⁷ optical depths each), albedo 1,
+    /// g = 0, under a sun of 3 W/m² and a sky of at most 0.8 W·m⁻²·sr⁻¹.
+    fn thick_scene(method: Method) -> Scene {
+        let text = "[medium]\ngrid = \"procedural\"\nresolution = [12, 10, 8]\nvoxel_size = 40.0\n\
+                    origin = [-240.0, 100.0, -160.0]\nsigma_t = 1e6\nalbedo = [1.0, 1.0, 1.0]\ng = 0.0\n\
+                    [sun]\ndirection = [0.3, 0.8, 0.5]\nirradiance = [3.0, 3.0, 3.0]\n\
+                    [sky]\nmodel = \"constant\"\nradiance = [0.3, 0.45, 0.8]\n\
+                    [camera]\nposition = [0.0, 350.0, 1500.0]\nlook_at = [0.0, 300.0, 0.0]\nfov_deg = 30.0\nwidth = 24\nheight = 18\n";
+        let desc = SceneDesc::from_toml(text, "thick.toml").unwrap();
+        let mut scene = Scene::build(desc, "thick.toml", std::path::Path::new(".")).unwrap();
+        scene.render.method = method;
+        scene
+    }
+
+    #[test]
+    fn a_cloud_of_very_thick_voxels_is_no_brighter_than_its_light_allows() {
+        // A conservative surface sends back what it receives: its exitance is at most
+        // E + π L_sky, and no direction of a diffuse surface is more than ~2.5 times brighter than
+        // the mean (the Eddington profile's 1 + (3/2)μ). The centres' I0 ((3/2)τ times the
+        // surface's) gave 10⁷ here.
+        let bound = 2.5 * (3.0 / std::f32::consts::PI + 0.8);
+        for method in [Method::Diffusion, Method::Full] {
+            let out = crate::render::render(&thick_scene(method), &NoProgress).unwrap();
+            let max = out.image.pixels.iter().map(|p| p.max_element()).fold(0f32, f32::max);
+            let cloud = out.image.pixels.iter().filter(|p| p.max_element() > 0.9).count();
+            assert!(
+                max <= bound && cloud > 0,
+                "{method:?}: max pixel {max} (bound {bound}), {cloud} bright pixels"
+            );
+        }
     }
 }

@@ -1,0 +1,75 @@
+//! When the iteration stops, when it diverges, and the extrapolation of its slowest mode.
+
+use super::grid::Ctx;
+use super::BandOptics;
+
+/// Extrapolation of the slowest error mode (Lyusternik's): once DSA has removed the diffusive
+/// modes, the change shrinks geometrically, by r per iteration (≈ 0.6–0.75 measured: the
+/// anisotropic orders DSA does not reach), so the remaining error is r/(1 − r) times the last step.
+/// When the last two ratios agree within 0.1 and r ∈ (0.3, 0.9), the factor to add the last step
+/// with; None otherwise (an erratic history is left alone). Both ratios must be of changes made
+/// after the last extrapolation (at iteration `last`, 0 for none), so at most every third
+/// iteration. Measured on the five evaluation scenes: 13/13/6/13/13 → 8/9/5/9/8 iterations,
+/// the same images within the tolerance.
+pub(super) fn dominant_mode_step(history: &[f64], last: usize) -> Option<f32> {
+    let n = history.len();
+    if n < 4 || n < last + 3 {
+        return None;
+    }
+    let (r0, r1) = (history[n - 2] / history[n - 3], history[n - 1] / history[n - 2]);
+    (r1 > 0.3 && r1 < 0.9 && (r1 - r0).abs() < 0.1).then(|| (r1 / (1.0 - r1)) as f32)
+}
+
+/// A change of I_00 this many times the smallest since the iteration (re)started means the
+/// acceleration amplifies: a converging iteration's change falls (erratically by at most ~2 on the
+/// evaluation scenes), a diverging one's grows by orders of magnitude within a few iterations.
+pub(super) const DIVERGENCE_FACTOR: f64 = 4.0;
+
+/// (max |ΔI_00|, max |I_00|) over the full voxels and bands (W·m⁻²·sr⁻¹): inf for the first
+/// when either iterate holds a non-finite value (so a NaN is never read as "no change").
+pub(super) fn i00_change(next: &[f32], moments: &[f32], nsh: usize) -> (f64, f64) {
+    next.iter()
+        .step_by(nsh)
+        .zip(moments.iter().step_by(nsh))
+        .fold((0.0f64, 1e-30f64), |(c, m), (x, y)| {
+            let d = (x - y).abs() as f64;
+            (if d.is_finite() { c.max(d) } else { f64::INFINITY }, m.max(x.abs() as f64))
+        })
+}
+
+/// Whether plain source iteration (after the acceleration was given up) has converged: its
+/// change falls by r per iteration with r → 1 on thick media, so the error left is about
+/// r/(1 − r) times the last change, not the change itself (a change of 4.9·10⁻³ at r = 0.957
+/// left 22 times that). `changes`: the relative changes since the restart.
+pub(super) fn plain_converged(changes: &[f64], tolerance: f64) -> bool {
+    match changes {
+        [.., a, b] if b < a => b * (b / (a - b)).max(1.0) < tolerance,
+        _ => false,
+    }
+}
+
+/// The largest scaled optical depth of a full voxel along its thinnest axis, max ρ σt′ h.
+pub(super) fn max_voxel_optical_depth(c: &Ctx, voxels: &[usize], bands: &[BandOptics]) -> f64 {
+    let rho = voxels.iter().fold(0.0f64, |a, &v| a.max(c.rho.at(v) as f64));
+    let st = bands.iter().fold(0.0f64, |a, b| a.max(b.sigma_t));
+    rho * st * c.h.iter().copied().fold(f64::INFINITY, f64::min)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dominant_mode_step_extrapolates_only_a_steady_geometric_decay() {
+        let geometric: Vec<f64> = (0..7).map(|i| 0.75f64.powi(i)).collect();
+        // r = 0.75: the remaining error is 3 steps.
+        assert!((dominant_mode_step(&geometric[..4], 0).unwrap() - 3.0).abs() < 1e-5);
+        assert_eq!(dominant_mode_step(&geometric[..5], 4), None, "two ratios since the last one");
+        assert_eq!(dominant_mode_step(&geometric[..6], 4), None);
+        assert!((dominant_mode_step(&geometric[..7], 4).unwrap() - 3.0).abs() < 1e-5);
+        assert!((dominant_mode_step(&geometric[..5], 0).unwrap() - 3.0).abs() < 1e-5);
+        assert_eq!(dominant_mode_step(&[1.0, 0.5, 0.6, 0.3], 0), None, "erratic");
+        assert_eq!(dominant_mode_step(&[1.0, 0.95, 0.9025, 0.857], 0), None, "too slow to trust");
+        assert_eq!(dominant_mode_step(&[1.0, 0.1, 0.01, 0.001], 0), None, "fast already");
+    }
+}

@@ -1,0 +1,164 @@
+//! The solver's view of the grid ([`Ctx`]): the swept box, the full-voxel index and the
+//! optics the sweeps, the per-voxel source and moment steps and the acceleration read, and the
+//! box's cells in each sweep order ([`box_cells`]).
+
+use super::ground::GroundMap;
+use super::source::parity_order;
+use super::BandOptics;
+use crate::lighting::{Ground, Sky};
+use crate::math::{sh_count, Rgb};
+use crate::medium::{Density, Medium};
+use glam::DVec3;
+
+/// The full voxels (ρ > 0): the unknowns of the solve, in grid order.
+pub(super) struct FullVoxels {
+    /// Per grid voxel: its index among the full voxels, or `u32::MAX` where ρ = 0.
+    pub(super) full: Vec<u32>,
+    /// Grid index of every full voxel.
+    pub(super) voxels: Vec<usize>,
+}
+
+impl FullVoxels {
+    /// The full voxels of `rho`.
+    pub(super) fn of(rho: &Density) -> FullVoxels {
+        let voxels: Vec<usize> = rho.full_index().full_voxels().collect();
+        let mut full = vec![u32::MAX; rho.len()];
+        for (f, &g) in voxels.iter().enumerate() {
+            full[g] = f as u32;
+        }
+        FullVoxels { full, voxels }
+    }
+}
+
+/// Cells ahead of the current one in a sweep's plane whose source and radiance are prefetched.
+pub(super) const PREFETCH_AHEAD: usize = 16;
+
+/// Everything the sweeps read: the grid, the swept box, the full voxels and the δ-M optics.
+pub(super) struct Ctx<'a> {
+    pub(super) dims: [usize; 3],
+    /// The swept box: minimum corner and cells per axis (the full voxels plus one voxel).
+    pub(super) lo: [usize; 3],
+    pub(super) n: [usize; 3],
+    pub(super) h: [f64; 3],
+    pub(super) rho: &'a Density,
+    pub(super) full: &'a [u32],
+    pub(super) nsh: usize,
+    /// Even-l harmonics (the first of the inner order, [`parity_order`]).
+    pub(super) even: usize,
+    /// Grid index of every full voxel, in grid order.
+    pub(super) voxels: &'a [usize],
+    /// δ-M sun transmittance T′ per grid voxel and band.
+    pub(super) sun_t: &'a [[f32; 3]],
+    /// The box's cells in each major axis' sweep order ([`box_cells`]).
+    pub(super) cells: [Vec<(f32, u32)>; 3],
+    pub(super) sigma_t: [f32; 3],
+    /// All bands share σt′ (one set of step weights serves them).
+    pub(super) grey: bool,
+    pub(super) sky: &'a Sky,
+    /// Grid origin (m) and the ground's height (m), if any.
+    pub(super) origin: DVec3,
+    pub(super) ground_height: Option<f64>,
+}
+
+impl<'a> Ctx<'a> {
+    /// The sweeps' view of medium `m` under `sky` and `ground`: the box of the full voxels grown
+    /// by one voxel, swept with SH `order` and the δ-M `bands`.
+    pub(super) fn new(
+        m: &'a Medium,
+        sky: &'a Sky,
+        ground: Option<&Ground>,
+        index: &'a FullVoxels,
+        sun_t: &'a [[f32; 3]],
+        order: usize,
+        bands: &[BandOptics; 3],
+    ) -> Ctx<'a> {
+        let dims = m.dims();
+        let rho = &*m.density;
+        let (lo, hi) = m.active_box(1).unwrap_or(([0; 3], dims));
+        let n = [0, 1, 2].map(|a| hi[a] - lo[a]);
+        Ctx {
+            dims,
+            lo,
+            n,
+            h: [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64],
+            rho,
+            full: &index.full,
+            nsh: sh_count(order),
+            even: parity_order(order).1,
+            voxels: &index.voxels,
+            sun_t,
+            cells: [0, 1, 2].map(|a| box_cells(dims, lo, n, rho, &index.full, index.voxels.len(), a)),
+            sigma_t: [0, 1, 2].map(|b| bands[b].sigma_t as f32),
+            grey: bands[0].sigma_t == bands[1].sigma_t && bands[1].sigma_t == bands[2].sigma_t,
+            sky,
+            origin: DVec3::new(m.origin.x as f64, m.origin.y as f64, m.origin.z as f64),
+            ground_height: ground.map(|g| g.height as f64),
+        }
+    }
+
+    /// Radiance entering the swept box along `om` at the outside grid position (i, j, k): clear
+    /// air outside the box carries it unchanged from the sky or, going up, from the ground point
+    /// straight back along −om.
+    #[inline]
+    pub(super) fn boundary(&self, om: DVec3, i: isize, j: isize, k: isize, ground: &GroundMap, sky: Rgb) -> [f32; 3] {
+        let c = match self.ground_height {
+            Some(gh) if om.y > 0.0 => {
+                let p = self.origin
+                    + DVec3::new(
+                        (i as f64 + 0.5) * self.h[0],
+                        (j as f64 + 0.5) * self.h[1],
+                        (k as f64 + 0.5) * self.h[2],
+                    );
+                let q = p - om * ((p.y - gh).max(0.0) / om.y);
+                ground.at(q.x, q.z)
+            }
+            _ => sky,
+        };
+        [c.x, c.y, c.z]
+    }
+}
+/// The two axes across major axis `a`, the faster-varying first.
+pub(super) fn cross_axes(a: usize) -> (usize, usize) {
+    match a {
+        0 => (1, 2),
+        1 => (0, 2),
+        _ => (0, 1),
+    }
+}
+
+/// The swept box's cells (density, full-voxel index or `u32::MAX`) in the order a sweep along
+/// major axis `a` visits them: planes of a, rows of the second cross axis, cells of the first;
+/// so the sweeps read them contiguously whichever axis they run along. [`PREFETCH_AHEAD`] empty
+/// cells follow the last, so that the sweep's look-ahead never runs off the end. Every index is
+/// checked below `voxels` (the number of full voxels) here, once per solve: the sweeps index the
+/// sources and radiances by it unchecked.
+pub(super) fn box_cells(
+    dims: [usize; 3],
+    lo: [usize; 3],
+    n: [usize; 3],
+    rho: &Density,
+    full: &[u32],
+    voxels: usize,
+    a: usize,
+) -> Vec<(f32, u32)> {
+    let (b, cc) = cross_axes(a);
+    let mut out = Vec::with_capacity(n[0] * n[1] * n[2] + PREFETCH_AHEAD);
+    for pa in 0..n[a] {
+        for ic in 0..n[cc] {
+            for ib in 0..n[b] {
+                let mut v = lo;
+                v[a] += pa;
+                v[b] += ib;
+                v[cc] += ic;
+                let vi = v[0] + dims[0] * (v[1] + dims[1] * v[2]);
+                assert!(
+                    full[vi] == u32::MAX || (full[vi] as usize) < voxels,
+                    "full-voxel index out of range"
+                );
+                out.push((rho.at(vi), full[vi]));
+            }
+        }
+    }
+    out.extend([(0.0, u32::MAX); PREFETCH_AHEAD]);
+    out
+}

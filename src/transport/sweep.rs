@@ -1,0 +1,553 @@
+//! The sweeps (module docs of [`super::solve`]): for an ordinate Ω, the axis a with the largest
+//! |Ω_a|/h_a orders the voxel planes upwind. A voxel's centre looks back along −Ω to the plane of
+//! the previous centres, a distance s = h_a/|Ω_a|; there, the radiance, source and density are
+//! bilinear in the four upwind centres (the offsets are ≤ 1 voxel because a is the major axis).
+//! Across the step the source is linear in optical path and integrated exactly:
+//! I = I_b e^{−τ} + w_in S_b + w_out S (τ = σt′ s (ρ_b + ρ)/2). Empty voxels carry the radiance
+//! unchanged. Outside the swept box the ordinate sees the sky or, going up, the ground
+//! ([`GroundMap`]); light leaving the box downwards is splatted onto the ground map.
+
+use super::grid::{cross_axes, Ctx, PREFETCH_AHEAD};
+use super::ground::GroundMap;
+use super::simd::{has_avx, prefetch};
+use super::source::{moments_block, source_block, Lanes, PairTables, ORDINATE_BATCH, PAIRS};
+use super::sphere::Quadrature;
+use crate::math::Vec3;
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// One sweep of every ordinate: the diffuse radiance moments I_lm per full voxel (inner harmonic
+/// order), and how much the cloud changes the ground's downward irradiance, per ground map column.
+///
+/// `moments` are the last iterate's; the source J(Ω) = Σ a′χ′_l (I_lm + E T′ Y_lm(Ω_sun)) Y_lm(Ω)
+/// is evaluated from them directly (no array of source coefficients is stored). Ordinates go in
+/// batches of opposite pairs: (1) per full voxel, the source in both ordinates of each pair of the
+/// batch from one pass over its coefficients; (2) the batch's sweeps, one ordinate per task;
+/// (3) per full voxel, the moments of both ordinates of each pair in one pass, the pairs in
+/// their fixed order.
+pub(super) fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], next: &mut [f32], ground: &GroundMap) -> Vec<[f64; 3]> {
+    let nsh = c.nsh;
+    let nfull = moments.len() / (3 * nsh);
+    // `next` is the last iteration's array, kept (reused, no new pages); the batch's sources
+    // and radiances are freed before the acceleration's solve.
+    next.fill(0.0);
+    let mut src = vec![[0f32; 3]; ORDINATE_BATCH * nfull];
+    let mut radiance = vec![[0f32; 3]; ORDINATE_BATCH * nfull];
+    // Change of the ground's downward irradiance by the cloud, per ground map column (W/m²).
+    let mut e_down = vec![[0f64; 3]; ground.radiance.len()];
+    // Full voxels per task in the per-voxel steps (1) and (3).
+    let chunk = 256;
+    for (bi, first) in (0..t.pairs.len()).step_by(PAIRS).enumerate() {
+        let batch = first..(first + PAIRS).min(t.pairs.len());
+        // (1) Source in each ordinate, clamped at 0 (the truncated expansion may dip); slot 2p
+        // holds pair p's ordinate d, 2p + 1 its opposite.
+        // Each task writes its voxels' entries of every slot: the slots' chunks, task by task.
+        let mut slots: Vec<_> = src.chunks_mut(nfull).map(|slot| slot.chunks_mut(chunk)).collect();
+        let outs: Vec<Vec<&mut [[f32; 3]]>> = (0..nfull.div_ceil(chunk))
+            .map(|_| slots.iter_mut().filter_map(Iterator::next).collect())
+            .collect();
+        moments
+            .par_chunks(chunk * 3 * nsh)
+            .zip(outs)
+            .enumerate()
+            .for_each(|(ci, (block, mut out))| source_block(c, t, bi, batch.len(), block, ci * chunk, &mut out));
+        // (2) The sweeps.
+        let dirs: Vec<usize> = batch.clone().flat_map(|p| t.pairs[p]).collect();
+        let wts: Vec<f32> = batch.clone().flat_map(|p| t.weights[p]).collect();
+        let splats: Vec<Splats> = dirs
+            .par_iter()
+            .zip(src.par_chunks(nfull.max(1)))
+            .zip(radiance.par_chunks_mut(nfull.max(1)))
+            .map(|((d, sd), rd)| sweep_ordinate(c, q.dirs[*d], q.weights[*d], sd, ground, rd))
+            .collect();
+        let radiance = &radiance;
+        for splats in &splats {
+            for (col, e) in splats {
+                for band in 0..3 {
+                    e_down[*col][band] += e[band];
+                }
+            }
+        }
+        // (3) Moments: I_lm += w I(Ω) Y_lm(Ω) + w′ I(−Ω) (−1)^l Y_lm(Ω).
+        let nblk = t.y_acc.len() / t.pairs.len().div_ceil(PAIRS);
+        let yb = &t.y_acc[bi * nblk..(bi + 1) * nblk];
+        let lanes = Lanes {
+            nfull,
+            wts: &wts,
+            radiance,
+            y: yb,
+        };
+        next.par_chunks_mut(chunk * 3 * nsh)
+            .enumerate()
+            .for_each(|(ci, block)| moments_block(c, &lanes, block, ci * chunk));
+    }
+    e_down
+}
+
+/// (e^{−x}, w_in, w_out) of a step of optical length x with a source linear in optical path
+/// (as the slab solver's, whose f64 form the test checks it against), in f32 with a series
+/// below x = 0.2 (the closed form cancels there).
+#[inline]
+pub(super) fn step_weights(x: f32) -> (f32, f32, f32) {
+    if x < 0.2 {
+        let (x2, x3, x4, x5) = (x * x, x * x * x, x * x * x * x, x * x * x * x * x);
+        return (
+            1.0 - x + 0.5 * x2 - x3 / 6.0 + x4 / 24.0 - x5 / 120.0,
+            0.5 * x - x2 / 3.0 + x3 / 8.0 - x4 / 30.0 + x5 / 144.0,
+            0.5 * x - x2 / 6.0 + x3 / 24.0 - x4 / 120.0 + x5 / 720.0,
+        );
+    }
+    let e = (-x).exp();
+    let w_out = 1.0 - (1.0 - e) / x;
+    (e, 1.0 - e - w_out, w_out)
+}
+
+/// One ordinate's ground splats (map column, change of the downward irradiance in W/m² per band).
+pub(super) type Splats = Vec<(usize, [f64; 3])>;
+
+/// A cell of a sweep's plane buffer: radiance per band, density, density × source per band
+/// (lanes [`I`], [`RHO`], [`RS`]) and a spare lane, so that the upwind interpolation is eight-lane
+/// arithmetic on one 32-byte record per neighbour.
+#[derive(Clone, Copy, Default)]
+#[repr(C, align(32))]
+struct PlaneCell([f32; 8]);
+
+/// Lanes of a [`PlaneCell`].
+const I: usize = 0;
+const RHO: usize = 3;
+const RS: usize = 4;
+
+impl PlaneCell {
+    fn new(i: [f32; 3], rho: f32, rs: [f32; 3]) -> PlaneCell {
+        PlaneCell([i[0], i[1], i[2], rho, rs[0], rs[1], rs[2], 0.0])
+    }
+}
+
+/// Σ_k w_k n_k per lane of four plane records, from 0 in the neighbours' order.
+#[inline(always)]
+fn bilinear(w: &[f32; 4], n: [&[f32; 8]; 4]) -> [f32; 8] {
+    std::array::from_fn(|k| 0.0 + w[0] * n[0][k] + w[1] * n[1][k] + w[2] * n[2][k] + w[3] * n[3][k])
+}
+
+/// [`bilinear`] in eight-lane AVX arithmetic (the compiler keeps it in four-lane halves): the
+/// same multiplies and adds in the same order, so the same bits.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn bilinear_avx(w: &[f32; 4], n: [&[f32; 8]; 4]) -> [f32; 8] {
+    use std::arch::x86_64::*;
+    let mut acc = _mm256_setzero_ps();
+    for (wk, nk) in w.iter().zip(n) {
+        acc = _mm256_add_ps(acc, _mm256_mul_ps(_mm256_set1_ps(*wk), _mm256_loadu_ps(nk.as_ptr())));
+    }
+    let mut out = [0f32; 8];
+    _mm256_storeu_ps(out.as_mut_ptr(), acc);
+    out
+}
+
+/// Upwind density below which a cell's back source is its own instead of the density-weighted
+/// mean of its upwind neighbours. The mean ρ·J/ρ loses its bits where ρ·J is subnormal (f32 has
+/// 24 bits down to 1.2e-38; the Disney cloud holds densities of 1.7e-37, and the bilinear
+/// weights make them smaller still) and 1/ρ overflows to inf below 2.9e-39, so it would be
+/// NaN or inf; a density of 1e-30 puts an optical depth below 1e-30·σt·h into the step, which no
+/// image can show.
+const RHO_WEIGHT_MIN: f32 = 1e-30;
+
+/// One cell's step along a sweep (module docs) from its upwind record `acc` ([`bilinear`]),
+/// its density, its source `sc` (0 where empty; `full`: ρ > 0) and the step length `s` (m): its
+/// radiance and its record for the next plane.
+#[inline(always)]
+fn cell(c: &Ctx, acc: [f32; 8], rho: f32, sc: [f32; 3], full: bool, s: f32) -> ([f32; 3], PlaneCell) {
+    let ib_ = [acc[I], acc[I + 1], acc[I + 2]];
+    let (rb, sbw) = (acc[RHO], [acc[RS], acc[RS + 1], acc[RS + 2]]);
+    let mut out = ib_;
+    let rm = 0.5 * (rb + rho) * s;
+    if rm > 0.0 {
+        let sb = if rb > RHO_WEIGHT_MIN { sbw.map(|x| x * (1.0 / rb)) } else { sc };
+        let se = if full { sc } else { sb };
+        let mut wgt = step_weights(c.sigma_t[0] * rm);
+        for band in 0..3 {
+            if band > 0 && !c.grey {
+                wgt = step_weights(c.sigma_t[band] * rm);
+            }
+            let (e, wi, wo) = wgt;
+            out[band] = ib_[band] * e + wi * sb[band] + wo * se[band];
+        }
+    }
+    (out, PlaneCell::new(out, rho, sc.map(|x| rho * x)))
+}
+
+/// [`bilinear`] and [`cell`] for grey optics (one σt′) in AVX registers: the three bands in the
+/// lanes of one four-lane operation, the same multiplies and adds in the same order, so the
+/// same bits.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn cell_grey_avx(
+    w: &[f32; 4],
+    n: [&[f32; 8]; 4],
+    rho: f32,
+    sc: [f32; 3],
+    full: bool,
+    s: f32,
+    sigma_t: f32,
+) -> ([f32; 3], PlaneCell) {
+    use std::arch::x86_64::*;
+    let mut acc = _mm256_setzero_ps();
+    for (wk, nk) in w.iter().zip(n) {
+        acc = _mm256_add_ps(acc, _mm256_mul_ps(_mm256_set1_ps(*wk), _mm256_loadu_ps(nk.as_ptr())));
+    }
+    // Lanes I, I + 1, I + 2, RHO and RS, RS + 1, RS + 2, spare.
+    let (lo, hi) = (_mm256_castps256_ps128(acc), _mm256_extractf128_ps::<1>(acc));
+    let sc4 = _mm_setr_ps(sc[0], sc[1], sc[2], 0.0);
+    let rb = _mm_cvtss_f32(_mm_shuffle_ps::<0xff>(lo, lo));
+    let rm = 0.5 * (rb + rho) * s;
+    let out = if rm > 0.0 {
+        let sb = if rb > RHO_WEIGHT_MIN {
+            _mm_mul_ps(hi, _mm_set1_ps(1.0 / rb))
+        } else {
+            sc4
+        };
+        let se = if full { sc4 } else { sb };
+        let (e, wi, wo) = step_weights(sigma_t * rm);
+        let ie = _mm_mul_ps(lo, _mm_set1_ps(e));
+        _mm_add_ps(_mm_add_ps(ie, _mm_mul_ps(_mm_set1_ps(wi), sb)), _mm_mul_ps(_mm_set1_ps(wo), se))
+    } else {
+        lo
+    };
+    // The record: the radiance, ρ, ρ × source, and ρ × 0 = +0 in the spare lane.
+    let rec_lo = _mm_blend_ps::<0b1000>(out, _mm_set1_ps(rho));
+    let rec_hi = _mm_mul_ps(_mm_set1_ps(rho), sc4);
+    let mut rec = PlaneCell::default();
+    _mm256_storeu_ps(rec.0.as_mut_ptr(), _mm256_set_m128(rec_hi, rec_lo));
+    let mut o = [0f32; 4];
+    _mm_storeu_ps(o.as_mut_ptr(), out);
+    ([o[0], o[1], o[2]], rec)
+}
+
+/// Sweep one ordinate `om` (weight `w`, sr) through the box upwind plane by plane: the radiance at
+/// every full voxel's centre, and the ground splats (column, change of downward irradiance, W/m²)
+/// of the light leaving the box downwards. `src` is the source in this ordinate per full voxel;
+/// `radiance` receives the radiance at every full voxel (all lie in the box).
+///
+/// # Safety
+///
+/// `AVX` = true only where the processor has AVX (the cells' steps then run AVX instructions).
+#[inline(always)]
+unsafe fn sweep_kernel<const AVX: bool>(
+    c: &Ctx,
+    om: DVec3,
+    w: f64,
+    src: &[[f32; 3]],
+    ground: &GroundMap,
+    radiance: &mut [[f32; 3]],
+) -> Splats {
+    debug_assert!(!AVX || has_avx());
+    let mut splats = Vec::new();
+    let skyr = c.sky.radiance(Vec3::new(-om.x as f32, -om.y as f32, -om.z as f32));
+    let splat = om.y < 0.0 && c.ground_height.is_some();
+    // Major axis and the two others.
+    let r = [om.x.abs() / c.h[0], om.y.abs() / c.h[1], om.z.abs() / c.h[2]];
+    let a = (0..3).max_by(|p, q| r[*p].total_cmp(&r[*q])).unwrap_or(0);
+    let (b, cc) = cross_axes(a);
+    let (na, nb, nc) = (c.n[a], c.n[b], c.n[cc]);
+    let cells = &c.cells[a];
+    let oa = om[a];
+    let s = (c.h[a] / oa.abs()) as f32;
+    // Back point offsets in the previous plane (voxels), split into floor and fraction.
+    // |offset| ≤ 1 as a is the major axis; clamp rounding and keep the floor in {−1, 0}, so
+    // ties (|Ω_b|/h_b = |Ω_a|/h_a) stay inside the 2×2 upwind neighbourhood.
+    let ob = (-(s as f64) * om[b] / c.h[b]).clamp(-1.0, 1.0);
+    let oc = (-(s as f64) * om[cc] / c.h[cc]).clamp(-1.0, 1.0);
+    let (fb, fc) = (ob.floor().min(0.0), oc.floor().min(0.0));
+    let (tb, tc) = ((ob - fb) as f32, (oc - fc) as f32);
+    let (fb, fc) = (fb as isize, fc as isize);
+    let wts = [(1.0 - tb) * (1.0 - tc), tb * (1.0 - tc), (1.0 - tb) * tc, tb * tc];
+    let stride = nb + 2;
+    // Plane buffers with a one-cell ghost ring.
+    let mut prev = vec![PlaneCell::default(); stride * (nc + 2)];
+    let mut cur = prev.clone();
+    // Grid coordinates of box cell (pa, pb, pc) in the (a, b, c) frame.
+    let coord = |pa: isize, pb: isize, pc: isize| {
+        let mut v = [0isize; 3];
+        v[a] = pa + c.lo[a] as isize;
+        v[b] = pb + c.lo[b] as isize;
+        v[cc] = pc + c.lo[cc] as isize;
+        v
+    };
+    // The ghost cells of plane pa (all of it when `whole`; otherwise the ring's row and column on
+    // the upwind side, the only ones the cells read: the upwind floor is −1 or 0 per cross
+    // axis): what enters the box there.
+    let (ring_b, ring_c) = (if fb < 0 { -1 } else { nb as isize }, if fc < 0 { -1 } else { nc as isize });
+    let fill_ghosts = |pa: isize, whole: bool, buf: &mut [PlaneCell]| {
+        for ic in -1..=nc as isize {
+            let ibs = if whole || ic == ring_c { -1..=nb as isize } else { ring_b..=ring_b };
+            for ib in ibs {
+                let v = coord(pa, ib, ic);
+                buf[(ib + 1) as usize + stride * (ic + 1) as usize] =
+                    PlaneCell::new(c.boundary(om, v[0], v[1], v[2], ground, skyr), 0.0, [0.0; 3]);
+            }
+        }
+    };
+    let first = if oa > 0.0 { -1 } else { na as isize };
+    let sky_only = !(c.ground_height.is_some() && om.y > 0.0);
+    if sky_only {
+        // Without a ground seen upwards every ghost cell holds the sky ([`Ctx::boundary`]): fill
+        // both buffers once (the cells write only the interior).
+        let ghost = PlaneCell::new([skyr.x, skyr.y, skyr.z], 0.0, [0.0; 3]);
+        prev.fill(ghost);
+        cur.fill(ghost);
+    } else {
+        fill_ghosts(first, true, &mut prev);
+    }
+    // Offset of the upwind (0, 0) neighbour from a cell in the plane buffer.
+    let up = fb + fc * stride as isize;
+    // The unchecked indexing below relies on these: a cell's four upwind records lie in the
+    // plane buffer (its size and the upwind floors asserted here), and the box's full voxels
+    // index `src` and `radiance` ([`box_cells`] checked each below `voxels.len()`).
+    assert!(src.len() == c.voxels.len() && radiance.len() == c.voxels.len() && cells.len() == na * nb * nc + PREFETCH_AHEAD);
+    assert!(prev.len() == stride * (nc + 2) && cur.len() == prev.len() && (-1..=0).contains(&fb) && (-1..=0).contains(&fc));
+    for step in 0..na {
+        let pa = if oa > 0.0 { step } else { na - 1 - step };
+        let plane = &cells[pa * nb * nc..(pa + 1) * nb * nc];
+        // The cells PREFETCH_AHEAD further on (past the plane's end: the next plane's, or the
+        // padding).
+        let ahead = &cells[pa * nb * nc + PREFETCH_AHEAD..][..nb * nc];
+        for (ic, (row, row_ahead)) in plane.chunks_exact(nb).zip(ahead.chunks_exact(nb)).enumerate() {
+            let l0 = stride * (ic + 1) + 1;
+            for (ib, (&(rho, fi), &(_, fa))) in row.iter().zip(row_ahead).enumerate() {
+                // The full voxels' sources and radiances lie a grid row apart in x-major sweeps
+                // (past the L2 cache on large boxes): ask for the lines a few cells ahead.
+                if fa != u32::MAX {
+                    prefetch(src.as_ptr().wrapping_add(fa as usize));
+                    prefetch(radiance.as_ptr().wrapping_add(fa as usize));
+                }
+                let l = l0 + ib;
+                // l = stride (ic + 1) + ib + 1 with ib < nb, ic < nc and up = fb + fc stride with
+                // fb, fc in {−1, 0}: u ≥ stride ic + ib ≥ 0 and u + stride + 1 < stride (nc + 2).
+                let u = (l as isize + up) as usize;
+                // SAFETY: the bounds above (asserted before the planes).
+                let (n0, n1, n2, n3) = unsafe {
+                    (
+                        &prev.get_unchecked(u).0,
+                        &prev.get_unchecked(u + 1).0,
+                        &prev.get_unchecked(u + stride).0,
+                        &prev.get_unchecked(u + stride + 1).0,
+                    )
+                };
+                // Radiance and density bilinear; the source (per unit extinction, defined only
+                // where ρ > 0) density-weighted, so that empty neighbours do not pull it
+                // towards 0 (a uniform source stays uniform: the furnace holds). One expression
+                // per lane (from 0, the neighbours in order) so it compiles to whole-record
+                // arithmetic without copies of the records.
+                let (n, full) = ([n0, n1, n2, n3], fi != u32::MAX);
+                // SAFETY: a full cell's index is below voxels.len() = src.len() (asserted in box_cells and above).
+                let sc = if full {
+                    unsafe { *src.get_unchecked(fi as usize) }
+                } else {
+                    [0f32; 3]
+                };
+                #[cfg(not(target_arch = "x86_64"))]
+                let (out, rec) = cell(c, bilinear(&wts, n), rho, sc, full, s);
+                #[cfg(target_arch = "x86_64")]
+                let (out, rec) = if AVX && c.grey {
+                    // SAFETY: `AVX` only where the processor has it (the function's contract).
+                    unsafe { cell_grey_avx(&wts, n, rho, sc, full, s, c.sigma_t[0]) }
+                } else if AVX {
+                    // SAFETY: as above.
+                    cell(c, unsafe { bilinear_avx(&wts, n) }, rho, sc, full, s)
+                } else {
+                    cell(c, bilinear(&wts, n), rho, sc, full, s)
+                };
+                // SAFETY: l ≤ u + stride + 1 < cur.len() (asserted above).
+                unsafe { *cur.get_unchecked_mut(l) = rec };
+                if full {
+                    // SAFETY: fi < voxels.len() = radiance.len() (asserted in box_cells and above).
+                    unsafe { *radiance.get_unchecked_mut(fi as usize) = out };
+                }
+            }
+        }
+        let pa = pa as isize;
+        if splat {
+            // Light leaving the box downwards lands on the ground along Ω: splat its flux
+            // change against the sky it hides, (I − L_sky) w |Ω·n| A_face, per column area.
+            let exit_b = if om[b] > 0.0 { nb - 1 } else { 0 };
+            let exit_c = if om[cc] > 0.0 { nc - 1 } else { 0 };
+            let mut faces: Vec<(usize, usize, usize)> = (0..nc).map(|ic| (exit_b, ic, b)).collect();
+            faces.extend((0..nb).map(|ib| (ib, exit_c, cc)));
+            if step + 1 == na {
+                faces.extend((0..nc).flat_map(|ic| (0..nb).map(move |ib| (ib, ic, a))));
+            }
+            for (ib, ic, ax) in faces {
+                let v = coord(pa, ib as isize, ic as isize);
+                let mut face = c.origin
+                    + DVec3::new(
+                        (v[0] as f64 + 0.5) * c.h[0],
+                        (v[1] as f64 + 0.5) * c.h[1],
+                        (v[2] as f64 + 0.5) * c.h[2],
+                    );
+                face[ax] += 0.5 * c.h[ax] * om[ax].signum();
+                let gh = c.ground_height.unwrap_or(0.0);
+                let q = face + om * ((gh - face.y).min(0.0) / om.y);
+                if let Some(col) = ground.column(q.x, q.z) {
+                    let area = c.h[0] * c.h[1] * c.h[2] / c.h[ax];
+                    let f = w as f32 as f64 * om[ax].abs() * area / (c.h[0] * c.h[2]);
+                    let i = &cur[ib + 1 + stride * (ic + 1)].0[I..I + 3];
+                    splats.push((col, [0, 1, 2].map(|band| f * (i[band] as f64 - skyr[band] as f64))));
+                }
+            }
+        }
+        std::mem::swap(&mut prev, &mut cur);
+        if !sky_only {
+            fill_ghosts(pa, false, &mut prev);
+        }
+    }
+    splats
+}
+
+/// [`sweep_kernel`] with the AVX cell steps where the processor has AVX: the same bits.
+pub(super) fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, radiance: &mut [[f32; 3]]) -> Splats {
+    #[cfg(target_arch = "x86_64")]
+    if has_avx() {
+        // SAFETY: the processor has AVX.
+        return unsafe { sweep_ordinate_avx(c, om, w, src, ground, radiance) };
+    }
+    // SAFETY: AVX = false asks nothing of the processor.
+    unsafe { sweep_kernel::<false>(c, om, w, src, ground, radiance) }
+}
+
+/// [`sweep_kernel`] compiled for AVX, with its AVX cell steps.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn sweep_ordinate_avx(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, radiance: &mut [[f32; 3]]) -> Splats {
+    // SAFETY: the processor has AVX (this function's own contract).
+    unsafe { sweep_kernel::<true>(c, om, w, src, ground, radiance) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lighting::Sky;
+    use crate::math::{real_sh, Rgb};
+    use crate::medium::Density;
+    use crate::transport::grid::box_cells;
+    use crate::transport::source::{moments_kernel, parity_order, source_kernel};
+    use crate::transport::BandOptics;
+
+    #[test]
+    fn step_weights_integrate_constants_and_ramps() {
+        for x in [1e-4f32, 5e-3, 0.02, 0.199, 0.201, 0.5, 3.0, 40.0] {
+            let (e, wi, wo) = step_weights(x);
+            let xd = x as f64;
+            let ed = (-xd).exp();
+            // ∫₀ˣ e^{−(x−t)} dt = 1 − e^{−x}; ∫₀ˣ (t/x) e^{−(x−t)} dt = 1 − (1 − e^{−x})/x.
+            let wod = 1.0 - (1.0 - ed) / xd;
+            assert!(((e as f64) - ed).abs() < 1e-6, "x={x}");
+            assert!(((wi + wo) as f64 - (1.0 - ed)).abs() < 1e-6 * (1.0 - ed).max(1e-2), "x={x}");
+            assert!(((wo as f64) - wod).abs() < 1e-5 * wod, "x={x}: {wo} vs {wod}");
+            assert!(wi >= 0.0 && wo >= 0.0);
+        }
+    }
+
+    #[test]
+    fn the_avx_kernels_give_the_same_bits_as_the_plain_ones() {
+        // A 7×5×4 box with empty voxels inside, random moments: each kernel as built and through
+        // its dispatcher (AVX where the processor has it) must agree bit for bit.
+        let dims = [7, 5, 4];
+        let nv = dims[0] * dims[1] * dims[2];
+        let rho: Vec<f32> = (0..nv).map(|v| ((v as f32 * 0.618).fract() - 0.2).max(0.0) * 3.0).collect();
+        let mut full = vec![u32::MAX; nv];
+        let mut voxels = Vec::new();
+        for v in 0..nv {
+            if rho[v] > 0.0 {
+                full[v] = voxels.len() as u32;
+                voxels.push(v);
+            }
+        }
+        let density = Density::from_grid(&crate::medium::Grid3::from_vec(dims, rho, "test").unwrap());
+        let nfull = voxels.len();
+        let order = 7;
+        let (perm, even) = parity_order(order);
+        let nsh = perm.len();
+        let sun_t: Vec<[f32; 3]> = (0..nv).map(|v| [0.3, 0.5, 0.7].map(|t| t + 0.01 * (v % 7) as f32)).collect();
+        let sky = Sky::constant(Rgb::new(0.2, 0.3, 0.5));
+        let c = Ctx {
+            dims,
+            lo: [0; 3],
+            n: dims,
+            h: [10.0, 8.0, 12.0],
+            rho: &density,
+            full: &full,
+            nsh,
+            even,
+            voxels: &voxels,
+            sun_t: &sun_t,
+            cells: [0, 1, 2].map(|a| box_cells(dims, [0; 3], dims, &density, &full, voxels.len(), a)),
+            sigma_t: [0.05, 0.06, 0.07],
+            grey: false,
+            sky: &sky,
+            origin: DVec3::ZERO,
+            ground_height: None,
+        };
+        let ground = GroundMap {
+            margin: 0,
+            dims: [dims[0], dims[2]],
+            radiance: vec![Rgb::ZERO; dims[0] * dims[2]],
+            diffuse: vec![Rgb::ZERO; dims[0] * dims[2]],
+            clear: Rgb::ZERO,
+            origin: [0.0; 2],
+            h: [10.0, 12.0],
+        };
+        let bands: Vec<BandOptics> = (0..3)
+            .map(|b| BandOptics::delta_m(0.05, 0.9 + 0.03 * b as f64, 0.85, order))
+            .collect();
+        let q = Quadrature::product(8, 16);
+        let mut y_sun = vec![0.0; nsh];
+        real_sh(order, DVec3::new(0.2, -0.9, 0.3).normalize(), &mut y_sun);
+        let t = PairTables::new(&q, order, &perm, &bands, [2.0, 1.8, 1.5], &y_sun);
+        let moments: Vec<f32> = (0..nfull * 3 * nsh)
+            .map(|i| ((i as f32 * 0.37).sin() * 0.5 + 0.6) / (1 + i % nsh) as f32)
+            .collect();
+        let bits = |v: &[[f32; 3]]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
+        // Step (1).
+        let (mut plain, mut disp) = (vec![[0f32; 3]; ORDINATE_BATCH * nfull], vec![[0f32; 3]; ORDINATE_BATCH * nfull]);
+        source_kernel(&c, &t, 1, PAIRS, &moments, 0, &mut plain.chunks_mut(nfull).collect::<Vec<_>>());
+        source_block(&c, &t, 1, PAIRS, &moments, 0, &mut disp.chunks_mut(nfull).collect::<Vec<_>>());
+        assert_eq!(bits(&plain), bits(&disp));
+        assert!(plain.iter().flatten().any(|x| *x > 0.0));
+        // Step (2), one ordinate per major axis and sign, with coloured and with grey optics
+        // (the AVX copy's own cell step).
+        let grey = Ctx {
+            sigma_t: [0.05; 3],
+            grey: true,
+            cells: c.cells.clone(),
+            ..c
+        };
+        for c in [&c, &grey] {
+            for d in [0, 5, 37, 64, 90, 127] {
+                let (mut ra, mut rb) = (vec![[0f32; 3]; nfull], vec![[0f32; 3]; nfull]);
+                // SAFETY: AVX = false asks nothing of the processor.
+                unsafe { sweep_kernel::<false>(c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut ra) };
+                sweep_ordinate(c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut rb);
+                assert_eq!(bits(&ra), bits(&rb), "ordinate {d}, grey {}", c.grey);
+                assert!(ra.iter().flatten().any(|x| *x > 0.0));
+            }
+        }
+        // Step (3).
+        let wts: Vec<f32> = t.weights[PAIRS..2 * PAIRS].iter().flatten().copied().collect();
+        let nblk = t.y_acc.len() / t.pairs.len().div_ceil(PAIRS);
+        let l = Lanes {
+            nfull,
+            wts: &wts,
+            radiance: &plain,
+            y: &t.y_acc[nblk..2 * nblk],
+        };
+        let (mut ma, mut mb) = (moments.clone(), moments.clone());
+        moments_kernel(&c, &l, &mut ma, 0);
+        moments_block(&c, &l, &mut mb, 0);
+        assert_eq!(
+            ma.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+            mb.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+        );
+    }
+}
