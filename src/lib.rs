@@ -38,8 +38,8 @@ macro_rules! stages {
 }
 
 stages!(
-    camera, cube, diffusion, edges, exposure, half, image, incident, io, lighting, limits, lit, math, medium, optics, peak, pipeline, reference,
-    render, scene, sequence, tools, transport,
+    camera, cube, diffusion, edges, exposure, half, image, incident, io, lighting, limits, lit, math, medium, optics, peak, pipeline,
+    reference, render, scene, sequence, tools, transport,
 );
 
 mod api;
