@@ -33,7 +33,7 @@ use super::source::{diffuse_source_of, parity_order, PairTables};
 use super::sphere::Quadrature;
 use super::sweep::sweep;
 use super::warm::{TransportState, WARM_MIN_ITERATIONS};
-use super::Optics;
+use super::TransportOptics;
 use crate::diffusion::multigrid::Hierarchy;
 use crate::error::{Error, Result};
 use crate::lighting::{Ground, Sky, Sun};
@@ -74,7 +74,7 @@ impl Default for TransportSettings {
 #[derive(Clone, Debug)]
 pub struct TransportField {
     /// The optics it was solved with.
-    pub optics: Optics,
+    pub optics: TransportOptics,
     /// SH order.
     pub order: usize,
     /// Per voxel: index into the full-voxel arrays, or `u32::MAX` where ρ = 0.
@@ -136,7 +136,7 @@ pub fn solve_warm(
     progress: &dyn Progress,
     opts: SolveOptions,
 ) -> Result<(TransportField, Option<TransportState>)> {
-    let optics = Optics::from_medium(m, s.order);
+    let optics = TransportOptics::from_medium(m, s.order);
     let index = FullVoxels::of(&m.density);
     let sun_t = sun_transmittance(m, sun, &optics);
     let ctx = Ctx::new(m, sky, ground, &index, &sun_t, s.order, &optics.bands);
@@ -182,7 +182,7 @@ pub fn solve_warm(
 }
 
 /// δ-M sun transmittance T′ = T^{1 − a f} = T^{σt′/σt} at the voxel centres, per band.
-fn sun_transmittance(m: &Medium, sun: &Sun, optics: &Optics) -> Vec<[f32; 3]> {
+fn sun_transmittance(m: &Medium, sun: &Sun, optics: &TransportOptics) -> Vec<[f32; 3]> {
     let exact = crate::sunlight::SunTransmittance::compute(m, sun.dir);
     exact
         .grid
@@ -192,7 +192,7 @@ fn sun_transmittance(m: &Medium, sun: &Sun, optics: &Optics) -> Vec<[f32; 3]> {
 }
 
 /// The per-pair tables of the sweeps for the sun's beam and the δ-M optics.
-fn pair_tables(q: &Quadrature, sun: &Sun, order: usize, optics: &Optics) -> PairTables {
+fn pair_tables(q: &Quadrature, sun: &Sun, order: usize, optics: &TransportOptics) -> PairTables {
     let (perm, _) = parity_order(order);
     let e_sun = [sun.irradiance.x as f64, sun.irradiance.y as f64, sun.irradiance.z as f64];
     let mut y_sun = vec![0.0; sh_count(order)];
@@ -208,7 +208,7 @@ struct Solver<'a> {
     tables: &'a PairTables,
     /// The DSA hierarchies (none: no acceleration).
     hier: &'a [Hierarchy],
-    optics: &'a Optics,
+    optics: &'a TransportOptics,
     ground: &'a GroundLight<'a>,
     s: &'a TransportSettings,
 }
