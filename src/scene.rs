@@ -38,6 +38,15 @@ pub enum Method {
 }
 
 impl Method {
+    /// Every method.
+    pub const ALL: [Method; 5] = [
+        Method::Single,
+        Method::Reference,
+        Method::Diffusion,
+        Method::Full,
+        Method::Transport,
+    ];
+
     /// The name used in scene files and on the command line.
     pub fn name(self) -> &'static str {
         match self {
@@ -50,14 +59,25 @@ impl Method {
     }
 }
 
-/// Declares the `[render]` table once: each row is a scene-file key with its doc and type, and
-/// the field of [`RenderSettings`] (usually a stage's settings struct) it sets. The key's default
-/// is that field's default, so a new setting is one row here plus its field in the stage that
-/// owns it. (serde's `flatten` would let the stage structs deserialise directly, but it loses the
+/// Declares the `[render]` table once: each row is a scene-file key with its doc and type, the
+/// field of [`RenderSettings`] (usually a stage's settings struct) it sets, and, after `for`, the
+/// methods that read it (none named: every method) with an optional hint for the others
+/// ([`RENDER_KEYS`]: the CLI warns when a key is set for a method that does not read it). The
+/// key's default is that field's default, so a new setting is one row here plus its field in the
+/// stage that owns it. (serde's `flatten` would let the stage structs deserialise directly, but it loses the
 /// key and line in type errors and cannot be combined with `deny_unknown_fields`.)
 macro_rules! render_table {
-    ($( $(#[$doc:meta])* $key:ident : $ty:ty => $($path:ident).+ ; )*) => {
-        /// `[render]`: the flat table of the scene file (see `RenderSettings` for where each
+    ($( $(#[$doc:meta])* $key:ident : $ty:ty => $($path:ident).+ $(, for [$($method:ident),+] $(($hint:literal))?)? ; )*) => {
+        /// Every `[render]` key with the methods that read it.
+        pub const RENDER_KEYS: &[RenderKey] = &[
+            $( RenderKey {
+                key: stringify!($key),
+                methods: render_key_methods!($($($method),+)?),
+                hint: render_key_hint!($($($hint)?)?),
+            }, )*
+        ];
+
+        /// `[render]`: the flat table of the scene file (see [`RenderSettings`] for where each
         /// key goes).
         #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
         #[serde(deny_unknown_fields, default)]
@@ -81,80 +101,118 @@ macro_rules! render_table {
     };
 }
 
+/// The methods of a [`render_table!`] row: those named, or every method.
+macro_rules! render_key_methods {
+    () => {
+        &Method::ALL
+    };
+    ($($method:ident),+) => {
+        &[$(Method::$method),+]
+    };
+}
+
+/// The hint of a [`render_table!`] row, if it gives one.
+macro_rules! render_key_hint {
+    () => {
+        None
+    };
+    ($hint:literal) => {
+        Some($hint)
+    };
+}
+
+/// A `[render]` key and the methods that read it.
+#[derive(Clone, Copy, Debug)]
+pub struct RenderKey {
+    /// The key (without `render.`).
+    pub key: &'static str,
+    /// The methods that read it.
+    pub methods: &'static [Method],
+    /// Why it does not apply to the other methods, or what they read instead.
+    pub hint: Option<&'static str>,
+}
+
+impl RenderKey {
+    /// Whether method `m` reads the key.
+    pub fn applies_to(&self, m: Method) -> bool {
+        self.methods.contains(&m)
+    }
+}
+
 render_table! {
     /// The method.
     method: Method => method;
     /// Seed of every random stream.
     seed: u64 => seed;
     /// `reference`: samples (paths) per pixel.
-    spp: u32 => spp;
+    spp: u32 => spp, for [Reference] ("it is the path tracer's samples per pixel; the deterministic methods' anti-aliasing is render.aa_samples");
     /// `single`, `diffusion`, `full`, `transport`: anti-aliasing samples per pixel (stratified
     /// positions, one whole gather each); independent of the path tracer's `spp`.
-    aa_samples: u32 => aa_samples;
+    aa_samples: u32 => aa_samples, for [Single, Diffusion, Full, Transport] ("its samples per pixel are render.spp");
     /// Exposure of the PNG preview, in stops (the EXR is never scaled).
     exposure: f32 => exposure;
     /// Ray-march step of the gather, as a fraction of the smallest voxel edge (unitless).
-    step: f32 => step_voxels;
+    step: f32 => step_voxels, for [Single, Diffusion, Full, Transport] ("it tracks collisions exactly, without a march step");
     /// `reference`: most scattering events (medium or ground) per path; absent = no cap.
-    max_depth: Option<u32> => max_depth;
+    max_depth: Option<u32> => max_depth, for [Reference];
     /// `reference`: stop after the pass in progress once this many seconds have passed.
-    time_limit: Option<f64> => time_limit;
+    time_limit: Option<f64> => time_limit, for [Reference];
     /// `reference`: add the per-pixel standard error of the mean as EXR layer `stderr`.
-    stderr: bool => stderr;
+    stderr: bool => stderr, for [Reference];
     /// Pixels per face edge of the viewing cubes (a multiple of 4; docs/cubes.md).
-    cube_resolution: usize => cubes.res;
+    cube_resolution: usize => cubes.res, for [Full];
     /// Ground irradiance samples per edge (N×N hemicubes; docs/cubes.md).
-    ground_samples: usize => cubes.ground_samples;
+    ground_samples: usize => cubes.ground_samples, for [Full];
     /// Density T below which the final gather uses the edge treatment (paper section 4); 0 turns it off.
-    low_density_threshold: f32 => edges.threshold;
+    low_density_threshold: f32 => edges.threshold, for [Full];
     /// `full`: optical depth D_s (after the δ-M transform) of every eye ray's surface layer that
     /// the final gather renders with the Poisson orders of eqs. 8–9, like a low-density segment,
     /// instead of the diffusion source (docs/edges.md, "The surface layer"); 0: the paper's scheme.
-    surface_depth: f32 => edges.surface_depth;
+    surface_depth: f32 => edges.surface_depth, for [Full];
     /// `full`: fraction of `surface_depth` over which the surface layer blends into the diffusion
     /// source (smoothstep in optical depth), in [0, 1].
-    surface_band: f32 => edges.surface_band;
+    surface_band: f32 => edges.surface_band, for [Full];
     /// Relative residual the diffusion solver must reach (unitless).
-    solver_tolerance: f64 => solver.tolerance;
+    solver_tolerance: f64 => solver.tolerance, for [Diffusion, Full];
     /// Most conjugate-gradient iterations of the diffusion solver per band.
-    solver_max_iterations: usize => solver.max_iterations;
+    solver_max_iterations: usize => solver.max_iterations, for [Diffusion, Full];
     /// `full`: most clear-air propagation iterations (0: diffusion plus edges only, paper Fig. 6).
-    iterations: usize => clear_air.iterations;
+    iterations: usize => clear_air.iterations, for [Full];
     /// `full`: stop iterating once I0 changes by less than this fraction (unitless).
-    propagation_tolerance: f64 => clear_air.propagation_tolerance;
+    propagation_tolerance: f64 => clear_air.propagation_tolerance, for [Full];
     /// `full`: write the components (diffusion, low_density, sun_single, background) as EXR layers.
-    aov: bool => aov;
+    aov: bool => aov, for [Full, Transport] ("only full and transport write AOV layers");
     /// `diffusion`, `full`: the gather's diffuse source is a·max(0, I0 + g·I1·ω) instead of a·I0
     /// (src/diffusion/flux.rs, docs/diffusion.md); default on (measured with the δ-M transform,
     /// docs/budget.md "Fixes"), false: the paper's gather.
-    diffuse_anisotropy: bool => diffuse_anisotropy;
+    diffuse_anisotropy: bool => diffuse_anisotropy, for [Diffusion, Full];
     /// `diffusion`, `full`: add the single scattering of the reduced sky and ground light to the
     /// gather's source, a·∫p·I_ri,sky (src/lit/sky_single.rs); default on (docs/budget.md
     /// "Fixes"), false: the paper's gather.
-    sky_single_scattering: bool => incident.sky_single;
+    sky_single_scattering: bool => incident.sky_single, for [Diffusion, Full];
     /// `diffusion`, `full`: the sky and ground light enter through the diffusion's boundary
     /// condition (eq. 7 with each boundary face's incoming radiance; `full`'s clear-air cubes give
     /// it per face) instead of as stage 1's reduced sky bins (src/diffusion/boundary.rs); default
     /// on (docs/budget.md "The sky through the boundary"), false: the paper's scheme.
-    sky_boundary: bool => solver.sky_boundary;
+    sky_boundary: bool => solver.sky_boundary, for [Diffusion, Full];
     /// `diffusion`, `full`: forward fraction f of the δ-M transform every stage runs on
     /// (0 ≤ f < 1, capped at g; src/optics.rs); default 0.65, measured in docs/budget.md ("The sky through the boundary");
     /// 0 is the paper's scheme exactly.
-    forward_fraction: f32 => forward_fraction;
+    forward_fraction: f32 => forward_fraction, for [Diffusion, Full];
     /// `transport`: Legendre order L of the δ-M phase function and of the spherical-harmonic
     /// source, 1 to 15 (memory 24·(L + 1)² bytes per full voxel; docs/transport.md).
-    transport_order: usize => transport.order;
+    transport_order: usize => transport.order, for [Transport];
     /// `transport`: Gauss–Legendre ordinates in cos θ, even, 2 to 32; the azimuths are twice as
     /// many (8: 8 × 16 = 128 ordinates). Exact for order L when ≥ L + 1.
-    transport_polar_ordinates: usize => transport.n_mu;
+    transport_polar_ordinates: usize => transport.n_mu, for [Transport];
     /// `transport`: stop iterating once I0 changes by less than this fraction of its largest
     /// value between iterations (unitless, 0 < t < 1).
-    transport_tolerance: f64 => transport.tolerance;
+    transport_tolerance: f64 => transport.tolerance, for [Transport];
     /// `transport`: most source iterations (sweeps of every ordinate), at least 1.
-    transport_max_iterations: usize => transport.max_iterations;
+    transport_max_iterations: usize => transport.max_iterations, for [Transport];
     /// `transport`: accelerate the iteration with a diffusion solve (DSA); false: plain source
     /// iteration (many more sweeps in thick clouds).
-    transport_acceleration: bool => transport.acceleration;
+    transport_acceleration: bool => transport.acceleration, for [Transport];
 }
 
 /// The whole scene file, as written.

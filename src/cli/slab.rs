@@ -4,7 +4,7 @@
 //! f = g², `--forward-fraction 0`: the paper's scheme) or discrete-ordinates transport
 //! ([`crate::transport::slab`]), both deterministic: standard errors 0.
 
-use crate::diffusion::slab::{slab_forward_fraction, solve_slab_similar, Incidence as DiffusionIncidence};
+use crate::diffusion::slab::{slab_forward_fraction, solve_slab_similar};
 use crate::error::{Error, Result};
 use crate::reference::slab::{slab, Incidence, SlabParams, SlabResult};
 use clap::{Args, ValueEnum};
@@ -71,32 +71,26 @@ pub fn run(a: SlabArgs) -> Result<()> {
     p.validate("command line")?;
     let r = match a.method {
         SlabMethod::Reference => slab(&p, a.samples, a.seed)?,
-        SlabMethod::Diffusion | SlabMethod::Transport => {
-            let inc = match a.incidence {
-                IncidenceArg::Collimated => DiffusionIncidence::Normal,
-                IncidenceArg::Diffuse => DiffusionIncidence::Diffuse,
-            };
-            let d = if a.method == SlabMethod::Transport {
-                let s = crate::transport::slab::SlabSettings::default();
-                let x = crate::transport::slab::solve_slab(a.thickness, a.albedo, a.g, inc, &s);
-                crate::diffusion::slab::SlabResult { r: x.r, t: x.t }
-            } else {
-                let f = a.forward_fraction.unwrap_or_else(|| slab_forward_fraction(a.g));
-                if !(0.0..1.0).contains(&f) {
-                    return Err(Error::invalid(
-                        "command line",
-                        "--forward-fraction",
-                        format!("{f} is outside [0, 1); give a fraction such as 0.81 (g²) or 0 for the paper's scheme"),
-                    ));
-                }
-                solve_slab_similar(a.thickness, a.albedo, a.g, f, inc)
-            };
+        SlabMethod::Transport => {
+            let s = crate::transport::slab::SlabSettings::default();
+            let x = crate::transport::slab::solve_slab(a.thickness, a.albedo, a.g, p.incidence, &s);
             SlabResult {
-                r: d.r,
-                t: d.t,
+                r: x.r,
+                t: x.t,
                 r_stderr: 0.0,
                 t_stderr: 0.0,
             }
+        }
+        SlabMethod::Diffusion => {
+            let f = a.forward_fraction.unwrap_or_else(|| slab_forward_fraction(a.g));
+            if !(0.0..1.0).contains(&f) {
+                return Err(Error::invalid(
+                    "command line",
+                    "--forward-fraction",
+                    format!("{f} is outside [0, 1); give a fraction such as 0.81 (g²) or 0 for the paper's scheme"),
+                ));
+            }
+            solve_slab_similar(a.thickness, a.albedo, a.g, f, p.incidence)
         }
     };
     let line = serde_json::to_string(&r).map_err(|e| Error::format("<json>", e.to_string()))?;

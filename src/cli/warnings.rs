@@ -3,7 +3,7 @@
 
 use super::scene_file::SceneFile;
 use crate::math::Vec3;
-use crate::scene::{Method, Scene, SkyModel};
+use crate::scene::{Method, Scene, SkyModel, RENDER_KEYS};
 
 /// What kind of grid `medium.grid` names.
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -88,78 +88,23 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
 
     let m = scene.render.method;
     let name = m.name();
-    let reference = m == Method::Reference;
-    rule(
-        "render.spp",
-        reference,
-        &format!(
-            "to method {name} (it is the path tracer's samples per pixel; the deterministic methods' \
-             anti-aliasing is render.aa_samples)"
-        ),
-    );
-    rule(
-        "render.aa_samples",
-        !reference,
-        "to method reference (its samples per pixel are render.spp)",
-    );
-    let only_reference = format!("to method {name} (only reference uses it)");
-    for key in ["render.max_depth", "render.time_limit", "render.stderr"] {
-        rule(key, reference, &only_reference);
-    }
-    rule(
-        "render.step",
-        !reference,
-        "to method reference (it tracks collisions exactly, without a march step)",
-    );
-    let only_full = format!("to method {name} (only full uses it)");
-    for key in [
-        "render.cube_resolution",
-        "render.ground_samples",
-        "render.iterations",
-        "render.propagation_tolerance",
-        "render.low_density_threshold",
-        "render.surface_depth",
-        "render.surface_band",
-    ] {
-        rule(key, m == Method::Full, &only_full);
-    }
-    rule(
-        "render.aov",
-        matches!(m, Method::Full | Method::Transport),
-        &format!("to method {name} (only full and transport write AOV layers)"),
-    );
-    let solved = matches!(m, Method::Diffusion | Method::Full);
-    let only_solved = format!("to method {name} (only diffusion and full use it)");
-    for key in [
-        "render.solver_tolerance",
-        "render.solver_max_iterations",
-        "render.diffuse_anisotropy",
-        "render.sky_boundary",
-        "render.forward_fraction",
-    ] {
-        rule(key, solved, &only_solved);
+    for k in RENDER_KEYS {
+        let why = match k.hint {
+            Some(hint) => format!("to method {name} ({hint})"),
+            None => format!("to method {name} (only {} it)", readers(k.methods)),
+        };
+        rule(&format!("render.{}", k.key), k.applies_to(m), &why);
     }
     // The sky's single scattering is the reduced sky of stage 1, which carries no sky when the
     // sky enters through the boundary condition (its light is then in I0 itself).
-    if solved && scene.render.solver.sky_boundary {
+    let sky_single = RENDER_KEYS.iter().find(|k| k.key == "sky_single_scattering");
+    if sky_single.is_some_and(|k| k.applies_to(m)) && scene.render.solver.sky_boundary {
         rule(
             "render.sky_single_scattering",
             false,
             "with render.sky_boundary = true (the sky enters through the diffusion's boundary and is in I0 itself; \
              set render.sky_boundary = false for the paper's stage-1 sky)",
         );
-    } else {
-        rule("render.sky_single_scattering", solved, &only_solved);
-    }
-    let only_transport = format!("to method {name} (only transport uses it)");
-    for key in [
-        "render.transport_order",
-        "render.transport_polar_ordinates",
-        "render.transport_tolerance",
-        "render.transport_max_iterations",
-        "render.transport_acceleration",
-    ] {
-        rule(key, m == Method::Transport, &only_transport);
     }
     let t = &scene.render.transport;
     if m == Method::Transport && t.n_mu < t.order + 1 {
@@ -178,6 +123,17 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
     out.extend(super::cloud_size::warning(scene));
     out.extend(frame_warning(scene));
     out
+}
+
+/// "diffusion and full uses"-style list of the methods that read a key: "full uses",
+/// "diffusion and full use", "single, diffusion, full and transport use".
+fn readers(methods: &[Method]) -> String {
+    let names: Vec<&str> = methods.iter().map(|m| m.name()).collect();
+    match names.as_slice() {
+        [one] => format!("{one} uses"),
+        [rest @ .., last] => format!("{} and {last} use", rest.join(", ")),
+        [] => "no method uses".into(),
+    }
 }
 
 /// A warning when the camera cannot see the cloud: its box is outside the view or smaller than a
@@ -271,6 +227,42 @@ mod tests {
             }
         }
         assert!(n >= 5, "{n} example scenes");
+    }
+
+    #[test]
+    fn each_render_key_warns_exactly_for_the_methods_that_do_not_read_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("s.toml");
+        // Every [render] key at its default (the two without one given a value).
+        let toml::Value::Table(mut keys) = toml::Value::try_from(crate::scene::RenderDesc::default()).unwrap() else {
+            panic!("[render] serialises as a table");
+        };
+        keys.insert("max_depth".into(), 10.into());
+        keys.insert("time_limit".into(), 100.0.into());
+        let declared: Vec<&str> = RENDER_KEYS.iter().map(|k| k.key).collect();
+        let mut written: Vec<&str> = keys.keys().map(String::as_str).collect();
+        written.sort_unstable();
+        let mut sorted = declared.clone();
+        sorted.sort_unstable();
+        assert_eq!(written, sorted, "RENDER_KEYS declares every [render] key once");
+        for m in Method::ALL {
+            keys.insert("method".into(), m.name().into());
+            let render = toml::to_string(&keys).unwrap();
+            std::fs::write(
+                &p,
+                format!("[medium]\nresolution = [4, 4, 4]\nvoxel_size = 100.0\n\n[render]\n{render}"),
+            )
+            .unwrap();
+            let w = warnings_of(&p);
+            for k in RENDER_KEYS {
+                let warned = w
+                    .iter()
+                    .any(|s| s.contains(&format!("`render.{}` does not apply to method {}", k.key, m.name())));
+                assert_eq!(warned, !k.applies_to(m), "render.{} with method {}: {w:?}", k.key, m.name());
+            }
+        }
+        assert_eq!(readers(&[Method::Full]), "full uses");
+        assert_eq!(readers(&[Method::Diffusion, Method::Full]), "diffusion and full use");
     }
 
     #[test]

@@ -9,23 +9,35 @@
 //! (e^{−τ} for a normal beam, 2E₃(τ) for diffuse light), as the adding-doubling table does.
 
 use super::{boundary_terms, interior_coupling};
+use serde::Serialize;
 
 /// How the slab is lit.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Incidence {
-    /// A collimated beam at normal incidence (the table's UR1/UT1).
-    Normal,
-    /// Uniform diffuse radiance over the incoming hemisphere (URU/UTU).
+    /// A beam at normal incidence (the adding-doubling table's UR1/UT1).
+    Collimated,
+    /// Uniform radiance from the whole upper hemisphere (cosine-weighted incident directions;
+    /// the table's URU/UTU).
     Diffuse,
 }
 
-/// Reflectance and transmittance of a slab.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// Reflected and transmitted fractions with their standard errors (0 from the deterministic
+/// solvers, `diffusion::slab` and `transport::slab`).
+#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
 pub struct SlabResult {
-    /// Total reflectance (diffuse).
+    /// Total reflectance (fraction of the incident flux leaving through the top).
+    #[serde(rename = "R")]
     pub r: f64,
-    /// Total transmittance (diffuse + unscattered).
+    /// Total transmittance (fraction leaving through the bottom, unscattered beam included).
+    #[serde(rename = "T")]
     pub t: f64,
+    /// Standard error of R.
+    #[serde(rename = "R_stderr")]
+    pub r_stderr: f64,
+    /// Standard error of T.
+    #[serde(rename = "T_stderr")]
+    pub t_stderr: f64,
 }
 
 /// Exponential integral E_n(x) = ∫₀¹ μ^{n−2} e^{−x/μ} dμ (n ≥ 2, x ≥ 0), composite Gauss–Legendre.
@@ -68,7 +80,7 @@ pub fn solve_slab(tau: f64, a: f64, g: f64, incidence: Incidence, cells: usize) 
     let mut q0 = vec![0.0; n];
     let mut q1 = vec![0.0; n];
     let e_in = match incidence {
-        Incidence::Normal => {
+        Incidence::Collimated => {
             for k in 0..n {
                 let t0 = k as f64 * dtau;
                 let mean = (-t0).exp() * (-(-dtau).exp_m1()) / dtau;
@@ -136,12 +148,14 @@ pub fn solve_slab(tau: f64, a: f64, g: f64, incidence: Incidence, cells: usize) 
     let phi_top = (bd * x[0] + bf * (-f[0])) * h;
     let phi_bot = (bd * x[n - 1] + bf * f[n - 1]) * h;
     let unscattered = match incidence {
-        Incidence::Normal => (-tau).exp(),
+        Incidence::Collimated => (-tau).exp(),
         Incidence::Diffuse => 2.0 * expint(3, tau),
     };
     SlabResult {
         r: four_pi * phi_top / e_in,
         t: four_pi * phi_bot / e_in + unscattered,
+        r_stderr: 0.0,
+        t_stderr: 0.0,
     }
 }
 

@@ -12,21 +12,11 @@
 //!
 //! Photon i draws from its own stream `Rng::new(seed, i)`, so the result is identical at any thread count.
 
+pub use crate::diffusion::slab::{Incidence, SlabResult};
 use crate::error::{Error, Result};
 use crate::math::Rng;
 use crate::optics::Hg;
 use rayon::prelude::*;
-use serde::Serialize;
-
-/// How the slab is lit.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Incidence {
-    /// A beam at normal incidence.
-    Collimated,
-    /// Uniform radiance from the whole upper hemisphere (cosine-weighted incident directions).
-    Diffuse,
-}
 
 /// A slab case.
 #[derive(Clone, Copy, Debug)]
@@ -39,23 +29,6 @@ pub struct SlabParams {
     pub g: f64,
     /// Illumination.
     pub incidence: Incidence,
-}
-
-/// Reflected and transmitted fractions with their standard errors.
-#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
-pub struct SlabResult {
-    /// Total reflectance (fraction of the incident flux leaving through the top).
-    #[serde(rename = "R")]
-    pub r: f64,
-    /// Total transmittance (fraction leaving through the bottom, unscattered beam included).
-    #[serde(rename = "T")]
-    pub t: f64,
-    /// Standard error of R.
-    #[serde(rename = "R_stderr")]
-    pub r_stderr: f64,
-    /// Standard error of T.
-    #[serde(rename = "T_stderr")]
-    pub t_stderr: f64,
 }
 
 /// Where a photon ends.

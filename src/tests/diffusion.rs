@@ -50,7 +50,7 @@ fn slab_matches_analytic_diffusion_solution() {
     // cell the difference is well below 0.5 % (measured ~1e-4).
     for (tau, a, g) in [(2.0, 0.9, 0.0), (5.0, 0.99, 0.5), (10.0, 0.95, 0.9)] {
         let (r_exact, t_exact) = analytic_slab(tau, a, g);
-        let s = solve_slab(tau, a, g, Incidence::Normal, (tau / 0.01) as usize);
+        let s = solve_slab(tau, a, g, Incidence::Collimated, (tau / 0.01) as usize);
         assert!(
             (s.r - r_exact).abs() < 5e-3 * r_exact.max(0.01),
             "tau {tau} a {a} g {g}: R {} vs {r_exact}",
@@ -75,7 +75,7 @@ fn slab_against_adding_doubling() {
         if (1.0 - g) * tau < 5.0 || a < 0.99 {
             continue;
         }
-        let n = solve_slab(tau, a, g, Incidence::Normal, default_cells(tau));
+        let n = solve_slab(tau, a, g, Incidence::Collimated, default_cells(tau));
         let d = solve_slab(tau, a, g, Incidence::Diffuse, default_cells(tau));
         for (name, got, want) in [("UR1", n.r, v[3]), ("UT1", n.t, v[4]), ("URU", d.r, v[5]), ("UTU", d.t, v[6])] {
             assert!((got - want).abs() < 0.04, "tau {tau} a {a} g {g} {name}: {got:.4} vs {want:.4}");
@@ -94,7 +94,7 @@ fn delta_m_slab_against_adding_doubling() {
     for v in super::common::slab_rows() {
         let (tau, a, g) = (v[0], v[1], v[2]);
         let f = slab_forward_fraction(g);
-        let n = solve_slab_similar(tau, a, g, f, Incidence::Normal);
+        let n = solve_slab_similar(tau, a, g, f, Incidence::Collimated);
         let d = solve_slab_similar(tau, a, g, f, Incidence::Diffuse);
         for x in [n.r, n.t, d.r, d.t] {
             assert!(x >= 0.0 && x.is_finite(), "tau {tau} a {a} g {g}: {n:?} {d:?}");

@@ -15,7 +15,7 @@ fn every_adding_doubling_row_within_0_005() {
     let results: Vec<(String, f64, usize)> = rows
         .par_iter()
         .flat_map_iter(|r| {
-            [(Incidence::Normal, r[3], r[4]), (Incidence::Diffuse, r[5], r[6])]
+            [(Incidence::Collimated, r[3], r[4]), (Incidence::Diffuse, r[5], r[6])]
                 .into_iter()
                 .map(move |(inc, er, et)| {
                     let x = solve_slab(r[0], r[1], r[2], inc, &s);

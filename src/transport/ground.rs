@@ -4,7 +4,7 @@
 //! sweep (light leaving the box downwards minus the sky it hides), so every ground bounce is
 //! iterated.
 
-use super::Optics;
+use super::TransportOptics;
 use crate::lighting::{Ground, Sky, Sun};
 use crate::math::{Rgb, Vec3};
 use crate::medium::Medium;
@@ -71,7 +71,7 @@ pub(super) struct GroundLight<'a> {
 impl<'a> GroundLight<'a> {
     /// The columns under medium `m`: the footprint grown by the reach of the cloud's shadow
     /// (at most twice the footprint), and T′ = T^{σt′/σt} of the sun at each.
-    pub(super) fn new(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&'a Ground>, optics: &Optics) -> GroundLight<'a> {
+    pub(super) fn new(m: &Medium, sun: &Sun, sky: &Sky, ground: Option<&'a Ground>, optics: &TransportOptics) -> GroundLight<'a> {
         let [nx, ny, nz] = m.dims();
         let (hx, hz) = (m.voxel_size.x as f64, m.voxel_size.z as f64);
         let margin = match ground {

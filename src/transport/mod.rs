@@ -2,8 +2,9 @@
 //! equation, with δ-M scaled optics, the sun exact and apart, and the iteration accelerated by a
 //! diffusion solve (diffusion synthetic acceleration, DSA). See docs/transport.md.
 //!
-//! - [`Optics`]: the medium's optics after the δ-M similarity transform (Wiscombe 1977), the one
-//!   place the transport solver reads σt, albedo and g.
+//! - [`TransportOptics`]: the medium's optics after the δ-M similarity transform (Wiscombe 1977)
+//!   truncated at the solver's Legendre order, the one place the transport solver reads σt,
+//!   albedo and g (the medium's own are [`crate::optics::Optics`]).
 //! - [`slab`]: the solver on a plane-parallel column (checked against adding-doubling).
 //! - [`solve`]: the 3-D solver (SH source per full voxel, sweeps, DSA); its stages are the private
 //!   modules `sweep`, `source`, `dsa` (its operator in `accel`), `ground`, `grid` and `convergence`. The gather is
@@ -195,7 +196,7 @@ impl BandOptics {
 /// The medium's optics for the transport solver: the exact HG g and, per RGB band, the δ-M
 /// scaled extinction, albedo and phase moments.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Optics {
+pub struct TransportOptics {
     /// Exact HG mean cosine (for the exact single scattering).
     pub g: f64,
     /// Exact extinction per unit density (m⁻¹).
@@ -206,14 +207,14 @@ pub struct Optics {
     pub bands: [BandOptics; 3],
 }
 
-impl Optics {
+impl TransportOptics {
     /// The medium's optics truncated after Legendre order `order`. The only reader of the
     /// medium's σt, albedo and g in this module.
-    pub fn from_medium(m: &Medium, order: usize) -> Optics {
+    pub fn from_medium(m: &Medium, order: usize) -> TransportOptics {
         let o = &m.optics;
         let a = [o.albedo.x as f64, o.albedo.y as f64, o.albedo.z as f64];
         let (st, g) = (o.sigma_t as f64, o.phase.mean_cosine());
-        Optics {
+        TransportOptics {
             g,
             sigma_t: st,
             albedo: a,

@@ -185,7 +185,7 @@ pub fn solve_slab(tau: f64, albedo: f64, g: f64, incidence: Incidence, s: &SlabS
     // The beam's first scattering, integrated exactly along each ordinate over each layer: the
     // source a′/(4π) p′(μ_j, 1) e^{−τ′} (normal incidence, flux 1) is not linear in τ′.
     let beam: Vec<Vec<f64>> = match incidence {
-        Incidence::Normal => (0..2 * nq)
+        Incidence::Collimated => (0..2 * nq)
             .map(|j| {
                 let (m, c) = (mu[j % nq], b.albedo / (4.0 * PI) * b.phase(mu_of(j)));
                 nodes
@@ -208,7 +208,7 @@ pub fn solve_slab(tau: f64, albedo: f64, g: f64, incidence: Incidence, s: &SlabS
         Incidence::Diffuse => vec![vec![0.0; n - 1]; 2 * nq],
     };
     let top = match incidence {
-        Incidence::Normal => 0.0,
+        Incidence::Collimated => 0.0,
         Incidence::Diffuse => 1.0,
     };
     // Step weights per ordinate and layer.
@@ -289,7 +289,7 @@ pub fn solve_slab(tau: f64, albedo: f64, g: f64, incidence: Incidence, s: &SlabS
     // Hemispherical fluxes 2π Σ w μ I.
     let flux = |v: &[f64]| 2.0 * PI * v.iter().zip(&mu).zip(&wh).map(|((i, m), w)| i * m * w).sum::<f64>();
     let (e_in, direct) = match incidence {
-        Incidence::Normal => (1.0, (-tau_s).exp()),
+        Incidence::Collimated => (1.0, (-tau_s).exp()),
         Incidence::Diffuse => (PI, 0.0),
     };
     SlabSolution {
@@ -328,7 +328,7 @@ mod tests {
 
     #[test]
     fn conservative_slab_conserves_energy() {
-        for inc in [Incidence::Normal, Incidence::Diffuse] {
+        for inc in [Incidence::Collimated, Incidence::Diffuse] {
             let r = solve_slab(10.0, 1.0, 0.85, inc, &SlabSettings::default());
             assert!((r.r + r.t - 1.0).abs() < 1e-3, "{inc:?}: R+T = {}", r.r + r.t);
         }
@@ -337,8 +337,8 @@ mod tests {
     #[test]
     fn acceleration_cuts_the_iterations_of_a_thick_slab() {
         let s = SlabSettings::default();
-        let plain = solve_slab(20.0, 0.999, 0.5, Incidence::Normal, &SlabSettings { acceleration: false, ..s });
-        let dsa = solve_slab(20.0, 0.999, 0.5, Incidence::Normal, &s);
+        let plain = solve_slab(20.0, 0.999, 0.5, Incidence::Collimated, &SlabSettings { acceleration: false, ..s });
+        let dsa = solve_slab(20.0, 0.999, 0.5, Incidence::Collimated, &s);
         assert!(dsa.iterations * 10 < plain.iterations, "{} vs {}", dsa.iterations, plain.iterations);
         assert!((dsa.r - plain.r).abs() < 1e-3 && (dsa.t - plain.t).abs() < 1e-3);
     }

@@ -34,7 +34,7 @@ use super::source::{diffuse_source_of, parity_order, PairTables};
 use super::sphere::Quadrature;
 use super::sweep::sweep;
 use super::warm::{TransportState, WARM_MIN_ITERATIONS};
-use super::Optics;
+use super::TransportOptics;
 use crate::diffusion::multigrid::Hierarchy;
 use crate::error::{Error, Result};
 use crate::lighting::{Ground, Sky, Sun};
@@ -75,7 +75,7 @@ impl Default for TransportSettings {
 #[derive(Clone, Debug)]
 pub struct TransportField {
     /// The optics it was solved with.
-    pub optics: Optics,
+    pub optics: TransportOptics,
     /// SH order.
     pub order: usize,
     /// Per voxel: index into the full-voxel arrays, or `u32::MAX` where ρ = 0.
@@ -143,7 +143,7 @@ pub fn solve_warm(
     progress: &dyn Progress,
     opts: SolveOptions,
 ) -> Result<(TransportField, Option<TransportState>)> {
-    let optics = Optics::from_medium(m, s.order);
+    let optics = TransportOptics::from_medium(m, s.order);
     let h_min = m.voxel_size.x.min(m.voxel_size.y).min(m.voxel_size.z) as f64;
     let tau_max = m.density.max_value() as f64 * optics.bands.iter().fold(0.0f64, |a, b| a.max(b.sigma_t)) * h_min;
     if tau_max > MAX_VOXEL_OPTICAL_DEPTH {
@@ -203,7 +203,7 @@ pub fn solve_warm(
 }
 
 /// δ-M sun transmittance T′ = T^{1 − a f} = T^{σt′/σt} at the voxel centres, per band.
-fn sun_transmittance(m: &Medium, sun: &Sun, optics: &Optics) -> Vec<[f32; 3]> {
+fn sun_transmittance(m: &Medium, sun: &Sun, optics: &TransportOptics) -> Vec<[f32; 3]> {
     let exact = crate::lit::sunlight::SunTransmittance::compute(m, sun.dir);
     exact
         .grid
@@ -213,7 +213,7 @@ fn sun_transmittance(m: &Medium, sun: &Sun, optics: &Optics) -> Vec<[f32; 3]> {
 }
 
 /// The per-pair tables of the sweeps for the sun's beam and the δ-M optics.
-fn pair_tables(q: &Quadrature, sun: &Sun, order: usize, optics: &Optics) -> PairTables {
+fn pair_tables(q: &Quadrature, sun: &Sun, order: usize, optics: &TransportOptics) -> PairTables {
     let (perm, _) = parity_order(order);
     let e_sun = [sun.irradiance.x as f64, sun.irradiance.y as f64, sun.irradiance.z as f64];
     let mut y_sun = vec![0.0; sh_count(order)];
@@ -229,7 +229,7 @@ struct Solver<'a> {
     tables: &'a PairTables,
     /// The DSA hierarchies (none: no acceleration).
     hier: &'a [Hierarchy],
-    optics: &'a Optics,
+    optics: &'a TransportOptics,
     ground: &'a GroundLight<'a>,
     s: &'a TransportSettings,
 }
