@@ -390,18 +390,7 @@ mod tests {
     /// Two smooth lobes (peak 1) in a `dims` grid with a clear-air gap between them, lit with a
     /// constant I0, half sun transmittance and a grey sky.
     fn two_lobes(dims: [usize; 3], radius: f32) -> LitVolume {
-        let mut g = Grid3::filled(dims, 0.0);
-        let c = Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32) * 0.5;
-        for k in 0..dims[2] {
-            for j in 0..dims[1] {
-                for i in 0..dims[0] {
-                    let p = Vec3::new(i as f32 + 0.5, j as f32 + 0.5, k as f32 + 0.5);
-                    let a = (p - c - Vec3::new(radius, 0.0, 0.0)).length() / radius;
-                    let b = (p - c + Vec3::new(radius * 1.2, 0.0, 0.0)).length() / (0.8 * radius);
-                    g.set(i, j, k, (1.0 - a * a).max(0.0) + (1.0 - b * b).max(0.0));
-                }
-            }
-        }
+        let g = crate::tests::common::two_lobes(dims, radius);
         let n = g.len();
         let m = crate::medium::Medium::new(g, Vec3::ZERO, Vec3::ONE, 1.0, Rgb::splat(0.9), 0.8);
         let sun = Sun {

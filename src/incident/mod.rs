@@ -1009,17 +1009,8 @@ mod tests {
     #[test]
     fn sweep_matches_a_per_ray_dda_walk() {
         let dims = [7, 6, 5];
-        let mut g = Grid3::filled(dims, 0.0);
         let mut rng = Rng::new(11, 0);
-        for k in 0..dims[2] {
-            for j in 0..dims[1] {
-                for i in 0..dims[0] {
-                    if rng.uniform() < 0.7 {
-                        g.set(i, j, k, 0.2 + rng.uniform());
-                    }
-                }
-            }
-        }
+        let g = crate::tests::common::random_cloud(dims, &mut rng, 0.7, 0.2, 1.0);
         let m = Medium::new(g, Vec3::ZERO, Vec3::new(1.0, 0.45, 1.3), 0.8, Rgb::new(0.9, 0.8, 0.7), 0.0);
         assert_eq!(m.active_box(1), Some(([0; 3], dims)), "the oracle walks the whole grid");
         let bins = DirectionBins::new();

@@ -188,17 +188,8 @@ mod tests {
     #[test]
     fn transmittance_matches_the_medium_s() {
         let dims = [9, 7, 8];
-        let mut g = Grid3::filled(dims, 0.0);
         let mut rng = Rng::new(7, 2);
-        for k in 0..dims[2] {
-            for j in 0..dims[1] {
-                for i in 0..dims[0] {
-                    if rng.uniform() < 0.6 {
-                        g.set(i, j, k, 3.0 * rng.uniform());
-                    }
-                }
-            }
-        }
+        let g = crate::tests::common::random_cloud(dims, &mut rng, 0.6, 0.0, 3.0);
         let m = Medium::new(g, Vec3::new(-2.0, 1.0, 0.5), Vec3::new(1.0, 0.7, 1.3), 0.4, Rgb::ONE, 0.0);
         for n in 0..3000 {
             let p = m.origin + m.voxel_size * Vec3::new(rng.uniform() * 11.0 - 1.0, rng.uniform() * 9.0 - 1.0, rng.uniform() * 10.0 - 1.0);

@@ -2,6 +2,7 @@
 //! (empty scene = sky bins, furnace, hemicube irradiance, opaque slab shadow), the pyramid
 //! renderer against the brute-force march, border-voxel detection and the stage-1 sign convention.
 
+use super::common::two_lobes;
 use crate::cube::border::{find_border_voxels, render_border_cubes};
 use crate::cube::ground::{hemicube_irradiance, hemicube_weights, render_ground, LitGround};
 use crate::cube::render::{opposite_bin, render_cube_brute, BinMask, CubeOptions, CubeRenderer};
@@ -42,25 +43,6 @@ fn lit(
     LitVolume::new(m, vec![i0; n], Grid3::filled(dims, sun_t), sun, sky, ground)
 }
 
-/// A smooth blob of density (peak 1) centred in a grid, with a hole of empty voxels around it.
-fn blob(dims: [usize; 3], radius: f32) -> Grid3 {
-    let mut g = Grid3::filled(dims, 0.0);
-    let c = Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32) * 0.5;
-    for k in 0..dims[2] {
-        for j in 0..dims[1] {
-            for i in 0..dims[0] {
-                let p = Vec3::new(i as f32 + 0.5, j as f32 + 0.5, k as f32 + 0.5);
-                // Two lobes, so some cubes look across clear air at cloud.
-                let a = (p - c - Vec3::new(radius, 0.0, 0.0)).length() / radius;
-                let b = (p - c + Vec3::new(radius * 1.2, 0.0, 0.0)).length() / (0.8 * radius);
-                let v = (1.0 - a * a).max(0.0) + (1.0 - b * b).max(0.0);
-                g.set(i, j, k, v);
-            }
-        }
-    }
-    g
-}
-
 /// [`lit`] on an empty 4³ grid (σt 1, albedo 1, g 0.8, I0 1, T_sun 1) under `sun` and a constant
 /// sky `sky`.
 fn empty_lit(sun: Sun, sky: Rgb, ground: Option<Ground>) -> LitVolume {
@@ -82,7 +64,18 @@ fn empty_lit(sun: Sun, sky: Rgb, ground: Option<Ground>) -> LitVolume {
 /// T_sun 0.7, the sun from (0.4, 0.8, 0.3) at 3 W/m².
 fn blob_lit(dims: [usize; 3], g: f32, i0: Rgb, sky: Rgb, ground: Option<Ground>) -> LitVolume {
     let sun = sun(Vec3::new(0.4, 0.8, 0.3), 3.0);
-    lit(blob(dims, 3.0), Vec3::new(-7.0, 0.0, -6.0), 1.5, 0.9, g, i0, 0.7, sun, sky, ground)
+    lit(
+        two_lobes(dims, 3.0),
+        Vec3::new(-7.0, 0.0, -6.0),
+        1.5,
+        0.9,
+        g,
+        i0,
+        0.7,
+        sun,
+        sky,
+        ground,
+    )
 }
 
 fn rel(a: Rgb, b: Rgb) -> f32 {
@@ -137,7 +130,7 @@ fn furnace_every_bin_sees_l() {
     // direction reads L. The only error is the cut-off: the dropped rest is ≤ t_cutoff·L.
     let l = Rgb::new(0.7, 1.0, 1.3);
     let dims = [12, 10, 11];
-    let mut g = blob(dims, 3.0);
+    let mut g = two_lobes(dims, 3.0);
     for (n, x) in g.data_mut().iter_mut().enumerate() {
         *x = *x * 3.0 + if n % 7 == 0 { 0.5 } else { 0.0 };
     }
@@ -186,7 +179,7 @@ fn pyramid_cube_bins_match_a_fine_brute_force_cube() {
     // seen from a border voxel between the lobes. Measured at res 8: mean 0.84 %, max 7.5 %; the
     // bounds leave room for rounding only, and fail if the level choice or the compositing breaks.
     let dims = [40, 24, 24];
-    let g = blob(dims, 7.0);
+    let g = two_lobes(dims, 7.0);
     let n = g.len();
     let m = Medium::new(g, Vec3::new(-20.0, 0.0, -12.0), Vec3::ONE, 0.6, Rgb::splat(0.95), 0.85);
     let i0: Vec<Rgb> = (0..n)
@@ -316,7 +309,7 @@ fn entry_radiance_is_the_radiance_arriving_from_behind_the_ray() {
 fn border_cubes_do_not_depend_on_the_thread_count() {
     let dims = [16, 12, 12];
     let v = lit(
-        blob(dims, 3.0),
+        two_lobes(dims, 3.0),
         Vec3::ZERO,
         1.0,
         0.9,
@@ -366,7 +359,7 @@ fn hemicube_under_a_furnace_cloud_reads_pi_l() {
     // so E = πL wherever the ground point is, under the cloud or beside it (cut-off 1e-3 only).
     let l = Rgb::new(0.4, 0.5, 0.9);
     let v = lit(
-        blob([16, 8, 16], 4.0),
+        two_lobes([16, 8, 16], 4.0),
         Vec3::new(-8.0, 4.0, -8.0),
         1.0,
         1.0,

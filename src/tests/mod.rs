@@ -3,7 +3,7 @@
 
 mod anisotropy;
 mod bad_input;
-mod common;
+pub(crate) mod common;
 mod cubes;
 mod diffusion;
 mod edges;
