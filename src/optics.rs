@@ -123,16 +123,30 @@ pub struct Optics {
     pub sun_single: (Rgb, Hg),
 }
 
-/// Optics after a similarity transform with forward fraction f (see [`Optics::similarity`]):
-/// per-band extinction, since σt' = σt(1 − a·f) depends on the albedo.
+/// One band's optics after the δ-M similarity transform (Wiscombe 1977) with forward fraction
+/// f (0 ≤ f < 1): the fraction f of the scattering, taken as exactly forward, is treated as
+/// unscattered. See [`delta_m`].
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ScaledOptics {
-    /// Extinction per band at density 1 (m⁻¹), f64.
-    pub sigma_t: [f64; 3],
-    /// Scattering per band at density 1 (m⁻¹): σs(1 − f).
-    pub sigma_s: Rgb,
-    /// The phase function of the remaining (not forward-peaked) scattering, g' = (g − f)/(1 − f).
-    pub phase: Hg,
+pub struct DeltaM {
+    /// Scaled extinction σt′ = σt(1 − a f) (the unit of the σt given: m⁻¹, or optical depth).
+    pub sigma_t: f64,
+    /// Scaled single-scattering albedo a′ = a(1 − f)/(1 − a f) (unitless).
+    pub albedo: f64,
+    /// Scaled HG mean cosine g′ = (g − f)/(1 − f) (unitless).
+    pub g: f64,
+}
+
+/// The δ-M transform of one band with extinction `sigma_t`, albedo `albedo` and HG mean cosine
+/// `g`, truncating the forward fraction `f`: the one place the transform is written (the
+/// diffusion and full media through [`Optics::delta_m`], the transport solver's bands with
+/// f = g^{L+1}, the diffusion slab with f = g²). It keeps the absorption, σt′(1 − a′) = σt(1 − a),
+/// and the transport extinction, σt′(1 − a′g′) = σt(1 − a g); f = 0 is exactly the identity.
+pub fn delta_m(sigma_t: f64, albedo: f64, g: f64, f: f64) -> DeltaM {
+    DeltaM {
+        sigma_t: sigma_t * (1.0 - albedo * f),
+        albedo: albedo * (1.0 - f) / (1.0 - albedo * f),
+        g: (g - f) / (1.0 - f),
+    }
 }
 
 impl Optics {
@@ -160,14 +174,15 @@ impl Optics {
             return *self;
         }
         let mean_a = (self.albedo.x + self.albedo.y + self.albedo.z) / 3.0;
-        let st = self.sigma_t * (1.0 - mean_a * f);
+        // One extinction for all bands: the mean albedo's; each band keeps its absorption.
+        let scaled = delta_m(self.sigma_t as f64, mean_a as f64, self.phase.g, f as f64);
+        let st = scaled.sigma_t as f32;
         let sigma_a = Rgb::ONE - self.albedo;
         let albedo = (Rgb::ONE - sigma_a * (self.sigma_t / st)).clamp(Rgb::ZERO, Rgb::ONE);
-        let g = self.phase.g as f32;
         Optics {
             sigma_t: st,
             albedo,
-            phase: Hg::new((g - f) / (1.0 - f)),
+            phase: Hg::new(scaled.g as f32),
             sun_single: (self.albedo * (self.sigma_t / st), self.phase),
         }
     }
@@ -218,22 +233,6 @@ impl Optics {
     #[inline]
     pub fn sigma_tr(&self, c: usize) -> f64 {
         self.sigma_t as f64 * (1.0 - self.albedo[c] as f64 * self.phase.g)
-    }
-
-    /// Similarity transform with forward fraction `f` (0 ≤ f < 1): the fraction f of the
-    /// scattering, taken as exactly forward, is treated as unscattered, so σt' = σt(1 − a·f),
-    /// σs' = σs(1 − f) and g' = (g − f)/(1 − f). f = 0 is the identity (exactly), the per-band
-    /// view stage 1 reads; f = g gives g' = 0.
-    pub fn similarity(&self, f: f32) -> ScaledOptics {
-        let a = self.albedo.as_dvec3();
-        let st = self.sigma_t as f64;
-        let fd = f as f64;
-        let g = self.phase.g as f32;
-        ScaledOptics {
-            sigma_t: [st * (1.0 - fd * a.x), st * (1.0 - fd * a.y), st * (1.0 - fd * a.z)],
-            sigma_s: self.sigma_s() * (1.0 - f),
-            phase: Hg::new((g - f) / (1.0 - f)),
-        }
     }
 }
 
@@ -338,23 +337,19 @@ mod tests {
     }
 
     #[test]
-    fn similarity_is_identity_at_zero_and_keeps_absorption() {
-        let o = Optics::new(0.05, Rgb::new(0.9, 0.99, 1.0), 0.85);
-        let s0 = o.similarity(0.0);
-        for c in 0..3 {
-            assert_eq!(s0.sigma_t[c], o.sigma_t as f64);
-        }
-        assert_eq!(s0.sigma_s, o.sigma_s());
-        assert_eq!(s0.phase, o.phase);
-        let s = o.similarity(o.phase.g as f32);
-        assert_eq!(s.phase.mean_cosine(), 0.0);
-        for c in 0..3 {
-            // σa' = σt' − σs' = σa: the transform moves scattering, never absorption.
-            let sa = s.sigma_t[c] - s.sigma_s[c] as f64;
-            assert!((sa - o.sigma_a(c)).abs() < 1e-8, "band {c}: {sa} vs {}", o.sigma_a(c));
-            // σtr = σt'(1 − a'g') is invariant: the diffusion operator does not change.
-            let tr = s.sigma_t[c] - s.sigma_s[c] as f64 * s.phase.mean_cosine();
-            assert!((tr - o.sigma_tr(c)).abs() < 1e-8);
+    fn delta_m_is_identity_at_zero_and_keeps_absorption_and_transport_extinction() {
+        let (st, g) = (0.05f32 as f64, 0.85f32 as f64);
+        for a in [0.9f32 as f64, 0.99f32 as f64, 1.0] {
+            let s0 = delta_m(st, a, g, 0.0);
+            assert_eq!((s0.sigma_t, s0.albedo, s0.g), (st, a, g));
+            let s = delta_m(st, a, g, g);
+            assert_eq!(s.g, 0.0);
+            // σa′ = σt′ − σs′ = σa: the transform moves scattering, never absorption.
+            let sa = s.sigma_t * (1.0 - s.albedo);
+            assert!((sa - st * (1.0 - a)).abs() < 1e-8, "a = {a}: {sa} vs {}", st * (1.0 - a));
+            // σtr = σt′(1 − a′g′) is invariant: the diffusion operator does not change.
+            let tr = s.sigma_t * (1.0 - s.albedo * s.g);
+            assert!((tr - st * (1.0 - a * g)).abs() < 1e-8);
         }
     }
 }

@@ -160,19 +160,14 @@ pub fn solve_slab(tau: f64, a: f64, g: f64, incidence: Incidence, cells: usize) 
 }
 
 /// [`solve_slab`] after the δ-M similarity transform with forward fraction `f` (0 ≤ f < 1;
-/// Wiscombe 1977, the same as [`crate::optics::Optics::similarity`]): τ′ = τ(1 − a f),
-/// a′ = a(1 − f)/(1 − a f), g′ = (g − f)/(1 − f). The forward-peaked fraction f of the
-/// scattering is treated as unscattered, so the transformed slab's unscattered transmission
-/// e^{−τ′} (or 2E₃(τ′)) holds it and R, T stay hemispherical totals. f = 0 is [`solve_slab`]
-/// exactly; f = g² ([`slab_forward_fraction`]) is the measured choice.
+/// [`crate::optics::delta_m`]): τ′ = τ(1 − a f), a′ = a(1 − f)/(1 − a f), g′ = (g − f)/(1 − f).
+/// The forward-peaked fraction f of the scattering is treated as unscattered, so the transformed
+/// slab's unscattered transmission e^{−τ′} (or 2E₃(τ′)) holds it and R, T stay hemispherical
+/// totals. f = 0 is [`solve_slab`] exactly; f = g² ([`slab_forward_fraction`]) is the measured
+/// choice.
 pub fn solve_slab_similar(tau: f64, a: f64, g: f64, f: f64, incidence: Incidence) -> SlabResult {
-    if f == 0.0 {
-        return solve_slab(tau, a, g, incidence, default_cells(tau));
-    }
-    let tau_s = tau * (1.0 - a * f);
-    let a_s = a * (1.0 - f) / (1.0 - a * f);
-    let g_s = (g - f) / (1.0 - f);
-    solve_slab(tau_s, a_s, g_s, incidence, default_cells(tau_s))
+    let scaled = crate::optics::delta_m(tau, a, g, f);
+    solve_slab(scaled.sigma_t, scaled.albedo, scaled.g, incidence, default_cells(scaled.sigma_t))
 }
 
 /// The slab's forward fraction f = g² for g > 0 (0 otherwise): measured against the

@@ -781,10 +781,10 @@ pub fn compute(
     let nb = bd[0] * bd[1] * bd[2];
     let mut rho = vec![0f32; nb];
     m.density.fill_box(lo, hi, &mut rho);
-    // The medium's optics per band. A similarity transform is never applied here alone: it is
-    // already in `m.optics` when `render.forward_fraction` asks for one (`render::delta_m`, the
-    // same medium for every stage).
-    let optics = m.optics.similarity(0.0);
+    // The medium's optics. A similarity transform is never applied here alone: it is already in
+    // `m.optics` when `render.forward_fraction` asks for one (`render::delta_m`, the same medium
+    // for every stage).
+    let optics = m.optics;
     let mut srcs = source_list(bins, sources, settings, entry.is_some());
     let h = m.voxel_size;
     let plan = plan_families(&srcs, bins, settings);
@@ -797,7 +797,7 @@ pub fn compute(
         sources: srcs,
         entry,
         lo,
-        atten: optics.sigma_t,
+        atten: [optics.sigma_t as f64; 3],
     };
     // With the sun the only source and one extinction for every band, Q0 and Q1 follow from
     // ρT̄ (4 B per full voxel instead of 48), and the sweep accumulates Σ0 of one band only: 8 B
@@ -950,7 +950,7 @@ mod tests {
         use crate::medium::{ray_box, Dda};
         use glam::DVec3;
         let bd = m.dims();
-        let (h, atten) = (m.voxel_size, m.optics.similarity(0.0).sigma_t);
+        let (h, atten) = (m.voxel_size, [m.optics.sigma_t as f64; 3]);
         let lin = |c: [usize; 3]| c[0] + bd[0] * (c[1] + bd[1] * c[2]);
         let mut sums = vec![[0f64; 4]; bd[0] * bd[1] * bd[2]];
         let hi = DVec3::new(bd[0] as f64, bd[1] as f64, bd[2] as f64);
@@ -1036,7 +1036,7 @@ mod tests {
                 let srcs = source_list(&bins, &sources, &settings, with_hook);
                 let si = srcs.iter().position(|s| s.bin == Some(b)).unwrap();
                 let mean = per_ray_mean(&m, &srcs, &plan_families(&srcs, &bins, &settings), si, entry);
-                let (sigma_s, dw) = (m.optics.similarity(0.0).sigma_s, bins.bins[b].solid_angle);
+                let (sigma_s, dw) = (m.optics.sigma_s(), bins.bins[b].solid_angle);
                 for (n, q) in q0_of(&inc).into_iter().enumerate() {
                     let rho = m.density.at(n) as f64;
                     for band in 0..3 {

@@ -9,8 +9,8 @@
 //!   Q0_c = ρT̄ · σs_c E_c/(4π),   Q1 = g · Q0 · (−sun dir)
 //! ```
 //!
-//! and, when every band decays with the same extinction (stage 1's similarity with f = 0 has one
-//! σt for all bands), T̄ is one number per voxel: ρT̄ in 2 B per full voxel instead of 48, in 16
+//! and, when every band decays with the same extinction (the medium's optics have one σt for all
+//! bands), T̄ is one number per voxel: ρT̄ in 2 B per full voxel instead of 48, in 16
 //! bits ([`Field16`]: relative rounding ≤ 2⁻¹² down to 2⁻¹³ of the largest ρT̄, absolute
 //! ≤ 2⁻²⁵ of it below, where the sun's light is spent; it lives from stage 1 to the final lit
 //! volume of `full`, through both solves).
@@ -21,7 +21,7 @@ use super::Acc;
 use crate::math::{Rgb, Vec3};
 use crate::medium::field16::Field16;
 use crate::medium::sparse::{FullIndex, VoxelField};
-use crate::optics::ScaledOptics;
+use crate::optics::Optics;
 use rayon::prelude::*;
 use std::f64::consts::PI;
 use std::sync::Arc;
@@ -108,8 +108,8 @@ impl FirstScattering {
     /// Σ0, Σ1 scattered with ρσs/(4π) and ρσs·g/(4π). One parallel pass, ρσs/(4π) once per voxel
     /// and band. With δ-scaling (f = g) the scattering that changes direction is σs(1 − g),
     /// isotropic (g' = 0).
-    pub fn general(index: Arc<FullIndex>, optics: &ScaledOptics, acc: &[Acc], rho: &[f32]) -> FirstScattering {
-        let (sigma_s, g) = (optics.sigma_s, optics.phase.mean_cosine());
+    pub fn general(index: Arc<FullIndex>, optics: &Optics, acc: &[Acc], rho: &[f32]) -> FirstScattering {
+        let (sigma_s, g) = (optics.sigma_s(), optics.phase.mean_cosine());
         let n = acc.len() + 1;
         let mut q0 = vec![Rgb::ZERO; n];
         let mut q1: [Vec<Rgb>; 3] = std::array::from_fn(|_| vec![Rgb::ZERO; n]);
@@ -142,7 +142,7 @@ impl FirstScattering {
     /// From a sweep whose only source was the sun, towards unit `sun_dir` with irradiance
     /// `sun_e` (W/m² per band), every band decaying alike: Σ0_c = E_c·T̄, so ρT̄ = ρΣ0_c/E_c;
     /// `sums` holds Σ0 of the band [`Self::sun_band`] only (Σ1 is the same light along the flow).
-    pub fn sun(index: Arc<FullIndex>, optics: &ScaledOptics, sums: &[[f64; 1]], rho: &[f32], sun_dir: Vec3, sun_e: Rgb) -> FirstScattering {
+    pub fn sun(index: Arc<FullIndex>, optics: &Optics, sums: &[[f64; 1]], rho: &[f32], sun_dir: Vec3, sun_e: Rgb) -> FirstScattering {
         let band = Self::sun_band(sun_e);
         let inv_e = if sun_e[band] > 0.0 { 1.0 / sun_e[band] as f64 } else { 0.0 };
         let acc = sums;
@@ -158,7 +158,7 @@ impl FirstScattering {
         let g = optics.phase.mean_cosine();
         FirstScattering::Sun {
             rho_t: Field16::new(index, &rho_t),
-            q0_per_rho_t: std::array::from_fn(|c| optics.sigma_s[c] as f64 * sun_e[c] as f64 / (4.0 * PI)),
+            q0_per_rho_t: std::array::from_fn(|c| optics.sigma_s()[c] as f64 * sun_e[c] as f64 / (4.0 * PI)),
             q1_per_q0: std::array::from_fn(|a| -g * sun_dir[a] as f64),
         }
     }
@@ -198,7 +198,7 @@ mod tests {
         }
         let index = g.full_index();
         let rho: Vec<f32> = g.data().iter().copied().filter(|r| *r > 0.0).collect();
-        let optics = Optics::new(0.8, Rgb::new(0.9, 0.7, 0.99), 0.6).similarity(0.0);
+        let optics = Optics::new(0.8, Rgb::new(0.9, 0.7, 0.99), 0.6);
         let (dir, e) = (Vec3::new(0.3, 0.8, -0.5).normalize(), Rgb::new(2.0, 3.0, 1.5));
         let acc: Vec<Acc> = rho
             .iter()

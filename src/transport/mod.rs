@@ -165,10 +165,11 @@ impl BandOptics {
     /// δ-M transform of (σt, a, HG g) truncated after order `order`.
     pub fn delta_m(sigma_t: f64, albedo: f64, g: f64, order: usize) -> BandOptics {
         let f = g.max(0.0).powi(order as i32 + 1);
+        let scaled = crate::optics::delta_m(sigma_t, albedo, g, f);
         let chi = (0..=order).map(|l| (g.powi(l as i32) - f) / (1.0 - f)).collect();
         BandOptics {
-            sigma_t: sigma_t * (1.0 - albedo * f),
-            albedo: albedo * (1.0 - f) / (1.0 - albedo * f),
+            sigma_t: scaled.sigma_t,
+            albedo: scaled.albedo,
             f,
             chi,
         }
