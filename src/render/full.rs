@@ -17,12 +17,13 @@
 //! ground still lit by its hemicubes).
 
 use super::diffusion::{boundary_light, check_incident, compute_incident, scene_lit_volume, solved_lit_volume, visible_i0_rgb};
+use super::edge_pixels::{edge_pixels, EDGE_GRID, EDGE_SAMPLES};
 use super::single::pixel_sample;
 use super::{Progress, Timings};
 use crate::cube::{clear_air, BorderKeep, BorderLight, ClearAir, CubeImage, CubeOptions, CubeRenderer};
 use crate::diffusion::{solve_diffusion_lean, BoundaryLight, DiffusionSettings, DiffusionSolution};
 use crate::edges::gather::{CubeRequest, CubeSource, EdgeGather, SunInput};
-use crate::edges::sparse::{gather_image, PixelRay, SparseSettings};
+use crate::edges::sparse::{gather_image, gather_pixels, PixelRay, SparseSettings};
 use crate::error::check_finite_field;
 use crate::error::Result;
 use crate::image::Image;
@@ -372,22 +373,24 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
     let spp = scene.render.aa_samples;
     let n = cam.width as usize * cam.height as usize;
     let mut sum = vec![[Rgb::ZERO; 4]; n];
+    // Sample `s` of `spp` in pixel (x, y).
+    let pixel_ray = |x: u32, y: u32, s: u32, spp: u32| {
+        let (px, py, _) = pixel_sample(scene, x, y, s, spp);
+        let r = cam.ray(px, py);
+        let t_ground = lit.ground_hit(r.origin, r.dir);
+        PixelRay {
+            o: r.origin,
+            d: r.dir,
+            t_max: t_ground.unwrap_or(f32::INFINITY),
+            background: lit.background(r.origin, r.dir, t_ground),
+        }
+    };
     progress.begin("final gather", spp as u64);
     for s in 0..spp {
         if progress.cancelled() {
             break;
         }
-        let ray = |x: u32, y: u32| {
-            let (px, py, _) = pixel_sample(scene, x, y, s, spp);
-            let r = cam.ray(px, py);
-            let t_ground = lit.ground_hit(r.origin, r.dir);
-            PixelRay {
-                o: r.origin,
-                d: r.dir,
-                t_max: t_ground.unwrap_or(f32::INFINITY),
-                background: lit.background(r.origin, r.dir, t_ground),
-            }
-        };
+        let ray = |x: u32, y: u32| pixel_ray(x, y, s, spp);
         let (aovs, stats) = gather_image(&edge, cam.width, cam.height, &ray, Some(SparseSettings::default()));
         progress.log(&format!(
             "final gather: {} cubes rendered, K interpolated for {} segments, own cube for {}",
@@ -408,6 +411,52 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
             live.pixels = sum.iter().map(|a| (a[0] + a[1] + a[2] + a[3]) * k).collect();
             progress.image(&live);
         }
+    }
+    if spp == 1 && !progress.cancelled() {
+        // The edges' pixels as their mean over EDGE_GRID² sub-pixels: one sparse gather over the
+        // image at EDGE_GRID× the resolution, only its sub-pixels in edge pixels (K interpolated
+        // between sub-pixels as between pixels).
+        let edges = edge_pixels(&sum, cam.width);
+        let (w, sub_w) = (cam.width as usize, (cam.width * EDGE_GRID) as usize);
+        let mut is_edge = vec![false; n];
+        for &i in &edges {
+            is_edge[i] = true;
+        }
+        let parent = |x: u32, y: u32| (x / EDGE_GRID, y / EDGE_GRID, (y % EDGE_GRID) * EDGE_GRID + x % EDGE_GRID);
+        let sub_ray = |x: u32, y: u32| {
+            let (px, py, s) = parent(x, y);
+            pixel_ray(px, py, s, EDGE_SAMPLES)
+        };
+        let wanted = |i: usize| {
+            let (px, py, _) = parent((i % sub_w) as u32, (i / sub_w) as u32);
+            is_edge[py as usize * w + px as usize]
+        };
+        let (sub, stats) = gather_pixels(
+            &edge,
+            cam.width * EDGE_GRID,
+            cam.height * EDGE_GRID,
+            &sub_ray,
+            Some(SparseSettings::default()),
+            &wanted,
+        );
+        for &i in &edges {
+            sum[i] = [Rgb::ZERO; 4];
+        }
+        for (k, a) in sub.iter().enumerate() {
+            let (px, py, _) = parent((k % sub_w) as u32, (k / sub_w) as u32);
+            let i = py as usize * w + px as usize;
+            if is_edge[i] {
+                let acc = &mut sum[i];
+                for (c, v) in acc.iter_mut().zip([a.diffusion, a.edge, a.sun_single, a.background]) {
+                    *c += v * (1.0 / EDGE_SAMPLES as f32);
+                }
+            }
+        }
+        progress.log(&format!(
+            "final gather: {} edge pixels re-shaded with {EDGE_SAMPLES} samples ({} cubes)",
+            edges.len(),
+            stats.cubes
+        ));
     }
     let k = 1.0 / spp as f32;
     let mut img = Image::new(cam.width, cam.height);
