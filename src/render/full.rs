@@ -351,7 +351,8 @@ const GATHER_STEP_VOXELS: f32 = 2.0;
 /// Final gather over a propagated scene: the image, with AOV layers when `render.aov` is set.
 /// K is computed sparsely and interpolated across pixels where neighbouring cubes lie at similar
 /// depths ([`crate::edges::sparse`], the paper's speed-up); `render.aa_samples` > 1 averages whole
-/// gathers at jittered pixel positions.
+/// gathers at jittered pixel positions, 1 shades pixel centres and re-shades the edge pixels
+/// with [`EDGE_SAMPLES`] sub-pixels ([`crate::render::edge_pixels`]).
 pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image {
     let cubes = GatherCubes::new(lit, scene);
     let m = &lit.medium;
