@@ -414,50 +414,8 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
         }
     }
     if spp == 1 && !progress.cancelled() {
-        // The edges' pixels as their mean over EDGE_GRID² sub-pixels: one sparse gather over the
-        // image at EDGE_GRID× the resolution, only its sub-pixels in edge pixels (K interpolated
-        // between sub-pixels as between pixels).
-        let edges = edge_pixels(&sum, cam.width);
-        let (w, sub_w) = (cam.width as usize, (cam.width * EDGE_GRID) as usize);
-        let mut is_edge = vec![false; n];
-        for &i in &edges {
-            is_edge[i] = true;
-        }
-        let parent = |x: u32, y: u32| (x / EDGE_GRID, y / EDGE_GRID, (y % EDGE_GRID) * EDGE_GRID + x % EDGE_GRID);
-        let sub_ray = |x: u32, y: u32| {
-            let (px, py, s) = parent(x, y);
-            pixel_ray(px, py, s, EDGE_SAMPLES)
-        };
-        let wanted = |i: usize| {
-            let (px, py, _) = parent((i % sub_w) as u32, (i / sub_w) as u32);
-            is_edge[py as usize * w + px as usize]
-        };
-        let (sub, stats) = gather_pixels(
-            &edge,
-            cam.width * EDGE_GRID,
-            cam.height * EDGE_GRID,
-            &sub_ray,
-            Some(SparseSettings::default()),
-            &wanted,
-        );
-        for &i in &edges {
-            sum[i] = [Rgb::ZERO; 4];
-        }
-        for (k, a) in sub.iter().enumerate() {
-            let (px, py, _) = parent((k % sub_w) as u32, (k / sub_w) as u32);
-            let i = py as usize * w + px as usize;
-            if is_edge[i] {
-                let acc = &mut sum[i];
-                for (c, v) in acc.iter_mut().zip([a.diffusion, a.edge, a.sun_single, a.background]) {
-                    *c += v * (1.0 / EDGE_SAMPLES as f32);
-                }
-            }
-        }
-        progress.log(&format!(
-            "final gather: {} edge pixels re-shaded with {EDGE_SAMPLES} samples ({} cubes)",
-            edges.len(),
-            stats.cubes
-        ));
+        let n_edges = refine_edge_pixels(&edge, cam.width, &mut sum, &pixel_ray);
+        progress.log(&format!("final gather: {n_edges} edge pixels re-shaded with {EDGE_SAMPLES} samples"));
     }
     let k = 1.0 / spp as f32;
     let mut img = Image::new(cam.width, cam.height);
@@ -468,6 +426,64 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
         }
     }
     img
+}
+
+/// Image rows re-shaded by one sparse sub-pixel gather ([`refine_edge_pixels`]): 4 rows of
+/// `EDGE_GRID` = 4 sub-pixels are 16 sub-pixel rows, the sparse gather's largest square, and a
+/// band's memory stays that of 16 image rows at 4× the width.
+const EDGE_BAND_ROWS: u32 = 4;
+
+/// Re-shade the edge pixels ([`edge_pixels`]) of a one-sample image `px` (parts diffusion, edge,
+/// sun single scattering, background) as their mean over `EDGE_GRID`² sub-pixels: per band of
+/// [`EDGE_BAND_ROWS`] rows holding an edge, one sparse gather over the band at `EDGE_GRID`× the
+/// resolution, only the sub-pixels of edge pixels (K interpolated between sub-pixels as between
+/// pixels). `pixel_ray(x, y, s, n)` is sample s of n in pixel (x, y). Returns the number of
+/// pixels re-shaded.
+fn refine_edge_pixels(
+    edge: &EdgeGather,
+    width: u32,
+    px: &mut [[Rgb; 4]],
+    pixel_ray: &(dyn Fn(u32, u32, u32, u32) -> PixelRay + Sync),
+) -> usize {
+    let edges = edge_pixels(px, width);
+    let (w, height) = (width as usize, (px.len() / width.max(1) as usize) as u32);
+    let mut is_edge = vec![false; px.len()];
+    for &i in &edges {
+        is_edge[i] = true;
+        px[i] = [Rgb::ZERO; 4];
+    }
+    let sub_w = w * EDGE_GRID as usize;
+    for y0 in (0..height).step_by(EDGE_BAND_ROWS as usize) {
+        let rows = EDGE_BAND_ROWS.min(height - y0);
+        if !is_edge[y0 as usize * w..(y0 + rows) as usize * w].contains(&true) {
+            continue;
+        }
+        // Band sub-pixel (x, y) → pixel and its sample (pixel_sample's strata).
+        let parent = |x: u32, y: u32| {
+            let y = y + y0 * EDGE_GRID;
+            (x / EDGE_GRID, y / EDGE_GRID, (y % EDGE_GRID) * EDGE_GRID + x % EDGE_GRID)
+        };
+        let pixel_of = |k: usize| {
+            let (x, y, _) = parent((k % sub_w) as u32, (k / sub_w) as u32);
+            y as usize * w + x as usize
+        };
+        let sub_ray = |x: u32, y: u32| {
+            let (x, y, s) = parent(x, y);
+            pixel_ray(x, y, s, EDGE_SAMPLES)
+        };
+        let wanted = |k: usize| is_edge[pixel_of(k)];
+        let sparse = Some(SparseSettings::default());
+        let (sub, _) = gather_pixels(edge, width * EDGE_GRID, rows * EDGE_GRID, &sub_ray, sparse, &wanted);
+        for (k, a) in sub.iter().enumerate() {
+            let i = pixel_of(k);
+            if is_edge[i] {
+                for (c, v) in px[i].iter_mut().zip([a.diffusion, a.edge, a.sun_single, a.background]) {
+                    *c += v * (1.0 / EDGE_SAMPLES as f32);
+                }
+            }
+        }
+    }
+    edges.len()
 }
 
 /// Render the image.
