@@ -468,10 +468,16 @@ impl<'a> CubeRenderer<'a> {
         let t_end = t_ground.unwrap_or(f32::INFINITY);
         // Sunlight travels along −sun.dir; the scattered light travels towards the eye, −d.
         // The sun's exact single scattering per unit extinction (albedo included; TMS under δ-M).
-        let sun_e = if self.sun_transformed {
-            lit.sun.irradiance * m.optics.albedo * m.optics.phase.eval(lit.sun.dir, -d)
+        // Under δ-M the TMS pair is split (`Optics::sun_scatter_split`): the truncated peak's
+        // part counts only where no peak scattering follows on the way to the cube's centre,
+        // weighted by T′^k (T′ the δ-M transmittance marched from the centre), as in the final
+        // gather; the whole pair would count a path of several peak scatterings once per
+        // scattering (the aureole 2–3× too bright, docs/full.md).
+        let (sun_e, sun_peak, peak_k) = if self.sun_transformed {
+            (lit.sun.irradiance * m.optics.albedo * m.optics.phase.eval(lit.sun.dir, -d), Rgb::ZERO, 0.0)
         } else {
-            lit.sun.irradiance * m.optics.sun_scatter(lit.sun.dir, -d)
+            let (smooth, peak, k) = m.optics.sun_scatter_split(lit.sun.dir, -d);
+            (lit.sun.irradiance * smooth, lit.sun.irradiance * peak, k)
         };
         let albedo = m.optics.albedo;
         let sigma_t = m.optics.sigma_t;
@@ -572,7 +578,8 @@ impl<'a> CubeRenderer<'a> {
                             let e = (-sigma_t * rho * len).exp();
                             // T(1 − e)·J with J = (a ρI0 + a p E_sun ρT_sun)/ρ from the pre-multiplied cell.
                             let w = tr * (1.0 - e) / rho;
-                            let mut src = albedo * Rgb::new(c[1], c[2], c[3]) + sun_e * c[4];
+                            let sun = if peak_k > 0.0 { sun_e + sun_peak * tr.powf(peak_k) } else { sun_e };
+                            let mut src = albedo * Rgb::new(c[1], c[2], c[3]) + sun * c[4];
                             if gather {
                                 // The fine field at the sample (at coarser levels a point sample
                                 // of it, scaled by the level's ρ like its I0).

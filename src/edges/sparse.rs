@@ -100,6 +100,19 @@ pub fn gather_image(
     ray: &(dyn Fn(u32, u32) -> PixelRay + Sync),
     sparse: Option<SparseSettings>,
 ) -> (Vec<EdgeAov>, GatherStats) {
+    gather_pixels(g, width, height, ray, sparse, &|_| true)
+}
+
+/// [`gather_image`] for the pixels `wanted(row-major index)` only; the others are left
+/// [`EdgeAov::default`] (a wanted pixel's interpolation still reads the lattice's corners).
+pub fn gather_pixels(
+    g: &EdgeGather,
+    width: u32,
+    height: u32,
+    ray: &(dyn Fn(u32, u32) -> PixelRay + Sync),
+    sparse: Option<SparseSettings>,
+    wanted: &(dyn Fn(usize) -> bool + Sync),
+) -> (Vec<EdgeAov>, GatherStats) {
     let (w, h) = (width as usize, height as usize);
     let cubes = AtomicU64::new(0);
     let interp = AtomicU64::new(0);
@@ -108,6 +121,9 @@ pub fn gather_image(
         let px: Vec<EdgeAov> = (0..w * h)
             .into_par_iter()
             .map(|i| {
+                if !wanted(i) {
+                    return EdgeAov::default();
+                }
                 let r = ray((i % w) as u32, (i / w) as u32);
                 g.radiance(r.o, r.d, r.t_max, r.background)
             })
@@ -154,6 +170,9 @@ pub fn gather_image(
     let px: Vec<EdgeAov> = (0..w * h)
         .into_par_iter()
         .map(|i| {
+            if !wanted(i) {
+                return EdgeAov::default();
+            }
             let (x, y) = (i % w, i / w);
             let r = rays[i];
             let plan = g.plan(r.o, r.d, r.t_max);

@@ -17,12 +17,13 @@
 //! ground still lit by its hemicubes).
 
 use super::diffusion::{boundary_light, check_incident, compute_incident, scene_lit_volume, solved_lit_volume, visible_i0_rgb};
+use super::edge_pixels::{edge_pixels, EDGE_GRID, EDGE_SAMPLES};
 use super::single::pixel_sample;
 use super::{Progress, Timings};
 use crate::cube::{clear_air, BorderKeep, BorderLight, ClearAir, CubeImage, CubeOptions, CubeRenderer};
 use crate::diffusion::{solve_diffusion_lean, BoundaryLight, DiffusionSettings, DiffusionSolution};
 use crate::edges::gather::{CubeRequest, CubeSource, EdgeGather, SunInput};
-use crate::edges::sparse::{gather_image, PixelRay, SparseSettings};
+use crate::edges::sparse::{gather_image, gather_pixels, PixelRay, SparseSettings};
 use crate::error::check_finite_field;
 use crate::error::Result;
 use crate::image::Image;
@@ -350,7 +351,8 @@ const GATHER_STEP_VOXELS: f32 = 2.0;
 /// Final gather over a propagated scene: the image, with AOV layers when `render.aov` is set.
 /// K is computed sparsely and interpolated across pixels where neighbouring cubes lie at similar
 /// depths ([`crate::edges::sparse`], the paper's speed-up); `render.aa_samples` > 1 averages whole
-/// gathers at jittered pixel positions.
+/// gathers at jittered pixel positions, 1 shades pixel centres and re-shades the edge pixels
+/// with [`EDGE_SAMPLES`] sub-pixels ([`crate::render::edge_pixels`]).
 pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image {
     let cubes = GatherCubes::new(lit, scene);
     let m = &lit.medium;
@@ -372,22 +374,24 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
     let spp = scene.render.aa_samples;
     let n = cam.width as usize * cam.height as usize;
     let mut sum = vec![[Rgb::ZERO; 4]; n];
+    // Sample `s` of `spp` in pixel (x, y).
+    let pixel_ray = |x: u32, y: u32, s: u32, spp: u32| {
+        let (px, py, _) = pixel_sample(scene, x, y, s, spp);
+        let r = cam.ray(px, py);
+        let t_ground = lit.ground_hit(r.origin, r.dir);
+        PixelRay {
+            o: r.origin,
+            d: r.dir,
+            t_max: t_ground.unwrap_or(f32::INFINITY),
+            background: lit.background(r.origin, r.dir, t_ground),
+        }
+    };
     progress.begin("final gather", spp as u64);
     for s in 0..spp {
         if progress.cancelled() {
             break;
         }
-        let ray = |x: u32, y: u32| {
-            let (px, py, _) = pixel_sample(scene, x, y, s, spp);
-            let r = cam.ray(px, py);
-            let t_ground = lit.ground_hit(r.origin, r.dir);
-            PixelRay {
-                o: r.origin,
-                d: r.dir,
-                t_max: t_ground.unwrap_or(f32::INFINITY),
-                background: lit.background(r.origin, r.dir, t_ground),
-            }
-        };
+        let ray = |x: u32, y: u32| pixel_ray(x, y, s, spp);
         let (aovs, stats) = gather_image(&edge, cam.width, cam.height, &ray, Some(SparseSettings::default()));
         progress.log(&format!(
             "final gather: {} cubes rendered, K interpolated for {} segments, own cube for {}",
@@ -409,6 +413,10 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
             progress.image(&live);
         }
     }
+    if spp == 1 && !progress.cancelled() {
+        let n_edges = refine_edge_pixels(&edge, cam.width, &mut sum, &pixel_ray);
+        progress.log(&format!("final gather: {n_edges} edge pixels re-shaded with {EDGE_SAMPLES} samples"));
+    }
     let k = 1.0 / spp as f32;
     let mut img = Image::new(cam.width, cam.height);
     img.pixels = sum.iter().map(|a| (a[0] + a[1] + a[2] + a[3]) * k).collect();
@@ -418,6 +426,64 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
         }
     }
     img
+}
+
+/// Image rows re-shaded by one sparse sub-pixel gather ([`refine_edge_pixels`]): 4 rows of
+/// `EDGE_GRID` = 4 sub-pixels are 16 sub-pixel rows, the sparse gather's largest square, and a
+/// band's memory stays that of 16 image rows at 4× the width.
+const EDGE_BAND_ROWS: u32 = 4;
+
+/// Re-shade the edge pixels ([`edge_pixels`]) of a one-sample image `px` (parts diffusion, edge,
+/// sun single scattering, background) as their mean over `EDGE_GRID`² sub-pixels: per band of
+/// [`EDGE_BAND_ROWS`] rows holding an edge, one sparse gather over the band at `EDGE_GRID`× the
+/// resolution, only the sub-pixels of edge pixels (K interpolated between sub-pixels as between
+/// pixels). `pixel_ray(x, y, s, n)` is sample s of n in pixel (x, y). Returns the number of
+/// pixels re-shaded.
+fn refine_edge_pixels(
+    edge: &EdgeGather,
+    width: u32,
+    px: &mut [[Rgb; 4]],
+    pixel_ray: &(dyn Fn(u32, u32, u32, u32) -> PixelRay + Sync),
+) -> usize {
+    let edges = edge_pixels(px, width);
+    let (w, height) = (width as usize, (px.len() / width.max(1) as usize) as u32);
+    let mut is_edge = vec![false; px.len()];
+    for &i in &edges {
+        is_edge[i] = true;
+        px[i] = [Rgb::ZERO; 4];
+    }
+    let sub_w = w * EDGE_GRID as usize;
+    for y0 in (0..height).step_by(EDGE_BAND_ROWS as usize) {
+        let rows = EDGE_BAND_ROWS.min(height - y0);
+        if !is_edge[y0 as usize * w..(y0 + rows) as usize * w].contains(&true) {
+            continue;
+        }
+        // Band sub-pixel (x, y) → pixel and its sample (pixel_sample's strata).
+        let parent = |x: u32, y: u32| {
+            let y = y + y0 * EDGE_GRID;
+            (x / EDGE_GRID, y / EDGE_GRID, (y % EDGE_GRID) * EDGE_GRID + x % EDGE_GRID)
+        };
+        let pixel_of = |k: usize| {
+            let (x, y, _) = parent((k % sub_w) as u32, (k / sub_w) as u32);
+            y as usize * w + x as usize
+        };
+        let sub_ray = |x: u32, y: u32| {
+            let (x, y, s) = parent(x, y);
+            pixel_ray(x, y, s, EDGE_SAMPLES)
+        };
+        let wanted = |k: usize| is_edge[pixel_of(k)];
+        let sparse = Some(SparseSettings::default());
+        let (sub, _) = gather_pixels(edge, width * EDGE_GRID, rows * EDGE_GRID, &sub_ray, sparse, &wanted);
+        for (k, a) in sub.iter().enumerate() {
+            let i = pixel_of(k);
+            if is_edge[i] {
+                for (c, v) in px[i].iter_mut().zip([a.diffusion, a.edge, a.sun_single, a.background]) {
+                    *c += v * (1.0 / EDGE_SAMPLES as f32);
+                }
+            }
+        }
+    }
+    edges.len()
 }
 
 /// Render the image.

@@ -2,6 +2,7 @@
 //! dispatch. Progress, timings and the row loop live below the stages, in [`crate::pipeline`].
 
 pub mod diffusion;
+pub mod edge_pixels;
 pub mod empty;
 pub mod full;
 pub mod single;

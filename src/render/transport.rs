@@ -20,6 +20,7 @@ use crate::medium::march::march;
 use crate::medium::Medium;
 use crate::peak::PeakSpread;
 use crate::pipeline::{render_rows, NoProgress, Progress, Timings};
+use crate::render::edge_pixels::{refine_edges, EDGE_SAMPLES};
 use crate::render::single::pixel_sample;
 use crate::render::transport_ground::EyeGround;
 use crate::render::warm::Warm;
@@ -144,42 +145,6 @@ fn background(scene: &Scene, ground: Option<&EyeGround>, o: Vec3, d: Vec3) -> Rg
     scene.sky.radiance(d)
 }
 
-/// Samples per pixel where a one-sample image has an edge ([`refine_edges`]).
-const EDGE_SAMPLES: u32 = 16;
-
-/// Relative luminance step between neighbouring pixels above which both are re-rendered with
-/// [`EDGE_SAMPLES`].
-const EDGE_CONTRAST: f32 = 0.1;
-
-/// Anti-alias the edges of a one-sample image: a pixel whose luminance differs from one of its
-/// eight neighbours' by more than [`EDGE_CONTRAST`] of the larger is re-shaded by `shade` (the
-/// pixel's mean over a stratified grid, as `reference` integrates the pixel's box). A point
-/// sample on an edge is the wrong estimate of the pixel's mean: at `sunset` the cloud's sunlit
-/// base meets the ground inside one pixel row, and its centre sample read the bright base
-/// (+45 % on that row, +2.6 % over the cloud).
-fn refine_edges(px: &mut [[Rgb; 3]], width: u32, shade: impl Fn(u32, u32) -> [Rgb; 3] + Sync) {
-    let (w, h) = (width as usize, px.len() / width.max(1) as usize);
-    let lum: Vec<f32> = px
-        .iter()
-        .map(|p| (p[0] + p[1] + p[2]).dot(Rgb::new(0.2126, 0.7152, 0.0722)))
-        .collect();
-    let edge = |i: usize| {
-        let (x, y) = ((i % w) as i64, (i / w) as i64);
-        (-1..=1).flat_map(|dy| (-1..=1).map(move |dx| (x + dx, y + dy))).any(|(nx, ny)| {
-            if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
-                return false;
-            }
-            let (a, b) = (lum[i], lum[nx as usize + w * ny as usize]);
-            (a - b).abs() > EDGE_CONTRAST * a.max(b)
-        })
-    };
-    let edges: Vec<usize> = (0..px.len()).filter(|&i| edge(i)).collect();
-    let shaded: Vec<[Rgb; 3]> = edges.par_iter().map(|&i| shade((i % w) as u32, (i / w) as u32)).collect();
-    for (i, p) in edges.into_iter().zip(shaded) {
-        px[i] = p;
-    }
-}
-
 /// Most memory a transport render may ask for (bytes), whatever the machine has; the CLI also
 /// checks the estimate against the memory available before it starts.
 const MAX_BYTES: u64 = 16 << 30;
@@ -287,7 +252,7 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
     });
     if spp == 1 {
         timings.time("gather: edges", || {
-            refine_edges(&mut px, cam.width, |x, y| shade(x, y, EDGE_SAMPLES))
+            refine_edges(&mut px, cam.width, |x, y| shade(x, y, EDGE_SAMPLES));
         });
     }
     let mut img = Image::new(cam.width, cam.height);
@@ -331,30 +296,6 @@ mod tests {
         // A peak scattering on the eye's leg removes the peak's share: only the smooth part is left.
         let smooth = (1.0 - band.f) * band.phase(0.95);
         assert!((sun_phase(&peak, g, &band, a, 0.95, 0.5, 0.0) - smooth).abs() < 1e-9);
-    }
-
-    #[test]
-    fn only_pixels_beside_an_edge_are_reshaded() {
-        // 5×3, a step between columns 1 and 2 (luminance 1 → 2), and a 5 % ripple at (4, 0).
-        let (w, h) = (5u32, 3u32);
-        let mut px: Vec<[Rgb; 3]> = (0..w * h)
-            .map(|i| {
-                let (x, y) = (i % w, i / w);
-                let v = if x < 2 {
-                    1.0
-                } else if (x, y) == (4, 0) {
-                    2.1
-                } else {
-                    2.0
-                };
-                [Rgb::splat(v), Rgb::ZERO, Rgb::ZERO]
-            })
-            .collect();
-        refine_edges(&mut px, w, |_, _| [Rgb::splat(-1.0), Rgb::ZERO, Rgb::ZERO]);
-        for (i, p) in px.iter().enumerate() {
-            let x = i as u32 % w;
-            assert_eq!(p[0].x == -1.0, x == 1 || x == 2, "pixel {i}: {:?}", p[0]);
-        }
     }
 
     #[test]

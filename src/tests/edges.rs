@@ -400,6 +400,8 @@ fn sparse_gather_matches_per_pixel_cubes_on_a_smooth_scene() {
     // A cube radiance that varies smoothly in space: interpolating K across pixels must agree with
     // one cube per segment to well under 1 %, while rendering fewer cubes; with a depth tolerance
     // of 0 m it must reproduce the reference.
+    use crate::edges::gather::EdgeAov;
+    use crate::edges::sparse::gather_pixels;
     use crate::edges::{gather_image, PixelRay, SparseSettings};
     struct Smooth;
     impl CubeSource for Smooth {
@@ -454,6 +456,13 @@ fn sparse_gather_matches_per_pixel_cubes_on_a_smooth_scene() {
     assert!(sum > 0.0 && diff < 5e-3 * sum, "{diff} vs {sum}");
     // Deterministic: the same again, bit for bit.
     assert_eq!(gather_image(&g, w, h, &ray, Some(sp)).0, img);
+    // Only some pixels (full's edge pixels): the same bits there, nothing elsewhere.
+    let wanted = |i: usize| (i % w as usize) % 5 == 2;
+    let (part, st_part) = gather_pixels(&g, w, h, &ray, Some(sp), &wanted);
+    assert!(st_part.cubes <= st.cubes, "{st_part:?} vs {st:?}");
+    for (i, (a, b)) in part.iter().zip(&img).enumerate() {
+        assert_eq!(*a, if wanted(i) { *b } else { EdgeAov::default() }, "pixel {i}");
+    }
     let strict = SparseSettings {
         block: 8,
         depth_tolerance: 0.0,
