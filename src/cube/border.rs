@@ -390,7 +390,7 @@ mod tests {
     /// Two smooth lobes (peak 1) in a `dims` grid with a clear-air gap between them, lit with a
     /// constant I0, half sun transmittance and a grey sky.
     fn two_lobes(dims: [usize; 3], radius: f32) -> LitVolume {
-        let g = crate::tests::common::two_lobes(dims, radius);
+        let g = crate::medium::test_grids::two_lobes(dims, radius);
         let n = g.len();
         let m = crate::medium::Medium::new(g, Vec3::ZERO, Vec3::ONE, 1.0, Rgb::splat(0.9), 0.8);
         let sun = Sun {

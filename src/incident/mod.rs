@@ -1010,7 +1010,7 @@ mod tests {
     fn sweep_matches_a_per_ray_dda_walk() {
         let dims = [7, 6, 5];
         let mut rng = Rng::new(11, 0);
-        let g = crate::tests::common::random_cloud(dims, &mut rng, 0.7, 0.2, 1.0);
+        let g = crate::medium::test_grids::random_cloud(dims, &mut rng, 0.7, 0.2, 1.0);
         let m = Medium::new(g, Vec3::ZERO, Vec3::new(1.0, 0.45, 1.3), 0.8, Rgb::new(0.9, 0.8, 0.7), 0.0);
         assert_eq!(m.active_box(1), Some(([0; 3], dims)), "the oracle walks the whole grid");
         let bins = DirectionBins::new();

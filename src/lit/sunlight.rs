@@ -189,7 +189,7 @@ mod tests {
     fn transmittance_matches_the_medium_s() {
         let dims = [9, 7, 8];
         let mut rng = Rng::new(7, 2);
-        let g = crate::tests::common::random_cloud(dims, &mut rng, 0.6, 0.0, 3.0);
+        let g = crate::medium::test_grids::random_cloud(dims, &mut rng, 0.6, 0.0, 3.0);
         let m = Medium::new(g, Vec3::new(-2.0, 1.0, 0.5), Vec3::new(1.0, 0.7, 1.3), 0.4, Rgb::ONE, 0.0);
         for n in 0..3000 {
             let p = m.origin + m.voxel_size * Vec3::new(rng.uniform() * 11.0 - 1.0, rng.uniform() * 9.0 - 1.0, rng.uniform() * 10.0 - 1.0);

@@ -19,6 +19,8 @@ pub mod march;
 pub mod procedural;
 pub mod sparse;
 pub mod subgrid;
+#[cfg(test)]
+pub(crate) mod test_grids;
 pub mod up_axis;
 pub mod vdb;
 

@@ -2,7 +2,7 @@
 //! (empty scene = sky bins, furnace, hemicube irradiance, opaque slab shadow), the pyramid
 //! renderer against the brute-force march, border-voxel detection and the stage-1 sign convention.
 
-use super::common::two_lobes;
+use crate::medium::test_grids::two_lobes;
 use crate::cube::border::{find_border_voxels, render_border_cubes};
 use crate::cube::ground::{hemicube_irradiance, hemicube_weights, render_ground, LitGround};
 use crate::cube::render::{opposite_bin, render_cube_brute, BinMask, CubeOptions, CubeRenderer};
