@@ -15,6 +15,7 @@ mod convergence;
 mod dsa;
 mod grid;
 mod ground;
+mod moments16;
 mod simd;
 pub mod slab;
 pub mod solve;
@@ -98,12 +99,12 @@ impl TransportMemory {
     /// margin that keeps the estimate at or above the measured peaks (148 MB at 100×80×60, order 7).
     pub const DOMAIN_BYTES: u64 = 200;
 
-    /// Bytes per full voxel: at a sweep's peak two spherical-harmonic arrays (the moments and the
-    /// sweep's new moments; the source is evaluated from the moments, not stored) of 3 bands ×
-    /// (L + 1)² f32, plus a batch of ordinates' sources and radiances (2 × 12 B each): 1,920 B at
-    /// order 7 (a stored source array would add 768 B).
+    /// Bytes per full voxel: at a sweep's peak two spherical-harmonic arrays of 3 bands ×
+    /// (L + 1)², the last iterate's moments in 16-bit codes and the sweep's new moments in f32
+    /// (the source is evaluated from the moments, not stored), plus a batch of ordinates' sources
+    /// and radiances (2 × 12 B each): 1,536 B at order 7.
     pub fn bytes_per_full_voxel(order: usize) -> u64 {
-        2 * 3 * 4 * crate::math::sh_count(order) as u64 + 2 * 12 * source::ORDINATE_BATCH as u64
+        3 * (2 + 4) * crate::math::sh_count(order) as u64 + 2 * 12 * source::ORDINATE_BATCH as u64
     }
 
     /// The estimate for medium `m` solved with `s`.
