@@ -29,10 +29,9 @@ pub(super) const DIVERGENCE_FACTOR: f64 = 4.0;
 /// (max |ΔI_00|, max |I_00|) over the full voxels and bands (W·m⁻²·sr⁻¹): inf for the first
 /// when either iterate holds a non-finite value (so a NaN is never read as "no change").
 pub(super) fn i00_change(next: &[f32], moments: &Moments16) -> (f64, f64) {
-    let nsh = moments.nsh();
     next.iter()
-        .step_by(nsh)
-        .zip((0..moments.len()).step_by(nsh).map(|i| moments.get(i)))
+        .step_by(moments.nsh())
+        .zip(moments.i00())
         .fold((0.0f64, 1e-30f64), |(c, m), (x, y)| {
             let d = (x - y).abs() as f64;
             (if d.is_finite() { c.max(d) } else { f64::INFINITY }, m.max(x.abs() as f64))

@@ -58,6 +58,11 @@ impl Moments16 {
         self.codes[i].to_f32() * self.scale[(i / self.nsh) % 3]
     }
 
+    /// I_00 of every full voxel and band, in order.
+    pub(super) fn i00(&self) -> impl Iterator<Item = f32> + '_ {
+        self.codes.iter().step_by(self.nsh).enumerate().map(|(j, c)| c.to_f32() * self.scale[j % 3])
+    }
+
     /// The codes of every full voxel in order, 3·nsh each.
     pub(super) fn codes(&self) -> &[Signed16] {
         &self.codes
@@ -117,6 +122,7 @@ mod tests {
         }
         // Zero stays zero exactly, and storing again replaces the codes.
         assert_eq!(m.get(8), 0.0);
+        assert!(m.i00().eq([0, 4, 8, 12, 16, 20].map(|i| m.get(i))));
         let mut m = m;
         m.store(&[0.0; 24]);
         assert!((0..24).all(|i| m.get(i) == 0.0));

@@ -337,7 +337,8 @@ unsafe fn sweep_kernel<const AVX: bool>(
             } else {
                 whole
             };
-            for (ib, (&(rho, fi), &(_, fa))) in row.iter().zip(row_ahead).enumerate().skip(lo).take(hi - lo) {
+            for (k, (&(rho, fi), &(_, fa))) in row[lo..hi].iter().zip(&row_ahead[lo..hi]).enumerate() {
+                let ib = lo + k;
                 // The full voxels' sources and radiances lie a grid row apart in x-major sweeps
                 // (past the L2 cache on large boxes): ask for the lines a few cells ahead.
                 if fa != u32::MAX {
