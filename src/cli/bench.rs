@@ -1,6 +1,7 @@
-//! `cloudgi bench`: every stage's time (the `Timings` the renderer collects) for the
-//! chosen methods on three sizes of the procedural cloud, as a markdown table (the table in
-//! docs/performance.md, "Time per stage", is this command's output).
+//! `cloudgi bench`: every stage's time (the `Timings` the renderer collects) and each run's peak
+//! memory for the chosen methods on three sizes of the procedural cloud and on any scene files
+//! named with `--clouds` (e.g. the Disney cloud), as a markdown table (the tables in
+//! docs/performance.md, "Time per stage", are this command's output).
 
 use super::scene_file::SceneFile;
 use super::MethodArg;
@@ -25,6 +26,10 @@ pub struct BenchArgs {
     /// scaled by the voxel count, exceeds this many seconds; a note names the skipped runs.
     #[arg(long, default_value_t = 120.0)]
     max_seconds: f64,
+    /// Scene files timed as they stand after the procedural sizes (their own grid, e.g.
+    /// examples/bench/disney16.toml: the Disney cloud at 1/16), one row per method each.
+    #[arg(long, value_delimiter = ',')]
+    clouds: Vec<PathBuf>,
     /// Override camera.width (pixels).
     #[arg(long)]
     width: Option<u32>,
@@ -70,23 +75,67 @@ fn parse_size(s: &str) -> Result<[usize; 3]> {
     }
 }
 
-/// Seconds a run on `size` is predicted to take from the same method's run on `prev` that took
-/// `seconds`: proportional to the voxels (the methods' work is per voxel).
-fn predicted(prev: [usize; 3], seconds: f64, size: [usize; 3]) -> f64 {
-    let n = |s: [usize; 3]| s.iter().map(|&v| v as f64).product::<f64>();
-    seconds * n(size) / n(prev)
+/// Seconds a run on a grid of `voxels` is predicted to take from the same method's run on a grid
+/// of `prev` voxels that took `seconds`: proportional to the voxels (the methods' work is per
+/// voxel).
+fn predicted(prev: usize, seconds: f64, voxels: usize) -> f64 {
+    seconds * voxels as f64 / prev.max(1) as f64
 }
 
-/// One table row: the cloud, the method, seconds per stage (in `stages`' order) and the total.
+/// One table row: the cloud, the method, seconds per stage (in `stages`' order), the total and
+/// the run's peak memory.
 struct Row {
-    size: [usize; 3],
+    cloud: String,
+    /// Grid voxels (what the next cloud's time is predicted from).
+    voxels: usize,
     method: Method,
     stages: Vec<(String, f64)>,
     total: f64,
+    memory: Option<Peak>,
+}
+
+/// A run's peak resident memory above the process's resident memory at its start (bytes), and
+/// the cloud's full voxels.
+#[derive(Clone, Copy)]
+struct Peak {
+    bytes: u64,
+    full_voxels: usize,
+}
+
+/// The process's resident memory, from /proc/self/status (Linux; None elsewhere).
+mod resident {
+    /// A `/proc/self/status` entry (`VmRSS:`, `VmHWM:`) in bytes.
+    fn status(key: &str) -> Option<u64> {
+        let text = std::fs::read_to_string("/proc/self/status").ok()?;
+        let line = text.lines().find(|l| l.starts_with(key))?;
+        let kb: u64 = line[key.len()..].trim().trim_end_matches("kB").trim().parse().ok()?;
+        Some(kb * 1024)
+    }
+
+    /// Restart the peak (writing 5 to /proc/self/clear_refs sets it to the resident memory
+    /// now) and return the resident memory now.
+    pub(super) fn restart_peak() -> Option<u64> {
+        std::fs::write("/proc/self/clear_refs", "5").ok()?;
+        status("VmRSS:")
+    }
+
+    /// The peak since [`restart_peak`].
+    pub(super) fn peak() -> Option<u64> {
+        status("VmHWM:")
+    }
+}
+
+/// One cloud of the table: its name and scene.
+struct Cloud {
+    name: String,
+    desc: crate::scene::SceneDesc,
+    source: String,
+    base: PathBuf,
 }
 
 /// The markdown table: one column per stage any method ran (in order of first appearance),
-/// the total, and the total over that of the first method on the same cloud.
+/// the total, the total over that of the first method on the same cloud, and the run's peak
+/// memory in all and per full voxel.
 fn table(rows: &[Row]) -> String {
     let mut names: Vec<&str> = Vec::new();
     for r in rows {
@@ -98,23 +147,27 @@ fn table(rows: &[Row]) -> String {
     }
     let first = rows.first().map(|r| r.method);
     let mut out = format!(
-        "| cloud | method | {} | total | × {} |\n",
+        "| cloud | method | {} | total | × {} | peak | B per full voxel |\n",
         names.join(" | "),
         first.map_or("", |m| m.name())
     );
-    out += &format!("|---|---|{}---|---|\n", "---|".repeat(names.len()));
+    out += &format!("|---|---|{}---|---|---|---|\n", "---|".repeat(names.len()));
     for r in rows {
-        let base = rows.iter().find(|b| b.size == r.size && Some(b.method) == first).map(|b| b.total);
+        let base = rows.iter().find(|b| b.cloud == r.cloud && Some(b.method) == first).map(|b| b.total);
         let cells: Vec<String> = names
             .iter()
             .map(|n| r.stages.iter().find(|s| s.0 == *n).map_or("–".into(), |s| format!("{:.2} s", s.1)))
             .collect();
         let ratio = base.filter(|b| *b > 0.0).map_or("–".into(), |b| format!("{:.1}", r.total / b));
+        let (peak, per_voxel) = r.memory.map_or(("–".into(), "–".into()), |p| {
+            (
+                format!("{:.1} MB", p.bytes as f64 / 1e6),
+                format!("{:.0}", p.bytes as f64 / p.full_voxels.max(1) as f64),
+            )
+        });
         out += &format!(
-            "| {}×{}×{} | {} | {} | {:.2} s | {ratio} |\n",
-            r.size[0],
-            r.size[1],
-            r.size[2],
+            "| {} | {} | {} | {:.2} s | {ratio} | {peak} | {per_voxel} |\n",
+            r.cloud,
             r.method.name(),
             cells.join(" | "),
             r.total
@@ -142,26 +195,37 @@ pub fn run(a: BenchArgs) -> Result<()> {
     }
     let base = &file.desc.medium;
     let extent = base.voxel_size * base.resolution[0] as f32;
-    let mut rows = Vec::new();
-    let mut notes = Vec::new();
-    let name = |s: &[usize; 3]| format!("{}×{}×{}", s[0], s[1], s[2]);
-    for size in &sizes {
-        for m in &a.methods {
-            let method: Method = (*m).into();
-            let last = rows.iter().rev().find(|r: &&Row| r.method == method);
-            if let Some(t) = last.map(|r| predicted(r.size, r.total, *size)).filter(|t| *t > a.max_seconds) {
-                notes.push(format!(
-                    "{} {}: skipped, ≈ {t:.0} s predicted from {} (raise --max-seconds {} to run it)",
-                    name(size),
-                    method.name(),
-                    name(&last.map_or(*size, |r| r.size)),
-                    a.max_seconds
-                ));
-                continue;
-            }
+    let mut clouds: Vec<Cloud> = sizes
+        .iter()
+        .map(|size| {
             let mut desc = file.desc.clone();
             desc.medium.resolution = *size;
             desc.medium.voxel_size = extent / size[0] as f32;
+            Cloud {
+                name: format!("{}×{}×{}", size[0], size[1], size[2]),
+                desc,
+                source: file.source.clone(),
+                base: file.base.clone(),
+            }
+        })
+        .collect();
+    for path in &a.clouds {
+        let f = SceneFile::read(Some(path))?;
+        clouds.push(Cloud {
+            name: path
+                .file_stem()
+                .map_or_else(|| f.source.clone(), |s| s.to_string_lossy().into_owned()),
+            desc: f.desc,
+            source: f.source,
+            base: f.base,
+        });
+    }
+    let mut rows = Vec::new();
+    let mut notes = Vec::new();
+    for cloud in &clouds {
+        for m in &a.methods {
+            let method: Method = (*m).into();
+            let mut desc = cloud.desc.clone();
             desc.render.method = method;
             if let Some(w) = a.width {
                 desc.camera.width = w;
@@ -169,19 +233,38 @@ pub fn run(a: BenchArgs) -> Result<()> {
             if let Some(h) = a.height {
                 desc.camera.height = h;
             }
-            super::memory::check_image(&desc, &file.source)?;
-            let scene = Scene::build(desc, &file.source, &file.base)?;
+            super::memory::check_image(&desc, &cloud.source)?;
+            let resident = resident::restart_peak();
+            let scene = Scene::build(desc, &cloud.source, &cloud.base)?;
+            let voxels = scene.medium.density.len();
+            let last = rows.iter().rev().find(|r: &&Row| r.method == method);
+            if let Some(t) = last.map(|r| predicted(r.voxels, r.total, voxels)).filter(|t| *t > a.max_seconds) {
+                notes.push(format!(
+                    "{} {}: skipped, ≈ {t:.0} s predicted from {} (raise --max-seconds {} to run it)",
+                    cloud.name,
+                    method.name(),
+                    last.map_or("", |r| &r.cloud),
+                    a.max_seconds
+                ));
+                continue;
+            }
             super::memory::check_solver(&scene)?;
             let log = Log(Mutex::new(Vec::new()));
             let out = crate::render::render(&scene, &log)?;
+            let memory = resident.zip(resident::peak()).map(|(start, peak)| Peak {
+                bytes: peak.saturating_sub(start),
+                full_voxels: scene.medium.density.count(),
+            });
             for l in log.0.into_inner().unwrap_or_default() {
-                notes.push(format!("{} {}: {l}", name(size), method.name()));
+                notes.push(format!("{} {}: {l}", cloud.name, method.name()));
             }
             rows.push(Row {
-                size: *size,
+                cloud: cloud.name.clone(),
+                voxels,
                 method,
                 total: out.timings.total(),
                 stages: out.timings.stages,
+                memory,
             });
         }
     }
@@ -217,7 +300,7 @@ mod tests {
 
     #[test]
     fn runs_are_predicted_by_voxels_and_per_iteration_lines_dropped() {
-        assert_eq!(predicted([50, 40, 30], 4.0, [100, 80, 60]), 32.0);
+        assert_eq!(predicted(50 * 40 * 30, 4.0, 100 * 80 * 60), 32.0);
         let log = Log(Mutex::new(Vec::new()));
         log.log("transport: iteration 3, relative change of I0 2.09e-1");
         log.log("transport: 128 ordinates, order 7, 14 iterations");
@@ -227,7 +310,12 @@ mod tests {
     #[test]
     fn table_has_a_column_per_stage_and_the_ratio_to_the_first_method() {
         let row = |method, stages: &[(&str, f64)]| Row {
-            size: [2, 2, 2],
+            cloud: "2×2×2".into(),
+            voxels: 8,
+            memory: (method == Method::Diffusion).then_some(Peak {
+                bytes: 2_500_000,
+                full_voxels: 5,
+            }),
             method,
             total: stages.iter().map(|s| s.1).sum(),
             stages: stages.iter().map(|(n, t)| (n.to_string(), *t)).collect(),
@@ -237,8 +325,11 @@ mod tests {
             row(Method::Diffusion, &[("incident light", 1.0), ("gather", 1.0)]),
         ]);
         let lines: Vec<&str> = t.lines().collect();
-        assert_eq!(lines[0], "| cloud | method | gather | incident light | total | × single |");
-        assert_eq!(lines[2], "| 2×2×2 | single | 0.50 s | – | 0.50 s | 1.0 |");
-        assert_eq!(lines[3], "| 2×2×2 | diffusion | 1.00 s | 1.00 s | 2.00 s | 4.0 |");
+        assert_eq!(
+            lines[0],
+            "| cloud | method | gather | incident light | total | × single | peak | B per full voxel |"
+        );
+        assert_eq!(lines[2], "| 2×2×2 | single | 0.50 s | – | 0.50 s | 1.0 | – | – |");
+        assert_eq!(lines[3], "| 2×2×2 | diffusion | 1.00 s | 1.00 s | 2.00 s | 4.0 | 2.5 MB | 500000 |");
     }
 }

@@ -51,6 +51,9 @@ pub(super) struct Ctx<'a> {
     pub(super) sun_t: &'a [[f32; 3]],
     /// The box's cells in each major axis' sweep order ([`box_cells`]).
     pub(super) cells: [Vec<(f32, u32)>; 3],
+    /// Per major axis, each row of `cells`: its first full cell and one past its last
+    /// ([`full_spans`]).
+    pub(super) spans: [Vec<(u32, u32)>; 3],
     pub(super) sigma_t: [f32; 3],
     /// All bands share σt′ (one set of step weights serves them).
     pub(super) grey: bool,
@@ -76,6 +79,8 @@ impl<'a> Ctx<'a> {
         let rho = &*m.density;
         let (lo, hi) = m.active_box(1).unwrap_or(([0; 3], dims));
         let n = [0, 1, 2].map(|a| hi[a] - lo[a]);
+        let cells = [0, 1, 2].map(|a| box_cells(dims, lo, n, rho, &index.full, index.voxels.len(), a));
+        let spans = [0, 1, 2].map(|a| full_spans(&cells[a], n[cross_axes(a).0]));
         Ctx {
             dims,
             lo,
@@ -87,7 +92,8 @@ impl<'a> Ctx<'a> {
             even: parity_order(order).1,
             voxels: &index.voxels,
             sun_t,
-            cells: [0, 1, 2].map(|a| box_cells(dims, lo, n, rho, &index.full, index.voxels.len(), a)),
+            cells,
+            spans,
             sigma_t: [0, 1, 2].map(|b| bands[b].sigma_t as f32),
             grey: bands[0].sigma_t == bands[1].sigma_t && bands[1].sigma_t == bands[2].sigma_t,
             sky,
@@ -161,4 +167,19 @@ pub(super) fn box_cells(
     }
     out.extend([(0.0, u32::MAX); PREFETCH_AHEAD]);
     out
+}
+
+/// Per row of `cells` (rows of `row` cells, [`box_cells`]' order; the look-ahead padding after the
+/// last row ignored): the index of its first full cell and one past its last, (0, 0) for a row
+/// without one. The sweeps step only the cells of a row that a full cell or a non-clear upwind
+/// cell can reach.
+pub(super) fn full_spans(cells: &[(f32, u32)], row: usize) -> Vec<(u32, u32)> {
+    let rows = (cells.len() - PREFETCH_AHEAD) / row.max(1);
+    cells[..rows * row]
+        .chunks_exact(row.max(1))
+        .map(|r| match (r.iter().position(|c| c.1 != u32::MAX), r.iter().rposition(|c| c.1 != u32::MAX)) {
+            (Some(first), Some(last)) => (first as u32, last as u32 + 1),
+            _ => (0, 0),
+        })
+        .collect()
 }

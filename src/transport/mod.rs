@@ -15,6 +15,7 @@ mod convergence;
 mod dsa;
 mod grid;
 mod ground;
+mod moments16;
 mod simd;
 pub mod slab;
 pub mod solve;
@@ -75,10 +76,11 @@ impl TransportSettings {
 
 /// Peak memory of a transport render (solve, eye source and gather; not the image), estimated
 /// from the medium before anything is allocated. Peak resident memory measured on the
-/// development sandbox (`/usr/bin/time -f %M`, 8×8 images, less a `single` render of the same
-/// grid): the default cloud at 100×80×60 (44 k full voxels) 127.5 MB at order 7 and 52.8 MB at
-/// order 3, at 50×40×30 16.4 MB, a full 48³ cube at order 3 87.2 MB; the model below is within
-/// 3 % of each.
+/// development sandbox (`/usr/bin/time -f %M`, 8×6 images unless named; docs/performance.md,
+/// "Peaks"): the default cloud at 50×40×30 20.2 MB, 100×80×60 94.0 MB, 200×160×120 674 MB, the
+/// Disney cloud at a quarter of 1/16 (7.6 k full voxels, 48×36) 25.6 MB and at 1/16 (363 k,
+/// 320×240) 681 MB; the model below is 1.03–1.25 times each (the most on the smallest cloud,
+/// where the fixed part is most of it).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TransportMemory {
     /// Voxels with ρ > 0.
@@ -90,20 +92,23 @@ pub struct TransportMemory {
 }
 
 impl TransportMemory {
+    /// Bytes of a render whatever the cloud: the program, its libraries and threads.
+    pub const FIXED_BYTES: u64 = 14 << 20;
     /// Bytes per voxel of the whole grid at the solve's peak: the full-voxel index (4) and the
     /// δ-M sun transmittance per band (12), rounded up to the fit of the measurements (the
     /// gather's eye-source grids, 24 B, come after the solve has freed its sweep arrays).
     pub const GRID_BYTES: u64 = 24;
-    /// Bytes per voxel of the tight box of full voxels: the acceleration's box-sized arrays and a
-    /// margin that keeps the estimate at or above the measured peaks (148 MB at 100×80×60, order 7).
-    pub const DOMAIN_BYTES: u64 = 200;
+    /// Bytes per voxel of the tight box of full voxels: the sweeps' cells in three orders
+    /// (3 × 8 B per voxel of the swept box), the acceleration's box-sized arrays, and a margin
+    /// that keeps the estimate at or above the measured peaks.
+    pub const DOMAIN_BYTES: u64 = 56;
 
-    /// Bytes per full voxel: at a sweep's peak two spherical-harmonic arrays (the moments and the
-    /// sweep's new moments; the source is evaluated from the moments, not stored) of 3 bands ×
-    /// (L + 1)² f32, plus a batch of ordinates' sources and radiances (2 × 12 B each): 1,920 B at
-    /// order 7 (a stored source array would add 768 B).
+    /// Bytes per full voxel: at a sweep's peak two spherical-harmonic arrays of 3 bands ×
+    /// (L + 1)², the last iterate's moments in 16-bit codes and the sweep's new moments in f32
+    /// (the source is evaluated from the moments, not stored), plus a batch of ordinates' sources
+    /// and radiances (2 × 12 B each): 1,536 B at order 7.
     pub fn bytes_per_full_voxel(order: usize) -> u64 {
-        2 * 3 * 4 * crate::math::sh_count(order) as u64 + 2 * 12 * source::ORDINATE_BATCH as u64
+        3 * (2 + 4) * crate::math::sh_count(order) as u64 + 2 * 12 * source::ORDINATE_BATCH as u64
     }
 
     /// The estimate for medium `m` solved with `s`.
@@ -113,7 +118,10 @@ impl TransportMemory {
         TransportMemory {
             full_voxels: full,
             order: s.order,
-            bytes: full * Self::bytes_per_full_voxel(s.order) + m.density.len() as u64 * Self::GRID_BYTES + domain * Self::DOMAIN_BYTES,
+            bytes: Self::FIXED_BYTES
+                + full * Self::bytes_per_full_voxel(s.order)
+                + m.density.len() as u64 * Self::GRID_BYTES
+                + domain * Self::DOMAIN_BYTES,
         }
     }
 

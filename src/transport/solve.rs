@@ -30,6 +30,7 @@ use super::dsa::{accelerate, hierarchies};
 use super::grid::{Ctx, FullVoxels};
 use super::ground::GroundLight;
 pub use super::ground::GroundMap;
+use super::moments16::Moments16;
 use super::source::{diffuse_source_of, parity_order, PairTables};
 use super::sphere::Quadrature;
 use super::sweep::sweep;
@@ -190,14 +191,14 @@ pub fn solve_warm(
         ground_map,
         ..
     } = it;
-    drop(next);
+    drop(moments);
     let nsh = ctx.nsh;
     // The field takes the index and T′ the solver no longer reads.
-    let mut field = solver.field(&moments, history, ground_map, Vec::new(), Vec::new());
+    let mut field = solver.field(&next, history, ground_map, Vec::new(), Vec::new());
     drop(ctx);
     let state = opts
         .keep
-        .then(|| TransportState::new(m, s.order, index.full.clone(), moments, 3 * nsh));
+        .then(|| TransportState::new(m, s.order, index.full.clone(), next, 3 * nsh));
     (field.full, field.sun_t) = (index.full, sun_t);
     Ok((field, state))
 }
@@ -236,8 +237,10 @@ struct Solver<'a> {
 
 /// The iterate and the record of the iteration.
 struct Iterate {
-    /// The moments I_lm per full voxel, band and harmonic (solver order), and the next sweep's.
-    moments: Vec<f32>,
+    /// The last iterate's moments I_lm per full voxel, band and harmonic (solver order), coded,
+    /// as the sweeps read them.
+    moments: Moments16,
+    /// The sweep's new moments; between iterations, the last iterate itself in f32.
     next: Vec<f32>,
     /// Relative change of I0 after each iteration.
     history: Vec<f64>,
@@ -261,10 +264,10 @@ impl Iterate {
         // A warm start's error is mostly the slow modes the dominant-mode step removes, which
         // needs three iterations to see (src/transport/warm.rs).
         let min_iterations = if warm.is_some() { WARM_MIN_ITERATIONS } else { 1 };
-        let moments = warm.unwrap_or_else(|| vec![0f32; solver.ctx.voxels.len() * 3 * solver.ctx.nsh]);
+        let next = warm.unwrap_or_else(|| vec![0f32; solver.ctx.voxels.len() * 3 * solver.ctx.nsh]);
         Iterate {
-            next: vec![0f32; moments.len()],
-            moments,
+            moments: Moments16::of(&next, solver.ctx.nsh),
+            next,
             history: Vec::new(),
             ground_map: solver.ground.map(None),
             min_iterations,
@@ -286,7 +289,7 @@ impl Solver<'_> {
     /// Source iteration to the tolerance or the cap: a sweep, the acceleration, the divergence
     /// guard and the extrapolation per iteration.
     fn iterate(&self, it: &mut Iterate, progress: &dyn Progress, live: Option<&dyn Fn(&TransportField)>) -> Result<()> {
-        let (s, nsh) = (self.s, self.ctx.nsh);
+        let s = self.s;
         // The extrapolation assumes the slowest error mode keeps its sign (a ratio r > 0). With a
         // back-scattering phase function the odd moments' scattering eigenvalues a′χ′_l are
         // negative: their error alternates, and adding the last step r/(1 − r) times amplified
@@ -303,7 +306,7 @@ impl Solver<'_> {
             if it.accelerated && !self.hier.is_empty() {
                 accelerate(self.ctx, self.ctx.voxels, self.hier, &self.optics.bands, &it.moments, &mut it.next);
             }
-            let (change_abs, scale) = i00_change(&it.next, &it.moments, nsh);
+            let (change_abs, scale) = i00_change(&it.next, &it.moments);
             it.since_start += 1;
             let diverging = !change_abs.is_finite() || (it.since_start >= 2 && change_abs > DIVERGENCE_FACTOR * it.smallest);
             if diverging && it.accelerated {
@@ -326,13 +329,14 @@ impl Solver<'_> {
                 .then(|| dominant_mode_step(&it.history, it.extrapolated))
                 .flatten()
             {
+                let old = &it.moments;
                 it.next
                     .par_iter_mut()
-                    .zip(it.moments.par_iter())
-                    .for_each(|(x, o)| *x += k * (*x - o));
+                    .enumerate()
+                    .for_each(|(i, x)| *x += k * (*x - old.get(i)));
                 it.extrapolated = it.history.len();
             }
-            std::mem::swap(&mut it.moments, &mut it.next);
+            it.moments.store(&it.next);
             it.ground_map = self.ground.map(Some(&e_down));
             progress.converge(change, s.tolerance);
             progress.advance(1);
@@ -343,7 +347,7 @@ impl Solver<'_> {
             ));
             if let Some(show) = live {
                 show(&self.field(
-                    &it.moments,
+                    &it.next,
                     it.history.clone(),
                     it.ground_map.clone(),
                     self.ctx.full.to_vec(),
@@ -366,8 +370,8 @@ impl Solver<'_> {
     fn give_up_acceleration(&self, it: &mut Iterate, change_abs: f64, progress: &dyn Progress) {
         it.accelerated = false;
         it.given_up = Some(it.history.len() + 1);
-        it.moments.fill(0.0);
         it.next.fill(0.0);
+        it.moments.store(&it.next);
         let smallest = it.smallest;
         (it.smallest, it.since_start) = (f64::INFINITY, 0);
         it.ground_map = self.ground.map(None);

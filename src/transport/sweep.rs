@@ -9,6 +9,7 @@
 
 use super::grid::{cross_axes, Ctx, PREFETCH_AHEAD};
 use super::ground::GroundMap;
+use super::moments16::Moments16;
 use super::simd::{has_avx, prefetch};
 use super::source::{moments_block, source_block, Lanes, PairTables, ORDINATE_BATCH, PAIRS};
 use super::sphere::Quadrature;
@@ -19,13 +20,13 @@ use rayon::prelude::*;
 /// One sweep of every ordinate: the diffuse radiance moments I_lm per full voxel (inner harmonic
 /// order), and how much the cloud changes the ground's downward irradiance, per ground map column.
 ///
-/// `moments` are the last iterate's; the source J(Ω) = Σ a′χ′_l (I_lm + E T′ Y_lm(Ω_sun)) Y_lm(Ω)
+/// `moments` are the last iterate's (coded); the source J(Ω) = Σ a′χ′_l (I_lm + E T′ Y_lm(Ω_sun)) Y_lm(Ω)
 /// is evaluated from them directly (no array of source coefficients is stored). Ordinates go in
 /// batches of opposite pairs: (1) per full voxel, the source in both ordinates of each pair of the
 /// batch from one pass over its coefficients; (2) the batch's sweeps, one ordinate per task;
 /// (3) per full voxel, the moments of both ordinates of each pair in one pass, the pairs in
 /// their fixed order.
-pub(super) fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], next: &mut [f32], ground: &GroundMap) -> Vec<[f64; 3]> {
+pub(super) fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &Moments16, next: &mut [f32], ground: &GroundMap) -> Vec<[f64; 3]> {
     let nsh = c.nsh;
     let nfull = moments.len() / (3 * nsh);
     // `next` is the last iteration's array, kept (reused, no new pages); the batch's sources
@@ -46,11 +47,10 @@ pub(super) fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], ne
         let outs: Vec<Vec<&mut [[f32; 3]]>> = (0..nfull.div_ceil(chunk))
             .map(|_| slots.iter_mut().filter_map(Iterator::next).collect())
             .collect();
-        moments
-            .par_chunks(chunk * 3 * nsh)
-            .zip(outs)
-            .enumerate()
-            .for_each(|(ci, (block, mut out))| source_block(c, t, bi, batch.len(), block, ci * chunk, &mut out));
+        outs.into_par_iter().enumerate().for_each(|(ci, mut out)| {
+            let voxels = ci * chunk..nfull.min((ci + 1) * chunk);
+            source_block(c, t, bi, batch.len(), moments, voxels, &mut out)
+        });
         // (2) The sweeps.
         let dirs: Vec<usize> = batch.clone().flat_map(|p| t.pairs[p]).collect();
         let wts: Vec<f32> = batch.clone().flat_map(|p| t.weights[p]).collect();
@@ -291,15 +291,24 @@ unsafe fn sweep_kernel<const AVX: bool>(
     };
     let first = if oa > 0.0 { -1 } else { na as isize };
     let sky_only = !(c.ground_height.is_some() && om.y > 0.0);
+    let ghost = PlaneCell::new([skyr.x, skyr.y, skyr.z], 0.0, [0.0; 3]);
     if sky_only {
         // Without a ground seen upwards every ghost cell holds the sky ([`Ctx::boundary`]): fill
         // both buffers once (the cells write only the interior).
-        let ghost = PlaneCell::new([skyr.x, skyr.y, skyr.z], 0.0, [0.0; 3]);
         prev.fill(ghost);
         cur.fill(ghost);
     } else {
         fill_ghosts(first, true, &mut prev);
     }
+    // Clear air: with the sky on every ghost cell, a cell whose upwind cells hold the sky's
+    // record and which is empty holds it too. Per row of each plane buffer, the span of cells
+    // that may differ from it (the rest hold it exactly); a plane's row steps only the cells its
+    // own full cells or its upwind rows' spans reach. Seen from the ground upwards the ghost
+    // cells differ, and every cell is stepped.
+    let whole = (0, nb);
+    let mut live_prev = vec![if sky_only { (0, 0) } else { whole }; nc];
+    let mut live_cur = live_prev.clone();
+    let spans = &c.spans[a];
     // Offset of the upwind (0, 0) neighbour from a cell in the plane buffer.
     let up = fb + fc * stride as isize;
     // The unchecked indexing below relies on these: a cell's four upwind records lie in the
@@ -315,7 +324,21 @@ unsafe fn sweep_kernel<const AVX: bool>(
         let ahead = &cells[pa * nb * nc + PREFETCH_AHEAD..][..nb * nc];
         for (ic, (row, row_ahead)) in plane.chunks_exact(nb).zip(ahead.chunks_exact(nb)).enumerate() {
             let l0 = stride * (ic + 1) + 1;
-            for (ib, (&(rho, fi), &(_, fa))) in row.iter().zip(row_ahead).enumerate() {
+            let (lo, hi) = if sky_only {
+                let live = stepped_cells(&live_prev, ic as isize + fc, fb, spans[pa * nc + ic], nb);
+                // Cells this buffer's row held off the sky two planes back and will not step now:
+                // back to the sky's record.
+                let (old_lo, old_hi) = live_cur[ic];
+                for ib in (old_lo..old_hi).filter(|ib| *ib < live.0 || *ib >= live.1) {
+                    cur[l0 + ib] = ghost;
+                }
+                live_cur[ic] = live;
+                live
+            } else {
+                whole
+            };
+            for (k, (&(rho, fi), &(_, fa))) in row[lo..hi].iter().zip(&row_ahead[lo..hi]).enumerate() {
+                let ib = lo + k;
                 // The full voxels' sources and radiances lie a grid row apart in x-major sweeps
                 // (past the L2 cache on large boxes): ask for the lines a few cells ahead.
                 if fa != u32::MAX {
@@ -398,11 +421,36 @@ unsafe fn sweep_kernel<const AVX: bool>(
             }
         }
         std::mem::swap(&mut prev, &mut cur);
+        std::mem::swap(&mut live_prev, &mut live_cur);
         if !sky_only {
             fill_ghosts(pa, false, &mut prev);
         }
     }
     splats
+}
+
+/// The cells [lo, hi) of row `ic` that a sweep steps (the rest hold the clear sky's record,
+/// [`sweep_kernel`]): those whose upwind cells (rows `up` and `up` + 1 of the previous plane,
+/// offsets `fb` and `fb` + 1 along the row) reach a cell of that plane's `live` spans, and the
+/// row's own `full` span; a row of `nb` cells.
+fn stepped_cells(live: &[(usize, usize)], up: isize, fb: isize, full: (u32, u32), nb: usize) -> (usize, usize) {
+    let (mut lo, mut hi) = (full.0 as usize, full.1 as usize);
+    let mut join = |(a, b): (usize, usize)| {
+        if a < b {
+            (lo, hi) = if lo < hi { (lo.min(a), hi.max(b)) } else { (a, b) };
+        }
+    };
+    for r in [up, up + 1] {
+        if let Some(&(a, b)) = usize::try_from(r).ok().and_then(|r| live.get(r)) {
+            // Cell ib reads upwind cells ib + fb and ib + fb + 1.
+            if a < b {
+                let from = (a as isize - fb - 1).max(0) as usize;
+                let to = ((b as isize - fb) as usize).min(nb);
+                join((from, to));
+            }
+        }
+    }
+    (lo, hi)
 }
 
 /// [`sweep_kernel`] with the AVX cell steps where the processor has AVX: the same bits.
@@ -430,9 +478,21 @@ mod tests {
     use crate::lighting::Sky;
     use crate::math::{real_sh, Rgb};
     use crate::medium::Density;
-    use crate::transport::grid::box_cells;
+    use crate::transport::grid::{box_cells, full_spans};
     use crate::transport::source::{moments_kernel, parity_order, source_kernel};
     use crate::transport::BandOptics;
+
+    #[test]
+    fn a_row_steps_what_its_full_cells_and_upwind_spans_reach() {
+        // Upwind rows 1 and 2 of the previous plane; cell ib reads ib + fb and ib + fb + 1.
+        let live = [(0, 0), (3, 5), (6, 7), (0, 0)];
+        assert_eq!(stepped_cells(&live, 1, 0, (0, 0), 10), (2, 7));
+        assert_eq!(stepped_cells(&live, 1, -1, (0, 0), 10), (3, 8));
+        assert_eq!(stepped_cells(&live, 1, 0, (8, 10), 10), (2, 10), "the row's own full cells");
+        assert_eq!(stepped_cells(&live, -1, 0, (0, 0), 10), (0, 0), "a ghost row and a clear row");
+        assert_eq!(stepped_cells(&live, 3, 0, (4, 5), 10), (4, 5), "past the last row: the ghosts");
+        assert_eq!(stepped_cells(&[(0, 2)], 0, 0, (0, 0), 10), (0, 2), "clipped at the row's start");
+    }
 
     #[test]
     fn step_weights_integrate_constants_and_ramps() {
@@ -451,11 +511,19 @@ mod tests {
 
     #[test]
     fn the_avx_kernels_give_the_same_bits_as_the_plain_ones() {
-        // A 7×5×4 box with empty voxels inside, random moments: each kernel as built and through
-        // its dispatcher (AVX where the processor has it) must agree bit for bit.
-        let dims = [7, 5, 4];
+        // An 11×9×8 box, empty voxels inside the cloud and clear air around it, random moments:
+        // each kernel as built and through its dispatcher (AVX where the processor has it) must
+        // agree bit for bit, and the sweep stepping only the cells off the clear sky agrees with
+        // stepping every cell.
+        let dims = [11, 9, 8];
         let nv = dims[0] * dims[1] * dims[2];
-        let rho: Vec<f32> = (0..nv).map(|v| ((v as f32 * 0.618).fract() - 0.2).max(0.0) * 3.0).collect();
+        let inside = |v: usize| {
+            let (i, j, k) = (v % dims[0], (v / dims[0]) % dims[1], v / (dims[0] * dims[1]));
+            (2..dims[0] - 3).contains(&i) && (2..dims[1] - 2).contains(&j) && (1..dims[2] - 2).contains(&k)
+        };
+        let rho: Vec<f32> = (0..nv)
+            .map(|v| if inside(v) { ((v as f32 * 0.618).fract() - 0.2).max(0.0) * 3.0 } else { 0.0 })
+            .collect();
         let mut full = vec![u32::MAX; nv];
         let mut voxels = Vec::new();
         for v in 0..nv {
@@ -483,11 +551,16 @@ mod tests {
             voxels: &voxels,
             sun_t: &sun_t,
             cells: [0, 1, 2].map(|a| box_cells(dims, [0; 3], dims, &density, &full, voxels.len(), a)),
+            spans: [0, 1, 2].map(|_| Vec::new()),
             sigma_t: [0.05, 0.06, 0.07],
             grey: false,
             sky: &sky,
             origin: DVec3::ZERO,
             ground_height: None,
+        };
+        let c = Ctx {
+            spans: [0, 1, 2].map(|a| full_spans(&c.cells[a], dims[cross_axes(a).0])),
+            ..c
         };
         let ground = GroundMap {
             margin: 0,
@@ -511,8 +584,9 @@ mod tests {
         let bits = |v: &[[f32; 3]]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
         // Step (1).
         let (mut plain, mut disp) = (vec![[0f32; 3]; ORDINATE_BATCH * nfull], vec![[0f32; 3]; ORDINATE_BATCH * nfull]);
-        source_kernel(&c, &t, 1, PAIRS, &moments, 0, &mut plain.chunks_mut(nfull).collect::<Vec<_>>());
-        source_block(&c, &t, 1, PAIRS, &moments, 0, &mut disp.chunks_mut(nfull).collect::<Vec<_>>());
+        let coded = Moments16::of(&moments, nsh);
+        source_kernel(&c, &t, 1, PAIRS, &coded, 0..nfull, &mut plain.chunks_mut(nfull).collect::<Vec<_>>());
+        source_block(&c, &t, 1, PAIRS, &coded, 0..nfull, &mut disp.chunks_mut(nfull).collect::<Vec<_>>());
         assert_eq!(bits(&plain), bits(&disp));
         assert!(plain.iter().flatten().any(|x| *x > 0.0));
         // Step (2), one ordinate per major axis and sign, with coloured and with grey optics
@@ -521,6 +595,7 @@ mod tests {
             sigma_t: [0.05; 3],
             grey: true,
             cells: c.cells.clone(),
+            spans: c.spans.clone(),
             ..c
         };
         for c in [&c, &grey] {
@@ -531,6 +606,21 @@ mod tests {
                 sweep_ordinate(c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut rb);
                 assert_eq!(bits(&ra), bits(&rb), "ordinate {d}, grey {}", c.grey);
                 assert!(ra.iter().flatten().any(|x| *x > 0.0));
+            }
+        }
+        // Every cell stepped: each row's span the whole row.
+        let every = Ctx {
+            spans: [0, 1, 2].map(|a| vec![(0, dims[cross_axes(a).0] as u32); c.spans[a].len()]),
+            cells: c.cells.clone(),
+            ..c
+        };
+        assert!(c.spans.iter().flatten().any(|s| s.0 == s.1), "some rows are clear");
+        for d in 0..q.dirs.len() {
+            let (mut skip, mut all) = (vec![[0f32; 3]; nfull], vec![[0f32; 3]; nfull]);
+            sweep_ordinate(&c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut skip);
+            sweep_ordinate(&every, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut all);
+            for (x, y) in skip.iter().flatten().zip(all.iter().flatten()) {
+                assert!((x - y).abs() <= 1e-6 * y.abs(), "ordinate {d}: {x} vs {y}");
             }
         }
         // Step (3).

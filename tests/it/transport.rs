@@ -59,6 +59,7 @@ fn bench_times_transport_with_its_iterations_and_memory_and_skips_what_would_tak
         text.contains("| transport solve | eye source |") && text.contains("| 10×8×6 | transport |"),
         "{text}"
     );
+    assert!(text.contains("| peak | B per full voxel |"), "{text}");
     assert!(
         text.contains("10×8×6 transport: transport:") && text.contains("iterations") && text.contains("B + grid"),
         "{text}"
@@ -70,4 +71,18 @@ fn bench_times_transport_with_its_iterations_and_memory_and_skips_what_would_tak
     );
     let bad = bench(&["--max-seconds", "0"]);
     assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("--max-seconds"));
+    // A scene file of its own grid (the Disney cloud at a quarter of 1/16) gets a row by its name.
+    let clouds = bench(&["--clouds", "tests/data/clouds/wdas.toml"]);
+    let text = String::from_utf8_lossy(&clouds.stdout);
+    assert!(clouds.status.success(), "{}", String::from_utf8_lossy(&clouds.stderr));
+    assert!(
+        text.contains("| wdas | transport |") && text.contains("wdas transport: transport:"),
+        "{text}"
+    );
+    let missing = bench(&["--clouds", "no-such-scene.toml"]);
+    let err = String::from_utf8_lossy(&missing.stderr);
+    assert!(
+        !missing.status.success() && err.contains("no-such-scene.toml") && missing.stdout.is_empty(),
+        "{err}"
+    );
 }
