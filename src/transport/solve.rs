@@ -33,7 +33,7 @@ pub use super::ground::GroundMap;
 use super::source::{diffuse_source_of, parity_order, PairTables};
 use super::sphere::Quadrature;
 use super::sweep::sweep;
-use super::warm::{TransportState, WARM_MIN_ITERATIONS};
+use super::warm::{warm_converged, TransportState};
 use super::TransportOptics;
 use crate::diffusion::multigrid::Hierarchy;
 use crate::error::{Error, Result};
@@ -197,7 +197,7 @@ pub fn solve_warm(
     drop(ctx);
     let state = opts
         .keep
-        .then(|| TransportState::new(m, s.order, index.full.clone(), moments, 3 * nsh));
+        .then(|| TransportState::new(m, s.order, moments, 3 * nsh));
     (field.full, field.sun_t) = (index.full, sun_t);
     Ok((field, state))
 }
@@ -242,8 +242,8 @@ struct Iterate {
     /// Relative change of I0 after each iteration.
     history: Vec<f64>,
     ground_map: GroundMap,
-    /// Fewest iterations before the stopping test may stop it.
-    min_iterations: usize,
+    /// Started from a previous frame's state: stopped by [`warm_converged`].
+    warm: bool,
     /// Iteration of the last extrapolation (0: none).
     extrapolated: usize,
     /// The acceleration's guard (docs/transport.md, "When the acceleration diverges"): whether
@@ -258,16 +258,14 @@ struct Iterate {
 impl Iterate {
     /// The cold start (zero) or the warm start's moments.
     fn new(solver: &Solver, warm: Option<Vec<f32>>) -> Iterate {
-        // A warm start's error is mostly the slow modes the dominant-mode step removes, which
-        // needs three iterations to see (src/transport/warm.rs).
-        let min_iterations = if warm.is_some() { WARM_MIN_ITERATIONS } else { 1 };
+        let is_warm = warm.is_some();
         let moments = warm.unwrap_or_else(|| vec![0f32; solver.ctx.voxels.len() * 3 * solver.ctx.nsh]);
         Iterate {
             next: vec![0f32; moments.len()],
             moments,
             history: Vec::new(),
             ground_map: solver.ground.map(None),
-            min_iterations,
+            warm: is_warm,
             extrapolated: 0,
             accelerated: solver.s.acceleration,
             smallest: f64::INFINITY,
@@ -350,9 +348,12 @@ impl Solver<'_> {
                     self.ctx.sun_t.to_vec(),
                 ));
             }
-            if change < s.tolerance
-                && it.history.len() >= it.min_iterations
-                && (it.accelerated || plain_converged(it.since_restart(), s.tolerance))
+            let stop = if it.warm {
+                warm_converged(&it.history, s.tolerance)
+            } else {
+                change < s.tolerance
+            };
+            if stop && (it.accelerated || plain_converged(it.since_restart(), s.tolerance))
             {
                 break;
             }

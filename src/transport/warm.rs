@@ -1,41 +1,46 @@
 //! Warm starts of the transport solve across a sequence's frames. The previous frame's converged
 //! moments (per full voxel, band and spherical harmonic, in the solver's order) are carried to
-//! the next frame's grid by world position: each new full voxel takes the moments of the old
-//! voxel that contains its centre, when that voxel was full; a voxel new to the cloud starts from
-//! the cold start's zero. The iteration then runs to the same tolerance as a cold solve, so only
-//! the number of iterations changes (docs/sequences.md, "Warm starts").
+//! the next frame's grid by world position ([`FullVoxelPlacement::values_at`]: trilinear over the
+//! old full voxels, so grids may grow, move or change size); a voxel with no old full voxel
+//! around its centre starts from the cold start's zero. The iteration then runs to the same
+//! tolerance as a cold solve, so only the number of iterations changes (docs/sequences.md, "Warm
+//! starts").
 
-use crate::math::Vec3;
+use crate::medium::remap::FullVoxelPlacement;
 use crate::medium::Medium;
-use rayon::prelude::*;
 
-/// Fewest source iterations of a warm-started solve, so that the dominant-mode extrapolation
-/// (three iterations' changes) can remove the slow error a warm start leaves.
-pub const WARM_MIN_ITERATIONS: usize = 3;
+/// Whether a warm-started solve may stop, from its relative changes of I0 so far (EXPERIMENT).
+pub(super) fn warm_converged(history: &[f64], tolerance: f64) -> bool {
+    let env = |k: &str, d: f64| std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(d);
+    let (min, k) = (env("CLOUDGI_WARM_MIN", 3.0) as usize, env("CLOUDGI_WARM_K", 0.0));
+    let n = history.len();
+    if n < min.max(1) || history[n - 1] >= tolerance {
+        return false;
+    }
+    if k <= 0.0 || n < 2 {
+        return true;
+    }
+    let r = history[n - 1] / history[n - 2];
+    let err = if r < 1.0 { history[n - 1] * (r / (1.0 - r)).max(1.0) } else { f64::INFINITY };
+    err < k * tolerance
+}
 
 /// A converged transport solution, kept for the next frame's start.
 #[derive(Clone, Debug)]
 pub struct TransportState {
     order: usize,
-    origin: Vec3,
-    voxel_size: Vec3,
-    dims: [usize; 3],
-    /// Per voxel: index into `moments` (in units of `stride`), or `u32::MAX` where ρ = 0.
-    full: Vec<u32>,
-    /// Moments per full voxel, `stride` values each (W·m⁻²·sr⁻¹).
+    placement: FullVoxelPlacement,
+    /// Moments per full voxel in grid order, `stride` values each (W·m⁻²·sr⁻¹).
     moments: Vec<f32>,
     stride: usize,
 }
 
 impl TransportState {
-    /// The state of a solve of `m` at SH `order`: its full-voxel index and moments.
-    pub(crate) fn new(m: &Medium, order: usize, full: Vec<u32>, moments: Vec<f32>, stride: usize) -> TransportState {
+    /// The state of a solve of `m` at SH `order`: its moments, `stride` per full voxel.
+    pub(crate) fn new(m: &Medium, order: usize, moments: Vec<f32>, stride: usize) -> TransportState {
         TransportState {
             order,
-            origin: m.origin,
-            voxel_size: m.voxel_size,
-            dims: m.dims(),
-            full,
+            placement: FullVoxelPlacement::of(m),
             moments,
             stride,
         }
@@ -44,36 +49,19 @@ impl TransportState {
     /// The start of a solve of `m` at `order` over the full voxels `voxels` (grid indices, in the
     /// solver's order), `stride` values each; None when the order differs (nothing to map).
     pub(crate) fn start(&self, m: &Medium, order: usize, voxels: &[usize], stride: usize) -> Option<Vec<f32>> {
-        if order != self.order || stride != self.stride {
-            return None;
-        }
-        let [nx, ny, _] = m.dims();
-        let [ox, oy, oz] = self.dims;
-        let mut out = vec![0f32; voxels.len() * stride];
-        out.par_chunks_mut(stride).zip(voxels.par_iter()).for_each(|(o, &g)| {
-            let c = m.voxel_center(g % nx, (g / nx) % ny, g / (nx * ny));
-            let p = (c - self.origin) / self.voxel_size;
-            if p.x < 0.0 || p.y < 0.0 || p.z < 0.0 {
-                return;
-            }
-            let (i, j, k) = (p.x as usize, p.y as usize, p.z as usize);
-            if i >= ox || j >= oy || k >= oz {
-                return;
-            }
-            let old = self.full[i + ox * (j + oy * k)];
-            if old != u32::MAX {
-                let at = old as usize * stride;
-                o.copy_from_slice(&self.moments[at..at + stride]);
-            }
-        });
-        Some(out)
+        (order == self.order && stride == self.stride).then(|| self.placement.values_at(&self.moments, stride, m, voxels))
+    }
+
+    /// Bytes held: the moments and the old grid's occupancy.
+    pub fn bytes(&self) -> usize {
+        4 * self.moments.len() + self.placement.bytes()
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::math::Rgb;
+    use crate::math::{Rgb, Vec3};
     use crate::medium::Grid3;
 
     fn medium(dims: [usize; 3], origin: Vec3, full: impl Fn(usize, usize, usize) -> bool) -> Medium {
@@ -92,7 +80,7 @@ mod tests {
     fn moments_follow_world_position_and_new_voxels_start_cold() {
         // Old: 2×1×1 voxels at x = 0..20 m, both full, moments 1 and 2.
         let old = medium([2, 1, 1], Vec3::ZERO, |_, _, _| true);
-        let state = TransportState::new(&old, 1, vec![0, 1], vec![1.0, 1.0, 2.0, 2.0], 2);
+        let state = TransportState::new(&old, 1, vec![1.0, 1.0, 2.0, 2.0], 2);
         // New: 3×1×1 voxels from x = 10 m: the first is the old second voxel, the others are new.
         let new = medium([3, 1, 1], Vec3::new(10.0, 0.0, 0.0), |_, _, _| true);
         assert_eq!(state.start(&new, 1, &[0, 1, 2], 2).unwrap(), [2.0, 2.0, 0.0, 0.0, 0.0, 0.0]);
