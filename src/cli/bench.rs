@@ -171,7 +171,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
             }
             super::memory::check_image(&desc, &file.source)?;
             let scene = Scene::build(desc, &file.source, &file.base)?;
-            super::memory::check_solver(&scene)?;
+            super::memory::check_solver(&scene, 0)?;
             let log = Log(Mutex::new(Vec::new()));
             let out = crate::render::render(&scene, &log)?;
             for l in log.0.into_inner().unwrap_or_default() {

@@ -1,8 +1,8 @@
 //! Warm starts of the diffusion solve across a sequence's frames (`diffusion` and `full`): the
 //! previous frame's converged I0 is carried to the next frame's full voxels by world position
-//! ([`FullVoxelPlacement::values_at`]: trilinear over the old full voxels; a voxel with no old
-//! full voxel around its centre starts from zero, the cold start), and the solve runs from it to
-//! the same relative residual as a cold solve (docs/sequences.md, "Warm starts").
+//! ([`FullVoxelPlacement::values_at`]: trilinear over the old full voxels; a voxel new to the
+//! cloud from its neighbours), and the solve runs from it to the same relative residual as a
+//! cold solve (docs/sequences.md, "Warm starts").
 
 use super::DiffusionSolution;
 use crate::medium::field16::Field16;
@@ -39,8 +39,7 @@ impl DiffusionState {
     /// The start of a solve on `m`: I0 per band on its full voxels.
     pub fn start(&self, m: &Medium) -> [Field16; 3] {
         let index = m.density.full_index();
-        let voxels: Vec<usize> = index.full_voxels().collect();
-        let i0 = self.placement.values_at(&self.i0, 3, m, &voxels);
+        let i0 = self.placement.values_at(&self.i0, 3, m);
         [0, 1, 2].map(|b| {
             let band: Vec<f32> = i0.iter().skip(b).step_by(3).copied().collect();
             Field16::new(index.clone(), &band)

@@ -33,7 +33,7 @@ pub use super::ground::GroundMap;
 use super::source::{diffuse_source_of, parity_order, PairTables};
 use super::sphere::Quadrature;
 use super::sweep::sweep;
-use super::warm::{warm_converged, TransportState};
+use super::warm::{warm_converged, TransportState, WarmStart};
 use super::TransportOptics;
 use crate::diffusion::multigrid::Hierarchy;
 use crate::error::{Error, Result};
@@ -178,7 +178,7 @@ pub fn solve_warm(
         ground: &ground_light,
         s,
     };
-    let warm = opts.start.and_then(|st| st.start(m, s.order, &index.voxels, 3 * ctx.nsh));
+    let warm = opts.start.and_then(|st| st.start(m, s.order, 3 * ctx.nsh, &ground_light));
     let mut it = Iterate::new(&solver, warm);
     solver.iterate(&mut it, progress, opts.live)?;
     solver.check_converged(&it)?;
@@ -192,12 +192,11 @@ pub fn solve_warm(
     } = it;
     drop(next);
     let nsh = ctx.nsh;
+    let kept_ground = opts.keep.then(|| ground_map.clone());
     // The field takes the index and T′ the solver no longer reads.
     let mut field = solver.field(&moments, history, ground_map, Vec::new(), Vec::new());
     drop(ctx);
-    let state = opts
-        .keep
-        .then(|| TransportState::new(m, s.order, moments, 3 * nsh));
+    let state = kept_ground.map(|g| TransportState::new(m, s.order, moments, 3 * nsh, g));
     (field.full, field.sun_t) = (index.full, sun_t);
     Ok((field, state))
 }
@@ -256,15 +255,18 @@ struct Iterate {
 }
 
 impl Iterate {
-    /// The cold start (zero) or the warm start's moments.
-    fn new(solver: &Solver, warm: Option<Vec<f32>>) -> Iterate {
+    /// The cold start (zero) or the warm start's moments and ground.
+    fn new(solver: &Solver, warm: Option<WarmStart>) -> Iterate {
         let is_warm = warm.is_some();
-        let moments = warm.unwrap_or_else(|| vec![0f32; solver.ctx.voxels.len() * 3 * solver.ctx.nsh]);
+        let (moments, e_down) = match warm {
+            Some(w) => (w.moments, w.e_down),
+            None => (vec![0f32; solver.ctx.voxels.len() * 3 * solver.ctx.nsh], None),
+        };
         Iterate {
             next: vec![0f32; moments.len()],
             moments,
             history: Vec::new(),
-            ground_map: solver.ground.map(None),
+            ground_map: solver.ground.map(e_down.as_deref()),
             warm: is_warm,
             extrapolated: 0,
             accelerated: solver.s.acceleration,
