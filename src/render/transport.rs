@@ -226,9 +226,6 @@ pub fn render_with(scene: &Scene, progress: &dyn Progress, timings: &mut Timings
         let opts = SolveOptions { start, keep, live };
         solve_warm(m, &scene.sun, &scene.sky, scene.ground.as_ref(), s, progress, opts)
     })?;
-    if std::env::var("CLOUDGI_DEBUG_HIST").is_ok() {
-        eprintln!("DEBUG history {} {:?}", keep, field.history.iter().map(|h| format!("{h:.1e}")).collect::<Vec<_>>());
-    }
     if let Some(w) = warm {
         w.transport = state;
         w.iterations = Some(field.iterations());
