@@ -299,7 +299,8 @@ mod tests {
         let carried = 768 * size.full;
         assert_eq!(warm_state_bytes(&scene, carried, true), carried);
         assert_eq!(warm_state_bytes(&scene, carried, false), 0, "--cold keeps none");
-        let need = 64 * bytes_per_pixel(Method::Transport, false, false) + TransportMemory::of(&scene.medium, &scene.render.transport).bytes;
+        let need =
+            64 * bytes_per_pixel(Method::Transport, false, false) + TransportMemory::of(&scene.medium, &scene.render.transport).bytes;
         assert!(check_solver_fits(&scene, Some(need), 0).is_ok());
         let e = check_solver_fits(&scene, Some(need), carried).unwrap_err().to_string();
         assert!(e.contains("warm starts") && e.contains("--cold"), "{e}");
