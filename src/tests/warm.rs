@@ -45,21 +45,34 @@ fn every_solving_method_starts_a_frame_from_the_last_one_and_ends_where_a_cold_s
         let warm_image = render_warm(&next, &NoProgress, &mut warm).unwrap().image;
         let (w, c) = (warm.iterations.unwrap(), cold.iterations.unwrap());
         let apart = block_error(&warm_image, &cold_image);
-        // transport: the tolerance's own effect on the image is ~1e-4 (docs/sequences.md); the
-        // diffusion solves stop on the residual, and agree to I0's 16-bit coding.
-        let bound = if method == Method::Transport { 5e-4 } else { 1e-4 };
-        assert!(w <= c && apart < bound, "{method:?}: iterations warm {w}, cold {c}; images {apart:.2e} apart");
-        if method != Method::Full {
-            assert!(w < c, "{method:?}: iterations warm {w}, cold {c}");
+        if method == Method::Transport {
+            // The warm frame is closer to a converged solve than the cold one, so the two differ
+            // by about the cold frame's own error. On this small cloud that takes the warm solve
+            // more iterations than the cold one (docs/sequences.md).
+            let mut tight = next.clone();
+            (tight.render.transport.tolerance, tight.render.transport.max_iterations) = (1e-5, 200);
+            let converged = render_warm(&tight, &NoProgress, &mut Warm::new(false)).unwrap().image;
+            let (warm_error, cold_error) = (block_error(&warm_image, &converged), block_error(&cold_image, &converged));
+            assert!(
+                warm_error <= cold_error && apart <= 1.5 * cold_error,
+                "transport: warm {warm_error:.2e} and cold {cold_error:.2e} from converged, {apart:.2e} apart \
+                 (iterations warm {w}, cold {c})"
+            );
+            continue;
         }
+        // The diffusion solves stop on the residual: the images agree to I0's 16-bit coding (this
+        // small grid's CG takes 2 iterations either way).
+        assert!(
+            w <= c && apart < 1e-4,
+            "{method:?}: iterations warm {w}, cold {c}; images {apart:.2e} apart"
+        );
     }
 }
 
 #[test]
 fn a_transport_solve_started_from_its_own_solution_starts_converged() {
     // The moments and the cloud's light on the ground both carried: the first sweep changes I0
-    // by less than the tolerance (the ground's light alone, had it started from the clear sky,
-    // changes it by more).
+    // by less than the tolerance.
     let s = frame(Method::Transport, 50.0, 0);
     assert!(s.ground.is_some(), "the scene has a ground to carry light to");
     let t = &s.render.transport;
