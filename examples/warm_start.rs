@@ -1,20 +1,23 @@
-//! Warm against cold transport solves over two sequences, as a markdown table
-//! (docs/sequences.md, "Warm starts"):
+//! Warm against cold solves over two sequences, as a markdown table (docs/sequences.md, "Warm
+//! starts"):
 //! - `growing`: the procedural cumulus on a grid that grows by one voxel per axis and moves 6 m
 //!   per frame (every frame a different grid size and origin);
 //! - `sun`: the same cloud with only the sun moving, 1° in elevation and azimuth per frame.
 //!
-//! Per frame: transport iterations and solve seconds cold and warm, the block mean relative error
-//! of the warm image against the cold one, and of the cold image against a solve to 1e-5 (the
-//! tolerance's own effect on the image).
+//! Per frame: the solve's iterations (`transport`: source iterations; `diffusion`, `full`: CG
+//! iterations of the middle band, summed over `full`'s solves), the solve's and the frame's
+//! seconds, cold and warm; the block mean relative error of the warm image against the cold one,
+//! and of the cold and warm images against a tightly converged one (`transport` to 1e-5,
+//! `diffusion` and `full` to a relative residual of 1e-7): the tolerance's own effect on the image.
 //!
-//! `cargo run --release --features internals --example warm_start [FRAMES] [WIDTH]` (defaults 8 and 80; 4:3 images)
+//! `cargo run --release --features internals --example warm_start [FRAMES] [WIDTH] [METHOD]`
+//! (defaults 8, 80 and transport; 4:3 images)
 
 use cloudgi::math::Vec3;
 use cloudgi::medium::procedural::cumulus;
 use cloudgi::medium::Medium;
 use cloudgi::render::warm::{render_warm, Warm};
-use cloudgi::scene::{Scene, SceneDesc};
+use cloudgi::scene::{Method, Scene, SceneDesc};
 use cloudgi::tools::compare::compare;
 use cloudgi::{Image, NoProgress};
 use std::path::Path;
@@ -23,9 +26,10 @@ use std::path::Path;
 const VOXEL: f32 = 16.0;
 const DIMS: [usize; 3] = [50, 40, 30];
 
-fn scene(width: u32, frame: usize, growing: bool) -> Scene {
+fn scene(width: u32, frame: usize, growing: bool, method: Method) -> Scene {
     let mut d = SceneDesc::default();
     (d.camera.width, d.camera.height) = (width, width * 3 / 4);
+    d.render.method = method;
     let f = frame as f32;
     d.sun.direction = None;
     d.sun.elevation_deg = Some(if growing { 50.0 } else { 50.0 - f });
@@ -39,11 +43,22 @@ fn scene(width: u32, frame: usize, growing: bool) -> Scene {
     s
 }
 
-/// Render, returning the image, the solve's iterations and seconds.
-fn render(s: &Scene, warm: &mut Warm) -> (Image, usize, f64) {
+/// The scene solved to a tight tolerance.
+fn tight(s: &Scene) -> Scene {
+    let mut t = s.clone();
+    t.render.transport.tolerance = 1e-5;
+    t.render.transport.max_iterations = 200;
+    t.render.solver.tolerance = 1e-7;
+    t.render.solver.max_iterations = 2000;
+    t
+}
+
+/// Render, returning the image, the solve's iterations, the solve's and the frame's seconds.
+fn render(s: &Scene, warm: &mut Warm) -> (Image, usize, f64, f64) {
     let out = render_warm(s, &NoProgress, warm).expect("renders");
-    let solve = out.timings.stages.iter().find(|t| t.0 == "transport solve").map_or(0.0, |t| t.1);
-    (out.image, warm.iterations.unwrap_or(0), solve)
+    let t = &out.timings.stages;
+    let solve = t.iter().filter(|t| t.0.ends_with(" solve")).map(|t| t.1).sum();
+    (out.image, warm.iterations.unwrap_or(0), solve, out.timings.total())
 }
 
 fn block_error(test: &Image, reference: &Image) -> f64 {
@@ -54,31 +69,50 @@ fn block_error(test: &Image, reference: &Image) -> f64 {
 }
 
 fn main() {
-    let args: Vec<usize> = std::env::args().skip(1).filter_map(|a| a.parse().ok()).collect();
-    let frames = args.first().copied().unwrap_or(8);
-    let width = args.get(1).copied().unwrap_or(80) as u32;
-    println!("| sequence | frame | full voxels | iterations cold / warm | solve s cold / warm | warm vs cold | cold vs 1e-5 |");
-    println!("|---|---|---|---|---|---|---|");
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let frames = args.first().and_then(|a| a.parse().ok()).unwrap_or(8);
+    let width = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(80);
+    let method = match args.get(2).map_or("transport", String::as_str) {
+        "diffusion" => Method::Diffusion,
+        "full" => Method::Full,
+        _ => Method::Transport,
+    };
+    println!(
+        "| {} | frame | full voxels | iterations cold / warm | solve s cold / warm | frame s cold / warm | warm vs cold | cold vs tight | warm vs tight |",
+        method.name()
+    );
+    println!("|---|---|---|---|---|---|---|---|---|");
     for growing in [true, false] {
         let (mut warm, mut total) = (Warm::new(true), [0usize; 2]);
+        let mut seconds = [0f64; 2];
         for frame in 0..frames {
-            let s = scene(width, frame, growing);
-            let (cold_img, cold_it, cold_s) = render(&s, &mut Warm::new(false));
-            let (warm_img, warm_it, warm_s) = render(&s, &mut warm);
-            let mut tight = s.clone();
-            tight.render.transport.tolerance = 1e-5;
-            tight.render.transport.max_iterations = 200;
-            let (tight_img, _, _) = render(&tight, &mut Warm::new(false));
-            total[0] += cold_it;
-            total[1] += warm_it;
+            let s = scene(width, frame, growing, method);
+            let (cold_img, cold_it, cold_s, cold_f) = render(&s, &mut Warm::new(false));
+            let (warm_img, warm_it, warm_s, warm_f) = render(&s, &mut warm);
+            let (tight_img, ..) = render(&tight(&s), &mut Warm::new(false));
+            if frame > 0 {
+                total[0] += cold_it;
+                total[1] += warm_it;
+                seconds[0] += cold_f;
+                seconds[1] += warm_f;
+            }
             println!(
-                "| {} | {frame} | {} | {cold_it} / {warm_it} | {cold_s:.2} / {warm_s:.2} | {:.2e} | {:.2e} |",
-                if growing { "growing, moving cloud" } else { "sun moving 1°/frame" },
-                s.medium.density.full_index().full_voxels().count(),
+                "| {} | {frame} | {} | {cold_it} / {warm_it} | {cold_s:.2} / {warm_s:.2} | {cold_f:.2} / {warm_f:.2} | {:.1e} | {:.1e} | {:.1e} |",
+                if growing { "growing" } else { "sun" },
+                s.medium.density.full_index().count(),
                 block_error(&warm_img, &cold_img),
                 block_error(&cold_img, &tight_img),
+                block_error(&warm_img, &tight_img),
             );
         }
-        eprintln!("iterations over the sequence: cold {}, warm {}", total[0], total[1]);
+        eprintln!(
+            "{}: after the first frame, iterations cold {} warm {} ({:.2}×), frame seconds cold {:.1} warm {:.1}",
+            if growing { "growing" } else { "sun" },
+            total[0],
+            total[1],
+            total[0] as f64 / total[1].max(1) as f64,
+            seconds[0],
+            seconds[1]
+        );
     }
 }

@@ -248,7 +248,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
                 ));
                 continue;
             }
-            super::memory::check_solver(&scene)?;
+            super::memory::check_solver(&scene, 0)?;
             let log = Log(Mutex::new(Vec::new()));
             let out = crate::render::render(&scene, &log)?;
             let memory = resident.zip(resident::peak()).map(|(start, peak)| Peak {

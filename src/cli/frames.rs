@@ -169,21 +169,26 @@ pub fn render(a: &RenderArgs, file: &SceneFile, quiet: bool) -> Result<()> {
     for (i, frame) in todo.iter().enumerate() {
         let t = Instant::now();
         let scene = Scene::build(frame.desc.clone(), &file.source, &file.base).map_err(|e| at_frame(e, frame.number))?;
-        memory::check_solver(&scene).map_err(|e| at_frame(e, frame.number))?;
+        let kept = memory::warm_state_bytes(&scene, warm.bytes(), warm.enabled);
+        memory::check_solver(&scene, kept).map_err(|e| at_frame(e, frame.number))?;
         if i == 0 {
             for w in warnings::warnings(file, &a.flags(), &scene) {
                 eprintln!("warning: {w}");
             }
         }
-        let was_warm = warm.transport.is_some();
+        let was_warm = warm.is_warm();
         let out = render_warm(&scene, &progress::Bars::new(quiet), &mut warm)?;
         write_exr_and_png(&out.image, &frame.exr, &frame.png, scene.render.exposure)?;
         if !quiet {
             let done = i + 1;
             let elapsed = start.elapsed().as_secs_f64();
             let eta = elapsed / done as f64 * (todo.len() - done) as f64;
-            let solve = match warm.iterations.filter(|_| scene.render.method == Method::Transport) {
-                Some(n) => format!(" · {n} iterations{}", if was_warm { " (warm)" } else { " (cold)" }),
+            let kind = match scene.render.method {
+                Method::Transport => "iterations",
+                _ => "CG iterations",
+            };
+            let solve = match warm.iterations {
+                Some(n) => format!(" · {n} {kind}{}", if was_warm { " (warm)" } else { " (cold)" }),
                 None => String::new(),
             };
             eprintln!(

@@ -1,6 +1,7 @@
 //! Refuse an image too large for this machine's memory before any work, instead of letting the
 //! allocator abort mid-render.
 
+use crate::diffusion::warm::DiffusionState;
 use crate::diffusion::MAX_BOX_ROW_CELLS;
 use crate::error::{Error, Result};
 use crate::medium::Density;
@@ -153,19 +154,47 @@ pub fn grid_memory(method: Method) -> GridMemory {
     }
 }
 
-/// The solver's arrays, estimated from the loaded medium for the scene's method, must fit in
-/// `available` bytes beside the image: `transport` per full voxel ([`TransportMemory`]), the other
-/// methods from the grid's, the cloud's box's and the full voxels' counts ([`grid_memory`]).
-pub fn check_solver_fits(scene: &Scene, available: Option<u64>) -> Result<()> {
+/// Bytes a frame of a sequence holds for its warm starts beside its own solve: the state
+/// `carried` in from the previous frame (held through the solve) and, for `diffusion` and
+/// `full`, the state this frame keeps for the next (`transport` keeps its solve's moments, which
+/// [`TransportMemory`] counts already). None without warm starts.
+pub fn warm_state_bytes(scene: &Scene, carried: u64, warm: bool) -> u64 {
+    if !warm {
+        return 0;
+    }
+    let kept = match scene.render.method {
+        Method::Diffusion | Method::Full => {
+            let size = CloudSize::of(&scene.medium.density);
+            DiffusionState::bytes_for(size.full, size.grid)
+        }
+        _ => 0,
+    };
+    carried.saturating_add(kept)
+}
+
+/// The solver's arrays, estimated from the loaded medium for the scene's method, and `warm`
+/// bytes of warm-start state ([`warm_state_bytes`]) must fit in `available` bytes beside the
+/// image: `transport` per full voxel ([`TransportMemory`]), the other methods from the grid's,
+/// the cloud's box's and the full voxels' counts ([`grid_memory`]).
+pub fn check_solver_fits(scene: &Scene, available: Option<u64>, warm: u64) -> Result<()> {
     check_solver_row(scene)?;
     let Some(avail) = available else {
         return Ok(());
     };
     let r = &scene.render;
     let image = (scene.camera.width as u64 * scene.camera.height as u64).saturating_mul(bytes_per_pixel(r.method, r.aov, r.stderr));
-    let beside = avail.saturating_sub(image);
+    let beside = avail.saturating_sub(image).saturating_sub(warm);
+    let what = if warm > 0 {
+        format!(
+            "the memory available beside the image and the {} the sequence keeps for its warm starts \
+             (--cold keeps none)",
+            gib(warm)
+        )
+    } else {
+        "the memory available beside the image".to_string()
+    };
     if r.method == Method::Transport {
-        return TransportMemory::of(&scene.medium, &r.transport).check(&scene.source, beside, "the memory available beside the image");
+        return TransportMemory::of(&scene.medium, &r.transport).check(&scene.source, beside, &what);
     }
     let size = CloudSize::of(&scene.medium.density);
     let model = grid_memory(r.method);
@@ -192,8 +221,7 @@ pub fn check_solver_fits(scene: &Scene, available: Option<u64>) -> Result<()> {
         &scene.source,
         "medium",
         format!(
-            "method {} needs about {} ({} grid voxels × {} B{per_cloud}) but the memory available beside \
-             the image is {}; coarsen the cloud (medium.downsample, medium.resolution or \
+            "method {} needs about {} ({} grid voxels × {} B{per_cloud}) but {what} is {}; coarsen the cloud (medium.downsample, medium.resolution or \
              medium.max_voxels){other}",
             r.method.name(),
             gib(need),
@@ -225,9 +253,10 @@ fn check_solver_row(scene: &Scene) -> Result<()> {
     ))
 }
 
-/// [`check_solver_fits`] against this machine's available memory.
-pub fn check_solver(scene: &Scene) -> Result<()> {
-    check_solver_fits(scene, available_bytes())
+/// [`check_solver_fits`] against this machine's available memory, with `warm` bytes of
+/// warm-start state.
+pub fn check_solver(scene: &Scene, warm: u64) -> Result<()> {
+    check_solver_fits(scene, available_bytes(), warm)
 }
 
 #[cfg(test)]
@@ -256,10 +285,39 @@ mod tests {
         // pixels; docs/performance.md): the guard's estimate is at least that and at most 1.3×.
         let measured = 94_000_000.0;
         assert!((1.0..=1.3).contains(&(need as f64 / measured)), "{need}");
-        let e = check_solver_fits(&scene, Some(need)).unwrap_err().to_string();
+        let e = check_solver_fits(&scene, Some(need), 0).unwrap_err().to_string();
         assert!(e.contains("method transport") && e.contains("render.transport_order = 7"), "{e}");
-        assert!(check_solver_fits(&scene, Some(2 * need)).is_ok());
-        assert!(check_solver_fits(&scene, None).is_ok());
+        assert!(check_solver_fits(&scene, Some(2 * need), 0).is_ok());
+        assert!(check_solver_fits(&scene, None, 0).is_ok());
+    }
+
+    #[test]
+    fn a_sequence_counts_the_warm_start_state_it_keeps_between_frames() {
+        let mut scene = Scene::default_scene().unwrap();
+        (scene.camera.width, scene.camera.height) = (8, 8);
+        let size = CloudSize::of(&scene.medium.density);
+        // transport: the moments carried in from the last frame (768 B per full voxel at order
+        // 7); the frame's own are its solve's.
+        let carried = 768 * size.full;
+        assert_eq!(warm_state_bytes(&scene, carried, true), carried);
+        assert_eq!(warm_state_bytes(&scene, carried, false), 0, "--cold keeps none");
+        let need =
+            64 * bytes_per_pixel(Method::Transport, false, false) + TransportMemory::of(&scene.medium, &scene.render.transport).bytes;
+        assert!(check_solver_fits(&scene, Some(need), 0).is_ok());
+        let e = check_solver_fits(&scene, Some(need), carried).unwrap_err().to_string();
+        assert!(e.contains("warm starts") && e.contains("--cold"), "{e}");
+        assert!(check_solver_fits(&scene, Some(need + carried), carried).is_ok());
+        // diffusion and full: also the I0 this frame keeps (12 B per full voxel and the grid's
+        // occupancy).
+        for method in [Method::Diffusion, Method::Full] {
+            scene.render.method = method;
+            let kept = warm_state_bytes(&scene, 0, true);
+            assert_eq!(kept, 12 * size.full + size.grid.div_ceil(4));
+            let need = 64 * bytes_per_pixel(method, false, false) + grid_memory(method).bytes(size);
+            let e = check_solver_fits(&scene, Some(need + kept - 1), kept).unwrap_err().to_string();
+            assert!(e.contains(&format!("method {}", method.name())) && e.contains("--cold"), "{e}");
+            assert!(check_solver_fits(&scene, Some(need + kept), kept).is_ok());
+        }
     }
 
     #[test]
@@ -271,17 +329,17 @@ mod tests {
         scene.medium = wide;
         for method in [Method::Full, Method::Diffusion, Method::Transport] {
             scene.render.method = method;
-            let e = check_solver_fits(&scene, None).unwrap_err().to_string();
+            let e = check_solver_fits(&scene, None, 0).unwrap_err().to_string();
             let spans = format!("spans {} voxels along x", MAX_BOX_ROW_CELLS + 1);
             assert!(e.contains(&spans) && e.contains("medium.downsample"), "{e}");
         }
         for method in [Method::Single, Method::Reference] {
             scene.render.method = method;
-            assert!(check_solver_fits(&scene, None).is_ok());
+            assert!(check_solver_fits(&scene, None, 0).is_ok());
         }
         scene.medium = widest;
         scene.render.method = Method::Full;
-        assert!(check_solver_fits(&scene, None).is_ok());
+        assert!(check_solver_fits(&scene, None, 0).is_ok());
     }
 
     #[test]
@@ -294,7 +352,7 @@ mod tests {
             scene.render.method = method;
             let image = 64 * bytes_per_pixel(method, false, false);
             let need = grid_memory(method).bytes(size);
-            let e = check_solver_fits(&scene, Some(image + need - 1)).unwrap_err().to_string();
+            let e = check_solver_fits(&scene, Some(image + need - 1), 0).unwrap_err().to_string();
             assert!(
                 e.contains(&format!("method {}", method.name())) && e.contains("medium.downsample"),
                 "{e}"
@@ -302,7 +360,7 @@ mod tests {
             let sparse = method != Method::Single;
             assert_eq!(e.contains("--method transport"), sparse, "{e}");
             assert_eq!(e.contains(&format!("{} full voxels", size.full)), sparse, "{e}");
-            assert!(check_solver_fits(&scene, Some(image + need)).is_ok());
+            assert!(check_solver_fits(&scene, Some(image + need), 0).is_ok());
         }
     }
 

@@ -333,7 +333,7 @@ fn render(a: RenderArgs, quiet: bool) -> Result<()> {
     output::check_files(&[&exr, &png], "--output", &file.inputs(&desc))?;
     memory::check_image(&desc, &file.source)?;
     let scene = Scene::build(desc, &file.source, &file.base)?;
-    memory::check_solver(&scene)?;
+    memory::check_solver(&scene, 0)?;
     for w in warnings::warnings(&file, &a.flags(), &scene) {
         note!("warning: {w}");
     }

@@ -83,6 +83,7 @@ pub(crate) mod multigrid;
 pub use multigrid::MAX_BOX_ROW_CELLS;
 pub mod slab;
 pub mod surface;
+pub mod warm;
 
 use crate::error::{Error, Result};
 use crate::half::Signed16;
@@ -532,12 +533,23 @@ pub fn solve_diffusion(
     previous: Option<&DiffusionSolution>,
     settings: &DiffusionSettings,
 ) -> Result<DiffusionSolution> {
-    let start = previous.map(|p| p.i0.clone());
+    solve_diffusion_from(medium, incident, boundary, previous.map(|p| p.i0.clone()), settings)
+}
+
+/// [`solve_diffusion`] from `start` (I0 per band on the medium's full voxels; zero without), to
+/// the same relative residual.
+pub fn solve_diffusion_from(
+    medium: &Medium,
+    incident: &IncidentLight,
+    boundary: &BoundaryLight,
+    start: Option<[Field16; 3]>,
+    settings: &DiffusionSettings,
+) -> Result<DiffusionSolution> {
     solve_bands(medium, incident, boundary, start, BandSolves::Together, settings).map(|(sol, _)| sol)
 }
 
 /// [`solve_diffusion`] with the bands one after another ([`BandSolves::OneByOne`]), warm-started
-/// from `start` if given, whose I0 is overwritten band by band (no second copy is held). Also
+/// from `start` (I0 per band) if given, which is overwritten band by band (no second copy is held). Also
 /// returns the relative change ‖I0_new − I0_old‖₂/‖I0_new‖₂ over all voxels and bands from the
 /// start (0 from none), of I0 clamped at 0 as the lit volume uses it (the raw P1 solution's
 /// negative dipoles on sunlit faces would count as change the image never sees).
@@ -545,10 +557,10 @@ pub fn solve_diffusion_lean(
     medium: &Medium,
     incident: &IncidentLight,
     boundary: &BoundaryLight,
-    start: Option<DiffusionSolution>,
+    start: Option<[Field16; 3]>,
     settings: &DiffusionSettings,
 ) -> Result<(DiffusionSolution, f64)> {
-    solve_bands(medium, incident, boundary, start.map(|s| s.i0), BandSolves::OneByOne, settings)
+    solve_bands(medium, incident, boundary, start, BandSolves::OneByOne, settings)
 }
 
 /// The order of the bands' solves: speed against memory.

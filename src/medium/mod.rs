@@ -17,6 +17,7 @@ pub mod loaders;
 pub mod majorant;
 pub mod march;
 pub mod procedural;
+pub mod remap;
 pub mod sparse;
 pub mod subgrid;
 #[cfg(test)]

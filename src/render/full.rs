@@ -21,6 +21,7 @@ use super::edge_pixels::{edge_pixels, EDGE_GRID, EDGE_SAMPLES};
 use super::single::pixel_sample;
 use super::{Progress, Timings};
 use crate::cube::{clear_air, BorderKeep, BorderLight, ClearAir, CubeImage, CubeOptions, CubeRenderer};
+use crate::diffusion::warm::{DiffusionState, WarmSolve};
 use crate::diffusion::{solve_diffusion_lean, BoundaryLight, DiffusionSettings, DiffusionSolution};
 use crate::edges::gather::{CubeRequest, CubeSource, EdgeGather, SunInput};
 use crate::edges::sparse::{gather_image, gather_pixels, PixelRay, SparseSettings};
@@ -44,6 +45,8 @@ pub struct Propagation {
     pub incident: IncidentLight,
     /// Relative change ‖I0_new − I0_old‖/‖I0_new‖ of each clear-air iteration.
     pub changes: Vec<f64>,
+    /// CG iterations of the diffusion solves (the middle band's, summed over the solves).
+    pub cg_iterations: usize,
 }
 
 /// Relative residual of the first diffusion solve when clear-air iterations follow it: its I0 only
@@ -54,6 +57,12 @@ const FIRST_SOLVE_TOLERANCE: f64 = 1e-2;
 
 /// Stages 1–2 and the clear-air iterations.
 pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Propagation> {
+    propagate_from(scene, progress, timings, None)
+}
+
+/// [`propagate`] with the first diffusion solve started from `start` (a previous frame's
+/// solution, src/diffusion/warm.rs) instead of zero, to the same tolerance.
+pub fn propagate_from(scene: &Scene, progress: &dyn Progress, timings: &mut Timings, start: Option<&DiffusionState>) -> Result<Propagation> {
     let settings = &scene.render.solver;
     let mut inc = timings.time("incident light", || compute_incident(scene, None));
     check_incident(&inc)?;
@@ -71,9 +80,11 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         ..settings.clone()
     };
     let mut sol = timings.time("diffusion solve", || {
-        solve_diffusion_lean(&scene.medium, &inc, &unoccluded, None, &first).map(|(sol, _)| sol)
+        let start = start.map(|st| st.start(&scene.medium));
+        solve_diffusion_lean(&scene.medium, &inc, &unoccluded, start, &first).map(|(sol, _)| sol)
     })?;
     progress.log(&sol.summary());
+    let mut cg_iterations = sol.stats[1].iterations;
     // The sun transmittance depends only on the medium and the sun: once per run, after the
     // first solve (only the lit volumes read it), so that solve does not hold it.
     let sun_t = timings.time("sun transmittance", || SunTransmittance::compute(&scene.medium, scene.sun.dir));
@@ -132,7 +143,7 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         };
         // The new I0 overwrites the old band by band; the change is measured as it does.
         let (new, change) = timings.time("diffusion solve", || {
-            solve_diffusion_lean(&scene.medium, &inc, &boundary, Some(sol), settings)
+            solve_diffusion_lean(&scene.medium, &inc, &boundary, Some(sol.i0), settings)
         })?;
         // A change near or above 100 % is not noise: on grids whose voxels are optically very
         // thick (τ ≫ 1 per voxel) stage 1 deposits all light in the first voxel, and the P1 dipole
@@ -154,6 +165,7 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
             100.0 * change,
             new.stats[1].iterations
         ));
+        cg_iterations += new.stats[1].iterations;
         sol = new;
         changes.push(change);
         if change < scene.render.clear_air.propagation_tolerance {
@@ -166,6 +178,7 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
         solution: sol,
         incident: inc,
         changes,
+        cg_iterations,
     })
 }
 
@@ -488,7 +501,15 @@ fn refine_edge_pixels(
 
 /// Render the image.
 pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
+    Ok(render_warm(scene, progress, timings, WarmSolve::default())?.0)
+}
+
+/// [`render`] as a frame of a sequence: the first diffusion solve starts from `warm.start` and,
+/// with `warm.keep`, the final solution is handed on; also the solves' CG iterations.
+pub fn render_warm(scene: &Scene, progress: &dyn Progress, timings: &mut Timings, warm: WarmSolve) -> Result<(Image, Option<DiffusionState>, usize)> {
+    let p = propagate_from(scene, progress, timings, warm.start)?;
+    let state = warm.keep.then(|| DiffusionState::new(&scene.medium, &p.solution));
     // The solution and stage-1 light are dead once the lit volume holds what the gather needs.
-    let Propagation { lit, .. } = propagate(scene, progress, timings)?;
-    Ok(timings.time("final gather", || gather(scene, &lit, progress)))
+    let Propagation { lit, cg_iterations, .. } = p;
+    Ok((timings.time("final gather", || gather(scene, &lit, progress)), state, cg_iterations))
 }

@@ -2,7 +2,6 @@
 //! (empty scene = sky bins, furnace, hemicube irradiance, opaque slab shadow), the pyramid
 //! renderer against the brute-force march, border-voxel detection and the stage-1 sign convention.
 
-use crate::medium::test_grids::two_lobes;
 use crate::cube::border::{find_border_voxels, render_border_cubes};
 use crate::cube::ground::{hemicube_irradiance, hemicube_weights, render_ground, LitGround};
 use crate::cube::render::{opposite_bin, render_cube_brute, BinMask, CubeOptions, CubeRenderer};
@@ -11,6 +10,7 @@ use crate::diffusion::boundary::hemisphere_radiance;
 use crate::lighting::{DirectionBins, Ground, Sky, Sun, CUBE_FACES};
 use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
+use crate::medium::test_grids::two_lobes;
 use crate::medium::{Density, Grid3, Medium};
 use crate::NoProgress;
 use std::f64::consts::PI;

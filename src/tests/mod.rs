@@ -22,3 +22,4 @@ mod transport;
 mod transport_slab;
 mod vdb;
 mod vdb_scene;
+mod warm;

@@ -113,6 +113,34 @@ impl<'a> GroundLight<'a> {
         }
     }
 
+    /// The cloud's change to the sky's downward irradiance (W/m² per column and band) that
+    /// `old`, another frame's map, implies at each of these columns' centres: its downward
+    /// diffuse irradiance there, less this sky's; zero off `old` (a warm start's, src/transport/warm.rs).
+    /// None without a ground.
+    pub(super) fn e_down_from(&self, old: &GroundMap) -> Option<Vec<[f64; 3]>> {
+        let g = self.ground?;
+        let [nx, _] = self.dims;
+        let e = (0..self.dims[0] * self.dims[1])
+            .map(|c| {
+                let (i, k) = ((c % nx) as f64 - self.margin as f64, (c / nx) as f64 - self.margin as f64);
+                let (x, z) = (self.origin[0] + (i + 0.5) * self.h[0], self.origin[1] + (k + 0.5) * self.h[1]);
+                let Some(o) = old.column(x, z) else {
+                    return [0.0; 3];
+                };
+                let d = old.diffuse[o].to_array();
+                [0, 1, 2].map(|b| {
+                    let albedo = g.albedo[b] as f64;
+                    if albedo > 0.0 {
+                        d[b] as f64 * PI / albedo - self.sky_down[b]
+                    } else {
+                        0.0
+                    }
+                })
+            })
+            .collect();
+        Some(e)
+    }
+
     /// The ground's radiance with the cloud's change `e_down` (W/m² per column and band) to the
     /// sky's downward irradiance; None: the clear sky's alone.
     pub(super) fn map(&self, e_down: Option<&[[f64; 3]]>) -> GroundMap {

@@ -34,7 +34,7 @@ use super::moments16::Moments16;
 use super::source::{diffuse_source_of, parity_order, PairTables};
 use super::sphere::Quadrature;
 use super::sweep::sweep;
-use super::warm::{TransportState, WARM_MIN_ITERATIONS};
+use super::warm::{warm_converged, TransportState, WarmStart};
 use super::TransportOptics;
 use crate::diffusion::multigrid::Hierarchy;
 use crate::error::{Error, Result};
@@ -179,7 +179,7 @@ pub fn solve_warm(
         ground: &ground_light,
         s,
     };
-    let warm = opts.start.and_then(|st| st.start(m, s.order, &index.voxels, 3 * ctx.nsh));
+    let warm = opts.start.and_then(|st| st.start(m, s.order, 3 * ctx.nsh, &ground_light));
     let mut it = Iterate::new(&solver, warm);
     solver.iterate(&mut it, progress, opts.live)?;
     solver.check_converged(&it)?;
@@ -193,12 +193,11 @@ pub fn solve_warm(
     } = it;
     drop(moments);
     let nsh = ctx.nsh;
+    let kept_ground = opts.keep.then(|| ground_map.clone());
     // The field takes the index and T′ the solver no longer reads.
     let mut field = solver.field(&next, history, ground_map, Vec::new(), Vec::new());
     drop(ctx);
-    let state = opts
-        .keep
-        .then(|| TransportState::new(m, s.order, index.full.clone(), next, 3 * nsh));
+    let state = kept_ground.map(|g| TransportState::new(m, s.order, next, 3 * nsh, g));
     (field.full, field.sun_t) = (index.full, sun_t);
     Ok((field, state))
 }
@@ -245,8 +244,8 @@ struct Iterate {
     /// Relative change of I0 after each iteration.
     history: Vec<f64>,
     ground_map: GroundMap,
-    /// Fewest iterations before the stopping test may stop it.
-    min_iterations: usize,
+    /// Started from a previous frame's state: stopped by [`warm_converged`].
+    warm: bool,
     /// Iteration of the last extrapolation (0: none).
     extrapolated: usize,
     /// The acceleration's guard (docs/transport.md, "When the acceleration diverges"): whether
@@ -259,18 +258,19 @@ struct Iterate {
 }
 
 impl Iterate {
-    /// The cold start (zero) or the warm start's moments.
-    fn new(solver: &Solver, warm: Option<Vec<f32>>) -> Iterate {
-        // A warm start's error is mostly the slow modes the dominant-mode step removes, which
-        // needs three iterations to see (src/transport/warm.rs).
-        let min_iterations = if warm.is_some() { WARM_MIN_ITERATIONS } else { 1 };
-        let next = warm.unwrap_or_else(|| vec![0f32; solver.ctx.voxels.len() * 3 * solver.ctx.nsh]);
+    /// The cold start (zero) or the warm start's moments and ground.
+    fn new(solver: &Solver, warm: Option<WarmStart>) -> Iterate {
+        let is_warm = warm.is_some();
+        let (next, e_down) = match warm {
+            Some(w) => (w.moments, w.e_down),
+            None => (vec![0f32; solver.ctx.voxels.len() * 3 * solver.ctx.nsh], None),
+        };
         Iterate {
             moments: Moments16::of(&next, solver.ctx.nsh),
             next,
             history: Vec::new(),
-            ground_map: solver.ground.map(None),
-            min_iterations,
+            ground_map: solver.ground.map(e_down.as_deref()),
+            warm: is_warm,
             extrapolated: 0,
             accelerated: solver.s.acceleration,
             smallest: f64::INFINITY,
@@ -354,9 +354,12 @@ impl Solver<'_> {
                     self.ctx.sun_t.to_vec(),
                 ));
             }
-            if change < s.tolerance
-                && it.history.len() >= it.min_iterations
-                && (it.accelerated || plain_converged(it.since_restart(), s.tolerance))
+            let stop = if it.warm {
+                warm_converged(&it.history, s.tolerance)
+            } else {
+                change < s.tolerance
+            };
+            if stop && (it.accelerated || plain_converged(it.since_restart(), s.tolerance))
             {
                 break;
             }

@@ -10,7 +10,8 @@ use super::single::{background, pixel_sample};
 use super::{render_rows, Progress, Timings};
 use crate::diffusion::flux::{diffuse_flux, FluxField};
 use crate::diffusion::surface::visible_i0;
-use crate::diffusion::{solve_diffusion, BoundaryLight, DiffusionSolution};
+use crate::diffusion::warm::{DiffusionState, WarmSolve};
+use crate::diffusion::{solve_diffusion_from, BoundaryLight, DiffusionSolution};
 use crate::error::check_finite_field;
 use crate::error::Result;
 use crate::image::Image;
@@ -153,12 +154,22 @@ fn source_field(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution, sun
 
 /// Render the image.
 pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
+    Ok(render_warm(scene, progress, timings, WarmSolve::default())?.0)
+}
+
+/// [`render`] as a frame of a sequence: the solve starts from `warm.start` (a previous frame's
+/// solution, src/diffusion/warm.rs) and, with `warm.keep`, hands its own on; also the solve's
+/// CG iterations (the middle band's).
+pub fn render_warm(scene: &Scene, progress: &dyn Progress, timings: &mut Timings, warm: WarmSolve) -> Result<(Image, Option<DiffusionState>, usize)> {
     let inc = timings.time("incident light", || compute_incident(scene, None));
     check_incident(&inc)?;
     let sol = timings.time("diffusion solve", || {
-        solve_diffusion(&scene.medium, &inc, &boundary_light(scene), None, &scene.render.solver)
+        let start = warm.start.map(|st| st.start(&scene.medium));
+        solve_diffusion_from(&scene.medium, &inc, &boundary_light(scene), start, &scene.render.solver)
     })?;
     progress.log(&sol.summary());
+    let state = warm.keep.then(|| DiffusionState::new(&scene.medium, &sol));
+    let iterations = sol.stats[1].iterations;
     // Only the source field reads the sun transmittance: computed after the solve, not held
     // through it.
     let sun_t = timings.time("sun transmittance", || SunTransmittance::compute(&scene.medium, scene.sun.dir));
@@ -204,7 +215,7 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
     });
     let mut img = Image::new(cam.width, cam.height);
     img.pixels = px;
-    Ok(img)
+    Ok((img, state, iterations))
 }
 
 #[cfg(test)]

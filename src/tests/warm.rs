@@ -1,0 +1,95 @@
+//! Warm starts across a sequence's frames, end to end through `render_warm`: every solving method
+//! starts from the previous frame's state mapped onto a moved and grown grid, and ends where a
+//! cold solve does (docs/sequences.md, "Warm starts").
+
+use crate::math::Vec3;
+use crate::medium::procedural::cumulus;
+use crate::medium::Medium;
+use crate::pipeline::NoProgress;
+use crate::render::warm::{render_warm, Warm};
+use crate::scene::{Method, Scene, SceneDesc};
+use crate::tools::compare::compare;
+use crate::transport::solve::{solve_warm, SolveOptions};
+
+/// A small cumulus of 40-m voxels under a sun at `elevation_deg`, its grid grown by `grow`
+/// voxels per axis and moved 10 m per grown voxel, with a ground.
+fn frame(method: Method, elevation_deg: f32, grow: usize) -> Scene {
+    let mut d = SceneDesc::default();
+    (d.camera.width, d.camera.height) = (32, 24);
+    d.render.method = method;
+    d.sun.direction = None;
+    d.sun.elevation_deg = Some(elevation_deg);
+    d.sun.azimuth_deg = Some(40.0);
+    let mut s = Scene::build(d, "warm.toml", std::path::Path::new(".")).unwrap();
+    let dims = [20 + grow, 16 + grow, 12 + grow];
+    let origin = Vec3::new(-400.0 + 10.0 * grow as f32, 0.0, -240.0);
+    let o = &s.medium.optics;
+    s.medium = Medium::new(cumulus(dims, 1), origin, Vec3::splat(40.0), o.sigma_t, o.albedo, s.desc.medium.g);
+    s
+}
+
+fn block_error(a: &crate::image::Image, b: &crate::image::Image) -> f64 {
+    compare(a, b, None).unwrap().block_mean_relative_error.unwrap_or(0.0)
+}
+
+#[test]
+fn every_solving_method_starts_a_frame_from_the_last_one_and_ends_where_a_cold_solve_does() {
+    for method in [Method::Transport, Method::Diffusion, Method::Full] {
+        let mut warm = Warm::new(true);
+        render_warm(&frame(method, 50.0, 0), &NoProgress, &mut warm).unwrap();
+        assert!(warm.is_warm() && warm.bytes() > 0, "{method:?} keeps a state");
+        let next = frame(method, 49.0, 1);
+        let mut cold = Warm::new(false);
+        let cold_image = render_warm(&next, &NoProgress, &mut cold).unwrap().image;
+        assert!(!cold.is_warm(), "--cold keeps nothing");
+        let warm_image = render_warm(&next, &NoProgress, &mut warm).unwrap().image;
+        let (w, c) = (warm.iterations.unwrap(), cold.iterations.unwrap());
+        let apart = block_error(&warm_image, &cold_image);
+        if method == Method::Transport {
+            // The warm frame is closer to a converged solve than the cold one, so the two differ
+            // by about the cold frame's own error. On this small cloud that takes the warm solve
+            // more iterations than the cold one (docs/sequences.md).
+            let mut tight = next.clone();
+            (tight.render.transport.tolerance, tight.render.transport.max_iterations) = (1e-5, 200);
+            let converged = render_warm(&tight, &NoProgress, &mut Warm::new(false)).unwrap().image;
+            let (warm_error, cold_error) = (block_error(&warm_image, &converged), block_error(&cold_image, &converged));
+            assert!(
+                warm_error <= cold_error && apart <= 1.5 * cold_error,
+                "transport: warm {warm_error:.2e} and cold {cold_error:.2e} from converged, {apart:.2e} apart \
+                 (iterations warm {w}, cold {c})"
+            );
+            continue;
+        }
+        // The diffusion solves stop on the residual: the images agree to I0's 16-bit coding (this
+        // small grid's CG takes 2 iterations either way).
+        assert!(
+            w <= c && apart < 1e-4,
+            "{method:?}: iterations warm {w}, cold {c}; images {apart:.2e} apart"
+        );
+    }
+}
+
+#[test]
+fn a_transport_solve_started_from_its_own_solution_starts_converged() {
+    // The moments and the cloud's light on the ground both carried: the first sweep changes I0
+    // by less than the tolerance.
+    let s = frame(Method::Transport, 50.0, 0);
+    assert!(s.ground.is_some(), "the scene has a ground to carry light to");
+    let t = &s.render.transport;
+    let keep = SolveOptions {
+        keep: true,
+        ..SolveOptions::default()
+    };
+    let (cold, state) = solve_warm(&s.medium, &s.sun, &s.sky, s.ground.as_ref(), t, &NoProgress, keep).unwrap();
+    let start = SolveOptions {
+        start: state.as_ref(),
+        ..SolveOptions::default()
+    };
+    let (warm, _) = solve_warm(&s.medium, &s.sun, &s.sky, s.ground.as_ref(), t, &NoProgress, start).unwrap();
+    assert!(
+        warm.history[0] < t.tolerance && warm.iterations() < cold.iterations(),
+        "warm {:?}, cold {:?}",
+        warm.history,
+        cold.history
+    );
+}
