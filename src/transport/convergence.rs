@@ -1,7 +1,6 @@
 //! When the iteration stops, when it diverges, and the extrapolation of its slowest mode.
 
 use super::grid::Ctx;
-use super::moments16::Moments16;
 use super::BandOptics;
 
 /// Extrapolation of the slowest error mode (Lyusternik's): once DSA has removed the diffusive
@@ -35,10 +34,10 @@ pub(super) const DIVERGENCE_FACTOR: f64 = 4.0;
 
 /// (max |ΔI_00|, max |I_00|) over the full voxels and bands (W·m⁻²·sr⁻¹): inf for the first
 /// when either iterate holds a non-finite value (so a NaN is never read as "no change").
-pub(super) fn i00_change(next: &[f32], moments: &Moments16) -> (f64, f64) {
+pub(super) fn i00_change(next: &[f32], moments: &[f32], nsh: usize) -> (f64, f64) {
     next.iter()
-        .step_by(moments.nsh())
-        .zip(moments.i00())
+        .step_by(nsh)
+        .zip(moments.iter().step_by(nsh))
         .fold((0.0f64, 1e-30f64), |(c, m), (x, y)| {
             let d = (x - y).abs() as f64;
             (if d.is_finite() { c.max(d) } else { f64::INFINITY }, m.max(x.abs() as f64))

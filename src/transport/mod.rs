@@ -15,7 +15,6 @@ mod convergence;
 mod dsa;
 mod grid;
 mod ground;
-mod moments16;
 mod simd;
 pub mod slab;
 pub mod solve;
@@ -76,11 +75,10 @@ impl TransportSettings {
 
 /// Peak memory of a transport render (solve, eye source and gather; not the image), estimated
 /// from the medium before anything is allocated. Peak resident memory measured on the
-/// development sandbox (`/usr/bin/time -f %M`, 8×6 images unless named; docs/performance.md,
-/// "Peaks"): the default cloud at 50×40×30 20.2 MB, 100×80×60 94.0 MB, 200×160×120 674 MB, the
-/// Disney cloud at a quarter of 1/16 (7.6 k full voxels, 48×36) 25.6 MB and at 1/16 (363 k,
-/// 320×240) 681 MB; the model below is 1.03–1.25 times each (the most on the smallest cloud,
-/// where the fixed part is most of it).
+/// development sandbox (`/usr/bin/time -f %M`, two threads, 8×6 images unless named;
+/// docs/performance.md, "Peaks"): the default cloud at 50×40×30 20.9 MB and 100×80×60 107 MB, the
+/// Disney cloud at 1/16 (363 k full voxels, 320×240) 823 MB; the model below is 1.02–1.31 times
+/// each (the most on the smallest cloud, where the fixed part is most of it).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TransportMemory {
     /// Voxels with ρ > 0.
@@ -103,12 +101,12 @@ impl TransportMemory {
     /// that keeps the estimate at or above the measured peaks.
     pub const DOMAIN_BYTES: u64 = 56;
 
-    /// Bytes per full voxel: at a sweep's peak two spherical-harmonic arrays of 3 bands ×
-    /// (L + 1)², the last iterate's moments in 16-bit codes and the sweep's new moments in f32
-    /// (the source is evaluated from the moments, not stored), plus a batch of ordinates' sources
-    /// and radiances (2 × 12 B each): 1,536 B at order 7.
+    /// Bytes per full voxel: at a sweep's peak two spherical-harmonic arrays (the moments and the
+    /// sweep's new moments; the source is evaluated from the moments, not stored) of 3 bands ×
+    /// (L + 1)² f32, plus a batch of ordinates' sources and radiances (2 × 12 B each): 1,920 B at
+    /// order 7 (a stored source array would add 768 B).
     pub fn bytes_per_full_voxel(order: usize) -> u64 {
-        3 * (2 + 4) * crate::math::sh_count(order) as u64 + 2 * 12 * source::ORDINATE_BATCH as u64
+        2 * 3 * 4 * crate::math::sh_count(order) as u64 + 2 * 12 * source::ORDINATE_BATCH as u64
     }
 
     /// The estimate for medium `m` solved with `s`.

@@ -30,7 +30,6 @@ use super::dsa::{accelerate, hierarchies};
 use super::grid::{Ctx, FullVoxels};
 use super::ground::GroundLight;
 pub use super::ground::GroundMap;
-use super::moments16::Moments16;
 use super::source::{diffuse_source_of, parity_order, PairTables};
 use super::sphere::Quadrature;
 use super::sweep::sweep;
@@ -191,13 +190,13 @@ pub fn solve_warm(
         ground_map,
         ..
     } = it;
-    drop(moments);
+    drop(next);
     let nsh = ctx.nsh;
     let kept_ground = opts.keep.then(|| ground_map.clone());
     // The field takes the index and T′ the solver no longer reads.
-    let mut field = solver.field(&next, history, ground_map, Vec::new(), Vec::new());
+    let mut field = solver.field(&moments, history, ground_map, Vec::new(), Vec::new());
     drop(ctx);
-    let state = kept_ground.map(|g| TransportState::new(m, s.order, next, 3 * nsh, g));
+    let state = kept_ground.map(|g| TransportState::new(m, s.order, moments, 3 * nsh, g));
     (field.full, field.sun_t) = (index.full, sun_t);
     Ok((field, state))
 }
@@ -236,10 +235,8 @@ struct Solver<'a> {
 
 /// The iterate and the record of the iteration.
 struct Iterate {
-    /// The last iterate's moments I_lm per full voxel, band and harmonic (solver order), coded,
-    /// as the sweeps read them.
-    moments: Moments16,
-    /// The sweep's new moments; between iterations, the last iterate itself in f32.
+    /// The moments I_lm per full voxel, band and harmonic (solver order), and the next sweep's.
+    moments: Vec<f32>,
     next: Vec<f32>,
     /// Relative change of I0 after each iteration.
     history: Vec<f64>,
@@ -261,13 +258,13 @@ impl Iterate {
     /// The cold start (zero) or the warm start's moments and ground.
     fn new(solver: &Solver, warm: Option<WarmStart>) -> Iterate {
         let is_warm = warm.is_some();
-        let (next, e_down) = match warm {
+        let (moments, e_down) = match warm {
             Some(w) => (w.moments, w.e_down),
             None => (vec![0f32; solver.ctx.voxels.len() * 3 * solver.ctx.nsh], None),
         };
         Iterate {
-            moments: Moments16::of(&next, solver.ctx.nsh),
-            next,
+            next: vec![0f32; moments.len()],
+            moments,
             history: Vec::new(),
             ground_map: solver.ground.map(e_down.as_deref()),
             warm: is_warm,
@@ -289,7 +286,7 @@ impl Solver<'_> {
     /// Source iteration to the tolerance or the cap: a sweep, the acceleration, the divergence
     /// guard and the extrapolation per iteration.
     fn iterate(&self, it: &mut Iterate, progress: &dyn Progress, live: Option<&dyn Fn(&TransportField)>) -> Result<()> {
-        let s = self.s;
+        let (s, nsh) = (self.s, self.ctx.nsh);
         // The extrapolation assumes the slowest error mode keeps its sign (a ratio r > 0). With a
         // back-scattering phase function the odd moments' scattering eigenvalues a′χ′_l are
         // negative: their error alternates, and adding the last step r/(1 − r) times amplified
@@ -306,7 +303,7 @@ impl Solver<'_> {
             if it.accelerated && !self.hier.is_empty() {
                 accelerate(self.ctx, self.ctx.voxels, self.hier, &self.optics.bands, &it.moments, &mut it.next);
             }
-            let (change_abs, scale) = i00_change(&it.next, &it.moments);
+            let (change_abs, scale) = i00_change(&it.next, &it.moments, nsh);
             it.since_start += 1;
             let diverging = !change_abs.is_finite() || (it.since_start >= 2 && change_abs > DIVERGENCE_FACTOR * it.smallest);
             if diverging && it.accelerated {
@@ -329,14 +326,13 @@ impl Solver<'_> {
                 .then(|| dominant_mode_step(&it.history, it.extrapolated))
                 .flatten()
             {
-                let old = &it.moments;
                 it.next
                     .par_iter_mut()
-                    .enumerate()
-                    .for_each(|(i, x)| *x += k * (*x - old.get(i)));
+                    .zip(it.moments.par_iter())
+                    .for_each(|(x, o)| *x += k * (*x - o));
                 it.extrapolated = it.history.len();
             }
-            it.moments.store(&it.next);
+            std::mem::swap(&mut it.moments, &mut it.next);
             it.ground_map = self.ground.map(Some(&e_down));
             progress.converge(change, s.tolerance);
             progress.advance(1);
@@ -347,7 +343,7 @@ impl Solver<'_> {
             ));
             if let Some(show) = live {
                 show(&self.field(
-                    &it.next,
+                    &it.moments,
                     it.history.clone(),
                     it.ground_map.clone(),
                     self.ctx.full.to_vec(),
@@ -373,8 +369,8 @@ impl Solver<'_> {
     fn give_up_acceleration(&self, it: &mut Iterate, change_abs: f64, progress: &dyn Progress) {
         it.accelerated = false;
         it.given_up = Some(it.history.len() + 1);
+        it.moments.fill(0.0);
         it.next.fill(0.0);
-        it.moments.store(&it.next);
         let smallest = it.smallest;
         (it.smallest, it.since_start) = (f64::INFINITY, 0);
         it.ground_map = self.ground.map(None);

@@ -4,13 +4,11 @@
 //! and (3) the moments I_lm += w I(Ω) Y_lm(Ω) of the batch's radiances ([`moments_block`]).
 
 use super::grid::Ctx;
-use super::moments16::Moments16;
 use super::simd::has_avx;
 use super::sphere::Quadrature;
 use super::BandOptics;
 use crate::math::real_sh;
 use rayon::prelude::*;
-use std::ops::Range;
 
 /// The order of the harmonics inside the solver: every even-l one first, then the odd-l ones
 /// (each l's block in `real_sh`'s order). Y_lm(−Ω) = (−1)^l Y_lm(Ω), so one pass over a voxel's
@@ -147,25 +145,15 @@ fn accumulate(acc: &mut [f32], s: &[f32; PAIRS], blocks: &[[[f32; 8]; PAIRS]]) {
         }
     }
 }
-/// Step (1) of a sweep batch for the full voxels `voxels` (of `moments`): the source in both ordinates of each of the batch's `pairs` pairs
-/// (batch `bi`), into `out[2p]` and `out[2p + 1]` (each slot's entries for these voxels).
+/// Step (1) of a sweep batch for the full voxels from `f0` whose moments are `block`: the
+/// source in both ordinates of each of the batch's `pairs` pairs (batch `bi`), into `out[2p]` and
+/// `out[2p + 1]` (each slot's entries for these voxels).
 #[inline(always)]
-pub(super) fn source_kernel(
-    c: &Ctx,
-    t: &PairTables,
-    bi: usize,
-    pairs: usize,
-    moments: &Moments16,
-    voxels: Range<usize>,
-    out: &mut [&mut [[f32; 3]]],
-) {
+pub(super) fn source_kernel(c: &Ctx, t: &PairTables, bi: usize, pairs: usize, block: &[f32], f0: usize, out: &mut [&mut [[f32; 3]]]) {
     let (nsh, ne) = (c.nsh, c.even);
-    let mut mom = vec![0f32; 3 * nsh];
-    let f0 = voxels.start;
-    for (k, codes) in moments.codes()[3 * nsh * voxels.start..3 * nsh * voxels.end].chunks_exact(3 * nsh).enumerate() {
+    for (k, mom) in block.chunks_exact(3 * nsh).enumerate() {
         let f = f0 + k;
         let tf = c.sun_t[c.voxels[f]];
-        moments.decode_voxel(codes, &mut mom);
         let (mut plus, mut minus) = ([[0f32; 3]; PAIRS], [[0f32; 3]; PAIRS]);
         for b in 0..3 {
             let (m, y) = (&mom[b * nsh..(b + 1) * nsh], &t.y_src[(bi * 3 + b) * nsh..(bi * 3 + b + 1) * nsh]);
@@ -184,36 +172,20 @@ pub(super) fn source_kernel(
 }
 
 /// [`source_kernel`], compiled for AVX where the processor has it.
-pub(super) fn source_block(
-    c: &Ctx,
-    t: &PairTables,
-    bi: usize,
-    pairs: usize,
-    moments: &Moments16,
-    voxels: Range<usize>,
-    out: &mut [&mut [[f32; 3]]],
-) {
+pub(super) fn source_block(c: &Ctx, t: &PairTables, bi: usize, pairs: usize, block: &[f32], f0: usize, out: &mut [&mut [[f32; 3]]]) {
     #[cfg(target_arch = "x86_64")]
     if has_avx() {
         // SAFETY: the processor has AVX.
-        return unsafe { source_block_avx(c, t, bi, pairs, moments, voxels, out) };
+        return unsafe { source_block_avx(c, t, bi, pairs, block, f0, out) };
     }
-    source_kernel(c, t, bi, pairs, moments, voxels, out)
+    source_kernel(c, t, bi, pairs, block, f0, out)
 }
 
 /// [`source_kernel`] compiled for AVX.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
-unsafe fn source_block_avx(
-    c: &Ctx,
-    t: &PairTables,
-    bi: usize,
-    pairs: usize,
-    moments: &Moments16,
-    voxels: Range<usize>,
-    out: &mut [&mut [[f32; 3]]],
-) {
-    source_kernel(c, t, bi, pairs, moments, voxels, out)
+unsafe fn source_block_avx(c: &Ctx, t: &PairTables, bi: usize, pairs: usize, block: &[f32], f0: usize, out: &mut [&mut [[f32; 3]]]) {
+    source_kernel(c, t, bi, pairs, block, f0, out)
 }
 
 /// What step (3) of a sweep batch reads: the batch's radiances per ordinate slot and full voxel, the

@@ -9,7 +9,6 @@
 
 use super::grid::{cross_axes, Ctx, PREFETCH_AHEAD};
 use super::ground::GroundMap;
-use super::moments16::Moments16;
 use super::simd::{has_avx, prefetch};
 use super::source::{moments_block, source_block, Lanes, PairTables, ORDINATE_BATCH, PAIRS};
 use super::sphere::Quadrature;
@@ -20,13 +19,13 @@ use rayon::prelude::*;
 /// One sweep of every ordinate: the diffuse radiance moments I_lm per full voxel (inner harmonic
 /// order), and how much the cloud changes the ground's downward irradiance, per ground map column.
 ///
-/// `moments` are the last iterate's (coded); the source J(Ω) = Σ a′χ′_l (I_lm + E T′ Y_lm(Ω_sun)) Y_lm(Ω)
+/// `moments` are the last iterate's; the source J(Ω) = Σ a′χ′_l (I_lm + E T′ Y_lm(Ω_sun)) Y_lm(Ω)
 /// is evaluated from them directly (no array of source coefficients is stored). Ordinates go in
 /// batches of opposite pairs: (1) per full voxel, the source in both ordinates of each pair of the
 /// batch from one pass over its coefficients; (2) the batch's sweeps, one ordinate per task;
 /// (3) per full voxel, the moments of both ordinates of each pair in one pass, the pairs in
 /// their fixed order.
-pub(super) fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &Moments16, next: &mut [f32], ground: &GroundMap) -> Vec<[f64; 3]> {
+pub(super) fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], next: &mut [f32], ground: &GroundMap) -> Vec<[f64; 3]> {
     let nsh = c.nsh;
     let nfull = moments.len() / (3 * nsh);
     // `next` is the last iteration's array, kept (reused, no new pages); the batch's sources
@@ -47,10 +46,11 @@ pub(super) fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &Moments16
         let outs: Vec<Vec<&mut [[f32; 3]]>> = (0..nfull.div_ceil(chunk))
             .map(|_| slots.iter_mut().filter_map(Iterator::next).collect())
             .collect();
-        outs.into_par_iter().enumerate().for_each(|(ci, mut out)| {
-            let voxels = ci * chunk..nfull.min((ci + 1) * chunk);
-            source_block(c, t, bi, batch.len(), moments, voxels, &mut out)
-        });
+        moments
+            .par_chunks(chunk * 3 * nsh)
+            .zip(outs)
+            .enumerate()
+            .for_each(|(ci, (block, mut out))| source_block(c, t, bi, batch.len(), block, ci * chunk, &mut out));
         // (2) The sweeps.
         let dirs: Vec<usize> = batch.clone().flat_map(|p| t.pairs[p]).collect();
         let wts: Vec<f32> = batch.clone().flat_map(|p| t.weights[p]).collect();
@@ -584,9 +584,8 @@ mod tests {
         let bits = |v: &[[f32; 3]]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
         // Step (1).
         let (mut plain, mut disp) = (vec![[0f32; 3]; ORDINATE_BATCH * nfull], vec![[0f32; 3]; ORDINATE_BATCH * nfull]);
-        let coded = Moments16::of(&moments, nsh);
-        source_kernel(&c, &t, 1, PAIRS, &coded, 0..nfull, &mut plain.chunks_mut(nfull).collect::<Vec<_>>());
-        source_block(&c, &t, 1, PAIRS, &coded, 0..nfull, &mut disp.chunks_mut(nfull).collect::<Vec<_>>());
+        source_kernel(&c, &t, 1, PAIRS, &moments, 0, &mut plain.chunks_mut(nfull).collect::<Vec<_>>());
+        source_block(&c, &t, 1, PAIRS, &moments, 0, &mut disp.chunks_mut(nfull).collect::<Vec<_>>());
         assert_eq!(bits(&plain), bits(&disp));
         assert!(plain.iter().flatten().any(|x| *x > 0.0));
         // Step (2), one ordinate per major axis and sign, with coloured and with grey optics
