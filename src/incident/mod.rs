@@ -397,8 +397,7 @@ impl Family {
         }
         let src = &ctx.sources[self.src];
         let hook = src.bin.and_then(|b| ctx.entry.map(|h| (h, b)));
-        let atten = ctx.atten;
-        let grey = atten[0] == atten[1] && atten[1] == atten[2];
+        let kappa = ctx.kappa;
         let w = self.w;
         let range = self.slab[p].clone();
         for i in range.clone() {
@@ -440,30 +439,19 @@ impl Family {
                         }
                     }
                     // Eq. 2 across the segment: ∫I ds = I_in (1 − e^{−κl})/κ, then I_in e^{−κl}.
-                    let mut e = [0f32; 3];
-                    let mut integral = [0f32; 3];
-                    for c in 0..3 {
-                        if grey && c > 0 {
-                            e[c] = e[0];
-                            integral[c] = integral[0];
-                            continue;
-                        }
-                        let tau = atten[c] * r as f64 * len;
-                        let (ec, ic) = if tau < 1e-6 {
-                            (1.0 - tau, len * (1.0 - 0.5 * tau))
-                        } else {
-                            let ec = (-tau).exp();
-                            (ec, (1.0 - ec) * len / tau)
-                        };
-                        e[c] = ec as f32;
-                        integral[c] = ic as f32;
-                    }
-                    let li = l * Rgb::from_array(integral);
+                    let tau = kappa * r as f64 * len;
+                    let (e, integral) = if tau < 1e-6 {
+                        (1.0 - tau, len * (1.0 - 0.5 * tau))
+                    } else {
+                        let e = (-tau).exp();
+                        (e, (1.0 - e) * len / tau)
+                    };
+                    let li = l * Rgb::splat(integral as f32);
                     let s = &mut self.sums[cv * nu + cu];
                     s[0] += w * li.x;
                     s[1] += w * li.y;
                     s[2] += w * li.z;
-                    self.l[ri] = l * Rgb::from_array(e);
+                    self.l[ri] = l * Rgb::splat(e as f32);
                 }
             }
         }
@@ -500,8 +488,8 @@ struct Sweep<'a> {
     sources: Vec<Source>,
     entry: Option<&'a EntryRadiance<'a>>,
     lo: [usize; 3],
-    /// Extinction per unit density the incident light decays with, per band (m⁻¹).
-    atten: [f64; 3],
+    /// Extinction per unit density the incident light decays with, the same in every band (m⁻¹).
+    kappa: f64,
 }
 
 /// What one family's voxel sums S (Σ w∫I ds per band) add to the accumulators: Σ0 and Σ1 gain
@@ -797,13 +785,12 @@ pub fn compute(
         sources: srcs,
         entry,
         lo,
-        atten: [optics.sigma_t as f64; 3],
+        kappa: optics.sigma_t as f64,
     };
     // With the sun the only source and one extinction for every band, Q0 and Q1 follow from
     // ρT̄ (4 B per full voxel instead of 48), and the sweep accumulates Σ0 of one band only: 8 B
     // per full voxel instead of 96 (all twelve sums would be `full`'s peak at 200×160×120).
-    let grey = sw.atten.iter().all(|&a| a == sw.atten[0]);
-    let sun_only = grey && sw.sources.iter().all(|s| s.bin.is_none());
+    let sun_only = sw.sources.iter().all(|s| s.bin.is_none());
     let (dir, e) = sources.sun.unwrap_or((Vec3::Y, Rgb::ZERO));
     let swept = Swept {
         rho: &rho,
