@@ -21,8 +21,8 @@ pub const WARM_ERROR_FRACTION: f64 = 0.1;
 /// Whether a warm-started solve may stop, from its relative changes of I0 so far (`history`).
 /// A warm start's error lies in the slow modes (the anisotropic orders DSA does not reach, which
 /// fall by r ≈ 0.6–0.7 per iteration), spread over the whole cloud, where a cold solve's last
-/// error lies in a few voxels: at the cold test (last change below the tolerance) the warm image
-/// was 2–5 times further from the converged one than the cold image. So the error left,
+/// error lies in a few voxels: stopped at the cold test (last change below the tolerance) the warm
+/// image is 2–5 times further from the converged one than the cold image. So the error left,
 /// estimated as the last change Δ times max(1, r/(1 − r)) with r the last ratio of changes (the
 /// geometric tail), must be below [`WARM_ERROR_FRACTION`] of the tolerance, after at least
 /// [`WARM_MIN_ITERATIONS`] (docs/sequences.md: then the warm image is closer to the converged
