@@ -673,15 +673,16 @@ fn a_full_disk_or_a_closed_pipe_is_no_panic() {
         assert!(!err.contains("panicked"), "{args:?}: {err}");
     }
     // A reader that closed the pipe before the command wrote: quiet, the shell's 128 + SIGPIPE.
-    let mut child = Command::new(BIN)
+    // The read end is closed before the command starts, so its first write always fails.
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let out = Command::new(BIN)
         .current_dir(dir.path())
         .args(["info", "g.vdb"])
-        .stdout(std::process::Stdio::piped())
+        .stdout(writer)
         .stderr(std::process::Stdio::piped())
-        .spawn()
+        .output()
         .unwrap();
-    drop(child.stdout.take());
-    let out = child.wait_with_output().unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(141), "{err}");
     assert!(err.is_empty(), "{err}");
