@@ -17,6 +17,9 @@ pub struct PeakSpread {
     weight: Vec<f64>,
     /// χ_l for l = first...
     moment: Vec<f64>,
+    /// (2l + 1)(1 − f) g′^l for l = first.. (the smooth part's series at the same orders): empty
+    /// where the peak is the identity on the smooth part's orders (`transport`'s truncation).
+    smooth: Vec<f64>,
 }
 
 impl PeakSpread {
@@ -34,12 +37,22 @@ impl PeakSpread {
                 first: 0,
                 weight: Vec::new(),
                 moment: Vec::new(),
+                smooth: Vec::new(),
             };
         }
         let gp = (g - f) / (1.0 - f);
         let f_chi = move |l: usize| g.powi(l as i32) - (1.0 - f) * gp.powi(l as i32);
         // χ_0 = χ_1 = 1 (δ-M keeps the normalisation and the mean cosine).
-        Self::from_moments(g, 2, f_chi, move |l| f_chi(l) / f)
+        let mut s = Self::from_moments(g, 2, f_chi, move |l| f_chi(l) / f);
+        // P's χ_l < 1 from l = 2 on, where HG(g′) has orders too: the light peak-scattered on the
+        // sun's leg reaches the smooth part's scattering spread as well.
+        s.smooth = (0..s.weight.len())
+            .map(|i| {
+                let l = s.first + i;
+                (2 * l + 1) as f64 * (1.0 - f) * gp.powi(l as i32)
+            })
+            .collect();
+        s
     }
 
     /// Orders from `first` until (2l + 1) g^l < 10⁻⁶ (at least 8 of them).
@@ -54,7 +67,12 @@ impl PeakSpread {
             moment.push(chi(l));
             l += 1;
         }
-        PeakSpread { first, weight, moment }
+        PeakSpread {
+            first,
+            weight,
+            moment,
+            smooth: Vec::new(),
+        }
     }
 
     /// The Legendre polynomials P_l(cos Θ) of this series' orders, for [`Self::spread_with`]
@@ -100,6 +118,23 @@ impl PeakSpread {
             .map(|((w, m), p)| w * ((-lambda * (1.0 - m)).exp() - 1.0) * p)
             .sum()
     }
+
+    /// ([`Self::spread_with`], the same for the smooth part): with the λ peak scatterings on the
+    /// sun's leg before it, the scattering towards the eye is spread in both parts, f P and
+    /// (1 − f) HG(g′): Σ_l (2l + 1)(1 − f) g′^l (e^{−λ(1 − χ_l)} − 1) P_l(cos Θ) is what the smooth
+    /// part loses (0 where the peak leaves the smooth part's orders alone, as `transport`'s does).
+    pub fn spread_split_with(&self, lambda: f64, legendre: &[f64]) -> (f64, f64) {
+        if lambda <= 0.0 {
+            return (0.0, 0.0);
+        }
+        let (mut smooth, mut peak) = (0.0, 0.0);
+        for (i, ((w, m), p)) in self.weight.iter().zip(&self.moment).zip(legendre).enumerate() {
+            let lost = ((-lambda * (1.0 - m)).exp() - 1.0) * p;
+            peak += w * lost;
+            smooth += self.smooth.get(i).map_or(0.0, |ws| ws * lost);
+        }
+        (smooth, peak)
+    }
 }
 
 #[cfg(test)]
@@ -122,6 +157,35 @@ mod tests {
             }
             assert_eq!(s.spread(0.0, 0.7), 0.0);
         }
+    }
+
+    /// The similarity transform's smooth part is spread too, keeping its energy and mean cosine:
+    /// fully spread, the whole HG(g) (both parts) keeps only 1 + 3gμ, the light peak-scattered
+    /// many times on the sun's leg having lost its direction beyond the first moment.
+    #[test]
+    fn a_similarity_spread_flattens_the_smooth_part_too_down_to_its_first_two_orders() {
+        let (g, f) = (0.9f64, 0.65f64);
+        let gp = (g - f) / (1.0 - f);
+        let hg = |g: f64, c: f64| (1.0 - g * g) / (1.0 + g * g - 2.0 * g * c).powf(1.5);
+        let s = PeakSpread::similarity(g, f);
+        let (x, w) = crate::transport::gauss_legendre(600);
+        for lambda in [0.5, 3.0] {
+            let parts: Vec<(f64, f64)> = x.iter().map(|c| s.spread_split_with(lambda, &s.legendre(*c))).collect();
+            let e: f64 = parts.iter().zip(&w).map(|(p, w)| 0.5 * w * p.0).sum();
+            let mu: f64 = parts.iter().zip(&w).zip(&x).map(|((p, w), x)| 0.5 * w * x * p.0).sum();
+            assert!(e.abs() < 1e-9 && mu.abs() < 1e-9, "λ {lambda}: {e} {mu}");
+            let (smooth, peak) = s.spread_split_with(lambda, &s.legendre(1.0));
+            assert!(smooth < 0.0 && (peak - s.spread(lambda, 1.0)).abs() < 1e-9 * peak.abs());
+        }
+        for c in [-0.9, 0.0, 0.5, 0.9] {
+            let (smooth, peak) = s.spread_split_with(1e4, &s.legendre(c));
+            let left = hg(g, c) + smooth + peak;
+            assert!((left - (1.0 + 3.0 * g * c)).abs() < 1e-5, "cos {c}: {left}");
+            assert!((hg(gp, c) * (1.0 - f) + smooth - (1.0 - f) * (1.0 + 3.0 * gp * c)).abs() < 1e-5);
+        }
+        // `transport`'s truncation leaves its smooth part (orders ≤ L) alone.
+        let t = PeakSpread::truncated(0.9, 7);
+        assert_eq!(t.spread_split_with(2.0, &t.legendre(0.8)).0, 0.0);
     }
 
     /// The similarity transform's peak, p − (1 − f) HG(g′), is its series' sum at λ → ∞ taken

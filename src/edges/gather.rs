@@ -586,13 +586,16 @@ impl<'a> EdgeGather<'a> {
                 m.optics.sun_single.0 / (4.0 * std::f32::consts::PI),
             )
         });
-        let peak_at = |sun: Rgb| -> Rgb {
+        // (smooth, peak) parts at a point the sun reaches with E_⊙: both spread by the λ peak
+        // scatterings before them.
+        let sun_at = |sun: Rgb| -> (Rgb, Rgb) {
             match &spread {
                 Some((s, legendre, e, a)) if sun.y > 0.0 && *e > 0.0 => {
                     let lambda = peak_k as f64 * -(sun.y as f64 / *e as f64).min(1.0).ln();
-                    sun_peak + *a * s.spread_with(lambda, legendre) as f32
+                    let (smooth, peak) = s.spread_split_with(lambda, legendre);
+                    (sun_smooth + *a * smooth as f32, sun_peak + *a * peak as f32)
                 }
-                _ => sun_peak,
+                _ => (sun_smooth, sun_peak),
             }
         };
         let to_eye = -d;
@@ -639,7 +642,8 @@ impl<'a> EdgeGather<'a> {
                 }
                 let sun = if n == 1 { plan.sun[k] } else { (self.sun.irradiance_at)(pos) };
                 // The spread series dips below 0 in places (as transport's sun_phase): clamped there.
-                aov.sun_single += f * sun * (sun_smooth + peak_at(sun) * (tr as f32).powf(peak_k)).max(Rgb::ZERO);
+                let (smooth, peak) = sun_at(sun);
+                aov.sun_single += f * sun * (smooth + peak * (tr as f32).powf(peak_k)).max(Rgb::ZERO);
                 tr *= 1.0 + em1;
                 if tr < crate::medium::march::T_CUTOFF as f64 {
                     tr = 0.0;
