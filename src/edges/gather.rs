@@ -253,9 +253,9 @@ impl<'a> EdgeGather<'a> {
         }
     }
 
-    /// Spread the sun's peak part by the peak scatterings on the sun's leg
+    /// Spread the sun's peak and smooth parts by the peak scatterings on the sun's leg
     /// ([`crate::peak::PeakSpread`]): λ = af τ_⊙ = k (−ln T′_⊙), T′_⊙ = E_⊙(p)/`sun_irradiance`
-    /// (the unattenuated sun, W m⁻² per band). Without it the peak keeps HG's sharp shape
+    /// (the unattenuated sun, W m⁻² per band). Without it the sun term keeps HG's sharp shape
     /// however deep the point lies.
     pub fn with_peak_spread(mut self, sun_irradiance: Rgb) -> Self {
         let o = &self.medium.optics;
@@ -577,7 +577,7 @@ impl<'a> EdgeGather<'a> {
         }
         // The peak's part counted once: weighted by T_eye^{af} = T′^k (Optics::sun_scatter_split).
         let (sun_smooth, sun_peak, peak_k) = m.optics.sun_scatter_split(self.sun.dir, -d);
-        // The peak spread on the sun's leg (4π-normalised series, per band's albedo factor).
+        // The spread on the sun's leg (4π-normalised series, per band's albedo factor).
         let spread = self.peak.as_ref().map(|(s, e)| {
             (
                 s,
