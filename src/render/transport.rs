@@ -44,36 +44,61 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
     let peak = PeakSpread::truncated(o.g, f.order);
     (0..f.full.len())
         .into_par_iter()
-        .map(|v| {
-            let fi = f.full[v];
-            if fi == u32::MAX {
-                return (Rgb::ZERO, Rgb::ZERO);
-            }
-            let (i, j, k) = (v % nx, (v / nx) % ny, v / (nx * ny));
-            let centre = m.voxel_center(i, j, k);
-            let to_voxel = centre - eye;
-            let d = to_voxel.normalize_or_zero();
-            // Radiance towards the eye travels along −d.
-            let mut y = vec![0.0; nsh];
-            real_sh(f.order, -DVec3::new(d.x as f64, d.y as f64, d.z as f64), &mut y);
-            let cos_theta = (sun_dir.dot(d) as f64).clamp(-1.0, 1.0);
-            // Exact optical depth from the voxel's centre to the eye (or out of the grid).
-            let t_eye = m.transmittance(centre, -d, 0.0, to_voxel.length()) as f64;
-            let (mut diffuse, mut sun) = ([0f32; 3], [0f32; 3]);
-            for b in 0..3 {
-                let base = (fi as usize * 3 + b) * nsh;
-                let js = &f.diffuse_source[base..base + nsh];
-                diffuse[b] = js.iter().zip(&y).map(|(j, y)| *j as f64 * y).sum::<f64>().max(0.0) as f32;
-                let (a, band) = (o.albedo[b], &o.bands[b]);
-                let t_sun = f.sun_t[v][b] as f64;
-                if t_sun > 0.0 {
-                    let p = sun_phase(&peak, o.g, band, a, cos_theta, t_sun, t_eye);
-                    sun[b] = (a / (1.0 - a * band.f) * e_sun[b] as f64 * p / (4.0 * PI) * t_sun) as f32;
+        .map_init(
+            || vec![0.0; nsh],
+            |y, v| {
+                let fi = f.full[v];
+                if fi == u32::MAX {
+                    return (Rgb::ZERO, Rgb::ZERO);
                 }
-            }
-            (Rgb::from(diffuse), Rgb::from(sun))
-        })
+                let (i, j, k) = (v % nx, (v / nx) % ny, v / (nx * ny));
+                let centre = m.voxel_center(i, j, k);
+                let to_voxel = centre - eye;
+                let d = to_voxel.normalize_or_zero();
+                // Radiance towards the eye travels along −d.
+                real_sh(f.order, -DVec3::new(d.x as f64, d.y as f64, d.z as f64), y);
+                let angle = ScatteringAngle::new(&peak, (sun_dir.dot(d) as f64).clamp(-1.0, 1.0));
+                // Exact optical depth from the voxel's centre to the eye (or out of the grid).
+                let t_eye = m.transmittance(centre, -d, 0.0, to_voxel.length()) as f64;
+                let (mut diffuse, mut sun) = ([0f32; 3], [0f32; 3]);
+                // The last band's phase, its albedo, optics and T′_sun: a band alike takes it.
+                let mut last: Option<(f64, &crate::transport::BandOptics, f64, f64)> = None;
+                for b in 0..3 {
+                    let base = (fi as usize * 3 + b) * nsh;
+                    let js = &f.diffuse_source[base..base + nsh];
+                    diffuse[b] = js.iter().zip(y.iter()).map(|(j, y)| *j as f64 * y).sum::<f64>().max(0.0) as f32;
+                    let (a, band) = (o.albedo[b], &o.bands[b]);
+                    let t_sun = f.sun_t[v][b] as f64;
+                    if t_sun > 0.0 {
+                        let p = match last {
+                            Some((la, lb, lt, p)) if la == a && lb == band && lt == t_sun => p,
+                            _ => sun_phase(&peak, o.g, band, a, &angle, t_sun, t_eye),
+                        };
+                        last = Some((a, band, t_sun, p));
+                        sun[b] = (a / (1.0 - a * band.f) * e_sun[b] as f64 * p / (4.0 * PI) * t_sun) as f32;
+                    }
+                }
+                (Rgb::from(diffuse), Rgb::from(sun))
+            },
+        )
         .unzip()
+}
+
+/// A scattering angle Θ between the sun's direction and the eye's: cos Θ and the Legendre
+/// polynomials of the peak's orders there ([`PeakSpread::legendre`]), made once per voxel for
+/// every band.
+struct ScatteringAngle {
+    cos_theta: f64,
+    legendre: Vec<f64>,
+}
+
+impl ScatteringAngle {
+    fn new(peak: &PeakSpread, cos_theta: f64) -> ScatteringAngle {
+        ScatteringAngle {
+            cos_theta,
+            legendre: peak.legendre(cos_theta),
+        }
+    }
 }
 
 /// The sun's single-scattering phase function (4π-normalised) for the gather, from the δ-M
@@ -89,7 +114,8 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
 /// λ = af τ_sun peak scatterings before it spread its angle (moments g^{l−L−1} per scattering
 /// beyond order L). Only where nothing is on either leg is it TMS. No other stage changes:
 /// the solver, the march and the diffuse source keep δ-M's medium (σt′, a′, p′).
-fn sun_phase(peak: &PeakSpread, g: f64, band: &crate::transport::BandOptics, albedo: f64, cos_theta: f64, t_sun: f64, t_eye: f64) -> f64 {
+fn sun_phase(peak: &PeakSpread, g: f64, band: &crate::transport::BandOptics, albedo: f64, angle: &ScatteringAngle, t_sun: f64, t_eye: f64) -> f64 {
+    let cos_theta = angle.cos_theta;
     let hg = {
         let denom = 1.0 + g * g - 2.0 * g * cos_theta;
         (1.0 - g * g) / (denom * denom.sqrt().max(1e-300))
@@ -98,7 +124,7 @@ fn sun_phase(peak: &PeakSpread, g: f64, band: &crate::transport::BandOptics, alb
     let smooth = (1.0 - band.f) * band.phase(cos_theta);
     // T′_sun = e^{−(1 − af) τ_sun}: the expected number of peak scatterings on the sun's leg.
     let lambda = -af * t_sun.ln() / (1.0 - af);
-    let peak_part = hg - smooth + peak.spread(lambda, cos_theta);
+    let peak_part = hg - smooth + peak.spread_with(lambda, &angle.legendre);
     // p′'s truncated series dips below 0 at some angles (as the solver's source, clamped there too).
     (smooth + t_eye.powf(af) * peak_part).max(0.0)
 }
@@ -276,7 +302,7 @@ mod tests {
         let peak = PeakSpread::truncated(g, order);
         let hg = |c: f64| (1.0 - g * g) / (1.0 + g * g - 2.0 * g * c).powf(1.5);
         for c in [-1.0, -0.3, 0.2, 0.9, 0.99, 1.0] {
-            let p = sun_phase(&peak, g, &band, a, c, 1.0, 1.0);
+            let p = sun_phase(&peak, g, &band, a, &ScatteringAngle::new(&peak, c), 1.0, 1.0);
             assert!((p - hg(c)).abs() < 1e-6 * hg(c).max(1.0), "cos {c}: {p} vs {}", hg(c));
         }
         // Spread by peak scatterings on the sun's leg: the same light in all (½∫ p dμ = 1), less
@@ -288,14 +314,14 @@ mod tests {
             let norm: f64 = x
                 .iter()
                 .zip(&w)
-                .map(|(x, w)| 0.5 * w * sun_phase(&peak, g, &band, a, *x, t_sun, 1.0))
+                .map(|(x, w)| 0.5 * w * sun_phase(&peak, g, &band, a, &ScatteringAngle::new(&peak, *x), t_sun, 1.0))
                 .sum();
             assert!((norm - 1.0).abs() < 1e-3, "T′ {t_sun}: {norm}");
-            assert!(sun_phase(&peak, g, &band, a, 1.0, t_sun, 1.0) < hg(1.0));
+            assert!(sun_phase(&peak, g, &band, a, &ScatteringAngle::new(&peak, 1.0), t_sun, 1.0) < hg(1.0));
         }
         // A peak scattering on the eye's leg removes the peak's share: only the smooth part is left.
         let smooth = (1.0 - band.f) * band.phase(0.95);
-        assert!((sun_phase(&peak, g, &band, a, 0.95, 0.5, 0.0) - smooth).abs() < 1e-9);
+        assert!((sun_phase(&peak, g, &band, a, &ScatteringAngle::new(&peak, 0.95), 0.5, 0.0) - smooth).abs() < 1e-9);
     }
 
     #[test]

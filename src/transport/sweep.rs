@@ -275,40 +275,48 @@ unsafe fn sweep_kernel<const AVX: bool>(
         v[cc] = pc + c.lo[cc] as isize;
         v
     };
-    // The ghost cells of plane pa (all of it when `whole`; otherwise the ring's row and column on
-    // the upwind side, the only ones the cells read: the upwind floor is −1 or 0 per cross
-    // axis): what enters the box there.
-    let (ring_b, ring_c) = (if fb < 0 { -1 } else { nb as isize }, if fc < 0 { -1 } else { nc as isize });
-    let fill_ghosts = |pa: isize, whole: bool, buf: &mut [PlaneCell]| {
-        for ic in -1..=nc as isize {
-            let ibs = if whole || ic == ring_c { -1..=nb as isize } else { ring_b..=ring_b };
-            for ib in ibs {
-                let v = coord(pa, ib, ic);
-                buf[(ib + 1) as usize + stride * (ic + 1) as usize] =
-                    PlaneCell::new(c.boundary(om, v[0], v[1], v[2], ground, skyr), 0.0, [0.0; 3]);
-            }
-        }
+    // What enters a cell of plane pa that no cloud cell upwind reaches: the boundary radiance
+    // straight back along −Ω ([`Ctx::boundary`]), as the ghost ring's cells hold it.
+    let clear_record = |pa: isize, ib: isize, ic: isize| {
+        let v = coord(pa, ib, ic);
+        PlaneCell::new(c.boundary(om, v[0], v[1], v[2], ground, skyr), 0.0, [0.0; 3])
     };
-    let first = if oa > 0.0 { -1 } else { na as isize };
     let sky_only = !(c.ground_height.is_some() && om.y > 0.0);
     let ghost = PlaneCell::new([skyr.x, skyr.y, skyr.z], 0.0, [0.0; 3]);
+    // Without a ground seen upwards every such cell holds the sky: fill both buffers once (the
+    // cells write only the interior).
     if sky_only {
-        // Without a ground seen upwards every ghost cell holds the sky ([`Ctx::boundary`]): fill
-        // both buffers once (the cells write only the interior).
         prev.fill(ghost);
         cur.fill(ghost);
-    } else {
-        fill_ghosts(first, true, &mut prev);
     }
-    // Clear air: with the sky on every ghost cell, a cell whose upwind cells hold the sky's
-    // record and which is empty holds it too. Per row of each plane buffer, the span of cells
-    // that may differ from it (the rest hold it exactly); a plane's row steps only the cells its
-    // own full cells or its upwind rows' spans reach. Seen from the ground upwards the ghost
-    // cells differ, and every cell is stepped.
-    let whole = (0, nb);
-    let mut live_prev = vec![if sky_only { (0, 0) } else { whole }; nc];
+    // Clear air: a cell that is empty and whose upwind cells hold what enters them from outside
+    // the cloud holds that too (Ω's clear ray carries it unchanged). Per row of each plane
+    // buffer, the span of cells that may differ from it; a plane's row steps only the cells its
+    // own full cells or its upwind rows' spans reach. Under the sky the rest hold the sky's
+    // record; seen from the ground upwards, the cells a stepped cell reads outside the upwind
+    // spans are given their boundary record before it is stepped.
+    let mut live_prev = vec![(0, 0); nc];
     let mut live_cur = live_prev.clone();
     let spans = &c.spans[a];
+    // Downwind of the cloud: per (plane, row), the cells a full cell further on reads (its own
+    // full cells and, through the next plane's, every cell upwind of one; [`needed_cells`]).
+    // The rest are not stepped, except where the ground splats read the box's exit faces.
+    let needed = if splat {
+        Vec::new()
+    } else {
+        let mut needed = vec![(0, 0); na * nc];
+        for step in (0..na).rev() {
+            let pa = if oa > 0.0 { step } else { na - 1 - step };
+            for ic in 0..nc {
+                let own = spans[pa * nc + ic];
+                needed[pa * nc + ic] = match (step + 1 < na).then(|| if oa > 0.0 { pa + 1 } else { pa - 1 }) {
+                    Some(next) => needed_cells(&needed[next * nc..(next + 1) * nc], ic as isize, fc, fb, own, nb),
+                    None => (own.0 as usize, own.1 as usize),
+                };
+            }
+        }
+        needed
+    };
     // Offset of the upwind (0, 0) neighbour from a cell in the plane buffer.
     let up = fb + fc * stride as isize;
     // The unchecked indexing below relies on these: a cell's four upwind records lie in the
@@ -318,25 +326,36 @@ unsafe fn sweep_kernel<const AVX: bool>(
     assert!(prev.len() == stride * (nc + 2) && cur.len() == prev.len() && (-1..=0).contains(&fb) && (-1..=0).contains(&fc));
     for step in 0..na {
         let pa = if oa > 0.0 { step } else { na - 1 - step };
+        // The previous plane (the ghost plane before the box's first).
+        let pa_prev = if oa > 0.0 { pa as isize - 1 } else { pa as isize + 1 };
         let plane = &cells[pa * nb * nc..(pa + 1) * nb * nc];
         // The cells PREFETCH_AHEAD further on (past the plane's end: the next plane's, or the
         // padding).
         let ahead = &cells[pa * nb * nc + PREFETCH_AHEAD..][..nb * nc];
         for (ic, (row, row_ahead)) in plane.chunks_exact(nb).zip(ahead.chunks_exact(nb)).enumerate() {
             let l0 = stride * (ic + 1) + 1;
-            let (lo, hi) = if sky_only {
-                let live = stepped_cells(&live_prev, ic as isize + fc, fb, spans[pa * nc + ic], nb);
+            let (mut lo, mut hi) = stepped_cells(&live_prev, ic as isize + fc, fb, spans[pa * nc + ic], nb);
+            if let Some(&(need_lo, need_hi)) = needed.get(pa * nc + ic) {
+                (lo, hi) = if lo.max(need_lo) < hi.min(need_hi) { (lo.max(need_lo), hi.min(need_hi)) } else { (0, 0) };
+            }
+            if sky_only {
                 // Cells this buffer's row held off the sky two planes back and will not step now:
                 // back to the sky's record.
                 let (old_lo, old_hi) = live_cur[ic];
-                for ib in (old_lo..old_hi).filter(|ib| *ib < live.0 || *ib >= live.1) {
+                for ib in (old_lo..old_hi).filter(|ib| *ib < lo || *ib >= hi) {
                     cur[l0 + ib] = ghost;
                 }
-                live_cur[ic] = live;
-                live
-            } else {
-                whole
-            };
+            } else if lo < hi {
+                // Upwind rows ic + fc and ic + fc + 1, cells lo + fb ..= hi + fb (the ring's
+                // included): those off the previous plane's spans.
+                for r in [ic as isize + fc, ic as isize + fc + 1] {
+                    let (a0, a1) = usize::try_from(r).ok().and_then(|r| live_prev.get(r)).map_or((0, 0), |&(a0, a1)| (a0 as isize, a1 as isize));
+                    for j in (lo as isize + fb..=hi as isize + fb).filter(|j| *j < a0 || *j >= a1) {
+                        prev[(j + 1) as usize + stride * (r + 1) as usize] = clear_record(pa_prev, j, r);
+                    }
+                }
+            }
+            live_cur[ic] = (lo, hi);
             for (k, (&(rho, fi), &(_, fa))) in row[lo..hi].iter().zip(&row_ahead[lo..hi]).enumerate() {
                 let ib = lo + k;
                 // The full voxels' sources and radiances lie a grid row apart in x-major sweeps
@@ -422,9 +441,6 @@ unsafe fn sweep_kernel<const AVX: bool>(
         }
         std::mem::swap(&mut prev, &mut cur);
         std::mem::swap(&mut live_prev, &mut live_cur);
-        if !sky_only {
-            fill_ghosts(pa, false, &mut prev);
-        }
     }
     splats
 }
@@ -447,6 +463,23 @@ fn stepped_cells(live: &[(usize, usize)], up: isize, fb: isize, full: (u32, u32)
                 let from = (a as isize - fb - 1).max(0) as usize;
                 let to = ((b as isize - fb) as usize).min(nb);
                 join((from, to));
+            }
+        }
+    }
+    (lo, hi)
+}
+
+/// The cells [lo, hi) of row `ic` whose radiance a full cell downwind reads ([`sweep_kernel`]):
+/// the row's own `full` span and the cells the next plane's `next` spans read (its rows `ic` − `fc`
+/// and `ic` − `fc` − 1; cell ib there reads ib + `fb` and ib + `fb` + 1 here); a row of `nb` cells.
+fn needed_cells(next: &[(usize, usize)], ic: isize, fc: isize, fb: isize, full: (u32, u32), nb: usize) -> (usize, usize) {
+    let (mut lo, mut hi) = (full.0 as usize, full.1 as usize);
+    for r in [ic - fc, ic - fc - 1] {
+        if let Some(&(a, b)) = usize::try_from(r).ok().and_then(|r| next.get(r)) {
+            let from = (a as isize + fb).max(0) as usize;
+            let to = ((b as isize + fb + 1) as usize).min(nb);
+            if a < b && from < to {
+                (lo, hi) = if lo < hi { (lo.min(from), hi.max(to)) } else { (from, to) };
             }
         }
     }
@@ -495,6 +528,20 @@ mod tests {
     }
 
     #[test]
+    fn a_row_needs_its_full_cells_and_what_the_next_planes_needed_cells_read() {
+        // Next plane's rows 1 and 2 read this plane's row 1 (fc = 0: rows 1 and 0 of it read it);
+        // cell ib there reads ib + fb and ib + fb + 1 here.
+        let next = [(0, 0), (3, 5), (6, 7), (0, 0)];
+        assert_eq!(needed_cells(&next, 1, 0, 0, (0, 0), 10), (3, 6));
+        assert_eq!(needed_cells(&next, 1, 0, -1, (0, 0), 10), (2, 5));
+        assert_eq!(needed_cells(&next, 2, 0, 0, (0, 0), 10), (3, 8), "read by next rows 2 and 1");
+        assert_eq!(needed_cells(&next, 1, 0, 0, (8, 10), 10), (3, 10), "the row's own full cells");
+        assert_eq!(needed_cells(&next, 4, 0, 0, (0, 0), 10), (0, 0), "read by no next row");
+        assert_eq!(needed_cells(&next, 0, -1, 0, (0, 0), 10), (3, 6), "fc = −1: next rows 1 and 0");
+        assert_eq!(needed_cells(&[(0, 1)], 0, 0, -1, (0, 0), 10), (0, 1), "clipped at the row's start");
+    }
+
+    #[test]
     fn step_weights_integrate_constants_and_ramps() {
         for x in [1e-4f32, 5e-3, 0.02, 0.199, 0.201, 0.5, 3.0, 40.0] {
             let (e, wi, wo) = step_weights(x);
@@ -513,8 +560,8 @@ mod tests {
     fn the_avx_kernels_give_the_same_bits_as_the_plain_ones() {
         // An 11×9×8 box, empty voxels inside the cloud and clear air around it, random moments:
         // each kernel as built and through its dispatcher (AVX where the processor has it) must
-        // agree bit for bit, and the sweep stepping only the cells off the clear sky agrees with
-        // stepping every cell.
+        // agree bit for bit, and the sweep stepping only the cells off the clear air upwind and
+        // before the last cloud cell downwind agrees with stepping every cell.
         let dims = [11, 9, 8];
         let nv = dims[0] * dims[1] * dims[2];
         let inside = |v: usize| {
@@ -614,12 +661,30 @@ mod tests {
             ..c
         };
         assert!(c.spans.iter().flatten().any(|s| s.0 == s.1), "some rows are clear");
-        for d in 0..q.dirs.len() {
-            let (mut skip, mut all) = (vec![[0f32; 3]; nfull], vec![[0f32; 3]; nfull]);
-            sweep_ordinate(&c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut skip);
-            sweep_ordinate(&every, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut all);
-            for (x, y) in skip.iter().flatten().zip(all.iter().flatten()) {
-                assert!((x - y).abs() <= 1e-6 * y.abs(), "ordinate {d}: {x} vs {y}");
+        // And under a ground of one radiance (the clear air between it and the cloud carries it
+        // unchanged, skipped or stepped), seen by the upward ordinates.
+        let lit = GroundMap {
+            radiance: vec![Rgb::new(0.05, 0.1, 0.15); ground.radiance.len()],
+            clear: Rgb::new(0.05, 0.1, 0.15),
+            ..ground.clone()
+        };
+        fn grounded<'a>(c: &Ctx<'a>) -> Ctx<'a> {
+            Ctx {
+                ground_height: Some(-50.0),
+                cells: c.cells.clone(),
+                spans: c.spans.clone(),
+                ..*c
+            }
+        }
+        let (c_lit, every_lit) = (grounded(&c), grounded(&every));
+        for (skipping, stepping, g) in [(&c, &every, &ground), (&c_lit, &every_lit, &lit)] {
+            for d in 0..q.dirs.len() {
+                let (mut skip, mut all) = (vec![[0f32; 3]; nfull], vec![[0f32; 3]; nfull]);
+                sweep_ordinate(skipping, q.dirs[d], q.weights[d], &plain[..nfull], g, &mut skip);
+                sweep_ordinate(stepping, q.dirs[d], q.weights[d], &plain[..nfull], g, &mut all);
+                for (x, y) in skip.iter().flatten().zip(all.iter().flatten()) {
+                    assert!((x - y).abs() <= 1e-6 * y.abs(), "ordinate {d}: {x} vs {y}");
+                }
             }
         }
         // Step (3).
