@@ -66,7 +66,7 @@ pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) 
 /// first solution, src/diffusion/warm.rs) instead of zero, to the same tolerance; with
 /// `warm.keep` the first solution is kept for the next frame. The first solution, not the final
 /// one: the final one holds the clear-air light, which the first solve, stopped at
-/// FIRST_SOLVE_TOLERANCE, would keep part of (the warm image then 3–6 times further from the
+/// FIRST_SOLVE_TOLERANCE, would keep part of (the warm image then up to 6 times further from the
 /// converged one than the cold image; docs/sequences.md).
 pub fn propagate_from(scene: &Scene, progress: &dyn Progress, timings: &mut Timings, warm: WarmSolve) -> Result<Propagation> {
     let settings = &scene.render.solver;

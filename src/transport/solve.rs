@@ -33,7 +33,7 @@ pub use super::ground::GroundMap;
 use super::source::{diffuse_source_of, parity_order, PairTables};
 use super::sphere::Quadrature;
 use super::sweep::sweep;
-use super::warm::{warm_converged, SlowRatio, TransportState, WarmStart};
+use super::warm::{warm_converged, TransportState, WarmStart};
 use super::TransportOptics;
 use crate::diffusion::multigrid::Hierarchy;
 use crate::error::{Error, Result};
@@ -188,7 +188,6 @@ pub fn solve_warm(
         next,
         history,
         ground_map,
-        slow_ratio,
         ..
     } = it;
     drop(next);
@@ -197,7 +196,7 @@ pub fn solve_warm(
     // The field takes the index and T′ the solver no longer reads.
     let mut field = solver.field(&moments, history, ground_map, Vec::new(), Vec::new());
     drop(ctx);
-    let state = kept_ground.map(|g| TransportState::new(m, s.order, moments, 3 * nsh, g).with_slow_ratio(slow_ratio));
+    let state = kept_ground.map(|g| TransportState::new(m, s.order, moments, 3 * nsh, g));
     (field.full, field.sun_t) = (index.full, sun_t);
     Ok((field, state))
 }
@@ -244,9 +243,6 @@ struct Iterate {
     ground_map: GroundMap,
     /// Started from a previous frame's state: stopped by [`warm_converged`].
     warm: bool,
-    /// The slowest mode's ratio: the largest seen in this solve and the previous frames' since
-    /// the last cold one.
-    slow_ratio: SlowRatio,
     /// Iteration of the last extrapolation (0: none).
     extrapolated: usize,
     /// The acceleration's guard (docs/transport.md, "When the acceleration diverges"): whether
@@ -262,9 +258,9 @@ impl Iterate {
     /// The cold start (zero) or the warm start's moments and ground.
     fn new(solver: &Solver, warm: Option<WarmStart>) -> Iterate {
         let is_warm = warm.is_some();
-        let (moments, e_down, slow_ratio) = match warm {
-            Some(w) => (w.moments, w.e_down, w.slow_ratio),
-            None => (vec![0f32; solver.ctx.voxels.len() * 3 * solver.ctx.nsh], None, SlowRatio::default()),
+        let (moments, e_down) = match warm {
+            Some(w) => (w.moments, w.e_down),
+            None => (vec![0f32; solver.ctx.voxels.len() * 3 * solver.ctx.nsh], None),
         };
         Iterate {
             next: vec![0f32; moments.len()],
@@ -272,7 +268,6 @@ impl Iterate {
             history: Vec::new(),
             ground_map: solver.ground.map(e_down.as_deref()),
             warm: is_warm,
-            slow_ratio,
             extrapolated: 0,
             accelerated: solver.s.acceleration,
             smallest: f64::INFINITY,
@@ -327,7 +322,6 @@ impl Solver<'_> {
             it.smallest = it.smallest.min(change_abs);
             let change = change_abs / scale;
             it.history.push(change);
-            it.slow_ratio.observe(&it.history, it.extrapolated);
             if let Some(k) = (it.accelerated && extrapolate)
                 .then(|| dominant_mode_step(&it.history, it.extrapolated))
                 .flatten()
@@ -357,7 +351,7 @@ impl Solver<'_> {
                 ));
             }
             let stop = if it.warm {
-                warm_converged(change, it.history.len(), it.slow_ratio.0, s.tolerance)
+                warm_converged(&it.history, s.tolerance)
             } else {
                 change < s.tolerance
             };
@@ -375,8 +369,6 @@ impl Solver<'_> {
     fn give_up_acceleration(&self, it: &mut Iterate, change_abs: f64, progress: &dyn Progress) {
         it.accelerated = false;
         it.given_up = Some(it.history.len() + 1);
-        // From zero, a cold solve: stopped by the cold test, its ratios its own.
-        (it.warm, it.slow_ratio) = (false, SlowRatio::default());
         it.moments.fill(0.0);
         it.next.fill(0.0);
         let smallest = it.smallest;
