@@ -1,5 +1,6 @@
 //! Warm starts of the diffusion solve across a sequence's frames (`diffusion` and `full`): the
-//! previous frame's converged I0 is carried to the next frame's full voxels by world position
+//! previous frame's I0 (`diffusion`: the converged solution; `full`: its first solve's, without
+//! the clear-air light) is carried to the next frame's full voxels by world position
 //! ([`FullVoxelPlacement::values_at`]: trilinear over the old full voxels; a voxel new to the
 //! cloud from its neighbours), and the solve runs from it to the same relative residual as a
 //! cold solve (docs/sequences.md, "Warm starts").

@@ -47,6 +47,8 @@ pub struct Propagation {
     pub changes: Vec<f64>,
     /// CG iterations of the diffusion solves (the middle band's, summed over the solves).
     pub cg_iterations: usize,
+    /// The first solve's solution, kept for the next frame's first solve (with `keep`).
+    pub first_state: Option<DiffusionState>,
 }
 
 /// Relative residual of the first diffusion solve when clear-air iterations follow it: its I0 only
@@ -57,12 +59,16 @@ const FIRST_SOLVE_TOLERANCE: f64 = 1e-2;
 
 /// Stages 1–2 and the clear-air iterations.
 pub fn propagate(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> Result<Propagation> {
-    propagate_from(scene, progress, timings, None)
+    propagate_from(scene, progress, timings, WarmSolve::default())
 }
 
-/// [`propagate`] with the first diffusion solve started from `start` (a previous frame's
-/// solution, src/diffusion/warm.rs) instead of zero, to the same tolerance.
-pub fn propagate_from(scene: &Scene, progress: &dyn Progress, timings: &mut Timings, start: Option<&DiffusionState>) -> Result<Propagation> {
+/// [`propagate`] with the first diffusion solve started from `warm.start` (a previous frame's
+/// first solution, src/diffusion/warm.rs) instead of zero, to the same tolerance; with
+/// `warm.keep` the first solution is kept for the next frame. The first solution, not the final
+/// one: the final one holds the clear-air light, which the first solve, stopped at
+/// FIRST_SOLVE_TOLERANCE, would keep part of (the warm image then up to 6 times further from the
+/// converged one than the cold image; docs/sequences.md).
+pub fn propagate_from(scene: &Scene, progress: &dyn Progress, timings: &mut Timings, warm: WarmSolve) -> Result<Propagation> {
     let settings = &scene.render.solver;
     let mut inc = timings.time("incident light", || compute_incident(scene, None));
     check_incident(&inc)?;
@@ -80,10 +86,11 @@ pub fn propagate_from(scene: &Scene, progress: &dyn Progress, timings: &mut Timi
         ..settings.clone()
     };
     let mut sol = timings.time("diffusion solve", || {
-        let start = start.map(|st| st.start(&scene.medium));
+        let start = warm.start.map(|st| st.start(&scene.medium));
         solve_diffusion_lean(&scene.medium, &inc, &unoccluded, start, &first).map(|(sol, _)| sol)
     })?;
     progress.log(&sol.summary());
+    let first_state = warm.keep.then(|| DiffusionState::new(&scene.medium, &sol));
     let mut cg_iterations = sol.stats[1].iterations;
     // The sun transmittance depends only on the medium and the sun: once per run, after the
     // first solve (only the lit volumes read it), so that solve does not hold it.
@@ -179,6 +186,7 @@ pub fn propagate_from(scene: &Scene, progress: &dyn Progress, timings: &mut Timi
         incident: inc,
         changes,
         cg_iterations,
+        first_state,
     })
 }
 
@@ -505,11 +513,16 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
 }
 
 /// [`render`] as a frame of a sequence: the first diffusion solve starts from `warm.start` and,
-/// with `warm.keep`, the final solution is handed on; also the solves' CG iterations.
+/// with `warm.keep`, its solution is handed on ([`propagate_from`]); also the solves' CG
+/// iterations.
 pub fn render_warm(scene: &Scene, progress: &dyn Progress, timings: &mut Timings, warm: WarmSolve) -> Result<(Image, Option<DiffusionState>, usize)> {
-    let p = propagate_from(scene, progress, timings, warm.start)?;
-    let state = warm.keep.then(|| DiffusionState::new(&scene.medium, &p.solution));
+    let p = propagate_from(scene, progress, timings, warm)?;
     // The solution and stage-1 light are dead once the lit volume holds what the gather needs.
-    let Propagation { lit, cg_iterations, .. } = p;
+    let Propagation {
+        lit,
+        cg_iterations,
+        first_state: state,
+        ..
+    } = p;
     Ok((timings.time("final gather", || gather(scene, &lit, progress)), state, cg_iterations))
 }
