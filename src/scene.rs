@@ -213,10 +213,6 @@ render_table! {
     /// `transport`: accelerate the iteration with a diffusion solve (DSA); false: plain source
     /// iteration (many more sweeps in thick clouds).
     transport_acceleration: bool => transport.acceleration, for [Transport];
-    /// `transport`: a voxel keeps the SH orders whose source terms reach this fraction of its
-    /// I0, plus one (adaptive angular resolution, docs/transport.md), in [0, 1); 0 keeps order L
-    /// everywhere.
-    transport_truncation: f64 => transport.truncation, for [Transport];
 }
 
 /// The whole scene file, as written.

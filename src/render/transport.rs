@@ -197,11 +197,10 @@ pub fn render_with(scene: &Scene, progress: &dyn Progress, timings: &mut Timings
     }
     let last = field.history.last().copied().unwrap_or(0.0);
     progress.log(&format!(
-        "transport: {} ordinates, order {} ({:.0} % of its harmonics kept), {} iterations (last change {last:.1e}); \
-         memory ≈ {:.0} MB: {} full voxels × {} B + grid and DSA box (estimate)",
+        "transport: {} ordinates, order {}, {} iterations (last change {last:.1e}); memory ≈ {:.0} MB: \
+         {} full voxels × {} B + grid and DSA box (estimate)",
         field.ordinates,
         field.order,
-        100.0 * field.kept,
         field.iterations(),
         memory.bytes as f64 / 1e6,
         field.full_voxels,

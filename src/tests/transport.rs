@@ -336,39 +336,3 @@ fn back_scattering_converges_and_thick_voxels_fail_with_the_stage_named() {
     let e = solve(&ball(1e4, 1.0), &sun, &sky, None, &s, &NoProgress).unwrap_err().to_string();
     assert!(e.starts_with("transport solve:") && e.contains("--method full"), "{e}");
 }
-
-#[test]
-fn adaptive_angular_resolution_drops_orders_and_keeps_the_image() {
-    // A thick ball (voxels up to 8 optical depths): its nearly isotropic interior keeps few
-    // orders; the image stays within the solver's tolerance of the one at order L everywhere.
-    let mut s = scene(ball(0.8, 0.999), Method::Transport);
-    (s.sun, s.sky) = high_sun_and_blue_sky();
-    let every = TransportSettings {
-        truncation: 0.0,
-        ..TransportSettings::default()
-    };
-    let adaptive = TransportSettings::default();
-    let kept = |t: &TransportSettings| solve(&s.medium, &s.sun, &s.sky, None, t, &NoProgress).unwrap().kept;
-    let (k_every, k_adaptive) = (kept(&every), kept(&adaptive));
-    let image = |t: TransportSettings| {
-        let mut s = s.clone();
-        s.render.transport = t;
-        render(&s, &NoProgress).unwrap().image
-    };
-    let (a, b) = (image(every), image(adaptive));
-    assert_valid(&b);
-    let scale = a.pixels.iter().map(|p| luminance(*p)).fold(0.0, f32::max);
-    let worst = a
-        .pixels
-        .iter()
-        .zip(&b.pixels)
-        .map(|(x, y)| (*x - *y).abs().max_element() / scale)
-        .fold(0.0, f32::max);
-    eprintln!(
-        "adaptive angular resolution: {:.0} % of the harmonics kept, worst pixel change {worst:.2e} of the brightest",
-        100.0 * k_adaptive
-    );
-    assert_eq!(k_every, 1.0);
-    assert!(k_adaptive < 0.7, "{k_adaptive}");
-    assert!(worst < 5e-3, "{worst}");
-}

@@ -21,7 +21,6 @@ pub mod solve;
 mod source;
 pub mod sphere;
 mod sweep;
-mod truncation;
 pub mod warm;
 
 use crate::error::{check, Error, Result};
@@ -70,13 +69,6 @@ impl TransportSettings {
             self.max_iterations >= 1,
             self.max_iterations,
             "the solver needs at least 1 iteration (default 60)",
-        )?;
-        check(
-            file,
-            "render.transport_truncation",
-            self.truncation.is_finite() && (0.0..1.0).contains(&self.truncation),
-            self.truncation,
-            "the fraction of I0 below which a voxel's higher SH orders are dropped is in [0, 1), e.g. 1e-3 (0 keeps every order)",
         )
     }
 }

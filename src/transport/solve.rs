@@ -33,7 +33,6 @@ pub use super::ground::GroundMap;
 use super::source::{diffuse_source_of, parity_order, PairTables};
 use super::sphere::Quadrature;
 use super::sweep::sweep;
-use super::truncation::{Orders, DEFAULT_TRUNCATION};
 use super::warm::{warm_converged, TransportState, WarmStart};
 use super::TransportOptics;
 use crate::diffusion::multigrid::Hierarchy;
@@ -58,9 +57,6 @@ pub struct TransportSettings {
     pub max_iterations: usize,
     /// Diffusion synthetic acceleration on.
     pub acceleration: bool,
-    /// Adaptive angular resolution: a voxel keeps the SH orders whose source terms reach this
-    /// fraction of its I_00, plus one (src/transport/truncation.rs); 0 keeps order L everywhere.
-    pub truncation: f64,
 }
 
 impl Default for TransportSettings {
@@ -71,7 +67,6 @@ impl Default for TransportSettings {
             tolerance: 5e-3,
             max_iterations: 60,
             acceleration: true,
-            truncation: DEFAULT_TRUNCATION,
         }
     }
 }
@@ -94,9 +89,6 @@ pub struct TransportField {
     pub ground: GroundMap,
     /// Relative change of I0 after each iteration.
     pub history: Vec<f64>,
-    /// Share of the order-L harmonics the last sweep evaluated, over the full voxels (the
-    /// adaptive angular resolution, src/transport/truncation.rs; 1 without it).
-    pub kept: f64,
     /// Full voxels.
     pub full_voxels: usize,
     /// Ordinates.
@@ -194,7 +186,6 @@ pub fn solve_warm(
     let Iterate {
         moments,
         next,
-        orders,
         history,
         ground_map,
         ..
@@ -203,7 +194,7 @@ pub fn solve_warm(
     let nsh = ctx.nsh;
     let kept_ground = opts.keep.then(|| ground_map.clone());
     // The field takes the index and T′ the solver no longer reads.
-    let mut field = solver.field((&moments, &orders), history, ground_map, Vec::new(), Vec::new());
+    let mut field = solver.field(&moments, history, ground_map, Vec::new(), Vec::new());
     drop(ctx);
     let state = kept_ground.map(|g| TransportState::new(m, s.order, moments, 3 * nsh, g));
     (field.full, field.sun_t) = (index.full, sun_t);
@@ -247,8 +238,6 @@ struct Iterate {
     /// The moments I_lm per full voxel, band and harmonic (solver order), and the next sweep's.
     moments: Vec<f32>,
     next: Vec<f32>,
-    /// Per full voxel, the SH order the sweeps evaluate and accumulate.
-    orders: Orders,
     /// Relative change of I0 after each iteration.
     history: Vec<f64>,
     ground_map: GroundMap,
@@ -275,7 +264,6 @@ impl Iterate {
         };
         Iterate {
             next: vec![0f32; moments.len()],
-            orders: Orders::full(solver.ctx.voxels.len(), solver.s.order),
             moments,
             history: Vec::new(),
             ground_map: solver.ground.map(e_down.as_deref()),
@@ -311,7 +299,7 @@ impl Solver<'_> {
             if progress.cancelled() {
                 break;
             }
-            let e_down = sweep(self.ctx, self.q, self.tables, (&it.moments, &it.orders.of), &mut it.next, &it.ground_map);
+            let e_down = sweep(self.ctx, self.q, self.tables, &it.moments, &mut it.next, &it.ground_map);
             if it.accelerated && !self.hier.is_empty() {
                 accelerate(self.ctx, self.ctx.voxels, self.hier, &self.optics.bands, &it.moments, &mut it.next);
             }
@@ -344,8 +332,6 @@ impl Solver<'_> {
                     .for_each(|(x, o)| *x += k * (*x - o));
                 it.extrapolated = it.history.len();
             }
-            let bands = &self.optics.bands;
-            it.orders.update(&mut it.next, bands, nsh, self.ctx.even, s.truncation);
             std::mem::swap(&mut it.moments, &mut it.next);
             it.ground_map = self.ground.map(Some(&e_down));
             progress.converge(change, s.tolerance);
@@ -357,7 +343,7 @@ impl Solver<'_> {
             ));
             if let Some(show) = live {
                 show(&self.field(
-                    (&it.moments, &it.orders),
+                    &it.moments,
                     it.history.clone(),
                     it.ground_map.clone(),
                     self.ctx.full.to_vec(),
@@ -385,7 +371,6 @@ impl Solver<'_> {
         it.given_up = Some(it.history.len() + 1);
         it.moments.fill(0.0);
         it.next.fill(0.0);
-        it.orders.reset();
         let smallest = it.smallest;
         (it.smallest, it.since_start) = (f64::INFINITY, 0);
         it.ground_map = self.ground.map(None);
@@ -422,14 +407,7 @@ impl Solver<'_> {
     }
 
     /// The field of `moments`, for the gather.
-    fn field(
-        &self,
-        (moments, orders): (&[f32], &Orders),
-        history: Vec<f64>,
-        ground: GroundMap,
-        full: Vec<u32>,
-        sun_t: Vec<[f32; 3]>,
-    ) -> TransportField {
+    fn field(&self, moments: &[f32], history: Vec<f64>, ground: GroundMap, full: Vec<u32>, sun_t: Vec<[f32; 3]>) -> TransportField {
         let (perm, _) = parity_order(self.s.order);
         TransportField {
             optics: self.optics.clone(),
@@ -439,7 +417,6 @@ impl Solver<'_> {
             sun_t,
             ground,
             history,
-            kept: orders.kept_share(),
             full_voxels: self.ctx.voxels.len(),
             ordinates: self.q.dirs.len(),
         }

@@ -6,7 +6,6 @@
 use super::grid::Ctx;
 use super::simd::has_avx;
 use super::sphere::Quadrature;
-use super::truncation::kept;
 use super::BandOptics;
 use crate::math::real_sh;
 use rayon::prelude::*;
@@ -148,27 +147,17 @@ fn accumulate(acc: &mut [f32], s: &[f32; PAIRS], blocks: &[[[f32; 8]; PAIRS]]) {
 }
 /// Step (1) of a sweep batch for the full voxels from `f0` whose moments are `block`: the
 /// source in both ordinates of each of the batch's `pairs` pairs (batch `bi`), into `out[2p]` and
-/// `out[2p + 1]` (each slot's entries for these voxels), over each voxel's harmonics of l up to
-/// its order in `orders` (per full voxel, [`kept`]).
+/// `out[2p + 1]` (each slot's entries for these voxels).
 #[inline(always)]
-pub(super) fn source_kernel(
-    c: &Ctx,
-    t: &PairTables,
-    bi: usize,
-    pairs: usize,
-    (block, orders): (&[f32], &[u8]),
-    f0: usize,
-    out: &mut [&mut [[f32; 3]]],
-) {
+pub(super) fn source_kernel(c: &Ctx, t: &PairTables, bi: usize, pairs: usize, block: &[f32], f0: usize, out: &mut [&mut [[f32; 3]]]) {
     let (nsh, ne) = (c.nsh, c.even);
     for (k, mom) in block.chunks_exact(3 * nsh).enumerate() {
         let f = f0 + k;
         let tf = c.sun_t[c.voxels[f]];
-        let (ke, ko) = kept(orders[f]);
         let (mut plus, mut minus) = ([[0f32; 3]; PAIRS], [[0f32; 3]; PAIRS]);
         for b in 0..3 {
             let (m, y) = (&mom[b * nsh..(b + 1) * nsh], &t.y_src[(bi * 3 + b) * nsh..(bi * 3 + b + 1) * nsh]);
-            let (e, o) = (lanes_dot(&m[..ke], &y[..ke]), lanes_dot(&m[ne..ne + ko], &y[ne..ne + ko]));
+            let (e, o) = (lanes_dot(&m[..ne], &y[..ne]), lanes_dot(&m[ne..], &y[ne..]));
             let [sp_, sm_] = t.sun[bi * 3 + b];
             for p in 0..PAIRS {
                 plus[p][b] = (e[p] + o[p] + tf[b] * sp_[p]).max(0.0);
@@ -183,15 +172,7 @@ pub(super) fn source_kernel(
 }
 
 /// [`source_kernel`], compiled for AVX where the processor has it.
-pub(super) fn source_block(
-    c: &Ctx,
-    t: &PairTables,
-    bi: usize,
-    pairs: usize,
-    block: (&[f32], &[u8]),
-    f0: usize,
-    out: &mut [&mut [[f32; 3]]],
-) {
+pub(super) fn source_block(c: &Ctx, t: &PairTables, bi: usize, pairs: usize, block: &[f32], f0: usize, out: &mut [&mut [[f32; 3]]]) {
     #[cfg(target_arch = "x86_64")]
     if has_avx() {
         // SAFETY: the processor has AVX.
@@ -203,32 +184,21 @@ pub(super) fn source_block(
 /// [`source_kernel`] compiled for AVX.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
-unsafe fn source_block_avx(
-    c: &Ctx,
-    t: &PairTables,
-    bi: usize,
-    pairs: usize,
-    block: (&[f32], &[u8]),
-    f0: usize,
-    out: &mut [&mut [[f32; 3]]],
-) {
+unsafe fn source_block_avx(c: &Ctx, t: &PairTables, bi: usize, pairs: usize, block: &[f32], f0: usize, out: &mut [&mut [[f32; 3]]]) {
     source_kernel(c, t, bi, pairs, block, f0, out)
 }
 
 /// What step (3) of a sweep batch reads: the batch's radiances per ordinate slot and full voxel, the
-/// slots' weights (sr), the pairs' Y_lm (the batch's blocks of [`PairTables::y_acc`]) and the
-/// full voxels' orders ([`kept`]).
+/// slots' weights (sr) and the pairs' Y_lm (the batch's blocks of [`PairTables::y_acc`]).
 pub(super) struct Lanes<'a> {
     pub(super) nfull: usize,
-    pub(super) orders: &'a [u8],
     pub(super) wts: &'a [f32],
     pub(super) radiance: &'a [[f32; 3]],
     pub(super) y: &'a [[[f32; 8]; PAIRS]],
 }
 
 /// Step (3) of a sweep batch for the full voxels from `f0` whose new moments are `block`: I_lm +=
-/// w I(Ω) Y_lm(Ω) + w′ I(−Ω) (−1)^l Y_lm(Ω) over the batch's pairs, for l up to each voxel's
-/// order.
+/// w I(Ω) Y_lm(Ω) + w′ I(−Ω) (−1)^l Y_lm(Ω) over the batch's pairs.
 #[inline(always)]
 pub(super) fn moments_kernel(c: &Ctx, l: &Lanes, block: &mut [f32], f0: usize) {
     let (nsh, ne, nfull) = (c.nsh, c.even, l.nfull);
@@ -236,7 +206,6 @@ pub(super) fn moments_kernel(c: &Ctx, l: &Lanes, block: &mut [f32], f0: usize) {
     let (mut se, mut so) = ([0f32; PAIRS], [0f32; PAIRS]);
     for (k, acc) in block.chunks_exact_mut(3 * nsh).enumerate() {
         let f = f0 + k;
-        let (ke, ko) = kept(l.orders[f]);
         for band in 0..3 {
             for (slot, (e, o)) in se[..pairs].iter_mut().zip(&mut so[..pairs]).enumerate() {
                 let (ip, im) = (
@@ -247,8 +216,8 @@ pub(super) fn moments_kernel(c: &Ctx, l: &Lanes, block: &mut [f32], f0: usize) {
             }
             let a = &mut acc[band * nsh..(band + 1) * nsh];
             let nbe = ne.div_ceil(8);
-            accumulate(&mut a[..ke], &se, &l.y[..nbe]);
-            accumulate(&mut a[ne..ne + ko], &so, &l.y[nbe..]);
+            accumulate(&mut a[..ne], &se, &l.y[..nbe]);
+            accumulate(&mut a[ne..], &so, &l.y[nbe..]);
         }
     }
 }

@@ -24,16 +24,8 @@ use rayon::prelude::*;
 /// batches of opposite pairs: (1) per full voxel, the source in both ordinates of each pair of the
 /// batch from one pass over its coefficients; (2) the batch's sweeps, one ordinate per task;
 /// (3) per full voxel, the moments of both ordinates of each pair in one pass, the pairs in
-/// their fixed order. Steps (1) and (3) run over each full voxel's harmonics up to its order in
-/// `orders` (src/transport/truncation.rs).
-pub(super) fn sweep(
-    c: &Ctx,
-    q: &Quadrature,
-    t: &PairTables,
-    (moments, orders): (&[f32], &[u8]),
-    next: &mut [f32],
-    ground: &GroundMap,
-) -> Vec<[f64; 3]> {
+/// their fixed order.
+pub(super) fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], next: &mut [f32], ground: &GroundMap) -> Vec<[f64; 3]> {
     let nsh = c.nsh;
     let nfull = moments.len() / (3 * nsh);
     // `next` is the last iteration's array, kept (reused, no new pages); the batch's sources
@@ -58,7 +50,7 @@ pub(super) fn sweep(
             .par_chunks(chunk * 3 * nsh)
             .zip(outs)
             .enumerate()
-            .for_each(|(ci, (block, mut out))| source_block(c, t, bi, batch.len(), (block, orders), ci * chunk, &mut out));
+            .for_each(|(ci, (block, mut out))| source_block(c, t, bi, batch.len(), block, ci * chunk, &mut out));
         // (2) The sweeps.
         let dirs: Vec<usize> = batch.clone().flat_map(|p| t.pairs[p]).collect();
         let wts: Vec<f32> = batch.clone().flat_map(|p| t.weights[p]).collect();
@@ -81,7 +73,6 @@ pub(super) fn sweep(
         let yb = &t.y_acc[bi * nblk..(bi + 1) * nblk];
         let lanes = Lanes {
             nfull,
-            orders,
             wts: &wts,
             radiance,
             y: yb,
@@ -591,12 +582,10 @@ mod tests {
             .map(|i| ((i as f32 * 0.37).sin() * 0.5 + 0.6) / (1 + i % nsh) as f32)
             .collect();
         let bits = |v: &[[f32; 3]]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
-        // Every order from 0 to L among the voxels (src/transport/truncation.rs).
-        let orders: Vec<u8> = (0..nfull).map(|f| (f % (order + 1)) as u8).collect();
         // Step (1).
         let (mut plain, mut disp) = (vec![[0f32; 3]; ORDINATE_BATCH * nfull], vec![[0f32; 3]; ORDINATE_BATCH * nfull]);
-        source_kernel(&c, &t, 1, PAIRS, (&moments, &orders), 0, &mut plain.chunks_mut(nfull).collect::<Vec<_>>());
-        source_block(&c, &t, 1, PAIRS, (&moments, &orders), 0, &mut disp.chunks_mut(nfull).collect::<Vec<_>>());
+        source_kernel(&c, &t, 1, PAIRS, &moments, 0, &mut plain.chunks_mut(nfull).collect::<Vec<_>>());
+        source_block(&c, &t, 1, PAIRS, &moments, 0, &mut disp.chunks_mut(nfull).collect::<Vec<_>>());
         assert_eq!(bits(&plain), bits(&disp));
         assert!(plain.iter().flatten().any(|x| *x > 0.0));
         // Step (2), one ordinate per major axis and sign, with coloured and with grey optics
@@ -638,7 +627,6 @@ mod tests {
         let nblk = t.y_acc.len() / t.pairs.len().div_ceil(PAIRS);
         let l = Lanes {
             nfull,
-            orders: &orders,
             wts: &wts,
             radiance: &plain,
             y: &t.y_acc[nblk..2 * nblk],

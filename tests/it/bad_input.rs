@@ -236,12 +236,6 @@ fn bad_lights_ground_camera_and_render_keys() {
             "[render]\ntransport_acceleration = \"yes\"\n",
             &["s.toml", "transport_acceleration"],
         ),
-        (
-            "[render]\ntransport_truncation = -1e-3\n",
-            &["s.toml", "render.transport_truncation", "[0, 1)"],
-        ),
-        ("[render]\ntransport_truncation = 1.0\n", &["s.toml", "render.transport_truncation"]),
-        ("[render]\ntransport_truncation = nan\n", &["s.toml", "render.transport_truncation"]),
     ]);
     render_fails(
         "[sky]\nmodel = \"envmap\"\npath = \"env.exr\"\n",
