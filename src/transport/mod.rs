@@ -92,10 +92,11 @@ pub struct TransportMemory {
 impl TransportMemory {
     /// Bytes of a render whatever the cloud: the program, its libraries and threads.
     pub const FIXED_BYTES: u64 = 14 << 20;
-    /// Bytes per voxel of the whole grid at the solve's peak: the full-voxel index (4) and the
-    /// δ-M sun transmittance per band (12), rounded up to the fit of the measurements (the
-    /// gather's eye-source grids, 24 B, come after the solve has freed its sweep arrays).
-    pub const GRID_BYTES: u64 = 24;
+    /// Bytes per voxel of the whole grid at the solve's peak: the δ-M sun transmittance per band
+    /// (12; the full voxels are found through the medium's occupancy index, 0.25 B), rounded up
+    /// to the fit of the measurements (the gather's eye-source grids, 24 B, come after the solve
+    /// has freed its sweep arrays).
+    pub const GRID_BYTES: u64 = 20;
     /// Bytes per voxel of the tight box of full voxels: the sweeps' cells in three orders
     /// (3 × 8 B per voxel of the swept box), the acceleration's box-sized arrays, and a margin
     /// that keeps the estimate at or above the measured peaks.
