@@ -61,7 +61,7 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
             let t_eye = m.transmittance(centre, -d, 0.0, to_voxel.length()) as f64;
             let (mut diffuse, mut sun) = ([0f32; 3], [0f32; 3]);
             for b in 0..3 {
-                let base = (fi as usize * 3 + b) * nsh;
+                let base = (fi * 3 + b) * nsh;
                 let js = &f.diffuse_source[base..base + nsh];
                 diffuse[b] = js.iter().zip(&y).map(|(j, y)| *j as f64 * y).sum::<f64>().max(0.0) as f32;
                 let (a, band) = (o.albedo[b], &o.bands[b]);

@@ -76,9 +76,9 @@ impl TransportSettings {
 /// Peak memory of a transport render (solve, eye source and gather; not the image), estimated
 /// from the medium before anything is allocated. Peak resident memory measured on the
 /// development sandbox (`/usr/bin/time -f %M`, two threads, 8×6 images unless named;
-/// docs/performance.md, "Peaks"): the default cloud at 50×40×30 20.9 MB and 100×80×60 107 MB, the
-/// Disney cloud at 1/16 (363 k full voxels, 320×240) 823 MB; the model below is 1.02–1.31 times
-/// each (the most on the smallest cloud, where the fixed part is most of it).
+/// docs/performance.md, "Peaks"): the default cloud at 50×40×30 20.8 MB and 100×80×60 110.8 MB,
+/// the Disney cloud at 1/16 (363 k full voxels, 320×240) 815 MB; the model below is 1.02–1.30
+/// times each (the most on the smallest cloud, where the fixed part is most of it).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TransportMemory {
     /// Voxels with ρ > 0.
