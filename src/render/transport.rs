@@ -16,6 +16,7 @@ use crate::error::Result;
 use crate::image::Image;
 use crate::math::{real_sh, sh_count};
 use crate::math::{Rgb, Vec3};
+use crate::medium::sparse::FullIndex;
 use crate::medium::march::march;
 use crate::medium::Medium;
 use crate::peak::PeakSpread;
@@ -47,10 +48,9 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
         .map_init(
             || vec![0.0; nsh],
             |y, v| {
-                let fi = f.full[v];
-                if fi == u32::MAX {
+                let Some(fi) = f.full.slot(v).checked_sub(1) else {
                     return (Rgb::ZERO, Rgb::ZERO);
-                }
+                };
                 let (i, j, k) = (v % nx, (v / nx) % ny, v / (nx * ny));
                 let centre = m.voxel_center(i, j, k);
                 let to_voxel = centre - eye;
@@ -64,7 +64,7 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
                 // The last band's phase, its albedo, optics and T′_sun: a band alike takes it.
                 let mut last: Option<(f64, &crate::transport::BandOptics, f64, f64)> = None;
                 for b in 0..3 {
-                    let base = (fi as usize * 3 + b) * nsh;
+                    let base = (fi * 3 + b) * nsh;
                     let js = &f.diffuse_source[base..base + nsh];
                     diffuse[b] = js.iter().zip(y.iter()).map(|(j, y)| *j as f64 * y).sum::<f64>().max(0.0) as f32;
                     let (a, band) = (o.albedo[b], &o.bands[b]);
@@ -131,7 +131,7 @@ fn sun_phase(peak: &PeakSpread, g: f64, band: &crate::transport::BandOptics, alb
 
 /// Trilinear interpolation of `grid` at continuous voxel coordinates `v`, over full voxels only.
 #[inline]
-fn full_trilinear(m: &Medium, full: &[u32], grid: &[Rgb], v: Vec3) -> Rgb {
+fn full_trilinear(m: &Medium, full: &FullIndex, grid: &[Rgb], v: Vec3) -> Rgb {
     let d = m.dims();
     let u = v - Vec3::splat(0.5);
     let b = u.floor();
@@ -145,7 +145,7 @@ fn full_trilinear(m: &Medium, full: &[u32], grid: &[Rgb], v: Vec3) -> Rgb {
                     continue;
                 }
                 let idx = c[0] as usize + d[0] * (c[1] as usize + d[1] * c[2] as usize);
-                if full[idx] == u32::MAX {
+                if !full.is_full(idx) {
                     continue;
                 }
                 let w = (if dx == 1 { t.x } else { 1.0 - t.x })

@@ -29,6 +29,8 @@
 use super::sphere::Quadrature;
 use crate::diffusion::multigrid::{Stencil, Stencils, NONE};
 use crate::diffusion::Domain;
+use super::grid::full_of;
+use crate::medium::sparse::FullIndex;
 use crate::medium::Density;
 use std::f64::consts::PI;
 
@@ -141,7 +143,7 @@ pub(crate) struct DsaOperator<'a> {
     /// Grid dimensions, the density and the full-voxel index of every grid voxel.
     pub grid: [usize; 3],
     pub rho: &'a Density,
-    pub full: &'a [u32],
+    pub full: &'a FullIndex,
     /// Grid index of every full voxel (the unknowns), in grid order.
     pub voxels: &'a [usize],
     /// The box of the full voxels.
@@ -191,7 +193,7 @@ impl Stencils for DsaOperator<'_> {
             for (q, side) in [(2 * ax, -1i64), (2 * ax + 1, 1)] {
                 let nc = cell[ax] as i64 + side;
                 let nf = (nc >= 0 && nc < g[ax] as i64)
-                    .then(|| self.full[(v as i64 + side * gstride[ax] as i64) as usize])
+                    .then(|| full_of(self.full, (v as i64 + side * gstride[ax] as i64) as usize))
                     .filter(|f| *f != u32::MAX);
                 match nf {
                     Some(nf) => {

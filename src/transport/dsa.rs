@@ -7,7 +7,7 @@
 
 use super::accel::{DsaOperator, SweepDiffusion};
 use super::grid::Ctx;
-use super::grid::FullVoxels;
+use super::grid::{full_of, FullVoxels};
 use super::sphere::Quadrature;
 use super::BandOptics;
 use crate::diffusion::multigrid::Hierarchy;
@@ -32,7 +32,7 @@ pub(super) fn hierarchies(m: &Medium, bands: &[BandOptics; 3], index: &FullVoxel
             Hierarchy::build(&DsaOperator {
                 grid: m.dims(),
                 rho: &m.density,
-                full: &index.full,
+                full: &index.index,
                 voxels: &index.voxels,
                 dom,
                 h,
@@ -115,7 +115,7 @@ fn dsa_apply(c: &Ctx, voxels: &[usize], bo: &BandOptics, b: usize, delta: &[f64]
                     continue;
                 }
                 let nv = (v as i64 + side * gstride[ax] as i64) as usize;
-                let nf = match c.full[nv] {
+                let nf = match full_of(c.full, nv) {
                     u32::MAX => continue,
                     nf => nf as usize,
                 };

@@ -7,13 +7,16 @@ use super::source::parity_order;
 use super::BandOptics;
 use crate::lighting::{Ground, Sky};
 use crate::math::{sh_count, Rgb};
+use crate::medium::sparse::FullIndex;
 use crate::medium::{Density, Medium};
+use std::sync::Arc;
 use glam::DVec3;
 
 /// The full voxels (ρ > 0): the unknowns of the solve, in grid order.
 pub(super) struct FullVoxels {
-    /// Per grid voxel: its index among the full voxels, or `u32::MAX` where ρ = 0.
-    pub(super) full: Vec<u32>,
+    /// The medium's occupancy index: a grid voxel's slot is 1 + its index among the full voxels
+    /// (0 where ρ = 0), 0.25 B per grid voxel.
+    pub(super) index: Arc<FullIndex>,
     /// Grid index of every full voxel.
     pub(super) voxels: Vec<usize>,
 }
@@ -21,13 +24,16 @@ pub(super) struct FullVoxels {
 impl FullVoxels {
     /// The full voxels of `rho`.
     pub(super) fn of(rho: &Density) -> FullVoxels {
-        let voxels: Vec<usize> = rho.full_index().full_voxels().collect();
-        let mut full = vec![u32::MAX; rho.len()];
-        for (f, &g) in voxels.iter().enumerate() {
-            full[g] = f as u32;
-        }
-        FullVoxels { full, voxels }
+        let index = rho.full_index();
+        let voxels: Vec<usize> = index.full_voxels().collect();
+        FullVoxels { index, voxels }
     }
+}
+
+/// Index among the full voxels of grid voxel `g`, or `u32::MAX` where ρ = 0.
+#[inline(always)]
+pub(crate) fn full_of(index: &FullIndex, g: usize) -> u32 {
+    (index.slot(g) as u32).wrapping_sub(1)
 }
 
 /// Cells ahead of the current one in a sweep's plane whose source and radiance are prefetched.
@@ -41,7 +47,7 @@ pub(super) struct Ctx<'a> {
     pub(super) n: [usize; 3],
     pub(super) h: [f64; 3],
     pub(super) rho: &'a Density,
-    pub(super) full: &'a [u32],
+    pub(super) full: &'a FullIndex,
     pub(super) nsh: usize,
     /// Even-l harmonics (the first of the inner order, [`parity_order`]).
     pub(super) even: usize,
@@ -79,7 +85,7 @@ impl<'a> Ctx<'a> {
         let rho = &*m.density;
         let (lo, hi) = m.active_box(1).unwrap_or(([0; 3], dims));
         let n = [0, 1, 2].map(|a| hi[a] - lo[a]);
-        let cells = [0, 1, 2].map(|a| box_cells(dims, lo, n, rho, &index.full, index.voxels.len(), a));
+        let cells = [0, 1, 2].map(|a| box_cells(dims, lo, n, rho, &index.index, index.voxels.len(), a));
         let spans = [0, 1, 2].map(|a| full_spans(&cells[a], n[cross_axes(a).0]));
         Ctx {
             dims,
@@ -87,7 +93,7 @@ impl<'a> Ctx<'a> {
             n,
             h: [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64],
             rho,
-            full: &index.full,
+            full: &index.index,
             nsh: sh_count(order),
             even: parity_order(order).1,
             voxels: &index.voxels,
@@ -143,7 +149,7 @@ pub(super) fn box_cells(
     lo: [usize; 3],
     n: [usize; 3],
     rho: &Density,
-    full: &[u32],
+    full: &FullIndex,
     voxels: usize,
     a: usize,
 ) -> Vec<(f32, u32)> {
@@ -157,11 +163,9 @@ pub(super) fn box_cells(
                 v[b] += ib;
                 v[cc] += ic;
                 let vi = v[0] + dims[0] * (v[1] + dims[1] * v[2]);
-                assert!(
-                    full[vi] == u32::MAX || (full[vi] as usize) < voxels,
-                    "full-voxel index out of range"
-                );
-                out.push((rho.at(vi), full[vi]));
+                let fi = full_of(full, vi);
+                assert!(fi == u32::MAX || (fi as usize) < voxels, "full-voxel index out of range");
+                out.push((rho.at(vi), fi));
             }
         }
     }

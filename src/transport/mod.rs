@@ -76,9 +76,9 @@ impl TransportSettings {
 /// Peak memory of a transport render (solve, eye source and gather; not the image), estimated
 /// from the medium before anything is allocated. Peak resident memory measured on the
 /// development sandbox (`/usr/bin/time -f %M`, two threads, 8×6 images unless named;
-/// docs/performance.md, "Peaks"): the default cloud at 50×40×30 20.9 MB and 100×80×60 107 MB, the
-/// Disney cloud at 1/16 (363 k full voxels, 320×240) 823 MB; the model below is 1.02–1.31 times
-/// each (the most on the smallest cloud, where the fixed part is most of it).
+/// docs/performance.md, "Peaks"): the default cloud at 50×40×30 20.8 MB and 100×80×60 110.8 MB,
+/// the Disney cloud at 1/16 (363 k full voxels, 320×240) 815 MB; the model below is 1.02–1.30
+/// times each (the most on the smallest cloud, where the fixed part is most of it).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TransportMemory {
     /// Voxels with ρ > 0.
@@ -92,10 +92,11 @@ pub struct TransportMemory {
 impl TransportMemory {
     /// Bytes of a render whatever the cloud: the program, its libraries and threads.
     pub const FIXED_BYTES: u64 = 14 << 20;
-    /// Bytes per voxel of the whole grid at the solve's peak: the full-voxel index (4) and the
-    /// δ-M sun transmittance per band (12), rounded up to the fit of the measurements (the
-    /// gather's eye-source grids, 24 B, come after the solve has freed its sweep arrays).
-    pub const GRID_BYTES: u64 = 24;
+    /// Bytes per voxel of the whole grid at the solve's peak: the δ-M sun transmittance per band
+    /// (12; the full voxels are found through the medium's occupancy index, 0.25 B), rounded up
+    /// to the fit of the measurements (the gather's eye-source grids, 24 B, come after the solve
+    /// has freed its sweep arrays).
+    pub const GRID_BYTES: u64 = 20;
     /// Bytes per voxel of the tight box of full voxels: the sweeps' cells in three orders
     /// (3 × 8 B per voxel of the swept box), the acceleration's box-sized arrays, and a margin
     /// that keeps the estimate at or above the measured peaks.

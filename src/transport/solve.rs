@@ -39,10 +39,12 @@ use crate::diffusion::multigrid::Hierarchy;
 use crate::error::{Error, Result};
 use crate::lighting::{Ground, Sky, Sun};
 use crate::math::{real_sh, sh_count};
+use crate::medium::sparse::FullIndex;
 use crate::medium::Medium;
 use crate::pipeline::Progress;
 use glam::DVec3;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// Settings of the 3-D solver.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -78,8 +80,9 @@ pub struct TransportField {
     pub optics: TransportOptics,
     /// SH order.
     pub order: usize,
-    /// Per voxel: index into the full-voxel arrays, or `u32::MAX` where ρ = 0.
-    pub full: Vec<u32>,
+    /// The medium's occupancy index: a grid voxel's slot is 1 + its index into the full-voxel
+    /// arrays, 0 where ρ = 0.
+    pub full: Arc<FullIndex>,
     /// Diffuse source coefficients a′χ′_l I_lm per full voxel, band, lm (W·m⁻²·sr⁻¹); the sun's
     /// first scattering is not in it (the gather adds it exactly).
     pub diffuse_source: Vec<f32>,
@@ -193,11 +196,11 @@ pub fn solve_warm(
     drop(next);
     let nsh = ctx.nsh;
     let kept_ground = opts.keep.then(|| ground_map.clone());
-    // The field takes the index and T′ the solver no longer reads.
-    let mut field = solver.field(&moments, history, ground_map, Vec::new(), Vec::new());
+    // The field takes T′, which the solver no longer reads.
+    let mut field = solver.field(&moments, history, ground_map, Arc::clone(&index.index), Vec::new());
     drop(ctx);
     let state = kept_ground.map(|g| TransportState::new(m, s.order, moments, 3 * nsh, g));
-    (field.full, field.sun_t) = (index.full, sun_t);
+    field.sun_t = sun_t;
     Ok((field, state))
 }
 
@@ -346,7 +349,7 @@ impl Solver<'_> {
                     &it.moments,
                     it.history.clone(),
                     it.ground_map.clone(),
-                    self.ctx.full.to_vec(),
+                    Arc::new(self.ctx.full.clone()),
                     self.ctx.sun_t.to_vec(),
                 ));
             }
@@ -407,7 +410,7 @@ impl Solver<'_> {
     }
 
     /// The field of `moments`, for the gather.
-    fn field(&self, moments: &[f32], history: Vec<f64>, ground: GroundMap, full: Vec<u32>, sun_t: Vec<[f32; 3]>) -> TransportField {
+    fn field(&self, moments: &[f32], history: Vec<f64>, ground: GroundMap, full: Arc<FullIndex>, sun_t: Vec<[f32; 3]>) -> TransportField {
         let (perm, _) = parity_order(self.s.order);
         TransportField {
             optics: self.optics.clone(),

@@ -571,15 +571,9 @@ mod tests {
         let rho: Vec<f32> = (0..nv)
             .map(|v| if inside(v) { ((v as f32 * 0.618).fract() - 0.2).max(0.0) * 3.0 } else { 0.0 })
             .collect();
-        let mut full = vec![u32::MAX; nv];
-        let mut voxels = Vec::new();
-        for v in 0..nv {
-            if rho[v] > 0.0 {
-                full[v] = voxels.len() as u32;
-                voxels.push(v);
-            }
-        }
+        let voxels: Vec<usize> = (0..nv).filter(|v| rho[*v] > 0.0).collect();
         let density = Density::from_grid(&crate::medium::Grid3::from_vec(dims, rho, "test").unwrap());
+        let full = density.full_index();
         let nfull = voxels.len();
         let order = 7;
         let (perm, even) = parity_order(order);
