@@ -255,10 +255,10 @@ fn sphere_dir() -> tempfile::TempDir {
     dir
 }
 
-/// Render `cloud.vdb` in `d` to `out` at 16×12 with `extra` flags; with `live`, streamed to a
+/// Render `scene` in `d` to `out` at 16×12 with `extra` flags; with `live`, streamed to a
 /// loopback tev listener, whose received bytes are returned.
-fn render_small(d: &Path, out: &str, extra: &[&str], live: bool) -> Vec<u8> {
-    let mut args = vec!["render", "cloud.vdb", "-o", out, "--width", "16", "--height", "12"];
+fn render_small(d: &Path, scene: &str, out: &str, extra: &[&str], live: bool) -> Vec<u8> {
+    let mut args = vec!["render", scene, "-o", out, "--width", "16", "--height", "12"];
     args.extend(extra);
     if !live {
         ok(d, &args);
@@ -274,7 +274,9 @@ fn render_small(d: &Path, out: &str, extra: &[&str], live: bool) -> Vec<u8> {
 fn display_server_streams_each_transport_iteration_and_full_sample() {
     let dir = sphere_dir();
     let d = dir.path();
-    let bytes = render_small(d, "t.exr", &["--method", "transport"], true);
+    // The sphere at half resolution (29³ voxels, 3 iterations): the checks are on the stream.
+    std::fs::write(d.join("half.toml"), "[medium]\ngrid = \"cloud.vdb\"\ndownsample = 2\n").unwrap();
+    let bytes = render_small(d, "half.toml", "t.exr", &["--method", "transport"], true);
     let packets = tev_packets(&bytes);
     // CreateImage once, then an update per iteration (at least 2) and the final image.
     let updates: Vec<&[u8]> = packets.iter().filter(|p| p.0 == 6).map(|p| p.1).collect();
@@ -286,11 +288,11 @@ fn display_server_streams_each_transport_iteration_and_full_sample() {
     assert_eq!(update_pixels(updates[updates.len() - 2], 16, 12), want);
     assert_eq!(update_pixels(updates[updates.len() - 1], 16, 12), want);
     // Without a viewer the image is the same, bit for bit.
-    render_small(d, "plain.exr", &["--method", "transport"], false);
+    render_small(d, "half.toml", "plain.exr", &["--method", "transport"], false);
     let plain = Image::read_exr(&d.join("plain.exr")).unwrap();
     assert_eq!(plain.pixels, img.pixels);
     // `full`: an update after each antialiasing sample but the last, then the final image.
-    let bytes = render_small(d, "f.exr", &["--method", "full", "--aa-samples", "3"], true);
+    let bytes = render_small(d, "half.toml", "f.exr", &["--method", "full", "--aa-samples", "3"], true);
     let types: Vec<u8> = tev_packets(&bytes).iter().map(|p| p.0).collect();
     assert_eq!(types, [4, 6, 6, 6]);
 }
@@ -299,7 +301,7 @@ fn display_server_streams_each_transport_iteration_and_full_sample() {
 fn display_server_streams_every_pass_to_a_tev_listener() {
     let dir = sphere_dir();
     let d = dir.path();
-    let bytes = render_small(d, "live.exr", &["--method", "reference", "--spp", "3"], true);
+    let bytes = render_small(d, "cloud.vdb", "live.exr", &["--method", "reference", "--spp", "3"], true);
     let packets = tev_packets(&bytes);
     // CreateImage (4) once, then UpdateImageV3 (6) after each of the 3 passes and the final image.
     let types: Vec<u8> = packets.iter().map(|p| p.0).collect();
