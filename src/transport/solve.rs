@@ -196,7 +196,7 @@ pub fn solve_warm(
     drop(next);
     let nsh = ctx.nsh;
     let kept_ground = opts.keep.then(|| ground_map.clone());
-    // The field takes T′, which the solver no longer reads.
+    // T′ moves into the field once `ctx`, which borrows it, is dropped (below).
     let mut field = solver.field(&moments, history, ground_map, Arc::clone(&index.index), Vec::new());
     drop(ctx);
     let state = kept_ground.map(|g| TransportState::new(m, s.order, moments, 3 * nsh, g));
