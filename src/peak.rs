@@ -159,15 +159,23 @@ mod tests {
         }
     }
 
+    /// g = 0.9 split at f = 0.65: g, f, the smooth part's g′ and the peak's series.
+    fn similarity_case() -> (f64, f64, f64, PeakSpread) {
+        let (g, f) = (0.9, 0.65);
+        (g, f, (g - f) / (1.0 - f), PeakSpread::similarity(g, f))
+    }
+
+    /// Henyey–Greenstein's phase function, 4π-normalised.
+    fn hg(g: f64, cos: f64) -> f64 {
+        (1.0 - g * g) / (1.0 + g * g - 2.0 * g * cos).powf(1.5)
+    }
+
     /// The similarity transform's smooth part is spread too, keeping its energy and mean cosine:
     /// fully spread, the whole HG(g) (both parts) keeps only 1 + 3gμ, the light peak-scattered
     /// many times on the sun's leg having lost its direction beyond the first moment.
     #[test]
     fn a_similarity_spread_flattens_the_smooth_part_too_down_to_its_first_two_orders() {
-        let (g, f) = (0.9f64, 0.65f64);
-        let gp = (g - f) / (1.0 - f);
-        let hg = |g: f64, c: f64| (1.0 - g * g) / (1.0 + g * g - 2.0 * g * c).powf(1.5);
-        let s = PeakSpread::similarity(g, f);
+        let (g, f, gp, s) = similarity_case();
         let (x, w) = crate::transport::gauss_legendre(600);
         for lambda in [0.5, 3.0] {
             let parts: Vec<(f64, f64)> = x.iter().map(|c| s.spread_split_with(lambda, &s.legendre(*c))).collect();
@@ -192,10 +200,7 @@ mod tests {
     /// away: f χ_l (e^{−∞} − 1) leaves only orders 0 and 1 of f P, i.e. f (1 + 3 μ).
     #[test]
     fn a_fully_spread_similarity_peak_keeps_only_its_first_two_orders() {
-        let (g, f) = (0.9f64, 0.65f64);
-        let gp = (g - f) / (1.0 - f);
-        let hg = |g: f64, c: f64| (1.0 - g * g) / (1.0 + g * g - 2.0 * g * c).powf(1.5);
-        let s = PeakSpread::similarity(g, f);
+        let (g, f, gp, s) = similarity_case();
         for c in [-0.9, 0.0, 0.5, 0.9] {
             let peak = hg(g, c) - (1.0 - f) * hg(gp, c);
             let left = peak + s.spread(1e4, c);

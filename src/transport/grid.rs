@@ -47,7 +47,7 @@ pub(super) struct Ctx<'a> {
     pub(super) n: [usize; 3],
     pub(super) h: [f64; 3],
     pub(super) rho: &'a Density,
-    pub(super) full: &'a FullIndex,
+    pub(super) full: &'a Arc<FullIndex>,
     pub(super) nsh: usize,
     /// Even-l harmonics (the first of the inner order, [`parity_order`]).
     pub(super) even: usize,

@@ -349,7 +349,7 @@ impl Solver<'_> {
                     &it.moments,
                     it.history.clone(),
                     it.ground_map.clone(),
-                    Arc::new(self.ctx.full.clone()),
+                    Arc::clone(self.ctx.full),
                     self.ctx.sun_t.to_vec(),
                 ));
             }

@@ -450,40 +450,44 @@ unsafe fn sweep_kernel<const AVX: bool>(
 /// offsets `fb` and `fb` + 1 along the row) reach a cell of that plane's `live` spans, and the
 /// row's own `full` span; a row of `nb` cells.
 fn stepped_cells(live: &[(usize, usize)], up: isize, fb: isize, full: (u32, u32), nb: usize) -> (usize, usize) {
-    let (mut lo, mut hi) = (full.0 as usize, full.1 as usize);
-    let mut join = |(a, b): (usize, usize)| {
-        if a < b {
-            (lo, hi) = if lo < hi { (lo.min(a), hi.max(b)) } else { (a, b) };
-        }
-    };
+    let mut cells = (full.0 as usize, full.1 as usize);
     for r in [up, up + 1] {
         if let Some(&(a, b)) = usize::try_from(r).ok().and_then(|r| live.get(r)) {
             // Cell ib reads upwind cells ib + fb and ib + fb + 1.
             if a < b {
                 let from = (a as isize - fb - 1).max(0) as usize;
                 let to = ((b as isize - fb) as usize).min(nb);
-                join((from, to));
+                cells = span_union(cells, (from, to));
             }
         }
     }
-    (lo, hi)
+    cells
+}
+
+/// The smallest span [lo, hi) holding both spans (an empty span, lo ≥ hi, adds nothing).
+fn span_union((lo, hi): (usize, usize), (a, b): (usize, usize)) -> (usize, usize) {
+    match (lo < hi, a < b) {
+        (true, true) => (lo.min(a), hi.max(b)),
+        (false, true) => (a, b),
+        _ => (lo, hi),
+    }
 }
 
 /// The cells [lo, hi) of row `ic` whose radiance a full cell downwind reads ([`sweep_kernel`]):
 /// the row's own `full` span and the cells the next plane's `next` spans read (its rows `ic` − `fc`
 /// and `ic` − `fc` − 1; cell ib there reads ib + `fb` and ib + `fb` + 1 here); a row of `nb` cells.
 fn needed_cells(next: &[(usize, usize)], ic: isize, fc: isize, fb: isize, full: (u32, u32), nb: usize) -> (usize, usize) {
-    let (mut lo, mut hi) = (full.0 as usize, full.1 as usize);
+    let mut cells = (full.0 as usize, full.1 as usize);
     for r in [ic - fc, ic - fc - 1] {
         if let Some(&(a, b)) = usize::try_from(r).ok().and_then(|r| next.get(r)) {
-            let from = (a as isize + fb).max(0) as usize;
-            let to = ((b as isize + fb + 1) as usize).min(nb);
-            if a < b && from < to {
-                (lo, hi) = if lo < hi { (lo.min(from), hi.max(to)) } else { (from, to) };
+            if a < b {
+                let from = (a as isize + fb).max(0) as usize;
+                let to = ((b as isize + fb + 1) as usize).min(nb);
+                cells = span_union(cells, (from, to));
             }
         }
     }
-    (lo, hi)
+    cells
 }
 
 /// [`sweep_kernel`] with the AVX cell steps where the processor has AVX: the same bits.

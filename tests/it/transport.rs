@@ -52,9 +52,13 @@ fn bench_times_transport_with_its_iterations_and_memory_and_skips_what_would_tak
             .output()
             .unwrap()
     };
-    let out = bench(&["--max-seconds", "1e-4"]);
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // A run that must succeed: its table.
+    let table = |extra: &[&str]| {
+        let out = bench(extra);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let text = table(&["--max-seconds", "1e-4"]);
     assert!(
         text.contains("| transport solve | eye source |") && text.contains("| 10×8×6 | transport |"),
         "{text}"
@@ -72,9 +76,7 @@ fn bench_times_transport_with_its_iterations_and_memory_and_skips_what_would_tak
     let bad = bench(&["--max-seconds", "0"]);
     assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("--max-seconds"));
     // A scene file of its own grid (the Disney cloud at a quarter of 1/16) gets a row by its name.
-    let clouds = bench(&["--clouds", "tests/data/clouds/wdas.toml"]);
-    let text = String::from_utf8_lossy(&clouds.stdout);
-    assert!(clouds.status.success(), "{}", String::from_utf8_lossy(&clouds.stderr));
+    let text = table(&["--clouds", "tests/data/clouds/wdas.toml"]);
     assert!(
         text.contains("| wdas | transport |") && text.contains("wdas transport: transport:"),
         "{text}"
