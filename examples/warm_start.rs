@@ -1,8 +1,11 @@
-//! Warm against cold solves over two sequences, as a markdown table (docs/sequences.md, "Warm
+//! Warm against cold solves over three sequences, as a markdown table (docs/sequences.md, "Warm
 //! starts"):
 //! - `growing`: the procedural cumulus on a grid that grows by one voxel per axis and moves 6 m
 //!   per frame (every frame a different grid size and origin);
-//! - `sun`: the same cloud with only the sun moving, 1° in elevation and azimuth per frame.
+//! - `sun`: the same cloud with only the sun moving, 1° in elevation and azimuth per frame;
+//! - `drift`: the same cloud carried by the wind a quarter voxel (4 m) per frame, its density
+//!   evolving under a ±5 % wave that moves one voxel per frame through it (at most 1.6 % per
+//!   voxel and frame).
 //!
 //! Per frame: the solve's iterations (`transport`: source iterations; `diffusion`, `full`: CG
 //! iterations of the middle band, summed over `full`'s solves), the solve's and the frame's
@@ -10,8 +13,8 @@
 //! and of the cold and warm images against a tightly converged one (`transport` to 1e-5,
 //! `diffusion` and `full` to a relative residual of 1e-7): the tolerance's own effect on the image.
 //!
-//! `cargo run --release --features internals --example warm_start [FRAMES] [WIDTH] [METHOD]`
-//! (defaults 8, 80 and transport; 4:3 images)
+//! `cargo run --release --features internals --example warm_start [FRAMES] [WIDTH] [METHOD]
+//! [SEQUENCES]` (defaults 8, 80, transport and growing,sun,drift; 4:3 images)
 
 use cloudgi::math::Vec3;
 use cloudgi::medium::procedural::cumulus;
@@ -26,20 +29,54 @@ use std::path::Path;
 const VOXEL: f32 = 16.0;
 const DIMS: [usize; 3] = [50, 40, 30];
 
-fn scene(width: u32, frame: usize, growing: bool, method: Method) -> Scene {
+/// How a sequence changes from frame to frame.
+#[derive(Clone, Copy, PartialEq)]
+enum Sequence {
+    Growing,
+    Sun,
+    Drift,
+}
+
+impl Sequence {
+    fn name(self) -> &'static str {
+        match self {
+            Sequence::Growing => "growing",
+            Sequence::Sun => "sun",
+            Sequence::Drift => "drift",
+        }
+    }
+}
+
+/// Wavelength of the drifting cloud's density wave, in voxels along x + z.
+const WAVE_VOXELS: f32 = 20.0;
+
+fn scene(width: u32, frame: usize, seq: Sequence, method: Method) -> Scene {
     let mut d = SceneDesc::default();
     (d.camera.width, d.camera.height) = (width, width * 3 / 4);
     d.render.method = method;
     let f = frame as f32;
+    let sun = seq == Sequence::Sun;
     d.sun.direction = None;
-    d.sun.elevation_deg = Some(if growing { 50.0 } else { 50.0 - f });
-    d.sun.azimuth_deg = Some(if growing { 40.0 } else { 40.0 + f });
+    d.sun.elevation_deg = Some(if sun { 50.0 - f } else { 50.0 });
+    d.sun.azimuth_deg = Some(if sun { 40.0 + f } else { 40.0 });
     let mut s = Scene::build(d, "warm_start", Path::new(".")).expect("the default scene builds");
-    let grow = if growing { frame } else { 0 };
+    let grow = if seq == Sequence::Growing { frame } else { 0 };
     let dims = DIMS.map(|n| n + grow);
-    let origin = Vec3::new(-400.0 + if growing { 6.0 * f } else { 0.0 }, 0.0, -240.0);
+    let moved_m = match seq {
+        Sequence::Growing => 6.0 * f,
+        Sequence::Sun => 0.0,
+        Sequence::Drift => 0.25 * VOXEL * f,
+    };
+    let origin = Vec3::new(-400.0 + moved_m, 0.0, -240.0);
+    let mut density = cumulus(dims, 1);
+    if seq == Sequence::Drift {
+        for (k, j, i) in (0..dims[2]).flat_map(|k| (0..dims[1]).flat_map(move |j| (0..dims[0]).map(move |i| (k, j, i)))) {
+            let phase = std::f32::consts::TAU * ((i + k) as f32 - f) / WAVE_VOXELS;
+            density.set(i, j, k, density.get(i, j, k) * (1.0 + 0.05 * phase.sin()));
+        }
+    }
     let o = &s.medium.optics;
-    s.medium = Medium::new(cumulus(dims, 1), origin, Vec3::splat(VOXEL), o.sigma_t, o.albedo, s.desc.medium.g);
+    s.medium = Medium::new(density, origin, Vec3::splat(VOXEL), o.sigma_t, o.albedo, s.desc.medium.g);
     s
 }
 
@@ -82,11 +119,13 @@ fn main() {
         method.name()
     );
     println!("|---|---|---|---|---|---|---|---|---|");
-    for growing in [true, false] {
+    let chosen = args.get(3).map_or("growing,sun,drift", String::as_str);
+    let sequences = [Sequence::Growing, Sequence::Sun, Sequence::Drift];
+    for seq in sequences.into_iter().filter(|s| chosen.split(',').any(|c| c == s.name())) {
         let (mut warm, mut total) = (Warm::new(true), [0usize; 2]);
         let mut seconds = [0f64; 2];
         for frame in 0..frames {
-            let s = scene(width, frame, growing, method);
+            let s = scene(width, frame, seq, method);
             let (cold_img, cold_it, cold_s, cold_f) = render(&s, &mut Warm::new(false));
             let (warm_img, warm_it, warm_s, warm_f) = render(&s, &mut warm);
             let (tight_img, ..) = render(&tight(&s), &mut Warm::new(false));
@@ -98,7 +137,7 @@ fn main() {
             }
             println!(
                 "| {} | {frame} | {} | {cold_it} / {warm_it} | {cold_s:.2} / {warm_s:.2} | {cold_f:.2} / {warm_f:.2} | {:.1e} | {:.1e} | {:.1e} |",
-                if growing { "growing" } else { "sun" },
+                seq.name(),
                 s.medium.density.full_index().count(),
                 block_error(&warm_img, &cold_img),
                 block_error(&cold_img, &tight_img),
@@ -107,7 +146,7 @@ fn main() {
         }
         eprintln!(
             "{}: after the first frame, iterations cold {} warm {} ({:.2}×), frame seconds cold {:.1} warm {:.1}",
-            if growing { "growing" } else { "sun" },
+            seq.name(),
             total[0],
             total[1],
             total[0] as f64 / total[1].max(1) as f64,

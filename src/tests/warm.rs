@@ -10,6 +10,7 @@ use crate::render::warm::{render_warm, Warm};
 use crate::scene::{Method, Scene, SceneDesc};
 use crate::tools::compare::compare;
 use crate::transport::solve::{solve_warm, SolveOptions};
+use crate::transport::warm::IMAGE_ERROR_FRACTION;
 
 /// A small cumulus of 40-m voxels under a sun at `elevation_deg`, its grid grown by `grow`
 /// voxels per axis and moved 10 m per grown voxel, with a ground.
@@ -46,17 +47,17 @@ fn every_solving_method_starts_a_frame_from_the_last_one_and_ends_where_a_cold_s
         let (w, c) = (warm.iterations.unwrap(), cold.iterations.unwrap());
         let apart = block_error(&warm_image, &cold_image);
         if method == Method::Transport {
-            // The warm frame is closer to a converged solve than the cold one, so the two differ
-            // by about the cold frame's own error. On this small cloud that takes the warm solve
-            // more iterations than the cold one (docs/sequences.md).
+            // Warm and cold frames both lie within the stated tolerance of a converged solve
+            // (IMAGE_ERROR_FRACTION), the warm one in fewer iterations (docs/sequences.md).
             let mut tight = next.clone();
             (tight.render.transport.tolerance, tight.render.transport.max_iterations) = (1e-5, 200);
             let converged = render_warm(&tight, &NoProgress, &mut Warm::new(false)).unwrap().image;
             let (warm_error, cold_error) = (block_error(&warm_image, &converged), block_error(&cold_image, &converged));
+            let bound = IMAGE_ERROR_FRACTION * next.render.transport.tolerance;
             assert!(
-                warm_error <= cold_error && apart <= 1.5 * cold_error,
-                "transport: warm {warm_error:.2e} and cold {cold_error:.2e} from converged, {apart:.2e} apart \
-                 (iterations warm {w}, cold {c})"
+                warm_error < bound && cold_error < bound && w < c,
+                "transport: warm {warm_error:.2e} and cold {cold_error:.2e} from converged (bound {bound:.1e}), \
+                 {apart:.2e} apart; iterations warm {w}, cold {c}"
             );
             continue;
         }

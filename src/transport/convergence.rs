@@ -3,21 +3,40 @@
 use super::grid::Ctx;
 use super::BandOptics;
 
+/// The slowest error mode seen in a history of changes: their last ratio and how far it is from
+/// the ratio before.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct SlowMode {
+    /// r: the change shrinks by r per iteration.
+    pub(super) ratio: f64,
+    /// |r − r_before|: how uncertain r is.
+    pub(super) spread: f64,
+}
+
+impl SlowMode {
+    /// The factor to add the last step with: the geometric tail r/(1 − r).
+    pub(super) fn factor(self) -> f32 {
+        (self.ratio / (1.0 - self.ratio)) as f32
+    }
+}
+
 /// Extrapolation of the slowest error mode (Lyusternik's): once DSA has removed the diffusive
 /// modes, the change shrinks geometrically, by r per iteration (≈ 0.6–0.78 measured: the
-/// anisotropic orders DSA does not reach), so the remaining error is r/(1 − r) times the last step.
-/// When the last two ratios agree within [`RATIO_AGREEMENT`] and r ∈ (0.3, 0.9), the factor to add
-/// the last step with; None otherwise (an erratic history is left alone). Both ratios must be of
-/// changes made after the last extrapolation (at iteration `last`, 0 for none), so at most every
-/// third iteration. Measured on the five evaluation scenes: 13/13/6/13/13 → 8/8/5/9/8 iterations,
-/// the same images within the tolerance (docs/transport.md, "Iteration and acceleration").
-pub(super) fn dominant_mode_step(history: &[f64], last: usize) -> Option<f32> {
+/// anisotropic orders DSA does not reach), so the remaining error is r/(1 − r) times the last step
+/// ([`SlowMode::factor`]). When the last two ratios agree within [`RATIO_AGREEMENT`] and
+/// r ∈ (0.3, 0.9), the mode; None otherwise (an erratic history is left alone). Both ratios must
+/// be of changes made after the last extrapolation (at iteration `last`, 0 for none), so at most
+/// every third iteration. Measured on the five evaluation scenes: 13/13/6/13/13 → 8/8/5/9/8
+/// iterations, the same images within the tolerance (docs/transport.md, "Iteration and
+/// acceleration").
+pub(super) fn dominant_mode_step(history: &[f64], last: usize) -> Option<SlowMode> {
     let n = history.len();
     if n < 4 || n < last + 3 {
         return None;
     }
     let (r0, r1) = (history[n - 2] / history[n - 3], history[n - 1] / history[n - 2]);
-    (r1 > 0.3 && r1 < 0.9 && (r1 - r0).abs() < RATIO_AGREEMENT).then(|| (r1 / (1.0 - r1)) as f32)
+    let spread = (r1 - r0).abs();
+    (r1 > 0.3 && r1 < 0.9 && spread < RATIO_AGREEMENT).then_some(SlowMode { ratio: r1, spread })
 }
 
 /// How far apart the last two ratios of the change may be for [`dominant_mode_step`]. After an
@@ -42,6 +61,17 @@ pub(super) fn i00_change(next: &[f32], moments: &[f32], nsh: usize) -> (f64, f64
             let d = (x - y).abs() as f64;
             (if d.is_finite() { c.max(d) } else { f64::INFINITY }, m.max(x.abs() as f64))
         })
+}
+
+/// Σ|ΔI_00| / Σ|I_00| over the full voxels and bands: the change where the cloud is, as the
+/// image sees it (a mean), where [`i00_change`] sees the largest voxel's.
+pub(super) fn i00_mean_change(next: &[f32], moments: &[f32], nsh: usize) -> f64 {
+    let (d, m) = next
+        .iter()
+        .step_by(nsh)
+        .zip(moments.iter().step_by(nsh))
+        .fold((0.0f64, 1e-30f64), |(d, m), (x, y)| (d + (x - y).abs() as f64, m + x.abs() as f64));
+    if d.is_finite() { d / m } else { f64::INFINITY }
 }
 
 /// Whether plain source iteration (after the acceleration was given up) has converged: its
@@ -70,15 +100,18 @@ mod tests {
     fn dominant_mode_step_extrapolates_only_a_steady_geometric_decay() {
         let geometric: Vec<f64> = (0..7).map(|i| 0.75f64.powi(i)).collect();
         // r = 0.75: the remaining error is 3 steps.
-        assert!((dominant_mode_step(&geometric[..4], 0).unwrap() - 3.0).abs() < 1e-5);
+        let factor = |h: &[f64], last| dominant_mode_step(h, last).map(SlowMode::factor);
+        assert!((factor(&geometric[..4], 0).unwrap() - 3.0).abs() < 1e-5);
         assert_eq!(dominant_mode_step(&geometric[..5], 4), None, "two ratios since the last one");
         assert_eq!(dominant_mode_step(&geometric[..6], 4), None);
-        assert!((dominant_mode_step(&geometric[..7], 4).unwrap() - 3.0).abs() < 1e-5);
-        assert!((dominant_mode_step(&geometric[..5], 0).unwrap() - 3.0).abs() < 1e-5);
+        assert!((factor(&geometric[..7], 4).unwrap() - 3.0).abs() < 1e-5);
+        assert!((factor(&geometric[..5], 0).unwrap() - 3.0).abs() < 1e-5);
         assert_eq!(dominant_mode_step(&[1.0, 0.5, 0.6, 0.3], 0), None, "erratic");
         // The noon scene's changes after its first extrapolation: ratios 0.66, then 0.77.
         let noon = [1.0, 0.277, 0.14, 0.0847, 0.0226, 0.015, 0.0116];
-        assert!((dominant_mode_step(&noon, 4).unwrap() - 3.41).abs() < 0.01);
+        assert!((factor(&noon, 4).unwrap() - 3.41).abs() < 0.01);
+        let mode = dominant_mode_step(&noon, 4).unwrap();
+        assert!((mode.ratio - 0.773).abs() < 1e-3 && (mode.spread - 0.11).abs() < 0.01, "{mode:?}");
         assert_eq!(dominant_mode_step(&[1.0, 0.5, 0.3, 0.24], 0), None, "ratios 0.6 and 0.8 disagree");
         assert_eq!(dominant_mode_step(&[1.0, 0.95, 0.9025, 0.857], 0), None, "too slow to trust");
         assert_eq!(dominant_mode_step(&[1.0, 0.1, 0.01, 0.001], 0), None, "fast already");

@@ -25,7 +25,7 @@
 //! - **Convergence** (src/transport/convergence.rs): the stopping test, the divergence guard and
 //!   the dominant-mode extrapolation.
 
-use super::convergence::{dominant_mode_step, i00_change, max_voxel_optical_depth, plain_converged, DIVERGENCE_FACTOR};
+use super::convergence::{dominant_mode_step, i00_change, i00_mean_change, max_voxel_optical_depth, plain_converged, DIVERGENCE_FACTOR};
 use super::dsa::{accelerate, hierarchies};
 use super::grid::{Ctx, FullVoxels};
 use super::ground::GroundLight;
@@ -33,7 +33,7 @@ pub use super::ground::GroundMap;
 use super::source::{diffuse_source_of, parity_order, PairTables};
 use super::sphere::Quadrature;
 use super::sweep::sweep;
-use super::warm::{warm_converged, TransportState, WarmStart};
+use super::warm::{TransportState, WarmStart, WarmStop};
 use super::TransportOptics;
 use crate::diffusion::multigrid::Hierarchy;
 use crate::error::{Error, Result};
@@ -191,6 +191,8 @@ pub fn solve_warm(
         next,
         history,
         ground_map,
+        slowest,
+        carried_ratio,
         ..
     } = it;
     drop(next);
@@ -199,7 +201,7 @@ pub fn solve_warm(
     // T′ moves into the field once `ctx`, which borrows it, is dropped (below).
     let mut field = solver.field(&moments, history, ground_map, Arc::clone(&index.index), Vec::new());
     drop(ctx);
-    let state = kept_ground.map(|g| TransportState::new(m, s.order, moments, 3 * nsh, g));
+    let state = kept_ground.map(|g| TransportState::new(m, s.order, moments, 3 * nsh, g, slowest.unwrap_or(carried_ratio)));
     field.sun_t = sun_t;
     Ok((field, state))
 }
@@ -244,10 +246,14 @@ struct Iterate {
     /// Relative change of I0 after each iteration.
     history: Vec<f64>,
     ground_map: GroundMap,
-    /// Started from a previous frame's state: stopped by [`warm_converged`].
-    warm: bool,
+    /// Started from a previous frame's state: its stopping test.
+    warm: Option<WarmStop>,
     /// Iteration of the last extrapolation (0: none).
     extrapolated: usize,
+    /// The slowest mode's ratio this solve's extrapolations saw, and the previous frame's: the
+    /// next frame's start takes this solve's, else the previous one's.
+    slowest: Option<f64>,
+    carried_ratio: f64,
     /// The acceleration's guard (docs/transport.md, "When the acceleration diverges"): whether
     /// it is still on, the smallest change of I_00 since the iteration (re)started, iterations
     /// since then, and the iteration at which the acceleration was given up.
@@ -260,7 +266,8 @@ struct Iterate {
 impl Iterate {
     /// The cold start (zero) or the warm start's moments and ground.
     fn new(solver: &Solver, warm: Option<WarmStart>) -> Iterate {
-        let is_warm = warm.is_some();
+        let carried_ratio = warm.as_ref().map_or(0.0, |w| w.slow_ratio);
+        let stop = warm.as_ref().map(|w| WarmStop::new(w.slow_ratio));
         let (moments, e_down) = match warm {
             Some(w) => (w.moments, w.e_down),
             None => (vec![0f32; solver.ctx.voxels.len() * 3 * solver.ctx.nsh], None),
@@ -270,8 +277,10 @@ impl Iterate {
             moments,
             history: Vec::new(),
             ground_map: solver.ground.map(e_down.as_deref()),
-            warm: is_warm,
+            warm: stop,
             extrapolated: 0,
+            slowest: None,
+            carried_ratio,
             accelerated: solver.s.acceleration,
             smallest: f64::INFINITY,
             since_start: 0,
@@ -307,6 +316,7 @@ impl Solver<'_> {
                 accelerate(self.ctx, self.ctx.voxels, self.hier, &self.optics.bands, &it.moments, &mut it.next);
             }
             let (change_abs, scale) = i00_change(&it.next, &it.moments, nsh);
+            let mean_change = it.warm.is_some().then(|| i00_mean_change(&it.next, &it.moments, nsh));
             it.since_start += 1;
             let diverging = !change_abs.is_finite() || (it.since_start >= 2 && change_abs > DIVERGENCE_FACTOR * it.smallest);
             if diverging && it.accelerated {
@@ -325,15 +335,17 @@ impl Solver<'_> {
             it.smallest = it.smallest.min(change_abs);
             let change = change_abs / scale;
             it.history.push(change);
-            if let Some(k) = (it.accelerated && extrapolate)
+            let mode = (it.accelerated && extrapolate)
                 .then(|| dominant_mode_step(&it.history, it.extrapolated))
-                .flatten()
-            {
+                .flatten();
+            if let Some(mode) = mode {
+                let k = mode.factor();
                 it.next
                     .par_iter_mut()
                     .zip(it.moments.par_iter())
                     .for_each(|(x, o)| *x += k * (*x - o));
                 it.extrapolated = it.history.len();
+                it.slowest = Some(it.slowest.map_or(mode.ratio, |r| r.max(mode.ratio)));
             }
             std::mem::swap(&mut it.moments, &mut it.next);
             it.ground_map = self.ground.map(Some(&e_down));
@@ -353,10 +365,9 @@ impl Solver<'_> {
                     self.ctx.sun_t.to_vec(),
                 ));
             }
-            let stop = if it.warm {
-                warm_converged(&it.history, s.tolerance)
-            } else {
-                change < s.tolerance
+            let stop = match (&mut it.warm, mean_change) {
+                (Some(w), Some(mean)) => w.converged(mean, mode, s.tolerance),
+                _ => change < s.tolerance,
             };
             if stop && (it.accelerated || plain_converged(it.since_restart(), s.tolerance))
             {
@@ -372,6 +383,8 @@ impl Solver<'_> {
     fn give_up_acceleration(&self, it: &mut Iterate, change_abs: f64, progress: &dyn Progress) {
         it.accelerated = false;
         it.given_up = Some(it.history.len() + 1);
+        // From zero the solve is a cold one: stopped by the cold test.
+        it.warm = None;
         it.moments.fill(0.0);
         it.next.fill(0.0);
         let smallest = it.smallest;

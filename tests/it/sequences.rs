@@ -112,11 +112,14 @@ fn iterations(err: &str) -> Vec<usize> {
         .collect()
 }
 
-/// The farm contract for warm starts (docs/sequences.md, "Warm starts"): a warm frame is at
-/// least as close to the converged image (a solve to 1e-5) as the cold frame, so the two differ
-/// by about the cold frame's own distance from it (at most 1.5 times), in no more iterations.
+/// The farm contract for warm starts (docs/sequences.md, "Warm starts"): warm and cold frames
+/// both lie within the stated tolerance of the converged image (a solve to 1e-5), 0.4 of
+/// `render.transport_tolerance` (`transport::warm::IMAGE_ERROR_FRACTION` × the default 5e-3), so
+/// within twice it of each other, and each warm frame takes fewer iterations.
+const IMAGE_BOUND: f64 = 0.4 * 5e-3;
+
 #[test]
-fn warm_frames_are_closer_to_converged_than_cold_frames_in_no_more_iterations() {
+fn warm_frames_lie_within_the_stated_tolerance_of_converged_in_fewer_iterations() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     // A slowly changing sequence: the sun 2° lower and further round per frame.
@@ -133,16 +136,13 @@ fn warm_frames_are_closer_to_converged_than_cold_frames_in_no_more_iterations() 
     cloudgi(d, &["render", "tight.toml", "-o", "tight.####.exr", "--cold", "-q"]);
     assert_eq!((warm.len(), cold.len()), (4, 4));
     assert_eq!(warm[0], cold[0], "the first frame is cold");
-    // This small cloud's slowest mode falls by only ~0.77 per iteration: the warm frames take as
-    // many iterations as the cold ones (docs/sequences.md), never more.
-    assert!(warm.iter().zip(&cold).all(|(w, c)| w <= c), "warm {warm:?}, cold {cold:?}");
+    assert!(warm.iter().zip(&cold).skip(1).all(|(w, c)| w < c), "warm {warm:?}, cold {cold:?}");
     for f in [3, 5, 7] {
         let cold_error = block_error(d, &format!("cold.{f:04}.exr"), &format!("tight.{f:04}.exr"));
         let warm_error = block_error(d, &format!("warm.{f:04}.exr"), &format!("tight.{f:04}.exr"));
-        let apart = block_error(d, &format!("warm.{f:04}.exr"), &format!("cold.{f:04}.exr"));
         assert!(
-            warm_error <= cold_error && apart <= 1.5 * cold_error,
-            "frame {f}: warm {warm_error:.2e} and cold {cold_error:.2e} from converged, {apart:.2e} apart"
+            warm_error < IMAGE_BOUND && cold_error < IMAGE_BOUND,
+            "frame {f}: warm {warm_error:.2e} and cold {cold_error:.2e} from converged (bound {IMAGE_BOUND:.0e})"
         );
     }
 }
