@@ -32,8 +32,9 @@ pub struct FrameArgs {
     #[arg(long)]
     skip_existing: bool,
     /// Solve every frame from nothing. By default `transport` starts each frame from the
-    /// previous frame's solution (a chunk's first frame is cold); warm frames match cold ones
-    /// within the stated tolerance, cold frames are the same bits however the range is split.
+    /// previous frame's solution (a chunk's first frame is cold); warm and cold frames both lie
+    /// within 0.4 × render.transport_tolerance of the converged image (docs/sequences.md), cold
+    /// frames are the same bits however the range is split.
     #[arg(long)]
     cold: bool,
 }
