@@ -185,7 +185,7 @@ pub fn render_ground_with(renderer: &CubeRenderer<'_>, ground: &Ground, progress
     // The sun's shadow (the sharp part) at every sample, the hemicube light (smooth on the
     // ground) adaptively, to a tolerance relative to the whole irradiance.
     let sun: Vec<Rgb> = (0..n * n).into_par_iter().map(|k| sun_irradiance(lit, at(k % n, k / n))).collect();
-    let (sky, traced) = super::refine::refine(n, GROUND_COARSE, GROUND_TOLERANCE, &sun, |a, b| {
+    let (sky, traced) = super::refine::refine(n, GROUND_COARSE, GROUND_TOLERANCE, &sun, &|a, b| {
         progress.advance(1);
         hemicube_sky(renderer, &weights, at(a, b))
     });

@@ -183,7 +183,7 @@ mod tests {
             }
         }
         let avg = cube.bin_averages();
-        let exact = bins.integrate(32, f);
+        let exact = bins.integrate(32, &f);
         for (b, bin) in bins.bins.iter().enumerate() {
             let e = exact[b] / bin.solid_angle as f32;
             assert!((avg[b] - e).abs().max_element() < 2e-3, "bin {b}: {} vs {}", avg[b], e);

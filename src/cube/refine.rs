@@ -33,8 +33,9 @@ fn bracket(i: usize, s: usize, n: usize) -> (usize, usize, f32) {
 /// channel; the others are interpolated. `base` (≥ 0, per node): for a field that is added to
 /// it, the tolerance is relative to the sum; zero: relative to the field. Returns the values and
 /// how many nodes were evaluated. Each pass evaluates in parallel; the result does not depend on
-/// the thread count.
-pub fn refine(n: usize, coarse: usize, tol: f32, base: &[Rgb], f: impl Fn(usize, usize) -> Rgb + Sync) -> (Vec<Rgb>, usize) {
+/// the thread count. `f` is a trait object: each call traces a ray, and one copy of this
+/// function (with its parallel loop) serves every caller.
+pub fn refine(n: usize, coarse: usize, tol: f32, base: &[Rgb], f: &(dyn Fn(usize, usize) -> Rgb + Sync)) -> (Vec<Rgb>, usize) {
     assert_eq!(base.len(), n * n, "one base value per node");
     assert!(coarse.is_power_of_two(), "coarse spacing {coarse} is not a power of two");
     let mut out = vec![Rgb::ZERO; n * n];
@@ -86,11 +87,11 @@ mod tests {
         let f = |a: usize, b: usize| Rgb::new(10.0 + 0.01 * a as f32, 20.0 + 0.02 * b as f32, 30.0 + 0.01 * (a + b) as f32);
         for (n, coarse, nodes) in [(32, 2, 17), (32, 4, 9), (7, 4, 3), (2, 2, 2)] {
             assert_eq!(
-                refine(n, coarse, 1e-6, &vec![Rgb::ZERO; n * n], f).1,
+                refine(n, coarse, 1e-6, &vec![Rgb::ZERO; n * n], &f).1,
                 n * n,
                 "n {n} coarse {coarse}"
             );
-            let (got, evaluated) = refine(n, coarse, 0.01, &vec![Rgb::ZERO; n * n], f);
+            let (got, evaluated) = refine(n, coarse, 0.01, &vec![Rgb::ZERO; n * n], &f);
             assert_eq!(evaluated, nodes * nodes, "n {n} coarse {coarse}");
             for b in 0..n {
                 for a in 0..n {
@@ -108,16 +109,16 @@ mod tests {
         let n = 32;
         let f = |a: usize, b: usize| Rgb::splat(if a + b < 19 { 1.0 } else { 5.0 });
         let zero = vec![Rgb::ZERO; n * n];
-        let (got, evaluated) = refine(n, 4, 0.0, &zero, f);
+        let (got, evaluated) = refine(n, 4, 0.0, &zero, &f);
         for b in 0..n {
             for a in 0..n {
                 assert_eq!(got[a + n * b], f(a, b), "({a}, {b})");
             }
         }
         assert!(evaluated < n * n / 2, "{evaluated} evaluated");
-        let (_, evaluated) = refine(n, 4, 0.0, &zero, |_, _| Rgb::ONE);
+        let (_, evaluated) = refine(n, 4, 0.0, &zero, &|_, _| Rgb::ONE);
         assert_eq!(evaluated, 9 * 9);
-        let (all, evaluated) = refine(n, 1, 0.0, &zero, f);
+        let (all, evaluated) = refine(n, 1, 0.0, &zero, &f);
         assert_eq!(evaluated, n * n);
         assert_eq!(all, got);
     }
@@ -129,13 +130,13 @@ mod tests {
         let n = 32;
         let f = |a: usize, b: usize| Rgb::splat(if a + b < 19 { 1.0 } else { 2.0 });
         let base = vec![Rgb::splat(100.0); n * n];
-        let (got, evaluated) = refine(n, 4, 0.02, &base, f);
+        let (got, evaluated) = refine(n, 4, 0.02, &base, &f);
         assert_eq!(evaluated, 9 * 9);
         for b in 0..n {
             for a in 0..n {
                 assert!((got[a + n * b] - f(a, b)).abs().max_element() <= 0.02 * 102.0, "({a}, {b})");
             }
         }
-        assert!(refine(n, 4, 0.02, &vec![Rgb::ZERO; n * n], f).1 > 9 * 9);
+        assert!(refine(n, 4, 0.02, &vec![Rgb::ZERO; n * n], &f).1 > 9 * 9);
     }
 }

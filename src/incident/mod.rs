@@ -113,7 +113,7 @@ impl IncidentSources {
     /// The sky (any model, through [`DirectionBins::integrate`]), the ground below the
     /// horizon (unshadowed), and the sun.
     pub fn from_lighting(sun: &Sun, sky: &Sky, ground: Option<&Ground>, bins: &DirectionBins, sky_subdivisions: usize) -> IncidentSources {
-        let power = bins.integrate(sky_subdivisions.max(1), |d| {
+        let power = bins.integrate(sky_subdivisions.max(1), &|d| {
             if d.y < 0.0 {
                 if let Some(g) = ground {
                     // The Lambertian ground is uniform: its radiance does not depend on the point.

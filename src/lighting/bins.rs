@@ -211,8 +211,9 @@ impl DirectionBins {
     }
 
     /// Power ∫_bin L(ω) dω (W/m² per band) of a radiance function in every bin, integrated with
-    /// `sub`×`sub` sub-rectangles per bin, each weighted by its exact solid angle.
-    pub fn integrate(&self, sub: usize, radiance: impl Fn(Vec3) -> Rgb + Sync) -> Vec<Rgb> {
+    /// `sub`×`sub` sub-rectangles per bin, each weighted by its exact solid angle. Runs once per
+    /// scene: `radiance` is a trait object, one copy of this loop for every sky.
+    pub fn integrate(&self, sub: usize, radiance: &(dyn Fn(Vec3) -> Rgb + Sync)) -> Vec<Rgb> {
         use rayon::prelude::*;
         self.bins
             .par_iter()
@@ -283,7 +284,7 @@ mod tests {
     fn constant_sky_power_is_4pi_l() {
         let bins = DirectionBins::new();
         let l = Rgb::new(0.3, 0.45, 0.8);
-        let p = bins.integrate(8, |_| l);
+        let p = bins.integrate(8, &|_| l);
         let total: Rgb = p.iter().copied().sum();
         assert!((total - l * 4.0 * std::f32::consts::PI).abs().max_element() < 1e-5);
     }

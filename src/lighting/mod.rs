@@ -342,7 +342,7 @@ impl Sky {
     pub fn bin_powers(&self, bins: &DirectionBins) -> Vec<Rgb> {
         match &self.kind {
             SkyKind::Constant(l) => bins.bins.iter().map(|b| *l * b.solid_angle as f32).collect(),
-            _ => bins.integrate(16, |d| self.radiance(d)),
+            _ => bins.integrate(16, &|d| self.radiance(d)),
         }
     }
 

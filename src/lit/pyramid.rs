@@ -219,7 +219,7 @@ fn downsample(l: &Level) -> Level {
         rho[coarse(n)] += c[0];
     }
     rho.iter_mut().for_each(|r| *r *= 0.125);
-    let index = Arc::new(FullIndex::build(nd, &rho, |r| r > 0.0));
+    let index = Arc::new(FullIndex::build(nd, &rho));
     let occupancy = MajorantGrid::build(nd, index.full_voxels().map(|n| (n, rho[n])), BLOCK);
     drop(rho);
     let mut cells = vec![[0f32; 5]; index.count() + 1];
@@ -295,7 +295,7 @@ mod tests {
     fn cells_round_trip_each_channel_under_its_own_scale() {
         let n = 4000;
         let dims = [n, 1, 1];
-        let index = Arc::new(FullIndex::build(dims, &vec![1.0; n], |r| r > 0.0));
+        let index = Arc::new(FullIndex::build(dims, &vec![1.0; n]));
         let mut rng = crate::math::Rng::new(7, 3);
         let mag = [3e-6f32, 1.0, 7e5, 0.02, 0.0];
         let want: Vec<Cell> = (0..n)

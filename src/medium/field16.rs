@@ -89,7 +89,7 @@ mod tests {
     /// A field of `values` on full voxels 0..n of a 1-D grid.
     fn field16(values: &[f64]) -> Field16 {
         let dims = [values.len(), 1, 1];
-        let index = Arc::new(FullIndex::build(dims, &vec![1.0; values.len()], |r| r > 0.0));
+        let index = Arc::new(FullIndex::build(dims, &vec![1.0; values.len()]));
         Field16::new(index, values)
     }
 

@@ -118,7 +118,7 @@ impl Grid3 {
     /// first use and shared by every field stored per full voxel ([`super::sparse`]).
     pub fn full_index(&self) -> Arc<FullIndex> {
         self.full
-            .get_or_init(|| Arc::new(FullIndex::build(self.dims, &self.data, |v| v > 0.0)))
+            .get_or_init(|| Arc::new(FullIndex::build(self.dims, &self.data)))
             .clone()
     }
 

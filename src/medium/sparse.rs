@@ -37,14 +37,14 @@ pub struct FullIndex {
 }
 
 impl FullIndex {
-    /// The index of the voxels where `full(value)` holds, over a grid of `dims` with `values`
+    /// The index of the voxels whose value is > 0 (full), over a grid of `dims` with `values`
     /// (x fastest). Panics beyond 2³² − 2 full voxels (the medium's voxel limit is far below).
-    pub fn build(dims: [usize; 3], values: &[f32], full: impl Fn(f32) -> bool + Sync) -> FullIndex {
+    pub fn build(dims: [usize; 3], values: &[f32]) -> FullIndex {
         assert_eq!(values.len(), dims[0] * dims[1] * dims[2], "one value per voxel");
         let mut words: Vec<Word> = values
             .par_chunks(WORD_VOXELS)
             .map(|chunk| Word {
-                mask: chunk.iter().enumerate().fold(0, |m, (b, &v)| m | (u32::from(full(v)) << b)),
+                mask: chunk.iter().enumerate().fold(0, |m, (b, &v)| m | (u32::from(v > 0.0) << b)),
                 base: 0,
             })
             .collect();
@@ -363,7 +363,7 @@ mod tests {
     #[test]
     fn full_voxels_are_stored_and_empty_ones_read_the_empty_value() {
         let rho = [0.0, 2.0, 0.0, 0.5, 1.0, 0.0];
-        let idx = Arc::new(FullIndex::build([3, 2, 1], &rho, |r| r > 0.0));
+        let idx = Arc::new(FullIndex::build([3, 2, 1], &rho));
         assert_eq!((idx.count(), idx.len()), (3, 6));
         assert_eq!(idx.full_voxels().collect::<Vec<_>>(), vec![1, 3, 4]);
         let f = VoxelField::from_fn(idx.clone(), -1.0f32, |g| 10.0 * g as f32);
@@ -391,7 +391,7 @@ mod tests {
                 }
             })
             .collect();
-        let idx = FullIndex::build([7, 5, 3], &rho, |r| r > 0.0);
+        let idx = FullIndex::build([7, 5, 3], &rho);
         let mut rank = 0;
         let naive: Vec<usize> = rho
             .iter()

@@ -87,7 +87,7 @@ fn empty_scene_cube_reproduces_the_sky_bins() {
     let l = Rgb::new(0.3, 0.45, 0.8);
     let v = empty_lit(sun(Vec3::Y, 3.0), l, None);
     let bins = DirectionBins::new();
-    let sky = bins.integrate(8, |d| v.sky.radiance(d));
+    let sky = bins.integrate(8, &|d| v.sky.radiance(d));
     for res in [4, 16] {
         let r = CubeRenderer::new(&v, &CubeOptions { res, ..Default::default() });
         for p in [Vec3::new(2.0, 2.0, 2.0), Vec3::new(-7.0, 30.0, 1.0)] {

@@ -228,7 +228,7 @@ mod tests {
 
     /// Stage 1's light on a 2×1×1 grid of full voxels, in the sun's form with Q0 per unit ρT̄ `q0`.
     fn sun_only(q0: f64) -> IncidentLight {
-        let index = Arc::new(FullIndex::build([2, 1, 1], &[1.0, 1.0], |r| r > 0.0));
+        let index = Arc::new(FullIndex::build([2, 1, 1], &[1.0, 1.0]));
         let mut inc = IncidentLight {
             dims: [2, 1, 1],
             scattering: FirstScattering::zero(index),
