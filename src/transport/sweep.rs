@@ -413,14 +413,20 @@ unsafe fn sweep_kernel<const AVX: bool>(
         if splat {
             // Light leaving the box downwards lands on the ground along Ω: splat its flux
             // change against the sky it hides, (I − L_sky) w |Ω·n| A_face, per column area.
+            // Before the next plane, the part of a cell's bilinear spread that lands off the box
+            // leaves across b and c (|Ω_b| s / h_b of it across b); the corner cell's spread off
+            // both, (1 − in_b)(1 − in_c), is counted across b only, so across c it sends its
+            // in_b part. After the last plane its whole flux leaves across a.
             let exit_b = if om[b] > 0.0 { nb - 1 } else { 0 };
             let exit_c = if om[cc] > 0.0 { nc - 1 } else { 0 };
-            let mut faces: Vec<(usize, usize, usize)> = (0..nc).map(|ic| (exit_b, ic, b)).collect();
-            faces.extend((0..nb).map(|ib| (ib, exit_c, cc)));
-            if step + 1 == na {
-                faces.extend((0..nc).flat_map(|ic| (0..nb).map(move |ib| (ib, ic, a))));
-            }
-            for (ib, ic, ax) in faces {
+            let in_b = if om[b] > 0.0 { tb } else { 1.0 - tb };
+            let faces: Vec<(usize, usize, usize, f32)> = if step + 1 < na {
+                let across_c = (0..nb).map(|ib| (ib, exit_c, cc, if ib == exit_b { in_b } else { 1.0 }));
+                (0..nc).map(|ic| (exit_b, ic, b, 1.0)).chain(across_c).collect()
+            } else {
+                (0..nc).flat_map(|ic| (0..nb).map(move |ib| (ib, ic, a, 1.0))).collect()
+            };
+            for (ib, ic, ax, part) in faces {
                 let v = coord(pa, ib as isize, ic as isize);
                 let mut face = c.origin
                     + DVec3::new(
@@ -435,7 +441,7 @@ unsafe fn sweep_kernel<const AVX: bool>(
                     let area = c.h[0] * c.h[1] * c.h[2] / c.h[ax];
                     let f = w as f32 as f64 * om[ax].abs() * area / (c.h[0] * c.h[2]);
                     let i = &cur[ib + 1 + stride * (ic + 1)].0[I..I + 3];
-                    splats.push((col, [0, 1, 2].map(|band| f * (i[band] as f64 - skyr[band] as f64))));
+                    splats.push((col, [0, 1, 2].map(|band| f * part as f64 * (i[band] as f64 - skyr[band] as f64))));
                 }
             }
         }
@@ -512,6 +518,17 @@ unsafe fn sweep_ordinate_avx(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], groun
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A sweep's total splatted change Σ e per band (W/m² × columns).
+    fn splat_total(splats: &Splats) -> [f64; 3] {
+        let mut total = [0.0; 3];
+        for (_, e) in splats {
+            for band in 0..3 {
+                total[band] += e[band];
+            }
+        }
+        total
+    }
     use crate::lighting::Sky;
     use crate::math::{real_sh, Rgb};
     use crate::medium::Density;
@@ -683,6 +700,33 @@ mod tests {
                 for (x, y) in skip.iter().flatten().zip(all.iter().flatten()) {
                     assert!((x - y).abs() <= 1e-6 * y.abs(), "ordinate {d}: {x} vs {y}");
                 }
+            }
+        }
+        // Light leaves the cloud's box (the full voxels grown by one) in clear air, so the ground
+        // splats' flux change per ordinate does not depend on the box: the box stepped to its
+        // faces agrees with the whole grid's.
+        let (lo, n) = ([1, 1, 0], [8, 7, 7]);
+        let cells = [0, 1, 2].map(|a| box_cells(dims, lo, n, &density, &full, voxels.len(), a));
+        let tight = Ctx {
+            lo,
+            n,
+            spans: [0, 1, 2].map(|a| full_spans(&cells[a], n[cross_axes(a).0])),
+            cells,
+            ..grounded(&c)
+        };
+        let wide = GroundMap {
+            margin: 400,
+            dims: [dims[0] + 800, dims[2] + 800],
+            radiance: vec![Rgb::new(0.05, 0.1, 0.15); (dims[0] + 800) * (dims[2] + 800)],
+            diffuse: vec![Rgb::ZERO; (dims[0] + 800) * (dims[2] + 800)],
+            ..lit.clone()
+        };
+        for d in (0..q.dirs.len()).filter(|d| q.dirs[*d].y < 0.0) {
+            let mut r = vec![[0f32; 3]; nfull];
+            let tt = splat_total(&sweep_ordinate(&tight, q.dirs[d], q.weights[d], &plain[..nfull], &wide, &mut r));
+            let tw = splat_total(&sweep_ordinate(&c_lit, q.dirs[d], q.weights[d], &plain[..nfull], &wide, &mut r));
+            for band in 0..3 {
+                assert!((tt[band] - tw[band]).abs() <= 1e-5 * tw[band].abs(), "ordinate {d}: {tt:?} vs {tw:?}");
             }
         }
         // Step (3).
