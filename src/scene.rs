@@ -195,9 +195,6 @@ render_table! {
     /// it per face) instead of as stage 1's reduced sky bins (src/diffusion/boundary.rs); default
     /// on (docs/budget.md "The sky through the boundary"), false: the paper's scheme.
     sky_boundary: bool => solver.sky_boundary, for [Diffusion, Full];
-    /// `diffusion`, `full`: flux-limited diffusion (Levermore & Pomraning; src/diffusion/limiter.rs):
-    /// the solve's flux and I1 bounded by free streaming; false: Fick's law (eq. 4).
-    flux_limiter: bool => solver.flux_limiter, for [Diffusion, Full];
     /// `diffusion`, `full`: forward fraction f of the δ-M transform every stage runs on
     /// (0 ≤ f < 1, capped at g; src/optics.rs); default 0.65, measured in docs/budget.md ("The sky through the boundary");
     /// 0 is the paper's scheme exactly.

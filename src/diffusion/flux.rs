@@ -37,9 +37,7 @@
 //! relative error on the evaluation scenes. The `diffusion` gather's records take I1 in f32.
 
 use super::boundary::face_index;
-use super::limiter::{kappa_at, kappa_face, Limiter};
-use super::{interior_coupling, limited_boundary_terms, BoundaryLight, DiffusionSolution};
-use crate::medium::field16::Field16;
+use super::{boundary_terms, interior_coupling, DiffusionSolution};
 use crate::half::Bf16;
 use crate::incident::IncidentLight;
 use crate::math::{Rgb, Trilinear, Vec3};
@@ -57,19 +55,6 @@ pub fn diffuse_flux<'a>(
     sol: &'a DiffusionSolution,
     tau_min: f64,
 ) -> impl Fn(usize) -> [Vec3; 3] + Sync + 'a {
-    flux_of(m, inc, &sol.i0, &sol.boundary, tau_min, sol.limiter.as_deref())
-}
-
-/// [`diffuse_flux`] of the field `i0` with the light `boundary` entering through the boundary
-/// faces, each face's flux scaled by `limiter`'s κ (none: Fick's law, κ = 1).
-pub(crate) fn flux_of<'a>(
-    m: &'a Medium,
-    inc: &'a IncidentLight,
-    i0: &'a [Field16; 3],
-    boundary: &'a BoundaryLight,
-    tau_min: f64,
-    limiter: Option<&'a Limiter>,
-) -> impl Fn(usize) -> [Vec3; 3] + Sync + 'a {
     let d = m.dims();
     let rho = &*m.density;
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
@@ -78,7 +63,7 @@ pub(crate) fn flux_of<'a>(
     let index = m.density.full_index();
     let scattering = &inc.scattering;
     assert!(
-        Arc::ptr_eq(scattering.index(), &index) && i0.iter().all(|f| Arc::ptr_eq(f.index(), &index)),
+        Arc::ptr_eq(scattering.index(), &index) && sol.i0.iter().all(|f| Arc::ptr_eq(f.index(), &index)),
         "stage 1's and the diffusion's fields are on the density's full voxels"
     );
     move |idx| {
@@ -97,7 +82,7 @@ pub(crate) fn flux_of<'a>(
         let mut out = [Vec3::ZERO; 3];
         for (c, o) in out.iter_mut().enumerate() {
             let s = sigma_tr[c];
-            let i0 = &i0[c];
+            let i0 = &sol.i0[c];
             let ip = f64::from(i0.at_slot(sp));
             let f_at = |q: usize, ax: usize| scattering.q1_at_slot(ax, q, c) as f64 / (rho.at_slot(q) as f64 * s);
             let mut v = [0f64; 3];
@@ -108,13 +93,12 @@ pub(crate) fn flux_of<'a>(
                     let (nidx, sq) = nbr[ax][t];
                     let rn = rho.at_slot(sq) as f64;
                     phi[t] = if rn > 0.0 {
-                        let k = kappa_face(limiter, sp, sq, c);
-                        let cf = k * interior_coupling(rp, rn, s, h[ax], tau_min);
-                        let ff = 0.5 * k * (fp + f_at(sq, ax));
+                        let cf = interior_coupling(rp, rn, s, h[ax], tau_min);
+                        let ff = 0.5 * (fp + f_at(sq, ax));
                         -cf * h[ax] * (f64::from(i0.at_slot(sq)) - ip) + ff * side as f64
                     } else {
-                        let (dt, ft) = limited_boundary_terms(rp, s, h[ax], tau_min, kappa_at(limiter, sp, c));
-                        let l_in = boundary.at(nidx, face_index(ax, side), c);
+                        let (dt, ft) = boundary_terms(rp, s, h[ax], tau_min);
+                        let l_in = sol.boundary.at(nidx, face_index(ax, side), c);
                         h[ax] * (dt * (ip - l_in) + ft * fp * side as f64)
                     };
                 }

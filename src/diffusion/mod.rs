@@ -78,7 +78,6 @@
 
 pub mod boundary;
 pub mod flux;
-pub mod limiter;
 pub(crate) mod multigrid;
 
 pub use multigrid::MAX_BOX_ROW_CELLS;
@@ -95,7 +94,6 @@ use crate::medium::sparse::FullIndex;
 use crate::medium::Medium;
 use boundary::face_index;
 pub use boundary::BoundaryLight;
-use limiter::{kappa_at, kappa_face, Limiter};
 use multigrid::{Hierarchy, Operator, Stencil, Stencils, NONE};
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -118,10 +116,6 @@ pub struct DiffusionSettings {
     /// radiance of every boundary face, [`boundary`]) instead of as stage 1's reduced sky bins
     /// (`render.sky_boundary`, default on); false: the paper's scheme.
     pub sky_boundary: bool,
-    /// Flux-limited diffusion ([`limiter`], Levermore & Pomraning): the solve's flux scaled by
-    /// κ = 3λ(R) from a lagged outer iteration, and I1 from the same limited law
-    /// (`render.flux_limiter`); false: Fick's law, eq. 4 as printed.
-    pub flux_limiter: bool,
 }
 
 impl Default for DiffusionSettings {
@@ -131,7 +125,6 @@ impl Default for DiffusionSettings {
             max_iterations: 200,
             min_optical_depth: DEFAULT_MIN_OPTICAL_DEPTH,
             sky_boundary: true,
-            flux_limiter: true,
         }
     }
 }
@@ -202,8 +195,6 @@ pub struct DiffusionSolution {
     pub stats: [SolveStats; 3],
     /// The light that entered through the boundary faces (eq. 7's incoming radiance).
     pub boundary: BoundaryLight,
-    /// The flux limiter's κ the solve used (none: Fick's law), which I1 uses too.
-    pub limiter: Option<Arc<Limiter>>,
 }
 
 impl DiffusionSolution {
@@ -245,16 +236,9 @@ pub fn interior_coupling(rho_p: f64, rho_n: f64, sigma_tr: f64, h: f64, tau_min:
 /// φ/h = (β I_P + f)/(h(1 + 2β)), β = 2/(3ρσtr h) with ρσtr h floored at `tau_min`.
 #[inline]
 pub fn boundary_terms(rho_p: f64, sigma_tr: f64, h: f64, tau_min: f64) -> (f64, f64) {
-    limited_boundary_terms(rho_p, sigma_tr, h, tau_min, 1.0)
-}
-
-/// [`boundary_terms`] with the flux scaled by the limiter's `kappa` (D → κD, F → κF, so
-/// β → κβ): φ/h = κ(β I_P + f)/(h(1 + 2κβ)).
-#[inline]
-pub fn limited_boundary_terms(rho_p: f64, sigma_tr: f64, h: f64, tau_min: f64, kappa: f64) -> (f64, f64) {
-    let beta = 2.0 * kappa / (3.0 * (rho_p * sigma_tr * h).max(tau_min));
+    let beta = 2.0 / (3.0 * (rho_p * sigma_tr * h).max(tau_min));
     let den = h * (1.0 + 2.0 * beta);
-    (beta / den, kappa / den)
+    (beta / den, 1.0 / den)
 }
 
 /// The tight box of the full voxels, `lo` its minimum corner in the grid: the multigrid
@@ -287,12 +271,12 @@ impl Domain {
 /// Band `c`'s operator (stored) and right-hand side, for the tests' dense comparisons.
 #[cfg(test)]
 pub(crate) fn assemble(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_min: f64, dom: &Domain) -> (Operator, Vec<f64>) {
-    let b = band_rhs(m, inc, bl, c, tau_min, None, None)
+    let b = band_rhs(m, inc, bl, c, tau_min, None)
         .values
         .iter()
         .map(|v| f64::from(*v))
         .collect();
-    (BandOperator::new(m, c, tau_min, dom, None).assembled(), b)
+    (BandOperator::new(m, c, tau_min, dom).assembled(), b)
 }
 
 /// Band `c`'s operator (see the module docs) on the full voxels (in grid order, their cells
@@ -312,16 +296,12 @@ pub(crate) struct BandOperator<'a> {
     /// Voxel size per axis (m).
     h: [f64; 3],
     tau_min: f64,
-    /// The flux limiter's κ of band `band` (none: Fick's law).
-    limiter: Option<(&'a Limiter, usize)>,
 }
 
 impl<'a> BandOperator<'a> {
-    /// Band `c` of `m`'s optics, its fluxes scaled by `limiter`'s κ.
-    fn new(m: &'a Medium, c: usize, tau_min: f64, dom: &Domain, limiter: Option<&'a Limiter>) -> BandOperator<'a> {
-        let mut op = Self::with_coefficients(m, dom, m.optics.sigma_a(c), m.optics.sigma_tr(c), tau_min);
-        op.limiter = limiter.map(|l| (l, c));
-        op
+    /// Band `c` of `m`'s optics.
+    fn new(m: &'a Medium, c: usize, tau_min: f64, dom: &Domain) -> BandOperator<'a> {
+        Self::with_coefficients(m, dom, m.optics.sigma_a(c), m.optics.sigma_tr(c), tau_min)
     }
 
     /// Absorption and transport coefficients `sigma_a`, `sigma_tr` at density 1 (m⁻¹) of the
@@ -346,7 +326,6 @@ impl<'a> BandOperator<'a> {
             sigma_tr,
             h: [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64],
             tau_min,
-            limiter: None,
         }
     }
 }
@@ -394,14 +373,12 @@ impl Stencils for BandOperator<'_> {
                 // Slot 0 (empty, or beyond the grid) reads ρ = 0.
                 let sn = nidx.map_or(0, |g| self.index.slot(g));
                 let rn = self.rho.at_slot(sn) as f64;
-                let (lim, c) = self.limiter.map_or((None, 0), |(l, c)| (Some(l), c));
                 if rn > 0.0 {
-                    let cf = kappa_face(lim, u + 1, sn, c) * interior_coupling(rp, rn, self.sigma_tr, self.h[ax], self.tau_min);
+                    let cf = interior_coupling(rp, rn, self.sigma_tr, self.h[ax], self.tau_min);
                     st.diag += cf;
                     (st.off[q], st.nbr[q]) = (-cf, (sn - 1) as u32);
                 } else {
-                    let kappa = kappa_at(lim, u + 1, c);
-                    st.diag += limited_boundary_terms(rp, self.sigma_tr, self.h[ax], self.tau_min, kappa).0;
+                    st.diag += boundary_terms(rp, self.sigma_tr, self.h[ax], self.tau_min).0;
                 }
             }
         }
@@ -413,16 +390,8 @@ impl Stencils for BandOperator<'_> {
 /// through the boundary faces, less A·x0 when a warm start `x0` is given: the residual
 /// b − A x0 of the start, from which the solve finds the correction (so the start need not be
 /// held in f32 beside it). Computed in f64, kept in f32 (rounding it is far below the solver's
-/// tolerance). Every face's flux is scaled by `limiter`'s κ (none: Fick's law).
-fn band_rhs(
-    m: &Medium,
-    inc: &IncidentLight,
-    bl: &BoundaryLight,
-    c: usize,
-    tau_min: f64,
-    x0: Option<&Field16>,
-    limiter: Option<&Limiter>,
-) -> Rhs {
+/// tolerance).
+fn band_rhs(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_min: f64, x0: Option<&Field16>) -> Rhs {
     let gd = m.dims();
     let rho = &*m.density;
     let index = m.density.full_index();
@@ -457,16 +426,15 @@ fn band_rhs(
                 let sn = nidx.map_or(0, |q| index.slot(q));
                 let rn = rho.at_slot(sn) as f64;
                 if rn > 0.0 {
-                    let k = kappa_face(limiter, sp, sn, c);
-                    let ff = 0.5 * k * (fp + f_at(sn, a));
+                    let ff = 0.5 * (fp + f_at(sn, a));
                     rhs -= ff * side as f64 / h[a];
                     if x0.is_some() {
-                        let cf = k * interior_coupling(rp, rn, sigma_tr, h[a], tau_min);
+                        let cf = interior_coupling(rp, rn, sigma_tr, h[a], tau_min);
                         diag += cf;
                         ax -= cf * x_at(sn);
                     }
                 } else {
-                    let (dterm, fterm) = limited_boundary_terms(rp, sigma_tr, h[a], tau_min, kappa_at(limiter, sp, c));
+                    let (dterm, fterm) = boundary_terms(rp, sigma_tr, h[a], tau_min);
                     // eq. 7 with incoming light: φ = (β(I_P − L_face) + f)/(1 + 2β).
                     rhs += dterm * bl.at(nidx, face_index(a, side), c) - fterm * fp * side as f64;
                     diag += dterm;
@@ -520,7 +488,6 @@ pub fn boundary_outflow(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution
     let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
     let vol = h[0] * h[1] * h[2];
     let stride = [1, d[0], d[0] * d[1]];
-    let index = m.density.full_index();
     let mut out = [0f64; 3];
     for (c, o) in out.iter_mut().enumerate() {
         let sigma_tr = m.optics.sigma_tr(c);
@@ -538,8 +505,7 @@ pub fn boundary_outflow(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution
                             let nc = cell[ax] as i64 + side;
                             let nidx = (nc >= 0 && nc < d[ax] as i64).then(|| (idx as i64 + side * stride[ax] as i64) as usize);
                             if nidx.map_or(true, |q| rho.at(q) <= 0.0) {
-                                let kappa = kappa_at(sol.limiter.as_deref(), index.slot(idx), c);
-                                let (dt, ft) = limited_boundary_terms(rp, sigma_tr, h[ax], tau_min, kappa);
+                                let (dt, ft) = boundary_terms(rp, sigma_tr, h[ax], tau_min);
                                 let f = inc.q1(ax, idx, c) as f64 / (rp * sigma_tr) * side as f64;
                                 let l_in = bl.at(nidx, face_index(ax, side), c);
                                 let phi_over_h = dt * (f64::from(sol.i0[c].get(idx)) - l_in) + ft * f;
@@ -626,59 +592,6 @@ fn solve_bands(
     order: BandSolves,
     settings: &DiffusionSettings,
 ) -> Result<(DiffusionSolution, f64)> {
-    if !settings.flux_limiter {
-        return solve_limited(medium, incident, boundary, start, order, settings, None);
-    }
-    // The lagged outer iteration of [`limiter`]: κ from the start's I0 (Fick's law without a
-    // start), then from each solution, each solve started from the last, until I0 settles.
-    let tau_min = settings.min_optical_depth;
-    let original = start.clone();
-    let mut limiter = start.as_ref().map(|s| Limiter::of(medium, incident, s, boundary, tau_min));
-    let (mut sol, mut change) = solve_limited(medium, incident, boundary, start, order, settings, limiter.as_ref())?;
-    let mut iterations = sol.stats.each_ref().map(|s| s.iterations);
-    for _ in 0..limiter::MAX_OUTER {
-        if limiter.is_some() && change < limiter::OUTER_TOLERANCE {
-            break;
-        }
-        let next = Limiter::of(medium, incident, &sol.i0, boundary, tau_min);
-        (sol, change) = solve_limited(medium, incident, boundary, Some(sol.i0), order, settings, Some(&next))?;
-        limiter = Some(next);
-        (0..3).for_each(|c| iterations[c] += sol.stats[c].iterations);
-    }
-    // The statistics count every solve's iterations.
-    (0..3).for_each(|c| sol.stats[c].iterations = iterations[c]);
-    sol.limiter = limiter.map(Arc::new);
-    let relative = original.map_or(0.0, |old| relative_change(&old, &sol.i0));
-    Ok((sol, relative))
-}
-
-/// ‖new⁺ − old⁺‖₂/‖new⁺‖₂ over every band (⁺: clamped at 0, as in [`store`]).
-fn relative_change(old: &[Field16; 3], new: &[Field16; 3]) -> f64 {
-    let (mut change, mut norm) = (0f64, 0f64);
-    for (o, n) in old.iter().zip(new) {
-        for (a, b) in o.iter().zip(n.iter()) {
-            let (a, b) = (f64::from(a.max(0.0)), f64::from(b.max(0.0)));
-            change += (b - a).powi(2);
-            norm += b * b;
-        }
-    }
-    if norm > 0.0 {
-        (change / norm).sqrt()
-    } else {
-        0.0
-    }
-}
-
-/// One pass of [`solve_bands`]: every face's flux scaled by `limiter`'s κ (none: Fick's law).
-fn solve_limited(
-    medium: &Medium,
-    incident: &IncidentLight,
-    boundary: &BoundaryLight,
-    start: Option<[Field16; 3]>,
-    order: BandSolves,
-    settings: &DiffusionSettings,
-    limiter: Option<&Limiter>,
-) -> Result<(DiffusionSolution, f64)> {
     let dims = medium.dims();
     if incident.dims != dims {
         return Err(Error::Numerical {
@@ -702,7 +615,6 @@ fn solve_limited(
         i0: i0.map(|f| f.unwrap_or_else(|| Field16::zero(index.clone()))),
         stats,
         boundary: boundary.clone(),
-        limiter: None,
     };
     let Some(dom) = Domain::of(medium) else {
         return Ok((finish(i0, stats), 0.0));
@@ -716,8 +628,8 @@ fn solve_limited(
             continue;
         }
         let group: Vec<usize> = (first..3).filter(|c| albedo[*c] == albedo[first]).collect();
-        let rhs = |c: usize, x0: Option<&Field16>| band_rhs(medium, incident, boundary, c, settings.min_optical_depth, x0, limiter);
-        let band = BandOperator::new(medium, first, settings.min_optical_depth, &dom, limiter);
+        let rhs = |c: usize, x0: Option<&Field16>| band_rhs(medium, incident, boundary, c, settings.min_optical_depth, x0);
+        let band = BandOperator::new(medium, first, settings.min_optical_depth, &dom);
         // One band at a time (memory first) reads the rows as they are made; together (speed
         // first) assembles them once, as the build reads each row a few times.
         let h = match order {
@@ -871,7 +783,7 @@ mod tests {
         // Full voxels touching the grid's sides too (neighbours beyond the grid read ρ = 0).
         let m = random_cloud(Rng::new(5, 3), 0.7, [-2.0, 3.0], Vec3::new(1.0, 2.0, 1.5));
         let dom = Domain::of(&m).unwrap();
-        let band = BandOperator::new(&m, 1, 1e-3, &dom, None);
+        let band = BandOperator::new(&m, 1, 1e-3, &dom);
         let a = band.assembled();
         let rows = a.rows();
         assert!(band.len() > 200 && band.len() == m.density.full_index().count());
@@ -902,18 +814,18 @@ mod tests {
         let inc = compute(&m, &DirectionBins::new(), &sources, &IncidentSettings::default(), None);
         let (bl, tau) = (BoundaryLight::none(), 1e-3);
         let dom = Domain::of(&m).unwrap();
-        let band = BandOperator::new(&m, 1, tau, &dom, None);
+        let band = BandOperator::new(&m, 1, tau, &dom);
         let index = m.density.full_index();
         let h = Hierarchy::build(&band);
         // The reference: b in f64 (from its f32 values) solved far below the tolerance.
-        let cold = band_rhs(&m, &inc, &bl, 1, tau, None, None);
+        let cold = band_rhs(&m, &inc, &bl, 1, tau, None);
         assert!(cold.norms.is_none());
         let b: Vec<f64> = cold.values.iter().map(|v| f64::from(*v)).collect();
         let (exact, _) = h.solve(&b, None, 1e-12, 500);
         // A start 3 % off, as a clear-air iteration's: its residual is b − A x0 ...
         let x0: Vec<f64> = exact.iter().enumerate().map(|(u, x)| x * (0.97 + 0.02 * (u % 3) as f64)).collect();
         let start = Field16::new(index.clone(), &x0);
-        let warm = band_rhs(&m, &inc, &bl, 1, tau, Some(&start), None);
+        let warm = band_rhs(&m, &inc, &bl, 1, tau, Some(&start));
         let (bn, rn) = warm.norms.unwrap();
         let want_bn: f64 = (0..band.len()).map(|u| b[u] * b[u] / band.stencil(u).diag).sum::<f64>().sqrt();
         assert!((bn - want_bn).abs() <= 1e-6 * want_bn, "{bn} vs {want_bn}");
