@@ -44,7 +44,7 @@ fn main() {
     let eye = scene.camera.position;
     // Per bin: Σw·transport, Σw·full (isotropic), Σw·full (whole).
     let mut bins = vec![[0f64; 4]; SUN_DEPTHS.len() + 1];
-    let nsh = (field.order + 1) * (field.order + 1);
+    let nsh = cloudgi::math::sh_count(field.order);
     for k in 0..nz {
         for j in 0..ny {
             for i in 0..nx {

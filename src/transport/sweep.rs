@@ -518,6 +518,12 @@ unsafe fn sweep_ordinate_avx(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], groun
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::lighting::Sky;
+    use crate::math::{real_sh, Rgb};
+    use crate::medium::Density;
+    use crate::transport::grid::{box_cells, full_spans};
+    use crate::transport::source::{moments_kernel, parity_order, source_kernel};
+    use crate::transport::BandOptics;
 
     /// A sweep's total splatted change Σ e per band (W/m² × columns).
     fn splat_total(splats: &Splats) -> [f64; 3] {
@@ -529,12 +535,6 @@ mod tests {
         }
         total
     }
-    use crate::lighting::Sky;
-    use crate::math::{real_sh, Rgb};
-    use crate::medium::Density;
-    use crate::transport::grid::{box_cells, full_spans};
-    use crate::transport::source::{moments_kernel, parity_order, source_kernel};
-    use crate::transport::BandOptics;
 
     #[test]
     fn a_row_steps_what_its_full_cells_and_upwind_spans_reach() {
