@@ -6,24 +6,21 @@ use super::codec::Rows;
 use super::codec::{pow2, Mg, Real};
 use super::cycle::Work;
 use super::level::{with_rows, Coded, Level};
+use super::par::{for_chunks, map_chunks, map_each, map_range};
 use super::{Hierarchy, CHUNK, PAD};
-use rayon::prelude::*;
 
 /// Deterministic dot products per system: per-chunk partial sums added in order.
 pub(super) fn dot<A: Real, B: Real, const K: usize>(a: &[[A; K]], b: &[[B; K]]) -> [f64; K] {
-    let parts: Vec<[f64; K]> = a
-        .par_chunks(CHUNK)
-        .zip(b.par_chunks(CHUNK))
-        .map(|(x, y)| {
-            let mut s = [0.0; K];
-            for (p, q) in x.iter().zip(y) {
-                for k in 0..K {
-                    s[k] += p[k].get() * q[k].get();
-                }
+    let parts: Vec<[f64; K]> = map_range(a.len().div_ceil(CHUNK), |ci| {
+        let chunk = ci * CHUNK..a.len().min((ci + 1) * CHUNK);
+        let mut s = [0.0; K];
+        for (p, q) in a[chunk.clone()].iter().zip(&b[chunk]) {
+            for k in 0..K {
+                s[k] += p[k].get() * q[k].get();
             }
-            s
-        })
-        .collect();
+        }
+        s
+    });
     sum_parts(&parts)
 }
 
@@ -39,17 +36,17 @@ pub(super) fn sum_parts<const K: usize>(parts: &[[f64; K]]) -> [f64; K] {
 
 /// The CG step y += α p (in f64), r −= α q per system.
 pub(super) fn cg_step<const K: usize>(y: &mut [[f64; K]], r: &mut [[Mg; K]], p: &[[Mg; K]], q: &[[Mg; K]], alpha: [f64; K]) {
-    y.par_chunks_mut(CHUNK)
-        .zip(r.par_chunks_mut(CHUNK))
-        .zip(p.par_chunks(CHUNK).zip(q.par_chunks(CHUNK)))
-        .for_each(|((ys, rs), (ps, qs))| {
-            for (((yv, rv), pv), qv) in ys.iter_mut().zip(rs.iter_mut()).zip(ps).zip(qs) {
-                for k in 0..K {
-                    yv[k] += alpha[k] * pv[k].get();
-                    rv[k] = Mg::of(rv[k].get() - alpha[k] * qv[k].get());
-                }
+    let chunks = y.chunks_mut(CHUNK).zip(r.chunks_mut(CHUNK)).collect();
+    map_each(chunks, |ci, (ys, rs)| {
+        let first = ci * CHUNK;
+        let (ps, qs) = (&p[first..first + ys.len()], &q[first..first + ys.len()]);
+        for (((yv, rv), pv), qv) in ys.iter_mut().zip(rs.iter_mut()).zip(ps).zip(qs) {
+            for k in 0..K {
+                yv[k] += alpha[k] * pv[k].get();
+                rv[k] = Mg::of(rv[k].get() - alpha[k] * qv[k].get());
             }
-        });
+        }
+    });
 }
 
 /// v² / d: one entry's term of a squared norm scaled by the diagonal, ‖D^-½ v‖², given
@@ -75,10 +72,7 @@ impl Hierarchy {
     /// step's residual (made before α is known), rᵀD⁻¹r, rᵀD⁻¹q and qᵀD⁻¹q (q as stored): D is
     /// not stored, so the norm is taken where the rows are read.
     pub(super) fn apply<const K: usize>(&self, p: &[[Mg; K]], q: &mut [[Mg; K]], r: &[[Mg; K]]) -> [[f64; K]; 4] {
-        let parts: Vec<[[f64; K]; 4]> = with_rows!(&self.levels[0], |fine| q
-            .par_chunks_mut(CHUNK)
-            .enumerate()
-            .map(|(ci, qs)| {
+        let parts: Vec<[[f64; K]; 4]> = with_rows!(&self.levels[0], |fine| map_chunks(q, CHUNK, |ci, qs| {
                 let first = ci * CHUNK;
                 let mut sums = [[0.0; K]; 4];
                 fine.each_row_into(first, qs, |e, row, qv| {
@@ -94,8 +88,7 @@ impl Hierarchy {
                     }
                 });
                 sums
-            })
-            .collect());
+            }));
         std::array::from_fn(|i| sum_parts(&parts.iter().map(|s| s[i]).collect::<Vec<_>>()))
     }
 
@@ -109,10 +102,7 @@ impl Hierarchy {
         r: &mut [[Mg; K]],
         which: [bool; K],
     ) -> [f64; K] {
-        let parts: Vec<[f64; K]> = with_rows!(&self.levels[0], |fine| r
-            .par_chunks_mut(CHUNK)
-            .enumerate()
-            .map(|(ci, rs)| {
+        let parts: Vec<[f64; K]> = with_rows!(&self.levels[0], |fine| map_chunks(r, CHUNK, |ci, rs| {
                 let first = ci * CHUNK;
                 let mut rr = [0.0; K];
                 fine.each_row_into(first, rs, |e, row, rv| {
@@ -127,8 +117,7 @@ impl Hierarchy {
                     }
                 });
                 rr
-            })
-            .collect());
+            }));
         sum_parts(&parts)
     }
 
@@ -157,12 +146,15 @@ impl Hierarchy {
             Some(x) => {
                 assert!(x.iter().all(|v| v.len() == a.unknowns()), "one value per unknown");
                 let unk = a.unknowns_in_order();
-                unk.par_iter()
-                    .map(|u| match *u {
-                        PAD => [0.0; K],
-                        u => x.map(|v| v[u as usize].into()),
-                    })
-                    .collect()
+                let mut start = vec![[0.0; K]; unk.len()];
+                for_chunks(&mut start, CHUNK, |ci, xs| {
+                    for (xv, u) in xs.iter_mut().zip(&unk[ci * CHUNK..]) {
+                        if *u != PAD {
+                            *xv = x.map(|v| v[*u as usize].into());
+                        }
+                    }
+                });
+                start
             }
             None => vec![[0.0; K]; a.len()],
         };
@@ -204,9 +196,7 @@ impl Hierarchy {
     ) -> [SolveStats; K] {
         let a = &self.levels[0];
         let n = a.len();
-        let parts: Vec<[f64; K]> = with_rows!(a, |fine| (0..n.div_ceil(CHUNK))
-            .into_par_iter()
-            .map(|ci| {
+        let parts: Vec<[f64; K]> = with_rows!(a, |fine| map_range(n.div_ceil(CHUNK), |ci| {
                 let mut s = [0.0; K];
                 fine.each_row(ci * CHUNK..n.min((ci + 1) * CHUNK), |e, row| {
                     let (v, w) = (be(fine.unknown_of(e, &row)), inverse(fine.finest_row(e, &row).2));
@@ -215,8 +205,7 @@ impl Hierarchy {
                     }
                 });
                 s
-            })
-            .collect());
+            }));
         let bb = sum_parts(&parts);
         let bnorm = bb.map(f64::sqrt);
         let mut stats: [SolveStats; K] = std::array::from_fn(|_| SolveStats {
@@ -245,7 +234,7 @@ impl Hierarchy {
         // bit: A 0 = 0 exactly, and the same chunks add in the same order).
         let mut r = vec![[0.0; K]; n];
         let rr = if cold {
-            with_rows!(a, |fine| r.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, rs)| {
+            with_rows!(a, |fine| for_chunks(&mut r, CHUNK, |ci, rs| {
                 let first = ci * CHUNK;
                 fine.each_row_into(first, rs, |e, row, rv| *rv = be(fine.unknown_of(e, &row)).map(Mg::of));
             }));
@@ -329,9 +318,11 @@ impl Hierarchy {
                 let rz_new = dot(&r, &q);
                 let beta: [f64; K] = std::array::from_fn(|k| if active[k] && !restart[k] { rz_new[k] / rz[k] } else { 0.0 });
                 rz = rz_new;
-                p.par_iter_mut()
-                    .zip(&q)
-                    .for_each(|(pv, zz)| *pv = std::array::from_fn(|k| Mg::of(zz[k].get() + beta[k] * pv[k].get())));
+                for_chunks(&mut p, CHUNK, |ci, ps| {
+                    for (pv, zz) in ps.iter_mut().zip(&q[ci * CHUNK..]) {
+                        *pv = std::array::from_fn(|k| Mg::of(zz[k].get() + beta[k] * pv[k].get()));
+                    }
+                });
             }
         }
         // Report the true residuals (those not known from the stop: a breakdown or the

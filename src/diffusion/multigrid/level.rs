@@ -4,9 +4,9 @@
 
 use super::codec::{code_rows, pow2, unit_of, Codes, Dz, Mg, Plain, Real, RowAt, Rows, Run, Runs};
 use super::operator::{row_sum, Maxima, Operator, Stencils};
+use super::par::{for_chunks, map_each};
 use super::{CHUNK, NONE, PAD};
 use crate::half::Scaled16;
-use rayon::prelude::*;
 
 /// A [`Level`]'s rows with their type known ([`with_rows`]), their scales and its number of red
 /// entries: what the passes read.
@@ -428,10 +428,13 @@ impl Level {
     pub(super) fn link(&mut self, parent: &[u32], coarse: &mut Level, coarse_entry: &[u32], op: &Operator) {
         let plane_cells = (op.dims[0] * op.dims[1]) as u32;
         let plane = |cu: u32| (op.nodes[cu as usize].cell / plane_cells) as usize;
-        self.parent = (0..self.red)
-            .into_par_iter()
-            .map(|e| coarse_entry[parent[self.unknown(e) as usize] as usize])
-            .collect();
+        let mut parents = vec![0; self.red];
+        for_chunks(&mut parents, CHUNK, |ci, ps| {
+            for (p, e) in ps.iter_mut().zip(ci * CHUNK..) {
+                *p = coarse_entry[parent[self.unknown(e) as usize] as usize];
+            }
+        });
+        self.parent = parents;
         // Counts per plane (shifted by one), then their running sums from each range's start.
         let mut planes = vec![[0u32; 3]; op.dims[2] + 1];
         with_rows!(self, |c| c.each_row(0..self.red, |e, row| {
@@ -468,8 +471,9 @@ impl Level {
         red.fill([0.0; K]);
         black.fill([0.0; K]);
         let split = self.red as u32;
-        with_rows!(fine, |rows| with_diagonal!(fine, |diag| tasks.into_par_iter().for_each(
-            |(start, end, red, black)| {
+        with_rows!(fine, |rows| with_diagonal!(fine, |diag| map_each(
+            tasks,
+            |_, (start, end, red, black)| {
                 red.fill([0.0; K]);
                 black.fill([0.0; K]);
                 let xb = OtherColour::of(&rows, xb, fine.red + 1);
@@ -486,15 +490,15 @@ impl Level {
                     }
                 })
             }
-        )))
+        )));
     }
 
     /// The first red pass from x = 0: x = b / diag on the red unknowns, 0 elsewhere (the finest
     /// level's diagonals from its rows' sums and couplings: this pass reads its rows).
     pub(super) fn smooth_red_from_zero<const K: usize>(&self, x: &mut [[Mg; K]], b: &[[Mg; K]]) {
         let red = self.red;
-        x[red..].par_chunks_mut(CHUNK).for_each(|xs| xs.fill([0.0; K]));
-        with_rows!(self, |rows| x[..red].par_chunks_mut(CHUNK).enumerate().for_each(|(ci, xs)| {
+        for_chunks(&mut x[red..], CHUNK, |_, xs| xs.fill([0.0; K]));
+        with_rows!(self, |rows| for_chunks(&mut x[..red], CHUNK, |ci, xs| {
             let first = ci * CHUNK;
             rows.each_row_into(first, xs, |e, row, xv| {
                 let d = if self.row_sums {
@@ -518,10 +522,7 @@ impl Level {
         } else {
             (&mut xb[..black], &*xr, red + 1, 0)
         };
-        with_rows!(self, |coded| with_diagonal!(self, |diag| mine
-            .par_chunks_mut(CHUNK)
-            .enumerate()
-            .for_each(|(ci, xs)| {
+        with_rows!(self, |coded| with_diagonal!(self, |diag| for_chunks(mine, CHUNK, |ci, xs| {
                 let start = first + ci * CHUNK;
                 let other = OtherColour::of(&coded, other, off);
                 coded.each_row_into(start, xs, |e, row, xv| {
@@ -535,16 +536,13 @@ impl Level {
     /// x += w P xc on the red unknowns, each adding its parent's correction: a black pass
     /// follows, which overwrites the black ones whatever they hold.
     pub(super) fn prolong_red<const K: usize>(&self, x: &mut [[Mg; K]], xc: &[[Mg; K]], w: Mg) {
-        x[..self.red]
-            .par_chunks_mut(CHUNK)
-            .zip(self.parent.par_chunks(CHUNK))
-            .for_each(|(xs, ps)| {
-                for (v, p) in xs.iter_mut().zip(ps) {
-                    let c = &xc[*p as usize];
-                    for k in 0..K {
-                        v[k] += w * c[k];
-                    }
+        for_chunks(&mut x[..self.red], CHUNK, |ci, xs| {
+            for (v, p) in xs.iter_mut().zip(&self.parent[ci * CHUNK..]) {
+                let c = &xc[*p as usize];
+                for k in 0..K {
+                    v[k] += w * c[k];
                 }
-            });
+            }
+        });
     }
 }

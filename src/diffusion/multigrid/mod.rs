@@ -42,6 +42,7 @@ mod codec;
 mod cycle;
 mod level;
 mod operator;
+mod par;
 #[cfg(test)]
 mod tests;
 

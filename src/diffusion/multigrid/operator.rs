@@ -1,8 +1,8 @@
 //! The operator the hierarchy is built from: a symmetric 7-point stencil on its unknowns, read
 //! row by row ([`Stencils`]), and its Galerkin coarsening by 2×2×2 aggregation ([`coarsen`]).
 
-use super::NONE;
-use rayon::prelude::*;
+use super::par::{for_chunks, map_chunks, map_each, map_range};
+use super::{CHUNK, NONE};
 
 /// One unknown of an [`Operator`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -180,12 +180,8 @@ pub(super) fn coarsen(a: &impl Stencils) -> (Operator, Vec<u32>, Maxima) {
         .map(|k| first_at(a, 2 * k * nx * ny)..first_at(a, (2 * k + 2) * nx * ny))
         .collect();
     let mut rank = vec![NONE; plane * cd[2]];
-    let counts: Vec<u32> = rank
-        .par_chunks_mut(plane)
-        .zip(&fine_planes)
-        .enumerate()
-        .map(|(k, (r, fine))| {
-            for u in fine.clone() {
+    let counts: Vec<u32> = map_chunks(&mut rank, plane, |k, r| {
+            for u in fine_planes[k].clone() {
                 r[key(a.ijk(u)) as usize - k * plane] = 0;
             }
             let mut c = 0;
@@ -194,8 +190,7 @@ pub(super) fn coarsen(a: &impl Stencils) -> (Operator, Vec<u32>, Maxima) {
                 c += 1;
             }
             c
-        })
-        .collect();
+        });
     let offsets: Vec<u32> = counts
         .iter()
         .scan(0, |s, c| {
@@ -203,15 +198,22 @@ pub(super) fn coarsen(a: &impl Stencils) -> (Operator, Vec<u32>, Maxima) {
             Some(*s - c)
         })
         .collect();
-    rank.par_chunks_mut(plane).zip(&offsets).for_each(|(r, o)| {
-        r.iter_mut().filter(|v| **v != NONE).for_each(|v| *v += o);
+    for_chunks(&mut rank, plane, |k, r| {
+        r.iter_mut().filter(|v| **v != NONE).for_each(|v| *v += offsets[k]);
     });
-    let parent: Vec<u32> = (0..a.len()).into_par_iter().map(|u| rank[key(a.ijk(u)) as usize]).collect();
-    let mut nodes: Vec<Node> = (0..rank.len() as u32)
-        .into_par_iter()
-        .filter(|c| rank[*c as usize] != NONE)
-        .map(Node::at)
-        .collect();
+    let mut parent = vec![0; a.len()];
+    for_chunks(&mut parent, CHUNK, |ci, ps| {
+        for (p, u) in ps.iter_mut().zip(ci * CHUNK..) {
+            *p = rank[key(a.ijk(u)) as usize];
+        }
+    });
+    let node_chunks = map_range(rank.len().div_ceil(CHUNK), |ci| {
+        (ci * CHUNK..rank.len().min((ci + 1) * CHUNK))
+            .filter(|c| rank[*c] != NONE)
+            .map(|c| Node::at(c as u32))
+            .collect::<Vec<_>>()
+    });
+    let mut nodes: Vec<Node> = node_chunks.concat();
     drop(rank);
     let mut planes = Vec::with_capacity(cd[2]);
     let (mut rest, mut base) = (&mut nodes[..], 0);
@@ -220,9 +222,7 @@ pub(super) fn coarsen(a: &impl Stencils) -> (Operator, Vec<u32>, Maxima) {
         planes.push((fine, base, mine));
         (rest, base) = (more, base + here as usize);
     }
-    let maxima = planes
-        .into_par_iter()
-        .map(|(fine, base, mine)| {
+    let maxima = map_each(planes, |_, (fine, base, mine)| {
             let mut m = Maxima::default();
             for u in fine {
                 let st = a.stencil(u);
@@ -245,7 +245,8 @@ pub(super) fn coarsen(a: &impl Stencils) -> (Operator, Vec<u32>, Maxima) {
             }
             m
         })
-        .reduce(Maxima::default, Maxima::max);
+        .into_iter()
+        .fold(Maxima::default(), Maxima::max);
     (Operator { dims: cd, nodes }, parent, maxima)
 }
 
@@ -285,10 +286,11 @@ impl Maxima {
 
     /// Those of all of `a`'s rows (a pass over them: for a level not read by [`coarsen`]).
     pub(super) fn all(a: &impl Stencils) -> Maxima {
-        (0..a.len())
-            .into_par_iter()
-            .map(|u| Maxima::of(&a.stencil(u)))
-            .reduce(Maxima::default, Maxima::max)
+        map_range(a.len().div_ceil(CHUNK), |ci| {
+            (ci * CHUNK..a.len().min((ci + 1) * CHUNK)).fold(Maxima::default(), |m, u| m.max(Maxima::of(&a.stencil(u))))
+        })
+        .into_iter()
+        .fold(Maxima::default(), Maxima::max)
     }
 }
 

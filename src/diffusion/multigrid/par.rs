@@ -1,0 +1,65 @@
+//! The multigrid's parallel loops, all through one compiled rayon loop ([`run`]): a pass hands
+//! it one task per chunk of entries (or per plane), and the loop over the chunk's rows stays
+//! the pass's own, generic code. Rayon's plumbing is then compiled once for the multigrid
+//! instead of once per pass, band count, precision and row codec; the call through a trait
+//! object happens once per chunk, not per row.
+
+use rayon::prelude::*;
+use std::sync::{Mutex, PoisonError};
+
+/// `task(i)` for every i in `0..tasks`, on rayon's pool.
+fn run(tasks: usize, task: &(dyn Fn(usize) + Sync)) {
+    (0..tasks).into_par_iter().for_each(task);
+}
+
+/// `f(i, item)` for each of `items` in parallel; the results in the items' order.
+pub(super) fn map_each<T: Send, R: Send>(items: Vec<T>, f: impl Fn(usize, T) -> R + Sync) -> Vec<R> {
+    // One slot per task, each locked by its task alone: the lock only proves to the compiler
+    // that the tasks' items and results are disjoint.
+    let slots: Vec<Mutex<(Option<T>, Option<R>)>> = items.into_iter().map(|t| Mutex::new((Some(t), None))).collect();
+    run(slots.len(), &|i| {
+        let mut slot = slots[i].lock().unwrap_or_else(PoisonError::into_inner);
+        let item = slot.0.take().expect("each task runs once");
+        slot.1 = Some(f(i, item));
+    });
+    slots
+        .into_iter()
+        .map(|s| s.into_inner().unwrap_or_else(PoisonError::into_inner).1.expect("every task ran"))
+        .collect()
+}
+
+/// [`map_each`] over the `size`-entry chunks of `v` (the last may be shorter).
+pub(super) fn map_chunks<T: Send, R: Send>(v: &mut [T], size: usize, f: impl Fn(usize, &mut [T]) -> R + Sync) -> Vec<R> {
+    map_each(v.chunks_mut(size).collect(), f)
+}
+
+/// `f(ci, chunk)` for each `size`-entry chunk of `v` in parallel.
+pub(super) fn for_chunks<T: Send>(v: &mut [T], size: usize, f: impl Fn(usize, &mut [T]) + Sync) {
+    map_chunks(v, size, f);
+}
+
+/// `f(i)` for every i in `0..tasks` in parallel; the results in order.
+pub(super) fn map_range<R: Send>(tasks: usize, f: impl Fn(usize) -> R + Sync) -> Vec<R> {
+    map_each(vec![(); tasks], |i, ()| f(i))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chunks_cover_the_slice_once_and_results_keep_their_order() {
+        let mut v: Vec<usize> = vec![0; 10_007];
+        let firsts = map_chunks(&mut v, 1000, |ci, xs| {
+            for (t, x) in xs.iter_mut().enumerate() {
+                *x += ci * 1000 + t + 1;
+            }
+            (ci, xs.len())
+        });
+        assert_eq!(v, (1..=10_007).collect::<Vec<_>>());
+        assert_eq!(firsts.len(), 11);
+        assert!(firsts.iter().enumerate().all(|(i, (ci, len))| *ci == i && *len == if i == 10 { 7 } else { 1000 }));
+        assert_eq!(map_range(5, |i| i * i), [0, 1, 4, 9, 16]);
+        assert!(map_range(0, |i| i).is_empty());
+    }
+}
