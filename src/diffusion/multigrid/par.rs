@@ -12,25 +12,46 @@ fn run(tasks: usize, task: &(dyn Fn(usize) + Sync)) {
     (0..tasks).into_par_iter().for_each(task);
 }
 
+/// A task's item, then its result.
+enum Slot<T, R> {
+    Item(T),
+    Running,
+    Done(R),
+}
+
 /// `f(i, item)` for each of `items` in parallel; the results in the items' order.
+///
+/// Plain loops, not iterator chains: this is compiled once per pass, so it is kept small.
 pub(super) fn map_each<T: Send, R: Send>(items: Vec<T>, f: impl Fn(usize, T) -> R + Sync) -> Vec<R> {
     // One slot per task, each locked by its task alone: the lock only proves to the compiler
     // that the tasks' items and results are disjoint.
-    let slots: Vec<Mutex<(Option<T>, Option<R>)>> = items.into_iter().map(|t| Mutex::new((Some(t), None))).collect();
+    let mut slots = Vec::with_capacity(items.len());
+    for item in items {
+        slots.push(Mutex::new(Slot::Item(item)));
+    }
     run(slots.len(), &|i| {
         let mut slot = slots[i].lock().unwrap_or_else(PoisonError::into_inner);
-        let item = slot.0.take().expect("each task runs once");
-        slot.1 = Some(f(i, item));
+        if let Slot::Item(item) = std::mem::replace(&mut *slot, Slot::Running) {
+            *slot = Slot::Done(f(i, item));
+        }
     });
-    slots
-        .into_iter()
-        .map(|s| s.into_inner().unwrap_or_else(PoisonError::into_inner).1.expect("every task ran"))
-        .collect()
+    let mut results = Vec::with_capacity(slots.len());
+    for slot in slots {
+        // Rayon runs every task once (a task's panic is raised by `run`): each slot is done.
+        if let Slot::Done(r) = slot.into_inner().unwrap_or_else(PoisonError::into_inner) {
+            results.push(r);
+        }
+    }
+    results
 }
 
 /// [`map_each`] over the `size`-entry chunks of `v` (the last may be shorter).
 pub(super) fn map_chunks<T: Send, R: Send>(v: &mut [T], size: usize, f: impl Fn(usize, &mut [T]) -> R + Sync) -> Vec<R> {
-    map_each(v.chunks_mut(size).collect(), f)
+    let mut chunks = Vec::with_capacity(v.len().div_ceil(size));
+    for chunk in v.chunks_mut(size) {
+        chunks.push(chunk);
+    }
+    map_each(chunks, f)
 }
 
 /// `f(ci, chunk)` for each `size`-entry chunk of `v` in parallel.
