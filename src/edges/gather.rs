@@ -146,9 +146,10 @@ impl EdgeSettings {
     }
 }
 
-/// Default D_s for `render.surface_depth` (optical depth of the δ-M medium); measured in
-/// docs/budget.md ("The surface layer"): the five scenes' scores stop changing beyond 3.
-pub const DEFAULT_SURFACE_DEPTH: f32 = 3.0;
+/// Default D_s for `render.surface_depth` (optical depth of the δ-M medium): the five scenes'
+/// scores stop changing beyond 3 (docs/budget.md, "The surface layer"); with the sun's chord
+/// on its orders ≥ 2, 4 lifts the glare sweep's ψ = 35°–60° views (docs/accuracy.md).
+pub const DEFAULT_SURFACE_DEPTH: f32 = 4.0;
 
 /// Default T for `render.low_density_threshold` (density units); see docs/edges.md.
 pub const DEFAULT_THRESHOLD: f32 = 0.3;
