@@ -33,6 +33,7 @@
 //! weight is 1 − smoothstep(0, gap, min ρ), so two wisps that touch across clear air fade into one
 //! segment instead of switching abruptly when the gap closes.
 
+use super::escape::SunChord;
 use super::orders_kernel::{edge_radiance, segment_orders, OrderKernel, DEFAULT_TAIL};
 use super::segments::{density_bounds, depth_from_samples, LowSegment, RayProfile};
 use crate::cube::CubeImage;
@@ -145,9 +146,10 @@ impl EdgeSettings {
     }
 }
 
-/// Default D_s for `render.surface_depth` (optical depth of the δ-M medium); measured in
-/// docs/budget.md ("The surface layer"): the five scenes' scores stop changing beyond 3.
-pub const DEFAULT_SURFACE_DEPTH: f32 = 3.0;
+/// Default D_s for `render.surface_depth` (optical depth of the δ-M medium): the five scenes'
+/// scores stop changing beyond 3 (docs/budget.md, "The surface layer"); with the sun's chord
+/// on its orders ≥ 2, 4 lifts the glare sweep's ψ = 35°–60° views (docs/accuracy.md).
+pub const DEFAULT_SURFACE_DEPTH: f32 = 4.0;
 
 /// Default T for `render.low_density_threshold` (density units); see docs/edges.md.
 pub const DEFAULT_THRESHOLD: f32 = 0.3;
@@ -189,6 +191,8 @@ pub struct EdgeGather<'a> {
     /// The δ-M peak's spread on the sun's leg and the sun's irradiance above the medium (W m⁻²
     /// per band), when set ([`EdgeGather::with_peak_spread`]).
     peak: Option<(PeakSpread, Rgb)>,
+    /// The δ-M chord along the sun that weights the sun's orders ≥ 2 ([`EdgeGather::with_sun_chord`]).
+    chord: Option<&'a SunChord>,
 }
 
 /// One low-density segment (or a bridge's merged/split variant) whose E is needed for a pixel.
@@ -250,7 +254,16 @@ impl<'a> EdgeGather<'a> {
             dense,
             bounds: density_bounds(medium).unwrap_or((Vec3::ZERO, Vec3::ZERO)),
             peak: None,
+            chord: None,
         }
+    }
+
+    /// Weight the segments' sun order i ≥ 2 by s^{i−1}, s the chance that the sun's scattered
+    /// light stays in the cloud along the sun's chord relative to the surface layer's own
+    /// ([`SunChord::stay_at`], docs/edges.md). Without it every order stays (eq. 8 alone).
+    pub fn with_sun_chord(mut self, chord: &'a SunChord) -> Self {
+        self.chord = Some(chord);
+        self
     }
 
     /// Spread the sun's peak and smooth parts by the peak scatterings on the sun's leg
@@ -334,7 +347,10 @@ impl<'a> EdgeGather<'a> {
             // cos θ = (−ω_sun)·(−d): sunlight leaving towards the eye.
             let c = self.sun.dir.dot(d) as f64;
             let phase = m.optics.phase;
-            let ks: Vec<Rgb> = (1..=q.len()).map(|i| es * phase.order(i).eval_cos_f64(c) as f32).collect();
+            let stay = self.chord.map_or(1.0, |ch| self.segment_stay(plan, seg, ch));
+            let ks: Vec<Rgb> = (1..=q.len())
+                .map(|i| es * (phase.order(i).eval_cos_f64(c) * stay.powi(i as i32 - 1)) as f32)
+                .collect();
             e += edge_radiance(&q, &ks, m.optics.albedo, 2);
         }
         e
@@ -385,6 +401,24 @@ impl<'a> EdgeGather<'a> {
             acc / tau as f32
         } else {
             at_centre()
+        }
+    }
+
+    /// The chord's factor ([`SunChord::stay_at`]) over the segment, at its pieces' midpoints
+    /// weighted as its sun is ([`Self::segment_sun`]: where the first collisions lie).
+    fn segment_stay(&self, plan: &PixelPlan, seg: &LowSegment, chord: &SunChord) -> f64 {
+        let (od, dd) = (plan.o.as_dvec3(), plan.d.as_dvec3());
+        let (mut num, mut den) = (0f64, 0f64);
+        for (p, e) in plan.profile.pieces[seg.first..seg.end].iter().zip(&plan.sun[seg.first..seg.end]) {
+            let w = e.max_element() as f64 * p.tau;
+            let mid = (od + dd * (0.5 * (p.t0 + p.t1))).as_vec3();
+            num += w * chord.stay_at(self.medium.to_voxel(mid));
+            den += w;
+        }
+        if den > 0.0 {
+            num / den
+        } else {
+            chord.stay_at(self.medium.to_voxel(seg.center(plan.o, plan.d)))
         }
     }
 

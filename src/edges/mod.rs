@@ -3,6 +3,7 @@
 //! Henyey–Greenstein scattering over a view-aligned cube, and a front-to-back gather that blends
 //! them with the dense (diffusion) solution. See `docs/edges.md`.
 
+pub mod escape;
 pub mod gather;
 pub(crate) mod orders;
 pub mod orders_kernel;

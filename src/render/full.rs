@@ -23,6 +23,7 @@ use super::{Progress, Timings};
 use crate::cube::{clear_air, BorderKeep, BorderLight, ClearAir, CubeImage, CubeOptions, CubeRenderer};
 use crate::diffusion::warm::{DiffusionState, WarmSolve};
 use crate::diffusion::{solve_diffusion_lean, BoundaryLight, DiffusionSettings, DiffusionSolution};
+use crate::edges::escape::SunChord;
 use crate::edges::gather::{CubeRequest, CubeSource, EdgeGather, SunInput};
 use crate::edges::sparse::{gather_image, gather_pixels, PixelRay, SparseSettings};
 use crate::error::check_finite_field;
@@ -391,6 +392,13 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
     let mut settings = scene.render.edges;
     settings.step_m = settings.step_m.max(GATHER_STEP_VOXELS * m.min_voxel());
     let edge = EdgeGather::new(m, settings, &cubes, sun, &dense).with_peak_spread(sun_e);
+    // The sun's chord weights the surface layer's sun orders ≥ 2 (docs/edges.md); the paper's
+    // scheme (no layer, D_s = 0) keeps eq. 8 alone.
+    let chord = (settings.surface_depth > 0.0).then(|| SunChord::new(m, lit.sun.dir, lit.sun_t().clone(), settings.surface_depth));
+    let edge = match &chord {
+        Some(c) => edge.with_sun_chord(c),
+        None => edge,
+    };
     let cam = &scene.camera;
     let spp = scene.render.aa_samples;
     let n = cam.width as usize * cam.height as usize;
