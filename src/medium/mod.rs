@@ -279,9 +279,9 @@ impl Medium {
 
     /// A dense copy of ρ on the cloud's box grown by one voxel (0 beyond it), built on the first
     /// call and kept: 4 B per box voxel for fewer instructions per look-up; its `trilinear` gives
-    /// the same bits as [`Density::trilinear`]. For `reference`, `single` and `diffusion`'s gather
-    /// (built after its solve, below its peak) only: `full` must not build it (it would be alive
-    /// at its peak).
+    /// the same bits as [`Density::trilinear`]. For `reference`, `single`, and `diffusion`'s and
+    /// `transport`'s gathers (built after their solves, below their peaks) only: `full` must not
+    /// build it (it would be alive at its peak).
     pub fn dense_density(&self) -> &SubGrid {
         self.dense_box.get_or_init(|| {
             let (lo, hi) = self.active_box(1).unwrap_or(([0; 3], [0; 3]));

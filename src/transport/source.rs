@@ -37,8 +37,8 @@ fn opposite_pairs(q: &Quadrature) -> Vec<[usize; 2]> {
     pairs
 }
 
-/// Ordinates swept side by side: their per-voxel sources and radiances are held at once
-/// (2 × 12 B per full voxel each). Fixed, so the sums are the same for any thread count.
+/// Ordinates swept side by side: their per-voxel sources, replaced by their radiances, are held
+/// at once (12 B per full voxel each). Fixed, so the sums are the same for any thread count.
 pub(crate) const ORDINATE_BATCH: usize = 16;
 
 /// Opposite pairs per batch: the lanes of the source evaluation.
