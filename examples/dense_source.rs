@@ -57,15 +57,15 @@ fn main() {
                 let to_voxel = c - eye;
                 let d = to_voxel.normalize_or_zero();
                 let w = rho as f64 * scene.medium.transmittance(c, -d, 0.0, to_voxel.length()) as f64;
-                let tau_sun = -(field.sun_t[v][1] as f64).max(1e-30).ln();
+                let fi = field.full.slot(v) - 1;
+                let tau_sun = -(field.sun_t[fi][1] as f64).max(1e-30).ln();
                 let b = SUN_DEPTHS.iter().position(|&t| tau_sun < t).unwrap_or(SUN_DEPTHS.len());
                 // The gather's own look-ups at the centre (m.to_voxel, the trilinear density).
                 let i0 = lit.i0(m.to_voxel(c), m.density_at(c));
-                bins[b][0] += w * tr_diffuse[v].y as f64;
+                bins[b][0] += w * tr_diffuse[fi].y as f64;
                 bins[b][1] += w * (a * i0.y) as f64;
                 bins[b][2] += w * (a * lit.diffuse_at(c, -d).y) as f64;
                 // Transport's isotropic part a′I_00·Y_00 (band 1), Y_00 = 1/√(4π).
-                let fi = field.full.slot(v) - 1;
                 bins[b][3] += w * field.diffuse_source[(fi * 3 + 1) * nsh] as f64 / (4.0 * std::f64::consts::PI).sqrt();
             }
         }

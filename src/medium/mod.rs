@@ -279,9 +279,9 @@ impl Medium {
 
     /// A dense copy of ρ on the cloud's box grown by one voxel (0 beyond it), built on the first
     /// call and kept: 4 B per box voxel for fewer instructions per look-up; its `trilinear` gives
-    /// the same bits as [`Density::trilinear`]. For `reference`, `single` and `diffusion`'s gather
-    /// (built after its solve, below its peak) only: `full` must not build it (it would be alive
-    /// at its peak).
+    /// the same bits as [`Density::trilinear`]. For `reference`, `single`, and `diffusion`'s and
+    /// `transport`'s gathers (built after their solves, below their peaks) only: `full` must not
+    /// build it (it would be alive at its peak).
     pub fn dense_density(&self) -> &SubGrid {
         self.dense_box.get_or_init(|| {
             let (lo, hi) = self.active_box(1).unwrap_or(([0; 3], [0; 3]));
@@ -321,6 +321,12 @@ impl Medium {
     /// [`Self::density_integral`], stopped once the sum reaches `limit` (then some value
     /// ≥ `limit`: every dual cell adds a non-negative Simpson term); below it, the same bits.
     pub fn density_integral_until(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32, limit: f64) -> f64 {
+        self.density_integral_until_with(|v| self.density.trilinear(v), o, d, t_min, t_max, limit)
+    }
+
+    /// [`Self::density_integral_until`] with ρ at continuous voxel coordinates from `rho`, which
+    /// must give the medium's trilinear density (e.g. from [`Self::dense_density`], the same bits).
+    pub fn density_integral_until_with(&self, rho: impl Fn([f32; 3]) -> f32, o: Vec3, d: Vec3, t_min: f32, t_max: f32, limit: f64) -> f64 {
         let Some((t0, t1)) = self.intersect(o, d, t_min, t_max) else {
             return 0.0;
         };
@@ -330,7 +336,7 @@ impl Medium {
         let orig = self.origin.as_dvec3();
         let rho = |t: f64| -> f64 {
             let v = ((od + dd * t) - orig) * inv_h;
-            self.density.trilinear([v.x as f32, v.y as f32, v.z as f32]) as f64
+            rho([v.x as f32, v.y as f32, v.z as f32]) as f64
         };
         let mut sum = 0.0;
         self.majorant.for_each_block(self, o, d, t0, t1, |ta, tb, maj| {
@@ -413,9 +419,15 @@ impl Medium {
     /// Transmittance exp(−optical depth) along a ray segment; exact.
     #[inline]
     pub fn transmittance(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> f32 {
+        self.transmittance_with(|v| self.density.trilinear(v), o, d, t_min, t_max)
+    }
+
+    /// [`Self::transmittance`] with ρ from `rho`, as [`Self::density_integral_until_with`]: the
+    /// same bits.
+    pub fn transmittance_with(&self, rho: impl Fn([f32; 3]) -> f32, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> f32 {
         // Beyond TAU_ZERO the rest of the ray cannot change the result (0): it is not walked.
         let sigma_t = self.optics.sigma_t as f64;
-        let sum = self.density_integral_until(o, d, t_min, t_max, TAU_ZERO / sigma_t);
+        let sum = self.density_integral_until_with(rho, o, d, t_min, t_max, TAU_ZERO / sigma_t);
         (-((sigma_t * sum) as f32)).exp()
     }
 

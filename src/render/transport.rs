@@ -17,7 +17,7 @@ use crate::image::Image;
 use crate::math::{real_sh, sh_count};
 use crate::math::{Rgb, Vec3};
 use crate::medium::sparse::FullIndex;
-use crate::medium::march::march;
+use crate::medium::march::march_with;
 use crate::medium::Medium;
 use crate::peak::PeakSpread;
 use crate::pipeline::{render_rows, NoProgress, Progress, Timings};
@@ -32,9 +32,9 @@ use glam::DVec3;
 use rayon::prelude::*;
 use std::f64::consts::PI;
 
-/// Source per unit scaled optical depth towards the eye, per voxel (zero where ρ = 0): the
-/// diffuse (multiple-scattering) part and the sun's single scattering with the forward peak that
-/// δ-M truncated put back ([`sun_phase`]).
+/// Source per unit scaled optical depth towards the eye, per full voxel (in grid order, as
+/// [`TransportField::full`] indexes them): the diffuse (multiple-scattering) part and the sun's
+/// single scattering with the forward peak that δ-M truncated put back ([`sun_phase`]).
 pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
     let m = &scene.medium;
     let [nx, ny, _] = m.dims();
@@ -43,14 +43,15 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
     let o = &f.optics;
     let (sun_dir, e_sun) = (scene.sun.dir, scene.sun.irradiance);
     let peak = PeakSpread::truncated(o.g, f.order);
-    (0..f.full.len())
-        .into_par_iter()
+    // ρ for the marches to the eye from the dense copy: the same bits, fewer instructions.
+    let dense = m.dense_density();
+    let voxels: Vec<usize> = f.full.full_voxels().collect();
+    voxels
+        .par_iter()
+        .enumerate()
         .map_init(
             || vec![0.0; nsh],
-            |y, v| {
-                let Some(fi) = f.full.slot(v).checked_sub(1) else {
-                    return (Rgb::ZERO, Rgb::ZERO);
-                };
+            |y, (fi, &v)| {
                 let (i, j, k) = (v % nx, (v / nx) % ny, v / (nx * ny));
                 let centre = m.voxel_center(i, j, k);
                 let to_voxel = centre - eye;
@@ -59,7 +60,7 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
                 real_sh(f.order, -DVec3::new(d.x as f64, d.y as f64, d.z as f64), y);
                 let angle = ScatteringAngle::new(&peak, (sun_dir.dot(d) as f64).clamp(-1.0, 1.0));
                 // Exact optical depth from the voxel's centre to the eye (or out of the grid).
-                let t_eye = m.transmittance(centre, -d, 0.0, to_voxel.length()) as f64;
+                let t_eye = m.transmittance_with(|v| dense.trilinear(v), centre, -d, 0.0, to_voxel.length()) as f64;
                 let (mut diffuse, mut sun) = ([0f32; 3], [0f32; 3]);
                 // The last band's phase, its albedo, optics and T′_sun: a band alike takes it.
                 let mut last: Option<(f64, &crate::transport::BandOptics, f64, f64)> = None;
@@ -68,7 +69,7 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
                     let js = &f.diffuse_source[base..base + nsh];
                     diffuse[b] = js.iter().zip(y.iter()).map(|(j, y)| *j as f64 * y).sum::<f64>().max(0.0) as f32;
                     let (a, band) = (o.albedo[b], &o.bands[b]);
-                    let t_sun = f.sun_t[v][b] as f64;
+                    let t_sun = f.sun_t[fi][b] as f64;
                     if t_sun > 0.0 {
                         let p = match last {
                             Some((la, lb, lt, p)) if la == a && lb == band && lt == t_sun => p,
@@ -129,9 +130,10 @@ fn sun_phase(peak: &PeakSpread, g: f64, band: &crate::transport::BandOptics, alb
     (smooth + t_eye.powf(af) * peak_part).max(0.0)
 }
 
-/// Trilinear interpolation of `grid` at continuous voxel coordinates `v`, over full voxels only.
+/// Trilinear interpolation of `values` (one per full voxel, [`eye_source`]) at continuous voxel
+/// coordinates `v`, over full voxels only.
 #[inline]
-fn full_trilinear(m: &Medium, full: &FullIndex, grid: &[Rgb], v: Vec3) -> Rgb {
+fn full_trilinear(m: &Medium, full: &FullIndex, values: &[Rgb], v: Vec3) -> Rgb {
     let d = m.dims();
     let u = v - Vec3::splat(0.5);
     let b = u.floor();
@@ -145,13 +147,13 @@ fn full_trilinear(m: &Medium, full: &FullIndex, grid: &[Rgb], v: Vec3) -> Rgb {
                     continue;
                 }
                 let idx = c[0] as usize + d[0] * (c[1] as usize + d[1] * c[2] as usize);
-                if !full.is_full(idx) {
+                let Some(fi) = full.slot(idx).checked_sub(1) else {
                     continue;
-                }
+                };
                 let w = (if dx == 1 { t.x } else { 1.0 - t.x })
                     * (if dy == 1 { t.y } else { 1.0 - t.y })
                     * (if dz == 1 { t.z } else { 1.0 - t.z });
-                sum += grid[idx] * w;
+                sum += values[fi] * w;
                 wsum += w;
             }
         }
@@ -249,6 +251,9 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
     scaled.optics.sigma_t = field.optics.bands[1].sigma_t as f32;
     let cam = &scene.camera;
     let spp = scene.render.aa_samples;
+    // ρ from the dense copy on the cloud's box (built by the eye source, after the solve): the
+    // same bits as the packed density's.
+    let dense = m.dense_density();
     let step = scene.render.step_voxels * m.min_voxel();
     // Per pixel: [diffuse source, sun single scattering, background]; the image is their sum.
     let shade = |x: u32, y: u32, spp: u32| {
@@ -258,10 +263,11 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
             let ray = cam.ray(px, py);
             let (o, d) = (ray.origin, ray.dir);
             let t_max = scene.ground.as_ref().and_then(|g| g.intersect(o, d)).unwrap_or(f32::INFINITY);
-            let ms = march(&scaled, o, d, 0.0, t_max, step, xi, |v, _| {
+            let rho = |v: [f32; 3]| dense.trilinear(v);
+            let ms = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _| {
                 full_trilinear(m, &field.full, &diffuse, v)
             });
-            let ss = march(&scaled, o, d, 0.0, t_max, step, xi, |v, _| full_trilinear(m, &field.full, &sun, v));
+            let ss = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _| full_trilinear(m, &field.full, &sun, v));
             let bg = if ms.transmittance > 0.0 {
                 background(scene, ground.as_ref(), o, d)
             } else {

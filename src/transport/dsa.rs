@@ -74,8 +74,15 @@ pub(super) fn accelerate(c: &Ctx, voxels: &[usize], hier: &[Hierarchy], bands: &
         if bands[b].chi.get(1).is_some_and(|&c| c < 0.0) {
             delta.iter_mut().for_each(|d| *d *= 0.5);
         }
-        dsa_apply(c, voxels, &bands[b], b, delta, next);
     }
+    // Each voxel's update writes only its own entries: voxels in parallel, the same bits.
+    let chunk = 1024;
+    next.par_chunks_mut(chunk * 3 * c.nsh).enumerate().for_each(|(ci, block)| {
+        let f0 = ci * chunk;
+        for (b, delta) in deltas.iter().enumerate() {
+            dsa_apply(c, &voxels[f0..f0 + block.len() / (3 * c.nsh)], f0, &bands[b], b, delta, block);
+        }
+    });
 }
 
 /// Band `b`'s DSA right-hand side per full voxel: ρσs′ ΔI0 of the last sweep.
@@ -92,15 +99,18 @@ fn dsa_rhs(c: &Ctx, voxels: &[usize], bo: &BandOptics, b: usize, moments: &[f32]
         .collect()
 }
 
-/// Add band `b`'s correction δ (per full voxel) as its P1 radiance (see [`accelerate`]).
-fn dsa_apply(c: &Ctx, voxels: &[usize], bo: &BandOptics, b: usize, delta: &[f64], next: &mut [f32]) {
+/// Add band `b`'s correction δ (per full voxel) as its P1 radiance (see [`accelerate`]) to the
+/// full voxels from `f0`, whose grid indices are `voxels` and whose entries of the new moments
+/// are `next`.
+fn dsa_apply(c: &Ctx, voxels: &[usize], f0: usize, bo: &BandOptics, b: usize, delta: &[f64], next: &mut [f32]) {
     let (dims, nsh) = (c.dims, c.nsh);
     let y00 = 1.0 / (4.0 * PI).sqrt();
     let sigma_tr = bo.sigma_tr();
     let gstride = [1, dims[0], dims[0] * dims[1]];
-    for (f, &v) in voxels.iter().enumerate() {
+    for (k, &v) in voxels.iter().enumerate() {
+        let f = f0 + k;
         let cell = [v % dims[0], (v / dims[0]) % dims[1], v / (dims[0] * dims[1])];
-        let fo = (f * 3 + b) * nsh;
+        let fo = (k * 3 + b) * nsh;
         next[fo] += (delta[f] / y00) as f32;
         if nsh < 4 {
             continue;

@@ -53,7 +53,7 @@ pub(super) struct Ctx<'a> {
     pub(super) even: usize,
     /// Grid index of every full voxel, in grid order.
     pub(super) voxels: &'a [usize],
-    /// δ-M sun transmittance T′ per grid voxel and band.
+    /// δ-M sun transmittance T′ per full voxel and band.
     pub(super) sun_t: &'a [[f32; 3]],
     /// The box's cells in each major axis' sweep order ([`box_cells`]).
     pub(super) cells: [Vec<(f32, u32)>; 3],

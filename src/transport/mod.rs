@@ -76,9 +76,10 @@ impl TransportSettings {
 /// Peak memory of a transport render (solve, eye source and gather; not the image), estimated
 /// from the medium before anything is allocated. Peak resident memory measured on the
 /// development sandbox (`/usr/bin/time -f %M`, two threads, 8×6 images unless named;
-/// docs/performance.md, "Peaks"): the default cloud at 50×40×30 20.8 MB and 100×80×60 110.8 MB,
-/// the Disney cloud at 1/16 (363 k full voxels, 320×240) 815 MB; the model below is 1.02–1.30
-/// times each (the most on the smallest cloud, where the fixed part is most of it).
+/// docs/performance.md, "Peaks"): the default cloud at 50×40×30 20.7 MB, 100×80×60 99.2 MB and
+/// 200×160×120 709 MB, the Disney cloud at 1/16 (363 k full voxels, 320×240) 749 MB; the model
+/// below is 1.03–1.24 times each (the most on the smallest cloud, where the fixed part is most of
+/// it).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TransportMemory {
     /// Voxels with ρ > 0.
@@ -92,22 +93,28 @@ pub struct TransportMemory {
 impl TransportMemory {
     /// Bytes of a render whatever the cloud: the program, its libraries and threads.
     pub const FIXED_BYTES: u64 = 14 << 20;
-    /// Bytes per voxel of the whole grid at the solve's peak: the δ-M sun transmittance per band
-    /// (12; the full voxels are found through the medium's occupancy index, 0.25 B), rounded up
-    /// to the fit of the measurements (the gather's eye-source grids, 24 B, come after the solve
+    /// Bytes per voxel of the whole grid at the solve's peak: the medium's occupancy index
+    /// (0.25 B), through which the full voxels are found, rounded up to the fit of the
+    /// measurements (the gather's dense density copy, 4 B per box voxel, comes after the solve
     /// has freed its sweep arrays).
-    pub const GRID_BYTES: u64 = 20;
+    pub const GRID_BYTES: u64 = 8;
     /// Bytes per voxel of the tight box of full voxels: the sweeps' cells in three orders
     /// (3 × 8 B per voxel of the swept box), the acceleration's box-sized arrays, and a margin
     /// that keeps the estimate at or above the measured peaks.
     pub const DOMAIN_BYTES: u64 = 56;
 
-    /// Bytes per full voxel: at a sweep's peak two spherical-harmonic arrays (the moments and the
-    /// sweep's new moments; the source is evaluated from the moments, not stored) of 3 bands ×
-    /// (L + 1)² f32, plus a batch of ordinates' sources and radiances (2 × 12 B each): 1,920 B at
-    /// order 7 (a stored source array would add 768 B).
+    /// Bytes per full voxel beside the harmonic arrays and the batch array: the δ-M sun
+    /// transmittance per band (12 B) and the acceleration's per-unknown arrays (its right-hand
+    /// sides, corrections and CG vectors; 55–68 B measured), which live beside the batch array.
+    pub const FULL_EXTRA_BYTES: u64 = 84;
+
+    /// Bytes per full voxel: at the solve's peak two spherical-harmonic arrays (the moments and
+    /// the sweep's new moments; the source is evaluated from the moments, not stored) of 3 bands
+    /// × (L + 1)² f32, the batch array of ordinates' sources, in place of which the sweeps write
+    /// their radiances (12 B each), and [`Self::FULL_EXTRA_BYTES`]: 1,812 B at order 7 (a stored
+    /// source array would add 768 B).
     pub fn bytes_per_full_voxel(order: usize) -> u64 {
-        2 * 3 * 4 * crate::math::sh_count(order) as u64 + 2 * 12 * source::ORDINATE_BATCH as u64
+        2 * 3 * 4 * crate::math::sh_count(order) as u64 + 12 * source::ORDINATE_BATCH as u64 + Self::FULL_EXTRA_BYTES
     }
 
     /// The estimate for medium `m` solved with `s`.

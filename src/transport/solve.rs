@@ -32,7 +32,7 @@ use super::ground::GroundLight;
 pub use super::ground::GroundMap;
 use super::source::{diffuse_source_of, parity_order, PairTables};
 use super::sphere::Quadrature;
-use super::sweep::sweep;
+use super::sweep::{sweep, BatchArrays};
 use super::warm::{TransportState, WarmStart, WarmStop};
 use super::TransportOptics;
 use crate::diffusion::multigrid::Hierarchy;
@@ -86,7 +86,7 @@ pub struct TransportField {
     /// Diffuse source coefficients a′χ′_l I_lm per full voxel, band, lm (W·m⁻²·sr⁻¹); the sun's
     /// first scattering is not in it (the gather adds it exactly).
     pub diffuse_source: Vec<f32>,
-    /// δ-M sun transmittance T′ per voxel centre and band (1 where no cloud is near).
+    /// δ-M sun transmittance T′ per full voxel's centre and band.
     pub sun_t: Vec<[f32; 3]>,
     /// The ground's radiance.
     pub ground: GroundMap,
@@ -162,7 +162,7 @@ pub fn solve_warm(
         });
     }
     let index = FullVoxels::of(&m.density);
-    let sun_t = sun_transmittance(m, sun, &optics);
+    let sun_t = sun_transmittance(m, sun, &optics, &index.voxels);
     let ctx = Ctx::new(m, sky, ground, &index, &sun_t, s.order, &optics.bands);
     let q = Quadrature::product(s.n_mu, 2 * s.n_mu);
     let tables = pair_tables(&q, sun, s.order, &optics);
@@ -189,13 +189,14 @@ pub fn solve_warm(
     let Iterate {
         moments,
         next,
+        batch,
         history,
         ground_map,
         slowest,
         carried_ratio,
         ..
     } = it;
-    drop(next);
+    drop((next, batch));
     let nsh = ctx.nsh;
     let kept_ground = opts.keep.then(|| ground_map.clone());
     // T′ moves into the field once `ctx`, which borrows it, is dropped (below).
@@ -206,13 +207,23 @@ pub fn solve_warm(
     Ok((field, state))
 }
 
-/// δ-M sun transmittance T′ = T^{1 − a f} = T^{σt′/σt} at the voxel centres, per band.
-fn sun_transmittance(m: &Medium, sun: &Sun, optics: &TransportOptics) -> Vec<[f32; 3]> {
+/// δ-M sun transmittance T′ = T^{1 − a f} = T^{σt′/σt} at the centres of the full voxels
+/// (grid indices `voxels`), per band.
+fn sun_transmittance(m: &Medium, sun: &Sun, optics: &TransportOptics, voxels: &[usize]) -> Vec<[f32; 3]> {
     let exact = crate::lit::sunlight::SunTransmittance::compute(m, sun.dir);
-    exact
-        .grid
-        .values()
-        .map(|t| [0, 1, 2].map(|b| t.powf((optics.bands[b].sigma_t / optics.sigma_t) as f32)))
+    let ratio = [0, 1, 2].map(|b| (optics.bands[b].sigma_t / optics.sigma_t) as f32);
+    // Grey optics (every example): one power serves the three bands.
+    let grey = ratio[1..].iter().all(|r| *r == ratio[0]);
+    voxels
+        .par_iter()
+        .map(|&v| {
+            let t = exact.grid.at_index(v);
+            if grey {
+                [t.powf(ratio[0]); 3]
+            } else {
+                ratio.map(|r| t.powf(r))
+            }
+        })
         .collect()
 }
 
@@ -243,6 +254,8 @@ struct Iterate {
     /// The moments I_lm per full voxel, band and harmonic (solver order), and the next sweep's.
     moments: Vec<f32>,
     next: Vec<f32>,
+    /// The sweeps' per-voxel arrays of an ordinate batch.
+    batch: BatchArrays,
     /// Relative change of I0 after each iteration.
     history: Vec<f64>,
     ground_map: GroundMap,
@@ -274,6 +287,7 @@ impl Iterate {
         };
         Iterate {
             next: vec![0f32; moments.len()],
+            batch: BatchArrays::new(solver.ctx.voxels.len()),
             moments,
             history: Vec::new(),
             ground_map: solver.ground.map(e_down.as_deref()),
@@ -311,7 +325,7 @@ impl Solver<'_> {
             if progress.cancelled() {
                 break;
             }
-            let e_down = sweep(self.ctx, self.q, self.tables, &it.moments, &mut it.next, &it.ground_map);
+            let e_down = sweep(self.ctx, self.q, self.tables, &it.moments, &mut it.next, &it.ground_map, &mut it.batch);
             if it.accelerated && !self.hier.is_empty() {
                 accelerate(self.ctx, self.ctx.voxels, self.hier, &self.optics.bands, &it.moments, &mut it.next);
             }

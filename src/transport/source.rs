@@ -37,8 +37,8 @@ fn opposite_pairs(q: &Quadrature) -> Vec<[usize; 2]> {
     pairs
 }
 
-/// Ordinates swept side by side: their per-voxel sources and radiances are held at once
-/// (2 × 12 B per full voxel each). Fixed, so the sums are the same for any thread count.
+/// Ordinates swept side by side: their per-voxel sources, replaced by their radiances, are held
+/// at once (12 B per full voxel each). Fixed, so the sums are the same for any thread count.
 pub(crate) const ORDINATE_BATCH: usize = 16;
 
 /// Opposite pairs per batch: the lanes of the source evaluation.
@@ -131,8 +131,9 @@ fn lanes_dot(m: &[f32], y: &[[f32; PAIRS]]) -> [f32; PAIRS] {
 /// acc[k] += Σ_p s[p] y_p[k] (the pairs in order, in a sum from 0 per k, then added), eight k
 /// at a time: `blocks[kb][p]` holds y_p[8kb..8kb + 8]; the same order for any thread count.
 /// Lanes past a short batch's last pair hold s = y = 0 and add +0 (a sum from +0 never is −0).
+/// `FIRST`: acc[k] = the sum instead, the same bits as adding it to +0 (the sum is never −0).
 #[inline(always)]
-fn accumulate(acc: &mut [f32], s: &[f32; PAIRS], blocks: &[[[f32; 8]; PAIRS]]) {
+fn accumulate<const FIRST: bool>(acc: &mut [f32], s: &[f32; PAIRS], blocks: &[[[f32; 8]; PAIRS]]) {
     for (a, blk) in acc.chunks_mut(8).zip(blocks) {
         let mut r = [0f32; 8];
         for (sp, y) in s.iter().zip(blk) {
@@ -141,7 +142,11 @@ fn accumulate(acc: &mut [f32], s: &[f32; PAIRS], blocks: &[[[f32; 8]; PAIRS]]) {
             }
         }
         for (al, rl) in a.iter_mut().zip(r) {
-            *al += rl;
+            if FIRST {
+                *al = rl;
+            } else {
+                *al += rl;
+            }
         }
     }
 }
@@ -153,7 +158,7 @@ pub(super) fn source_kernel(c: &Ctx, t: &PairTables, bi: usize, pairs: usize, bl
     let (nsh, ne) = (c.nsh, c.even);
     for (k, mom) in block.chunks_exact(3 * nsh).enumerate() {
         let f = f0 + k;
-        let tf = c.sun_t[c.voxels[f]];
+        let tf = c.sun_t[f];
         let (mut plus, mut minus) = ([[0f32; 3]; PAIRS], [[0f32; 3]; PAIRS]);
         for b in 0..3 {
             let (m, y) = (&mom[b * nsh..(b + 1) * nsh], &t.y_src[(bi * 3 + b) * nsh..(bi * 3 + b + 1) * nsh]);
@@ -195,6 +200,8 @@ pub(super) struct Lanes<'a> {
     pub(super) wts: &'a [f32],
     pub(super) radiance: &'a [[f32; 3]],
     pub(super) y: &'a [[[f32; 8]; PAIRS]],
+    /// The sweep's first batch: it writes the new moments instead of adding to them.
+    pub(super) first: bool,
 }
 
 /// Step (3) of a sweep batch for the full voxels from `f0` whose new moments are `block`: I_lm +=
@@ -216,8 +223,13 @@ pub(super) fn moments_kernel(c: &Ctx, l: &Lanes, block: &mut [f32], f0: usize) {
             }
             let a = &mut acc[band * nsh..(band + 1) * nsh];
             let nbe = ne.div_ceil(8);
-            accumulate(&mut a[..ne], &se, &l.y[..nbe]);
-            accumulate(&mut a[ne..], &so, &l.y[nbe..]);
+            if l.first {
+                accumulate::<true>(&mut a[..ne], &se, &l.y[..nbe]);
+                accumulate::<true>(&mut a[ne..], &so, &l.y[nbe..]);
+            } else {
+                accumulate::<false>(&mut a[..ne], &se, &l.y[..nbe]);
+                accumulate::<false>(&mut a[ne..], &so, &l.y[nbe..]);
+            }
         }
     }
 }
@@ -241,15 +253,19 @@ unsafe fn moments_block_avx(c: &Ctx, l: &Lanes, block: &mut [f32], f0: usize) {
 /// The diffuse source a′χ′_l I_lm in real_sh's order for the gather, from the solver's
 /// moments (in `perm`'s parity order), per full voxel, band, lm.
 pub(super) fn diffuse_source_of(moments: &[f32], bands: &[BandOptics], perm: &[usize], nsh: usize) -> Vec<f32> {
+    // Per band and inner index: the real_sh index and a′χ′_l.
+    let factors: Vec<Vec<(usize, f64)>> = bands
+        .iter()
+        .map(|bo| perm.iter().map(|&k| (k, bo.albedo * bo.chi[(k as f64).sqrt().floor() as usize])).collect())
+        .collect();
     let mut diffuse_source = vec![0f32; moments.len()];
     diffuse_source
         .par_chunks_mut(3 * nsh)
         .zip(moments.par_chunks(3 * nsh))
         .for_each(|(o, mf)| {
-            for (band, bo) in bands.iter().enumerate() {
-                for (i, k) in perm.iter().enumerate() {
-                    let l = (*k as f64).sqrt().floor() as usize;
-                    o[band * nsh + k] = (bo.albedo * bo.chi[l] * mf[band * nsh + i] as f64) as f32;
+            for (band, fb) in factors.iter().enumerate() {
+                for (i, &(k, a_chi)) in fb.iter().enumerate() {
+                    o[band * nsh + k] = (a_chi * mf[band * nsh + i] as f64) as f32;
                 }
             }
         });
@@ -345,8 +361,8 @@ mod tests {
         let mut acc = vec![0f32; nsh];
         let nbe = ne.div_ceil(8);
         let nblk = t.y_acc.len() / t.pairs.len().div_ceil(PAIRS);
-        accumulate(&mut acc[..ne], &se, &t.y_acc[..nbe]);
-        accumulate(&mut acc[ne..], &so, &t.y_acc[nbe..nblk]);
+        accumulate::<false>(&mut acc[..ne], &se, &t.y_acc[..nbe]);
+        accumulate::<false>(&mut acc[ne..], &so, &t.y_acc[nbe..nblk]);
         for (i, k) in perm.iter().enumerate() {
             let want: f64 = t.pairs[..np]
                 .iter()

@@ -16,23 +16,45 @@ use crate::math::Vec3;
 use glam::DVec3;
 use rayon::prelude::*;
 
+/// The per-voxel array of a sweep batch: per ordinate slot and full voxel, the source in that
+/// ordinate, which its sweep replaces by the radiance (12 B × [`ORDINATE_BATCH`] per full voxel).
+/// Made once per solve, so the iterations write pages already mapped.
+pub(super) struct BatchArrays {
+    light: Vec<[f32; 3]>,
+}
+
+impl BatchArrays {
+    /// The array for `nfull` full voxels.
+    pub(super) fn new(nfull: usize) -> BatchArrays {
+        BatchArrays {
+            light: vec![[0f32; 3]; ORDINATE_BATCH * nfull],
+        }
+    }
+}
+
 /// One sweep of every ordinate: the diffuse radiance moments I_lm per full voxel (inner harmonic
-/// order), and how much the cloud changes the ground's downward irradiance, per ground map column.
+/// order) into `next`, and how much the cloud changes the ground's downward irradiance, per
+/// ground map column.
 ///
 /// `moments` are the last iterate's; the source J(Ω) = Σ a′χ′_l (I_lm + E T′ Y_lm(Ω_sun)) Y_lm(Ω)
 /// is evaluated from them directly (no array of source coefficients is stored). Ordinates go in
 /// batches of opposite pairs: (1) per full voxel, the source in both ordinates of each pair of the
-/// batch from one pass over its coefficients; (2) the batch's sweeps, one ordinate per task;
-/// (3) per full voxel, the moments of both ordinates of each pair in one pass, the pairs in
-/// their fixed order.
-pub(super) fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], next: &mut [f32], ground: &GroundMap) -> Vec<[f64; 3]> {
+/// batch from one pass over its coefficients; (2) the batch's sweeps, one ordinate per task, each
+/// replacing its source by its radiance; (3) per full voxel, the moments of both ordinates of each pair in one pass, the pairs in
+/// their fixed order (the first batch writes `next`, the others add to it).
+pub(super) fn sweep(
+    c: &Ctx,
+    q: &Quadrature,
+    t: &PairTables,
+    moments: &[f32],
+    next: &mut [f32],
+    ground: &GroundMap,
+    arrays: &mut BatchArrays,
+) -> Vec<[f64; 3]> {
     let nsh = c.nsh;
     let nfull = moments.len() / (3 * nsh);
-    // `next` is the last iteration's array, kept (reused, no new pages); the batch's sources
-    // and radiances are freed before the acceleration's solve.
-    next.fill(0.0);
-    let mut src = vec![[0f32; 3]; ORDINATE_BATCH * nfull];
-    let mut radiance = vec![[0f32; 3]; ORDINATE_BATCH * nfull];
+    let light = &mut arrays.light;
+    assert!(light.len() == ORDINATE_BATCH * nfull, "the batch array for these full voxels");
     // Change of the ground's downward irradiance by the cloud, per ground map column (W/m²).
     let mut e_down = vec![[0f64; 3]; ground.radiance.len()];
     // Full voxels per task in the per-voxel steps (1) and (3).
@@ -42,7 +64,7 @@ pub(super) fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], ne
         // (1) Source in each ordinate, clamped at 0 (the truncated expansion may dip); slot 2p
         // holds pair p's ordinate d, 2p + 1 its opposite.
         // Each task writes its voxels' entries of every slot: the slots' chunks, task by task.
-        let mut slots: Vec<_> = src.chunks_mut(nfull).map(|slot| slot.chunks_mut(chunk)).collect();
+        let mut slots: Vec<_> = light.chunks_mut(nfull.max(1)).map(|slot| slot.chunks_mut(chunk)).collect();
         let outs: Vec<Vec<&mut [[f32; 3]]>> = (0..nfull.div_ceil(chunk))
             .map(|_| slots.iter_mut().filter_map(Iterator::next).collect())
             .collect();
@@ -56,11 +78,10 @@ pub(super) fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], ne
         let wts: Vec<f32> = batch.clone().flat_map(|p| t.weights[p]).collect();
         let splats: Vec<Splats> = dirs
             .par_iter()
-            .zip(src.par_chunks(nfull.max(1)))
-            .zip(radiance.par_chunks_mut(nfull.max(1)))
-            .map(|((d, sd), rd)| sweep_ordinate(c, q.dirs[*d], q.weights[*d], sd, ground, rd))
+            .zip(light.par_chunks_mut(nfull.max(1)))
+            .map(|(d, ld)| sweep_ordinate(c, q.dirs[*d], q.weights[*d], ground, ld))
             .collect();
-        let radiance = &radiance;
+        let radiance = &**light;
         for splats in &splats {
             for (col, e) in splats {
                 for band in 0..3 {
@@ -76,6 +97,7 @@ pub(super) fn sweep(c: &Ctx, q: &Quadrature, t: &PairTables, moments: &[f32], ne
             wts: &wts,
             radiance,
             y: yb,
+            first: bi == 0,
         };
         next.par_chunks_mut(chunk * 3 * nsh)
             .enumerate()
@@ -227,8 +249,9 @@ unsafe fn cell_grey_avx(
 
 /// Sweep one ordinate `om` (weight `w`, sr) through the box upwind plane by plane: the radiance at
 /// every full voxel's centre, and the ground splats (column, change of downward irradiance, W/m²)
-/// of the light leaving the box downwards. `src` is the source in this ordinate per full voxel;
-/// `radiance` receives the radiance at every full voxel (all lie in the box).
+/// of the light leaving the box downwards. `light` holds the source in this ordinate per full
+/// voxel and receives the radiance there (all lie in the box): a cell reads its source before it
+/// writes its radiance, and each full voxel is one cell of the sweep.
 ///
 /// # Safety
 ///
@@ -238,9 +261,8 @@ unsafe fn sweep_kernel<const AVX: bool>(
     c: &Ctx,
     om: DVec3,
     w: f64,
-    src: &[[f32; 3]],
     ground: &GroundMap,
-    radiance: &mut [[f32; 3]],
+    light: &mut [[f32; 3]],
 ) -> Splats {
     debug_assert!(!AVX || has_avx());
     let mut splats = Vec::new();
@@ -321,8 +343,8 @@ unsafe fn sweep_kernel<const AVX: bool>(
     let up = fb + fc * stride as isize;
     // The unchecked indexing below relies on these: a cell's four upwind records lie in the
     // plane buffer (its size and the upwind floors asserted here), and the box's full voxels
-    // index `src` and `radiance` ([`box_cells`] checked each below `voxels.len()`).
-    assert!(src.len() == c.voxels.len() && radiance.len() == c.voxels.len() && cells.len() == na * nb * nc + PREFETCH_AHEAD);
+    // index `light` ([`box_cells`] checked each below `voxels.len()`).
+    assert!(light.len() == c.voxels.len() && cells.len() == na * nb * nc + PREFETCH_AHEAD);
     assert!(prev.len() == stride * (nc + 2) && cur.len() == prev.len() && (-1..=0).contains(&fb) && (-1..=0).contains(&fc));
     for step in 0..na {
         let pa = if oa > 0.0 { step } else { na - 1 - step };
@@ -361,8 +383,7 @@ unsafe fn sweep_kernel<const AVX: bool>(
                 // The full voxels' sources and radiances lie a grid row apart in x-major sweeps
                 // (past the L2 cache on large boxes): ask for the lines a few cells ahead.
                 if fa != u32::MAX {
-                    prefetch(src.as_ptr().wrapping_add(fa as usize));
-                    prefetch(radiance.as_ptr().wrapping_add(fa as usize));
+                    prefetch(light.as_ptr().wrapping_add(fa as usize));
                 }
                 let l = l0 + ib;
                 // l = stride (ic + 1) + ib + 1 with ib < nb, ic < nc and up = fb + fc stride with
@@ -383,9 +404,9 @@ unsafe fn sweep_kernel<const AVX: bool>(
                 // per lane (from 0, the neighbours in order) so it compiles to whole-record
                 // arithmetic without copies of the records.
                 let (n, full) = ([n0, n1, n2, n3], fi != u32::MAX);
-                // SAFETY: a full cell's index is below voxels.len() = src.len() (asserted in box_cells and above).
+                // SAFETY: a full cell's index is below voxels.len() = light.len() (asserted in box_cells and above).
                 let sc = if full {
-                    unsafe { *src.get_unchecked(fi as usize) }
+                    unsafe { *light.get_unchecked(fi as usize) }
                 } else {
                     [0f32; 3]
                 };
@@ -404,8 +425,8 @@ unsafe fn sweep_kernel<const AVX: bool>(
                 // SAFETY: l ≤ u + stride + 1 < cur.len() (asserted above).
                 unsafe { *cur.get_unchecked_mut(l) = rec };
                 if full {
-                    // SAFETY: fi < voxels.len() = radiance.len() (asserted in box_cells and above).
-                    unsafe { *radiance.get_unchecked_mut(fi as usize) = out };
+                    // SAFETY: fi < voxels.len() = light.len() (asserted in box_cells and above).
+                    unsafe { *light.get_unchecked_mut(fi as usize) = out };
                 }
             }
         }
@@ -497,22 +518,22 @@ fn needed_cells(next: &[(usize, usize)], ic: isize, fc: isize, fb: isize, full: 
 }
 
 /// [`sweep_kernel`] with the AVX cell steps where the processor has AVX: the same bits.
-pub(super) fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, radiance: &mut [[f32; 3]]) -> Splats {
+pub(super) fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, ground: &GroundMap, light: &mut [[f32; 3]]) -> Splats {
     #[cfg(target_arch = "x86_64")]
     if has_avx() {
         // SAFETY: the processor has AVX.
-        return unsafe { sweep_ordinate_avx(c, om, w, src, ground, radiance) };
+        return unsafe { sweep_ordinate_avx(c, om, w, ground, light) };
     }
     // SAFETY: AVX = false asks nothing of the processor.
-    unsafe { sweep_kernel::<false>(c, om, w, src, ground, radiance) }
+    unsafe { sweep_kernel::<false>(c, om, w, ground, light) }
 }
 
 /// [`sweep_kernel`] compiled for AVX, with its AVX cell steps.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
-unsafe fn sweep_ordinate_avx(c: &Ctx, om: DVec3, w: f64, src: &[[f32; 3]], ground: &GroundMap, radiance: &mut [[f32; 3]]) -> Splats {
+unsafe fn sweep_ordinate_avx(c: &Ctx, om: DVec3, w: f64, ground: &GroundMap, light: &mut [[f32; 3]]) -> Splats {
     // SAFETY: the processor has AVX (this function's own contract).
-    unsafe { sweep_kernel::<true>(c, om, w, src, ground, radiance) }
+    unsafe { sweep_kernel::<true>(c, om, w, ground, light) }
 }
 
 #[cfg(test)]
@@ -599,7 +620,7 @@ mod tests {
         let order = 7;
         let (perm, even) = parity_order(order);
         let nsh = perm.len();
-        let sun_t: Vec<[f32; 3]> = (0..nv).map(|v| [0.3, 0.5, 0.7].map(|t| t + 0.01 * (v % 7) as f32)).collect();
+        let sun_t: Vec<[f32; 3]> = voxels.iter().map(|v| [0.3, 0.5, 0.7].map(|t| t + 0.01 * (v % 7) as f32)).collect();
         let sky = Sky::constant(Rgb::new(0.2, 0.3, 0.5));
         let c = Ctx {
             dims,
@@ -661,10 +682,10 @@ mod tests {
         };
         for c in [&c, &grey] {
             for d in [0, 5, 37, 64, 90, 127] {
-                let (mut ra, mut rb) = (vec![[0f32; 3]; nfull], vec![[0f32; 3]; nfull]);
+                let (mut ra, mut rb) = (plain[..nfull].to_vec(), plain[..nfull].to_vec());
                 // SAFETY: AVX = false asks nothing of the processor.
-                unsafe { sweep_kernel::<false>(c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut ra) };
-                sweep_ordinate(c, q.dirs[d], q.weights[d], &plain[..nfull], &ground, &mut rb);
+                unsafe { sweep_kernel::<false>(c, q.dirs[d], q.weights[d], &ground, &mut ra) };
+                sweep_ordinate(c, q.dirs[d], q.weights[d], &ground, &mut rb);
                 assert_eq!(bits(&ra), bits(&rb), "ordinate {d}, grey {}", c.grey);
                 assert!(ra.iter().flatten().any(|x| *x > 0.0));
             }
@@ -694,9 +715,9 @@ mod tests {
         let (c_lit, every_lit) = (grounded(&c), grounded(&every));
         for (skipping, stepping, g) in [(&c, &every, &ground), (&c_lit, &every_lit, &lit)] {
             for d in 0..q.dirs.len() {
-                let (mut skip, mut all) = (vec![[0f32; 3]; nfull], vec![[0f32; 3]; nfull]);
-                sweep_ordinate(skipping, q.dirs[d], q.weights[d], &plain[..nfull], g, &mut skip);
-                sweep_ordinate(stepping, q.dirs[d], q.weights[d], &plain[..nfull], g, &mut all);
+                let (mut skip, mut all) = (plain[..nfull].to_vec(), plain[..nfull].to_vec());
+                sweep_ordinate(skipping, q.dirs[d], q.weights[d], g, &mut skip);
+                sweep_ordinate(stepping, q.dirs[d], q.weights[d], g, &mut all);
                 for (x, y) in skip.iter().flatten().zip(all.iter().flatten()) {
                     assert!((x - y).abs() <= 1e-6 * y.abs(), "ordinate {d}: {x} vs {y}");
                 }
@@ -722,9 +743,8 @@ mod tests {
             ..lit.clone()
         };
         for d in (0..q.dirs.len()).filter(|d| q.dirs[*d].y < 0.0) {
-            let mut r = vec![[0f32; 3]; nfull];
-            let tt = splat_total(&sweep_ordinate(&tight, q.dirs[d], q.weights[d], &plain[..nfull], &wide, &mut r));
-            let tw = splat_total(&sweep_ordinate(&c_lit, q.dirs[d], q.weights[d], &plain[..nfull], &wide, &mut r));
+            let tt = splat_total(&sweep_ordinate(&tight, q.dirs[d], q.weights[d], &wide, &mut plain[..nfull].to_vec()));
+            let tw = splat_total(&sweep_ordinate(&c_lit, q.dirs[d], q.weights[d], &wide, &mut plain[..nfull].to_vec()));
             for band in 0..3 {
                 assert!((tt[band] - tw[band]).abs() <= 1e-5 * tw[band].abs(), "ordinate {d}: {tt:?} vs {tw:?}");
             }
@@ -737,13 +757,19 @@ mod tests {
             wts: &wts,
             radiance: &plain,
             y: &t.y_acc[nblk..2 * nblk],
+            first: false,
         };
         let (mut ma, mut mb) = (moments.clone(), moments.clone());
         moments_kernel(&c, &l, &mut ma, 0);
         moments_block(&c, &l, &mut mb, 0);
-        assert_eq!(
-            ma.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
-            mb.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
-        );
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&ma), bits(&mb));
+        // The sweep's first batch writes over the last iteration's values what adding to zeros
+        // gives.
+        let mut added = vec![0f32; moments.len()];
+        moments_block(&c, &l, &mut added, 0);
+        let mut written = moments.clone();
+        moments_block(&c, &Lanes { first: true, ..l }, &mut written, 0);
+        assert_eq!(bits(&written), bits(&added));
     }
 }
