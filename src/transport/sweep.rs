@@ -40,8 +40,9 @@ impl BatchArrays {
 /// is evaluated from them directly (no array of source coefficients is stored). Ordinates go in
 /// batches of opposite pairs: (1) per full voxel, the source in both ordinates of each pair of the
 /// batch from one pass over its coefficients; (2) the batch's sweeps, one ordinate per task, each
-/// replacing its source by its radiance; (3) per full voxel, the moments of both ordinates of each pair in one pass, the pairs in
-/// their fixed order (the first batch writes `next`, the others add to it).
+/// replacing its source by its radiance; (3) per full voxel, the moments of both ordinates of each
+/// pair in one pass, the pairs in their fixed order (the first batch writes `next`, the others add
+/// to it).
 pub(super) fn sweep(
     c: &Ctx,
     q: &Quadrature,
