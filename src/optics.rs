@@ -202,18 +202,29 @@ impl Optics {
     /// T_eye^{af} = T′^k, T′ the marched δ-M transmittance from the eye, k = af/(1 − af) =
     /// σt/σt′ − 1 (0 without the transform: the split changes nothing).
     pub fn sun_scatter_split(&self, to_sun: Vec3, to_eye: Vec3) -> (Rgb, Rgb, f32) {
-        let (g, g_scaled) = (self.sun_single.1.mean_cosine(), self.phase.mean_cosine());
-        // g′ = (g − f)/(1 − f).
-        let f = if g_scaled < g {
-            ((g - g_scaled) / (1.0 - g_scaled)) as f32
-        } else {
-            0.0
-        };
+        let f = self.forward_fraction() as f32;
         let all = self.sun_scatter(to_sun, to_eye);
         let smooth = self.sun_single.0 * ((1.0 - f) * self.phase.eval(to_sun, to_eye));
-        // σt/σt′ = 1 − a′ + a σt/σt′ (σa is kept), per band; the middle band's.
-        let ratio = 1.0 - self.albedo.y + self.sun_single.0.y;
-        (smooth, all - smooth, (ratio - 1.0).max(0.0))
+        (smooth, all - smooth, (self.extinction_ratio() - 1.0).max(0.0))
+    }
+
+    /// The δ-M forward fraction f this medium was made with, from g′ = (g − f)/(1 − f) (0 without
+    /// the transform).
+    pub fn forward_fraction(&self) -> f64 {
+        let (g, g_scaled) = (self.sun_single.1.mean_cosine(), self.phase.mean_cosine());
+        if g_scaled < g {
+            (g - g_scaled) / (1.0 - g_scaled)
+        } else {
+            0.0
+        }
+    }
+
+    /// σt/σt′, the true extinction over this (δ-M) medium's: 1 − a′ + a σt/σt′ (σa is kept), per
+    /// band; the middle band's (one scaled extinction serves all bands). 1 without the transform:
+    /// the exact transmittance is T′ to this power.
+    #[inline]
+    pub fn extinction_ratio(&self) -> f32 {
+        1.0 - self.albedo.y + self.sun_single.0.y
     }
 
     /// Scattering σs = a·σt per band at density 1 (m⁻¹).

@@ -78,9 +78,18 @@ impl PeakSpread {
     /// The Legendre polynomials P_l(cos Θ) of this series' orders, for [`Self::spread_with`]
     /// (one ray, many points).
     pub fn legendre(&self, cos_theta: f64) -> Vec<f64> {
+        let mut all = self.legendre_all(cos_theta);
+        all.drain(..self.first.min(all.len()));
+        all
+    }
+
+    /// The Legendre polynomials P_l(cos Θ) from order 0 to this series' last, for
+    /// [`Self::peak_only_with`].
+    pub fn legendre_all(&self, cos_theta: f64) -> Vec<f64> {
+        let n = self.first + self.weight.len();
+        let mut out = Vec::with_capacity(n);
         let (mut p0, mut p1) = (1.0, cos_theta);
-        let mut out = Vec::with_capacity(self.weight.len());
-        for l in 0..self.first + self.weight.len() {
+        for l in 0..n {
             let p = match l {
                 0 => 1.0,
                 1 => cos_theta,
@@ -90,11 +99,30 @@ impl PeakSpread {
                     p2
                 }
             };
-            if l >= self.first {
-                out.push(p);
-            }
+            out.push(p);
         }
         out
+    }
+
+    /// Σ_l (2l + 1)(e^{−λ(1 − χ_l)} − e^{−λ}) P_l(cos Θ) (4π-normalised; χ_l = 1 below the first
+    /// order), with `legendre` from [`Self::legendre_all`]: the angular distribution, per unit of
+    /// the δ-M beam T′, of the light that k ≥ 1 peak scatterings (Poisson, mean λ) turned by Θ,
+    /// Σ_{k≥1} e^{−λ} λ^k/k! χ_l^k per order. Its integral over the sphere is 1 − e^{−λ}:
+    /// T′(1 − e^{−λ}) = T′ − T, the part of T′ that is not unscattered. Zero where λ = 0.
+    pub fn peak_only_with(&self, lambda: f64, legendre: &[f64]) -> f64 {
+        if lambda <= 0.0 {
+            return 0.0;
+        }
+        let none = (-lambda).exp();
+        let low: f64 = legendre[..self.first].iter().enumerate().map(|(l, p)| (2 * l + 1) as f64 * p).sum();
+        let high: f64 = self
+            .moment
+            .iter()
+            .zip(&legendre[self.first..])
+            .enumerate()
+            .map(|(i, (m, p))| (2 * (self.first + i) + 1) as f64 * ((-lambda * (1.0 - m)).exp() - none) * p)
+            .sum();
+        low * (1.0 - none) + high
     }
 
     /// Σ_l (2l + 1) f χ_l (e^{−λ(1 − χ_l)} − 1) P_l(cos Θ) (4π-normalised): what λ peak

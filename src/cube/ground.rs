@@ -1,12 +1,14 @@
 //! The lit ground (paper section 3, last paragraph): upward hemicubes on a ground sample grid
 //! over the area the cloud can shadow give the irradiance
 //!
-//!   E(x) = ∫_{ω·y>0} L(x, ω) (ω·y) dω + E_sun · max(ω_sun·y, 0) · T_sun(x),
+//!   E(x) = ∫_{ω·y>0} L(x, ω) (ω·y) dω + E_sun · max(ω_sun·y, 0) · T_sun(x) + E_peak(x),
 //!
-//! where L is the cloud-lit scene (cloud with colour I0 and the sun's single scattering, sky
-//! behind) rendered on the hemicube and T_sun the exact transmittance of the cloud towards the
-//! sun. Each hemicube pixel is weighted by its exact cosine-weighted solid angle. The ground is
-//! Lambertian: radiance = albedo·E/π. Outside the grid the unoccluded irradiance is used.
+//! where L is the cloud-lit scene (cloud with colour I0 and the smooth part of the sun's single
+//! scattering, sky behind) rendered on the hemicube, T_sun the exact (not δ-M) transmittance of
+//! the cloud towards the sun, and E_peak the light the δ-M forward peak scatters, spread by the
+//! peak's angles ([`super::ground_peak`]). Each hemicube pixel is weighted by its exact
+//! cosine-weighted solid angle. The ground is Lambertian: radiance = albedo·E/π. Outside the grid
+//! the unoccluded irradiance is used.
 //!
 //! **Area.** The rectangle (in x, z) covering the cloud's occupied voxels projected straight down,
 //! widened on every side by the cloud top's height above the ground (beyond that the cloud is below
@@ -14,7 +16,8 @@
 //! onto the ground (its shadow; for suns lower than ω_sun·y = 0.1 the shadow is projected as if
 //! the sun were at that height, so a grazing sun cannot stretch the grid without bound).
 
-use super::render::{BinMask, CubeOptions, CubeRenderer};
+use super::ground_peak::GroundPeak;
+use super::render::{BinMask, CubeOptions, CubeRenderer, LevelTables};
 use crate::lighting::Ground;
 pub use crate::lit::ground::{GroundGrid, LitGround};
 use crate::lit::LitVolume;
@@ -97,10 +100,12 @@ pub fn hemicube_weights(res: usize) -> Vec<f64> {
     out
 }
 
-/// Irradiance (W/m²) on an upward-facing ground point `p` from the hemicube plus the sun.
-/// `weights` are [`hemicube_weights`] at the renderer's `opts.res`.
+/// Irradiance (W/m²) on an upward-facing ground point `p` from the hemicube plus the sun and its
+/// peak. `weights` are [`hemicube_weights`] at the renderer's `opts.res`.
 pub fn hemicube_irradiance(renderer: &CubeRenderer<'_>, weights: &[f64], p: Vec3) -> Rgb {
-    hemicube_sky(renderer, weights, p) + sun_irradiance(renderer.lit, p)
+    let lit = renderer.lit;
+    let peak = GroundPeak::new(lit).map_or(Rgb::ZERO, |k| k.irradiance(lit, p));
+    hemicube_sky(renderer, weights, p) + sun_irradiance(lit, p) + peak
 }
 
 /// The hemicube's part of [`hemicube_irradiance`]: Σ L·w over the upper hemisphere's pixels
@@ -125,11 +130,13 @@ fn hemicube_sky(renderer: &CubeRenderer<'_>, weights: &[f64], p: Vec3) -> Rgb {
     Rgb::new(acc[0] as f32, acc[1] as f32, acc[2] as f32)
 }
 
-/// The sun's part of [`hemicube_irradiance`]: E_sun·cosθ_sun·T_sun with the exact transmittance.
+/// The sun's unscattered part of [`hemicube_irradiance`]: E_sun·cosθ_sun·T_sun with the exact
+/// transmittance T = T′^{σt/σt′} (the light δ-M's T′ holds beyond it is [`GroundPeak`]'s).
 fn sun_irradiance(lit: &LitVolume, p: Vec3) -> Rgb {
     let sun = &lit.sun;
     if sun.dir.y > 0.0 {
-        sun.irradiance * (sun.dir.y * lit.medium.transmittance(p, sun.dir, 0.0, f32::INFINITY))
+        let t_scaled = lit.medium.transmittance(p, sun.dir, 0.0, f32::INFINITY);
+        sun.irradiance * (sun.dir.y * t_scaled.powf(lit.medium.optics.extinction_ratio()))
     } else {
         Rgb::ZERO
     }
@@ -149,7 +156,16 @@ pub const GROUND_TOLERANCE: f32 = 0.02;
 /// Render `opts.ground_samples`² hemicubes of `opts.ground_res` pixels per face edge over
 /// [`ground_area`] and return the lit ground.
 pub fn render_ground(lit: &LitVolume, ground: &Ground, opts: &CubeOptions, progress: &dyn Progress) -> LitGround {
-    render_ground_with(&CubeRenderer::new(lit, &ground_options(opts)), ground, progress)
+    render_ground_with(&ground_renderer(lit, opts, LevelTables::new(lit, opts)), ground, progress)
+}
+
+/// The hemicubes' renderer over `lit` (`tables` made for its pyramid): [`ground_options`], and
+/// the sun's single scattering with the δ-M medium's own (a′, HG(g′)), its smooth part: the peak's
+/// part is [`GroundPeak`]'s.
+pub fn ground_renderer<'a>(lit: &'a LitVolume, opts: &CubeOptions, tables: LevelTables) -> CubeRenderer<'a> {
+    let mut renderer = CubeRenderer::with_tables(lit, &ground_options(opts), tables);
+    renderer.sun_transformed = true;
+    renderer
 }
 
 /// The hemicubes' renderer options: `opts` at the ground's resolution.
@@ -160,7 +176,7 @@ pub fn ground_options(opts: &CubeOptions) -> CubeOptions {
     }
 }
 
-/// [`render_ground`] with a renderer already built (its `opts.res` is the hemicube resolution).
+/// [`render_ground`] with a renderer already built ([`ground_renderer`]).
 pub fn render_ground_with(renderer: &CubeRenderer<'_>, ground: &Ground, progress: &dyn Progress) -> LitGround {
     let lit = renderer.lit;
     let mut out = LitGround::unoccluded(ground.clone(), &lit.sun, &lit.sky);
@@ -184,7 +200,14 @@ pub fn render_ground_with(renderer: &CubeRenderer<'_>, ground: &Ground, progress
     progress.begin("ground hemicubes", (n * n) as u64);
     // The sun's shadow (the sharp part) at every sample, the hemicube light (smooth on the
     // ground) adaptively, to a tolerance relative to the whole irradiance.
-    let sun: Vec<Rgb> = (0..n * n).into_par_iter().map(|k| sun_irradiance(lit, at(k % n, k / n))).collect();
+    let peak = GroundPeak::new(lit);
+    let sun: Vec<Rgb> = (0..n * n)
+        .into_par_iter()
+        .map(|k| {
+            let p = at(k % n, k / n);
+            sun_irradiance(lit, p) + peak.as_ref().map_or(Rgb::ZERO, |g| g.irradiance(lit, p))
+        })
+        .collect();
     let (sky, traced) = super::refine::refine(n, GROUND_COARSE, GROUND_TOLERANCE, &sun, &|a, b| {
         progress.advance(1);
         hemicube_sky(renderer, &weights, at(a, b))

@@ -6,6 +6,7 @@
 
 pub mod border;
 pub mod ground;
+pub mod ground_peak;
 pub mod image;
 pub mod refine;
 pub mod render;
@@ -108,7 +109,7 @@ pub fn clear_air(lit: LitVolume, ground: Option<&Ground>, opts: &CubeOptions, ke
     // The lit ground keeps the pyramid: one set of level tables for both renderers.
     let tables = LevelTables::new(&lit, opts);
     if let Some(g) = ground {
-        let renderer = CubeRenderer::with_tables(&lit, &ground::ground_options(opts), tables.clone());
+        let renderer = ground::ground_renderer(&lit, opts, tables.clone());
         let lg = ground::render_ground_with(&renderer, g, progress);
         lit = lit.with_ground(Some(lg));
     }
