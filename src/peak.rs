@@ -13,6 +13,8 @@
 pub struct PeakSpread {
     /// First order with χ_l < 1.
     first: usize,
+    /// (2l + 1) f for l < first (χ_l = 1 there).
+    low: Vec<f64>,
     /// (2l + 1) f χ_l for l = first.. (the peak's own part of the 4π-normalised series).
     weight: Vec<f64>,
     /// χ_l for l = first...
@@ -35,6 +37,7 @@ impl PeakSpread {
         if f <= 0.0 {
             return PeakSpread {
                 first: 0,
+                low: Vec::new(),
                 weight: Vec::new(),
                 moment: Vec::new(),
                 smooth: Vec::new(),
@@ -69,6 +72,7 @@ impl PeakSpread {
         }
         PeakSpread {
             first,
+            low: (0..first).map(|l| (2 * l + 1) as f64 * f_chi(l)).collect(),
             weight,
             moment,
             smooth: Vec::new(),
@@ -104,25 +108,20 @@ impl PeakSpread {
         out
     }
 
-    /// Σ_l (2l + 1)(e^{−λ(1 − χ_l)} − e^{−λ}) P_l(cos Θ) (4π-normalised; χ_l = 1 below the first
-    /// order), with `legendre` from [`Self::legendre_all`]: the angular distribution, per unit of
-    /// the δ-M beam T′, of the light that k ≥ 1 peak scatterings (Poisson, mean λ) turned by Θ,
-    /// Σ_{k≥1} e^{−λ} λ^k/k! χ_l^k per order. Its integral over the sphere is 1 − e^{−λ}:
-    /// T′(1 − e^{−λ}) = T′ − T, the part of T′ that is not unscattered. Zero where λ = 0.
-    pub fn peak_only_with(&self, lambda: f64, legendre: &[f64]) -> f64 {
-        if lambda <= 0.0 {
-            return 0.0;
-        }
-        let none = (-lambda).exp();
-        let low: f64 = legendre[..self.first].iter().enumerate().map(|(l, p)| (2 * l + 1) as f64 * p).sum();
+    /// Σ_l (2l + 1) f χ_l e^{−λ(1 − χ_l)} P_l(cos Θ) (4π-normalised; χ_l = 1 below the first
+    /// order), with `legendre` from [`Self::legendre_all`]: the peak f P scattering light that λ
+    /// peak scatterings on the sun's leg have spread before (f P itself at λ = 0; its integral
+    /// over the sphere is f whatever λ).
+    pub fn peak_with(&self, lambda: f64, legendre: &[f64]) -> f64 {
+        let low: f64 = self.low.iter().zip(legendre).map(|(w, p)| w * p).sum();
         let high: f64 = self
-            .moment
+            .weight
             .iter()
+            .zip(&self.moment)
             .zip(&legendre[self.first..])
-            .enumerate()
-            .map(|(i, (m, p))| (2 * (self.first + i) + 1) as f64 * ((-lambda * (1.0 - m)).exp() - none) * p)
+            .map(|((w, m), p)| w * (-lambda * (1.0 - m)).exp() * p)
             .sum();
-        low * (1.0 - none) + high
+        low + high
     }
 
     /// Σ_l (2l + 1) f χ_l (e^{−λ(1 − χ_l)} − 1) P_l(cos Θ) (4π-normalised): what λ peak

@@ -4,24 +4,23 @@
 //! T′ = T^{σt/σt′} holds, beside the unscattered sun T, the light peak-scattered one or more times
 //! on the way, as if it went on straight. Counted as direct sun it lands exactly in the cloud's
 //! shadow; it really leaves the cloud turned by the peak's angles and lands spread around it, over
-//! the peak's width × its distance from the ground. So the ground's direct sun is T (exact) and
-//! the peak's light is integrated over the directions ω of the sky around the sun:
+//! the peak's width × its distance from the ground. So the ground's direct sun is T (exact) and the
+//! peak's light is gathered over the directions ω of the sky around the sun, from the last peak
+//! scattering on each ray x + tω:
 //!
-//!   E_peak(x) = E_⊙ ∫_{ω·y>0} T′(x, ω) K(λ(x, ω), ω·ω_⊙) (ω·y) dω,
+//!   E_peak(x) = E_⊙ ∫_{ω·y>0} (ω·y) dω ∫ dt a σt ρ(y) T′_⊙(y) [f P]_λ(y)(ω·ω_⊙)/(4π) T(x, y),
 //!
-//! K the angular distribution of k ≥ 1 peak scatterings with Poisson mean λ = af τ along the ray
-//! ([`PeakSpread::peak_only_with`]; per unit solid angle, its integral 1 − e^{−λ}). It is the
-//! light last peak-scattered on the ray x + tω, with the sun's leg to that point taken along ω
-//! (small angles): ∫ af σ e^{−(1−af)τ(t,∞)} e^{−τ(0,t)} dτ = T′ − T along the ray. Over the
-//! ground it keeps the energy: for every ω, ∫ dA (ω·y) T′K over the plane is the cloud's
-//! cross-section integral of T′K along ω, the same as along ω_⊙ for a cloud whose λ seen along
-//! any nearby direction is distributed as along the sun's (exact for a sphere), and K integrates
-//! to 1 − e^{−λ}: E_⊙ μ_⊙ ∫ (T′ − T) dA.
+//! T′_⊙(y) the δ-M transmittance from y to the sun (the lit volume's grid: every peak scattering on
+//! the sun's leg counted in the beam), [f P]_λ the peak with the λ = af τ_⊙(y) peak scatterings on
+//! that leg spreading it ([`PeakSpread::peak_with`], as the final gather spreads the eye's sun
+//! term), and T(x, y) the exact transmittance back to the ground (no scattering after the last).
+//! Integrated over the ground it gives the light T′ − T that the δ-M beam holds beyond the
+//! unscattered sun (exactly for a thin slab: ∫ af σ e^{−(1−af)τ(t,∞)} e^{−τ(0,t)} dτ = T′ − T).
 //!
 //! The smooth part of the scattering, (1 − f) HG(g′), is the hemicubes' (their sun single
-//! scattering with the δ-M medium's own a′ and g′, [`super::render::CubeRenderer::sun_transformed`]),
-//! and the light scattered more than once the diffusion's I0 of the same δ-M medium: every stage
-//! sees one transform, and no peak-scattered path is counted twice.
+//! scattering with the δ-M medium's own a′ and g′, `CubeRenderer::sun_transformed`), and the light
+//! scattered more than once the diffusion's I0 of the same δ-M medium: every stage sees one
+//! transform, and no peak-scattered path is counted twice.
 
 use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
@@ -36,22 +35,35 @@ const PANELS_DEG: [f64; 12] = [0.0, 1.5, 4.0, 8.0, 14.0, 22.0, 32.0, 45.0, 62.0,
 /// Azimuths around the sun per polar node.
 const AZIMUTHS: usize = 8;
 
+/// The peak's spread is tabulated in λ up to this (the beam is then T′ ≤ e^{−λ σt′/(σt − σt′)},
+/// below 10⁻³ for f ≤ 0.8), in steps of [`LAMBDA_STEP`].
+const LAMBDA_MAX: f64 = 16.0;
+const LAMBDA_STEP: f64 = 0.25;
+
+/// A ray's march stops when its exact transmittance back to the ground falls below this.
+const T_CUTOFF: f64 = 1e-4;
+
 /// One direction of the quadrature.
 struct Node {
     /// Unit direction towards the sky.
     dir: Vec3,
     /// Solid angle × ω·y (sr).
     weight: f64,
-    /// P_l(ω·ω_⊙) from order 0 ([`PeakSpread::legendre_all`]).
-    legendre: Vec<f64>,
+    /// Index of its polar angle in [`GroundPeak::tables`].
+    polar: usize,
 }
 
-/// The peak's light on the ground for one lit volume: its quadrature and series.
+/// The peak's light on the ground for one lit volume: its quadrature and tables.
 pub struct GroundPeak {
     nodes: Vec<Node>,
-    spread: PeakSpread,
-    /// af/(1 − af): λ = this × τ′ (τ′ the δ-M optical depth).
+    /// Per polar angle, [f P]_λ(cos Θ)/(4π) at λ = 0, LAMBDA_STEP, .., LAMBDA_MAX.
+    tables: Vec<Vec<f64>>,
+    /// af/(1 − af): λ = this × τ′_⊙.
     lambda_per_tau: f64,
+    /// The true albedo a per band.
+    albedo: Rgb,
+    /// The true extinction σt at density 1 (m⁻¹).
+    sigma_t: f64,
 }
 
 impl GroundPeak {
@@ -65,18 +77,27 @@ impl GroundPeak {
             return None;
         }
         let spread = PeakSpread::similarity(optics.sun_single.1.mean_cosine(), f);
+        let ratio = optics.extinction_ratio();
         // Two unit vectors across the sun's direction.
         let e1 = if sun.x.abs() < 0.9 { Vec3::X } else { Vec3::Z };
         let e1 = (e1 - sun * sun.dot(e1)).normalize();
         let e2 = sun.cross(e1);
-        let (gx, gw) = ([-1.0 / 3f64.sqrt(), 1.0 / 3f64.sqrt()], [1.0, 1.0]);
-        let mut nodes = Vec::new();
+        let half = 1.0 / 3f64.sqrt();
+        let steps = (LAMBDA_MAX / LAMBDA_STEP).round() as usize;
+        let (mut nodes, mut tables) = (Vec::new(), Vec::new());
         for pair in PANELS_DEG.windows(2) {
             let (a, b) = (pair[0].to_radians(), pair[1].to_radians());
-            for (x, w) in gx.iter().zip(gw) {
+            // Gauss–Legendre, two nodes per panel.
+            for x in [-half, half] {
                 let theta = 0.5 * (a + b) + 0.5 * (b - a) * x;
-                let d_theta = 0.5 * (b - a) * w;
+                let d_theta = 0.5 * (b - a);
                 let legendre = spread.legendre_all(theta.cos());
+                let polar = tables.len();
+                tables.push(
+                    (0..=steps)
+                        .map(|i| spread.peak_with(i as f64 * LAMBDA_STEP, &legendre) / (4.0 * PI))
+                        .collect(),
+                );
                 for j in 0..AZIMUTHS {
                     let phi = 2.0 * PI * (j as f64 + 0.5) / AZIMUTHS as f64;
                     let (s, c) = (theta.sin() as f32, theta.cos() as f32);
@@ -85,36 +106,63 @@ impl GroundPeak {
                         continue;
                     }
                     let weight = theta.sin() * d_theta * (2.0 * PI / AZIMUTHS as f64) * dir.y as f64;
-                    nodes.push(Node {
-                        dir,
-                        weight,
-                        legendre: legendre.clone(),
-                    });
+                    nodes.push(Node { dir, weight, polar });
                 }
             }
         }
         Some(GroundPeak {
             nodes,
-            spread,
-            lambda_per_tau: (optics.extinction_ratio() - 1.0).max(0.0) as f64,
+            tables,
+            lambda_per_tau: (ratio - 1.0).max(0.0) as f64,
+            albedo: optics.sun_single.0 / ratio,
+            sigma_t: optics.sigma_t as f64 * ratio as f64,
         })
     }
 
-    /// E_peak (W/m²) at ground point `p` (see the module docs): one δ-M march per direction of
-    /// the quadrature; directions that miss the cloud add nothing (λ = 0).
+    /// [f P]_λ/(4π) along polar node `polar` (linear in λ between the table's entries).
+    #[inline]
+    fn peak(&self, polar: usize, lambda: f64) -> f64 {
+        let table = &self.tables[polar];
+        let x = (lambda / LAMBDA_STEP).clamp(0.0, (table.len() - 1) as f64);
+        let i = (x as usize).min(table.len() - 2);
+        let u = x - i as f64;
+        table[i] * (1.0 - u) + table[i + 1] * u
+    }
+
+    /// E_peak (W/m²) at ground point `p` (see the module docs): one march per direction of the
+    /// quadrature over the lit volume's dual cells (empty blocks skipped), the sun's δ-M
+    /// transmittance read at each cell's middle.
     pub fn irradiance(&self, lit: &LitVolume, p: Vec3) -> Rgb {
         let m = &lit.medium;
+        let sun_t = lit.sun_t();
         let mut sum = 0.0;
         for node in &self.nodes {
-            let tau = m.optical_depth(p, node.dir, 0.0, f32::INFINITY) as f64;
-            if tau <= 0.0 {
+            let Some((t0, t1)) = m.intersect(p, node.dir, 0.0, f32::INFINITY) else {
                 continue;
-            }
-            let lambda = self.lambda_per_tau * tau;
-            sum += node.weight * (-tau).exp() * self.spread.peak_only_with(lambda, &node.legendre);
+            };
+            let (mut tr, mut ray) = (1.0f64, 0.0f64);
+            m.for_each_dual_run(p, node.dir, t0, t1, |cells| {
+                for c in cells {
+                    if tr < T_CUTOFF {
+                        return;
+                    }
+                    let v = m.to_voxel(p + node.dir * (0.5 * (c.t0 + c.t1)) as f32).to_array();
+                    let rho = m.density.trilinear(v) as f64;
+                    if rho <= 0.0 {
+                        continue;
+                    }
+                    let t_sun = sun_t.trilinear(v) as f64;
+                    let e = (-self.sigma_t * rho * (c.t1 - c.t0)).exp();
+                    if t_sun > 0.0 {
+                        let lambda = -self.lambda_per_tau * t_sun.ln();
+                        ray += tr * (1.0 - e) * t_sun * self.peak(node.polar, lambda);
+                    }
+                    tr *= e;
+                }
+            });
+            sum += node.weight * ray;
         }
-        // K is 4π-normalised.
-        lit.sun.irradiance * (sum / (4.0 * PI)) as f32
+        lit.sun.irradiance * self.albedo * sum as f32
     }
 }
 
@@ -122,12 +170,12 @@ impl GroundPeak {
 mod tests {
     use super::*;
     use crate::lighting::{Sky, Sun};
+    use crate::lit::sunlight::SunTransmittance;
     use crate::medium::{Grid3, Medium};
 
     /// g = 0.9 at 1 m voxels, true σt `sigma_t` (m⁻¹), albedo 1, δ-M at `full`'s f = 0.65, lit by
     /// a sun of unit irradiance from `sun_dir`.
     fn lit(grid: Grid3, origin: Vec3, sigma_t: f32, sun_dir: Vec3) -> LitVolume {
-        let dims = grid.dims();
         let mut m = Medium::new(grid, origin, Vec3::ONE, sigma_t, Rgb::ONE, 0.9);
         m.optics = m.optics.delta_m(0.65);
         let n = m.density.len();
@@ -135,7 +183,8 @@ mod tests {
             dir: sun_dir.normalize(),
             irradiance: Rgb::ONE,
         };
-        LitVolume::new(m, vec![Rgb::ZERO; n], Grid3::filled(dims, 0.5), sun, Sky::constant(Rgb::ZERO), None)
+        let sun_t = SunTransmittance::compute(&m, sun.dir).grid;
+        LitVolume::new(m, vec![Rgb::ZERO; n], sun_t, sun, Sky::constant(Rgb::ZERO), None)
     }
 
     /// The δ-M and the exact transmittance towards the sun from `p`.
