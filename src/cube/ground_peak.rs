@@ -15,7 +15,7 @@
 //! that leg spreading it ([`PeakSpread::peak_with`], as the final gather spreads the eye's sun
 //! term), and T(x, y) the exact transmittance back to the ground (no scattering after the last).
 //! Integrated over the ground it gives the light T′ − T that the δ-M beam holds beyond the
-//! unscattered sun (exactly for a thin slab: ∫ af σ e^{−(1−af)τ(t,∞)} e^{−τ(0,t)} dτ = T′ − T).
+//! unscattered sun (for a slab and small angles: ∫ af σ e^{−(1−af)τ(t,∞)} e^{−τ(0,t)} dτ = T′ − T).
 //!
 //! The smooth part of the scattering, (1 − f) HG(g′), is the hemicubes' (their sun single
 //! scattering with the δ-M medium's own a′ and g′, `CubeRenderer::sun_transformed`), and the light
