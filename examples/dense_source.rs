@@ -6,9 +6,16 @@
 //! summed by the sun's δ-M depth τ′_⊙ = −ln T′_⊙ (transport's T′). Printed per bin: the bin's
 //! share of transport's seen source; full's isotropic part a′I0 over transport's a′I_00·Y_00; each
 //! method's source towards the eye over its own isotropic part (transport: its whole SH series;
-//! full: a′(I0 + g′I1·ω), eq. 3); full's source towards the eye over transport's.
+//! full: a′(I0 + g′I1·ω), eq. 3); full's source towards the eye over transport's; transport's
+//! source towards the eye with its series cut after l = 1 (the P1 closure's shape) and after l = 2,
+//! over its whole series. `render.transport_order = 3` in the scene makes f = g⁴ = 0.656 for
+//! g = 0.9, `full`'s own forward fraction.
 //!
-//! `cargo run --release --features internals --example dense_source SCENE.toml`
+//! With OUT.exr (and MODE: none, i0, i1 or both) it instead renders `full`'s image with
+//! transport's I0 and/or I1 (the l ≤ 1 moments of its diffuse field) in place of the
+//! diffusion's: how far exact first moments would take `full` (docs/accuracy.md).
+//!
+//! `cargo run --release --features internals --example dense_source SCENE.toml [OUT.exr [MODE]]`
 
 use cloudgi::pipeline::{NoProgress, Timings};
 use cloudgi::render::full::propagate;
@@ -47,12 +54,7 @@ fn main() {
     let [nx, ny, nz] = m.dims();
     let eye = scene.camera.position;
     // Per bin: Σw·transport, Σw·full (isotropic), Σw·full (whole).
-    let mut bins = vec![[0f64; 7]; SUN_DEPTHS.len() + 1];
-    // Transport's δ-M moments χ_l = (g^l − f)/(1 − f), l ≤ its order.
-    let order = field.order;
-    let chi: Vec<f64> = (0..=order).map(|l| (g.powi(l as i32) - f) / (1.0 - f)).collect();
-    let table = OnceScattered::new(&chi, 20.0, 400);
-    let e_sun = scene.sun.irradiance.y as f64;
+    let mut bins = vec![[0f64; 6]; SUN_DEPTHS.len() + 1];
     let nsh = cloudgi::math::sh_count(field.order);
     let mut y = vec![0f64; nsh];
     for k in 0..nz {
@@ -82,26 +84,22 @@ fn main() {
                 let js = &field.diffuse_source[(fi * 3 + 1) * nsh..(fi * 3 + 2) * nsh];
                 bins[b][4] += w * js[..4].iter().zip(&y).map(|(j, y)| *j as f64 * y).sum::<f64>();
                 bins[b][5] += w * js[..9].iter().zip(&y).map(|(j, y)| *j as f64 * y).sum::<f64>();
-                // The half-space model of the once-scattered light's orders l ≥ 2.
-                let cos_theta = scene.sun.dir.dot(d) as f64;
-                let t_sun = field.sun_t[fi][1] as f64;
-                bins[b][6] += w * (a as f64).powi(2) * e_sun * t_sun * table.source(tau_sun, cos_theta);
             }
         }
     }
     let total: f64 = bins.iter().map(|b| b[0]).sum();
     println!("{path}: f = {f:.3}");
-    println!("| τ′_⊙ | share of transport's seen source | isotropic part: full / transport | towards the eye / isotropic: transport | full | towards the eye: full / transport | transport's l ≤ 1 / its whole | l ≤ 2 / whole | model / transport's l ≥ 2 |");
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!("| τ′_⊙ | share of transport's seen source | isotropic part: full / transport | towards the eye / isotropic: transport | full | towards the eye: full / transport | transport's l ≤ 1 / its whole | l ≤ 2 / whole |");
+    println!("|---|---|---|---|---|---|---|---|");
     let mut lo = 0.0;
-    let mut sums = [0f64; 7];
+    let mut sums = [0f64; 6];
     for (b, s) in bins.iter().enumerate() {
         let hi = SUN_DEPTHS.get(b).map_or("∞".to_string(), |t| t.to_string());
         if s[0] > 0.0 {
             println!("| {lo}–{hi} | {:.3} | {} |", s[0] / total, ratios(s));
         }
         lo = SUN_DEPTHS.get(b).copied().unwrap_or(f64::INFINITY);
-        for c in 0..7 {
+        for c in 0..6 {
             sums[c] += s[c];
         }
     }
@@ -110,80 +108,16 @@ fn main() {
 
 /// The ratios of one bin's sums [transport, full isotropic, full whole, transport isotropic,
 /// transport l ≤ 1, transport l ≤ 2].
-fn ratios(s: &[f64; 7]) -> String {
+fn ratios(s: &[f64; 6]) -> String {
     format!(
-        "{:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3}",
+        "{:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3}",
         s[1] / s[3],
         s[0] / s[3],
         s[2] / s[1],
         s[2] / s[0],
         s[4] / s[0],
-        s[5] / s[0],
-        s[6] / (s[0] - s[4])
+        s[5] / s[0]
     )
-}
-
-/// Orders l ≥ 2 of the once-scattered sunlight in a half-space lit at normal incidence, δ-M depth
-/// τ: I(μ) = a′E T′ p(μ) G(μ, τ), G = (1 − e^{−τ(1/μ − 1)})/(1 − μ) for μ > 0, 1/(1 − μ) below;
-/// the source towards cos Θ per a′²E T′: Σ_{l≥2} (2l+1)/2 χ_l P_l(cos Θ) ∫ p G P_l dμ.
-struct OnceScattered {
-    chi: Vec<f64>,
-    tau_max: f64,
-    /// m_l(τ) = ∫ 2π p(μ) G(μ, τ) P_l(μ) dμ / (4π)·(2l+1)·χ_l ... per τ node, l = 0..=L.
-    rows: Vec<Vec<f64>>,
-}
-
-impl OnceScattered {
-    fn new(chi: &[f64], tau_max: f64, n: usize) -> OnceScattered {
-        let l_max = chi.len() - 1;
-        let (mu, wt) = cloudgi::transport::gauss_legendre(256);
-        let p_at: Vec<f64> = mu
-            .iter()
-            .map(|&x| {
-                let pl = cloudgi::transport::legendre(l_max, x);
-                (0..=l_max)
-                    .map(|l| (2 * l + 1) as f64 / (4.0 * std::f64::consts::PI) * chi[l] * pl[l])
-                    .sum()
-            })
-            .collect();
-        let rows = (0..=n)
-            .map(|i| {
-                let tau = tau_max * i as f64 / n as f64;
-                let mut m = vec![0.0; l_max + 1];
-                for (k, (&x, &w)) in mu.iter().zip(&wt).enumerate() {
-                    let g = if x > 0.0 {
-                        -(-tau * (1.0 / x - 1.0)).exp_m1() / (1.0 - x)
-                    } else {
-                        1.0 / (1.0 - x)
-                    };
-                    let pl = cloudgi::transport::legendre(l_max, x);
-                    for l in 2..=l_max {
-                        // 2π ∫ p G P_l dμ times (2l+1)/(4π) χ_l.
-                        m[l] += w * 2.0 * std::f64::consts::PI * p_at[k] * g * pl[l] * (2 * l + 1) as f64 / (4.0 * std::f64::consts::PI)
-                            * chi[l];
-                    }
-                }
-                m
-            })
-            .collect();
-        OnceScattered {
-            chi: chi.to_vec(),
-            tau_max,
-            rows,
-        }
-    }
-
-    /// Σ_{l≥2} of the source towards cos Θ at depth τ, per a′²E T′.
-    fn source(&self, tau: f64, cos_theta: f64) -> f64 {
-        let n = self.rows.len() - 1;
-        let x = (tau / self.tau_max * n as f64).clamp(0.0, n as f64);
-        let i = (x as usize).min(n - 1);
-        let t = x - i as f64;
-        let pl = cloudgi::transport::legendre(self.chi.len() - 1, cos_theta);
-        (2..self.chi.len())
-            .map(|l| ((1.0 - t) * self.rows[i][l] + t * self.rows[i + 1][l]) * pl[l])
-            .sum()
-    }
 }
 
 /// `full`'s image with transport's I0 and/or I1 (the first moments of its diffuse field) in

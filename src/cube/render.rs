@@ -482,11 +482,6 @@ impl<'a> CubeRenderer<'a> {
         let albedo = m.optics.albedo;
         let sigma_t = m.optics.sigma_t;
         let cut = self.opts.t_cutoff;
-        let once = (self.sun_transformed && std::env::var("CLOUDGI_ONCE_CUBE").is_ok()).then(|| {
-            let t = crate::edges::gather::once_table(m.optics.phase.mean_cosine() as f64);
-            (t, crate::transport::legendre(t.l_max, lit.sun.dir.dot(d) as f64))
-        });
-        let once_e = lit.sun.irradiance * albedo * albedo;
         // Without the first moment or the sky's single scattering the gather adds nothing to I0.
         let gather = self.gather_source && (lit.flux.is_some() || lit.sky_single.is_some());
         let coarse = if gather { self.coarse_flux() } else { None };
@@ -585,12 +580,6 @@ impl<'a> CubeRenderer<'a> {
                             let w = tr * (1.0 - e) / rho;
                             let sun = if peak_k > 0.0 { sun_e + sun_peak * tr.powf(peak_k) } else { sun_e };
                             let mut src = albedo * Rgb::new(c[1], c[2], c[3]) + sun * c[4];
-                            if let Some((t, pl)) = &once {
-                                if c[4] > 0.0 {
-                                    let tau_sun = -((c[4] / rho) as f64).min(1.0).ln();
-                                    src += once_e * (c[4] * t.source(tau_sun, pl) as f32);
-                                }
-                            }
                             if gather {
                                 // The fine field at the sample (at coarser levels a point sample
                                 // of it, scaled by the level's ρ like its I0).

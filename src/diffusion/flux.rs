@@ -84,9 +84,7 @@ pub fn diffuse_flux<'a>(
             let s = sigma_tr[c];
             let i0 = &sol.i0[c];
             let ip = f64::from(i0.at_slot(sp));
-            let f_at = |q: usize, ax: usize| {
-                scattering.q1_at_slot(ax, q, c) as f64 * super::once::source_scale(inc, m, q, c).1 / (rho.at_slot(q) as f64 * s)
-            };
+            let f_at = |q: usize, ax: usize| scattering.q1_at_slot(ax, q, c) as f64 / (rho.at_slot(q) as f64 * s);
             let mut v = [0f64; 3];
             for ax in 0..3 {
                 let fp = f_at(sp, ax);

@@ -81,7 +81,6 @@ pub mod flux;
 pub(crate) mod multigrid;
 
 pub use multigrid::MAX_BOX_ROW_CELLS;
-pub mod once;
 pub mod slab;
 pub mod surface;
 pub mod warm;
@@ -406,9 +405,7 @@ fn band_rhs(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_m
         "stage 1's fields are on the density's full voxels"
     );
     // F = Q1/(ρσtr) per axis at the centre of the full voxel in slot `s`.
-    let f_at = |s: usize, ax: usize| -> f64 {
-        inc.scattering.q1_at_slot(ax, s, c) as f64 * once::source_scale(inc, m, s, c).1 / (rho.at_slot(s) as f64 * sigma_tr)
-    };
+    let f_at = |s: usize, ax: usize| -> f64 { inc.scattering.q1_at_slot(ax, s, c) as f64 / (rho.at_slot(s) as f64 * sigma_tr) };
     let x_at = |s: usize| x0.map_or(0.0, |x| f64::from(x.at_slot(s)));
     // (b − A x0, b, the diagonal of A) of the full voxel at grid index `idx`; without a start,
     // (b, b, 1): the solve needs no norms then.
@@ -416,7 +413,7 @@ fn band_rhs(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_m
         let sp = index.slot(idx);
         let (rp, xp) = (rho.at_slot(sp) as f64, x_at(sp));
         let cell = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])];
-        let mut rhs = inc.scattering.q0_at_slot(sp, c) as f64 * once::source_scale(inc, m, sp, c).0;
+        let mut rhs = inc.scattering.q0_at_slot(sp, c) as f64;
         let mut diag = rp * sigma_a;
         // A x0 without the diagonal's share, which is added once the diagonal is summed.
         let mut ax = 0.0;

@@ -193,7 +193,6 @@ pub struct EdgeGather<'a> {
     peak: Option<(PeakSpread, Rgb)>,
     /// The δ-M chord along the sun that weights the sun's orders ≥ 2 ([`EdgeGather::with_sun_chord`]).
     chord: Option<&'a SunChord>,
-    once: Option<OnceScattered>,
 }
 
 /// One low-density segment (or a bridge's merged/split variant) whose E is needed for a pixel.
@@ -256,7 +255,6 @@ impl<'a> EdgeGather<'a> {
             bounds: density_bounds(medium).unwrap_or((Vec3::ZERO, Vec3::ZERO)),
             peak: None,
             chord: None,
-            once: None,
         }
     }
 
@@ -278,10 +276,6 @@ impl<'a> EdgeGather<'a> {
         if g_scaled < g {
             let f = (g - g_scaled) / (1.0 - g_scaled);
             self.peak = Some((PeakSpread::similarity(g, f), sun_irradiance));
-        }
-        if std::env::var("CLOUDGI_ONCE").is_ok() {
-            let chi: Vec<f64> = (0..=24).map(|l| (g_scaled as f64).powi(l)).collect();
-            self.once = Some(OnceScattered::new(&chi, 20.0, 400));
         }
         self
     }
@@ -639,8 +633,6 @@ impl<'a> EdgeGather<'a> {
             }
         };
         let to_eye = -d;
-        let once_pl = self.once.as_ref().map(|o| crate::transport::legendre(o.chi.len() - 1, self.sun.dir.dot(d) as f64));
-        let a2 = m.optics.albedo * m.optics.albedo;
         let mut tr = 1.0f64;
         // Optical depth from the ray's start (the surface layer's coordinate).
         let mut tau = 0.0f64;
@@ -676,20 +668,13 @@ impl<'a> EdgeGather<'a> {
                 // e^{−δ} − 1 once for the step's weight and the transmittance behind it.
                 let em1 = (-delta).exp_m1();
                 let f = (tr * -em1) as f32;
-                let sun = if n == 1 { plan.sun[k] } else { (self.sun.irradiance_at)(pos) };
                 if w > 0.0 {
-                    let mut src = (self.dense)(pos, to_eye);
-                    if let (Some(o), Some(pl), Some((_, e))) = (&self.once, &once_pl, &self.peak) {
-                        if sun.y > 0.0 && e.y > 0.0 {
-                            let tau_sun = -(sun.y as f64 / e.y as f64).min(1.0).ln();
-                            src += a2 * sun * o.source(tau_sun, pl) as f32;
-                        }
-                    }
-                    aov.diffusion += f * w * src;
+                    aov.diffusion += f * w * (self.dense)(pos, to_eye);
                 }
                 if w < 1.0 {
                     aov.edge += f * (1.0 - w) * edge_src.get(k).copied().unwrap_or(Rgb::ZERO);
                 }
+                let sun = if n == 1 { plan.sun[k] } else { (self.sun.irradiance_at)(pos) };
                 // The spread series dips below 0 in places (as transport's sun_phase): clamped there.
                 let (smooth, peak) = sun_at(sun);
                 aov.sun_single += f * sun * (smooth + peak * (tr as f32).powf(peak_k)).max(Rgb::ZERO);
@@ -746,51 +731,3 @@ fn refine_extrema(prof: &mut RayProfile, m: &Medium, gap: f32, lo: f32, hi: f32)
         }
     }
 }
-
-/// Orders l ≥ 2 of the once-scattered sunlight in a half-space lit at normal incidence, δ-M depth
-/// τ: I(μ) = a′E T′ p(μ) G(μ, τ), G = (1 − e^{−τ(1/μ − 1)})/(1 − μ) for μ > 0, 1/(1 − μ) below;
-/// the source towards cos Θ per a′²E T′: Σ_{l≥2} (2l+1)/(4π) χ_l P_l(cos Θ) 2π∫ p G P_l dμ.
-pub(crate) struct OnceScattered {
-    pub(crate) l_max: usize,
-    chi: Vec<f64>,
-    tau_max: f64,
-    rows: Vec<Vec<f64>>,
-}
-
-impl OnceScattered {
-    fn new(chi: &[f64], tau_max: f64, n: usize) -> OnceScattered {
-        let l_max = chi.len() - 1;
-        let (mu, wt) = crate::transport::gauss_legendre(256);
-        let p_at: Vec<f64> = mu
-            .iter()
-            .map(|&x| {
-                let pl = crate::transport::legendre(l_max, x);
-                (0..=l_max).map(|l| (2 * l + 1) as f64 / (4.0 * std::f64::consts::PI) * chi[l] * pl[l]).sum()
-            })
-            .collect();
-        let rows = (0..=n)
-            .map(|i| {
-                let tau = tau_max * i as f64 / n as f64;
-                let mut m = vec![0.0; l_max + 1];
-                for (k, (&x, &w)) in mu.iter().zip(&wt).enumerate() {
-                    let g = if x > 0.0 { -(-tau * (1.0 / x - 1.0)).exp_m1() / (1.0 - x) } else { 1.0 / (1.0 - x) };
-                    let pl = crate::transport::legendre(l_max, x);
-                    for l in 2..=l_max {
-                        m[l] += w * 0.5 * p_at[k] * g * pl[l] * (2 * l + 1) as f64 * chi[l];
-                    }
-                }
-                m
-            })
-            .collect();
-        OnceScattered { l_max, chi: chi.to_vec(), tau_max, rows }
-    }
-
-    pub(crate) fn source(&self, tau: f64, pl: &[f64]) -> f64 {
-        let n = self.rows.len() - 1;
-        let x = (tau / self.tau_max * n as f64).clamp(0.0, n as f64);
-        let i = (x as usize).min(n - 1);
-        let t = x - i as f64;
-        (2..self.chi.len()).map(|l| ((1.0 - t) * self.rows[i][l] + t * self.rows[i + 1][l]) * pl[l]).sum()
-    }
-}
-

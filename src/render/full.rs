@@ -108,7 +108,7 @@ pub fn propagate_from(scene: &Scene, progress: &dyn Progress, timings: &mut Timi
     };
     let cubes = |sol: &DiffusionSolution, inc: &IncidentLight| {
         clear_air(
-            scene_lit_volume(scene, with_once_i0(scene, inc, visible_i0_rgb(scene, inc, sol)), &sun_t),
+            scene_lit_volume(scene, visible_i0_rgb(scene, inc, sol), &sun_t),
             scene.ground.as_ref(),
             opts,
             keep,
@@ -180,12 +180,7 @@ pub fn propagate_from(scene: &Scene, progress: &dyn Progress, timings: &mut Timi
             break;
         }
     }
-    let lit = if crate::diffusion::once::hybrid(scene.medium.optics.phase).is_some() {
-        hybrid_lit_volume(scene, &inc, &sol, &sun_t)
-    } else {
-        solved_lit_volume(scene, &inc, &sol, &sun_t)
-    }
-    .with_ground(ground);
+    let lit = solved_lit_volume(scene, &inc, &sol, &sun_t).with_ground(ground);
     Ok(Propagation {
         lit,
         solution: sol,
@@ -194,41 +189,6 @@ pub fn propagate_from(scene: &Scene, progress: &dyn Progress, timings: &mut Timi
         cg_iterations,
         first_state,
     })
-}
-
-/// I0 plus the sun's once-scattered light (the hybrid experiment).
-fn with_once_i0(scene: &Scene, inc: &IncidentLight, i0: crate::medium::sparse::VoxelField<Rgb>) -> crate::medium::sparse::VoxelField<Rgb> {
-    let m = &scene.medium;
-    let index = m.density.full_index();
-    crate::medium::sparse::VoxelField::from_fn(index.clone(), Rgb::ZERO, |k| {
-        let s = index.slot(k);
-        let v = i0[k];
-        match crate::diffusion::once::once_moments(inc, m, &scene.sun, s) {
-            Some((o, _)) => v + o,
-            None => v,
-        }
-    })
-}
-
-/// The lit volume with the once-scattered light's I0 and I1 added (the hybrid experiment).
-fn hybrid_lit_volume(scene: &Scene, inc: &IncidentLight, sol: &DiffusionSolution, sun_t: &SunTransmittance) -> LitVolume {
-    let m = &scene.medium;
-    let mut lit = scene_lit_volume(scene, with_once_i0(scene, inc, visible_i0_rgb(scene, inc, sol)), sun_t);
-    if scene.render.diffuse_anisotropy {
-        let i1 = crate::diffusion::flux::diffuse_flux(m, inc, sol, scene.render.solver.min_optical_depth);
-        let index = m.density.full_index();
-        let f = move |k: usize| {
-            let mut v = i1(k);
-            if let Some((_, o)) = crate::diffusion::once::once_moments(inc, m, &scene.sun, index.slot(k)) {
-                for c in 0..3 {
-                    v[c] += o[c];
-                }
-            }
-            v
-        };
-        lit = lit.with_flux(crate::diffusion::flux::FluxField::new(m, f));
-    }
-    lit
 }
 
 /// Refuse a lit ground whose hemicube irradiance is non-finite: an error naming `ground hemicubes`.
