@@ -13,7 +13,8 @@ for tool in munged slurmctld slurmd sinfo; do
 done
 [ "$(id -u)" = 0 ] || { echo "ci/slurm/start.sh: must run as root (SlurmUser=root)" >&2; exit 1; }
 
-if sinfo -h -o %T 2>/dev/null | grep -qx idle; then
+# sinfo retries for MessageTimeout (9 s) when no controller answers: ask only a running one.
+if pgrep -x slurmctld >/dev/null && sinfo -h -o %T 2>/dev/null | grep -qx idle; then
   exit 0
 fi
 
@@ -49,6 +50,9 @@ MpiDefault=none
 JobAcctGatherType=jobacct_gather/none
 AccountingStorageType=accounting_storage/none
 MinJobAge=30
+# Schedule as soon as a job is released or a CPU frees (the default, batch_sched_delay=3, left the
+# farm test's four scheduling steps 1-3 s each of waiting).
+SchedulerParameters=batch_sched_delay=0
 NodeName=localhost NodeAddr=127.0.0.1 CPUs=2 RealMemory=1000 State=UNKNOWN
 PartitionName=ci Nodes=localhost Default=YES MaxTime=INFINITE State=UP
 CONF
