@@ -693,22 +693,44 @@ fn a_full_disk_or_a_closed_pipe_is_no_panic() {
 #[cfg(unix)]
 #[test]
 fn an_interrupt_leaves_no_file_and_says_so() {
-    for (signal, code) in [("INT", 130), ("TERM", 143)] {
-        let dir = tempfile::tempdir().unwrap();
-        std::fs::write(dir.path().join("s.toml"), SCENE).unwrap();
-        let child = Command::new(BIN)
-            .current_dir(dir.path())
-            .args(["render", "s.toml", "--method", "reference", "--spp", "100000", "-q"])
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
-        // Long enough for the handlers to be installed on a loaded machine.
-        std::thread::sleep(std::time::Duration::from_millis(2000));
-        let killed = Command::new("kill")
-            .args([&format!("-{signal}"), &child.id().to_string()])
-            .status()
-            .unwrap();
-        assert!(killed.success());
+    // Both renders at once, a thread each: one wait for the handlers, and the renders that the
+    // signals cut short take a core each instead of both cores twice.
+    let runs: Vec<_> = [("INT", 130), ("TERM", 143)]
+        .into_iter()
+        .map(|(signal, code)| {
+            let dir = tempfile::tempdir().unwrap();
+            std::fs::write(dir.path().join("s.toml"), SCENE).unwrap();
+            let child = Command::new(BIN)
+                .current_dir(dir.path())
+                .args([
+                    "render",
+                    "s.toml",
+                    "--method",
+                    "reference",
+                    "--spp",
+                    "100000",
+                    "-q",
+                    "--threads",
+                    "1",
+                ])
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .unwrap();
+            (signal, code, dir, child)
+        })
+        .collect();
+    // Long enough for the handlers to be installed on a loaded machine.
+    std::thread::sleep(std::time::Duration::from_millis(2000));
+    // Both signalled before any assertion, so a failure leaves no render running.
+    let killed: Vec<bool> = runs
+        .iter()
+        .map(|(signal, _, _, child)| {
+            let kill = Command::new("kill").args([&format!("-{signal}"), &child.id().to_string()]).status();
+            kill.is_ok_and(|status| status.success())
+        })
+        .collect();
+    for ((signal, code, dir, child), killed) in runs.into_iter().zip(killed) {
+        assert!(killed);
         let out = child.wait_with_output().unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(code), "{err}");
