@@ -15,6 +15,7 @@ mod convergence;
 mod dsa;
 mod grid;
 mod ground;
+mod mixing;
 mod simd;
 pub mod slab;
 pub mod solve;
@@ -114,7 +115,10 @@ impl TransportMemory {
     /// their radiances (12 B each), and [`Self::FULL_EXTRA_BYTES`]: 1,812 B at order 7 (a stored
     /// source array would add 768 B).
     pub fn bytes_per_full_voxel(order: usize) -> u64 {
-        2 * 3 * 4 * crate::math::sh_count(order) as u64 + 12 * source::ORDINATE_BATCH as u64 + Self::FULL_EXTRA_BYTES
+        2 * 3 * 4 * crate::math::sh_count(order) as u64
+            + 12 * source::ORDINATE_BATCH as u64
+            + mixing::bytes_per_full_voxel()
+            + Self::FULL_EXTRA_BYTES
     }
 
     /// The estimate for medium `m` solved with `s`.
