@@ -60,19 +60,19 @@ impl Mixing {
         let residual: Vec<f32> = next.par_iter().step_by(nsh).zip(moments.par_iter().step_by(nsh)).map(|(g, x)| g - x).collect();
         let alpha = self.coefficients(&residual);
         let k = self.mixed.len();
-        if self.maps.len() < DEPTH {
-            self.maps.push_back(vec![0f32; residual.len() * k]);
-        } else {
+        // The newest map goes into a fresh slot while the history fills, then into the oldest
+        // map's, which each row reads before it is overwritten.
+        let recycled = self.maps.len() == DEPTH;
+        if recycled {
             let oldest = self.maps.pop_front().expect("DEPTH maps");
             self.maps.push_back(oldest);
             self.residuals.pop_front();
+        } else {
+            self.maps.push_back(vec![0f32; residual.len() * k]);
         }
-        // The slot written last held the oldest map: each row reads it before it stores G(x).
         let n = self.maps.len();
         let (earlier, newest) = self.maps.make_contiguous().split_at_mut(n - 1);
         let slot = &mut newest[0];
-        // Oldest map first: `earlier` then the slot's old contents (when it was recycled).
-        let recycled = n == DEPTH && alpha.len() == DEPTH + 1;
         let mixed = &self.mixed;
         next.par_chunks_mut(nsh).zip(slot.par_chunks_mut(k)).enumerate().for_each(|(r, (row, keep))| {
             for (j, &i) in mixed.iter().enumerate() {
