@@ -7,7 +7,7 @@
 //!   albedo and g (the medium's own are [`crate::optics::Optics`]).
 //! - [`slab`]: the solver on a plane-parallel column (checked against adding-doubling).
 //! - [`solve`]: the 3-D solver (SH source per full voxel, sweeps, DSA); its stages are the private
-//!   modules `sweep`, `source`, `dsa` (its operator in `accel`), `ground`, `grid` and `convergence`. The gather is
+//!   modules `sweep`, `source`, `dsa` (its operator in `accel`), `mixing`, `ground`, `grid` and `convergence`. The gather is
 //!   `crate::render::transport`.
 
 mod accel;

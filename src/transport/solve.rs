@@ -22,8 +22,10 @@
 //!   numerical diffusion (src/transport/accel.rs: consistent with the sweeps on thick voxels;
 //!   δ-M coefficients, Marshak boundary), solved by multigrid-preconditioned CG;
 //!   I_00 += √(4π) δ, and the correction's P1 current (Fick's law) goes into the first moments.
+//! - **Mixing** (src/transport/mixing.rs): Anderson mixing of a cold solve's orders l ≤ 2 over
+//!   the last three accelerated maps, fitted on I_00.
 //! - **Convergence** (src/transport/convergence.rs): the stopping test, the divergence guard and
-//!   the dominant-mode extrapolation.
+//!   the dominant-mode extrapolation of warm solves.
 
 use super::convergence::{dominant_mode_step, i00_change, i00_mean_change, max_voxel_optical_depth, plain_converged, DIVERGENCE_FACTOR};
 use super::dsa::{accelerate, hierarchies};
