@@ -118,9 +118,10 @@ fn acceleration_keeps_iterations_flat_in_optical_thickness() {
         },
     );
     eprintln!("DSA iterations at σt × 1, 2, 4, 8: {dsa:?}; without DSA at × 8: {plain}+");
-    // Measured 9, 11, 11, 11 (DSA with the first moments and the dominant-mode extrapolation;
-    // 9, 15, 20, 16 with the isotropic correction alone): bounded, no growth from × 2 to × 8.
-    assert!(dsa.iter().all(|n| *n <= 16) && dsa[3] <= dsa[1] + 3, "{dsa:?}");
+    // Measured 8, 8, 9, 9 (DSA with the first moments and the Anderson mixing; 9, 11, 11, 11 with
+    // the dominant-mode extrapolation instead, 9, 15, 20, 16 with the isotropic correction
+    // alone): bounded, no growth from × 2 to × 8.
+    assert!(dsa.iter().all(|n| *n <= 10) && dsa[3] <= dsa[1] + 2, "{dsa:?}");
     assert_eq!(plain, cap);
 }
 

@@ -7,7 +7,7 @@
 //!   albedo and g (the medium's own are [`crate::optics::Optics`]).
 //! - [`slab`]: the solver on a plane-parallel column (checked against adding-doubling).
 //! - [`solve`]: the 3-D solver (SH source per full voxel, sweeps, DSA); its stages are the private
-//!   modules `sweep`, `source`, `dsa` (its operator in `accel`), `ground`, `grid` and `convergence`. The gather is
+//!   modules `sweep`, `source`, `dsa` (its operator in `accel`), `mixing`, `ground`, `grid` and `convergence`. The gather is
 //!   `crate::render::transport`.
 
 mod accel;
@@ -15,6 +15,7 @@ mod convergence;
 mod dsa;
 mod grid;
 mod ground;
+mod mixing;
 mod simd;
 pub mod slab;
 pub mod solve;
@@ -111,10 +112,13 @@ impl TransportMemory {
     /// Bytes per full voxel: at the solve's peak two spherical-harmonic arrays (the moments and
     /// the sweep's new moments; the source is evaluated from the moments, not stored) of 3 bands
     /// × (L + 1)² f32, the batch array of ordinates' sources, in place of which the sweeps write
-    /// their radiances (12 B each), and [`Self::FULL_EXTRA_BYTES`]: 1,812 B at order 7 (a stored
-    /// source array would add 768 B).
+    /// their radiances (12 B each), the mixing's history (240 B) and [`Self::FULL_EXTRA_BYTES`]:
+    /// 2,052 B at order 7 (a stored source array would add 768 B).
     pub fn bytes_per_full_voxel(order: usize) -> u64 {
-        2 * 3 * 4 * crate::math::sh_count(order) as u64 + 12 * source::ORDINATE_BATCH as u64 + Self::FULL_EXTRA_BYTES
+        2 * 3 * 4 * crate::math::sh_count(order) as u64
+            + 12 * source::ORDINATE_BATCH as u64
+            + mixing::bytes_per_full_voxel()
+            + Self::FULL_EXTRA_BYTES
     }
 
     /// The estimate for medium `m` solved with `s`.

@@ -22,13 +22,16 @@
 //!   numerical diffusion (src/transport/accel.rs: consistent with the sweeps on thick voxels;
 //!   δ-M coefficients, Marshak boundary), solved by multigrid-preconditioned CG;
 //!   I_00 += √(4π) δ, and the correction's P1 current (Fick's law) goes into the first moments.
+//! - **Mixing** (src/transport/mixing.rs): Anderson mixing of a cold solve's orders l ≤ 2 over
+//!   the last three accelerated maps, fitted on I_00.
 //! - **Convergence** (src/transport/convergence.rs): the stopping test, the divergence guard and
-//!   the dominant-mode extrapolation.
+//!   the dominant-mode extrapolation of warm solves.
 
 use super::convergence::{dominant_mode_step, i00_change, i00_mean_change, max_voxel_optical_depth, plain_converged, DIVERGENCE_FACTOR};
 use super::dsa::{accelerate, hierarchies};
 use super::grid::{Ctx, FullVoxels};
 use super::ground::GroundLight;
+use super::mixing::Mixing;
 pub use super::ground::GroundMap;
 use super::source::{diffuse_source_of, parity_order, PairTables};
 use super::sphere::Quadrature;
@@ -263,6 +266,8 @@ struct Iterate {
     warm: Option<WarmStop>,
     /// Iteration of the last extrapolation (0: none).
     extrapolated: usize,
+    /// The cold solve's Anderson mixing.
+    mixing: Mixing,
     /// The slowest mode's ratio this solve's extrapolations saw, and the previous frame's: the
     /// next frame's start takes this solve's, else the previous one's.
     slowest: Option<f64>,
@@ -293,6 +298,7 @@ impl Iterate {
             ground_map: solver.ground.map(e_down.as_deref()),
             warm: stop,
             extrapolated: 0,
+            mixing: Mixing::new(&parity_order(solver.s.order).0, solver.ctx.nsh),
             slowest: None,
             carried_ratio,
             accelerated: solver.s.acceleration,
@@ -316,8 +322,9 @@ impl Solver<'_> {
         // The extrapolation assumes the slowest error mode keeps its sign (a ratio r > 0). With a
         // back-scattering phase function the odd moments' scattering eigenvalues a′χ′_l are
         // negative: their error alternates, and adding the last step r/(1 − r) times amplified
-        // it (g = −0.9 diverged). Not done there.
+        // it (g = −0.9 diverged). Neither it nor the mixing is done there.
         let extrapolate = self.optics.bands.iter().all(|b| b.chi.iter().all(|&c| c >= 0.0));
+        let first_moment_ratio = self.optics.bands.iter().fold(0.0f64, |r, b| r.max(b.albedo * b.chi.get(1).copied().unwrap_or(0.0)));
         progress.begin("transport iterations", s.max_iterations as u64);
         // An empty medium has nothing to iterate: the sky and ground pass unchanged.
         let iterations = if self.ctx.voxels.is_empty() { 0 } else { s.max_iterations };
@@ -349,7 +356,16 @@ impl Solver<'_> {
             it.smallest = it.smallest.min(change_abs);
             let change = change_abs / scale;
             it.history.push(change);
-            let mode = (it.accelerated && extrapolate)
+            // Cold solves mix (src/transport/mixing.rs); warm ones extrapolate, as their
+            // stopping rule reads the extrapolated mode.
+            let mixed = it.accelerated && extrapolate && it.warm.is_none();
+            if mixed {
+                it.mixing.mix(&it.moments, &mut it.next);
+                // Not measured here: the plain iteration's slowest mode, the first moment's
+                // a′χ′_1, is what a following warm frame's stopping rule assumes.
+                it.slowest.get_or_insert(first_moment_ratio);
+            }
+            let mode = (it.accelerated && extrapolate && !mixed)
                 .then(|| dominant_mode_step(&it.history, it.extrapolated))
                 .flatten();
             if let Some(mode) = mode {
