@@ -88,7 +88,7 @@ impl PeakSpread {
     }
 
     /// The Legendre polynomials P_l(cos Θ) from order 0 to this series' last, for
-    /// [`Self::peak_only_with`].
+    /// [`Self::peak_with`].
     pub fn legendre_all(&self, cos_theta: f64) -> Vec<f64> {
         let n = self.first + self.weight.len();
         let mut out = Vec::with_capacity(n);
