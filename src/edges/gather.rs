@@ -272,10 +272,9 @@ impl<'a> EdgeGather<'a> {
     /// however deep the point lies.
     pub fn with_peak_spread(mut self, sun_irradiance: Rgb) -> Self {
         let o = &self.medium.optics;
-        let (g, g_scaled) = (o.sun_single.1.mean_cosine(), o.phase.mean_cosine());
-        if g_scaled < g {
-            let f = (g - g_scaled) / (1.0 - g_scaled);
-            self.peak = Some((PeakSpread::similarity(g, f), sun_irradiance));
+        let f = o.forward_fraction();
+        if f > 0.0 {
+            self.peak = Some((PeakSpread::similarity(o.sun_single.1.mean_cosine(), f), sun_irradiance));
         }
         self
     }
