@@ -2,7 +2,7 @@
 //! an optional false-colour difference PNG (see `crate::tools::compare` for the mask and metrics).
 
 use crate::error::{Error, Result};
-use crate::tools::compare::{budget, choose_mask, compare, write_diff_png};
+use crate::tools::compare::{budget, choose_mask, compare, narrow_mask, write_diff_png, PixelCondition};
 use crate::Image;
 use clap::Args;
 use std::path::PathBuf;
@@ -32,6 +32,16 @@ pub struct CompareArgs {
     /// with only the sun on and a black ground); the mask (and --budget's regions) still come from REF.
     #[arg(long, value_name = "NAME")]
     ref_layer: Option<String>,
+    /// Keep only the pixels where a layer's luminance meets a condition (repeatable; all must
+    /// hold): LAYER<VALUE or LAYER>VALUE, LAYER a layer of REF (or of --where-from) or `image`
+    /// for its main channels. E.g. the ground the eye sees where REF is darker than 0.15:
+    /// `--all-pixels --where 'transmittance>0.99' --where 'light_ground>0' --where 'image<0.15'`.
+    #[arg(long = "where", value_name = "LAYER<VALUE", value_parser = PixelCondition::parse)]
+    conditions: Vec<PixelCondition>,
+    /// Read --where's layers from this EXR instead of REF (e.g. the whole scene's reference when
+    /// REF is a render with only the sun on).
+    #[arg(long, value_name = "EXR", requires = "conditions")]
+    where_from: Option<PathBuf>,
 }
 
 pub fn run(a: CompareArgs) -> Result<()> {
@@ -49,6 +59,7 @@ pub fn run(a: CompareArgs) -> Result<()> {
         }
         let mut inputs = vec![(a.test.clone(), "TEST".to_string()), (a.reference.clone(), "REF".to_string())];
         inputs.extend(a.mask.iter().map(|m| (m.clone(), "--mask".to_string())));
+        inputs.extend(a.where_from.iter().map(|m| (m.clone(), "--where-from".to_string())));
         super::output::check_files(&[d], "--diff", &inputs)?;
     }
     let test = Image::read_exr(&a.test)?;
@@ -100,7 +111,35 @@ pub fn run(a: CompareArgs) -> Result<()> {
         }
         mask
     };
-    let metrics = compare(&test, &reference, mask.as_deref())?;
+    let described = if mask.is_some() { "transmittance < 0.99" } else { "all" };
+    let mask = if a.conditions.is_empty() {
+        mask
+    } else {
+        let from;
+        let (img, source) = match &a.where_from {
+            Some(p) => {
+                from = Image::read_exr(p)?;
+                (&from, p.display().to_string())
+            }
+            None => (&full_reference, a.reference.display().to_string()),
+        };
+        if (img.width, img.height) != (reference.width, reference.height) {
+            return Err(Error::invalid(
+                source,
+                "--where-from",
+                format!(
+                    "is {}×{} but the images are {}×{}; use a render of the same view and size",
+                    img.width, img.height, reference.width, reference.height
+                ),
+            ));
+        }
+        narrow_mask(mask, img, &source, &a.conditions)?
+    };
+    let mut metrics = compare(&test, &reference, mask.as_deref())?;
+    metrics.mask = std::iter::once(described.to_string())
+        .chain(a.conditions.iter().map(|c| c.to_string()))
+        .collect::<Vec<_>>()
+        .join(" and ");
     if let Some(d) = &a.diff {
         write_diff_png(d, &test, &reference, mask.as_deref())?;
     }

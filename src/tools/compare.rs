@@ -157,6 +157,102 @@ pub fn choose_mask(reference: &Image, mask_img: Option<&Image>) -> Option<Vec<bo
     }
 }
 
+/// The name `--where` gives an image's main channels (its other names are its layers').
+pub const IMAGE_LAYER: &str = "image";
+
+/// A condition on each pixel's luminance in one layer of an image: `LAYER<VALUE` or
+/// `LAYER>VALUE` (`cloudgi compare --where`), LAYER one of the image's layers or [`IMAGE_LAYER`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct PixelCondition {
+    /// A layer name, or [`IMAGE_LAYER`].
+    pub layer: String,
+    /// True for `<`, false for `>`.
+    pub below: bool,
+    /// The threshold, in the layer's units (W·m⁻²·sr⁻¹ for light, unitless for transmittance).
+    pub value: f64,
+}
+
+impl PixelCondition {
+    /// Parse `LAYER<VALUE` or `LAYER>VALUE`; the error says what is wrong and the form expected.
+    pub fn parse(text: &str) -> std::result::Result<Self, String> {
+        let form = "write LAYER<VALUE or LAYER>VALUE, e.g. `image<0.15` or `light_ground>0`";
+        let (at, below) = match (text.find('<'), text.find('>')) {
+            (Some(i), None) => (i, true),
+            (None, Some(i)) => (i, false),
+            _ => return Err(format!("`{text}` needs exactly one `<` or `>`: {form}")),
+        };
+        let layer = text[..at].trim();
+        if layer.is_empty() {
+            return Err(format!("`{text}` names no layer: {form}"));
+        }
+        let value = text[at + 1..].trim();
+        match value.parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(PixelCondition {
+                layer: layer.to_string(),
+                below,
+                value: v,
+            }),
+            _ => Err(format!("`{value}` in `{text}` is not a finite number: {form}")),
+        }
+    }
+
+    /// Whether each pixel of `img` meets the condition; an error naming `source` and the layers
+    /// it has when it lacks this one.
+    pub fn select(&self, img: &Image, source: &str) -> Result<Vec<bool>> {
+        let px = if self.layer == IMAGE_LAYER {
+            &img.pixels[..]
+        } else {
+            img.layer(&self.layer).ok_or_else(|| {
+                let have: Vec<&str> = std::iter::once(IMAGE_LAYER).chain(img.layers.iter().map(|l| l.0.as_str())).collect();
+                Error::invalid(source, "--where", format!("no layer `{}`; it has: {}", self.layer, have.join(", ")))
+            })?
+        };
+        Ok(px
+            .iter()
+            .map(|p| {
+                let y = luminance(*p) as f64;
+                if self.below {
+                    y < self.value
+                } else {
+                    y > self.value
+                }
+            })
+            .collect())
+    }
+}
+
+impl std::fmt::Display for PixelCondition {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}{}{}", self.layer, if self.below { "<" } else { ">" }, self.value)
+    }
+}
+
+/// `mask` (`None`: every pixel) narrowed to the pixels of `img` (read from `source`) that meet
+/// every condition. Errors when a layer is missing or no pixel is left.
+pub fn narrow_mask(mask: Option<Vec<bool>>, img: &Image, source: &str, conditions: &[PixelCondition]) -> Result<Option<Vec<bool>>> {
+    if conditions.is_empty() {
+        return Ok(mask);
+    }
+    let mut keep = mask.unwrap_or_else(|| vec![true; img.pixels.len()]);
+    if keep.len() != img.pixels.len() {
+        return Err(Error::invalid(source, "--where", "its size differs from the images; use a render of the same view and size"));
+    }
+    for c in conditions {
+        for (k, ok) in keep.iter_mut().zip(c.select(img, source)?) {
+            *k &= ok;
+        }
+    }
+    if !keep.contains(&true) {
+        let all: Vec<String> = conditions.iter().map(|c| c.to_string()).collect();
+        return Err(Error::invalid(
+            source,
+            "--where",
+            format!("no pixel meets {} inside the mask; loosen a threshold", all.join(" and ")),
+        ));
+    }
+    Ok(Some(keep))
+}
+
 fn check_size(a: &Image, b: &Image, what: &str) -> Result<()> {
     if a.width != b.width || a.height != b.height {
         return Err(Error::invalid(
@@ -472,6 +568,43 @@ mod tests {
         let mut i = Image::new(vals.len() as u32, 1);
         i.pixels = vals.iter().map(|&v| Rgb::splat(v)).collect();
         i
+    }
+
+    #[test]
+    fn pixel_conditions_parse_and_refuse_bad_text() {
+        let c = PixelCondition::parse("image<0.15").unwrap();
+        assert_eq!((c.layer.as_str(), c.below, c.value), ("image", true, 0.15));
+        let c = PixelCondition::parse(" light_ground > 0 ").unwrap();
+        assert_eq!((c.layer.as_str(), c.below, c.value), ("light_ground", false, 0.0));
+        assert_eq!(c.to_string(), "light_ground>0");
+        for bad in ["image", "<0.1", "image<", "image<x", "a<1>2", "image<inf", "image<NaN"] {
+            let e = PixelCondition::parse(bad).unwrap_err();
+            assert!(e.contains("LAYER<VALUE"), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn conditions_narrow_the_mask_to_the_pixels_meeting_all_of_them() {
+        // Four pixels: the ground's transmittance 1, one cloud pixel (0.5); their luminances.
+        let mut i = img(&[0.1, 0.3, 0.1, 0.05]);
+        i.add_layer("transmittance", [1.0, 1.0, 0.5, 1.0].map(Rgb::splat).to_vec());
+        let ground = PixelCondition::parse("transmittance>0.99").unwrap();
+        let dark = PixelCondition::parse("image<0.15").unwrap();
+        let got = narrow_mask(None, &i, "r.exr", &[ground.clone(), dark.clone()]).unwrap();
+        assert_eq!(got, Some(vec![true, false, false, true]));
+        let got = narrow_mask(Some(vec![false, true, true, true]), &i, "r.exr", &[dark.clone()]).unwrap();
+        assert_eq!(got, Some(vec![false, false, true, true]));
+        assert_eq!(narrow_mask(None, &i, "r.exr", &[]).unwrap(), None);
+        // The scores follow the narrowed mask: only its two pixels count.
+        let t = img(&[0.2, 0.3, 0.1, 0.1]);
+        let m = compare(&t, &i, got.as_deref()).unwrap();
+        assert_eq!(m.pixels, 2);
+        assert!((m.luminance_bias - (0.2 / 0.15 - 1.0)).abs() < 1e-6, "{m:?}");
+        // Nothing left, or a layer the image lacks: an error naming --where and the fix.
+        let e = narrow_mask(Some(vec![false, true, false, false]), &i, "r.exr", &[dark]).unwrap_err().to_string();
+        assert!(e.contains("--where") && e.contains("image<0.15") && e.contains("loosen"), "{e}");
+        let e = narrow_mask(None, &i, "r.exr", &[PixelCondition::parse("light_sun<1").unwrap()]).unwrap_err().to_string();
+        assert!(e.contains("r.exr") && e.contains("light_sun") && e.contains("transmittance"), "{e}");
     }
 
     #[test]

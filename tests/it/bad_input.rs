@@ -958,6 +958,26 @@ fn bad_arguments_of_the_other_commands() {
         &["compare", "a.exr", "a.exr", "--mask", "m.exr"],
         &["--mask", "2×2"],
     );
+    fails(
+        &[("a.exr", img.clone())],
+        &["compare", "a.exr", "a.exr", "--where", "image"],
+        &["--where", "LAYER<VALUE"],
+    );
+    fails(
+        &[("a.exr", img.clone())],
+        &["compare", "a.exr", "a.exr", "--where", "light_sun<1"],
+        &["a.exr", "--where", "no layer `light_sun`", "it has: image"],
+    );
+    fails(
+        &[("a.exr", img.clone())],
+        &["compare", "a.exr", "a.exr", "--all-pixels", "--where", "image<0"],
+        &["--where", "image<0", "loosen"],
+    );
+    fails(
+        &[("a.exr", img.clone()), ("m.exr", small.clone())],
+        &["compare", "a.exr", "a.exr", "--where-from", "m.exr", "--where", "image<1"],
+        &["m.exr", "--where-from", "2×2"],
+    );
     fails(&[("a.exr", img), ("b.exr", small)], &["compare", "a.exr", "b.exr"], &["4×4", "2×2"]);
     fails(&[], &["info", "nope.vdb"], &["nope.vdb"]);
     fails(
