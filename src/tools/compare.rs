@@ -7,6 +7,9 @@
 //! its EXR (the exact transmittance of the pixel-centre ray, up to the ground). With
 //! `--mask MASK.exr` it is read from that file instead (its `transmittance` layer, or else its
 //! main channels' luminance). Without any, every pixel counts (the JSON then says `"mask": "all"`).
+//! `--where LAYER<VALUE` (or `>`, repeatable; [`PixelCondition`]) narrows the mask to the pixels
+//! where a layer's luminance (REF's, or `--where-from`'s) meets every threshold, e.g. the ground
+//! in a shadow; the JSON's `mask` then lists the conditions after the mask they narrow.
 //! Pure sky and ground pixels are left out because every method gets them (nearly) right and
 //! they would dilute the numbers.
 //!
@@ -57,7 +60,8 @@ pub struct Metrics {
     pub luminance_bias: f64,
     /// Number of pixels compared.
     pub pixels: usize,
-    /// Where the mask came from: `transmittance < 0.99` or `all`.
+    /// Where the mask came from: `transmittance < 0.99` or `all` (the CLI appends its `--where`
+    /// conditions, joined by ` and `).
     pub mask: String,
     /// Mean relative luminance error of 4×4 block means (unitless); `None` when no block counts.
     pub block_mean_relative_error: Option<f64>,
