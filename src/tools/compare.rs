@@ -596,7 +596,7 @@ mod tests {
         let dark = PixelCondition::parse("image<0.15").unwrap();
         let got = narrow_mask(None, &i, "r.exr", &[ground.clone(), dark.clone()]).unwrap();
         assert_eq!(got, Some(vec![true, false, false, true]));
-        let got = narrow_mask(Some(vec![false, true, true, true]), &i, "r.exr", &[dark.clone()]).unwrap();
+        let got = narrow_mask(Some(vec![false, true, true, true]), &i, "r.exr", std::slice::from_ref(&dark)).unwrap();
         assert_eq!(got, Some(vec![false, false, true, true]));
         assert_eq!(narrow_mask(None, &i, "r.exr", &[]).unwrap(), None);
         // The scores follow the narrowed mask: only its two pixels count.
