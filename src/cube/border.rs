@@ -22,7 +22,7 @@ use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
 use crate::medium::Density;
 use crate::pipeline::Progress;
-use rayon::prelude::*;
+use crate::par;
 
 /// Face offsets in [`crate::lighting::CUBE_FACES`] order: +x, −x, +y, −y, +z, −z.
 pub const FACE_OFFSETS: [[isize; 3]; 6] = [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]];
@@ -36,9 +36,7 @@ pub fn find_border_voxels(density: &Density) -> Vec<([usize; 3], u8)> {
     // Per face, the index offset of the neighbour and whether voxel (i, j, k) has one there.
     let strides = [1, -1, nx, -nx, nxy, -nxy];
     // Slices in parallel, each in memory order; concatenated in order.
-    let slices: Vec<Vec<([usize; 3], u8)>> = (0..d[2])
-        .into_par_iter()
-        .map(|k| {
+    let slices = par::map_range(d[2], &|k| {
             let mut out = Vec::new();
             for j in 0..d[1] {
                 for i in 0..d[0] {
@@ -59,8 +57,7 @@ pub fn find_border_voxels(density: &Density) -> Vec<([usize; 3], u8)> {
                 }
             }
             out
-        })
-        .collect();
+    });
     slices.concat()
 }
 
@@ -338,7 +335,7 @@ fn render_each(
     // on the batch size (scattered in order).
     let batch_groups = 8 * rayon::current_num_threads().max(1);
     for batch in groups.chunks(batch_groups) {
-        let per_group: Vec<Vec<(usize, Vec<Rgb>)>> = batch.par_iter().map(render_group).collect();
+        let per_group: Vec<Vec<(usize, Vec<Rgb>)>> = par::map_range(batch.len(), &|i| render_group(&batch[i]));
         for (n, bins) in per_group.into_iter().flatten() {
             take(n, &bins);
         }

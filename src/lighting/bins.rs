@@ -214,10 +214,8 @@ impl DirectionBins {
     /// `sub`×`sub` sub-rectangles per bin, each weighted by its exact solid angle. Runs once per
     /// scene: `radiance` is a trait object, one copy of this loop for every sky.
     pub fn integrate(&self, sub: usize, radiance: &(dyn Fn(Vec3) -> Rgb + Sync)) -> Vec<Rgb> {
-        use rayon::prelude::*;
-        self.bins
-            .par_iter()
-            .map(|b| {
+        crate::par::map_range(self.bins.len(), &|bi| {
+                let b = &self.bins[bi];
                 let f = &CUBE_FACES[b.face];
                 let du = (b.u[1] - b.u[0]) / sub as f64;
                 let dv = (b.v[1] - b.v[0]) / sub as f64;
@@ -234,8 +232,7 @@ impl DirectionBins {
                     }
                 }
                 Rgb::new(acc[0] as f32, acc[1] as f32, acc[2] as f32)
-            })
-            .collect()
+        })
     }
 }
 
