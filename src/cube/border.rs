@@ -37,26 +37,26 @@ pub fn find_border_voxels(density: &Density) -> Vec<([usize; 3], u8)> {
     let strides = [1, -1, nx, -nx, nxy, -nxy];
     // Slices in parallel, each in memory order; concatenated in order.
     let slices = par::map_range(d[2], &|k| {
-            let mut out = Vec::new();
-            for j in 0..d[1] {
-                for i in 0..d[0] {
-                    let n = i + d[0] * (j + d[1] * k);
-                    if density.is_full(n) {
-                        continue;
-                    }
-                    let inside = [i + 1 < d[0], i > 0, j + 1 < d[1], j > 0, k + 1 < d[2], k > 0];
-                    let mut faces = 0u8;
-                    for f in 0..6 {
-                        if inside[f] && density.is_full((n as isize + strides[f]) as usize) {
-                            faces |= 1 << f;
-                        }
-                    }
-                    if faces != 0 {
-                        out.push(([i, j, k], faces));
+        let mut out = Vec::new();
+        for j in 0..d[1] {
+            for i in 0..d[0] {
+                let n = i + d[0] * (j + d[1] * k);
+                if density.is_full(n) {
+                    continue;
+                }
+                let inside = [i + 1 < d[0], i > 0, j + 1 < d[1], j > 0, k + 1 < d[2], k > 0];
+                let mut faces = 0u8;
+                for f in 0..6 {
+                    if inside[f] && density.is_full((n as isize + strides[f]) as usize) {
+                        faces |= 1 << f;
                     }
                 }
+                if faces != 0 {
+                    out.push(([i, j, k], faces));
+                }
             }
-            out
+        }
+        out
     });
     slices.concat()
 }

@@ -95,33 +95,33 @@ impl FullVoxelPlacement {
                 break;
             }
             let filled: Vec<Option<Vec<f32>>> = par::map_range(missing.len(), &|m| {
-                    let r = missing[m];
-                    let g = voxels[r];
-                    let cell = [g % nx, (g / nx) % ny, g / (nx * ny)];
-                    let mut sum = vec![0f32; stride];
-                    let mut n = 0;
-                    for a in 0..3 {
-                        let step = [1, nx, nx * ny][a];
-                        for side in [-1i64, 1] {
-                            let c = cell[a] as i64 + side;
-                            if c < 0 || c >= dims[a] as i64 {
-                                continue;
-                            }
-                            let slot = new.slot((g as i64 + side * step as i64) as usize);
-                            if slot == 0 || !known[slot - 1] {
-                                continue;
-                            }
-                            let from = (slot - 1) * stride;
-                            sum.iter_mut().zip(&out[from..from + stride]).for_each(|(s, v)| *s += v);
-                            n += 1;
+                let r = missing[m];
+                let g = voxels[r];
+                let cell = [g % nx, (g / nx) % ny, g / (nx * ny)];
+                let mut sum = vec![0f32; stride];
+                let mut n = 0;
+                for a in 0..3 {
+                    let step = [1, nx, nx * ny][a];
+                    for side in [-1i64, 1] {
+                        let c = cell[a] as i64 + side;
+                        if c < 0 || c >= dims[a] as i64 {
+                            continue;
                         }
+                        let slot = new.slot((g as i64 + side * step as i64) as usize);
+                        if slot == 0 || !known[slot - 1] {
+                            continue;
+                        }
+                        let from = (slot - 1) * stride;
+                        sum.iter_mut().zip(&out[from..from + stride]).for_each(|(s, v)| *s += v);
+                        n += 1;
                     }
-                    (n > 0).then(|| sum.into_iter().map(|s| s / n as f32).collect())
+                }
+                (n > 0).then(|| sum.into_iter().map(|s| s / n as f32).collect())
                 });
             for (&r, f) in missing.iter().zip(filled) {
                 if let Some(f) = f {
-                    out[r * stride..(r + 1) * stride].copy_from_slice(&f);
-                    known[r] = true;
+                out[r * stride..(r + 1) * stride].copy_from_slice(&f);
+                known[r] = true;
                 }
             }
         }
