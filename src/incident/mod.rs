@@ -204,7 +204,7 @@ impl Layout {
         let mut ext = vec![(usize::MAX, 0); nv * na];
         // One plane per task: serial, this transposed copy took a tenth of stage 1.
         let stride = [1, bd[0], bd[0] * bd[1]];
-        let mut planes: Vec<(&mut [f32], &mut [(usize, usize)])> = out.chunks_mut(nu * nv).zip(ext.chunks_mut(nv)).collect();
+        let mut planes: Vec<_> = out.chunks_mut(nu * nv).zip(ext.chunks_mut(nv)).collect();
         par::for_chunks(&mut planes, 1, &|ca, part| {
             let (plane, ext) = &mut part[0];
             for (cv, (row, e)) in plane.chunks_exact_mut(nu).zip(ext.iter_mut()).enumerate() {
