@@ -208,7 +208,7 @@ impl<T: Copy + Send + Sync> VoxelField<T> {
     /// Every voxel, full or empty, reads `empty`.
     pub fn filled(index: Arc<FullIndex>, empty: T) -> VoxelField<T> {
         let n = index.count();
-        VoxelField::new(index, empty, std::iter::repeat(empty).take(n))
+        VoxelField::new(index, empty, std::iter::repeat_n(empty, n))
     }
 
     /// `at(grid index)` for every full voxel, in parallel; `empty` elsewhere.
