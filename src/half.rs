@@ -24,7 +24,7 @@
 //!
 //! [`Texel`] is what a [`crate::medium::SubGrid`] stores: f32 itself or a code.
 
-use rayon::prelude::*;
+use crate::par;
 
 /// A value stored in a grid: encoded once from f32, decoded at every read.
 pub trait Texel: Copy + Send + Sync + PartialEq + std::fmt::Debug + 'static {
@@ -210,12 +210,18 @@ pub fn power_of_two_scale(max: f64) -> f32 {
 
 /// [`Signed16::code_all`] after `lead` zero codes.
 pub(crate) fn code_after<T: Copy + Into<f64> + Sync>(values: &[T], lead: usize) -> (Vec<Signed16>, f32) {
-    let max = values.par_iter().map(|v| (*v).into().abs()).reduce(|| 0.0, f64::max);
-    let k = scale_exponent(max);
+    // The largest magnitude per chunk, then of the chunks' (a maximum is exact in any order).
+    let chunk_max = par::map_range(values.len().div_ceil(par::CHUNK), &|ci| {
+        values[ci * par::CHUNK..].iter().take(par::CHUNK).fold(0.0, |m: f64, v| m.max((*v).into().abs()))
+    });
+    let k = scale_exponent(chunk_max.into_iter().fold(0.0, f64::max));
     let inv = 2f64.powi(-k);
-    let mut codes = Vec::with_capacity(values.len() + lead);
-    codes.resize(lead, Signed16(0));
-    codes.par_extend(values.par_iter().map(|v| Signed16::from_f32(((*v).into() * inv) as f32)));
+    let mut codes = vec![Signed16(0); values.len() + lead];
+    par::for_chunks(&mut codes[lead..], par::CHUNK, &|ci, codes| {
+        for (c, v) in codes.iter_mut().zip(&values[ci * par::CHUNK..]) {
+            *c = Signed16::from_f32(((*v).into() * inv) as f32);
+        }
+    });
     (codes, 2f32.powi(k))
 }
 

@@ -46,6 +46,7 @@ mod api;
 #[doc(hidden)]
 pub mod cli;
 mod error;
+mod par;
 
 #[cfg(test)]
 mod tests;

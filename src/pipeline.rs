@@ -86,10 +86,9 @@ pub fn render_rows<T: Clone + Default + Send>(
     stage: &str,
     shade: impl Fn(u32, u32) -> T + Sync,
 ) -> Vec<T> {
-    use rayon::prelude::*;
     progress.begin(stage, height as u64);
     let mut px = vec![T::default(); width as usize * height as usize];
-    px.par_chunks_mut(width as usize).enumerate().for_each(|(y, row)| {
+    crate::par::for_chunks(&mut px, width as usize, &|y, row| {
         if progress.cancelled() {
             return;
         }

@@ -8,7 +8,7 @@
 /// time (docs/performance.md, "Memory of `full`").
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 pub(super) fn large_arrays_mapped() {
-    extern "C" {
+    unsafe extern "C" {
         fn mallopt(param: i32, value: i32) -> i32;
     }
     const M_MMAP_THRESHOLD: i32 = -3;

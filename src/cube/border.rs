@@ -22,7 +22,7 @@ use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
 use crate::medium::Density;
 use crate::pipeline::Progress;
-use rayon::prelude::*;
+use crate::par;
 
 /// Face offsets in [`crate::lighting::CUBE_FACES`] order: +x, −x, +y, −y, +z, −z.
 pub const FACE_OFFSETS: [[isize; 3]; 6] = [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]];
@@ -36,31 +36,28 @@ pub fn find_border_voxels(density: &Density) -> Vec<([usize; 3], u8)> {
     // Per face, the index offset of the neighbour and whether voxel (i, j, k) has one there.
     let strides = [1, -1, nx, -nx, nxy, -nxy];
     // Slices in parallel, each in memory order; concatenated in order.
-    let slices: Vec<Vec<([usize; 3], u8)>> = (0..d[2])
-        .into_par_iter()
-        .map(|k| {
-            let mut out = Vec::new();
-            for j in 0..d[1] {
-                for i in 0..d[0] {
-                    let n = i + d[0] * (j + d[1] * k);
-                    if density.is_full(n) {
-                        continue;
-                    }
-                    let inside = [i + 1 < d[0], i > 0, j + 1 < d[1], j > 0, k + 1 < d[2], k > 0];
-                    let mut faces = 0u8;
-                    for f in 0..6 {
-                        if inside[f] && density.is_full((n as isize + strides[f]) as usize) {
-                            faces |= 1 << f;
-                        }
-                    }
-                    if faces != 0 {
-                        out.push(([i, j, k], faces));
+    let slices = par::map_range(d[2], &|k| {
+        let mut out = Vec::new();
+        for j in 0..d[1] {
+            for i in 0..d[0] {
+                let n = i + d[0] * (j + d[1] * k);
+                if density.is_full(n) {
+                    continue;
+                }
+                let inside = [i + 1 < d[0], i > 0, j + 1 < d[1], j > 0, k + 1 < d[2], k > 0];
+                let mut faces = 0u8;
+                for f in 0..6 {
+                    if inside[f] && density.is_full((n as isize + strides[f]) as usize) {
+                        faces |= 1 << f;
                     }
                 }
+                if faces != 0 {
+                    out.push(([i, j, k], faces));
+                }
             }
-            out
-        })
-        .collect();
+        }
+        out
+    });
     slices.concat()
 }
 
@@ -338,7 +335,7 @@ fn render_each(
     // on the batch size (scattered in order).
     let batch_groups = 8 * rayon::current_num_threads().max(1);
     for batch in groups.chunks(batch_groups) {
-        let per_group: Vec<Vec<(usize, Vec<Rgb>)>> = batch.par_iter().map(render_group).collect();
+        let per_group: Vec<Vec<(usize, Vec<Rgb>)>> = par::map_range(batch.len(), &|i| render_group(&batch[i]));
         for (n, bins) in per_group.into_iter().flatten() {
             take(n, &bins);
         }

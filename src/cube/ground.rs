@@ -23,7 +23,7 @@ pub use crate::lit::ground::{GroundGrid, LitGround};
 use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
 use crate::pipeline::Progress;
-use rayon::prelude::*;
+use crate::par;
 
 /// The (x, z) rectangle the ground grid covers for this cloud and sun (see the module docs);
 /// None for an empty cloud.
@@ -201,7 +201,7 @@ pub fn render_ground_with(renderer: &CubeRenderer<'_>, ground: &Ground, progress
     progress.begin("ground hemicubes", (n * n) as u64);
     // The sun's shadow (the sharp part) at every sample, the hemicube light and the peak's
     // (smooth on the ground) adaptively, to a tolerance relative to the whole irradiance.
-    let sun: Vec<Rgb> = (0..n * n).into_par_iter().map(|k| sun_irradiance(lit, at(k % n, k / n))).collect();
+    let sun = par::map_range(n * n, &|k| sun_irradiance(lit, at(k % n, k / n)));
     // The peak's light is spread over tens of metres: smooth on the ground like the hemicubes'.
     let peak = GroundPeak::new(lit);
     let (sky, traced) = super::refine::refine(n, GROUND_COARSE, GROUND_TOLERANCE, &sun, &|a, b| {

@@ -7,7 +7,7 @@
 //! coarse nodes costs only the coarse nodes; near an edge the grid is evaluated as before.
 
 use crate::math::Rgb;
-use rayon::prelude::*;
+use crate::par;
 
 /// Is index `i` (of `n`) a node of the pass with spacing `s`?
 #[inline]
@@ -49,21 +49,19 @@ pub fn refine(n: usize, coarse: usize, tol: f32, base: &[Rgb], f: &(dyn Fn(usize
             .flat_map(|b| (0..n).filter(move |&a| on(a, s, n)).map(move |a| (a, b)))
             .filter(|&(a, b)| first || !(on(a, 2 * s, n) && on(b, 2 * s, n)))
             .collect();
-        let values: Vec<(Rgb, bool)> = new
-            .par_iter()
-            .map(|&(a, b)| {
-                if !first {
-                    let ((a0, a1, u), (b0, b1, v)) = (bracket(a, s, n), bracket(b, s, n));
-                    let c = [out[a0 + n * b0], out[a1 + n * b0], out[a0 + n * b1], out[a1 + n * b1]];
-                    let (lo, hi) = c.iter().fold((c[0], c[0]), |(lo, hi), x| (lo.min(*x), hi.max(*x)));
-                    if (hi - lo).cmple((hi + base[a + n * b]) * tol).all() {
-                        let l = (c[0] * (1.0 - u) + c[1] * u) * (1.0 - v) + (c[2] * (1.0 - u) + c[3] * u) * v;
-                        return (l, false);
-                    }
+        let values = par::map_range(new.len(), &|i| {
+            let (a, b) = new[i];
+            if !first {
+                let ((a0, a1, u), (b0, b1, v)) = (bracket(a, s, n), bracket(b, s, n));
+                let c = [out[a0 + n * b0], out[a1 + n * b0], out[a0 + n * b1], out[a1 + n * b1]];
+                let (lo, hi) = c.iter().fold((c[0], c[0]), |(lo, hi), x| (lo.min(*x), hi.max(*x)));
+                if (hi - lo).cmple((hi + base[a + n * b]) * tol).all() {
+                    let l = (c[0] * (1.0 - u) + c[1] * u) * (1.0 - v) + (c[2] * (1.0 - u) + c[3] * u) * v;
+                    return (l, false);
                 }
-                (f(a, b), true)
-            })
-            .collect();
+            }
+            (f(a, b), true)
+        });
         for (&(a, b), (l, e)) in new.iter().zip(values) {
             out[a + n * b] = l;
             evaluated += e as usize;

@@ -263,7 +263,7 @@ impl PixelTable {
     }
 
     /// Face pixels (i, j) of bin `b`.
-    pub fn bin_pixels(&self, b: usize) -> impl Iterator<Item = (usize, usize, usize)> {
+    pub fn bin_pixels(&self, b: usize) -> impl Iterator<Item = (usize, usize, usize)> + use<> {
         let per = self.res / BINS_PER_EDGE;
         let face = b / (BINS_PER_EDGE * BINS_PER_EDGE);
         let bv = (b / BINS_PER_EDGE) % BINS_PER_EDGE;

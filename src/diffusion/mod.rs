@@ -504,7 +504,7 @@ pub fn boundary_outflow(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution
                         for side in [-1i64, 1] {
                             let nc = cell[ax] as i64 + side;
                             let nidx = (nc >= 0 && nc < d[ax] as i64).then(|| (idx as i64 + side * stride[ax] as i64) as usize);
-                            if nidx.map_or(true, |q| rho.at(q) <= 0.0) {
+                            if nidx.is_none_or(|q| rho.at(q) <= 0.0) {
                                 let (dt, ft) = boundary_terms(rp, sigma_tr, h[ax], tau_min);
                                 let f = inc.q1(ax, idx, c) as f64 / (rp * sigma_tr) * side as f64;
                                 let l_in = bl.at(nidx, face_index(ax, side), c);

@@ -63,7 +63,7 @@ use crate::math::{mix64, Rgb, Rng, Vec3};
 use crate::math::{sh9, SH_COEFFS};
 use crate::medium::sparse::VoxelField;
 use crate::medium::Medium;
-use rayon::prelude::*;
+use crate::par;
 pub use scattering::FirstScattering;
 
 mod scattering;
@@ -204,20 +204,19 @@ impl Layout {
         let mut ext = vec![(usize::MAX, 0); nv * na];
         // One plane per task: serial, this transposed copy took a tenth of stage 1.
         let stride = [1, bd[0], bd[0] * bd[1]];
-        out.par_chunks_mut(nu * nv)
-            .zip(ext.par_chunks_mut(nv))
-            .enumerate()
-            .for_each(|(ca, (plane, ext))| {
-                for (cv, (row, e)) in plane.chunks_exact_mut(nu).zip(ext).enumerate() {
-                    let base = ca * stride[a] + cv * stride[v];
-                    for (cu, o) in row.iter_mut().enumerate() {
-                        let r = rho[base + cu * stride[u]];
-                        *o = r;
-                        if r > 0.0 {
-                            *e = (e.0.min(cu), cu + 1);
-                        }
+        let mut planes: Vec<_> = out.chunks_mut(nu * nv).zip(ext.chunks_mut(nv)).collect();
+        par::for_chunks(&mut planes, 1, &|ca, part| {
+            let (plane, ext) = &mut part[0];
+            for (cv, (row, e)) in plane.chunks_exact_mut(nu).zip(ext.iter_mut()).enumerate() {
+                let base = ca * stride[a] + cv * stride[v];
+                for (cu, o) in row.iter_mut().enumerate() {
+                    let r = rho[base + cu * stride[u]];
+                    *o = r;
+                    if r > 0.0 {
+                        *e = (e.0.min(cu), cu + 1);
                     }
                 }
+            }
             });
         Layout {
             a,
@@ -608,12 +607,13 @@ impl Swept<'_> {
                         row.cursor = if forward { 0 } else { len };
                     }
                     for p in 0..lay.na {
-                        fams.par_iter_mut().for_each(|f| f.step(sw, &lay, p));
+                        par::for_chunks(&mut fams, 1, &|_, f| f[0].step(sw, &lay, p));
                         let ca = fams[0].plane(&lay, p);
                         let by = bd[1];
                         let (fams, coef, lay) = (&fams[..], &coef[..], &lay);
                         match a {
-                            2 => rows[ca * by..(ca + 1) * by].par_iter_mut().enumerate().for_each(|(y, row)| {
+                            2 => par::for_chunks(&mut rows[ca * by..(ca + 1) * by], 1, &|y, row| {
+                                let row = &mut row[0];
                                 let mut r = 0;
                                 for x in 0..bd[0] {
                                     if rho[x + bd[0] * (y + by * ca)] > 0.0 {
@@ -622,7 +622,7 @@ impl Swept<'_> {
                                     }
                                 }
                             }),
-                            _ => rows.par_chunks_mut(by).enumerate().for_each(|(z, rz)| {
+                            _ => par::for_chunks(&mut rows, by, &|z, rz: &mut [Row<L>]| {
                                 if a == 0 {
                                     for (y, row) in rz.iter_mut().enumerate() {
                                         if rho[ca + bd[0] * (y + by * z)] > 0.0 {

@@ -22,7 +22,7 @@ use crate::math::{Rgb, Vec3};
 use crate::medium::field16::Field16;
 use crate::medium::sparse::{FullIndex, VoxelField};
 use crate::optics::Optics;
-use rayon::prelude::*;
+use crate::par;
 use std::f64::consts::PI;
 use std::sync::Arc;
 
@@ -114,22 +114,22 @@ impl FirstScattering {
         let mut q0 = vec![Rgb::ZERO; n];
         let mut q1: [Vec<Rgb>; 3] = std::array::from_fn(|_| vec![Rgb::ZERO; n]);
         let [q1x, q1y, q1z] = &mut q1;
-        acc.par_chunks(CHUNK)
-            .zip(rho.par_chunks(CHUNK))
-            .zip(q0[1..].par_chunks_mut(CHUNK))
-            .zip(q1x[1..].par_chunks_mut(CHUNK))
-            .zip(q1y[1..].par_chunks_mut(CHUNK))
-            .zip(q1z[1..].par_chunks_mut(CHUNK))
-            .for_each(|(((((acc, rho), q0), qx), qy), qz)| {
-                for (i, v) in acc.iter().enumerate() {
-                    let s: [f64; 3] = std::array::from_fn(|c| rho[i] as f64 * sigma_s[c] as f64 / (4.0 * PI));
-                    let term =
-                        |t: usize, k: f64| Rgb::new((s[0] * k * v[t]) as f32, (s[1] * k * v[t + 1]) as f32, (s[2] * k * v[t + 2]) as f32);
-                    q0[i] = term(0, 1.0);
-                    qx[i] = term(3, g);
-                    qy[i] = term(6, g);
-                    qz[i] = term(9, g);
-                }
+        let mut parts: Vec<[&mut [Rgb]; 4]> = (q0[1..].chunks_mut(CHUNK).zip(q1x[1..].chunks_mut(CHUNK)))
+            .zip(q1y[1..].chunks_mut(CHUNK).zip(q1z[1..].chunks_mut(CHUNK)))
+            .map(|((q0, qx), (qy, qz))| [q0, qx, qy, qz])
+            .collect();
+        par::for_chunks(&mut parts, 1, &|ci, part| {
+            let [q0, qx, qy, qz] = &mut part[0];
+            let (acc, rho) = (&acc[ci * CHUNK..ci * CHUNK + q0.len()], &rho[ci * CHUNK..]);
+            for (i, v) in acc.iter().enumerate() {
+                let s: [f64; 3] = std::array::from_fn(|c| rho[i] as f64 * sigma_s[c] as f64 / (4.0 * PI));
+                let term =
+                    |t: usize, k: f64| Rgb::new((s[0] * k * v[t]) as f32, (s[1] * k * v[t + 1]) as f32, (s[2] * k * v[t + 2]) as f32);
+                q0[i] = term(0, 1.0);
+                qx[i] = term(3, g);
+                qy[i] = term(6, g);
+                qz[i] = term(9, g);
+            }
             });
         let field = |slots| VoxelField::from_slots(index.clone(), slots);
         let [q1x, q1y, q1z] = q1;
@@ -147,13 +147,10 @@ impl FirstScattering {
         let inv_e = if sun_e[band] > 0.0 { 1.0 / sun_e[band] as f64 } else { 0.0 };
         let acc = sums;
         let mut rho_t = vec![0f32; acc.len()];
-        acc.par_chunks(CHUNK)
-            .zip(rho.par_chunks(CHUNK))
-            .zip(rho_t.par_chunks_mut(CHUNK))
-            .for_each(|((acc, rho), out)| {
-                for ((v, r), o) in acc.iter().zip(rho).zip(out) {
-                    *o = (*r as f64 * v[0] * inv_e) as f32;
-                }
+        par::for_chunks(&mut rho_t, CHUNK, &|ci, out| {
+            for ((v, r), o) in acc[ci * CHUNK..].iter().zip(&rho[ci * CHUNK..]).zip(out) {
+                *o = (*r as f64 * v[0] * inv_e) as f32;
+            }
             });
         let g = optics.phase.mean_cosine();
         FirstScattering::Sun {

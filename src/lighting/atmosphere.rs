@@ -16,8 +16,8 @@
 //! Three RGB "bands" stand for wavelengths 680, 550 and 440 nm, each 100 nm wide.
 
 use crate::math::{Rgb, Vec3};
+use crate::par;
 use glam::DVec3;
-use rayon::prelude::*;
 use std::f64::consts::PI;
 
 /// Planet radius (m). Source: Bruneton 2017 demo and Hillaire 2020, Earth preset.
@@ -326,10 +326,9 @@ impl Atmosphere {
     pub fn new(params: AtmosphereParams) -> Atmosphere {
         let p = &params;
         let hh = (p.top_radius * p.top_radius - p.bottom_radius * p.bottom_radius).sqrt();
-        let trans_data: Vec<DVec3> = (0..TRANS_W * TRANS_H)
-            .into_par_iter()
-            .map(|k| {
-                let (i, j) = (k % TRANS_W, k / TRANS_W);
+        let mut trans_data = vec![DVec3::ZERO; TRANS_W * TRANS_H];
+        par::for_chunks(&mut trans_data, TRANS_W, &|j, row| {
+            for (i, out) in row.iter_mut().enumerate() {
                 let (x_mu, x_r) = (i as f64 / (TRANS_W - 1) as f64, j as f64 / (TRANS_H - 1) as f64);
                 let rho = hh * x_r;
                 let r = (rho * rho + p.bottom_radius * p.bottom_radius).sqrt();
@@ -341,9 +340,9 @@ impl Atmosphere {
                     ((hh * hh - rho * rho - d * d) / (2.0 * r * d)).clamp(-1.0, 1.0)
                 };
                 let dens = p.integrated_densities(r, mu, d);
-                (-p.extinction(dens)).exp()
-            })
-            .collect();
+                *out = (-p.extinction(dens)).exp();
+            }
+        });
         let mut atm = Atmosphere {
             trans: Lut {
                 w: TRANS_W,
@@ -358,7 +357,7 @@ impl Atmosphere {
             params,
         };
         if atm.params.multiple_scattering {
-            let rows: Vec<Vec<DVec3>> = (0..MS_H).into_par_iter().map(|j| atm.ms_row(j)).collect();
+            let rows = par::map_range(MS_H, &|j| atm.ms_row(j));
             atm.ms.data = rows.concat();
         }
         atm
@@ -540,7 +539,7 @@ impl Atmosphere {
         let s = sun_dir.as_dvec3().normalize();
         let e = self.params.solar_irradiance;
         let mut px = vec![Rgb::ZERO; width * height];
-        px.par_chunks_mut(width).enumerate().for_each(|(j, row)| {
+        par::for_chunks(&mut px, width, &|j, row| {
             let theta = PI * (j as f64 + 0.5) / height as f64;
             let (sin_t, cos_t) = theta.sin_cos();
             let ray = self.march(r0, cos_t, VIEW_STEPS);

@@ -214,28 +214,25 @@ impl DirectionBins {
     /// `sub`×`sub` sub-rectangles per bin, each weighted by its exact solid angle. Runs once per
     /// scene: `radiance` is a trait object, one copy of this loop for every sky.
     pub fn integrate(&self, sub: usize, radiance: &(dyn Fn(Vec3) -> Rgb + Sync)) -> Vec<Rgb> {
-        use rayon::prelude::*;
-        self.bins
-            .par_iter()
-            .map(|b| {
-                let f = &CUBE_FACES[b.face];
-                let du = (b.u[1] - b.u[0]) / sub as f64;
-                let dv = (b.v[1] - b.v[0]) / sub as f64;
-                let mut acc = [0f64; 3];
-                for j in 0..sub {
-                    for i in 0..sub {
-                        let (u0, v0) = (b.u[0] + i as f64 * du, b.v[0] + j as f64 * dv);
-                        let sa = rect_solid_angle(u0, u0 + du, v0, v0 + dv);
-                        let dir = (f.n + f.tu * (u0 + 0.5 * du) as f32 + f.tv * (v0 + 0.5 * dv) as f32).normalize();
-                        let l = radiance(dir);
-                        acc[0] += l.x as f64 * sa;
-                        acc[1] += l.y as f64 * sa;
-                        acc[2] += l.z as f64 * sa;
-                    }
+        crate::par::map_range(self.bins.len(), &|bi| {
+            let b = &self.bins[bi];
+            let f = &CUBE_FACES[b.face];
+            let du = (b.u[1] - b.u[0]) / sub as f64;
+            let dv = (b.v[1] - b.v[0]) / sub as f64;
+            let mut acc = [0f64; 3];
+            for j in 0..sub {
+                for i in 0..sub {
+                    let (u0, v0) = (b.u[0] + i as f64 * du, b.v[0] + j as f64 * dv);
+                    let sa = rect_solid_angle(u0, u0 + du, v0, v0 + dv);
+                    let dir = (f.n + f.tu * (u0 + 0.5 * du) as f32 + f.tv * (v0 + 0.5 * dv) as f32).normalize();
+                    let l = radiance(dir);
+                    acc[0] += l.x as f64 * sa;
+                    acc[1] += l.y as f64 * sa;
+                    acc[2] += l.z as f64 * sa;
                 }
-                Rgb::new(acc[0] as f32, acc[1] as f32, acc[2] as f32)
-            })
-            .collect()
+            }
+            Rgb::new(acc[0] as f32, acc[1] as f32, acc[2] as f32)
+        })
     }
 }
 

@@ -4,7 +4,7 @@
 
 use super::sparse::{FullIndex, VoxelField};
 use crate::half::{code_after, Signed16};
-use rayon::prelude::*;
+use crate::par;
 use std::sync::Arc;
 
 /// Values per full voxel in [`Signed16`] relative to one scale 2ᵏ (module docs): 2 B per full
@@ -56,7 +56,14 @@ impl Field16 {
 
     /// The full voxels' values decoded, in grid order (4 B per full voxel).
     pub fn decoded(&self) -> Vec<f32> {
-        self.codes.packed().par_iter().map(|c| c.to_f32() * self.scale).collect()
+        let codes = self.codes.packed();
+        let mut out = vec![0f32; codes.len()];
+        par::for_chunks(&mut out, par::CHUNK, &|ci, out| {
+            for (o, c) in out.iter_mut().zip(&codes[ci * par::CHUNK..]) {
+                *o = c.to_f32() * self.scale;
+            }
+        });
+        out
     }
 
     /// Every grid voxel's value in grid order (empty voxels read 0).

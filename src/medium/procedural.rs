@@ -7,7 +7,7 @@
 
 use super::Grid3;
 use crate::math::{mix64, Rng};
-use rayon::prelude::*;
+use crate::par;
 
 /// Peak density of the core (unitless; with σt = 0.05 m⁻¹ and 10 m voxels, optical depth 0.75 per voxel).
 const CORE_DENSITY: f32 = 1.5;
@@ -155,7 +155,7 @@ pub fn cumulus(dims: [usize; 3], seed: u64) -> Grid3 {
     let (x_half, y0, y_span, z_half) = (0.455f32, 0.17f32, 0.6375f32, 0.2083f32);
     let n = dims[0] * dims[1] * dims[2];
     let mut data = vec![0f32; n];
-    data.par_chunks_mut(dims[0] * dims[1]).enumerate().for_each(|(k, slab)| {
+    par::for_chunks(&mut data, dims[0] * dims[1], &|k, slab| {
         for j in 0..dims[1] {
             for i in 0..dims[0] {
                 let u = (i as f32 + 0.5) / dims[0] as f32;

@@ -5,7 +5,7 @@
 use super::sparse::FullIndex;
 use super::Medium;
 use crate::math::Vec3;
-use rayon::prelude::*;
+use crate::par;
 use std::sync::Arc;
 
 /// Where a grid's full voxels lie in the world: what [`Self::values_at`] needs of an old frame.
@@ -50,10 +50,12 @@ impl FullVoxelPlacement {
         let d = self.index.dims();
         let mut out = vec![0f32; voxels.len() * stride];
         let stride = stride.max(1);
-        let mut known: Vec<bool> = out
-            .par_chunks_mut(stride)
-            .zip(voxels.par_iter())
-            .map(|(o, &g)| {
+        let mut known = vec![false; voxels.len()];
+        // Each task a chunk of voxels: their values and whether they were mapped.
+        let mut parts: Vec<(&mut [f32], &mut [bool])> = out.chunks_mut(par::CHUNK * stride).zip(known.chunks_mut(par::CHUNK)).collect();
+        par::for_chunks(&mut parts, 1, &|ci, part| {
+            let (out, known) = &mut part[0];
+            for ((o, k), &g) in out.chunks_mut(stride).zip(known.iter_mut()).zip(&voxels[ci * par::CHUNK..]) {
                 let centre = m.voxel_center(g % nx, (g / nx) % ny, g / (nx * ny));
                 // Continuous coordinates in units of old voxels, from the first old centre.
                 let u = (centre - self.origin) / self.voxel_size - Vec3::splat(0.5);
@@ -82,9 +84,9 @@ impl FullVoxelPlacement {
                 if weight > 0.0 {
                     o.iter_mut().for_each(|s| *s /= weight);
                 }
-                weight > 0.0
-            })
-            .collect();
+                *k = weight > 0.0;
+            }
+        });
         // Each step reads only the values known before it: the same whatever the thread count.
         let dims = m.dims();
         for _ in 0..FILL_STEPS {
@@ -92,36 +94,34 @@ impl FullVoxelPlacement {
             if missing.is_empty() {
                 break;
             }
-            let filled: Vec<Option<Vec<f32>>> = missing
-                .par_iter()
-                .map(|&r| {
-                    let g = voxels[r];
-                    let cell = [g % nx, (g / nx) % ny, g / (nx * ny)];
-                    let mut sum = vec![0f32; stride];
-                    let mut n = 0;
-                    for a in 0..3 {
-                        let step = [1, nx, nx * ny][a];
-                        for side in [-1i64, 1] {
-                            let c = cell[a] as i64 + side;
-                            if c < 0 || c >= dims[a] as i64 {
-                                continue;
-                            }
-                            let slot = new.slot((g as i64 + side * step as i64) as usize);
-                            if slot == 0 || !known[slot - 1] {
-                                continue;
-                            }
-                            let from = (slot - 1) * stride;
-                            sum.iter_mut().zip(&out[from..from + stride]).for_each(|(s, v)| *s += v);
-                            n += 1;
+            let filled: Vec<Option<Vec<f32>>> = par::map_range(missing.len(), &|m| {
+                let r = missing[m];
+                let g = voxels[r];
+                let cell = [g % nx, (g / nx) % ny, g / (nx * ny)];
+                let mut sum = vec![0f32; stride];
+                let mut n = 0;
+                for a in 0..3 {
+                    let step = [1, nx, nx * ny][a];
+                    for side in [-1i64, 1] {
+                        let c = cell[a] as i64 + side;
+                        if c < 0 || c >= dims[a] as i64 {
+                            continue;
                         }
+                        let slot = new.slot((g as i64 + side * step as i64) as usize);
+                        if slot == 0 || !known[slot - 1] {
+                            continue;
+                        }
+                        let from = (slot - 1) * stride;
+                        sum.iter_mut().zip(&out[from..from + stride]).for_each(|(s, v)| *s += v);
+                        n += 1;
                     }
-                    (n > 0).then(|| sum.into_iter().map(|s| s / n as f32).collect())
-                })
-                .collect();
+                }
+                (n > 0).then(|| sum.into_iter().map(|s| s / n as f32).collect())
+                });
             for (&r, f) in missing.iter().zip(filled) {
                 if let Some(f) = f {
-                    out[r * stride..(r + 1) * stride].copy_from_slice(&f);
-                    known[r] = true;
+                out[r * stride..(r + 1) * stride].copy_from_slice(&f);
+                known[r] = true;
                 }
             }
         }

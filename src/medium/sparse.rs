@@ -12,7 +12,7 @@
 //! full voxel; reading it by grid index is the slot and one load, no branch.
 
 use crate::math::Trilinear;
-use rayon::prelude::*;
+use crate::par;
 use std::sync::Arc;
 
 /// Grid voxels per occupancy word.
@@ -41,13 +41,13 @@ impl FullIndex {
     /// (x fastest). Panics beyond 2³² − 2 full voxels (the medium's voxel limit is far below).
     pub fn build(dims: [usize; 3], values: &[f32]) -> FullIndex {
         assert_eq!(values.len(), dims[0] * dims[1] * dims[2], "one value per voxel");
-        let mut words: Vec<Word> = values
-            .par_chunks(WORD_VOXELS)
-            .map(|chunk| Word {
-                mask: chunk.iter().enumerate().fold(0, |m, (b, &v)| m | (u32::from(v > 0.0) << b)),
-                base: 0,
-            })
-            .collect();
+        let mut words = vec![Word::default(); values.len().div_ceil(WORD_VOXELS)];
+        par::for_chunks(&mut words, par::CHUNK, &|ci, words| {
+            let first = ci * par::CHUNK * WORD_VOXELS;
+            for (w, chunk) in words.iter_mut().zip(values[first..].chunks(WORD_VOXELS)) {
+                w.mask = chunk.iter().enumerate().fold(0, |m, (b, &v)| m | (u32::from(v > 0.0) << b));
+            }
+        });
         let mut count = 0usize;
         for w in &mut words {
             w.base = u32::try_from(count).expect("fewer than 2^32 full voxels");
@@ -208,26 +208,38 @@ impl<T: Copy + Send + Sync> VoxelField<T> {
     /// Every voxel, full or empty, reads `empty`.
     pub fn filled(index: Arc<FullIndex>, empty: T) -> VoxelField<T> {
         let n = index.count();
-        VoxelField::new(index, empty, std::iter::repeat(empty).take(n))
+        VoxelField::new(index, empty, std::iter::repeat_n(empty, n))
     }
 
     /// `at(grid index)` for every full voxel, in parallel; `empty` elsewhere.
     pub fn from_fn(index: Arc<FullIndex>, empty: T, at: impl Fn(usize) -> T + Sync) -> VoxelField<T> {
-        // Sized up front: a collected list would grow to twice its length.
-        let mut data = Vec::with_capacity(index.count() + 1);
-        data.push(empty);
+        VoxelField::fill(index, empty, &|out, voxels| {
+            for (o, &g) in out.iter_mut().zip(voxels) {
+                *o = at(g);
+            }
+        })
+    }
+
+    /// The field with `fill(values, voxels)` writing the values of the full voxels with grid
+    /// indices `voxels`, called in parallel on chunks of them: one compiled copy of the loop per
+    /// value type, not per caller's closure.
+    fn fill(index: Arc<FullIndex>, empty: T, fill: &(dyn Fn(&mut [T], &[usize]) + Sync)) -> VoxelField<T> {
+        let mut data = vec![empty; index.count() + 1];
         // The full voxels' grid indices a batch at a time: all of them (8 B per full voxel)
         // would be the largest transient at `full`'s last stage (2.85 MB at 200×160×120).
         const BATCH: usize = 1 << 15;
         let mut batch = Vec::with_capacity(BATCH.min(index.count()));
         let mut voxels = index.full_voxels();
+        let mut done = 1;
         loop {
             batch.clear();
             batch.extend(voxels.by_ref().take(BATCH));
             if batch.is_empty() {
                 break;
             }
-            data.par_extend(batch.par_iter().map(|&g| at(g)));
+            let out = &mut data[done..done + batch.len()];
+            par::for_chunks(out, par::CHUNK, &|ci, out| fill(out, &batch[ci * par::CHUNK..]));
+            done += batch.len();
         }
         drop(voxels);
         VoxelField { index, data }
@@ -309,9 +321,16 @@ impl<T: Copy + Send + Sync> VoxelField<T> {
 
     /// A field of the same voxels with `f` of each value (the empty value too).
     pub fn map<U: Copy + Send + Sync>(&self, f: impl Fn(&T) -> U + Sync + Send) -> VoxelField<U> {
+        let empty = f(&self.data[0]);
+        let mut data = vec![empty; self.data.len()];
+        par::for_chunks(&mut data[1..], par::CHUNK, &|ci, out| {
+            for (o, v) in out.iter_mut().zip(&self.data[1 + ci * par::CHUNK..]) {
+                *o = f(v);
+            }
+        });
         VoxelField {
             index: self.index.clone(),
-            data: self.data.par_iter().map(f).collect(),
+            data,
         }
     }
 

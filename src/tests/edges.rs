@@ -6,7 +6,6 @@ use crate::edges::{CubeRequest, CubeSource, EdgeGather, EdgeSettings, SunInput};
 use crate::math::{Rgb, Rng, Vec3};
 use crate::medium::{procedural, Grid3, Medium};
 use crate::optics::Hg;
-use rayon::prelude::*;
 
 /// A cube filled with one radiance.
 struct Uniform(Rgb);
@@ -213,10 +212,7 @@ fn deterministic_at_any_thread_count() {
     let gather = sunlit_gather(&m, settings, &cubes, Vec3::Y, &sun, &dense);
     let rs = rays(60, 4);
     let seq: Vec<_> = rs.iter().map(|(o, d)| gather.radiance(*o, *d, f32::INFINITY, Rgb::ONE)).collect();
-    let par: Vec<_> = rs
-        .par_iter()
-        .map(|(o, d)| gather.radiance(*o, *d, f32::INFINITY, Rgb::ONE))
-        .collect();
+    let par = crate::par::map_range(rs.len(), &|i| gather.radiance(rs[i].0, rs[i].1, f32::INFINITY, Rgb::ONE));
     assert_eq!(seq, par);
     assert!(seq.iter().any(|a| a.cubes > 0));
 }
@@ -239,30 +235,29 @@ fn slab(sigma_t: f32, h: f32, albedo: f32, g: f32) -> Medium {
 fn slab_monte_carlo(tau0: f64, albedo: f64, g: f32, u: Vec3, paths: usize) -> f64 {
     let chunks = 16;
     let per = paths / chunks;
-    let sum: f64 = (0..chunks)
-        .into_par_iter()
-        .map(|c| {
-            let mut rng = Rng::new(77, c as u64);
-            let mut acc = 0.0;
-            for _ in 0..per {
-                let (mut y, mut dir, mut w) = (0.0f64, u, 1.0f64); // y: optical depth above the bottom
-                for _order in 1..=4 {
-                    let s = -(1.0 - rng.uniform_f64()).ln();
-                    let ny = y + s * dir.y as f64;
-                    if ny <= 0.0 || ny >= tau0 {
-                        break; // leaves the slab unscattered: not counted (order 0 of this vertex)
-                    }
-                    y = ny;
-                    w *= albedo;
-                    dir = sample_hg(dir, g, rng.uniform(), rng.uniform());
-                    if dir.y > 0.0 {
-                        acc += w * (-(tau0 - y) / dir.y as f64).exp();
-                    }
+    let sum: f64 = crate::par::map_range(chunks, &|c| {
+        let mut rng = Rng::new(77, c as u64);
+        let mut acc = 0.0;
+        for _ in 0..per {
+            let (mut y, mut dir, mut w) = (0.0f64, u, 1.0f64); // y: optical depth above the bottom
+            for _order in 1..=4 {
+                let s = -(1.0 - rng.uniform_f64()).ln();
+                let ny = y + s * dir.y as f64;
+                if ny <= 0.0 || ny >= tau0 {
+                    break; // leaves the slab unscattered: not counted (order 0 of this vertex)
+                }
+                y = ny;
+                w *= albedo;
+                dir = sample_hg(dir, g, rng.uniform(), rng.uniform());
+                if dir.y > 0.0 {
+                    acc += w * (-(tau0 - y) / dir.y as f64).exp();
                 }
             }
-            acc
-        })
-        .sum();
+        }
+        acc
+    })
+    .into_iter()
+    .sum();
     sum / (per * chunks) as f64
 }
 

@@ -109,7 +109,7 @@ fn chi2_hg_against(g_sample: f32, g: f32, n: usize, seed: u64) -> f64 {
     let mut expected = Vec::with_capacity(nt * np);
     for it in 0..nt {
         let p = band(edge(it), edge(it + 1));
-        expected.extend(std::iter::repeat(p * n as f64 / np as f64).take(np));
+        expected.extend(std::iter::repeat_n(p * n as f64 / np as f64, np));
     }
     // Pool cells with small expectation (the usual chi-square validity rule).
     let (mut stat, mut dof, mut pool_o, mut pool_e) = (0.0, 0usize, 0.0, 0.0);

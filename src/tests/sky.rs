@@ -5,10 +5,10 @@
 use crate::lighting::atmosphere::{cornette_shanks_phase, rayleigh_phase, Atmosphere, AtmosphereParams};
 use crate::lighting::{sun_and_sky, DirectionBins, Ground, Sky, SkyKind, Sun, SunDisc};
 use crate::math::{Rgb, Rng, Vec3};
+use crate::par;
 use crate::scene::{SceneDesc, SkyDesc, SkyModel, SunDesc};
 use crate::Error;
 use glam::{DVec3, Vec2};
-use rayon::prelude::*;
 use std::f64::consts::PI;
 use std::path::Path;
 
@@ -161,15 +161,14 @@ fn single_scattering_matches_brute_force() {
     let atm = Atmosphere::new(p.clone());
     let s = sun_at(20.0, 0.0);
     let cases = [(60.0, 90.0, 0.0), (15.0, 10.0, 0.0), (5.0, 180.0, 0.0), (30.0, 30.0, 3000.0)];
-    let worst = cases
-        .par_iter()
-        .map(|&(el, az, alt)| {
-            let d = sun_at(el, az);
-            let model = atm.sky_radiance(alt, d, s);
-            let reference = single_scattering_reference(&p, p.bottom_radius + alt, d, s, 3000, 600);
-            ((model - reference) / reference).abs().max_element()
-        })
-        .reduce(|| 0.0, f64::max);
+    let errors = par::map_range(cases.len(), &|i| {
+        let (el, az, alt) = cases[i];
+        let d = sun_at(el, az);
+        let model = atm.sky_radiance(alt, d, s);
+        let reference = single_scattering_reference(&p, p.bottom_radius + alt, d, s, 3000, 600);
+        ((model - reference) / reference).abs().max_element()
+    });
+    let worst = errors.into_iter().fold(0.0, f64::max);
     eprintln!("single scattering: worst relative error {worst:.5}");
     // 48 quadratic march segments, a 256×64 transmittance LUT: measured worst 0.35 %.
     assert!(worst < 0.01, "worst relative error {worst}");
@@ -185,62 +184,59 @@ fn mc_radiance(p: &AtmosphereParams, r0: f64, dir: DVec3, s: DVec3, c: usize, pa
     let sig_o = p.ozone_absorption[c];
     let maj = sig_r + sig_mt + sig_o; // densities are ≤ 1
     let g = p.mie_g;
-    let results: Vec<f64> = (0..paths)
-        .into_par_iter()
-        .map(|k| {
-            let mut rng = Rng::new(seed, k as u64);
-            let mut u = || rng.uniform_f64();
-            let mut pos = DVec3::new(0.0, r0, 0.0);
-            let mut d = dir;
-            let mut thr = 1.0;
-            let mut l = 0.0;
-            for _ in 0..100 {
-                let r = pos.length();
-                let mu = pos.dot(d) / r;
-                let t_end = p.distance_to_ground(r, mu).unwrap_or_else(|| p.distance_to_top(r, mu));
-                let mut t = 0.0;
-                let hit = loop {
-                    t -= (1.0 - u()).ln() / maj;
-                    if t >= t_end {
-                        break None;
-                    }
-                    let x = pos + d * t;
-                    let dn = p.densities(x.length() - p.bottom_radius);
-                    let st = sig_r * dn[0] + sig_mt * dn[1] + sig_o * dn[2];
-                    if u() * maj < st {
-                        break Some((x, dn, st));
-                    }
-                };
-                let Some((x, dn, st)) = hit else { break };
-                let (sr, sm) = (sig_r * dn[0], sig_m * dn[1]);
-                let ss = sr + sm;
-                thr *= ss / st;
-                let phase = |cos: f64| (sr * rayleigh_phase(cos) + sm * cornette_shanks_phase(cos, g)) / ss;
-                let rx = x.length();
-                l += thr * phase(s.dot(d)) * p.transmittance_to_top(rx, x.dot(s) / rx)[c];
-                // New tracing direction d' with cos(d, d') from the proxy mixture.
-                let cos = if u() * ss < sr {
-                    1.0 - 2.0 * u()
-                } else {
-                    let q = (1.0 - g * g) / (1.0 - g + 2.0 * g * u());
-                    ((1.0 + g * g - q * q) / (2.0 * g)).clamp(-1.0, 1.0)
-                };
-                let hg = (1.0 - g * g) / (4.0 * PI * (1.0 + g * g - 2.0 * g * cos).powf(1.5));
-                let proxy = (sr / (4.0 * PI) + sm * hg) / ss;
-                thr *= phase(cos) / proxy;
-                let phi = 2.0 * PI * u();
-                let sin = (1.0 - cos * cos).max(0.0).sqrt();
-                let f = crate::math::Frame::from_normal(d.as_vec3());
-                let local = f.to_world(Vec3::new((sin * phi.cos()) as f32, (sin * phi.sin()) as f32, cos as f32));
-                d = local.as_dvec3().normalize();
-                pos = x;
-                if thr < 1e-6 {
-                    break;
+    let results = par::map_range(paths, &|k| {
+        let mut rng = Rng::new(seed, k as u64);
+        let mut u = || rng.uniform_f64();
+        let mut pos = DVec3::new(0.0, r0, 0.0);
+        let mut d = dir;
+        let mut thr = 1.0;
+        let mut l = 0.0;
+        for _ in 0..100 {
+            let r = pos.length();
+            let mu = pos.dot(d) / r;
+            let t_end = p.distance_to_ground(r, mu).unwrap_or_else(|| p.distance_to_top(r, mu));
+            let mut t = 0.0;
+            let hit = loop {
+                t -= (1.0 - u()).ln() / maj;
+                if t >= t_end {
+                    break None;
                 }
+                let x = pos + d * t;
+                let dn = p.densities(x.length() - p.bottom_radius);
+                let st = sig_r * dn[0] + sig_mt * dn[1] + sig_o * dn[2];
+                if u() * maj < st {
+                    break Some((x, dn, st));
+                }
+            };
+            let Some((x, dn, st)) = hit else { break };
+            let (sr, sm) = (sig_r * dn[0], sig_m * dn[1]);
+            let ss = sr + sm;
+            thr *= ss / st;
+            let phase = |cos: f64| (sr * rayleigh_phase(cos) + sm * cornette_shanks_phase(cos, g)) / ss;
+            let rx = x.length();
+            l += thr * phase(s.dot(d)) * p.transmittance_to_top(rx, x.dot(s) / rx)[c];
+            // New tracing direction d' with cos(d, d') from the proxy mixture.
+            let cos = if u() * ss < sr {
+                1.0 - 2.0 * u()
+            } else {
+                let q = (1.0 - g * g) / (1.0 - g + 2.0 * g * u());
+                ((1.0 + g * g - q * q) / (2.0 * g)).clamp(-1.0, 1.0)
+            };
+            let hg = (1.0 - g * g) / (4.0 * PI * (1.0 + g * g - 2.0 * g * cos).powf(1.5));
+            let proxy = (sr / (4.0 * PI) + sm * hg) / ss;
+            thr *= phase(cos) / proxy;
+            let phi = 2.0 * PI * u();
+            let sin = (1.0 - cos * cos).max(0.0).sqrt();
+            let f = crate::math::Frame::from_normal(d.as_vec3());
+            let local = f.to_world(Vec3::new((sin * phi.cos()) as f32, (sin * phi.sin()) as f32, cos as f32));
+            d = local.as_dvec3().normalize();
+            pos = x;
+            if thr < 1e-6 {
+                break;
             }
-            l
-        })
-        .collect();
+        }
+        l
+    });
     let n = paths as f64;
     let mean = results.iter().sum::<f64>() / n;
     let var = results.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0);
@@ -454,15 +450,14 @@ fn ground_irradiance_is_sky_hemisphere_plus_shadowed_sun() {
     let (sun, sky) = atmosphere_sky(30.0, 256);
     let atm = Atmosphere::new(AtmosphereParams::default());
     let (nt, np) = (32, 64);
-    let e: DVec3 = (0..nt * np)
-        .into_par_iter()
-        .map(|k| {
-            let mu = ((k / np) as f64 + 0.5) / nt as f64;
-            let phi = 2.0 * PI * ((k % np) as f64 + 0.5) / np as f64;
-            let st = (1.0 - mu * mu).sqrt();
-            atm.sky_radiance(0.0, DVec3::new(st * phi.cos(), mu, st * phi.sin()), sun.dir.as_dvec3()) * mu
-        })
-        .sum::<DVec3>()
+    let e: DVec3 = par::map_range(nt * np, &|k| {
+        let mu = ((k / np) as f64 + 0.5) / nt as f64;
+        let phi = 2.0 * PI * ((k % np) as f64 + 0.5) / np as f64;
+        let st = (1.0 - mu * mu).sqrt();
+        atm.sky_radiance(0.0, DVec3::new(st * phi.cos(), mu, st * phi.sin()), sun.dir.as_dvec3()) * mu
+    })
+    .into_iter()
+    .sum::<DVec3>()
         * (2.0 * PI / (nt * np) as f64);
     let rel = ((sky.irradiance_up.as_dvec3() - e) / e).abs().max_element();
     assert!(rel < 0.02, "{} vs {e}", sky.irradiance_up);

@@ -8,7 +8,6 @@
 //! wrong diffuse-incidence distribution, while the whole table runs in a few seconds.
 
 use crate::reference::slab::{slab, Incidence, SlabParams};
-use rayon::prelude::*;
 
 const PHOTONS: u64 = 50_000;
 
@@ -41,31 +40,30 @@ fn rows() -> Vec<Row> {
 fn every_adding_doubling_row_within_three_standard_errors() {
     let rows = rows();
     assert_eq!(rows.len(), 105);
-    let failures: Vec<String> = rows
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(i, r)| {
-            [(Incidence::Collimated, r.ur1, r.ut1), (Incidence::Diffuse, r.uru, r.utu)]
-                .into_iter()
-                .filter_map(move |(inc, er, et)| {
-                    let p = SlabParams {
-                        thickness: r.tau,
-                        albedo: r.albedo,
-                        g: r.g,
-                        incidence: inc,
-                    };
-                    let s = slab(&p, PHOTONS, 1000 + i as u64).unwrap();
-                    let ok_r = (s.r - er).abs() <= 3.0 * s.r_stderr + 0.002;
-                    let ok_t = (s.t - et).abs() <= 3.0 * s.t_stderr + 0.002;
-                    (!(ok_r && ok_t)).then(|| {
-                        format!(
-                            "τ={} a={} g={} {:?}: R {:.5}±{:.5} (exact {er}), T {:.5}±{:.5} (exact {et})",
-                            r.tau, r.albedo, r.g, inc, s.r, s.r_stderr, s.t, s.t_stderr
-                        )
-                    })
+    let per_row = crate::par::map_range(rows.len(), &|i| {
+        let r = &rows[i];
+        [(Incidence::Collimated, r.ur1, r.ut1), (Incidence::Diffuse, r.uru, r.utu)]
+            .into_iter()
+            .filter_map(|(inc, er, et)| {
+                let p = SlabParams {
+                    thickness: r.tau,
+                    albedo: r.albedo,
+                    g: r.g,
+                    incidence: inc,
+                };
+                let s = slab(&p, PHOTONS, 1000 + i as u64).unwrap();
+                let ok_r = (s.r - er).abs() <= 3.0 * s.r_stderr + 0.002;
+                let ok_t = (s.t - et).abs() <= 3.0 * s.t_stderr + 0.002;
+                (!(ok_r && ok_t)).then(|| {
+                    format!(
+                        "τ={} a={} g={} {:?}: R {:.5}±{:.5} (exact {er}), T {:.5}±{:.5} (exact {et})",
+                        r.tau, r.albedo, r.g, inc, s.r, s.r_stderr, s.t, s.t_stderr
+                    )
                 })
-        })
-        .collect();
+            })
+            .collect::<Vec<String>>()
+    });
+    let failures = per_row.concat();
     assert!(
         failures.is_empty(),
         "{} of 210 cases fail:\n{}",

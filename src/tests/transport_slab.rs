@@ -5,29 +5,28 @@
 
 use super::common::slab_rows;
 use crate::transport::slab::{solve_slab, Incidence, SlabSettings};
-use rayon::prelude::*;
 
 #[test]
 fn every_adding_doubling_row_within_0_005() {
     let rows = slab_rows();
     assert_eq!(rows.len(), 105);
     let s = SlabSettings::default();
-    let results: Vec<(String, f64, usize)> = rows
-        .par_iter()
-        .flat_map_iter(|r| {
-            [(Incidence::Collimated, r[3], r[4]), (Incidence::Diffuse, r[5], r[6])]
-                .into_iter()
-                .map(move |(inc, er, et)| {
-                    let x = solve_slab(r[0], r[1], r[2], inc, &s);
-                    let err = (x.r - er).abs().max((x.t - et).abs());
-                    let line = format!(
-                        "τ={} a={} g={} {inc:?}: R {:.5} (exact {er}), T {:.5} (exact {et}), {} iterations",
-                        r[0], r[1], r[2], x.r, x.t, x.iterations
-                    );
-                    (line, err, x.iterations)
-                })
-        })
-        .collect();
+    let per_row = crate::par::map_range(rows.len(), &|i| {
+        let r = &rows[i];
+        [(Incidence::Collimated, r[3], r[4]), (Incidence::Diffuse, r[5], r[6])]
+            .into_iter()
+            .map(|(inc, er, et)| {
+                let x = solve_slab(r[0], r[1], r[2], inc, &s);
+                let err = (x.r - er).abs().max((x.t - et).abs());
+                let line = format!(
+                    "τ={} a={} g={} {inc:?}: R {:.5} (exact {er}), T {:.5} (exact {et}), {} iterations",
+                    r[0], r[1], r[2], x.r, x.t, x.iterations
+                );
+                (line, err, x.iterations)
+            })
+            .collect::<Vec<(String, f64, usize)>>()
+    });
+    let results = per_row.concat();
     let worst = results.iter().map(|r| r.1).fold(0.0, f64::max);
     let most = results.iter().max_by_key(|r| r.2).unwrap();
     let failures: Vec<&str> = results.iter().filter(|r| r.1 > 0.005).map(|r| r.0.as_str()).collect();

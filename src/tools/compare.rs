@@ -88,7 +88,7 @@ pub fn cloud_blocks(width: u32, height: u32, mask: Option<&[bool]>) -> Vec<[usiz
             for (k, p) in px.iter_mut().enumerate() {
                 *p = (by * BLOCK + k / BLOCK) * w + bx * BLOCK + k % BLOCK;
             }
-            if px.iter().filter(|&&i| mask.map_or(true, |m| m[i])).count() >= BLOCK_MIN_CLOUD {
+            if px.iter().filter(|&&i| mask.is_none_or(|m| m[i])).count() >= BLOCK_MIN_CLOUD {
                 out.push(px);
             }
         }
@@ -280,7 +280,7 @@ pub fn compare(test: &Image, reference: &Image, mask: Option<&[bool]>) -> Result
             return Err(Error::invalid("command line", "--mask", "mask size differs from the images"));
         }
     }
-    let sel = |i: usize| mask.map_or(true, |m| m[i]);
+    let sel = |i: usize| mask.is_none_or(|m| m[i]);
     let (mut se, mut peak, mut rel, mut nrel, mut yt, mut yr, mut n) = (0f64, 0f64, 0f64, 0usize, 0f64, 0f64, 0usize);
     for (i, (t, r)) in test.pixels.iter().zip(&reference.pixels).enumerate() {
         if !sel(i) {
@@ -531,7 +531,7 @@ pub fn diff_rgb8(test: &Image, reference: &Image, mask: Option<&[bool]>) -> Resu
     check_size(test, reference, "TEST.exr")?;
     let mut out = Vec::with_capacity(test.pixels.len() * 3);
     for (i, (t, r)) in test.pixels.iter().zip(&reference.pixels).enumerate() {
-        if !mask.map_or(true, |m| m[i]) {
+        if !mask.is_none_or(|m| m[i]) {
             out.extend_from_slice(&[40, 40, 40]);
             continue;
         }

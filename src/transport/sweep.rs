@@ -157,7 +157,7 @@ fn bilinear(w: &[f32; 4], n: [&[f32; 8]; 4]) -> [f32; 8] {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
 #[inline]
-unsafe fn bilinear_avx(w: &[f32; 4], n: [&[f32; 8]; 4]) -> [f32; 8] {
+unsafe fn bilinear_avx(w: &[f32; 4], n: [&[f32; 8]; 4]) -> [f32; 8] { unsafe {
     use std::arch::x86_64::*;
     let mut acc = _mm256_setzero_ps();
     for (wk, nk) in w.iter().zip(n) {
@@ -166,7 +166,7 @@ unsafe fn bilinear_avx(w: &[f32; 4], n: [&[f32; 8]; 4]) -> [f32; 8] {
     let mut out = [0f32; 8];
     _mm256_storeu_ps(out.as_mut_ptr(), acc);
     out
-}
+}}
 
 /// Upwind density below which a cell's back source is its own instead of the density-weighted
 /// mean of its upwind neighbours. The mean ρ·J/ρ loses its bits where ρ·J is subnormal (f32 has
@@ -214,7 +214,7 @@ unsafe fn cell_grey_avx(
     full: bool,
     s: f32,
     sigma_t: f32,
-) -> ([f32; 3], PlaneCell) {
+) -> ([f32; 3], PlaneCell) { unsafe {
     use std::arch::x86_64::*;
     let mut acc = _mm256_setzero_ps();
     for (wk, nk) in w.iter().zip(n) {
@@ -246,7 +246,7 @@ unsafe fn cell_grey_avx(
     let mut o = [0f32; 4];
     _mm_storeu_ps(o.as_mut_ptr(), out);
     ([o[0], o[1], o[2]], rec)
-}
+}}
 
 /// Sweep one ordinate `om` (weight `w`, sr) through the box upwind plane by plane: the radiance at
 /// every full voxel's centre, and the ground splats (column, change of downward irradiance, W/m²)

@@ -1,16 +1,11 @@
-//! The multigrid's parallel loops, all through one compiled rayon loop ([`run`]): a pass hands
-//! it one task per chunk of entries (or per plane), and the loop over the chunk's rows stays
-//! the pass's own, generic code. Rayon's plumbing is then compiled once for the multigrid
+//! The multigrid's parallel loops, all through the crate's one compiled rayon loop ([`run`]):
+//! a pass hands it one task per chunk of entries (or per plane), and the loop over the chunk's
+//! rows stays the pass's own, generic code. Rayon's plumbing is then compiled once for the multigrid
 //! instead of once per pass, band count, precision and row codec; the call through a trait
 //! object happens once per chunk, not per row.
 
-use rayon::prelude::*;
+use crate::par::run;
 use std::sync::{Mutex, PoisonError};
-
-/// `task(i)` for every i in `0..tasks`, on rayon's pool.
-fn run(tasks: usize, task: &(dyn Fn(usize) + Sync)) {
-    (0..tasks).into_par_iter().for_each(task);
-}
 
 /// A task's item, then its result.
 enum Slot<T, R> {

@@ -84,7 +84,7 @@ impl SourceField {
         // values r (no slot look-ups) and ρ of the r-th full voxel.
         let same = |f: &Arc<FullIndex>| Arc::ptr_eq(f, &index);
         assert!(
-            i0.iter().all(|f| same(f.index())) && sky_sh.map_or(true, |f| same(f.index())),
+            i0.iter().all(|f| same(f.index())) && sky_sh.is_none_or(|f| same(f.index())),
             "the diffusion's fields are stored on the medium's full voxels"
         );
         let rho = m.density.packed();
