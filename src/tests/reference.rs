@@ -213,7 +213,11 @@ fn time_limit_stops_early_and_layers_round_trip() {
     );
     s.render.time_limit = Some(0.3);
     let (img, spp) = render(&s);
-    assert!((1..1_000_000).contains(&spp), "{spp}");
+    // A million passes of 24 pixels cannot finish in 0.3 s on any machine; how many do is the
+    // machine's load (on a busy one none may), so only the early stop is asserted, and a pixel
+    // left without a sample reads a finite 0.
+    assert!(spp < 1_000_000, "{spp}");
+    assert!(img.pixels.iter().all(|p| p.is_finite() && p.min_element() >= 0.0));
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("r.exr");
     img.write_exr(&p).unwrap();
