@@ -1,0 +1,320 @@
+//! A sweep's cell step ([`super`] module docs) for the cells of a plane row, [`LANES`] at a time:
+//! the cells of a plane read only the previous plane, and every cell of a plane reads its four
+//! upwind neighbours at the same offsets with the same bilinear weights, so a run of cells is
+//! one lane-wise computation. The plane buffers hold each field of a cell in its own array
+//! ([`Plane`]), so the eight cells' upwind values are one eight-lane load per field and
+//! neighbour. Every operation is per lane with its own multiplies and adds in a fixed order
+//! (Rust never fuses a multiply with an add), so the step gives the same bits compiled as built
+//! (SSE2: two four-lane halves), compiled for AVX, and with any number of lanes (a test steps
+//! one cell at a time).
+
+use crate::transport::simd::prefetch;
+use std::array::from_fn;
+
+/// Cells of a row stepped together: one AVX register of f32.
+pub(in crate::transport) const LANES: usize = 8;
+
+/// Fields of a plane cell: the radiance per band ([`I`]..), the density ([`RHO`]) and the
+/// density × source per band ([`RS`]..).
+pub(in crate::transport) const I: usize = 0;
+pub(in crate::transport) const RHO: usize = 3;
+pub(in crate::transport) const RS: usize = 4;
+const FIELDS: usize = 7;
+
+/// A plane cell's fields.
+pub(in crate::transport) type Record = [f32; FIELDS];
+
+/// The record of a cell holding radiance `i`, density `rho` and density × source `rs`.
+pub(in crate::transport) fn record(i: [f32; 3], rho: f32, rs: [f32; 3]) -> Record {
+    [i[0], i[1], i[2], rho, rs[0], rs[1], rs[2]]
+}
+
+/// A sweep's plane buffer: per field, one array over the plane's cells (with the ghost ring),
+/// followed by [`LANES`] spare cells so that a run's last eight-lane load stays inside it.
+pub(in crate::transport) struct Plane {
+    /// Cells per field array, the spare ones included.
+    len: usize,
+    data: Vec<f32>,
+}
+
+impl Plane {
+    /// A buffer of `cells` cells, every field 0.
+    pub(in crate::transport) fn new(cells: usize) -> Plane {
+        let len = cells + LANES;
+        Plane {
+            len,
+            data: vec![0.0; FIELDS * len],
+        }
+    }
+
+    /// Cells in the buffer (without the spare ones).
+    pub(in crate::transport) fn cells(&self) -> usize {
+        self.len - LANES
+    }
+
+    /// Every cell (the spare ones included) set to `rec`.
+    pub(in crate::transport) fn fill(&mut self, rec: Record) {
+        for (field, value) in self.data.chunks_exact_mut(self.len).zip(rec) {
+            field.fill(value);
+        }
+    }
+
+    /// Cell `i` set to `rec`.
+    pub(in crate::transport) fn set(&mut self, i: usize, rec: Record) {
+        assert!(i < self.cells(), "plane cell {i} of {}", self.cells());
+        for (f, value) in rec.into_iter().enumerate() {
+            self.data[f * self.len + i] = value;
+        }
+    }
+
+    /// Cell `i`'s radiance per band.
+    pub(in crate::transport) fn radiance(&self, i: usize) -> [f32; 3] {
+        from_fn(|band| self.data[(I + band) * self.len + i])
+    }
+}
+
+/// Upwind density below which a cell's back source is its own instead of the density-weighted
+/// mean of its upwind neighbours. The mean ρ·J/ρ loses its bits where ρ·J is subnormal (f32 has
+/// 24 bits down to 1.2e-38; the Disney cloud holds densities of 1.7e-37, and the bilinear
+/// weights make them smaller still) and 1/ρ overflows to inf below 2.9e-39, so it would be
+/// NaN or inf; a density of 1e-30 puts an optical depth below 1e-30·σt·h into the step, which no
+/// image can show.
+const RHO_WEIGHT_MIN: f32 = 1e-30;
+
+/// What a sweep's steps share along one ordinate: the bilinear weights of the four upwind
+/// neighbours (offsets 0, 1, `stride`, `stride` + 1 from `up` cells off the cell), the step
+/// length `s` (m) and the δ-M extinction σt′ per band (1/m per unit density).
+pub(in crate::transport) struct Step {
+    pub(in crate::transport) weights: [f32; 4],
+    pub(in crate::transport) up: isize,
+    pub(in crate::transport) stride: usize,
+    pub(in crate::transport) s: f32,
+    pub(in crate::transport) sigma_t: [f32; 3],
+    /// All bands share σt′ (one set of step weights serves them).
+    pub(in crate::transport) grey: bool,
+}
+
+/// Step a run of cells of one plane row, `L` at a time: `row` holds their (density, full-voxel
+/// index or `u32::MAX`), `ahead` the cells [`PREFETCH_AHEAD`](crate::transport::grid::PREFETCH_AHEAD)
+/// further on in the sweep (whose sources are prefetched), and `l0` is the first one's index in
+/// the plane buffers. Each cell reads its upwind record in `prev` and its source in `light`,
+/// writes its record in `cur` and, if full, its radiance over its source in `light`.
+///
+/// Panics where the run's upwind records or records lie outside the buffers; a full-voxel
+/// index must be below `light.len()` (the callers check it once per solve, [`box_cells`](crate::transport::grid::box_cells)).
+#[inline(always)]
+pub(in crate::transport) fn step_row<const L: usize>(
+    k: &Step,
+    prev: &Plane,
+    cur: &mut Plane,
+    light: &mut [[f32; 3]],
+    row: &[(f32, u32)],
+    ahead: &[(f32, u32)],
+    l0: usize,
+) {
+    // The loads below reach cells l0 + up .. l0 + n + stride + L of `prev`; the stores cells
+    // l0 .. l0 + n of `cur`.
+    let n = row.len();
+    assert!(ahead.len() >= n && L <= LANES);
+    assert!(l0 as isize + k.up >= 0 && l0 + n + k.stride + 1 <= prev.cells() && prev.len == cur.len);
+    let mut start = 0;
+    while start < n {
+        let m = (n - start).min(L);
+        let mut rho = [0f32; L];
+        let mut full = [false; L];
+        let mut fi = [0usize; L];
+        let mut sc = [[0f32; L]; 3];
+        for j in 0..m {
+            let (r, f) = row[start + j];
+            // The full voxels' sources and radiances lie a grid row apart in x-major sweeps
+            // (past the L2 cache on large boxes): ask for the lines a few cells ahead.
+            let fa = ahead[start + j].1;
+            if fa != u32::MAX {
+                prefetch(light.as_ptr().wrapping_add(fa as usize));
+            }
+            rho[j] = r;
+            if f != u32::MAX {
+                full[j] = true;
+                fi[j] = f as usize;
+                // SAFETY: a full cell's index is below light.len() (this function's contract).
+                let s = unsafe { *light.get_unchecked(f as usize) };
+                for band in 0..3 {
+                    sc[band][j] = s[band];
+                }
+            }
+        }
+        let l = l0 + start;
+        let u = (l as isize + k.up) as usize;
+        // Radiance and density bilinear; the source (per unit extinction, defined only where
+        // ρ > 0) density-weighted, so that empty neighbours do not pull it towards 0 (a uniform
+        // source stays uniform: the furnace holds).
+        let acc: [[f32; L]; FIELDS] = from_fn(|f| {
+            let at = |i: usize| {
+                // SAFETY: u ≥ 0 and u + stride + 1 + L ≤ l0 + n + stride + L ≤ the field's
+                // length (the spare cells included), asserted above.
+                unsafe { std::ptr::read_unaligned(prev.data.as_ptr().add(f * prev.len + i) as *const [f32; L]) }
+            };
+            bilinear(&k.weights, [at(u), at(u + 1), at(u + k.stride), at(u + k.stride + 1)])
+        });
+        let out = cells(k, &acc, &rho, &full, &sc);
+        let rs: [[f32; L]; 3] = from_fn(|band| from_fn(|j| rho[j] * sc[band][j]));
+        let fields: [&[f32; L]; FIELDS] = [&out[0], &out[1], &out[2], &rho, &rs[0], &rs[1], &rs[2]];
+        for (f, values) in fields.into_iter().enumerate() {
+            let field = &mut cur.data[f * cur.len + l..][..m];
+            field.copy_from_slice(&values[..m]);
+        }
+        for j in 0..m {
+            if full[j] {
+                // SAFETY: as the source's load above.
+                unsafe { *light.get_unchecked_mut(fi[j]) = [out[0][j], out[1][j], out[2][j]] };
+            }
+        }
+        start += m;
+    }
+}
+
+/// Σ_k w_k n_k per lane of the four upwind neighbours, from 0 in the neighbours' order.
+#[inline(always)]
+fn bilinear<const L: usize>(w: &[f32; 4], n: [[f32; L]; 4]) -> [f32; L] {
+    from_fn(|j| 0.0 + w[0] * n[0][j] + w[1] * n[1][j] + w[2] * n[2][j] + w[3] * n[3][j])
+}
+
+/// The cells' step (module docs of [`super`]) from their upwind records `acc` ([`bilinear`]),
+/// densities, whether full and sources `sc` (0 where empty): their radiance per band.
+#[inline(always)]
+fn cells<const L: usize>(k: &Step, acc: &[[f32; L]; FIELDS], rho: &[f32; L], full: &[bool; L], sc: &[[f32; L]; 3]) -> [[f32; L]; 3] {
+    let rb = &acc[RHO];
+    let rm: [f32; L] = from_fn(|j| 0.5 * (rb[j] + rho[j]) * k.s);
+    let sb: [[f32; L]; 3] =
+        from_fn(|band| from_fn(|j| if rb[j] > RHO_WEIGHT_MIN { acc[RS + band][j] * (1.0 / rb[j]) } else { sc[band][j] }));
+    let grey = step_weights_lanes::<L>(from_fn(|j| k.sigma_t[0] * rm[j]));
+    from_fn(|band| {
+        let (e, wi, wo) = if band == 0 || k.grey {
+            grey
+        } else {
+            step_weights_lanes::<L>(from_fn(|j| k.sigma_t[band] * rm[j]))
+        };
+        let ib = &acc[I + band];
+        from_fn(|j| {
+            let se = if full[j] { sc[band][j] } else { sb[band][j] };
+            let stepped = ib[j] * e[j] + wi[j] * sb[band][j] + wo[j] * se;
+            if rm[j] > 0.0 {
+                stepped
+            } else {
+                ib[j]
+            }
+        })
+    })
+}
+
+/// Optical lengths below which the step weights are their series (the closed form cancels).
+const SERIES_BELOW: f32 = 0.5;
+
+/// (e^{−x}, w_in, w_out) of a step of optical length x ≥ 0 with a source linear in optical path
+/// (as the slab solver's, whose f64 form the test checks it against): with m = (1 − e^{−x})/x,
+/// w_in = m − e^{−x} and w_out = 1 − m; below [`SERIES_BELOW`] their Taylor series to x⁸,
+/// w_out = Σ (−1)^{k+1} x^k/(k+1)!, w_in = Σ (−1)^{k+1} k x^k/(k+1)!.
+#[inline(always)]
+pub(in crate::transport) fn step_weights_lanes<const L: usize>(x: [f32; L]) -> ([f32; L], [f32; L], [f32; L]) {
+    let e = exp_neg(x);
+    let mut wi = [0f32; L];
+    let mut wo = [0f32; L];
+    for j in 0..L {
+        let x = x[j];
+        let series_out = x * (1.0 / 2.0 + x * (-1.0 / 6.0 + x * (1.0 / 24.0 + x * (-1.0 / 120.0 + x * (1.0 / 720.0 + x * (-1.0 / 5040.0 + x * (1.0 / 40320.0 + x * (-1.0 / 362880.0))))))));
+        let series_in = x * (1.0 / 2.0 + x * (-2.0 / 6.0 + x * (3.0 / 24.0 + x * (-4.0 / 120.0 + x * (5.0 / 720.0 + x * (-6.0 / 5040.0 + x * (7.0 / 40320.0 + x * (-8.0 / 362880.0))))))));
+        let mean = (1.0 - e[j]) / x;
+        let (closed_in, closed_out) = (mean - e[j], 1.0 - mean);
+        let series = x < SERIES_BELOW;
+        wi[j] = if series { series_in } else { closed_in };
+        wo[j] = if series { series_out } else { closed_out };
+    }
+    (e, wi, wo)
+}
+
+/// [`step_weights_lanes`] of one step.
+#[cfg(test)]
+pub(in crate::transport) fn step_weights(x: f32) -> (f32, f32, f32) {
+    let (e, wi, wo) = step_weights_lanes([x]);
+    (e[0], wi[0], wo[0])
+}
+
+/// Optical lengths above which e^{−x} is 0 in [`exp_neg`] (e^{−87} = 1.6e-38, the smallest
+/// normal f32 is 1.2e-38).
+const EXP_NEG_MAX: f32 = 87.0;
+
+/// e^{−x} per lane for x ≥ 0, within 2 ulp (0 above [`EXP_NEG_MAX`]): −x = n ln 2 + r with n the
+/// nearest integer to −x/ln 2 (by adding and subtracting 1.5·2²³) and ln 2 in two parts (Cody and
+/// Waite), e^r by the Cephes `expf` polynomial on |r| ≤ ln 2/2, 2ⁿ from its exponent bits.
+#[inline(always)]
+pub(in crate::transport) fn exp_neg<const L: usize>(x: [f32; L]) -> [f32; L] {
+    const ROUND: f32 = 12_582_912.0;
+    const LN2_HI: f32 = 0.693_359_4;
+    const LN2_LO: f32 = -2.121_944_4e-4;
+    from_fn(|j| {
+        let y = -(if x[j] > EXP_NEG_MAX { EXP_NEG_MAX } else { x[j] });
+        let t = y * std::f32::consts::LOG2_E + ROUND;
+        let n = t - ROUND;
+        let r = (y - n * LN2_HI) - n * LN2_LO;
+        let p = ((((1.987_569_2e-4 * r + 1.398_199_9e-3) * r + 8.333_452e-3) * r + 4.166_579_6e-2) * r + 1.666_666_5e-1) * r + 5.000_000_1e-1;
+        let er = p * (r * r) + r + 1.0;
+        // t's low mantissa bits hold n (two's complement): 2ⁿ's exponent field is n + 127 ≥ 1.
+        let scale = f32::from_bits(t.to_bits().wrapping_sub(ROUND.to_bits()).wrapping_add(127) << 23);
+        if x[j] > EXP_NEG_MAX {
+            0.0
+        } else {
+            er * scale
+        }
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exp_neg_is_within_two_ulp() {
+        let mut worst = 0f64;
+        for i in 0..=200_000 {
+            let x = i as f32 * (EXP_NEG_MAX / 200_000.0);
+            let got = exp_neg([x])[0] as f64;
+            let want = (-(x as f64)).exp();
+            // One ulp of the wanted value (normal f32 down to e^{−87}).
+            let ulp = f32::EPSILON as f64 * 2f64.powi(want.log2().floor() as i32);
+            worst = worst.max((got - want).abs() / ulp);
+        }
+        assert!(worst <= 2.0, "{worst} ulp");
+        assert_eq!(exp_neg([0.0])[0], 1.0);
+        assert_eq!(exp_neg([87.5, 1e30, f32::INFINITY]), [0.0; 3]);
+    }
+
+    #[test]
+    fn step_weights_integrate_constants_and_ramps() {
+        // Step lengths 10⁻⁶·1.01^i up to 100 and both sides of the series' end.
+        let xs = (0..).map(|i| 1e-6f32 * 1.01f32.powi(i)).take_while(|x| *x < 100.0);
+        // Largest relative error of e^{−x}, w_in and w_out.
+        let mut worst = [0f64; 3];
+        for x in xs.chain([SERIES_BELOW, SERIES_BELOW * (1.0 - f32::EPSILON)]) {
+            let (e, wi, wo) = step_weights(x);
+            assert!(wi > 0.0 && wo > 0.0, "x={x}");
+            let xd = x as f64;
+            let ed = (-xd).exp();
+            // ∫₀ˣ e^{−(x−t)} dt = 1 − e^{−x}; ∫₀ˣ (t/x) e^{−(x−t)} dt = 1 − (1 − e^{−x})/x; below
+            // 0.1 their series to x²⁰ (the closed form cancels in f64 too).
+            let term = |k: i32, c: f64| (-1f64).powi(k + 1) * c * xd.powi(k) / (1..=k + 1).map(f64::from).product::<f64>();
+            let (wid, wod) = if xd < 0.1 {
+                ((1..=20).map(|k| term(k, k as f64)).sum(), (1..=20).map(|k| term(k, 1.0)).sum())
+            } else {
+                ((1.0 - ed) / xd - ed, 1.0 - (1.0 - ed) / xd)
+            };
+            // e^{−x} is 0 past EXP_NEG_MAX (below the smallest normal f32).
+            let ed = if x > EXP_NEG_MAX { 0.0 } else { ed };
+            for (w, (got, want)) in worst.iter_mut().zip([(e, ed), (wi, wid), (wo, wod)]) {
+                *w = w.max(if want == 0.0 { got as f64 } else { (got as f64 - want).abs() / want });
+            }
+        }
+        // e^{−x} within an ulp; the weights within 4.1e-7 and 2.5e-7 (w_in: m − e^{−x} cancels
+        // a few bits where x ≈ SERIES_BELOW).
+        assert!(worst[0] < 1.2e-7 && worst[1] < 5e-7 && worst[2] < 3e-7, "(e, w_in, w_out): {worst:?}");
+    }
+}
