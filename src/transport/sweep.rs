@@ -12,11 +12,13 @@ use super::ground::GroundMap;
 use super::simd::has_avx;
 use super::source::{moments_block, source_block, Lanes, PairTables, ORDINATE_BATCH, PAIRS};
 use super::sphere::Quadrature;
-use step::{record, step_row, Plane, Step, LANES};
+use lanes::Vector;
+use step::{record, step_row, Plane, Step};
 use crate::math::Vec3;
 use glam::DVec3;
 use rayon::prelude::*;
 
+mod lanes;
 mod step;
 
 /// The per-voxel array of a sweep batch: per ordinate slot and full voxel, the source in that
@@ -118,9 +120,9 @@ pub(super) type Splats = Vec<(usize, [f64; 3])>;
 /// of the light leaving the box downwards. `light` holds the source in this ordinate per full
 /// voxel and receives the radiance there (all lie in the box): a cell reads its source before it
 /// writes its radiance, and each full voxel is one cell of the sweep. The cells of a row are
-/// stepped `L` at a time ([`step_row`]: the same bits for any `L`).
+/// stepped [`Vector::N`] at a time ([`step_row`]: the same bits for any lanes).
 #[inline(always)]
-fn sweep_kernel<const L: usize>(
+fn sweep_kernel<V: Vector>(
     c: &Ctx,
     om: DVec3,
     w: f64,
@@ -248,7 +250,7 @@ fn sweep_kernel<const L: usize>(
             }
             live_cur[ic] = (lo, hi);
             if lo < hi {
-                step_row::<L>(&k, &prev, &mut cur, light, &row[lo..hi], &row_ahead[lo..hi], l0 + lo);
+                step_row::<V>(&k, &prev, &mut cur, light, &row[lo..hi], &row_ahead[lo..hi], l0 + lo);
             }
         }
         let pa = pa as isize;
@@ -338,22 +340,26 @@ fn needed_cells(next: &[(usize, usize)], ic: isize, fc: isize, fb: isize, full: 
     cells
 }
 
-/// [`sweep_kernel`] compiled for AVX where the processor has it, as built (SSE2 on x86-64)
-/// otherwise: the same bits.
+/// [`sweep_kernel`] in AVX lanes where the processor has it, else in SSE2 lanes (x86-64) or one
+/// lane at a time: the same bits.
 pub(super) fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, ground: &GroundMap, light: &mut [[f32; 3]]) -> Splats {
     #[cfg(target_arch = "x86_64")]
     if has_avx() {
         // SAFETY: the processor has AVX.
         return unsafe { sweep_ordinate_avx(c, om, w, ground, light) };
     }
-    sweep_kernel::<LANES>(c, om, w, ground, light)
+    #[cfg(target_arch = "x86_64")]
+    return sweep_kernel::<lanes::Sse2>(c, om, w, ground, light);
+    #[cfg(not(target_arch = "x86_64"))]
+    sweep_kernel::<f32>(c, om, w, ground, light)
 }
 
-/// [`sweep_kernel`] compiled for AVX: the row steps' eight lanes in one register.
+/// [`sweep_kernel`] compiled for AVX: the row steps' eight lanes in one register ([`lanes::Avx`],
+/// made only here).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
 unsafe fn sweep_ordinate_avx(c: &Ctx, om: DVec3, w: f64, ground: &GroundMap, light: &mut [[f32; 3]]) -> Splats {
-    sweep_kernel::<LANES>(c, om, w, ground, light)
+    sweep_kernel::<lanes::Avx>(c, om, w, ground, light)
 }
 
 #[cfg(test)]
@@ -477,7 +483,7 @@ mod tests {
         assert_eq!(bits(&plain), bits(&disp));
         assert!(plain.iter().flatten().any(|x| *x > 0.0));
         // Step (2), every ordinate, with coloured and with grey optics: the rows' cells one at a
-        // time, eight at a time as built (SSE2 on x86-64) and through the dispatcher (AVX).
+        // time, eight at a time in SSE2 lanes and through the dispatcher (AVX lanes).
         let grey = Ctx {
             sigma_t: [0.05; 3],
             grey: true,
@@ -488,8 +494,11 @@ mod tests {
         for c in [&c, &grey] {
             for d in 0..q.dirs.len() {
                 let (mut one, mut ra, mut rb) = (plain[..nfull].to_vec(), plain[..nfull].to_vec(), plain[..nfull].to_vec());
-                sweep_kernel::<1>(c, q.dirs[d], q.weights[d], &ground, &mut one);
-                sweep_kernel::<LANES>(c, q.dirs[d], q.weights[d], &ground, &mut ra);
+                sweep_kernel::<f32>(c, q.dirs[d], q.weights[d], &ground, &mut one);
+                #[cfg(target_arch = "x86_64")]
+                sweep_kernel::<lanes::Sse2>(c, q.dirs[d], q.weights[d], &ground, &mut ra);
+                #[cfg(not(target_arch = "x86_64"))]
+                sweep_kernel::<f32>(c, q.dirs[d], q.weights[d], &ground, &mut ra);
                 sweep_ordinate(c, q.dirs[d], q.weights[d], &ground, &mut rb);
                 assert_eq!(bits(&one), bits(&ra), "ordinate {d}, grey {}", c.grey);
                 assert_eq!(bits(&ra), bits(&rb), "ordinate {d}, grey {}", c.grey);

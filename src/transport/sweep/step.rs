@@ -8,8 +8,8 @@
 //! (SSE2: two four-lane halves), compiled for AVX, and with any number of lanes (a test steps
 //! one cell at a time).
 
+use super::lanes::{Vector, ROUND};
 use crate::transport::simd::prefetch;
-use std::array::from_fn;
 
 /// Cells of a row stepped together: one AVX register of f32.
 pub(in crate::transport) const LANES: usize = 8;
@@ -69,7 +69,7 @@ impl Plane {
 
     /// Cell `i`'s radiance per band.
     pub(in crate::transport) fn radiance(&self, i: usize) -> [f32; 3] {
-        from_fn(|band| self.data[(I + band) * self.len + i])
+        [0, 1, 2].map(|band| self.data[(I + band) * self.len + i])
     }
 }
 
@@ -94,16 +94,18 @@ pub(in crate::transport) struct Step {
     pub(in crate::transport) grey: bool,
 }
 
-/// Step a run of cells of one plane row, `L` at a time: `row` holds their (density, full-voxel
-/// index or `u32::MAX`), `ahead` the cells [`PREFETCH_AHEAD`](crate::transport::grid::PREFETCH_AHEAD)
-/// further on in the sweep (whose sources are prefetched), and `l0` is the first one's index in
-/// the plane buffers. Each cell reads its upwind record in `prev` and its source in `light`,
-/// writes its record in `cur` and, if full, its radiance over its source in `light`.
+/// Step a run of cells of one plane row, [`Vector::N`] at a time: `row` holds their (density,
+/// full-voxel index or `u32::MAX`), `ahead` the cells
+/// [`PREFETCH_AHEAD`](crate::transport::grid::PREFETCH_AHEAD) further on in the sweep (whose
+/// sources are prefetched), and `l0` is the first one's index in the plane buffers. Each cell
+/// reads its upwind record in `prev` and its source in `light`, writes its record in `cur` and,
+/// if full, its radiance over its source in `light`.
 ///
 /// Panics where the run's upwind records or records lie outside the buffers; a full-voxel
-/// index must be below `light.len()` (the callers check it once per solve, [`box_cells`](crate::transport::grid::box_cells)).
+/// index must be below `light.len()` (the callers check it once per solve,
+/// [`box_cells`](crate::transport::grid::box_cells)).
 #[inline(always)]
-pub(in crate::transport) fn step_row<const L: usize>(
+pub(in crate::transport) fn step_row<V: Vector>(
     k: &Step,
     prev: &Plane,
     cur: &mut Plane,
@@ -112,18 +114,19 @@ pub(in crate::transport) fn step_row<const L: usize>(
     ahead: &[(f32, u32)],
     l0: usize,
 ) {
-    // The loads below reach cells l0 + up .. l0 + n + stride + L of `prev`; the stores cells
+    // The loads below reach cells l0 + up .. l0 + n + stride + N of `prev`; the stores cells
     // l0 .. l0 + n of `cur`.
     let n = row.len();
-    assert!(ahead.len() >= n && L <= LANES);
+    assert!(ahead.len() >= n && V::N <= LANES);
     assert!(l0 as isize + k.up >= 0 && l0 + n + k.stride + 1 <= prev.cells() && prev.len == cur.len);
+    let w = k.weights.map(V::splat);
     let mut start = 0;
     while start < n {
-        let m = (n - start).min(L);
-        let mut rho = [0f32; L];
-        let mut full = [false; L];
-        let mut fi = [0usize; L];
-        let mut sc = [[0f32; L]; 3];
+        let m = (n - start).min(V::N);
+        let mut rho = [0f32; 8];
+        let mut full = [0f32; 8];
+        let mut fi = [0usize; 8];
+        let mut sc = [[0f32; 8]; 3];
         for j in 0..m {
             let (r, f) = row[start + j];
             // The full voxels' sources and radiances lie a grid row apart in x-major sweeps
@@ -134,7 +137,7 @@ pub(in crate::transport) fn step_row<const L: usize>(
             }
             rho[j] = r;
             if f != u32::MAX {
-                full[j] = true;
+                full[j] = f32::from_bits(u32::MAX);
                 fi[j] = f as usize;
                 // SAFETY: a full cell's index is below light.len() (this function's contract).
                 let s = unsafe { *light.get_unchecked(f as usize) };
@@ -147,63 +150,59 @@ pub(in crate::transport) fn step_row<const L: usize>(
         let u = (l as isize + k.up) as usize;
         // Radiance and density bilinear; the source (per unit extinction, defined only where
         // ρ > 0) density-weighted, so that empty neighbours do not pull it towards 0 (a uniform
-        // source stays uniform: the furnace holds).
-        let acc: [[f32; L]; FIELDS] = from_fn(|f| {
-            let at = |i: usize| {
-                // SAFETY: u ≥ 0 and u + stride + 1 + L ≤ l0 + n + stride + L ≤ the field's
-                // length (the spare cells included), asserted above.
-                unsafe { std::ptr::read_unaligned(prev.data.as_ptr().add(f * prev.len + i) as *const [f32; L]) }
-            };
-            bilinear(&k.weights, [at(u), at(u + 1), at(u + k.stride), at(u + k.stride + 1)])
+        // source stays uniform: the furnace holds). From 0, the neighbours in order.
+        let acc: [V; FIELDS] = std::array::from_fn(|f| {
+            let field = prev.data[f * prev.len..].as_ptr();
+            // SAFETY: u ≥ 0 and u + stride + 1 + N ≤ l0 + n + stride + N ≤ the field's length
+            // (the spare cells included), asserted above.
+            let at = |i: usize| unsafe { V::load(field.add(i)) };
+            let mut sum = V::splat(0.0);
+            for (wk, i) in w.iter().zip([u, u + 1, u + k.stride, u + k.stride + 1]) {
+                sum = sum.add(wk.mul(at(i)));
+            }
+            sum
         });
-        let out = cells(k, &acc, &rho, &full, &sc);
-        let rs: [[f32; L]; 3] = from_fn(|band| from_fn(|j| rho[j] * sc[band][j]));
-        let fields: [&[f32; L]; FIELDS] = [&out[0], &out[1], &out[2], &rho, &rs[0], &rs[1], &rs[2]];
-        for (f, values) in fields.into_iter().enumerate() {
-            let field = &mut cur.data[f * cur.len + l..][..m];
-            field.copy_from_slice(&values[..m]);
+        let (rho_v, full_v) = (V::from_array(&rho), V::from_array(&full));
+        let sc_v = sc.each_ref().map(V::from_array);
+        let out = cells(k, &acc, rho_v, full_v, &sc_v);
+        let rs = sc_v.map(|s| rho_v.mul(s));
+        let fields = [out[0], out[1], out[2], rho_v, rs[0], rs[1], rs[2]];
+        let mut lanes = [[0f32; 8]; FIELDS];
+        for (f, (v, lanes)) in fields.into_iter().zip(&mut lanes).enumerate() {
+            v.to_array(lanes);
+            cur.data[f * cur.len + l..][..m].copy_from_slice(&lanes[..m]);
         }
         for j in 0..m {
-            if full[j] {
+            if full[j].to_bits() != 0 {
                 // SAFETY: as the source's load above.
-                unsafe { *light.get_unchecked_mut(fi[j]) = [out[0][j], out[1][j], out[2][j]] };
+                unsafe { *light.get_unchecked_mut(fi[j]) = [lanes[I][j], lanes[I + 1][j], lanes[I + 2][j]] };
             }
         }
         start += m;
     }
 }
 
-/// Σ_k w_k n_k per lane of the four upwind neighbours, from 0 in the neighbours' order.
+/// The cells' step (module docs of [`super`]) from their upwind records `acc`, densities `rho`,
+/// whether full (a mask) and sources `sc` (0 where empty): their radiance per band.
 #[inline(always)]
-fn bilinear<const L: usize>(w: &[f32; 4], n: [[f32; L]; 4]) -> [f32; L] {
-    from_fn(|j| 0.0 + w[0] * n[0][j] + w[1] * n[1][j] + w[2] * n[2][j] + w[3] * n[3][j])
-}
-
-/// The cells' step (module docs of [`super`]) from their upwind records `acc` ([`bilinear`]),
-/// densities, whether full and sources `sc` (0 where empty): their radiance per band.
-#[inline(always)]
-fn cells<const L: usize>(k: &Step, acc: &[[f32; L]; FIELDS], rho: &[f32; L], full: &[bool; L], sc: &[[f32; L]; 3]) -> [[f32; L]; 3] {
-    let rb = &acc[RHO];
-    let rm: [f32; L] = from_fn(|j| 0.5 * (rb[j] + rho[j]) * k.s);
-    let sb: [[f32; L]; 3] =
-        from_fn(|band| from_fn(|j| if rb[j] > RHO_WEIGHT_MIN { acc[RS + band][j] * (1.0 / rb[j]) } else { sc[band][j] }));
-    let grey = step_weights_lanes::<L>(from_fn(|j| k.sigma_t[0] * rm[j]));
-    from_fn(|band| {
+fn cells<V: Vector>(k: &Step, acc: &[V; FIELDS], rho: V, full: V, sc: &[V; 3]) -> [V; 3] {
+    let rb = acc[RHO];
+    let rm = V::splat(0.5).mul(rb.add(rho)).mul(V::splat(k.s));
+    let stepping = rm.gt(V::splat(0.0));
+    let weighted = rb.gt(V::splat(RHO_WEIGHT_MIN));
+    let inv_rb = V::splat(1.0).div(rb);
+    let grey = step_weights_lanes(V::splat(k.sigma_t[0]).mul(rm));
+    std::array::from_fn(|band| {
         let (e, wi, wo) = if band == 0 || k.grey {
             grey
         } else {
-            step_weights_lanes::<L>(from_fn(|j| k.sigma_t[band] * rm[j]))
+            step_weights_lanes(V::splat(k.sigma_t[band]).mul(rm))
         };
-        let ib = &acc[I + band];
-        from_fn(|j| {
-            let se = if full[j] { sc[band][j] } else { sb[band][j] };
-            let stepped = ib[j] * e[j] + wi[j] * sb[band][j] + wo[j] * se;
-            if rm[j] > 0.0 {
-                stepped
-            } else {
-                ib[j]
-            }
-        })
+        let ib = acc[I + band];
+        let sb = V::select(weighted, acc[RS + band].mul(inv_rb), sc[band]);
+        let se = V::select(full, sc[band], sb);
+        let stepped = ib.mul(e).add(wi.mul(sb)).add(wo.mul(se));
+        V::select(stepping, stepped, ib)
     })
 }
 
@@ -215,57 +214,49 @@ const SERIES_BELOW: f32 = 0.5;
 /// w_in = m − e^{−x} and w_out = 1 − m; below [`SERIES_BELOW`] their Taylor series to x⁸,
 /// w_out = Σ (−1)^{k+1} x^k/(k+1)!, w_in = Σ (−1)^{k+1} k x^k/(k+1)!.
 #[inline(always)]
-pub(in crate::transport) fn step_weights_lanes<const L: usize>(x: [f32; L]) -> ([f32; L], [f32; L], [f32; L]) {
+fn step_weights_lanes<V: Vector>(x: V) -> (V, V, V) {
     let e = exp_neg(x);
-    let mut wi = [0f32; L];
-    let mut wo = [0f32; L];
-    for j in 0..L {
-        let x = x[j];
-        let series_out = x * (1.0 / 2.0 + x * (-1.0 / 6.0 + x * (1.0 / 24.0 + x * (-1.0 / 120.0 + x * (1.0 / 720.0 + x * (-1.0 / 5040.0 + x * (1.0 / 40320.0 + x * (-1.0 / 362880.0))))))));
-        let series_in = x * (1.0 / 2.0 + x * (-2.0 / 6.0 + x * (3.0 / 24.0 + x * (-4.0 / 120.0 + x * (5.0 / 720.0 + x * (-6.0 / 5040.0 + x * (7.0 / 40320.0 + x * (-8.0 / 362880.0))))))));
-        let mean = (1.0 - e[j]) / x;
-        let (closed_in, closed_out) = (mean - e[j], 1.0 - mean);
-        let series = x < SERIES_BELOW;
-        wi[j] = if series { series_in } else { closed_in };
-        wo[j] = if series { series_out } else { closed_out };
-    }
-    (e, wi, wo)
+    let horner = |c: [f32; 8]| c.iter().rev().fold(V::splat(0.0), |acc, ck| acc.mul(x).add(V::splat(*ck))).mul(x);
+    let series_out = horner(std::array::from_fn(|k| SIGN[k] / FACTORIAL[k + 2]));
+    let series_in = horner(std::array::from_fn(|k| SIGN[k] * (k + 1) as f32 / FACTORIAL[k + 2]));
+    let mean = V::splat(1.0).sub(e).div(x);
+    let (closed_in, closed_out) = (mean.sub(e), V::splat(1.0).sub(mean));
+    let series = V::splat(SERIES_BELOW).gt(x);
+    (e, V::select(series, series_in, closed_in), V::select(series, series_out, closed_out))
 }
+
+/// (−1)^{k} and (k)! for the series' coefficients.
+const SIGN: [f32; 8] = [1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0];
+const FACTORIAL: [f32; 10] = [1.0, 1.0, 2.0, 6.0, 24.0, 120.0, 720.0, 5040.0, 40320.0, 362880.0];
 
 /// [`step_weights_lanes`] of one step.
 #[cfg(test)]
-pub(in crate::transport) fn step_weights(x: f32) -> (f32, f32, f32) {
-    let (e, wi, wo) = step_weights_lanes([x]);
-    (e[0], wi[0], wo[0])
+fn step_weights(x: f32) -> (f32, f32, f32) {
+    step_weights_lanes(x)
 }
 
 /// Optical lengths above which e^{−x} is 0 in [`exp_neg`] (e^{−87} = 1.6e-38, the smallest
 /// normal f32 is 1.2e-38).
 const EXP_NEG_MAX: f32 = 87.0;
 
-/// e^{−x} per lane for x ≥ 0, within 2 ulp (0 above [`EXP_NEG_MAX`]): −x = n ln 2 + r with n the
-/// nearest integer to −x/ln 2 (by adding and subtracting 1.5·2²³) and ln 2 in two parts (Cody and
-/// Waite), e^r by the Cephes `expf` polynomial on |r| ≤ ln 2/2, 2ⁿ from its exponent bits.
+/// e^{−x} per lane for x ≥ 0, within an ulp (0 above [`EXP_NEG_MAX`]): −x = n ln 2 + r with n
+/// the nearest integer to −x/ln 2 (by adding and subtracting [`ROUND`]) and ln 2 in two parts
+/// (Cody and Waite), e^r by the Cephes `expf` polynomial on |r| ≤ ln 2/2, 2ⁿ from its exponent
+/// bits.
 #[inline(always)]
-pub(in crate::transport) fn exp_neg<const L: usize>(x: [f32; L]) -> [f32; L] {
-    const ROUND: f32 = 12_582_912.0;
+fn exp_neg<V: Vector>(x: V) -> V {
     const LN2_HI: f32 = 0.693_359_4;
     const LN2_LO: f32 = -2.121_944_4e-4;
-    from_fn(|j| {
-        let y = -(if x[j] > EXP_NEG_MAX { EXP_NEG_MAX } else { x[j] });
-        let t = y * std::f32::consts::LOG2_E + ROUND;
-        let n = t - ROUND;
-        let r = (y - n * LN2_HI) - n * LN2_LO;
-        let p = ((((1.987_569_2e-4 * r + 1.398_199_9e-3) * r + 8.333_452e-3) * r + 4.166_579_6e-2) * r + 1.666_666_5e-1) * r + 5.000_000_1e-1;
-        let er = p * (r * r) + r + 1.0;
-        // t's low mantissa bits hold n (two's complement): 2ⁿ's exponent field is n + 127 ≥ 1.
-        let scale = f32::from_bits(t.to_bits().wrapping_sub(ROUND.to_bits()).wrapping_add(127) << 23);
-        if x[j] > EXP_NEG_MAX {
-            0.0
-        } else {
-            er * scale
-        }
-    })
+    const P: [f32; 6] = [1.987_569_2e-4, 1.398_199_9e-3, 8.333_452e-3, 4.166_579_6e-2, 1.666_666_5e-1, 5.000_000_1e-1];
+    let max = V::splat(EXP_NEG_MAX);
+    let beyond = x.gt(max);
+    let y = V::splat(0.0).sub(V::select(beyond, max, x));
+    let t = y.mul(V::splat(std::f32::consts::LOG2_E)).add(V::splat(ROUND));
+    let n = t.sub(V::splat(ROUND));
+    let r = y.sub(n.mul(V::splat(LN2_HI))).sub(n.mul(V::splat(LN2_LO)));
+    let p = P[1..].iter().fold(V::splat(P[0]), |acc, c| acc.mul(r).add(V::splat(*c)));
+    let er = p.mul(r.mul(r)).add(r).add(V::splat(1.0));
+    V::select(beyond, V::splat(0.0), er.mul(V::pow2_of_rounded(t)))
 }
 
 #[cfg(test)]
@@ -277,15 +268,15 @@ mod tests {
         let mut worst = 0f64;
         for i in 0..=200_000 {
             let x = i as f32 * (EXP_NEG_MAX / 200_000.0);
-            let got = exp_neg([x])[0] as f64;
+            let got = exp_neg(x) as f64;
             let want = (-(x as f64)).exp();
             // One ulp of the wanted value (normal f32 down to e^{−87}).
             let ulp = f32::EPSILON as f64 * 2f64.powi(want.log2().floor() as i32);
             worst = worst.max((got - want).abs() / ulp);
         }
         assert!(worst <= 2.0, "{worst} ulp");
-        assert_eq!(exp_neg([0.0])[0], 1.0);
-        assert_eq!(exp_neg([87.5, 1e30, f32::INFINITY]), [0.0; 3]);
+        assert_eq!(exp_neg(0f32), 1.0);
+        assert_eq!([87.5, 1e30, f32::INFINITY].map(exp_neg), [0.0; 3]);
     }
 
     #[test]
