@@ -19,6 +19,12 @@ pub(super) trait Vector: Copy {
     ///
     /// They must be readable.
     unsafe fn load(p: *const f32) -> Self;
+    /// The lanes into `p` .. `p` + [`Vector::N`].
+    ///
+    /// # Safety
+    ///
+    /// They must be writable.
+    unsafe fn store(self, p: *mut f32);
     fn add(self, o: Self) -> Self;
     fn sub(self, o: Self) -> Self;
     fn mul(self, o: Self) -> Self;
@@ -60,6 +66,11 @@ impl Vector for f32 {
     unsafe fn load(p: *const f32) -> f32 {
         // SAFETY: the caller's contract.
         unsafe { *p }
+    }
+    #[inline(always)]
+    unsafe fn store(self, p: *mut f32) {
+        // SAFETY: the caller's contract.
+        unsafe { *p = self };
     }
     #[inline(always)]
     fn add(self, o: f32) -> f32 {
@@ -150,6 +161,14 @@ mod x86 {
             unsafe { Sse2(_mm_loadu_ps(p), _mm_loadu_ps(p.add(4))) }
         }
         #[inline(always)]
+        unsafe fn store(self, p: *mut f32) {
+            // SAFETY: the caller's contract (and x86-64 always has SSE2).
+            unsafe {
+                _mm_storeu_ps(p, self.0);
+                _mm_storeu_ps(p.add(4), self.1);
+            }
+        }
+        #[inline(always)]
         fn add(self, o: Sse2) -> Sse2 {
             // SAFETY (here and below): x86-64 always has SSE2.
             self.map2(o, |a, b| unsafe { _mm_add_ps(a, b) })
@@ -208,6 +227,11 @@ mod x86 {
         unsafe fn load(p: *const f32) -> Avx {
             // The caller's contract.
             Avx(unsafe { _mm256_loadu_ps(p) })
+        }
+        #[inline(always)]
+        unsafe fn store(self, p: *mut f32) {
+            // The caller's contract.
+            unsafe { _mm256_storeu_ps(p, self.0) }
         }
         #[inline(always)]
         fn add(self, o: Avx) -> Avx {

@@ -119,7 +119,7 @@ pub(in crate::transport) fn step_row<V: Vector>(
     let n = row.len();
     assert!(ahead.len() >= n && V::N <= LANES);
     assert!(l0 as isize + k.up >= 0 && l0 + n + k.stride + 1 <= prev.cells() && prev.len == cur.len);
-    let w = k.weights.map(V::splat);
+    let w = [V::splat(k.weights[0]), V::splat(k.weights[1]), V::splat(k.weights[2]), V::splat(k.weights[3])];
     let mut start = 0;
     while start < n {
         let m = (n - start).min(V::N);
@@ -163,19 +163,28 @@ pub(in crate::transport) fn step_row<V: Vector>(
             sum
         });
         let (rho_v, full_v) = (V::from_array(&rho), V::from_array(&full));
-        let sc_v = sc.each_ref().map(V::from_array);
+        let sc_v = [V::from_array(&sc[0]), V::from_array(&sc[1]), V::from_array(&sc[2])];
         let out = cells(k, &acc, rho_v, full_v, &sc_v);
-        let rs = sc_v.map(|s| rho_v.mul(s));
+        let rs = [rho_v.mul(sc_v[0]), rho_v.mul(sc_v[1]), rho_v.mul(sc_v[2])];
         let fields = [out[0], out[1], out[2], rho_v, rs[0], rs[1], rs[2]];
         let mut lanes = [[0f32; 8]; FIELDS];
         for (f, (v, lanes)) in fields.into_iter().zip(&mut lanes).enumerate() {
+            if m == V::N {
+                // SAFETY: l + N ≤ l0 + n < the field's length, asserted above.
+                unsafe { v.store(cur.data.as_mut_ptr().add(f * cur.len + l)) };
+            } else {
+                v.to_array(lanes);
+                cur.data[f * cur.len + l..][..m].copy_from_slice(&lanes[..m]);
+            }
+        }
+        let mut radiance = [[0f32; 8]; 3];
+        for (v, lanes) in out.into_iter().zip(&mut radiance) {
             v.to_array(lanes);
-            cur.data[f * cur.len + l..][..m].copy_from_slice(&lanes[..m]);
         }
         for j in 0..m {
             if full[j].to_bits() != 0 {
                 // SAFETY: as the source's load above.
-                unsafe { *light.get_unchecked_mut(fi[j]) = [lanes[I][j], lanes[I + 1][j], lanes[I + 2][j]] };
+                unsafe { *light.get_unchecked_mut(fi[j]) = [radiance[0][j], radiance[1][j], radiance[2][j]] };
             }
         }
         start += m;
@@ -216,18 +225,40 @@ const SERIES_BELOW: f32 = 0.5;
 #[inline(always)]
 fn step_weights_lanes<V: Vector>(x: V) -> (V, V, V) {
     let e = exp_neg(x);
-    let horner = |c: [f32; 8]| c.iter().rev().fold(V::splat(0.0), |acc, ck| acc.mul(x).add(V::splat(*ck))).mul(x);
-    let series_out = horner(std::array::from_fn(|k| SIGN[k] / FACTORIAL[k + 2]));
-    let series_in = horner(std::array::from_fn(|k| SIGN[k] * (k + 1) as f32 / FACTORIAL[k + 2]));
+    let (series_in, series_out) = (horner(x, &SERIES_IN), horner(x, &SERIES_OUT));
     let mean = V::splat(1.0).sub(e).div(x);
     let (closed_in, closed_out) = (mean.sub(e), V::splat(1.0).sub(mean));
     let series = V::splat(SERIES_BELOW).gt(x);
     (e, V::select(series, series_in, closed_in), V::select(series, series_out, closed_out))
 }
 
-/// (−1)^{k} and (k)! for the series' coefficients.
-const SIGN: [f32; 8] = [1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0];
-const FACTORIAL: [f32; 10] = [1.0, 1.0, 2.0, 6.0, 24.0, 120.0, 720.0, 5040.0, 40320.0, 362880.0];
+/// Σ_k c_k x^{k+1} by Horner's rule.
+#[inline(always)]
+fn horner<V: Vector>(x: V, c: &[f32; 8]) -> V {
+    let mut acc = V::splat(0.0);
+    for ck in c.iter().rev() {
+        acc = acc.mul(x).add(V::splat(*ck));
+    }
+    acc.mul(x)
+}
+
+/// The coefficients of x, x², …, x⁸ in w_in's and w_out's series ([`step_weights_lanes`]).
+const SERIES_IN: [f32; 8] = series(true);
+const SERIES_OUT: [f32; 8] = series(false);
+
+/// (−1)^{k+1} k/(k+1)! (`times_k`) or (−1)^{k+1}/(k+1)! for k = 1..=8.
+const fn series(times_k: bool) -> [f32; 8] {
+    let mut c = [0f32; 8];
+    let mut factorial = 1f32;
+    let mut k = 1;
+    while k <= 8 {
+        factorial *= (k + 1) as f32;
+        let sign = if k % 2 == 1 { 1.0 } else { -1.0 };
+        c[k - 1] = sign * if times_k { k as f32 } else { 1.0 } / factorial;
+        k += 1;
+    }
+    c
+}
 
 /// [`step_weights_lanes`] of one step.
 #[cfg(test)]
@@ -254,7 +285,10 @@ fn exp_neg<V: Vector>(x: V) -> V {
     let t = y.mul(V::splat(std::f32::consts::LOG2_E)).add(V::splat(ROUND));
     let n = t.sub(V::splat(ROUND));
     let r = y.sub(n.mul(V::splat(LN2_HI))).sub(n.mul(V::splat(LN2_LO)));
-    let p = P[1..].iter().fold(V::splat(P[0]), |acc, c| acc.mul(r).add(V::splat(*c)));
+    let mut p = V::splat(P[0]);
+    for c in &P[1..] {
+        p = p.mul(r).add(V::splat(*c));
+    }
     let er = p.mul(r.mul(r)).add(r).add(V::splat(1.0));
     V::select(beyond, V::splat(0.0), er.mul(V::pow2_of_rounded(t)))
 }
