@@ -150,9 +150,6 @@ fn sweep_kernel<V: Vector>(
     let (fb, fc) = (fb as isize, fc as isize);
     let wts = [(1.0 - tb) * (1.0 - tc), tb * (1.0 - tc), (1.0 - tb) * tc, tb * tc];
     let stride = nb + 2;
-    // Plane buffers with a one-cell ghost ring.
-    let mut prev = Plane::new(stride * (nc + 2));
-    let mut cur = Plane::new(stride * (nc + 2));
     // Grid coordinates of box cell (pa, pb, pc) in the (a, b, c) frame.
     let coord = |pa: isize, pb: isize, pc: isize| {
         let mut v = [0isize; 3];
@@ -169,12 +166,10 @@ fn sweep_kernel<V: Vector>(
     };
     let sky_only = !(c.ground_height.is_some() && om.y > 0.0);
     let ghost = record([skyr.x, skyr.y, skyr.z], 0.0, [0.0; 3]);
-    // Without a ground seen upwards every such cell holds the sky: fill both buffers once (the
-    // cells write only the interior).
-    if sky_only {
-        prev.fill(ghost);
-        cur.fill(ghost);
-    }
+    // Plane buffers with a one-cell ghost ring. Without a ground seen upwards every such cell
+    // holds the sky: both buffers start as it (the cells write only the interior).
+    let start = if sky_only { ghost } else { record([0.0; 3], 0.0, [0.0; 3]) };
+    let (mut prev, mut cur) = (Plane::new(stride * (nc + 2), start), Plane::new(stride * (nc + 2), start));
     // Clear air: a cell that is empty and whose upwind cells hold what enters them from outside
     // the cloud holds that too (Ω's clear ray carries it unchanged). Per row of each plane
     // buffer, the span of cells that may differ from it; a plane's row steps only the cells its

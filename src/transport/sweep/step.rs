@@ -38,25 +38,18 @@ pub(in crate::transport) struct Plane {
 }
 
 impl Plane {
-    /// A buffer of `cells` cells, every field 0.
-    pub(in crate::transport) fn new(cells: usize) -> Plane {
+    /// A buffer of `cells` cells, each holding `rec`.
+    pub(in crate::transport) fn new(cells: usize, rec: Record) -> Plane {
         let len = cells + LANES;
         Plane {
             len,
-            data: vec![0.0; FIELDS * len],
+            data: rec.iter().flat_map(|value| std::iter::repeat_n(*value, len)).collect(),
         }
     }
 
     /// Cells in the buffer (without the spare ones).
     pub(in crate::transport) fn cells(&self) -> usize {
         self.len - LANES
-    }
-
-    /// Every cell (the spare ones included) set to `rec`.
-    pub(in crate::transport) fn fill(&mut self, rec: Record) {
-        for (field, value) in self.data.chunks_exact_mut(self.len).zip(rec) {
-            field.fill(value);
-        }
     }
 
     /// Cell `i` set to `rec`.
@@ -166,15 +159,15 @@ pub(in crate::transport) fn step_row<V: Vector>(
         let sc_v = [V::from_array(&sc[0]), V::from_array(&sc[1]), V::from_array(&sc[2])];
         let out = cells(k, &acc, rho_v, full_v, &sc_v);
         let rs = [rho_v.mul(sc_v[0]), rho_v.mul(sc_v[1]), rho_v.mul(sc_v[2])];
-        let fields = [out[0], out[1], out[2], rho_v, rs[0], rs[1], rs[2]];
-        let mut lanes = [[0f32; 8]; FIELDS];
-        for (f, (v, lanes)) in fields.into_iter().zip(&mut lanes).enumerate() {
-            if m == V::N {
-                // SAFETY: l + N ≤ l0 + n < the field's length, asserted above.
-                unsafe { v.store(cur.data.as_mut_ptr().add(f * cur.len + l)) };
-            } else {
-                v.to_array(lanes);
-                cur.data[f * cur.len + l..][..m].copy_from_slice(&lanes[..m]);
+        // A short run's last cells: its m lanes, the buffer's own values in the others.
+        let (part, keep) = (m < V::N, V::from_array(&FIRST_LANES[m]));
+        for (f, v) in [out[0], out[1], out[2], rho_v, rs[0], rs[1], rs[2]].into_iter().enumerate() {
+            // SAFETY: l + N ≤ l0 + n + N ≤ the field's length (the spare cells included),
+            // asserted above.
+            unsafe {
+                let p = cur.data.as_mut_ptr().add(f * cur.len + l);
+                let v = if part { V::select(keep, v, V::load(p)) } else { v };
+                v.store(p);
             }
         }
         let mut radiance = [[0f32; 8]; 3];
@@ -231,6 +224,21 @@ fn step_weights_lanes<V: Vector>(x: V) -> (V, V, V) {
     let series = V::splat(SERIES_BELOW).gt(x);
     (e, V::select(series, series_in, closed_in), V::select(series, series_out, closed_out))
 }
+
+/// Per lane count m, the mask of the first m of eight lanes.
+const FIRST_LANES: [[f32; 8]; 9] = {
+    let mut masks = [[0f32; 8]; 9];
+    let mut m = 0;
+    while m <= 8 {
+        let mut j = 0;
+        while j < m {
+            masks[m][j] = f32::from_bits(u32::MAX);
+            j += 1;
+        }
+        m += 1;
+    }
+    masks
+};
 
 /// Σ_k c_k x^{k+1} by Horner's rule.
 #[inline(always)]
