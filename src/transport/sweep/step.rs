@@ -41,10 +41,11 @@ impl Plane {
     /// A buffer of `cells` cells, each holding `rec`.
     pub(in crate::transport) fn new(cells: usize, rec: Record) -> Plane {
         let len = cells + LANES;
-        Plane {
-            len,
-            data: rec.iter().flat_map(|value| std::iter::repeat_n(*value, len)).collect(),
+        let mut data = Vec::with_capacity(FIELDS * len);
+        for value in rec {
+            data.resize(data.len() + len, value);
         }
+        Plane { len, data }
     }
 
     /// Cells in the buffer (without the spare ones).
