@@ -112,7 +112,7 @@ pub(in crate::transport) fn step_row<V: Vector>(
     // l0 .. l0 + n of `cur`.
     let n = row.len();
     assert!(ahead.len() >= n && V::N <= LANES);
-    assert!(l0 as isize + k.up >= 0 && l0 + n + k.stride + 1 <= prev.cells() && prev.len == cur.len);
+    assert!(l0 as isize + k.up >= 0 && l0 + n + k.stride < prev.cells() && prev.len == cur.len);
     let w = [V::splat(k.weights[0]), V::splat(k.weights[1]), V::splat(k.weights[2]), V::splat(k.weights[3])];
     let mut start = 0;
     while start < n {
@@ -161,7 +161,8 @@ pub(in crate::transport) fn step_row<V: Vector>(
         let out = cells(k, &acc, rho_v, full_v, &sc_v);
         let rs = [rho_v.mul(sc_v[0]), rho_v.mul(sc_v[1]), rho_v.mul(sc_v[2])];
         // A short run's last cells: its m lanes, the buffer's own values in the others.
-        let (part, keep) = (m < V::N, V::from_array(&FIRST_LANES[m]));
+        let part = m < V::N;
+        let keep = V::splat(m as f32).gt(V::from_array(&[0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]));
         for (f, v) in [out[0], out[1], out[2], rho_v, rs[0], rs[1], rs[2]].into_iter().enumerate() {
             // SAFETY: l + N ≤ l0 + n + N ≤ the field's length (the spare cells included),
             // asserted above.
@@ -226,21 +227,6 @@ fn step_weights_lanes<V: Vector>(x: V) -> (V, V, V) {
     (e, V::select(series, series_in, closed_in), V::select(series, series_out, closed_out))
 }
 
-/// Per lane count m, the mask of the first m of eight lanes.
-const FIRST_LANES: [[f32; 8]; 9] = {
-    let mut masks = [[0f32; 8]; 9];
-    let mut m = 0;
-    while m <= 8 {
-        let mut j = 0;
-        while j < m {
-            masks[m][j] = f32::from_bits(u32::MAX);
-            j += 1;
-        }
-        m += 1;
-    }
-    masks
-};
-
 /// Σ_k c_k x^{k+1} by Horner's rule.
 #[inline(always)]
 fn horner<V: Vector>(x: V, c: &[f32; 8]) -> V {
@@ -251,23 +237,28 @@ fn horner<V: Vector>(x: V, c: &[f32; 8]) -> V {
     acc.mul(x)
 }
 
-/// The coefficients of x, x², …, x⁸ in w_in's and w_out's series ([`step_weights_lanes`]).
-const SERIES_IN: [f32; 8] = series(true);
-const SERIES_OUT: [f32; 8] = series(false);
-
-/// (−1)^{k+1} k/(k+1)! (`times_k`) or (−1)^{k+1}/(k+1)! for k = 1..=8.
-const fn series(times_k: bool) -> [f32; 8] {
-    let mut c = [0f32; 8];
-    let mut factorial = 1f32;
-    let mut k = 1;
-    while k <= 8 {
-        factorial *= (k + 1) as f32;
-        let sign = if k % 2 == 1 { 1.0 } else { -1.0 };
-        c[k - 1] = sign * if times_k { k as f32 } else { 1.0 } / factorial;
-        k += 1;
-    }
-    c
-}
+/// The coefficients of x, x², …, x⁸ in w_in's and w_out's series ([`step_weights_lanes`]):
+/// (−1)^{k+1} k/(k+1)! and (−1)^{k+1}/(k+1)!.
+const SERIES_IN: [f32; 8] = [
+    1.0 / 2.0,
+    -2.0 / 6.0,
+    3.0 / 24.0,
+    -4.0 / 120.0,
+    5.0 / 720.0,
+    -6.0 / 5040.0,
+    7.0 / 40320.0,
+    -8.0 / 362880.0,
+];
+const SERIES_OUT: [f32; 8] = [
+    1.0 / 2.0,
+    -1.0 / 6.0,
+    1.0 / 24.0,
+    -1.0 / 120.0,
+    1.0 / 720.0,
+    -1.0 / 5040.0,
+    1.0 / 40320.0,
+    -1.0 / 362880.0,
+];
 
 /// [`step_weights_lanes`] of one step.
 #[cfg(test)]
@@ -287,7 +278,7 @@ const EXP_NEG_MAX: f32 = 87.0;
 fn exp_neg<V: Vector>(x: V) -> V {
     const LN2_HI: f32 = 0.693_359_4;
     const LN2_LO: f32 = -2.121_944_4e-4;
-    const P: [f32; 6] = [1.987_569_2e-4, 1.398_199_9e-3, 8.333_452e-3, 4.166_579_6e-2, 1.666_666_5e-1, 5.000_000_1e-1];
+    const P: [f32; 6] = [1.987_569_2e-4, 1.398_199_9e-3, 8.333_452e-3, 4.166_579_6e-2, 1.666_666_5e-1, 0.5];
     let max = V::splat(EXP_NEG_MAX);
     let beyond = x.gt(max);
     let y = V::splat(0.0).sub(V::select(beyond, max, x));
