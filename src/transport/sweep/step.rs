@@ -3,22 +3,21 @@
 //! upwind neighbours at the same offsets with the same bilinear weights, so a run of cells is
 //! one lane-wise computation. The plane buffers hold each field of a cell in its own array
 //! ([`Plane`]), so the eight cells' upwind values are one eight-lane load per field and
-//! neighbour. Every operation is per lane with its own multiplies and adds in a fixed order
-//! (Rust never fuses a multiply with an add), so the step gives the same bits compiled as built
-//! (SSE2: two four-lane halves), compiled for AVX, and with any number of lanes (a test steps
-//! one cell at a time).
+//! neighbour. The step is written once over a lane type ([`Vector`]: AVX, SSE2 or one `f32`),
+//! every operation per lane in a fixed order, so each gives the same bits (a test steps every
+//! ordinate one cell at a time, in SSE2 and in AVX lanes).
 
 use super::lanes::{Vector, ROUND};
 use crate::transport::simd::prefetch;
 
 /// Cells of a row stepped together: one AVX register of f32.
-pub(in crate::transport) const LANES: usize = 8;
+const LANES: usize = 8;
 
 /// Fields of a plane cell: the radiance per band ([`I`]..), the density ([`RHO`]) and the
 /// density × source per band ([`RS`]..).
-pub(in crate::transport) const I: usize = 0;
-pub(in crate::transport) const RHO: usize = 3;
-pub(in crate::transport) const RS: usize = 4;
+const I: usize = 0;
+const RHO: usize = 3;
+const RS: usize = 4;
 const FIELDS: usize = 7;
 
 /// A plane cell's fields.
