@@ -9,12 +9,17 @@
 
 use super::grid::{cross_axes, Ctx, PREFETCH_AHEAD};
 use super::ground::GroundMap;
-use super::simd::{has_avx, prefetch};
+use super::simd::has_avx;
 use super::source::{moments_block, source_block, Lanes, PairTables, ORDINATE_BATCH, PAIRS};
 use super::sphere::Quadrature;
+use lanes::Vector;
+use step::{record, step_row, Plane, Step};
 use crate::math::Vec3;
 use glam::DVec3;
 use rayon::prelude::*;
+
+mod lanes;
+mod step;
 
 /// The per-voxel array of a sweep batch: per ordinate slot and full voxel, the source in that
 /// ordinate, which its sweep replaces by the radiance (12 B × [`ORDINATE_BATCH`] per full voxel).
@@ -107,165 +112,23 @@ pub(super) fn sweep(
     e_down
 }
 
-/// (e^{−x}, w_in, w_out) of a step of optical length x with a source linear in optical path
-/// (as the slab solver's, whose f64 form the test checks it against), in f32 with a series
-/// below x = 0.2 (the closed form cancels there).
-#[inline]
-pub(super) fn step_weights(x: f32) -> (f32, f32, f32) {
-    if x < 0.2 {
-        let (x2, x3, x4, x5) = (x * x, x * x * x, x * x * x * x, x * x * x * x * x);
-        return (
-            1.0 - x + 0.5 * x2 - x3 / 6.0 + x4 / 24.0 - x5 / 120.0,
-            0.5 * x - x2 / 3.0 + x3 / 8.0 - x4 / 30.0 + x5 / 144.0,
-            0.5 * x - x2 / 6.0 + x3 / 24.0 - x4 / 120.0 + x5 / 720.0,
-        );
-    }
-    let e = (-x).exp();
-    let w_out = 1.0 - (1.0 - e) / x;
-    (e, 1.0 - e - w_out, w_out)
-}
-
 /// One ordinate's ground splats (map column, change of the downward irradiance in W/m² per band).
 pub(super) type Splats = Vec<(usize, [f64; 3])>;
-
-/// A cell of a sweep's plane buffer: radiance per band, density, density × source per band
-/// (lanes [`I`], [`RHO`], [`RS`]) and a spare lane, so that the upwind interpolation is eight-lane
-/// arithmetic on one 32-byte record per neighbour.
-#[derive(Clone, Copy, Default)]
-#[repr(C, align(32))]
-struct PlaneCell([f32; 8]);
-
-/// Lanes of a [`PlaneCell`].
-const I: usize = 0;
-const RHO: usize = 3;
-const RS: usize = 4;
-
-impl PlaneCell {
-    fn new(i: [f32; 3], rho: f32, rs: [f32; 3]) -> PlaneCell {
-        PlaneCell([i[0], i[1], i[2], rho, rs[0], rs[1], rs[2], 0.0])
-    }
-}
-
-/// Σ_k w_k n_k per lane of four plane records, from 0 in the neighbours' order.
-#[inline(always)]
-fn bilinear(w: &[f32; 4], n: [&[f32; 8]; 4]) -> [f32; 8] {
-    std::array::from_fn(|k| 0.0 + w[0] * n[0][k] + w[1] * n[1][k] + w[2] * n[2][k] + w[3] * n[3][k])
-}
-
-/// [`bilinear`] in eight-lane AVX arithmetic (the compiler keeps it in four-lane halves): the
-/// same multiplies and adds in the same order, so the same bits.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-#[inline]
-unsafe fn bilinear_avx(w: &[f32; 4], n: [&[f32; 8]; 4]) -> [f32; 8] { unsafe {
-    use std::arch::x86_64::*;
-    let mut acc = _mm256_setzero_ps();
-    for (wk, nk) in w.iter().zip(n) {
-        acc = _mm256_add_ps(acc, _mm256_mul_ps(_mm256_set1_ps(*wk), _mm256_loadu_ps(nk.as_ptr())));
-    }
-    let mut out = [0f32; 8];
-    _mm256_storeu_ps(out.as_mut_ptr(), acc);
-    out
-}}
-
-/// Upwind density below which a cell's back source is its own instead of the density-weighted
-/// mean of its upwind neighbours. The mean ρ·J/ρ loses its bits where ρ·J is subnormal (f32 has
-/// 24 bits down to 1.2e-38; the Disney cloud holds densities of 1.7e-37, and the bilinear
-/// weights make them smaller still) and 1/ρ overflows to inf below 2.9e-39, so it would be
-/// NaN or inf; a density of 1e-30 puts an optical depth below 1e-30·σt·h into the step, which no
-/// image can show.
-const RHO_WEIGHT_MIN: f32 = 1e-30;
-
-/// One cell's step along a sweep (module docs) from its upwind record `acc` ([`bilinear`]),
-/// its density, its source `sc` (0 where empty; `full`: ρ > 0) and the step length `s` (m): its
-/// radiance and its record for the next plane.
-#[inline(always)]
-fn cell(c: &Ctx, acc: [f32; 8], rho: f32, sc: [f32; 3], full: bool, s: f32) -> ([f32; 3], PlaneCell) {
-    let ib_ = [acc[I], acc[I + 1], acc[I + 2]];
-    let (rb, sbw) = (acc[RHO], [acc[RS], acc[RS + 1], acc[RS + 2]]);
-    let mut out = ib_;
-    let rm = 0.5 * (rb + rho) * s;
-    if rm > 0.0 {
-        let sb = if rb > RHO_WEIGHT_MIN { sbw.map(|x| x * (1.0 / rb)) } else { sc };
-        let se = if full { sc } else { sb };
-        let mut wgt = step_weights(c.sigma_t[0] * rm);
-        for band in 0..3 {
-            if band > 0 && !c.grey {
-                wgt = step_weights(c.sigma_t[band] * rm);
-            }
-            let (e, wi, wo) = wgt;
-            out[band] = ib_[band] * e + wi * sb[band] + wo * se[band];
-        }
-    }
-    (out, PlaneCell::new(out, rho, sc.map(|x| rho * x)))
-}
-
-/// [`bilinear`] and [`cell`] for grey optics (one σt′) in AVX registers: the three bands in the
-/// lanes of one four-lane operation, the same multiplies and adds in the same order, so the
-/// same bits.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-#[inline]
-unsafe fn cell_grey_avx(
-    w: &[f32; 4],
-    n: [&[f32; 8]; 4],
-    rho: f32,
-    sc: [f32; 3],
-    full: bool,
-    s: f32,
-    sigma_t: f32,
-) -> ([f32; 3], PlaneCell) { unsafe {
-    use std::arch::x86_64::*;
-    let mut acc = _mm256_setzero_ps();
-    for (wk, nk) in w.iter().zip(n) {
-        acc = _mm256_add_ps(acc, _mm256_mul_ps(_mm256_set1_ps(*wk), _mm256_loadu_ps(nk.as_ptr())));
-    }
-    // Lanes I, I + 1, I + 2, RHO and RS, RS + 1, RS + 2, spare.
-    let (lo, hi) = (_mm256_castps256_ps128(acc), _mm256_extractf128_ps::<1>(acc));
-    let sc4 = _mm_setr_ps(sc[0], sc[1], sc[2], 0.0);
-    let rb = _mm_cvtss_f32(_mm_shuffle_ps::<0xff>(lo, lo));
-    let rm = 0.5 * (rb + rho) * s;
-    let out = if rm > 0.0 {
-        let sb = if rb > RHO_WEIGHT_MIN {
-            _mm_mul_ps(hi, _mm_set1_ps(1.0 / rb))
-        } else {
-            sc4
-        };
-        let se = if full { sc4 } else { sb };
-        let (e, wi, wo) = step_weights(sigma_t * rm);
-        let ie = _mm_mul_ps(lo, _mm_set1_ps(e));
-        _mm_add_ps(_mm_add_ps(ie, _mm_mul_ps(_mm_set1_ps(wi), sb)), _mm_mul_ps(_mm_set1_ps(wo), se))
-    } else {
-        lo
-    };
-    // The record: the radiance, ρ, ρ × source, and ρ × 0 = +0 in the spare lane.
-    let rec_lo = _mm_blend_ps::<0b1000>(out, _mm_set1_ps(rho));
-    let rec_hi = _mm_mul_ps(_mm_set1_ps(rho), sc4);
-    let mut rec = PlaneCell::default();
-    _mm256_storeu_ps(rec.0.as_mut_ptr(), _mm256_set_m128(rec_hi, rec_lo));
-    let mut o = [0f32; 4];
-    _mm_storeu_ps(o.as_mut_ptr(), out);
-    ([o[0], o[1], o[2]], rec)
-}}
 
 /// Sweep one ordinate `om` (weight `w`, sr) through the box upwind plane by plane: the radiance at
 /// every full voxel's centre, and the ground splats (column, change of downward irradiance, W/m²)
 /// of the light leaving the box downwards. `light` holds the source in this ordinate per full
 /// voxel and receives the radiance there (all lie in the box): a cell reads its source before it
-/// writes its radiance, and each full voxel is one cell of the sweep.
-///
-/// # Safety
-///
-/// `AVX` = true only where the processor has AVX (the cells' steps then run AVX instructions).
+/// writes its radiance, and each full voxel is one cell of the sweep. The cells of a row are
+/// stepped [`Vector::N`] at a time ([`step_row`]: the same bits for any lanes).
 #[inline(always)]
-unsafe fn sweep_kernel<const AVX: bool>(
+fn sweep_kernel<V: Vector>(
     c: &Ctx,
     om: DVec3,
     w: f64,
     ground: &GroundMap,
     light: &mut [[f32; 3]],
 ) -> Splats {
-    debug_assert!(!AVX || has_avx());
     let mut splats = Vec::new();
     let skyr = c.sky.radiance(Vec3::new(-om.x as f32, -om.y as f32, -om.z as f32));
     let splat = om.y < 0.0 && c.ground_height.is_some();
@@ -287,9 +150,6 @@ unsafe fn sweep_kernel<const AVX: bool>(
     let (fb, fc) = (fb as isize, fc as isize);
     let wts = [(1.0 - tb) * (1.0 - tc), tb * (1.0 - tc), (1.0 - tb) * tc, tb * tc];
     let stride = nb + 2;
-    // Plane buffers with a one-cell ghost ring.
-    let mut prev = vec![PlaneCell::default(); stride * (nc + 2)];
-    let mut cur = prev.clone();
     // Grid coordinates of box cell (pa, pb, pc) in the (a, b, c) frame.
     let coord = |pa: isize, pb: isize, pc: isize| {
         let mut v = [0isize; 3];
@@ -302,16 +162,14 @@ unsafe fn sweep_kernel<const AVX: bool>(
     // straight back along −Ω ([`Ctx::boundary`]), as the ghost ring's cells hold it.
     let clear_record = |pa: isize, ib: isize, ic: isize| {
         let v = coord(pa, ib, ic);
-        PlaneCell::new(c.boundary(om, v[0], v[1], v[2], ground, skyr), 0.0, [0.0; 3])
+        record(c.boundary(om, v[0], v[1], v[2], ground, skyr), 0.0, [0.0; 3])
     };
     let sky_only = !(c.ground_height.is_some() && om.y > 0.0);
-    let ghost = PlaneCell::new([skyr.x, skyr.y, skyr.z], 0.0, [0.0; 3]);
-    // Without a ground seen upwards every such cell holds the sky: fill both buffers once (the
-    // cells write only the interior).
-    if sky_only {
-        prev.fill(ghost);
-        cur.fill(ghost);
-    }
+    let ghost = record([skyr.x, skyr.y, skyr.z], 0.0, [0.0; 3]);
+    // Plane buffers with a one-cell ghost ring. Without a ground seen upwards every such cell
+    // holds the sky: both buffers start as it (the cells write only the interior).
+    let start = if sky_only { ghost } else { record([0.0; 3], 0.0, [0.0; 3]) };
+    let (mut prev, mut cur) = (Plane::new(stride * (nc + 2), start), Plane::new(stride * (nc + 2), start));
     // Clear air: a cell that is empty and whose upwind cells hold what enters them from outside
     // the cloud holds that too (Ω's clear ray carries it unchanged). Per row of each plane
     // buffer, the span of cells that may differ from it; a plane's row steps only the cells its
@@ -340,13 +198,20 @@ unsafe fn sweep_kernel<const AVX: bool>(
         }
         needed
     };
-    // Offset of the upwind (0, 0) neighbour from a cell in the plane buffer.
-    let up = fb + fc * stride as isize;
-    // The unchecked indexing below relies on these: a cell's four upwind records lie in the
-    // plane buffer (its size and the upwind floors asserted here), and the box's full voxels
-    // index `light` ([`box_cells`] checked each below `voxels.len()`).
+    // The cell step's unchecked source and radiance accesses rely on this: the box's full
+    // voxels index `light` ([`box_cells`] checked each below `voxels.len()`).
     assert!(light.len() == c.voxels.len() && cells.len() == na * nb * nc + PREFETCH_AHEAD);
-    assert!(prev.len() == stride * (nc + 2) && cur.len() == prev.len() && (-1..=0).contains(&fb) && (-1..=0).contains(&fc));
+    // The upwind (0, 0) neighbour lies `up` cells off a cell in the plane buffer (floors in
+    // {−1, 0}: inside the ghost ring).
+    assert!((-1..=0).contains(&fb) && (-1..=0).contains(&fc));
+    let k = Step {
+        weights: wts,
+        up: fb + fc * stride as isize,
+        stride,
+        s,
+        sigma_t: c.sigma_t,
+        grey: c.grey,
+    };
     for step in 0..na {
         let pa = if oa > 0.0 { step } else { na - 1 - step };
         // The previous plane (the ghost plane before the box's first).
@@ -366,7 +231,7 @@ unsafe fn sweep_kernel<const AVX: bool>(
                 // back to the sky's record.
                 let (old_lo, old_hi) = live_cur[ic];
                 for ib in (old_lo..old_hi).filter(|ib| *ib < lo || *ib >= hi) {
-                    cur[l0 + ib] = ghost;
+                    cur.set(l0 + ib, ghost);
                 }
             } else if lo < hi {
                 // Upwind rows ic + fc and ic + fc + 1, cells lo + fb ..= hi + fb (the ring's
@@ -374,61 +239,13 @@ unsafe fn sweep_kernel<const AVX: bool>(
                 for r in [ic as isize + fc, ic as isize + fc + 1] {
                     let (a0, a1) = usize::try_from(r).ok().and_then(|r| live_prev.get(r)).map_or((0, 0), |&(a0, a1)| (a0 as isize, a1 as isize));
                     for j in (lo as isize + fb..=hi as isize + fb).filter(|j| *j < a0 || *j >= a1) {
-                        prev[(j + 1) as usize + stride * (r + 1) as usize] = clear_record(pa_prev, j, r);
+                        prev.set((j + 1) as usize + stride * (r + 1) as usize, clear_record(pa_prev, j, r));
                     }
                 }
             }
             live_cur[ic] = (lo, hi);
-            for (k, (&(rho, fi), &(_, fa))) in row[lo..hi].iter().zip(&row_ahead[lo..hi]).enumerate() {
-                let ib = lo + k;
-                // The full voxels' sources and radiances lie a grid row apart in x-major sweeps
-                // (past the L2 cache on large boxes): ask for the lines a few cells ahead.
-                if fa != u32::MAX {
-                    prefetch(light.as_ptr().wrapping_add(fa as usize));
-                }
-                let l = l0 + ib;
-                // l = stride (ic + 1) + ib + 1 with ib < nb, ic < nc and up = fb + fc stride with
-                // fb, fc in {−1, 0}: u ≥ stride ic + ib ≥ 0 and u + stride + 1 < stride (nc + 2).
-                let u = (l as isize + up) as usize;
-                // SAFETY: the bounds above (asserted before the planes).
-                let (n0, n1, n2, n3) = unsafe {
-                    (
-                        &prev.get_unchecked(u).0,
-                        &prev.get_unchecked(u + 1).0,
-                        &prev.get_unchecked(u + stride).0,
-                        &prev.get_unchecked(u + stride + 1).0,
-                    )
-                };
-                // Radiance and density bilinear; the source (per unit extinction, defined only
-                // where ρ > 0) density-weighted, so that empty neighbours do not pull it
-                // towards 0 (a uniform source stays uniform: the furnace holds). One expression
-                // per lane (from 0, the neighbours in order) so it compiles to whole-record
-                // arithmetic without copies of the records.
-                let (n, full) = ([n0, n1, n2, n3], fi != u32::MAX);
-                // SAFETY: a full cell's index is below voxels.len() = light.len() (asserted in box_cells and above).
-                let sc = if full {
-                    unsafe { *light.get_unchecked(fi as usize) }
-                } else {
-                    [0f32; 3]
-                };
-                #[cfg(not(target_arch = "x86_64"))]
-                let (out, rec) = cell(c, bilinear(&wts, n), rho, sc, full, s);
-                #[cfg(target_arch = "x86_64")]
-                let (out, rec) = if AVX && c.grey {
-                    // SAFETY: `AVX` only where the processor has it (the function's contract).
-                    unsafe { cell_grey_avx(&wts, n, rho, sc, full, s, c.sigma_t[0]) }
-                } else if AVX {
-                    // SAFETY: as above.
-                    cell(c, unsafe { bilinear_avx(&wts, n) }, rho, sc, full, s)
-                } else {
-                    cell(c, bilinear(&wts, n), rho, sc, full, s)
-                };
-                // SAFETY: l ≤ u + stride + 1 < cur.len() (asserted above).
-                unsafe { *cur.get_unchecked_mut(l) = rec };
-                if full {
-                    // SAFETY: fi < voxels.len() = light.len() (asserted in box_cells and above).
-                    unsafe { *light.get_unchecked_mut(fi as usize) = out };
-                }
+            if lo < hi {
+                step_row::<V>(&k, &prev, &mut cur, light, &row[lo..hi], &row_ahead[lo..hi], l0 + lo);
             }
         }
         let pa = pa as isize;
@@ -462,7 +279,7 @@ unsafe fn sweep_kernel<const AVX: bool>(
                 if let Some(col) = ground.column(q.x, q.z) {
                     let area = c.h[0] * c.h[1] * c.h[2] / c.h[ax];
                     let f = w as f32 as f64 * om[ax].abs() * area / (c.h[0] * c.h[2]);
-                    let i = &cur[ib + 1 + stride * (ic + 1)].0[I..I + 3];
+                    let i = cur.radiance(ib + 1 + stride * (ic + 1));
                     splats.push((col, [0, 1, 2].map(|band| f * part as f64 * (i[band] as f64 - skyr[band] as f64))));
                 }
             }
@@ -518,23 +335,26 @@ fn needed_cells(next: &[(usize, usize)], ic: isize, fc: isize, fb: isize, full: 
     cells
 }
 
-/// [`sweep_kernel`] with the AVX cell steps where the processor has AVX: the same bits.
+/// [`sweep_kernel`] in AVX lanes where the processor has it, else in SSE2 lanes (x86-64) or one
+/// lane at a time: the same bits.
 pub(super) fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, ground: &GroundMap, light: &mut [[f32; 3]]) -> Splats {
     #[cfg(target_arch = "x86_64")]
     if has_avx() {
         // SAFETY: the processor has AVX.
         return unsafe { sweep_ordinate_avx(c, om, w, ground, light) };
     }
-    // SAFETY: AVX = false asks nothing of the processor.
-    unsafe { sweep_kernel::<false>(c, om, w, ground, light) }
+    #[cfg(target_arch = "x86_64")]
+    return sweep_kernel::<lanes::Sse2>(c, om, w, ground, light);
+    #[cfg(not(target_arch = "x86_64"))]
+    sweep_kernel::<f32>(c, om, w, ground, light)
 }
 
-/// [`sweep_kernel`] compiled for AVX, with its AVX cell steps.
+/// [`sweep_kernel`] compiled for AVX: the row steps' eight lanes in one register ([`lanes::Avx`],
+/// made only here).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
 unsafe fn sweep_ordinate_avx(c: &Ctx, om: DVec3, w: f64, ground: &GroundMap, light: &mut [[f32; 3]]) -> Splats {
-    // SAFETY: the processor has AVX (this function's own contract).
-    unsafe { sweep_kernel::<true>(c, om, w, ground, light) }
+    sweep_kernel::<lanes::Avx>(c, om, w, ground, light)
 }
 
 #[cfg(test)]
@@ -582,21 +402,6 @@ mod tests {
         assert_eq!(needed_cells(&next, 4, 0, 0, (0, 0), 10), (0, 0), "read by no next row");
         assert_eq!(needed_cells(&next, 0, -1, 0, (0, 0), 10), (3, 6), "fc = −1: next rows 1 and 0");
         assert_eq!(needed_cells(&[(0, 1)], 0, 0, -1, (0, 0), 10), (0, 1), "clipped at the row's start");
-    }
-
-    #[test]
-    fn step_weights_integrate_constants_and_ramps() {
-        for x in [1e-4f32, 5e-3, 0.02, 0.199, 0.201, 0.5, 3.0, 40.0] {
-            let (e, wi, wo) = step_weights(x);
-            let xd = x as f64;
-            let ed = (-xd).exp();
-            // ∫₀ˣ e^{−(x−t)} dt = 1 − e^{−x}; ∫₀ˣ (t/x) e^{−(x−t)} dt = 1 − (1 − e^{−x})/x.
-            let wod = 1.0 - (1.0 - ed) / xd;
-            assert!(((e as f64) - ed).abs() < 1e-6, "x={x}");
-            assert!(((wi + wo) as f64 - (1.0 - ed)).abs() < 1e-6 * (1.0 - ed).max(1e-2), "x={x}");
-            assert!(((wo as f64) - wod).abs() < 1e-5 * wod, "x={x}: {wo} vs {wod}");
-            assert!(wi >= 0.0 && wo >= 0.0);
-        }
     }
 
     #[test]
@@ -672,8 +477,8 @@ mod tests {
         source_block(&c, &t, 1, PAIRS, &moments, 0, &mut disp.chunks_mut(nfull).collect::<Vec<_>>());
         assert_eq!(bits(&plain), bits(&disp));
         assert!(plain.iter().flatten().any(|x| *x > 0.0));
-        // Step (2), one ordinate per major axis and sign, with coloured and with grey optics
-        // (the AVX copy's own cell step).
+        // Step (2), every ordinate, with coloured and with grey optics: the rows' cells one at a
+        // time, eight at a time in SSE2 lanes and through the dispatcher (AVX lanes).
         let grey = Ctx {
             sigma_t: [0.05; 3],
             grey: true,
@@ -682,11 +487,15 @@ mod tests {
             ..c
         };
         for c in [&c, &grey] {
-            for d in [0, 5, 37, 64, 90, 127] {
-                let (mut ra, mut rb) = (plain[..nfull].to_vec(), plain[..nfull].to_vec());
-                // SAFETY: AVX = false asks nothing of the processor.
-                unsafe { sweep_kernel::<false>(c, q.dirs[d], q.weights[d], &ground, &mut ra) };
+            for d in 0..q.dirs.len() {
+                let (mut one, mut ra, mut rb) = (plain[..nfull].to_vec(), plain[..nfull].to_vec(), plain[..nfull].to_vec());
+                sweep_kernel::<f32>(c, q.dirs[d], q.weights[d], &ground, &mut one);
+                #[cfg(target_arch = "x86_64")]
+                sweep_kernel::<lanes::Sse2>(c, q.dirs[d], q.weights[d], &ground, &mut ra);
+                #[cfg(not(target_arch = "x86_64"))]
+                sweep_kernel::<f32>(c, q.dirs[d], q.weights[d], &ground, &mut ra);
                 sweep_ordinate(c, q.dirs[d], q.weights[d], &ground, &mut rb);
+                assert_eq!(bits(&one), bits(&ra), "ordinate {d}, grey {}", c.grey);
                 assert_eq!(bits(&ra), bits(&rb), "ordinate {d}, grey {}", c.grey);
                 assert!(ra.iter().flatten().any(|x| *x > 0.0));
             }
