@@ -13,12 +13,12 @@
 use super::source::PairTables;
 
 /// The order of a cold solve's first iterations.
-pub(super) const START_ORDER: usize = 3;
+const START_ORDER: usize = 3;
 
 /// The change of I0 (relative) below which the start ends. 0.05, four iterations at order 3
 /// on the Disney cloud, took 8 iterations instead of 7 (the last change 5.2·10⁻³ against
 /// 4.0·10⁻³).
-pub(super) const SWITCH_CHANGE: f64 = 0.2;
+const SWITCH_CHANGE: f64 = 0.2;
 
 /// Which tables an iteration of a cold solve sweeps with.
 #[derive(Clone, Copy, Debug, PartialEq)]
