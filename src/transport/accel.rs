@@ -1,6 +1,6 @@
 //! The acceleration's diffusion operator, made consistent with the sweeps' own diffusion limit.
 //!
-//! **Why.** A sweep step (`solve::step_weights`: the source linear in optical path between the
+//! **Why.** A sweep step (`sweep::step::step_weights`: the source linear in optical path between the
 //! upwind plane's bilinear back point and the voxel centre) is exact for a source linear along
 //! the ray, but for one with curvature J″ along the ray it gives I = J − J′/σ + (1 + ε(τ)) J″/σ²
 //! instead of J − J′/σ + J″/σ² (σ = ρσt′, τ = σs the step's optical length, s = h_a/|Ω_a|), with

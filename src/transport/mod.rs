@@ -7,7 +7,7 @@
 //!   albedo and g (the medium's own are [`crate::optics::Optics`]).
 //! - [`slab`]: the solver on a plane-parallel column (checked against adding-doubling).
 //! - [`solve`]: the 3-D solver (SH source per full voxel, sweeps, DSA); its stages are the private
-//!   modules `sweep`, `source`, `dsa` (its operator in `accel`), `mixing`, `ground`, `grid` and `convergence`. The gather is
+//!   modules `sweep`, `source`, `dsa` (its operator in `accel`), `mixing`, `start` (the first iterations at a lower order), `ground`, `grid` and `convergence`. The gather is
 //!   `crate::render::transport`.
 
 mod accel;
@@ -21,6 +21,7 @@ pub mod slab;
 pub mod solve;
 mod source;
 pub mod sphere;
+mod start;
 mod sweep;
 pub mod warm;
 

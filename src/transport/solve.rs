@@ -24,6 +24,8 @@
 //!   I_00 += √(4π) δ, and the correction's P1 current (Fick's law) goes into the first moments.
 //! - **Mixing** (src/transport/mixing.rs): Anderson mixing of a cold solve's orders l ≤ 2 over
 //!   the last three accelerated maps, fitted on I_00.
+//! - **Start** (src/transport/start.rs): a cold solve's first iterations read the source of
+//!   order ≤ 3 only.
 //! - **Convergence** (src/transport/convergence.rs): the stopping test, the divergence guard and
 //!   the dominant-mode extrapolation of warm solves.
 
@@ -35,6 +37,7 @@ use super::mixing::Mixing;
 pub use super::ground::GroundMap;
 use super::source::{diffuse_source_of, parity_order, PairTables};
 use super::sphere::Quadrature;
+use super::start::{next_phase, start_over, Phase, StartTables};
 use super::sweep::{sweep, BatchArrays};
 use super::warm::{TransportState, WarmStart, WarmStop};
 use super::TransportOptics;
@@ -169,6 +172,7 @@ pub fn solve_warm(
     let ctx = Ctx::new(m, sky, ground, &index, &sun_t, s.order, &optics.bands);
     let q = Quadrature::product(s.n_mu, 2 * s.n_mu);
     let tables = pair_tables(&q, sun, s.order, &optics);
+    let start = StartTables::new(&tables, s.order);
     let ground_light = GroundLight::new(m, sun, sky, ground, &optics);
     let hier = if s.acceleration {
         hierarchies(m, &optics.bands, &index, &q)
@@ -179,6 +183,7 @@ pub fn solve_warm(
         ctx: &ctx,
         q: &q,
         tables: &tables,
+        start: start.as_ref(),
         hier: &hier,
         optics: &optics,
         ground: &ground_light,
@@ -199,11 +204,12 @@ pub fn solve_warm(
         carried_ratio,
         ..
     } = it;
-    drop((next, batch));
+    drop(batch);
     let nsh = ctx.nsh;
     let kept_ground = opts.keep.then(|| ground_map.clone());
-    // T′ moves into the field once `ctx`, which borrows it, is dropped (below).
-    let mut field = solver.field(&moments, history, ground_map, Arc::clone(&index.index), Vec::new());
+    // T′ moves into the field once `ctx`, which borrows it, is dropped (below). The diffuse
+    // source takes the spent `next`: a fresh array of its size would be mapped page by page.
+    let mut field = solver.field(&moments, history, ground_map, Arc::clone(&index.index), Vec::new(), next);
     drop(ctx);
     let state = kept_ground.map(|g| TransportState::new(m, s.order, moments, 3 * nsh, g, slowest.unwrap_or(carried_ratio)));
     field.sun_t = sun_t;
@@ -245,6 +251,9 @@ struct Solver<'a> {
     ctx: &'a Ctx<'a>,
     q: &'a Quadrature,
     tables: &'a PairTables,
+    /// The tables of a cold solve's first iterations (src/transport/start.rs; none when the
+    /// solve's order is not above its start order).
+    start: Option<&'a StartTables>,
     /// The DSA hierarchies (none: no acceleration).
     hier: &'a [Hierarchy],
     optics: &'a TransportOptics,
@@ -279,6 +288,8 @@ struct Iterate {
     smallest: f64,
     since_start: usize,
     given_up: Option<usize>,
+    /// Still in a cold solve's first iterations at the start order (src/transport/start.rs).
+    starting: bool,
 }
 
 impl Iterate {
@@ -286,6 +297,7 @@ impl Iterate {
     fn new(solver: &Solver, warm: Option<WarmStart>) -> Iterate {
         let carried_ratio = warm.as_ref().map_or(0.0, |w| w.slow_ratio);
         let stop = warm.as_ref().map(|w| WarmStop::new(w.slow_ratio));
+        let cold = warm.is_none();
         let (moments, e_down) = match warm {
             Some(w) => (w.moments, w.e_down),
             None => (vec![0f32; solver.ctx.voxels.len() * 3 * solver.ctx.nsh], None),
@@ -305,6 +317,7 @@ impl Iterate {
             smallest: f64::INFINITY,
             since_start: 0,
             given_up: None,
+            starting: cold && solver.start.is_some() && solver.s.acceleration,
         }
     }
 
@@ -328,11 +341,15 @@ impl Solver<'_> {
         progress.begin("transport iterations", s.max_iterations as u64);
         // An empty medium has nothing to iterate: the sky and ground pass unchanged.
         let iterations = if self.ctx.voxels.is_empty() { 0 } else { s.max_iterations };
-        for _ in 0..iterations {
+        for done in 0..iterations {
             if progress.cancelled() {
                 break;
             }
-            let e_down = sweep(self.ctx, self.q, self.tables, &it.moments, &mut it.next, &it.ground_map, &mut it.batch);
+            // The last two iterations allowed are full ones, so a solve cut off by
+            // render.transport_max_iterations still ends on the whole map.
+            let phase = if it.starting && iterations - done > 2 { next_phase(&it.history) } else { Phase::Full };
+            let tables = self.start.map_or(self.tables, |st| st.tables(phase, self.tables));
+            let e_down = sweep(self.ctx, self.q, tables, &it.moments, &mut it.next, &it.ground_map, &mut it.batch);
             if it.accelerated && !self.hier.is_empty() {
                 accelerate(self.ctx, self.ctx.voxels, self.hier, &self.optics.bands, &it.moments, &mut it.next);
             }
@@ -356,6 +373,7 @@ impl Solver<'_> {
             it.smallest = it.smallest.min(change_abs);
             let change = change_abs / scale;
             it.history.push(change);
+            it.starting &= !start_over(phase, change);
             // Cold solves mix (src/transport/mixing.rs); warm ones extrapolate, as their
             // stopping rule reads the extrapolated mode.
             let mixed = it.accelerated && extrapolate && it.warm.is_none();
@@ -393,13 +411,15 @@ impl Solver<'_> {
                     it.ground_map.clone(),
                     Arc::clone(self.ctx.full),
                     self.ctx.sun_t.to_vec(),
+                    vec![0f32; it.moments.len()],
                 ));
             }
             let stop = match (&mut it.warm, mean_change) {
                 (Some(w), Some(mean)) => w.converged(mean, mode, s.tolerance),
                 _ => change < s.tolerance,
             };
-            if stop && (it.accelerated || plain_converged(it.since_restart(), s.tolerance))
+            // An iteration with the source at the start order is not the solve's map: no stop.
+            if stop && phase == Phase::Full && (it.accelerated || plain_converged(it.since_restart(), s.tolerance))
             {
                 break;
             }
@@ -412,6 +432,7 @@ impl Solver<'_> {
     /// iteration (positive, and a contraction for a′ ≤ 1).
     fn give_up_acceleration(&self, it: &mut Iterate, change_abs: f64, progress: &dyn Progress) {
         it.accelerated = false;
+        it.starting = false;
         it.given_up = Some(it.history.len() + 1);
         // From zero the solve is a cold one: stopped by the cold test.
         it.warm = None;
@@ -452,14 +473,23 @@ impl Solver<'_> {
         })
     }
 
-    /// The field of `moments`, for the gather.
-    fn field(&self, moments: &[f32], history: Vec<f64>, ground: GroundMap, full: Arc<FullIndex>, sun_t: Vec<[f32; 3]>) -> TransportField {
+    /// The field of `moments`, for the gather; its diffuse source is written over `spare` (as
+    /// long as `moments`).
+    fn field(
+        &self,
+        moments: &[f32],
+        history: Vec<f64>,
+        ground: GroundMap,
+        full: Arc<FullIndex>,
+        sun_t: Vec<[f32; 3]>,
+        spare: Vec<f32>,
+    ) -> TransportField {
         let (perm, _) = parity_order(self.s.order);
         TransportField {
             optics: self.optics.clone(),
             order: self.s.order,
             full,
-            diffuse_source: diffuse_source_of(moments, &self.optics.bands, &perm, self.ctx.nsh),
+            diffuse_source: diffuse_source_of(moments, &self.optics.bands, &perm, self.ctx.nsh, spare),
             sun_t,
             ground,
             history,

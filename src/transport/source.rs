@@ -45,6 +45,7 @@ pub(crate) const ORDINATE_BATCH: usize = 16;
 pub(super) const PAIRS: usize = ORDINATE_BATCH / 2;
 
 /// Per ordinate pair, what the sweeps' per-voxel steps read (inner harmonic order, f32).
+#[derive(Clone)]
 pub(super) struct PairTables {
     /// The ordinates (d, d′ = opposite).
     pub(super) pairs: Vec<[usize; 2]>,
@@ -60,6 +61,11 @@ pub(super) struct PairTables {
     /// The reduced sun's first scattering per unit T′ in Ω_d and in −Ω_d per batch and band, in
     /// lanes: Σ_lm a′χ′_l E Y_lm(Ω_sun) Y_lm(±Ω_d) (W·m⁻²·sr⁻¹).
     pub(super) sun: Vec<[[f32; PAIRS]; 2]>,
+    /// The even and odd harmonics the source kernel reads and the moment kernel accumulates: a
+    /// prefix of each parity part, all of them or those of a lower order
+    /// ([`PairTables::truncated`]).
+    pub(super) source_active: [usize; 2],
+    pub(super) moment_active: [usize; 2],
 }
 
 impl PairTables {
@@ -105,6 +111,23 @@ impl PairTables {
             y_acc,
             y_src,
             sun,
+            source_active: [ne, nsh - ne],
+            moment_active: [ne, nsh - ne],
+        }
+    }
+
+    /// The same tables with the source read from the harmonics of order ≤ `source_order` and
+    /// the moments accumulated to order `moment_order` (in the parity order each part's
+    /// harmonics of an order ≤ l are a prefix); the sun's first scattering keeps every order.
+    pub(super) fn truncated(&self, source_order: usize, moment_order: usize) -> PairTables {
+        let active = |order: usize| {
+            let count = |from: usize| (from..=order).step_by(2).map(|l| 2 * l + 1).sum::<usize>();
+            [count(0).min(self.source_active[0]), count(1).min(self.source_active[1])]
+        };
+        PairTables {
+            source_active: active(source_order),
+            moment_active: active(moment_order),
+            ..self.clone()
         }
     }
 }
@@ -156,13 +179,14 @@ fn accumulate<const FIRST: bool>(acc: &mut [f32], s: &[f32; PAIRS], blocks: &[[[
 #[inline(always)]
 pub(super) fn source_kernel(c: &Ctx, t: &PairTables, bi: usize, pairs: usize, block: &[f32], f0: usize, out: &mut [&mut [[f32; 3]]]) {
     let (nsh, ne) = (c.nsh, c.even);
+    let [ae, ao] = t.source_active;
     for (k, mom) in block.chunks_exact(3 * nsh).enumerate() {
         let f = f0 + k;
         let tf = c.sun_t[f];
         let (mut plus, mut minus) = ([[0f32; 3]; PAIRS], [[0f32; 3]; PAIRS]);
         for b in 0..3 {
             let (m, y) = (&mom[b * nsh..(b + 1) * nsh], &t.y_src[(bi * 3 + b) * nsh..(bi * 3 + b + 1) * nsh]);
-            let (e, o) = (lanes_dot(&m[..ne], &y[..ne]), lanes_dot(&m[ne..], &y[ne..]));
+            let (e, o) = (lanes_dot(&m[..ae], &y[..ae]), lanes_dot(&m[ne..ne + ao], &y[ne..ne + ao]));
             let [sp_, sm_] = t.sun[bi * 3 + b];
             for p in 0..PAIRS {
                 plus[p][b] = (e[p] + o[p] + tf[b] * sp_[p]).max(0.0);
@@ -202,6 +226,9 @@ pub(super) struct Lanes<'a> {
     pub(super) y: &'a [[[f32; 8]; PAIRS]],
     /// The sweep's first batch: it writes the new moments instead of adding to them.
     pub(super) first: bool,
+    /// The even and odd harmonics accumulated ([`PairTables::moment_active`]); the others are
+    /// left as they are.
+    pub(super) active: [usize; 2],
 }
 
 /// Step (3) of a sweep batch for the full voxels from `f0` whose new moments are `block`: I_lm +=
@@ -209,6 +236,7 @@ pub(super) struct Lanes<'a> {
 #[inline(always)]
 pub(super) fn moments_kernel(c: &Ctx, l: &Lanes, block: &mut [f32], f0: usize) {
     let (nsh, ne, nfull) = (c.nsh, c.even, l.nfull);
+    let [ae, ao] = l.active;
     let pairs = l.wts.len() / 2;
     let (mut se, mut so) = ([0f32; PAIRS], [0f32; PAIRS]);
     for (k, acc) in block.chunks_exact_mut(3 * nsh).enumerate() {
@@ -223,12 +251,13 @@ pub(super) fn moments_kernel(c: &Ctx, l: &Lanes, block: &mut [f32], f0: usize) {
             }
             let a = &mut acc[band * nsh..(band + 1) * nsh];
             let nbe = ne.div_ceil(8);
+            let (even, odd) = a.split_at_mut(ne);
             if l.first {
-                accumulate::<true>(&mut a[..ne], &se, &l.y[..nbe]);
-                accumulate::<true>(&mut a[ne..], &so, &l.y[nbe..]);
+                accumulate::<true>(&mut even[..ae], &se, &l.y[..nbe]);
+                accumulate::<true>(&mut odd[..ao], &so, &l.y[nbe..]);
             } else {
-                accumulate::<false>(&mut a[..ne], &se, &l.y[..nbe]);
-                accumulate::<false>(&mut a[ne..], &so, &l.y[nbe..]);
+                accumulate::<false>(&mut even[..ae], &se, &l.y[..nbe]);
+                accumulate::<false>(&mut odd[..ao], &so, &l.y[nbe..]);
             }
         }
     }
@@ -251,16 +280,16 @@ unsafe fn moments_block_avx(c: &Ctx, l: &Lanes, block: &mut [f32], f0: usize) {
     moments_kernel(c, l, block, f0)
 }
 /// The diffuse source a′χ′_l I_lm in real_sh's order for the gather, from the solver's
-/// moments (in `perm`'s parity order), per full voxel, band, lm.
-pub(super) fn diffuse_source_of(moments: &[f32], bands: &[BandOptics], perm: &[usize], nsh: usize) -> Vec<f32> {
+/// moments (in `perm`'s parity order), per full voxel, band, lm, written over `out` (as long as
+/// `moments`: the solve hands over its spent array, whose pages are already mapped).
+pub(super) fn diffuse_source_of(moments: &[f32], bands: &[BandOptics], perm: &[usize], nsh: usize, mut out: Vec<f32>) -> Vec<f32> {
     // Per band and inner index: the real_sh index and a′χ′_l.
     let factors: Vec<Vec<(usize, f64)>> = bands
         .iter()
         .map(|bo| perm.iter().map(|&k| (k, bo.albedo * bo.chi[(k as f64).sqrt().floor() as usize])).collect())
         .collect();
-    let mut diffuse_source = vec![0f32; moments.len()];
-    diffuse_source
-        .par_chunks_mut(3 * nsh)
+    assert_eq!(out.len(), moments.len(), "the diffuse source's array as long as the moments");
+    out.par_chunks_mut(3 * nsh)
         .zip(moments.par_chunks(3 * nsh))
         .for_each(|(o, mf)| {
             for (band, fb) in factors.iter().enumerate() {
@@ -269,7 +298,7 @@ pub(super) fn diffuse_source_of(moments: &[f32], bands: &[BandOptics], perm: &[u
                 }
             }
         });
-    diffuse_source
+    out
 }
 
 #[cfg(test)]
@@ -294,6 +323,30 @@ mod tests {
         for [d, o] in pairs {
             assert!((q.dirs[d] + q.dirs[o]).length() < 1e-12 && q.weights[d] == q.weights[o]);
         }
+    }
+
+    #[test]
+    fn truncated_tables_cover_exactly_the_lower_orders() {
+        // In the parity order the harmonics of order ≤ 3 are the first 6 even and 10 odd ones.
+        let order = 7;
+        let (perm, ne) = parity_order(order);
+        let q = Quadrature::product(4, 8);
+        let band = BandOptics {
+            sigma_t: 1.0,
+            albedo: 0.9,
+            chi: (0..=order).map(|l| 0.8f64.powi(l as i32)).collect(),
+            f: 0.0,
+        };
+        let bands = [band.clone(), band.clone(), band];
+        let full = PairTables::new(&q, order, &perm, &bands, [1.0; 3], &vec![0.0; perm.len()]);
+        assert_eq!((full.source_active, full.moment_active), ([28, 36], [28, 36]));
+        let t = full.truncated(3, order);
+        assert_eq!((t.source_active, t.moment_active), ([6, 10], [28, 36]));
+        let l_of = |k: usize| (k as f64).sqrt().floor() as usize;
+        let [e, o] = t.source_active;
+        assert!(perm[..e].iter().chain(&perm[ne..ne + o]).all(|k| l_of(*k) <= 3));
+        assert!(perm[e..ne].iter().chain(&perm[ne + o..]).all(|k| l_of(*k) > 3));
+        assert_eq!(full.truncated(9, 9).source_active, [28, 36], "no more than the tables hold");
     }
 
     #[test]

@@ -104,6 +104,7 @@ pub(super) fn sweep(
             radiance,
             y: yb,
             first: bi == 0,
+            active: t.moment_active,
         };
         next.par_chunks_mut(chunk * 3 * nsh)
             .enumerate()
@@ -568,6 +569,7 @@ mod tests {
             radiance: &plain,
             y: &t.y_acc[nblk..2 * nblk],
             first: false,
+            active: t.moment_active,
         };
         let (mut ma, mut mb) = (moments.clone(), moments.clone());
         moments_kernel(&c, &l, &mut ma, 0);
