@@ -97,6 +97,30 @@ fn furnace_conservative_cloud_under_uniform_sky_is_invisible() {
 }
 
 #[test]
+fn a_solve_cut_off_by_its_iteration_limit_ends_on_every_order() {
+    // A cold solve's first iterations read and make only the orders ≤ 3
+    // (src/transport/start.rs); the last two iterations the limit allows are full ones, so the
+    // field handed to the gather has its orders 4–7 even when the limit cuts the solve short.
+    let (sun, sky) = high_sun_and_blue_sky();
+    for max_iterations in [1, 2, 3] {
+        let s = TransportSettings {
+            max_iterations,
+            ..TransportSettings::default()
+        };
+        let f = solve(&ball(0.2, 0.99), &sun, &sky, None, &s, &NoProgress).unwrap();
+        assert_eq!(f.iterations(), max_iterations);
+        let nsh = f.diffuse_source.len() / (3 * f.full_voxels);
+        assert_eq!(nsh, 64);
+        let high = f
+            .diffuse_source
+            .chunks(nsh)
+            .map(|j| j[16..].iter().map(|x| x.abs()).fold(0.0, f32::max))
+            .fold(0.0, f32::max);
+        assert!(high > 0.0, "limit {max_iterations}: no harmonic of order 4–7");
+    }
+}
+
+#[test]
 fn acceleration_keeps_iterations_flat_in_optical_thickness() {
     let (sun, sky) = high_sun_and_blue_sky();
     let s = TransportSettings {
