@@ -527,6 +527,7 @@ impl Scene {
             Some(_) => None,
             None => None,
         };
+        let sun = crate::lighting::sun_over_ground(sun, ground.as_ref());
         let medium = Medium::from_desc_with(&desc.medium, f, base_dir, density.map(crate::Density::into_loaded))?;
         // camera.fit: the camera moved to frame the cloud's box (src/camera/fit.rs).
         let (desc, camera) = match desc.camera.fit {

@@ -70,6 +70,11 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
         !d.sun.from_atmosphere,
         "with sun.from_atmosphere = true (the atmosphere gives the irradiance)",
     );
+    rule(
+        "sun.angular_diameter_deg",
+        d.sun.angular_diameter_deg == 0.0,
+        "to any method (each lights the scene with a point sun: sharp shadows, no disc drawn)",
+    );
     let sky = d.sky.model;
     rule("sky.radiance", sky == SkyModel::Constant, "unless sky.model = \"constant\"");
     let atmosphere = "unless sky.model = \"atmosphere\"";
@@ -120,9 +125,28 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
         ));
     }
 
+    out.extend(hidden_sun_warning(scene));
     out.extend(super::cloud_size::warning(scene));
     out.extend(frame_warning(scene));
     out
+}
+
+/// A warning when the ground hides a sun given an irradiance of its own (a sun from the
+/// atmosphere is dark below the horizon anyway): the scene is lit by the sky alone
+/// ([`crate::lighting::sun_over_ground`]).
+fn hidden_sun_warning(scene: &Scene) -> Option<String> {
+    let d = &scene.desc.sun;
+    let given = !d.from_atmosphere && d.irradiance.iter().any(|&e| e > 0.0);
+    let hidden = scene.ground.is_some() && scene.sun.irradiance == crate::math::Rgb::ZERO;
+    (given && hidden).then(|| {
+        format!(
+            "{}: the sun is {:.2}° below the horizon and the ground hides it: it lights nothing directly, \
+             only the sky lights the scene; raise sun.direction's y (or sun.elevation_deg) above 0, or set \
+             ground.enabled = false to light the cloud from below",
+            scene.source,
+            -scene.sun.dir.y.asin().to_degrees()
+        )
+    })
 }
 
 /// "diffusion and full uses"-style list of the methods that read a key: "full uses",
@@ -263,6 +287,42 @@ mod tests {
         }
         assert_eq!(readers(&[Method::Full]), "full uses");
         assert_eq!(readers(&[Method::Diffusion, Method::Full]), "diffusion and full use");
+    }
+
+    #[test]
+    fn a_sun_below_the_horizon_is_reported_only_where_the_ground_hides_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("s.toml");
+        let grid = "[medium]\nresolution = [4, 4, 4]\nvoxel_size = 100.0\n";
+        for (rest, warned) in [
+            ("[sun]\ndirection = [1.0, -0.05, 0.0]\n[ground]\n", true),
+            ("[sun]\ndirection = [1.0, 0.05, 0.0]\n[ground]\n", false),
+            // No `[ground]` table: no ground.
+            ("[sun]\ndirection = [1.0, -0.05, 0.0]\n", false),
+            (
+                "[sun]\ndirection = [1.0, -0.05, 0.0]\nirradiance = [0.0, 0.0, 0.0]\n[ground]\n",
+                false,
+            ),
+        ] {
+            std::fs::write(&p, format!("{grid}{rest}")).unwrap();
+            let w = warnings_of(&p);
+            assert_eq!(w.iter().any(|m| m.contains("2.86° below the horizon")), warned, "{rest}: {w:?}");
+        }
+    }
+
+    #[test]
+    fn a_sun_disc_is_reported_as_ignored_and_a_point_sun_is_not() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("s.toml");
+        for (diameter, warned) in [(0.53, true), (0.0, false)] {
+            std::fs::write(&p, format!("[sun]\nangular_diameter_deg = {diameter:?}\n")).unwrap();
+            let w = warnings_of(&p);
+            assert_eq!(
+                w.iter().any(|m| m.contains("`sun.angular_diameter_deg` does not apply")),
+                warned,
+                "{w:?}"
+            );
+        }
     }
 
     #[test]

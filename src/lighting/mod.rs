@@ -408,7 +408,7 @@ impl Ground {
     /// Distance along a ray to the plane, seen from above only.
     #[inline]
     pub fn intersect(&self, origin: Vec3, dir: Vec3) -> Option<f32> {
-        if origin.y > self.height && dir.y < -1e-7 {
+        if origin.y > self.height && dir.y < -GRAZING_COSINE {
             Some((self.height - origin.y) / dir.y)
         } else {
             None
@@ -429,54 +429,20 @@ impl Ground {
     }
 }
 
-/// The sun's disc, for an optional angular size (`sun.angular_diameter_deg`; 0 = a point).
-/// [`Sun`] stays a point-light record; renderers that want soft shadows or a visible disc build
-/// this from it.
-#[derive(Clone, Copy, Debug)]
-pub struct SunDisc {
-    /// Unit direction to the disc's centre.
-    pub dir: Vec3,
-    /// Cosine of the angular radius (1 for a point).
-    pub cos_radius: f32,
-}
+/// Cosine below which a ray going down meets the ground plane (a ray closer to horizontal runs
+/// along it, as the sun on the horizon does).
+const GRAZING_COSINE: f32 = 1e-7;
 
-impl SunDisc {
-    /// The disc of `sun` with angular diameter `angular_diameter_deg` (degrees).
-    pub fn new(sun: &Sun, angular_diameter_deg: f32) -> SunDisc {
-        SunDisc {
-            dir: sun.dir,
-            cos_radius: (0.5 * angular_diameter_deg.to_radians()).cos(),
-        }
-    }
-
-    /// Solid angle (sr): 2π(1 − cos radius); 0 for a point.
-    pub fn solid_angle(&self) -> f32 {
-        2.0 * PI * (1.0 - self.cos_radius)
-    }
-
-    /// Whether unit direction `dir` lies in the disc (never, for a point).
-    pub fn contains(&self, dir: Vec3) -> bool {
-        self.cos_radius < 1.0 && dir.dot(self.dir) >= self.cos_radius
-    }
-
-    /// Uniform radiance of the disc (W·m⁻²·sr⁻¹): irradiance / solid angle (zero for a point,
-    /// whose radiance is a delta).
-    pub fn radiance(&self, sun: &Sun) -> Rgb {
-        let sa = self.solid_angle();
-        if sa > 0.0 {
-            sun.irradiance / sa
-        } else {
-            Rgb::ZERO
-        }
-    }
-
-    /// A direction uniformly distributed over the disc's solid angle (the centre for a point).
-    pub fn sample(&self, u: Vec2) -> Vec3 {
-        let cos_t = 1.0 - u.x * (1.0 - self.cos_radius);
-        let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
-        let phi = 2.0 * PI * u.y;
-        crate::math::Frame::from_normal(self.dir)
-            .to_world(Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t))
-            .normalize()
+/// The sun as the scene above `ground` receives it: a sun below the ground's horizon is hidden by
+/// the opaque plane from every point above it (every shadow ray towards it meets the plane), so
+/// it lights nothing directly and only the sky lights the scene. Applied once to the scene, so
+/// every method (and `reference`) sees the same sun. A medium is taken to lie above its ground.
+pub fn sun_over_ground(sun: Sun, ground: Option<&Ground>) -> Sun {
+    match ground {
+        Some(_) if sun.dir.y < -GRAZING_COSINE => Sun {
+            irradiance: Rgb::ZERO,
+            ..sun
+        },
+        _ => sun,
     }
 }

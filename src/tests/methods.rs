@@ -138,6 +138,29 @@ fn thin_box_single_scattering() {
 
 /// No cloud: every method shows exactly the sky (and the deterministic ones the lit ground);
 /// the reference's ground is a Monte Carlo estimate, checked against the closed form on average.
+/// The ground is an opaque plane: a sun 2.9° below its horizon reaches nothing above it (every
+/// shadow ray towards it meets the plane), so each method's image, its layers included, is the
+/// one the scene gives without that sun's irradiance.
+#[test]
+fn a_sun_below_the_grounds_horizon_lights_nothing() {
+    let with_sun = |irradiance: f32| {
+        move |d: &mut SceneDesc| {
+            d.ground = Some(Default::default());
+            d.sun.direction = Some([1.0, -0.05, 0.0]);
+            d.sun.irradiance = [irradiance; 3];
+        }
+    };
+    let render_with_layers = |mut s: Scene| {
+        s.render.aov = true;
+        render(&s)
+    };
+    for m in METHODS {
+        let hidden = render_with_layers(scene(m, 12, 9, with_sun(3.0)));
+        let none = render_with_layers(scene(m, 12, 9, with_sun(0.0)));
+        assert!(hidden == none, "{m:?}: the hidden sun changed the image");
+    }
+}
+
 #[test]
 fn empty_scene_is_sky_and_ground() {
     for m in METHODS {

@@ -3,7 +3,7 @@
 //! irradiance, and bad input.
 
 use crate::lighting::atmosphere::{cornette_shanks_phase, rayleigh_phase, Atmosphere, AtmosphereParams};
-use crate::lighting::{sun_and_sky, DirectionBins, Ground, Sky, SkyKind, Sun, SunDisc};
+use crate::lighting::{sun_and_sky, DirectionBins, Ground, Sky, SkyKind, Sun};
 use crate::math::{Rgb, Rng, Vec3};
 use crate::par;
 use crate::scene::{SceneDesc, SkyDesc, SkyModel, SunDesc};
@@ -464,25 +464,6 @@ fn ground_irradiance_is_sky_hemisphere_plus_shadowed_sun() {
     // Diffuse share of the ground's irradiance at 30° sun: blue sky light is a large part.
     let total = ground.irradiance(&sun, &sky, 1.0);
     assert!(sky.irradiance_up.z / total.z > sky.irradiance_up.x / total.x);
-}
-
-#[test]
-fn sun_disc_samples_lie_in_the_disc_and_carry_the_irradiance() {
-    let sun = Sun {
-        dir: Vec3::new(0.2, 0.9, 0.1).normalize(),
-        irradiance: Rgb::new(100.0, 120.0, 130.0),
-    };
-    let disc = SunDisc::new(&sun, 0.53);
-    let mut rng = Rng::new(1, 2);
-    for _ in 0..1000 {
-        let d = disc.sample(Vec2::new(rng.uniform(), rng.uniform()));
-        assert!(disc.contains(d) || d.dot(sun.dir) > disc.cos_radius - 1e-6);
-    }
-    // Radiance × solid angle = irradiance (the disc is small: cos ≈ 1 across it).
-    assert!((disc.radiance(&sun) * disc.solid_angle() - sun.irradiance).abs().max_element() < 1e-3);
-    let point = SunDisc::new(&sun, 0.0);
-    assert_eq!(point.sample(Vec2::new(0.4, 0.6)), sun.dir);
-    assert!(!point.contains(sun.dir));
 }
 
 #[test]

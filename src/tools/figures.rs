@@ -156,7 +156,6 @@ pub fn sunset_desc(desc: &SceneDesc) -> SceneDesc {
     d.sun.elevation_deg = Some(SUNSET_ELEVATION_DEG);
     d.sun.azimuth_deg = Some(az);
     d.sun.from_atmosphere = true;
-    d.sun.angular_diameter_deg = 0.53;
     d.sky.model = SkyModel::Atmosphere;
     d.sky.altitude_m = 0.0;
     d.sky.map_width = 256;
