@@ -103,20 +103,43 @@ pub fn solve_slab(tau: f64, a: f64, g: f64, incidence: Incidence, cells: usize) 
             std::f64::consts::PI
         }
     };
+    let (x, f) = solve_column(&q0, &q1, sigma_a, sigma_tr);
+    let (bd, bf) = boundary_terms(1.0, sigma_tr, h, 0.0);
+    // Outgoing fluxes 4π φ / h·h (per unit area: φ/h·h).
+    let phi_top = (bd * x[0] + bf * (-f[0])) * h;
+    let phi_bot = (bd * x[n - 1] + bf * f[n - 1]) * h;
+    let unscattered = match incidence {
+        Incidence::Collimated => (-tau).exp(),
+        Incidence::Diffuse => 2.0 * expint(3, tau),
+    };
+    SlabResult {
+        r: four_pi * phi_top / e_in,
+        t: four_pi * phi_bot / e_in + unscattered,
+        r_stderr: 0.0,
+        t_stderr: 0.0,
+    }
+}
+
+/// I0 per cell (ρ = 1, h = 1, so σ per unit optical depth) of the column with sources `q0`, `q1`
+/// (z components, z the depth), by the rows of [`super`]: interior faces and the ghost-eliminated
+/// Marshak boundary (eq. 7) at both faces. Returns (I0, F = Q1/σtr) per cell.
+fn solve_column(q0: &[f64], q1: &[f64], sigma_a: f64, sigma_tr: f64) -> (Vec<f64>, Vec<f64>) {
+    let n = q0.len();
+    let h = 1.0;
     // Tridiagonal system: lower l, diagonal d, upper u, rhs b.
-    let f: Vec<f64> = q1.iter().map(|q| q / sigma_tr).collect(); // ρ = 1
+    let f: Vec<f64> = q1.iter().map(|q| q / sigma_tr).collect();
     let mut d = vec![sigma_a; n];
     let mut l = vec![0.0; n];
     let mut u = vec![0.0; n];
-    let mut b = q0.clone();
+    let mut b = q0.to_vec();
     let (bd, bf) = boundary_terms(1.0, sigma_tr, h, 0.0);
+    let c = interior_coupling(1.0, 1.0, sigma_tr, h, 0.0);
     for k in 0..n {
         // Top face (outward normal −z).
         if k == 0 {
             d[k] += bd;
             b[k] -= bf * (-f[k]);
         } else {
-            let c = interior_coupling(1.0, 1.0, sigma_tr, h, 0.0);
             d[k] += c;
             l[k] = -c;
             b[k] += 0.5 * (f[k] + f[k - 1]) / h;
@@ -126,7 +149,6 @@ pub fn solve_slab(tau: f64, a: f64, g: f64, incidence: Incidence, cells: usize) 
             d[k] += bd;
             b[k] -= bf * f[k];
         } else {
-            let c = interior_coupling(1.0, 1.0, sigma_tr, h, 0.0);
             d[k] += c;
             u[k] = -c;
             b[k] -= 0.5 * (f[k] + f[k + 1]) / h;
@@ -144,19 +166,23 @@ pub fn solve_slab(tau: f64, a: f64, g: f64, incidence: Incidence, cells: usize) 
     for k in (0..n).rev() {
         x[k] = dp[k] - if k + 1 < n { cp[k] * x[k + 1] } else { 0.0 };
     }
-    // Outgoing fluxes 4π φ / h·h (per unit area: φ/h·h).
-    let phi_top = (bd * x[0] + bf * (-f[0])) * h;
-    let phi_bot = (bd * x[n - 1] + bf * f[n - 1]) * h;
-    let unscattered = match incidence {
-        Incidence::Collimated => (-tau).exp(),
-        Incidence::Diffuse => 2.0 * expint(3, tau),
-    };
-    SlabResult {
-        r: four_pi * phi_top / e_in,
-        t: four_pi * phi_bot / e_in + unscattered,
-        r_stderr: 0.0,
-        t_stderr: 0.0,
-    }
+    (x, f)
+}
+
+/// The diffusion's I0 per cell (W·m⁻²·sr⁻¹ per W·m⁻² of sun irradiance across its rays) in a
+/// slab of optical thickness `tau` (`cells` cells of τ/cells each), albedo `a`, HG `g`, lit by
+/// the sun at μ0 = cos of its angle from the inward normal: stage 1's voxel-mean Q0, Q1 (eqs. 5,
+/// 6, the sun's direction's z component μ0 in Q1) and the 3-D solver's rows.
+pub fn collimated_profile(tau: f64, a: f64, g: f64, mu0: f64, cells: usize) -> Vec<f64> {
+    let n = cells.max(1);
+    let dtau = tau / n as f64;
+    let (sigma_s, sigma_a, sigma_tr) = (a * dtau, (1.0 - a) * dtau, dtau * (1.0 - a * g));
+    let four_pi = 4.0 * std::f64::consts::PI;
+    // Cell mean of e^{−t/μ0} over the cell's optical depths [t0, t0 + Δτ].
+    let mean = |k: usize| (-(k as f64) * dtau / mu0).exp() * (-(-dtau / mu0).exp_m1()) * mu0 / dtau;
+    let q0: Vec<f64> = (0..n).map(|k| sigma_s / four_pi * mean(k)).collect();
+    let q1: Vec<f64> = q0.iter().map(|q| q * g * mu0).collect();
+    solve_column(&q0, &q1, sigma_a, sigma_tr).0
 }
 
 /// [`solve_slab`] after the δ-M similarity transform with forward fraction `f` (0 ≤ f < 1;

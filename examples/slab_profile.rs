@@ -1,0 +1,209 @@
+//! The diffusion's I0(τ) against the exact one in a slab lit by the sun at an angle (docs/accuracy.md,
+//! "The diffusion's I0 where the sun enters, in one dimension"): the medium `full` runs on (the
+//! cumulus's g = 0.9 and albedo 0.999 after δ-M with f = g⁴), I0 of the diffusion's own rows
+//! ([`cloudgi::diffusion::slab::collimated_profile`], cells as thick as one of the cumulus's 10-m
+//! voxels at density 1) and the exact mean diffuse radiance by Monte Carlo (track-length
+//! estimator, the same δ-M medium, HG(g′)), binned by optical depth along the normal and along the
+//! sun.
+//!
+//! `cargo run --release --example slab_profile [PHOTONS]`
+
+use cloudgi::diffusion::slab::collimated_profile;
+use cloudgi::math::Rng;
+use cloudgi::optics::{delta_m, Hg};
+use rayon::prelude::*;
+
+/// The slab's δ-M optical thickness: a half-space for the first 20 optical depths.
+const THICKNESS: f64 = 60.0;
+/// δ-M optical depth of one cell (a 10-m voxel of the cumulus at density 1: σt′ = 0.0172 m⁻¹).
+const CELL: f64 = 0.172;
+/// Upper ends of the depth bins (δ-M optical depth along the normal).
+const DEPTHS: [f64; 9] = [0.25, 0.5, 1.0, 1.5, 2.0, 3.0, 5.0, 10.0, 20.0];
+
+fn main() {
+    let photons: u64 = std::env::args().nth(1).map_or(400_000, |s| s.parse().expect("PHOTONS"));
+    let (g, a) = (0.9f64, 0.999f64);
+    let f = g.powi(4);
+    let dm = delta_m(1.0, a, g, f);
+    let cells = (THICKNESS / CELL).round() as usize;
+    println!("δ-M f = {f:.3}: a′ = {:.5}, g′ = {:.3}; {cells} cells of {CELL} optical depth, {photons} photons", dm.albedo, dm.g);
+    for mu0 in [1.0, 0.69, 0.4, 0.2] {
+        let diffusion = collimated_profile(THICKNESS, dm.albedo, dm.g, mu0, cells);
+        let exact = exact_profile(THICKNESS, dm.albedo, dm.g, mu0, cells, photons);
+        let p1 = pn_profile(THICKNESS, dm.albedo, dm.g, mu0, cells, false);
+        let p3 = pn_profile(THICKNESS, dm.albedo, dm.g, mu0, cells, true);
+        let worst = diffusion.iter().zip(&p1).map(|(d, p)| (d - p).abs() / p.abs()).fold(0.0, f64::max);
+        println!("μ0 = {mu0}: I0 / exact by depth along the normal: the diffusion's rows, P3 (exact I0 per unit sun irradiance); P1 = the rows within {worst:.1e}");
+        let mut lo = 0.0;
+        for hi in DEPTHS {
+            let (mut d, mut e, mut q, mut m) = (0.0, 0.0, 0.0, 0);
+            for k in 0..cells {
+                let mid = (k as f64 + 0.5) * CELL;
+                if mid >= lo && mid < hi {
+                    d += diffusion[k];
+                    e += exact[k];
+                    q += p3[k];
+                    m += 1;
+                }
+            }
+            println!("  τ′ {lo:>5}–{hi:<5} {:.3}  {:.3}  ({:.4})", d / e, q / e, e / m as f64);
+            lo = hi;
+        }
+    }
+}
+
+/// Mean diffuse radiance (1/4π)∫I dω per cell, per unit sun irradiance across its rays, by Monte
+/// Carlo: photons enter at μ0, each carries the flux μ0/N, collide at exponential free paths,
+/// keep a′ of their weight at each collision (Russian roulette below 10⁻³), and scatter by HG(g);
+/// path length after the first collision is tallied per cell (φ = Σℓ/Δτ, I0 = φ/4π).
+fn exact_profile(tau: f64, a: f64, g: f64, mu0: f64, cells: usize, photons: u64) -> Vec<f64> {
+    let dtau = tau / cells as f64;
+    let hg = Hg::new(g as f32);
+    const CHUNK: u64 = 4096;
+    let sums: Vec<Vec<f64>> = (0..photons.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|c| {
+            let mut tally = vec![0.0; cells];
+            for i in c * CHUNK..((c + 1) * CHUNK).min(photons) {
+                let mut rng = Rng::new(7, i);
+                let (mut z, mut mu, mut w, mut scattered) = (0.0f64, mu0, 1.0f64, false);
+                loop {
+                    let s = -(1.0 - rng.uniform_f64()).ln();
+                    let z1 = (z + s * mu).clamp(0.0, tau);
+                    if scattered {
+                        deposit(&mut tally, z, z1, mu, w, dtau);
+                    }
+                    if z + s * mu <= 0.0 || z + s * mu >= tau {
+                        break;
+                    }
+                    z = z1;
+                    scattered = true;
+                    w *= a;
+                    if w < 1e-3 {
+                        if rng.uniform_f64() < 0.1 {
+                            w *= 10.0;
+                        } else {
+                            break;
+                        }
+                    }
+                    let ct = hg.sample_cos(rng.uniform()) as f64;
+                    let st = (1.0 - ct * ct).max(0.0).sqrt();
+                    let phi = 2.0 * std::f64::consts::PI * rng.uniform_f64();
+                    mu = (mu * ct + (1.0 - mu * mu).max(0.0).sqrt() * st * phi.cos()).clamp(-1.0, 1.0);
+                }
+            }
+            tally
+        })
+        .collect();
+    let scale = mu0 / (photons as f64 * dtau * 4.0 * std::f64::consts::PI);
+    (0..cells).map(|k| sums.iter().map(|t| t[k]).sum::<f64>() * scale).collect()
+}
+
+/// Adds weight × the path length of the segment z0 → z1 (direction cosine `mu`) inside each cell.
+fn deposit(tally: &mut [f64], z0: f64, z1: f64, mu: f64, w: f64, dtau: f64) {
+    let (lo, hi) = if z0 < z1 { (z0, z1) } else { (z1, z0) };
+    let per_depth = w / mu.abs().max(1e-12);
+    let (k0, k1) = ((lo / dtau) as usize, ((hi / dtau) as usize).min(tally.len() - 1));
+    for (k, t) in tally.iter_mut().enumerate().take(k1 + 1).skip(k0) {
+        let (a, b) = (k as f64 * dtau, (k + 1) as f64 * dtau);
+        *t += per_depth * (hi.min(b) - lo.max(a)).max(0.0);
+    }
+}
+
+/// I0 per cell of the P1 (`p3` false) or P3 equations in the slab (φ_l = 2π∫I P_l dμ, HG(g)
+/// moments χ_l = g^l, the sun's first scattering S_l = a E T̄ χ_l P_l(μ0) with T̄ the cell mean):
+/// finite volumes with φ0, φ2 at cell centres and φ1, φ3 at faces, Marshak's conditions
+/// ∫₀¹ I P_{1,3}(μ) dμ = 0 for the inward μ at both faces (P1: the diffusion's rows exactly).
+fn pn_profile(tau: f64, a: f64, g: f64, mu0: f64, cells: usize, p3: bool) -> Vec<f64> {
+    let n = cells;
+    let h = tau / n as f64;
+    let sigma: Vec<f64> = (0..4).map(|l| 1.0 - a * g.powi(l)).collect();
+    let p_mu0 = [1.0, mu0, 0.5 * (3.0 * mu0 * mu0 - 1.0), 0.5 * (5.0 * mu0.powi(3) - 3.0 * mu0)];
+    let t_mean = |k: usize| (-(k as f64) * h / mu0).exp() * (-(-h / mu0).exp_m1()) * mu0 / h;
+    let src = |l: usize, k: usize| a * t_mean(k) * g.powi(l as i32) * p_mu0[l];
+    // Unknowns: top face (φ0, φ2), cells (φ0, φ2)…, bottom face (φ0, φ2).
+    let size = 2 * n + 4;
+    let (top, cell, bot) = (0usize, |k: usize| 2 + 2 * k, 2 * n + 2);
+    let mut m = vec![vec![0.0; size + 1]; size];
+    // φ1 and φ3 on the face from node L to node R (Δ apart) as (coefficients, constant).
+    let face = |l: usize, r: usize, delta: f64, s1: f64, s3: f64| {
+        let phi1 = (vec![(r, -1.0 / (3.0 * delta * sigma[1])), (l, 1.0 / (3.0 * delta * sigma[1])), (r + 1, -2.0 / (3.0 * delta * sigma[1])), (l + 1, 2.0 / (3.0 * delta * sigma[1]))], s1 / sigma[1]);
+        let phi3 = (vec![(r + 1, -3.0 / (7.0 * delta * sigma[3])), (l + 1, 3.0 / (7.0 * delta * sigma[3]))], s3 / sigma[3]);
+        (phi1, phi3)
+    };
+    type Lin = (Vec<(usize, f64)>, f64);
+    let add = |row: &mut Vec<f64>, e: &Lin, w: f64| {
+        for (i, c) in &e.0 {
+            row[*i] += w * c;
+        }
+        row[size] -= w * e.1;
+    };
+    let faces: Vec<(Lin, Lin)> = (0..=n)
+        .map(|j| match j {
+            0 => face(top, cell(0), 0.5 * h, src(1, 0), src(3, 0)),
+            j if j == n => face(cell(n - 1), bot, 0.5 * h, src(1, n - 1), src(3, n - 1)),
+            j => face(cell(j - 1), cell(j), h, 0.5 * (src(1, j - 1) + src(1, j)), 0.5 * (src(3, j - 1) + src(3, j))),
+        })
+        .collect();
+    for k in 0..n {
+        let (i0, i2) = (cell(k), cell(k) + 1);
+        let (lo, hi) = (&faces[k], &faces[k + 1]);
+        let row = &mut m[i0];
+        row[i0] += sigma[0];
+        row[size] += src(0, k);
+        add(row, &hi.0, 1.0 / h);
+        add(row, &lo.0, -1.0 / h);
+        let row = &mut m[i2];
+        if p3 {
+            row[i2] += sigma[2];
+            row[size] += src(2, k);
+            add(row, &hi.1, 0.6 / h);
+            add(row, &lo.1, -0.6 / h);
+            add(row, &hi.0, 0.4 / h);
+            add(row, &lo.0, -0.4 / h);
+        } else {
+            row[i2] = 1.0;
+        }
+    }
+    // Marshak: φ0/2 ± φ1 + 5φ2/8 = 0 and −φ0/8 + 5φ2/8 ± φ3 = 0 (+ at the top, − at the bottom).
+    for (node, f, sign) in [(top, &faces[0], 1.0), (bot, &faces[n], -1.0)] {
+        let row = &mut m[node];
+        row[node] += 0.5;
+        row[node + 1] += 0.625;
+        add(row, &f.0, sign);
+        let row = &mut m[node + 1];
+        if p3 {
+            row[node] -= 0.125;
+            row[node + 1] += 0.625;
+            add(row, &f.1, sign);
+        } else {
+            row[node + 1] = 1.0;
+        }
+    }
+    let x = gauss(m);
+    (0..n).map(|k| x[cell(k)] / (4.0 * std::f64::consts::PI)).collect()
+}
+
+/// Solves the augmented system (each row: coefficients, then the right-hand side) by Gaussian
+/// elimination with partial pivoting.
+fn gauss(mut m: Vec<Vec<f64>>) -> Vec<f64> {
+    let n = m.len();
+    for c in 0..n {
+        let p = (c..n).max_by(|&i, &j| m[i][c].abs().total_cmp(&m[j][c].abs())).unwrap();
+        m.swap(c, p);
+        for r in c + 1..n {
+            let k = m[r][c] / m[c][c];
+            if k != 0.0 {
+                for j in c..=n {
+                    m[r][j] -= k * m[c][j];
+                }
+            }
+        }
+    }
+    let mut x = vec![0.0; n];
+    for r in (0..n).rev() {
+        let s: f64 = (r + 1..n).map(|j| m[r][j] * x[j]).sum();
+        x[r] = (m[r][n] - s) / m[r][r];
+    }
+    x
+}
