@@ -30,23 +30,29 @@ fn main() {
     for mu0 in [1.0, 0.69, 0.4, 0.2] {
         let diffusion = collimated_profile(THICKNESS, dm.albedo, dm.g, mu0, cells);
         let exact = exact_profile(THICKNESS, dm.albedo, dm.g, mu0, cells, photons);
-        let p1 = pn_profile(THICKNESS, dm.albedo, dm.g, mu0, cells, false);
-        let p3 = pn_profile(THICKNESS, dm.albedo, dm.g, mu0, cells, true);
+        // The rows at ten times finer cells, averaged back over each cell.
+        let fine = collimated_profile(THICKNESS, dm.albedo, dm.g, mu0, 10 * cells);
+        let fine: Vec<f64> = fine.chunks(10).map(|c| c.iter().sum::<f64>() / 10.0).collect();
+        let p1 = pn_profile(THICKNESS, dm.albedo, dm.g, mu0, cells, Closure::P1);
+        let local = pn_profile(THICKNESS, dm.albedo, dm.g, mu0, cells, Closure::LocalSecondMoment);
+        let p3 = pn_profile(THICKNESS, dm.albedo, dm.g, mu0, cells, Closure::P3);
         let worst = diffusion.iter().zip(&p1).map(|(d, p)| (d - p).abs() / p.abs()).fold(0.0, f64::max);
-        println!("μ0 = {mu0}: I0 / exact by depth along the normal: the diffusion's rows, P3 (exact I0 per unit sun irradiance); P1 = the rows within {worst:.1e}");
+        println!("μ0 = {mu0}: I0 / exact by depth along the normal: the diffusion's rows, the same at cells 10× finer, P1 with φ2 = S2/σ2, P3 (exact I0 per unit sun irradiance); P1 = the rows within {worst:.1e}");
         let mut lo = 0.0;
         for hi in DEPTHS {
-            let (mut d, mut e, mut q, mut m) = (0.0, 0.0, 0.0, 0);
+            let (mut d, mut e, mut q, mut o, mut r, mut m) = (0.0, 0.0, 0.0, 0.0, 0.0, 0);
             for k in 0..cells {
                 let mid = (k as f64 + 0.5) * CELL;
                 if mid >= lo && mid < hi {
                     d += diffusion[k];
                     e += exact[k];
                     q += p3[k];
+                    o += local[k];
+                    r += fine[k];
                     m += 1;
                 }
             }
-            println!("  τ′ {lo:>5}–{hi:<5} {:.3}  {:.3}  ({:.4})", d / e, q / e, e / m as f64);
+            println!("  τ′ {lo:>5}–{hi:<5} {:.3}  {:.3}  {:.3}  {:.3}  ({:.4})", d / e, r / e, o / e, q / e, e / m as f64);
             lo = hi;
         }
     }
@@ -110,11 +116,23 @@ fn deposit(tally: &mut [f64], z0: f64, z1: f64, mu: f64, w: f64, dtau: f64) {
     }
 }
 
+/// How the P_N equations are closed.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Closure {
+    /// φ2 = φ3 = 0: the diffusion.
+    P1,
+    /// φ2 = S2/σ2, the l = 2 balance without its transport terms; φ3 = 0.
+    LocalSecondMoment,
+    /// φ4 = 0.
+    P3,
+}
+
 /// I0 per cell of the P1 (`p3` false) or P3 equations in the slab (φ_l = 2π∫I P_l dμ, HG(g)
 /// moments χ_l = g^l, the sun's first scattering S_l = a E T̄ χ_l P_l(μ0) with T̄ the cell mean):
 /// finite volumes with φ0, φ2 at cell centres and φ1, φ3 at faces, Marshak's conditions
 /// ∫₀¹ I P_{1,3}(μ) dμ = 0 for the inward μ at both faces (P1: the diffusion's rows exactly).
-fn pn_profile(tau: f64, a: f64, g: f64, mu0: f64, cells: usize, p3: bool) -> Vec<f64> {
+fn pn_profile(tau: f64, a: f64, g: f64, mu0: f64, cells: usize, closure: Closure) -> Vec<f64> {
+    let p3 = closure == Closure::P3;
     let n = cells;
     let h = tau / n as f64;
     let sigma: Vec<f64> = (0..4).map(|l| 1.0 - a * g.powi(l)).collect();
@@ -163,6 +181,9 @@ fn pn_profile(tau: f64, a: f64, g: f64, mu0: f64, cells: usize, p3: bool) -> Vec
             add(row, &lo.0, -0.4 / h);
         } else {
             row[i2] = 1.0;
+            if closure == Closure::LocalSecondMoment {
+                row[size] = src(2, k) / sigma[2];
+            }
         }
     }
     // Marshak: φ0/2 ± φ1 + 5φ2/8 = 0 and −φ0/8 + 5φ2/8 ± φ3 = 0 (+ at the top, − at the bottom).
@@ -178,6 +199,9 @@ fn pn_profile(tau: f64, a: f64, g: f64, mu0: f64, cells: usize, p3: bool) -> Vec
             add(row, &f.1, sign);
         } else {
             row[node + 1] = 1.0;
+            if closure == Closure::LocalSecondMoment {
+                row[size] = src(2, if node == top { 0 } else { n - 1 }) / sigma[2];
+            }
         }
     }
     let x = gauss(m);
