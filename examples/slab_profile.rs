@@ -9,7 +9,11 @@
 //! `cargo run --release --example slab_profile [PHOTONS]`
 
 use cloudgi::diffusion::slab::collimated_profile;
-use cloudgi::math::Rng;
+use cloudgi::diffusion::{solve_diffusion, BoundaryLight, DiffusionSettings};
+use cloudgi::incident::{compute, IncidentSettings, IncidentSources};
+use cloudgi::lighting::DirectionBins;
+use cloudgi::math::{Rgb, Rng, Vec3};
+use cloudgi::medium::{Grid3, Medium};
 use cloudgi::optics::{delta_m, Hg};
 use rayon::prelude::*;
 
@@ -26,7 +30,10 @@ fn main() {
     let f = g.powi(4);
     let dm = delta_m(1.0, a, g, f);
     let cells = (THICKNESS / CELL).round() as usize;
-    println!("δ-M f = {f:.3}: a′ = {:.5}, g′ = {:.3}; {cells} cells of {CELL} optical depth, {photons} photons", dm.albedo, dm.g);
+    println!(
+        "δ-M f = {f:.3}: a′ = {:.5}, g′ = {:.3}; {cells} cells of {CELL} optical depth, {photons} photons",
+        dm.albedo, dm.g
+    );
     for mu0 in [1.0, 0.69, 0.4, 0.2] {
         let diffusion = collimated_profile(THICKNESS, dm.albedo, dm.g, mu0, cells);
         let exact = exact_profile(THICKNESS, dm.albedo, dm.g, mu0, cells, photons);
@@ -52,8 +59,35 @@ fn main() {
                     m += 1;
                 }
             }
-            println!("  τ′ {lo:>5}–{hi:<5} {:.3}  {:.3}  {:.3}  {:.3}  ({:.4})", d / e, r / e, o / e, q / e, e / m as f64);
+            println!(
+                "  τ′ {lo:>5}–{hi:<5} {:.3}  {:.3}  {:.3}  {:.3}  ({:.4})",
+                d / e,
+                r / e,
+                o / e,
+                q / e,
+                e / m as f64
+            );
             lo = hi;
+        }
+    }
+    // Albedo 0.9 (diffusion length 3 optical depths) keeps the box's sides out of the middle.
+    let a3 = 0.9;
+    println!(
+        "3-D solver on a slab of {SLAB_3D} optical depths (a′ = {a3}, g′ = {:.3}), voxels of {VOXEL_3D}: I0 / exact by depth along the normal",
+        dm.g
+    );
+    let fine = (SLAB_3D / 0.05) as usize;
+    for mu0 in [1.0, 0.69, 0.4] {
+        let exact = exact_profile(SLAB_3D, a3, dm.g, mu0, fine, photons);
+        let rows = collimated_profile(SLAB_3D, a3, dm.g, mu0, (SLAB_3D / VOXEL_3D) as usize);
+        let rows: Vec<f64> = rows.iter().flat_map(|v| std::iter::repeat_n(*v, fine / rows.len())).collect();
+        let one_d = binned_ratio(&rows, &exact);
+        let row: Vec<String> = one_d.iter().map(|(hi, r)| format!("<{hi}: {r:.3}")).collect();
+        println!("  μ0 = {mu0}, the 1-D rows: {}", row.join(", "));
+        for tilt in [0.0f64, 45.0] {
+            let bins = staircase(a3, dm.g, mu0, tilt.to_radians(), &exact);
+            let row: Vec<String> = bins.iter().map(|(hi, r)| format!("<{hi}: {r:.3}")).collect();
+            println!("  μ0 = {mu0}, 3-D, faces tilted {tilt}°: {}", row.join(", "));
         }
     }
 }
@@ -145,8 +179,19 @@ fn pn_profile(tau: f64, a: f64, g: f64, mu0: f64, cells: usize, closure: Closure
     let mut m = vec![vec![0.0; size + 1]; size];
     // φ1 and φ3 on the face from node L to node R (Δ apart) as (coefficients, constant).
     let face = |l: usize, r: usize, delta: f64, s1: f64, s3: f64| {
-        let phi1 = (vec![(r, -1.0 / (3.0 * delta * sigma[1])), (l, 1.0 / (3.0 * delta * sigma[1])), (r + 1, -2.0 / (3.0 * delta * sigma[1])), (l + 1, 2.0 / (3.0 * delta * sigma[1]))], s1 / sigma[1]);
-        let phi3 = (vec![(r + 1, -3.0 / (7.0 * delta * sigma[3])), (l + 1, 3.0 / (7.0 * delta * sigma[3]))], s3 / sigma[3]);
+        let phi1 = (
+            vec![
+                (r, -1.0 / (3.0 * delta * sigma[1])),
+                (l, 1.0 / (3.0 * delta * sigma[1])),
+                (r + 1, -2.0 / (3.0 * delta * sigma[1])),
+                (l + 1, 2.0 / (3.0 * delta * sigma[1])),
+            ],
+            s1 / sigma[1],
+        );
+        let phi3 = (
+            vec![(r + 1, -3.0 / (7.0 * delta * sigma[3])), (l + 1, 3.0 / (7.0 * delta * sigma[3]))],
+            s3 / sigma[3],
+        );
         (phi1, phi3)
     };
     type Lin = (Vec<(usize, f64)>, f64);
@@ -160,7 +205,13 @@ fn pn_profile(tau: f64, a: f64, g: f64, mu0: f64, cells: usize, closure: Closure
         .map(|j| match j {
             0 => face(top, cell(0), 0.5 * h, src(1, 0), src(3, 0)),
             j if j == n => face(cell(n - 1), bot, 0.5 * h, src(1, n - 1), src(3, n - 1)),
-            j => face(cell(j - 1), cell(j), h, 0.5 * (src(1, j - 1) + src(1, j)), 0.5 * (src(3, j - 1) + src(3, j))),
+            j => face(
+                cell(j - 1),
+                cell(j),
+                h,
+                0.5 * (src(1, j - 1) + src(1, j)),
+                0.5 * (src(3, j - 1) + src(3, j)),
+            ),
         })
         .collect();
     for k in 0..n {
@@ -230,4 +281,89 @@ fn gauss(mut m: Vec<Vec<f64>>) -> Vec<f64> {
         x[r] = (m[r][n] - s) / m[r][r];
     }
     x
+}
+
+/// Depth bins of the 3-D comparison (upper ends, optical depth along the normal).
+const EDGES_3D: [f64; 6] = [0.5, 1.0, 2.0, 3.0, 5.0, 10.0];
+
+/// Σ`profile` / Σ`exact` over the fine cells of each bin of [`EDGES_3D`] (cells across [`SLAB_3D`]).
+fn binned_ratio(profile: &[f64], exact: &[f64]) -> Vec<(f64, f64)> {
+    let cell = SLAB_3D / exact.len() as f64;
+    let mut sums = [(0.0, 0.0); EDGES_3D.len()];
+    for (k, (p, e)) in profile.iter().zip(exact).enumerate() {
+        if let Some(b) = EDGES_3D.iter().position(|&hi| (k as f64 + 0.5) * cell < hi) {
+            sums[b].0 += p;
+            sums[b].1 += e;
+        }
+    }
+    EDGES_3D.iter().zip(sums).map(|(hi, (p, e))| (*hi, p / e)).collect()
+}
+
+/// The 3-D slab's δ-M optical thickness and its voxels' δ-M optical depth.
+const SLAB_3D: f64 = 20.0;
+const VOXEL_3D: f64 = 0.5;
+
+/// The 3-D solver's I0 over the exact one, binned by optical depth along the normal (bins ending
+/// at 0.5, 1, 2, 3, 5, 10), on a slab of [`SLAB_3D`] whose normal is tilted by `tilt` from the grid's
+/// y axis about x (45°: every surface voxel a stair), lit by the sun at μ0 from its normal, in the
+/// normal's plane; voxels of [`VOXEL_3D`] optical depth (1 m, σt′ = 0.5 m⁻¹). Read in the middle
+/// (8 voxels either side of the centre in x and along the slab) to stay clear of its edges.
+fn staircase(a: f64, g: f64, mu0: f64, tilt: f64, exact: &[f64]) -> Vec<(f64, f64)> {
+    let thick = SLAB_3D / VOXEL_3D;
+    let (nx, nyz) = (40usize, if tilt == 0.0 { 60usize } else { 100 });
+    let n = Vec3::new(0.0, tilt.cos() as f32, tilt.sin() as f32);
+    let t = Vec3::new(0.0, -tilt.sin() as f32, tilt.cos() as f32);
+    let sin0 = (1.0 - mu0 * mu0).sqrt() as f32;
+    let to_sun = n * mu0 as f32 - t * sin0;
+    let mut grid = Grid3::filled([nx, if tilt == 0.0 { thick as usize } else { nyz }, nyz], 0.0);
+    let dims = grid.dims();
+    // The slab's mid-plane passes through the box's centre.
+    let centre = Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32) * 0.5;
+    // Depth below the lit surface (voxels).
+    let depth_at = |i: usize, j: usize, k: usize| {
+        let p = Vec3::new(i as f32 + 0.5, j as f32 + 0.5, k as f32 + 0.5);
+        (0.5 * thick as f32) - (p - centre).dot(n)
+    };
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let d = depth_at(i, j, k);
+                if d >= 0.0 && d <= thick as f32 {
+                    grid.set(i, j, k, 1.0);
+                }
+            }
+        }
+    }
+    let m = Medium::new(grid, Vec3::ZERO, Vec3::ONE, VOXEL_3D as f32, Rgb::splat(a as f32), g as f32);
+    let src = IncidentSources {
+        bin_radiance: vec![Rgb::ZERO; 96],
+        sun: Some((to_sun, Rgb::ONE)),
+    };
+    let inc = compute(&m, &DirectionBins::new(), &src, &IncidentSettings::default(), None);
+    let settings = DiffusionSettings {
+        tolerance: 1e-8,
+        max_iterations: 1000,
+        min_optical_depth: 0.0,
+        sky_boundary: false,
+    };
+    let sol = solve_diffusion(&m, &inc, &BoundaryLight::none(), None, &settings).expect("solve");
+    let mut sums = [(0.0, 0.0); EDGES_3D.len()];
+    let cell = SLAB_3D / exact.len() as f64;
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let p = Vec3::new(i as f32 + 0.5, j as f32 + 0.5, k as f32 + 0.5);
+                if m.density.at(i + dims[0] * (j + dims[1] * k)) <= 0.0 || (p.x - centre.x).abs() > 8.0 || (p - centre).dot(t).abs() > 8.0 {
+                    continue;
+                }
+                let tau = f64::from(depth_at(i, j, k)) * VOXEL_3D;
+                if let Some(b) = EDGES_3D.iter().position(|&e| tau < e) {
+                    let e = exact[((tau / cell) as usize).min(exact.len() - 1)];
+                    sums[b].0 += f64::from(sol.at(i, j, k).x);
+                    sums[b].1 += e;
+                }
+            }
+        }
+    }
+    EDGES_3D.iter().zip(sums).map(|(e, (d, x))| (*e, d / x)).collect()
 }

@@ -210,3 +210,47 @@ pub fn slab_forward_fraction(g: f64) -> f64 {
 pub fn default_cells(tau: f64) -> usize {
     ((tau / 0.05).ceil() as usize).clamp(40, 4000)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    /// The diffuse outflow 4π φ through the top and bottom faces of the column `i0` (τ in
+    /// `cells` cells, albedo `a`, HG `g`, sun at `mu0`): eq. 7's flux (β I_P + f)/(1 + 2β) with
+    /// f = Q1·n/σtr of the face's cell, Q0 of a face cell a μ0(1 − e^{−Δτ/μ0})e^{−t0/μ0}/(4πΔτ)·Δτ.
+    fn outflow(i0: &[f64], tau: f64, a: f64, g: f64, mu0: f64) -> (f64, f64) {
+        let n = i0.len();
+        let dtau = tau / n as f64;
+        let sigma_tr = dtau * (1.0 - a * g);
+        let (bd, bf) = boundary_terms(1.0, sigma_tr, 1.0, 0.0);
+        let q0 = |t0: f64| a * mu0 * (-t0 / mu0).exp() * (-(-dtau / mu0).exp_m1()) / (4.0 * PI);
+        let f = |t0: f64| q0(t0) * g * mu0 / sigma_tr;
+        let top = bd * i0[0] - bf * f(0.0);
+        let bottom = bd * i0[n - 1] + bf * f(tau - dtau);
+        (4.0 * PI * top, 4.0 * PI * bottom)
+    }
+
+    #[test]
+    fn an_oblique_sun_s_scattered_power_is_absorbed_or_leaves() {
+        // Σ 4π σa I0 Δτ + the outflows = the power the beam loses to scattering, a μ0 (1 − e^{−τ/μ0}).
+        let (tau, a, g) = (6.0, 0.9, 0.7);
+        for mu0 in [1.0, 0.69, 0.4, 0.2] {
+            let i0 = collimated_profile(tau, a, g, mu0, 120);
+            let absorbed: f64 = i0.iter().map(|v| 4.0 * PI * (1.0 - a) * v * tau / 120.0).sum();
+            let (up, down) = outflow(&i0, tau, a, g, mu0);
+            let scattered = a * mu0 * -(-tau / mu0).exp_m1();
+            assert!((absorbed + up + down - scattered).abs() < 1e-12, "μ0 {mu0}: {} vs {scattered}", absorbed + up + down);
+            assert!(i0.iter().all(|v| v.is_finite() && *v > 0.0), "μ0 {mu0}");
+        }
+    }
+
+    #[test]
+    fn a_normal_sun_s_profile_gives_the_slab_s_reflectance_and_transmittance() {
+        let (tau, a, g, cells) = (4.0, 0.95, 0.8, 80);
+        let i0 = collimated_profile(tau, a, g, 1.0, cells);
+        let (up, down) = outflow(&i0, tau, a, g, 1.0);
+        let slab = solve_slab(tau, a, g, Incidence::Collimated, cells);
+        assert!((up - slab.r).abs() < 1e-12 && (down + (-tau).exp() - slab.t).abs() < 1e-12, "{up} {down} {slab:?}");
+    }
+}
