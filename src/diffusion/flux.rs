@@ -79,7 +79,6 @@ pub fn diffuse_flux<'a>(
                 (nidx, nidx.map_or(0, |q| index.slot(q)))
             })
         });
-        let w = super::stair_weight(rho, d, cell);
         let mut out = [Vec3::ZERO; 3];
         for (c, o) in out.iter_mut().enumerate() {
             let s = sigma_tr[c];
@@ -100,7 +99,7 @@ pub fn diffuse_flux<'a>(
                     } else {
                         let (dt, ft) = boundary_terms(rp, s, h[ax], tau_min);
                         let l_in = sol.boundary.at(nidx, face_index(ax, side), c);
-                        w * h[ax] * (dt * (ip - l_in) + ft * fp * side as f64)
+                        h[ax] * (dt * (ip - l_in) + ft * fp * side as f64)
                     };
                 }
                 // φ_+ = I1_a/3 through the + face, φ_− = −I1_a/3 through the − face.

@@ -241,45 +241,6 @@ pub fn boundary_terms(rho_p: f64, sigma_tr: f64, h: f64, tau_min: f64) -> (f64, 
     (beta / den, 1.0 / den)
 }
 
-/// The weight of each boundary face of the full voxel at grid cell `cell`: the surface those faces
-/// stand for over their area, 1/Σ_a |n_a| with n the unit outward normal (a staircase of a surface
-/// tilted to the grid exposes Σ_a |n_a| times its area). n is the sum of the offsets to the empty
-/// voxels among the 26 around it (beyond the grid: empty); 1 where they cancel.
-pub fn stair_weight(rho: &crate::medium::density::Density, dims: [usize; 3], cell: [usize; 3]) -> f64 {
-    let mode = std::env::var("CLOUDGI_STAIR").unwrap_or_default();
-    if mode.is_empty() {
-        return 1.0;
-    }
-    let empty = |o: [i64; 3]| {
-        let c: [i64; 3] = std::array::from_fn(|a| cell[a] as i64 + o[a]);
-        if (0..3).any(|a| c[a] < 0 || c[a] >= dims[a] as i64) {
-            return true;
-        }
-        rho.at(c[0] as usize + dims[0] * (c[1] as usize + dims[1] * c[2] as usize)) <= 0.0
-    };
-    let mut n = [0f64; 3];
-    for dz in -1i64..=1 {
-        for dy in -1i64..=1 {
-            for dx in -1i64..=1 {
-                let o = [dx, dy, dz];
-                let face = o.iter().filter(|v| **v != 0).count() == 1;
-                if (mode == "local" && !face) || o == [0, 0, 0] || !empty(o) {
-                    continue;
-                }
-                for a in 0..3 {
-                    n[a] += o[a] as f64;
-                }
-            }
-        }
-    }
-    let sum = n[0].abs() + n[1].abs() + n[2].abs();
-    if sum == 0.0 {
-        1.0
-    } else {
-        (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt() / sum
-    }
-}
-
 /// The tight box of the full voxels, `lo` its minimum corner in the grid: the multigrid
 /// aggregates its cells.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -405,25 +366,19 @@ impl Stencils for BandOperator<'_> {
             off: [0.0; 6],
             nbr: [NONE; 6],
         };
-        // Slot 0 (empty, or beyond the grid) reads ρ = 0.
-        let slots: [[usize; 2]; 3] = std::array::from_fn(|ax| {
-            [-1i64, 1].map(|side| {
+        for ax in 0..3 {
+            for (q, side) in [(2 * ax, -1i64), (2 * ax + 1, 1)] {
                 let nc = cell[ax] as i64 + side;
                 let nidx = (nc >= 0 && nc < gd[ax] as i64).then(|| (idx as i64 + side * gstride[ax] as i64) as usize);
-                nidx.map_or(0, |g| self.index.slot(g))
-            })
-        });
-        let w = if slots.iter().flatten().any(|sn| self.rho.at_slot(*sn) <= 0.0) { stair_weight(self.rho, gd, cell) } else { 1.0 };
-        for ax in 0..3 {
-            for (t, q) in [2 * ax, 2 * ax + 1].into_iter().enumerate() {
-                let sn = slots[ax][t];
+                // Slot 0 (empty, or beyond the grid) reads ρ = 0.
+                let sn = nidx.map_or(0, |g| self.index.slot(g));
                 let rn = self.rho.at_slot(sn) as f64;
                 if rn > 0.0 {
                     let cf = interior_coupling(rp, rn, self.sigma_tr, self.h[ax], self.tau_min);
                     st.diag += cf;
                     (st.off[q], st.nbr[q]) = (-cf, (sn - 1) as u32);
                 } else {
-                    st.diag += w * boundary_terms(rp, self.sigma_tr, self.h[ax], self.tau_min).0;
+                    st.diag += boundary_terms(rp, self.sigma_tr, self.h[ax], self.tau_min).0;
                 }
             }
         }
@@ -462,7 +417,6 @@ fn band_rhs(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_m
         let mut diag = rp * sigma_a;
         // A x0 without the diagonal's share, which is added once the diagonal is summed.
         let mut ax = 0.0;
-let w = stair_weight(rho, gd, cell);
         for a in 0..3 {
             let fp = f_at(sp, a);
             for side in [-1i64, 1] {
@@ -481,7 +435,6 @@ let w = stair_weight(rho, gd, cell);
                     }
                 } else {
                     let (dterm, fterm) = boundary_terms(rp, sigma_tr, h[a], tau_min);
-                    let (dterm, fterm) = (w * dterm, w * fterm);
                     // eq. 7 with incoming light: φ = (β(I_P − L_face) + f)/(1 + 2β).
                     rhs += dterm * bl.at(nidx, face_index(a, side), c) - fterm * fp * side as f64;
                     diag += dterm;
@@ -547,7 +500,6 @@ pub fn boundary_outflow(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution
                         continue;
                     }
                     let cell = [i, j, k];
-let w = stair_weight(rho, d, cell);
                     for ax in 0..3 {
                         for side in [-1i64, 1] {
                             let nc = cell[ax] as i64 + side;
@@ -556,7 +508,7 @@ let w = stair_weight(rho, d, cell);
                                 let (dt, ft) = boundary_terms(rp, sigma_tr, h[ax], tau_min);
                                 let f = inc.q1(ax, idx, c) as f64 / (rp * sigma_tr) * side as f64;
                                 let l_in = bl.at(nidx, face_index(ax, side), c);
-                                let phi_over_h = w * (dt * (f64::from(sol.i0[c].get(idx)) - l_in) + ft * f);
+                                let phi_over_h = dt * (f64::from(sol.i0[c].get(idx)) - l_in) + ft * f;
                                 *o += 4.0 * std::f64::consts::PI * phi_over_h * vol;
                             }
                         }
