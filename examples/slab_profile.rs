@@ -1,12 +1,14 @@
 //! The diffusion's I0(τ) against the exact one in a slab lit by the sun at an angle (docs/accuracy.md,
-//! "The diffusion's I0 where the sun enters, in one dimension"): the medium `full` runs on (the
-//! cumulus's g = 0.9 and albedo 0.999 after δ-M with f = g⁴), I0 of the diffusion's own rows
-//! ([`cloudgi::diffusion::slab::collimated_profile`], cells as thick as one of the cumulus's 10-m
-//! voxels at density 1) and the exact mean diffuse radiance by Monte Carlo (track-length
-//! estimator, the same δ-M medium, HG(g′)), binned by optical depth along the normal and along the
-//! sun.
+//! "The diffusion's I0 where the sun enters: one dimension first"). In the medium `full` runs on
+//! (the cumulus's g = 0.9 and albedo 0.999 after δ-M with f = g⁴), per depth bin along the normal
+//! and per μ0: I0 of the diffusion's own rows ([`cloudgi::diffusion::slab::collimated_profile`],
+//! cells as thick as one of the cumulus's 10-m voxels at density 1; and at cells ten times finer),
+//! of P1 with the sun's l = 2 moment from its local balance, and of P3, each over the exact mean
+//! diffuse radiance by Monte Carlo (track-length estimator, the same δ-M medium, HG(g′)). Then the
+//! 3-D solver (stage 1's sun and `solve_diffusion`) on a slab whose faces are axis-aligned and on
+//! one tilted 45° to the grid (a staircase), against the same Monte Carlo.
 //!
-//! `cargo run --release --example slab_profile [PHOTONS]`
+//! `cargo run --release --features internals --example slab_profile [PHOTONS]` (default 400,000)
 
 use cloudgi::diffusion::slab::collimated_profile;
 use cloudgi::diffusion::{solve_diffusion, BoundaryLight, DiffusionSettings};
