@@ -268,11 +268,13 @@ fn gauss(mut m: Vec<Vec<f64>>) -> Vec<f64> {
     for c in 0..n {
         let p = (c..n).max_by(|&i, &j| m[i][c].abs().total_cmp(&m[j][c].abs())).unwrap();
         m.swap(c, p);
-        for r in c + 1..n {
-            let k = m[r][c] / m[c][c];
+        let (upper, lower) = m.split_at_mut(c + 1);
+        let pivot = &upper[c];
+        for row in lower {
+            let k = row[c] / pivot[c];
             if k != 0.0 {
-                for j in c..=n {
-                    m[r][j] -= k * m[c][j];
+                for (v, q) in row[c..].iter_mut().zip(&pivot[c..]) {
+                    *v -= k * q;
                 }
             }
         }
