@@ -103,20 +103,43 @@ pub fn solve_slab(tau: f64, a: f64, g: f64, incidence: Incidence, cells: usize) 
             std::f64::consts::PI
         }
     };
+    let (x, f) = solve_column(&q0, &q1, sigma_a, sigma_tr);
+    let (bd, bf) = boundary_terms(1.0, sigma_tr, h, 0.0);
+    // Outgoing fluxes 4π φ / h·h (per unit area: φ/h·h).
+    let phi_top = (bd * x[0] + bf * (-f[0])) * h;
+    let phi_bot = (bd * x[n - 1] + bf * f[n - 1]) * h;
+    let unscattered = match incidence {
+        Incidence::Collimated => (-tau).exp(),
+        Incidence::Diffuse => 2.0 * expint(3, tau),
+    };
+    SlabResult {
+        r: four_pi * phi_top / e_in,
+        t: four_pi * phi_bot / e_in + unscattered,
+        r_stderr: 0.0,
+        t_stderr: 0.0,
+    }
+}
+
+/// I0 per cell (ρ = 1, h = 1, so σ per unit optical depth) of the column with sources `q0`, `q1`
+/// (z components, z the depth), by the rows of [`super`]: interior faces and the ghost-eliminated
+/// Marshak boundary (eq. 7) at both faces. Returns (I0, F = Q1/σtr) per cell.
+fn solve_column(q0: &[f64], q1: &[f64], sigma_a: f64, sigma_tr: f64) -> (Vec<f64>, Vec<f64>) {
+    let n = q0.len();
+    let h = 1.0;
     // Tridiagonal system: lower l, diagonal d, upper u, rhs b.
-    let f: Vec<f64> = q1.iter().map(|q| q / sigma_tr).collect(); // ρ = 1
+    let f: Vec<f64> = q1.iter().map(|q| q / sigma_tr).collect();
     let mut d = vec![sigma_a; n];
     let mut l = vec![0.0; n];
     let mut u = vec![0.0; n];
-    let mut b = q0.clone();
+    let mut b = q0.to_vec();
     let (bd, bf) = boundary_terms(1.0, sigma_tr, h, 0.0);
+    let c = interior_coupling(1.0, 1.0, sigma_tr, h, 0.0);
     for k in 0..n {
         // Top face (outward normal −z).
         if k == 0 {
             d[k] += bd;
             b[k] -= bf * (-f[k]);
         } else {
-            let c = interior_coupling(1.0, 1.0, sigma_tr, h, 0.0);
             d[k] += c;
             l[k] = -c;
             b[k] += 0.5 * (f[k] + f[k - 1]) / h;
@@ -126,7 +149,6 @@ pub fn solve_slab(tau: f64, a: f64, g: f64, incidence: Incidence, cells: usize) 
             d[k] += bd;
             b[k] -= bf * f[k];
         } else {
-            let c = interior_coupling(1.0, 1.0, sigma_tr, h, 0.0);
             d[k] += c;
             u[k] = -c;
             b[k] -= 0.5 * (f[k] + f[k + 1]) / h;
@@ -144,19 +166,23 @@ pub fn solve_slab(tau: f64, a: f64, g: f64, incidence: Incidence, cells: usize) 
     for k in (0..n).rev() {
         x[k] = dp[k] - if k + 1 < n { cp[k] * x[k + 1] } else { 0.0 };
     }
-    // Outgoing fluxes 4π φ / h·h (per unit area: φ/h·h).
-    let phi_top = (bd * x[0] + bf * (-f[0])) * h;
-    let phi_bot = (bd * x[n - 1] + bf * f[n - 1]) * h;
-    let unscattered = match incidence {
-        Incidence::Collimated => (-tau).exp(),
-        Incidence::Diffuse => 2.0 * expint(3, tau),
-    };
-    SlabResult {
-        r: four_pi * phi_top / e_in,
-        t: four_pi * phi_bot / e_in + unscattered,
-        r_stderr: 0.0,
-        t_stderr: 0.0,
-    }
+    (x, f)
+}
+
+/// The diffusion's I0 per cell (W·m⁻²·sr⁻¹ per W·m⁻² of sun irradiance across its rays) in a
+/// slab of optical thickness `tau` (`cells` cells of τ/cells each), albedo `a`, HG `g`, lit by
+/// the sun at μ0 = cos of its angle from the inward normal: stage 1's voxel-mean Q0, Q1 (eqs. 5,
+/// 6, the sun's direction's z component μ0 in Q1) and the 3-D solver's rows.
+pub fn collimated_profile(tau: f64, a: f64, g: f64, mu0: f64, cells: usize) -> Vec<f64> {
+    let n = cells.max(1);
+    let dtau = tau / n as f64;
+    let (sigma_s, sigma_a, sigma_tr) = (a * dtau, (1.0 - a) * dtau, dtau * (1.0 - a * g));
+    let four_pi = 4.0 * std::f64::consts::PI;
+    // Cell mean of e^{−t/μ0} over the cell's optical depths [t0, t0 + Δτ].
+    let mean = |k: usize| (-(k as f64) * dtau / mu0).exp() * (-(-dtau / mu0).exp_m1()) * mu0 / dtau;
+    let q0: Vec<f64> = (0..n).map(|k| sigma_s / four_pi * mean(k)).collect();
+    let q1: Vec<f64> = q0.iter().map(|q| q * g * mu0).collect();
+    solve_column(&q0, &q1, sigma_a, sigma_tr).0
 }
 
 /// [`solve_slab`] after the δ-M similarity transform with forward fraction `f` (0 ≤ f < 1;
@@ -183,4 +209,48 @@ pub fn slab_forward_fraction(g: f64) -> f64 {
 /// Cells used for a slab of optical thickness `tau`: at most 0.05 optical depth per cell, at least 40.
 pub fn default_cells(tau: f64) -> usize {
     ((tau / 0.05).ceil() as usize).clamp(40, 4000)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    /// The diffuse outflow 4π φ through the top and bottom faces of the column `i0` (τ in
+    /// `cells` cells, albedo `a`, HG `g`, sun at `mu0`): eq. 7's flux (β I_P + f)/(1 + 2β) with
+    /// f = Q1·n/σtr of the face's cell, Q0 of a face cell a μ0(1 − e^{−Δτ/μ0})e^{−t0/μ0}/(4πΔτ)·Δτ.
+    fn outflow(i0: &[f64], tau: f64, a: f64, g: f64, mu0: f64) -> (f64, f64) {
+        let n = i0.len();
+        let dtau = tau / n as f64;
+        let sigma_tr = dtau * (1.0 - a * g);
+        let (bd, bf) = boundary_terms(1.0, sigma_tr, 1.0, 0.0);
+        let q0 = |t0: f64| a * mu0 * (-t0 / mu0).exp() * (-(-dtau / mu0).exp_m1()) / (4.0 * PI);
+        let f = |t0: f64| q0(t0) * g * mu0 / sigma_tr;
+        let top = bd * i0[0] - bf * f(0.0);
+        let bottom = bd * i0[n - 1] + bf * f(tau - dtau);
+        (4.0 * PI * top, 4.0 * PI * bottom)
+    }
+
+    #[test]
+    fn an_oblique_sun_s_scattered_power_is_absorbed_or_leaves() {
+        // Σ 4π σa I0 Δτ + the outflows = the power the beam loses to scattering, a μ0 (1 − e^{−τ/μ0}).
+        let (tau, a, g) = (6.0, 0.9, 0.7);
+        for mu0 in [1.0, 0.69, 0.4, 0.2] {
+            let i0 = collimated_profile(tau, a, g, mu0, 120);
+            let absorbed: f64 = i0.iter().map(|v| 4.0 * PI * (1.0 - a) * v * tau / 120.0).sum();
+            let (up, down) = outflow(&i0, tau, a, g, mu0);
+            let scattered = a * mu0 * -(-tau / mu0).exp_m1();
+            assert!((absorbed + up + down - scattered).abs() < 1e-12, "μ0 {mu0}: {} vs {scattered}", absorbed + up + down);
+            assert!(i0.iter().all(|v| v.is_finite() && *v > 0.0), "μ0 {mu0}");
+        }
+    }
+
+    #[test]
+    fn a_normal_sun_s_profile_gives_the_slab_s_reflectance_and_transmittance() {
+        let (tau, a, g, cells) = (4.0, 0.95, 0.8, 80);
+        let i0 = collimated_profile(tau, a, g, 1.0, cells);
+        let (up, down) = outflow(&i0, tau, a, g, 1.0);
+        let slab = solve_slab(tau, a, g, Incidence::Collimated, cells);
+        assert!((up - slab.r).abs() < 1e-12 && (down + (-tau).exp() - slab.t).abs() < 1e-12, "{up} {down} {slab:?}");
+    }
 }
