@@ -54,7 +54,9 @@ MinJobAge=30
 # farm test's four scheduling steps 1-3 s each of waiting).
 SchedulerParameters=batch_sched_delay=0
 NodeName=localhost NodeAddr=127.0.0.1 CPUs=2 RealMemory=1000 State=UNKNOWN
-PartitionName=ci Nodes=localhost Default=YES MaxTime=INFINITE State=UP
+# Two jobs per CPU: the farm test's arrays (up to four one-CPU elements) start in one scheduling
+# pass (slurmctld schedules about once a second), not two.
+PartitionName=ci Nodes=localhost Default=YES MaxTime=INFINITE State=UP OverSubscribe=FORCE:2
 CONF
 mkdir -p "$state/ctld" "$state/d"
 

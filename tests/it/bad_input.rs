@@ -693,8 +693,8 @@ fn a_full_disk_or_a_closed_pipe_is_no_panic() {
 #[cfg(unix)]
 #[test]
 fn an_interrupt_leaves_no_file_and_says_so() {
-    // Both renders at once, a thread each: one wait for the handlers, and the renders that the
-    // signals cut short take a core each instead of both cores twice.
+    // Both renders at once, a thread each, each signalled as soon as it catches the signals (a
+    // render of 100,000 samples per pixel is still running then).
     let runs: Vec<_> = [("INT", 130), ("TERM", 143)]
         .into_iter()
         .map(|(signal, code)| {
@@ -719,8 +719,7 @@ fn an_interrupt_leaves_no_file_and_says_so() {
             (signal, code, dir, child)
         })
         .collect();
-    // Long enough for the handlers to be installed on a loaded machine.
-    std::thread::sleep(std::time::Duration::from_millis(2000));
+    let ready: Vec<bool> = runs.iter().map(|(_, _, _, child)| catches_interrupts(child.id())).collect();
     // Both signalled before any assertion, so a failure leaves no render running.
     let killed: Vec<bool> = runs
         .iter()
@@ -729,7 +728,8 @@ fn an_interrupt_leaves_no_file_and_says_so() {
             kill.is_ok_and(|status| status.success())
         })
         .collect();
-    for ((signal, code, dir, child), killed) in runs.into_iter().zip(killed) {
+    for (((signal, code, dir, child), killed), ready) in runs.into_iter().zip(killed).zip(ready) {
+        assert!(ready, "SIG{signal}: the render exited or caught no SIGINT/SIGTERM within 60 s");
         assert!(killed);
         let out = child.wait_with_output().unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
@@ -738,6 +738,33 @@ fn an_interrupt_leaves_no_file_and_says_so() {
         assert!(err.contains(&format!("interrupted (SIG{signal}): no output written")), "{err}");
         assert_eq!(listing(dir.path()), [PathBuf::from("s.toml")]);
     }
+}
+
+/// Whether process `pid` catches SIGINT and SIGTERM (bits 2 and 15, counted from 1, of its
+/// `SigCgt` mask in /proc) within 60 s; false as soon as it has exited. Where there is no /proc,
+/// true after a wait long enough on a loaded machine.
+#[cfg(unix)]
+fn catches_interrupts(pid: u32) -> bool {
+    use std::time::{Duration, Instant};
+    if !Path::new("/proc/self/status").exists() {
+        std::thread::sleep(Duration::from_secs(2));
+        return true;
+    }
+    let wanted = (1u64 << (2 - 1)) | (1u64 << (15 - 1));
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(60) {
+        let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+        let field = |name: &str| status.lines().find_map(|l| l.strip_prefix(name)).map(str::trim);
+        if field("State:").is_none_or(|state| state.starts_with('Z')) {
+            return false;
+        }
+        let caught = field("SigCgt:").and_then(|mask| u64::from_str_radix(mask, 16).ok()).unwrap_or(0);
+        if caught & wanted == wanted {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    false
 }
 
 // --------------------------------------------------------------------- command-line arguments

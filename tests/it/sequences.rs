@@ -169,7 +169,7 @@ fn wait_for(id: &str) {
     let start = Instant::now();
     while !slurm("squeue", &["-h", "-j", id, "-o", "%i"]).is_empty() {
         assert!(start.elapsed() < Duration::from_secs(300), "job {id} still queued after 300 s");
-        std::thread::sleep(Duration::from_millis(200));
+        std::thread::sleep(Duration::from_millis(100));
     }
 }
 
@@ -207,15 +207,15 @@ fn a_slurm_array_job_renders_the_frames_of_a_local_render() {
     for d in [local.path(), farm.path()] {
         std::fs::write(d.join("s.toml"), SUNSET).unwrap();
     }
-    // Warm starts (the default) restart cold at each chunk's first frame: the local render of
-    // each task's range is the farm's bits.
-    for range in ["1-2", "3-4", "5-6", "7-8"] {
-        cloudgi(local.path(), &["render", "s.toml", "--frames", range, "-o", "sun.####.exr", "-q"]);
-    }
     // 8 frames in 4 array elements (2 each); element 2 (frames 5-6) is cancelled before it runs.
     let job = submit(farm.path(), "0-3", "4", &[]);
     slurm("scancel", &[&format!("{job}_2")]);
     slurm("scontrol", &["release", &job]);
+    // The local renders while Slurm schedules the farm's. Warm starts (the default) restart cold
+    // at each chunk's first frame: the local render of each task's range is the farm's bits.
+    for range in ["1-2", "3-4", "5-6", "7-8"] {
+        cloudgi(local.path(), &["render", "s.toml", "--frames", range, "-o", "sun.####.exr", "-q"]);
+    }
     wait_for(&job);
     let exists = |f: u32| farm.path().join(format!("sun.{f:04}.exr")).is_file();
     assert!(
