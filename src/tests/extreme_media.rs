@@ -111,7 +111,7 @@ fn every_method_is_finite_on_extreme_media() {
                         // acceleration, with what to do.
                         Err(Error::Numerical { stage, message }) if m == Method::Transport && tau >= 1e3 => {
                             assert!(
-                                stage == "transport solve" && message.contains("--method full"),
+                                stage == "transport solve" && message.contains("--method reference"),
                                 "{label}: {message}"
                             );
                         }

@@ -37,7 +37,7 @@ fn assert_nonnegative(label: &str, s: &Scene) {
         // "Robustness"), rather than writing an unconverged image.
         Err(crate::Error::Numerical { stage, message }) if s.render.method == Method::Transport && s.medium.optics.sigma_t >= 100.0 => {
             assert!(
-                stage == "transport solve" && message.contains("--method full"),
+                stage == "transport solve" && message.contains("--method reference"),
                 "{label}: {message}"
             );
             return;

@@ -332,7 +332,7 @@ mod solve_tests {
         .unwrap_err()
         .to_string();
         assert!(
-            e.starts_with("transport solve:") && e.contains("--method diffusion") && e.contains("medium.voxel_size"),
+            e.starts_with("transport solve:") && e.contains("--method reference") && e.contains("medium.voxel_size"),
             "{e}"
         );
     }

@@ -162,8 +162,9 @@ pub fn solve_warm(
                 "voxels up to {tau_max:.1e} optical depths thick (medium.sigma_t × density × medium.voxel_size, δ-M \
                  scaled), above the {MAX_VOXEL_OPTICAL_DEPTH:.0e} to which the solve converges (the sweeps' f32 \
                  rounding, amplified about τ times by the acceleration, exceeds render.transport_tolerance beyond); \
-                 render it with --method full or --method diffusion, or give it thinner voxels (a smaller medium.voxel_size or \
-                 medium.sigma_t)"
+                 render it with --method reference (exact; full and diffusion finish but are measured 15-23 % dark at \
+                 50-125 optical depths per voxel, docs/accuracy.md), or give it thinner voxels (a smaller \
+                 medium.voxel_size or medium.sigma_t)"
             ),
         });
     }
