@@ -112,12 +112,12 @@ impl TransportMemory {
 
     /// Bytes per full voxel: at the solve's peak two spherical-harmonic arrays (the moments and
     /// the sweep's new moments; the source is evaluated from the moments, not stored) of 3 bands
-    /// × (L + 1)² f32, the batch array of a pass's ordinates' sources (32 ordinates), in place of
-    /// which the sweeps write their radiances (12 B each), the mixing's history (240 B) and
-    /// [`Self::FULL_EXTRA_BYTES`]: 2,244 B at order 7 (a stored source array would add 768 B).
+    /// × (L + 1)² f32, the batch array of ordinates' sources, in place of which the sweeps write
+    /// their radiances (12 B each), the mixing's history (240 B) and [`Self::FULL_EXTRA_BYTES`]:
+    /// 2,052 B at order 7 (a stored source array would add 768 B).
     pub fn bytes_per_full_voxel(order: usize) -> u64 {
         2 * 3 * 4 * crate::math::sh_count(order) as u64
-            + 12 * (source::ORDINATE_BATCH * sweep::BATCHES_PER_PASS) as u64
+            + 12 * source::ORDINATE_BATCH as u64
             + mixing::bytes_per_full_voxel()
             + Self::FULL_EXTRA_BYTES
     }

@@ -21,17 +21,9 @@ use rayon::prelude::*;
 mod lanes;
 mod step;
 
-/// Batches of ordinates that share one pass over the full voxels in the per-voxel steps (1) and
-/// (3) of [`sweep`]: a task evaluates the sources of each of them (and later accumulates their
-/// moments) while its block of voxels is in the cache, so the moments and the new moments
-/// stream from memory once per pass instead of once per batch. Each batch's sums are the ones it
-/// makes alone, in the same order: the same bits for any value.
-pub(super) const BATCHES_PER_PASS: usize = 2;
-
-/// The per-voxel array of a pass of sweep batches: per ordinate slot and full voxel, the source in
-/// that ordinate, which its sweep replaces by the radiance (12 B × [`ORDINATE_BATCH`] ×
-/// [`BATCHES_PER_PASS`] per full voxel). Made once per solve, so the iterations write pages
-/// already mapped.
+/// The per-voxel array of a sweep batch: per ordinate slot and full voxel, the source in that
+/// ordinate, which its sweep replaces by the radiance (12 B × [`ORDINATE_BATCH`] per full voxel).
+/// Made once per solve, so the iterations write pages already mapped.
 pub(super) struct BatchArrays {
     light: Vec<[f32; 3]>,
 }
@@ -40,7 +32,7 @@ impl BatchArrays {
     /// The array for `nfull` full voxels.
     pub(super) fn new(nfull: usize) -> BatchArrays {
         BatchArrays {
-            light: vec![[0f32; 3]; BATCHES_PER_PASS * ORDINATE_BATCH * nfull],
+            light: vec![[0f32; 3]; ORDINATE_BATCH * nfull],
         }
     }
 }
@@ -51,12 +43,11 @@ impl BatchArrays {
 ///
 /// `moments` are the last iterate's; the source J(Ω) = Σ a′χ′_l (I_lm + E T′ Y_lm(Ω_sun)) Y_lm(Ω)
 /// is evaluated from them directly (no array of source coefficients is stored). Ordinates go in
-/// batches of opposite pairs, [`BATCHES_PER_PASS`] batches at a time: (1) per full voxel, the
-/// source in both ordinates of each pair of each batch from one pass over its coefficients per
-/// batch; (2) the batches' sweeps, one ordinate per task, each replacing its source by its
-/// radiance; (3) per full voxel, the moments of both ordinates of each pair in one pass per
-/// batch, the batches and their pairs in their fixed order (the first batch writes `next`, the
-/// others add to it).
+/// batches of opposite pairs: (1) per full voxel, the source in both ordinates of each pair of the
+/// batch from one pass over its coefficients; (2) the batch's sweeps, one ordinate per task, each
+/// replacing its source by its radiance; (3) per full voxel, the moments of both ordinates of each
+/// pair in one pass, the pairs in their fixed order (the first batch writes `next`, the others add
+/// to it).
 pub(super) fn sweep(
     c: &Ctx,
     q: &Quadrature,
@@ -69,25 +60,17 @@ pub(super) fn sweep(
     let nsh = c.nsh;
     let nfull = moments.len() / (3 * nsh);
     let light = &mut arrays.light;
-    assert!(light.len() == BATCHES_PER_PASS * ORDINATE_BATCH * nfull, "the batch array for these full voxels");
+    assert!(light.len() == ORDINATE_BATCH * nfull, "the batch array for these full voxels");
     // Change of the ground's downward irradiance by the cloud, per ground map column (W/m²).
     let mut e_down = vec![[0f64; 3]; ground.radiance.len()];
-    // Full voxels per task in the per-voxel steps (1) and (3): the moments of a task's voxels
-    // (768 B each at order 7) stay in the L2 cache through the pass's batches.
+    // Full voxels per task in the per-voxel steps (1) and (3).
     let chunk = 256;
-    let batches: Vec<std::ops::Range<usize>> =
-        (0..t.pairs.len()).step_by(PAIRS).map(|first| first..(first + PAIRS).min(t.pairs.len())).collect();
-    let nblk = t.y_acc.len() / batches.len().max(1);
-    for (pi, pass) in batches.chunks(BATCHES_PER_PASS).enumerate() {
-        let b0 = pi * BATCHES_PER_PASS;
-        // The pass's ordinates in slot order: batch by batch, in each pair p's ordinate d at
-        // slot 2p and its opposite at 2p + 1.
-        let dirs: Vec<usize> = pass.iter().flat_map(|batch| batch.clone().flat_map(|p| t.pairs[p])).collect();
-        // The batches' slots, ORDINATE_BATCH each (a short last batch leaves its last ones unused).
-        let used = ORDINATE_BATCH * pass.len();
-        // (1) Source in each ordinate, clamped at 0 (the truncated expansion may dip).
+    for (bi, first) in (0..t.pairs.len()).step_by(PAIRS).enumerate() {
+        let batch = first..(first + PAIRS).min(t.pairs.len());
+        // (1) Source in each ordinate, clamped at 0 (the truncated expansion may dip); slot 2p
+        // holds pair p's ordinate d, 2p + 1 its opposite.
         // Each task writes its voxels' entries of every slot: the slots' chunks, task by task.
-        let mut slots: Vec<_> = light.chunks_mut(nfull.max(1)).take(used).map(|slot| slot.chunks_mut(chunk)).collect();
+        let mut slots: Vec<_> = light.chunks_mut(nfull.max(1)).map(|slot| slot.chunks_mut(chunk)).collect();
         let outs: Vec<Vec<&mut [[f32; 3]]>> = (0..nfull.div_ceil(chunk))
             .map(|_| slots.iter_mut().filter_map(Iterator::next).collect())
             .collect();
@@ -95,24 +78,16 @@ pub(super) fn sweep(
             .par_chunks(chunk * 3 * nsh)
             .zip(outs)
             .enumerate()
-            .for_each(|(ci, (block, mut out))| {
-                for (k, (batch, out)) in pass.iter().zip(out.chunks_mut(ORDINATE_BATCH)).enumerate() {
-                    source_block(c, t, b0 + k, batch.len(), block, ci * chunk, out);
-                }
-            });
-        // (2) The sweeps: the pass's ordinates' slots, each batch's first 2 × len.
-        let swept: Vec<(usize, &mut [[f32; 3]])> = light
-            .chunks_mut(nfull.max(1))
-            .take(used)
-            .enumerate()
-            .filter(|(slot, _)| slot % ORDINATE_BATCH < 2 * pass[slot / ORDINATE_BATCH].len())
-            .zip(&dirs)
-            .map(|((_, ld), d)| (*d, ld))
+            .for_each(|(ci, (block, mut out))| source_block(c, t, bi, batch.len(), block, ci * chunk, &mut out));
+        // (2) The sweeps.
+        let dirs: Vec<usize> = batch.clone().flat_map(|p| t.pairs[p]).collect();
+        let wts: Vec<f32> = batch.clone().flat_map(|p| t.weights[p]).collect();
+        let splats: Vec<Splats> = dirs
+            .par_iter()
+            .zip(light.par_chunks_mut(nfull.max(1)))
+            .map(|(d, ld)| sweep_ordinate(c, q.dirs[*d], q.weights[*d], ground, ld))
             .collect();
-        let splats: Vec<Splats> = swept
-            .into_par_iter()
-            .map(|(d, ld)| sweep_ordinate(c, q.dirs[d], q.weights[d], ground, ld))
-            .collect();
+        let radiance = &**light;
         for splats in &splats {
             for (col, e) in splats {
                 for band in 0..3 {
@@ -120,30 +95,20 @@ pub(super) fn sweep(
                 }
             }
         }
-        // (3) Moments: I_lm += w I(Ω) Y_lm(Ω) + w′ I(−Ω) (−1)^l Y_lm(Ω), batch by batch.
-        let radiance = &**light;
-        let lanes: Vec<(Vec<f32>, usize)> = pass
-            .iter()
+        // (3) Moments: I_lm += w I(Ω) Y_lm(Ω) + w′ I(−Ω) (−1)^l Y_lm(Ω).
+        let nblk = t.y_acc.len() / t.pairs.len().div_ceil(PAIRS);
+        let yb = &t.y_acc[bi * nblk..(bi + 1) * nblk];
+        let lanes = Lanes {
+            nfull,
+            wts: &wts,
+            radiance,
+            y: yb,
+            first: bi == 0,
+            active: t.moment_active,
+        };
+        next.par_chunks_mut(chunk * 3 * nsh)
             .enumerate()
-            .map(|(k, batch)| (batch.clone().flat_map(|p| t.weights[p]).collect(), b0 + k))
-            .collect();
-        let lanes: Vec<Lanes> = lanes
-            .iter()
-            .enumerate()
-            .map(|(k, (wts, bi))| Lanes {
-                nfull,
-                wts,
-                radiance: &radiance[k * ORDINATE_BATCH * nfull..(k + 1) * ORDINATE_BATCH * nfull],
-                y: &t.y_acc[bi * nblk..(bi + 1) * nblk],
-                first: *bi == 0,
-                active: t.moment_active,
-            })
-            .collect();
-        next.par_chunks_mut(chunk * 3 * nsh).enumerate().for_each(|(ci, block)| {
-            for l in &lanes {
-                moments_block(c, l, block, ci * chunk);
-            }
-        });
+            .for_each(|(ci, block)| moments_block(c, &lanes, block, ci * chunk));
     }
     e_down
 }
