@@ -88,6 +88,23 @@ impl SunTransmittance {
         }
     }
 
+    /// The transmittance at the centres of the grid voxels `voxels` (grid indices of full voxels
+    /// or their neighbours), rounded as [`Self::compute`]'s grid stores it: the same values as
+    /// that grid's there, marching only these voxels (the transport solve reads T at its full
+    /// voxels alone, a fifth of the Disney cloud's box).
+    pub fn at_voxels(m: &Medium, sun_dir: Vec3, voxels: &[usize]) -> Vec<f32> {
+        let (lo, hi) = m.active_box(1).unwrap_or(([0; 3], [0; 3]));
+        let rho = m.density.box_copy(lo, hi);
+        let [nx, ny, _] = m.dims();
+        voxels
+            .par_iter()
+            .map(|&v| {
+                let p = m.voxel_center(v % nx, (v / nx) % ny, v / (nx * ny));
+                Unit16::from_f32(transmittance(m, &rho, p, sun_dir)).to_f32()
+            })
+            .collect()
+    }
+
     /// Refuse a transmittance that was non-finite at some voxel centre (before its 16-bit code
     /// clamped it): an error naming the stage `sun transmittance`.
     pub fn check_finite(&self) -> crate::error::Result<()> {
@@ -196,6 +213,22 @@ mod tests {
             let d = crate::math::uniform_sphere(rng.uniform(), rng.uniform());
             let (got, want) = (transmittance(&m, &box_of(&m), p, d), m.transmittance(p, d, 0.0, f32::INFINITY));
             assert!((got - want).abs() <= 2e-6 * want + 1e-30, "{n}: {got} vs {want}");
+        }
+    }
+
+    /// At the full voxels, the values the whole grid stores there.
+    #[test]
+    fn at_voxels_reads_what_the_grid_stores() {
+        let mut rng = Rng::new(11, 3);
+        let g = crate::medium::test_grids::random_cloud([9, 7, 8], &mut rng, 0.6, 0.0, 3.0);
+        let m = Medium::new(g, Vec3::new(-2.0, 1.0, 0.5), Vec3::new(1.0, 0.7, 1.3), 0.4, Rgb::ONE, 0.0);
+        let dir = Vec3::new(0.3, 0.8, -0.5).normalize();
+        let grid = SunTransmittance::compute(&m, dir).grid;
+        let voxels: Vec<usize> = (0..m.density.len()).filter(|v| m.density.at(*v) > 0.0).collect();
+        let at = SunTransmittance::at_voxels(&m, dir, &voxels);
+        assert!(at.iter().any(|t| *t < 0.9), "some voxel in shadow");
+        for (v, t) in voxels.iter().zip(&at) {
+            assert_eq!(t.to_bits(), grid.at_index(*v).to_bits(), "voxel {v}");
         }
     }
 

@@ -220,14 +220,13 @@ pub fn solve_warm(
 /// δ-M sun transmittance T′ = T^{1 − a f} = T^{σt′/σt} at the centres of the full voxels
 /// (grid indices `voxels`), per band.
 fn sun_transmittance(m: &Medium, sun: &Sun, optics: &TransportOptics, voxels: &[usize]) -> Vec<[f32; 3]> {
-    let exact = crate::lit::sunlight::SunTransmittance::compute(m, sun.dir);
+    let exact = crate::lit::sunlight::SunTransmittance::at_voxels(m, sun.dir, voxels);
     let ratio = [0, 1, 2].map(|b| (optics.bands[b].sigma_t / optics.sigma_t) as f32);
     // Grey optics (every example): one power serves the three bands.
     let grey = ratio[1..].iter().all(|r| *r == ratio[0]);
-    voxels
+    exact
         .par_iter()
-        .map(|&v| {
-            let t = exact.grid.at_index(v);
+        .map(|&t| {
             if grey {
                 [t.powf(ratio[0]); 3]
             } else {
