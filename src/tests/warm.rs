@@ -99,6 +99,44 @@ fn a_slowly_drifting_clouds_warm_transport_frames_take_fewer_iterations_within_t
 }
 
 #[test]
+fn a_warm_start_no_nearer_than_zero_is_dropped_for_a_cold_solve() {
+    // The previous frame lit by the sun, this one by the sky alone (its sun set): the carried
+    // light is farther from this frame's first iterate than zero is. The solve starts again from
+    // zero and takes the cold solve's iterations plus the one that found it, ending where the cold
+    // solve does.
+    // A clear sky's irradiance is a tenth of the sun's or less; with no sun the scene is dim.
+    let mut lit = frame(Method::Transport, 50.0, 0, 0.0);
+    lit.sky = crate::lighting::Sky::constant(crate::math::Rgb::splat(0.02));
+    let mut dark = lit.clone();
+    dark.sun.irradiance = crate::math::Rgb::ZERO;
+    let t = &lit.render.transport;
+    let keep = SolveOptions {
+        keep: true,
+        ..SolveOptions::default()
+    };
+    let (_, state) = solve_warm(&lit.medium, &lit.sun, &lit.sky, lit.ground.as_ref(), t, &NoProgress, keep).unwrap();
+    let solve = |start| {
+        let opts = SolveOptions {
+            start,
+            ..SolveOptions::default()
+        };
+        solve_warm(&dark.medium, &dark.sun, &dark.sky, dark.ground.as_ref(), t, &NoProgress, opts)
+            .unwrap()
+            .0
+    };
+    let (cold, warm) = (solve(None), solve(state.as_ref()));
+    assert!(warm.history[0] >= 1.0, "the lit frame's light is a start: {:?}", warm.history);
+    assert_eq!(
+        warm.history[1..],
+        cold.history[..],
+        "warm {:?}, cold {:?}",
+        warm.history,
+        cold.history
+    );
+    assert_eq!(warm.diffuse_source, cold.diffuse_source);
+}
+
+#[test]
 fn a_transport_solve_started_from_its_own_solution_starts_converged() {
     // The moments and the cloud's light on the ground both carried: the first sweep changes I0
     // by less than the tolerance.

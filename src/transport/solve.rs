@@ -347,7 +347,7 @@ impl Solver<'_> {
             }
             // The last two iterations allowed are full ones, so a solve cut off by
             // render.transport_max_iterations still ends on the whole map.
-            let phase = if it.starting && iterations - done > 2 { next_phase(&it.history) } else { Phase::Full };
+            let phase = if it.starting && iterations - done > 2 { next_phase(it.since_restart()) } else { Phase::Full };
             let tables = self.start.map_or(self.tables, |st| st.tables(phase, self.tables));
             let e_down = sweep(self.ctx, self.q, tables, &it.moments, &mut it.next, &it.ground_map, &mut it.batch);
             if it.accelerated && !self.hier.is_empty() {
@@ -373,6 +373,10 @@ impl Solver<'_> {
             it.smallest = it.smallest.min(change_abs);
             let change = change_abs / scale;
             it.history.push(change);
+            if it.warm.is_some() && it.since_start == 1 && change >= 1.0 {
+                self.start_cold(it, change, progress);
+                continue;
+            }
             it.starting &= !start_over(phase, change);
             // Cold solves mix (src/transport/mixing.rs); warm ones extrapolate, as their
             // stopping rule reads the extrapolated mode.
@@ -425,6 +429,26 @@ impl Solver<'_> {
             }
         }
         Ok(())
+    }
+
+    /// A warm start no nearer the first iterate than zero is (a relative change of I0 of at least
+    /// 1, a cold start's by definition: from zero every value changes by itself) is no start,
+    /// e.g. a frame whose sun has just set carries light the scene no longer has, and the warm
+    /// iteration's extrapolation overshoots while that light decays. Start again from zero as a
+    /// cold solve (its start at order 3, the mixing, the cold stopping test).
+    fn start_cold(&self, it: &mut Iterate, change: f64, progress: &dyn Progress) {
+        it.warm = None;
+        it.starting = self.start.is_some() && it.accelerated;
+        it.moments.fill(0.0);
+        it.next.fill(0.0);
+        (it.smallest, it.since_start) = (f64::INFINITY, 0);
+        it.ground_map = self.ground.map(None);
+        progress.advance(1);
+        progress.log(&format!(
+            "transport: iteration {}, relative change of I0 {change:.2e} from the previous frame's light, no nearer than \
+             zero: solving from zero",
+            it.history.len()
+        ));
     }
 
     /// DSA's diffusion operator is not the sweeps' own diffusion limit, and on voxels many mean
