@@ -240,7 +240,20 @@ impl Hierarchy {
             }));
             bb
         } else {
-            self.true_residual(be, x, &mut r, [true; K])
+            let rr = self.true_residual(be, x, &mut r, [true; K]);
+            // A start no nearer the solution than zero is (its scaled residual at least b's: a
+            // warm start across an abrupt change of the light, a sun that has set) is dropped:
+            // that system goes on from zero, as its cold solve does, bit for bit.
+            let no_start: [bool; K] = std::array::from_fn(|k| rr[k] >= bb[k]);
+            if no_start.contains(&true) {
+                for v in x.iter_mut() {
+                    (0..K).filter(|&k| no_start[k]).for_each(|k| v[k] = 0.0);
+                }
+                let from_zero = self.true_residual(be, x, &mut r, no_start);
+                std::array::from_fn(|k| if no_start[k] { from_zero[k] } else { rr[k] })
+            } else {
+                rr
+            }
         };
         // Each system's final true r·r, kept from the check that stopped it.
         let mut last: [Option<f64>; K] = [None; K];

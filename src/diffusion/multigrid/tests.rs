@@ -156,6 +156,22 @@ fn multigrid_matches_dense_solve() {
 }
 
 #[test]
+fn a_start_no_nearer_than_zero_is_dropped_and_a_near_one_kept() {
+    let (s, b) = sun_lit_system([12, 10, 9], 5, 0.97, 0.8, Vec3::new(0.3, 1.0, -0.2), 0);
+    let h = Hierarchy::build_with(&s.rows(), 16);
+    let (cold, cold_stats) = h.solve(&b, None, 1e-9, 200);
+    // Ten times the solution: its residual is nine times b's. The solve is the cold one.
+    let far: Vec<f64> = cold.iter().map(|v| 10.0 * v).collect();
+    let (x, st) = h.solve(&b, Some(&far), 1e-9, 200);
+    assert_eq!(x, cold);
+    assert_eq!(st.history, cold_stats.history);
+    // The solution itself, slightly off: kept, and fewer iterations than from zero.
+    let near: Vec<f64> = cold.iter().map(|v| 1.01 * v).collect();
+    let (_, st) = h.solve(&b, Some(&near), 1e-9, 200);
+    assert!(st.history[0] < 0.1 && st.iterations < cold_stats.iterations, "{:?}", st.history);
+}
+
+#[test]
 fn systems_solved_together_match_their_own_solves_exactly() {
     let (s, b) = sun_lit_system([12, 10, 9], 5, 0.97, 0.8, Vec3::new(0.3, 1.0, -0.2), 0);
     let h = Hierarchy::build_with(&s.rows(), 16);
