@@ -239,6 +239,14 @@ mod tests {
         warnings(&file, &[], &scene)
     }
 
+    /// The warnings for a scene file holding `contents`.
+    fn warnings_for(contents: &str) -> Vec<String> {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("s.toml");
+        std::fs::write(&p, contents).unwrap();
+        warnings_of(&p)
+    }
+
     #[test]
     fn the_examples_warn_about_nothing() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples");
@@ -291,8 +299,6 @@ mod tests {
 
     #[test]
     fn a_sun_below_the_horizon_is_reported_only_where_the_ground_hides_it() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("s.toml");
         let grid = "[medium]\nresolution = [4, 4, 4]\nvoxel_size = 100.0\n";
         for (rest, warned) in [
             ("[sun]\ndirection = [1.0, -0.05, 0.0]\n[ground]\n", true),
@@ -304,19 +310,15 @@ mod tests {
                 false,
             ),
         ] {
-            std::fs::write(&p, format!("{grid}{rest}")).unwrap();
-            let w = warnings_of(&p);
+            let w = warnings_for(&format!("{grid}{rest}"));
             assert_eq!(w.iter().any(|m| m.contains("2.86° below the horizon")), warned, "{rest}: {w:?}");
         }
     }
 
     #[test]
     fn a_sun_disc_is_reported_as_ignored_and_a_point_sun_is_not() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("s.toml");
         for (diameter, warned) in [(0.53, true), (0.0, false)] {
-            std::fs::write(&p, format!("[sun]\nangular_diameter_deg = {diameter:?}\n")).unwrap();
-            let w = warnings_of(&p);
+            let w = warnings_for(&format!("[sun]\nangular_diameter_deg = {diameter:?}\n"));
             assert_eq!(
                 w.iter().any(|m| m.contains("`sun.angular_diameter_deg` does not apply")),
                 warned,
@@ -327,8 +329,6 @@ mod tests {
 
     #[test]
     fn a_cloud_behind_the_camera_or_beside_the_frame_is_reported() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("s.toml");
         let grid = "[medium]\nresolution = [4, 4, 4]\nvoxel_size = 100.0\n";
         for (camera, warned) in [
             ("", false),
@@ -340,8 +340,7 @@ mod tests {
                 false,
             ),
         ] {
-            std::fs::write(&p, format!("{grid}{camera}")).unwrap();
-            let w = warnings_of(&p);
+            let w = warnings_for(&format!("{grid}{camera}"));
             assert_eq!(w.iter().any(|m| m.contains("not in the camera's view")), warned, "{camera}: {w:?}");
         }
     }

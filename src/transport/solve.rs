@@ -437,18 +437,24 @@ impl Solver<'_> {
     /// iteration's extrapolation overshoots while that light decays. Start again from zero as a
     /// cold solve (its start at order 3, the mixing, the cold stopping test).
     fn start_cold(&self, it: &mut Iterate, change: f64, progress: &dyn Progress) {
-        it.warm = None;
+        self.restart_from_zero(it);
         it.starting = self.start.is_some() && it.accelerated;
-        it.moments.fill(0.0);
-        it.next.fill(0.0);
-        (it.smallest, it.since_start) = (f64::INFINITY, 0);
-        it.ground_map = self.ground.map(None);
         progress.advance(1);
         progress.log(&format!(
             "transport: iteration {}, relative change of I0 {change:.2e} from the previous frame's light, no nearer than \
              zero: solving from zero",
             it.history.len()
         ));
+    }
+
+    /// The iterate back to zero (the moments and the cloud's light on the ground) and its counts
+    /// restarted: from zero the solve is a cold one, stopped by the cold test.
+    fn restart_from_zero(&self, it: &mut Iterate) {
+        it.warm = None;
+        it.moments.fill(0.0);
+        it.next.fill(0.0);
+        (it.smallest, it.since_start) = (f64::INFINITY, 0);
+        it.ground_map = self.ground.map(None);
     }
 
     /// DSA's diffusion operator is not the sweeps' own diffusion limit, and on voxels many mean
@@ -458,13 +464,8 @@ impl Solver<'_> {
         it.accelerated = false;
         it.starting = false;
         it.given_up = Some(it.history.len() + 1);
-        // From zero the solve is a cold one: stopped by the cold test.
-        it.warm = None;
-        it.moments.fill(0.0);
-        it.next.fill(0.0);
         let smallest = it.smallest;
-        (it.smallest, it.since_start) = (f64::INFINITY, 0);
-        it.ground_map = self.ground.map(None);
+        self.restart_from_zero(it);
         it.history.push(1.0);
         progress.advance(1);
         progress.log(&format!(
