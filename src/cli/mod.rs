@@ -11,6 +11,7 @@ macro_rules! note {
 mod allocator;
 mod bench;
 mod cloud_size;
+mod thick_voxels;
 mod compare;
 mod console;
 mod display;

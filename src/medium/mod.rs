@@ -18,6 +18,7 @@ pub mod majorant;
 pub mod march;
 pub mod procedural;
 pub mod remap;
+pub mod skin;
 pub mod sparse;
 pub mod subgrid;
 #[cfg(test)]
@@ -76,6 +77,10 @@ pub struct MediumDesc {
     pub max_voxels: u64,
     /// Average N×N×N blocks after loading (1 = off).
     pub downsample: usize,
+    /// Split each voxel into K×K×K after loading (K odd; 1 = off), the same trilinear density
+    /// field at K times the resolution ([`Grid3::refine`]): for clouds whose light enters through
+    /// optically thick voxels (docs/accuracy.md, "Optically thick voxels").
+    pub refine: usize,
     /// The grid file's up axis: `"y"` (this program, Houdini) or `"z"` (Blender), turned to y-up.
     pub up_axis: UpAxis,
 }
@@ -95,10 +100,14 @@ impl Default for MediumDesc {
             scale: 1.0,
             max_voxels: 200_000_000,
             downsample: 1,
+            refine: 1,
             up_axis: UpAxis::Y,
         }
     }
 }
+
+/// Largest `medium.refine` (each voxel becomes refine³: 343 at 7).
+pub const MAX_REFINE: usize = 7;
 
 /// A validated medium.
 #[derive(Clone, Debug)]
@@ -171,6 +180,20 @@ impl Medium {
             d.downsample,
             "must be an integer from 1 (off) to 64",
         )?;
+        check(
+            file,
+            "medium.refine",
+            (1..=MAX_REFINE).contains(&d.refine) && d.refine % 2 == 1,
+            d.refine,
+            &format!("must be an odd integer from 1 (off) to {MAX_REFINE} (each voxel becomes refine³)"),
+        )?;
+        check(
+            file,
+            "medium.refine",
+            d.refine == 1 || d.downsample == 1,
+            d.refine,
+            "cannot be combined with medium.downsample; set one of them to 1",
+        )?;
         check(file, "medium.max_voxels", d.max_voxels >= 1, d.max_voxels, "must be at least 1")?;
         let loaded = match given {
             Some(loaded) => loaded,
@@ -181,6 +204,21 @@ impl Medium {
         if d.downsample > 1 && !loaded.downsampled {
             grid = grid.downsample(d.downsample);
             voxel *= d.downsample as f32;
+        }
+        if d.refine > 1 {
+            let n = (grid.len() as u64).saturating_mul((d.refine as u64).pow(3));
+            check(
+                &loaded.name,
+                "medium.max_voxels",
+                n <= d.max_voxels,
+                n,
+                &format!(
+                    "medium.refine = {} makes {n} voxels, more than medium.max_voxels = {}; lower medium.refine or raise medium.max_voxels",
+                    d.refine, d.max_voxels
+                ),
+            )?;
+            grid = grid.refine(d.refine);
+            voxel /= d.refine as f32;
         }
         let (grid, origin, voxel) = up_axis::to_y_up(d.up_axis, (grid, loaded.origin, voxel));
         let n = grid.len() as u64;

@@ -363,3 +363,49 @@ fn back_scattering_converges_and_thick_voxels_fail_with_the_stage_named() {
     let e = solve(&ball(1e4, 1.0), &sun, &sky, None, &s, &NoProgress).unwrap_err().to_string();
     assert!(e.starts_with("transport solve:") && e.contains("--method reference"), "{e}");
 }
+
+/// A cube of 8³ voxels of density 1 (10 m, one empty voxel around it) whose voxels are `tau`
+/// optical depths thick, refined `k` times per axis ([`Grid3::refine`]: the same field).
+fn thick_cube(tau: f32, albedo: f32, k: usize) -> Medium {
+    let mut g = Grid3::filled([10; 3], 0.0);
+    for n in 0..1000 {
+        let (i, j, l) = (n % 10, (n / 10) % 10, n / 100);
+        if [i, j, l].iter().all(|c| (1..=8).contains(c)) {
+            g.set(i, j, l, 1.0);
+        }
+    }
+    let h = 10.0 / k as f32;
+    Medium::new(g.refine(k), Vec3::new(-50.0, 50.0, -50.0), Vec3::splat(h), tau / 10.0, Rgb::splat(albedo), 0.85)
+}
+
+/// Light that enters through voxels many optical depths thick leaves from a layer thinner than
+/// one voxel, which one value per voxel does not resolve (docs/accuracy.md, "Optically thick
+/// voxels"): under a uniform sky with absorption `transport` is dark against `reference`, and
+/// the same cube refined to thinner voxels (`medium.refine`) is not.
+#[test]
+fn thick_entry_voxels_are_dark_and_refining_them_resolves_the_layer() {
+    let sky = Rgb::new(1.0, 1.0, 1.0);
+    let render_with = |m: Medium, method: Method| {
+        let mut s = scene(m, method);
+        s.sun = Sun {
+            dir: Vec3::Y,
+            irradiance: Rgb::ZERO,
+        };
+        s.sky = Sky::constant(sky);
+        s.render.spp = 64;
+        render(&s, &NoProgress).unwrap().image
+    };
+    let reference = render_with(thick_cube(12.0, 0.99, 1), Method::Reference);
+    let coarse = render_with(thick_cube(12.0, 0.99, 1), Method::Transport);
+    let fine = render_with(thick_cube(12.0, 0.99, 3), Method::Transport);
+    // The cloud's pixels: those the coarse image does not show as sky.
+    let cloud: Vec<usize> = (0..coarse.pixels.len())
+        .filter(|&p| (coarse.pixels[p] - sky).abs().max_element() > 1e-3)
+        .collect();
+    let mean = |img: &Image| cloud.iter().map(|&p| luminance(img.pixels[p]) as f64).sum::<f64>() / cloud.len() as f64;
+    let (r, c, f) = (mean(&reference), mean(&coarse), mean(&fine));
+    eprintln!("{} cloud pixels: reference {r:.4}, transport {c:.4} ({:+.1} %), refined 3× {f:.4} ({:+.1} %)", cloud.len(), 100.0 * (c / r - 1.0), 100.0 * (f / r - 1.0));
+    assert!(cloud.len() > 50, "{} cloud pixels", cloud.len());
+    assert!(c < 0.9 * r, "voxels of 12 optical depths: transport {c} against reference {r}");
+    assert!((f / r - 1.0).abs() < 0.04, "refined 3×: transport {f} against reference {r}");
+}

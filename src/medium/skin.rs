@@ -1,0 +1,110 @@
+//! How finely the voxels resolve the layer where light enters the cloud. Along every grid line of
+//! the three axes, in both directions, light from outside crosses the dual cells between voxel
+//! centres (ρ linear between two centres, as the trilinear field is along a grid line). The first
+//! cell in which its optical depth from outside reaches 1 holds the layer that the light leaving
+//! the cloud comes from (its radiance is about the source at one optical depth,
+//! Eddington–Barbier). Every deterministic method holds one value of the light per voxel: where
+//! that cell is many optical depths thick, the layer is not resolved and the image comes out dark
+//! (docs/accuracy.md, "Optically thick voxels").
+
+use super::Medium;
+use rayon::prelude::*;
+
+/// The optical depths (σt · h · mean ρ, unitless) of the dual cells in which light entering along
+/// a grid line first reaches one optical depth: one per grid line and direction that reaches it.
+pub fn entry_cell_depths(m: &Medium) -> Vec<f32> {
+    let Some((lo, hi)) = m.active_box(0) else {
+        return Vec::new();
+    };
+    let sigma_t = m.optics.sigma_t as f64;
+    let h = [m.voxel_size.x as f64, m.voxel_size.y as f64, m.voxel_size.z as f64];
+    let lines: Vec<(usize, usize, usize)> = (0..3)
+        .flat_map(|a| {
+            let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+            (lo[b]..hi[b]).flat_map(move |jb| (lo[c]..hi[c]).map(move |jc| (a, jb, jc)))
+        })
+        .collect();
+    lines
+        .par_iter()
+        .flat_map_iter(|&(a, jb, jc)| {
+            let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+            // The line's densities from one empty centre before the active box to one after.
+            let rho: Vec<f64> = (lo[a] as isize - 1..=hi[a] as isize)
+                .map(|ka| {
+                    let mut v = [0isize; 3];
+                    v[a] = ka;
+                    v[b] = jb as isize;
+                    v[c] = jc as isize;
+                    m.density.get_or_zero(v[0], v[1], v[2]) as f64
+                })
+                .collect();
+            let cell = |p: f64, q: f64| sigma_t * h[a] * 0.5 * (p + q);
+            let forward = first_cell_past_one(rho.windows(2).map(|w| cell(w[0], w[1])));
+            let backward = first_cell_past_one(rho.windows(2).rev().map(|w| cell(w[0], w[1])));
+            forward.into_iter().chain(backward)
+        })
+        .collect()
+}
+
+/// The first of `cells` (optical depths, in the order light crosses them) in which the optical
+/// depth from the first one's entry reaches 1.
+fn first_cell_past_one(cells: impl Iterator<Item = f64>) -> Option<f32> {
+    let mut tau = 0.0;
+    for cell in cells {
+        if tau + cell >= 1.0 {
+            return Some(cell as f32);
+        }
+        tau += cell;
+    }
+    None
+}
+
+/// The median of [`entry_cell_depths`] (`None`: no grid line reaches one optical depth).
+pub fn median_entry_cell_depth(m: &Medium) -> Option<f32> {
+    let mut depths = entry_cell_depths(m);
+    if depths.is_empty() {
+        return None;
+    }
+    let mid = depths.len() / 2;
+    let (_, median, _) = depths.select_nth_unstable_by(mid, f32::total_cmp);
+    Some(*median)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::{Rgb, Vec3};
+    use crate::medium::Grid3;
+
+    /// A box of density 1 with one empty voxel around it, `sigma_t` per metre, 2-m voxels.
+    fn uniform_box(sigma_t: f32) -> Medium {
+        let dims = [8, 7, 6];
+        let mut g = Grid3::filled(dims, 0.0);
+        for k in 1..dims[2] - 1 {
+            for j in 1..dims[1] - 1 {
+                for i in 1..dims[0] - 1 {
+                    g.set(i, j, k, 1.0);
+                }
+            }
+        }
+        Medium::new(g, Vec3::ZERO, Vec3::splat(2.0), sigma_t, Rgb::ONE, 0.0)
+    }
+
+    #[test]
+    fn a_thick_uniform_box_is_entered_through_its_first_half_voxel() {
+        // σt·h = 10: the half voxel from the empty centre to the first full one holds 5.
+        let depths = entry_cell_depths(&uniform_box(5.0));
+        // Every grid line through the box's 6×5×4 full voxels, both ways.
+        assert_eq!(depths.len(), 2 * (5 * 4 + 4 * 6 + 6 * 5));
+        assert!(depths.iter().all(|d| *d == 5.0), "{depths:?}");
+        assert_eq!(median_entry_cell_depth(&uniform_box(5.0)), Some(5.0));
+    }
+
+    #[test]
+    fn a_thin_uniform_box_reaches_one_optical_depth_in_its_interior() {
+        // σt·h = 0.5: cells of 0.25 then 0.5, 0.5: one optical depth is reached in the third.
+        assert_eq!(median_entry_cell_depth(&uniform_box(0.25)), Some(0.5));
+        // σt·h = 0.1: the longest line, 6 full voxels and two empty half voxels, holds 0.6.
+        assert_eq!(median_entry_cell_depth(&uniform_box(0.05)), None);
+    }
+}
