@@ -3,6 +3,7 @@
 //! the warning says by about how much and what to do.
 
 use crate::medium::skin::median_entry_cell_depth;
+use crate::medium::MAX_REFINE;
 use crate::scene::{Method, Scene};
 
 /// Median optical depth of the voxels light enters through above which the warning is given.
@@ -11,18 +12,26 @@ use crate::scene::{Method, Scene};
 pub const THICK_ENTRY: f32 = 2.5;
 
 /// The warning for `scene`, if its method holds one value of the light per voxel and the median
-/// voxel its light enters through is thicker than [`THICK_ENTRY`].
+/// voxel its light enters through is thicker than [`THICK_ENTRY`]; it names the `medium.refine`
+/// that brings the median to [`THICK_ENTRY`] or below, where one within [`MAX_REFINE`] does.
 pub fn warning(scene: &Scene) -> Option<String> {
     if scene.render.method == Method::Reference {
         return None;
     }
     let median = median_entry_cell_depth(&scene.medium).filter(|d| *d > THICK_ENTRY)?;
+    let d = &scene.desc.medium;
+    // Refining k times divides the entry cells' depth by about k (the cells are k times thinner).
+    let more = (3..=MAX_REFINE).step_by(2).find(|k| median / *k as f32 <= THICK_ENTRY);
+    let finer = match more.map(|k| k * d.refine).filter(|k| *k <= MAX_REFINE) {
+        _ if d.downsample > 1 => "a lower medium.downsample".to_string(),
+        Some(k) => format!("medium.refine = {k} ({}× the voxels, memory and time)", k.pow(3) / d.refine.pow(3)),
+        None => "a finer grid (medium.refine goes up to 7)".to_string(),
+    };
     Some(format!(
-        "{}: light enters the cloud through voxels {median:.1} optical depths thick (the median, from \
-         medium.sigma_t × density × voxel size), too coarse for method {} to resolve the layer the light \
-         leaves from: the image comes out dark (transport measured 4-8 % dark at 3-4, 22 % at 9, 39 % at 18; \
-         full and diffusion more; docs/accuracy.md, \"Optically thick voxels\"); render with --method \
-         reference, or give the cloud thinner voxels (a finer grid, or a smaller medium.sigma_t)",
+        "{}: light enters the cloud through voxels {median:.1} optical depths thick (the median; medium.sigma_t × \
+         density × voxel size), too thick for method {} to resolve the layer the light leaves from: the image comes \
+         out dark (transport measured 4-8 % dark at 3-4, 22 % at 9, 39 % at 18, full and diffusion more; \
+         docs/accuracy.md, \"Optically thick voxels\"); render with --method reference, or resolve the layer with {finer}",
         scene.source,
         scene.render.method.name()
     ))
@@ -35,11 +44,16 @@ mod tests {
     use std::path::Path;
 
     fn warning_for(sigma_t: f32, method: Method) -> Option<String> {
+        warning_with(sigma_t, method, |_| ())
+    }
+
+    fn warning_with(sigma_t: f32, method: Method, edit: impl FnOnce(&mut SceneDesc)) -> Option<String> {
         let mut d = SceneDesc::default();
         d.medium.resolution = [20, 16, 12];
         d.medium.voxel_size = 25.0;
         d.medium.sigma_t = sigma_t;
         d.render.method = method;
+        edit(&mut d);
         warning(&Scene::build(d, "s.toml", Path::new(".")).unwrap())
     }
 
@@ -51,5 +65,21 @@ mod tests {
             assert!(w.contains(&format!("method {}", m.name())) && w.contains("--method reference"), "{w}");
         }
         assert_eq!(warning_for(1.0, Method::Reference), None);
+    }
+
+    #[test]
+    fn the_warning_names_the_refinement_that_resolves_the_entry_layer() {
+        // σt·h = 7.5 on the built-in cloud: entry voxels about 3 thick, refined 3× about 1.
+        let w = warning_for(0.3, Method::Transport).unwrap();
+        assert!(w.contains("medium.refine = 3 (27× the voxels"), "{w}");
+        assert_eq!(warning_with(0.3, Method::Transport, |d| d.medium.refine = 3), None);
+        // Past what refine offers, a finer grid; with downsample set, less of it.
+        let w = warning_for(5.0, Method::Transport).unwrap();
+        assert!(w.contains("a finer grid"), "{w}");
+        let w = warning_with(1.0, Method::Transport, |d| {
+            d.medium.resolution = [10, 8, 6];
+            d.medium.downsample = 2;
+        });
+        assert!(w.is_some_and(|w| w.contains("a lower medium.downsample")));
     }
 }

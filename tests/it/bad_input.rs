@@ -121,6 +121,11 @@ fn bad_medium_values() {
         ("[medium]\ng = nan\n", &["s.toml", "medium.g"]),
         ("[medium]\ndownsample = 0\n", &["s.toml", "medium.downsample"]),
         ("[medium]\ndownsample = 65\n", &["s.toml", "medium.downsample"]),
+        ("[medium]\nrefine = 0\n", &["s.toml", "medium.refine", "odd"]),
+        ("[medium]\nrefine = 2\n", &["s.toml", "medium.refine", "odd"]),
+        ("[medium]\nrefine = 9\n", &["s.toml", "medium.refine", "7"]),
+        ("[medium]\nrefine = 3\ndownsample = 2\n", &["s.toml", "medium.refine", "medium.downsample"]),
+        ("[medium]\nrefine = 7\nmax_voxels = 1000000\n", &["medium.refine = 7", "medium.max_voxels"]),
         ("[medium]\nmax_voxels = 0\n", &["s.toml", "medium.max_voxels"]),
         ("[medium]\nresolution = [0, 10, 10]\n", &["s.toml", "medium.resolution"]),
         ("[medium]\nresolution = [5000, 10, 10]\n", &["s.toml", "medium.resolution"]),
@@ -769,7 +774,9 @@ fn catches_interrupts(pid: u32) -> bool {
 
 // --------------------------------------------------------------------- command-line arguments
 
-const SCENE: &str = "[medium]\nresolution = [8, 8, 8]\nvoxel_size = 100.0\n";
+/// The built-in cloud on 8³ voxels of 100 m, each one optical depth thick at density 1 (no
+/// thick-voxel warning).
+const SCENE: &str = "[medium]\nresolution = [8, 8, 8]\nvoxel_size = 100.0\nsigma_t = 0.01\n";
 
 #[test]
 fn bad_render_arguments_and_outputs() {
@@ -1109,6 +1116,18 @@ fn warns(files: &[File], args: &[&str], expect: &[&str]) {
         );
     }
     assert!(dir.path().join("out.exr").exists(), "the render still runs");
+}
+
+/// Voxels five optical depths thick where the light enters: every deterministic method is warned
+/// (with the refinement that resolves them), `reference` is not, and refined the cloud is quiet.
+#[test]
+fn thick_entry_voxels_are_warned_about() {
+    let thick = |extra: &str| vec![("s.toml", format!("{SCENE}sigma_t = 0.05\n{extra}").replace("sigma_t = 0.01\n", "").into_bytes())];
+    let warning = ["optical depths thick", "--method reference", "medium.refine = 3"];
+    warns(&thick(""), &["--method", "transport"], &warning);
+    warns(&thick(""), &["--method", "single"], &warning);
+    warns(&thick(""), &["--method", "reference", "--spp", "1"], &[]);
+    warns(&thick("refine = 3\n"), &["--method", "single"], &[]);
 }
 
 #[test]
