@@ -19,10 +19,11 @@ command -v jq >/dev/null || { echo "scripts/thick_voxels.sh: needs jq" >&2; exit
 mkdir -p "$out"
 cells() { jq -r '"\(.block_mean_relative_error * 1000 | round / 10) / \(.block_bias * 1000 | round / 10) %"'; }
 
-# One row: NAME (file stem), LABEL, σt·h (optical depth of a density-1 voxel), width, height.
+# One row: NAME (file stem), LABEL, σt·h (optical depth of a density-1 voxel), width, height, and
+# optionally the NAME whose reference it shares (a refined cloud is the same density field).
 row() {
     local name=$1 label=$2 tau=$3 w=$4 h=$5 line noise entry
-    local scene="$out/$name.toml" ref="$out/$name-reference.exr"
+    local scene="$out/$name.toml" ref="$out/${6:-$name}-reference.exr"
     [ -f "$ref" ] || "$bin" -q --threads 1 render "$scene" --method reference --spp 256 --stderr \
         --width "$w" --height "$h" -o "$ref" 2>/dev/null
     line="| $label | $tau"
@@ -46,6 +47,12 @@ for st in 0.05 0.1 0.2 0.3 0.5 1.0 2.0 5.0; do
         -e 's/^voxel_size = 10.0 /voxel_size = 25.0 /' \
         -e "s/^sigma_t = 0.05 /sigma_t = $st /" "$root/examples/default.toml" > "$out/procedural-$st.toml"
     row "procedural-$st" "procedural, $st" "$(echo "$st * 25" | bc -l | sed 's/0*$//; s/\.$//')" 64 48
+done
+# The thick rows again with the voxels refined (medium.refine: the same field, k³ the voxels).
+for st_k in 0.3:3 0.5:3 1.0:3 2.0:3 2.0:5 5.0:5; do
+    st=${st_k%:*} k=${st_k#*:}
+    sed -e "s/^sigma_t = $st /sigma_t = $st\nrefine = $k /" "$out/procedural-$st.toml" > "$out/procedural-$st-r$k.toml"
+    row "procedural-$st-r$k" "procedural, $st, refine $k" "$(echo "$st * 25 / $k" | bc -l | xargs printf '%.3g')" 64 48 "procedural-$st"
 done
 for st in 0.08 0.8 3.0; do
     sed -e "s#^grid = \"#grid = \"$root/tests/data/clouds/#" -e "s/^sigma_t = 0.08/sigma_t = $st/" \

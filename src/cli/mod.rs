@@ -11,7 +11,6 @@ macro_rules! note {
 mod allocator;
 mod bench;
 mod cloud_size;
-mod thick_voxels;
 mod compare;
 mod console;
 mod display;
@@ -26,6 +25,7 @@ mod progress;
 mod scene_file;
 mod sky;
 mod slab;
+mod thick_voxels;
 mod tonemap;
 mod warnings;
 

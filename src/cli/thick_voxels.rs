@@ -27,13 +27,21 @@ pub fn warning(scene: &Scene) -> Option<String> {
         Some(k) => format!("medium.refine = {k} ({}× the voxels, memory and time)", k.pow(3) / d.refine.pow(3)),
         None => "a finer grid (medium.refine goes up to 7)".to_string(),
     };
+    let m = scene.render.method;
+    // Refining resolves the layer for transport; the other methods' darkness there is mostly their
+    // own approximations' (docs/accuracy.md), so they are pointed to transport.
+    let remedy = if m == Method::Transport {
+        format!("resolve the layer with {finer}, or render with --method reference")
+    } else {
+        format!("render with --method transport and {finer}, or with --method reference")
+    };
     Some(format!(
         "{}: light enters the cloud through voxels {median:.1} optical depths thick (the median; medium.sigma_t × \
          density × voxel size), too thick for method {} to resolve the layer the light leaves from: the image comes \
          out dark (transport measured 4-8 % dark at 3-4, 22 % at 9, 39 % at 18, full and diffusion more; \
-         docs/accuracy.md, \"Optically thick voxels\"); render with --method reference, or resolve the layer with {finer}",
+         docs/accuracy.md, \"Optically thick voxels\"); {remedy}",
         scene.source,
-        scene.render.method.name()
+        m.name()
     ))
 }
 
@@ -62,7 +70,10 @@ mod tests {
         assert_eq!(warning_for(0.05, Method::Transport), None);
         for m in [Method::Single, Method::Diffusion, Method::Full, Method::Transport] {
             let w = warning_for(1.0, m).unwrap_or_else(|| panic!("{m:?}: no warning"));
-            assert!(w.contains(&format!("method {}", m.name())) && w.contains("--method reference"), "{w}");
+            assert!(
+                w.contains(&format!("method {}", m.name())) && w.contains("--method reference"),
+                "{w}"
+            );
         }
         assert_eq!(warning_for(1.0, Method::Reference), None);
     }

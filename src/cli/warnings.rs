@@ -250,16 +250,17 @@ mod tests {
 
     #[test]
     fn the_examples_warn_about_nothing() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples");
         let mut n = 0;
-        for e in std::fs::read_dir(dir).unwrap() {
-            let p = e.unwrap().path();
-            if p.extension().is_some_and(|x| x == "toml") {
-                assert_eq!(warnings_of(&p), Vec::<String>::new(), "{}", p.display());
-                n += 1;
+        for folder in ["examples", "examples/eval", "examples/eval/glare"] {
+            for e in std::fs::read_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join(folder)).unwrap() {
+                let p = e.unwrap().path();
+                if p.extension().is_some_and(|x| x == "toml") {
+                    assert_eq!(warnings_of(&p), Vec::<String>::new(), "{}", p.display());
+                    n += 1;
+                }
             }
         }
-        assert!(n >= 5, "{n} example scenes");
+        assert!(n >= 20, "{n} example scenes");
     }
 
     #[test]

@@ -196,7 +196,7 @@ mod tests {
     fn refining_keeps_the_trilinear_field_and_the_centres() {
         let dims = [5, 4, 3];
         let mut rng = Rng::new(3, 1);
-        let data: Vec<f32> = (0..60).map(|n| if n % 7 == 0 { 0.0 } else { rng.uniform() as f32 * 2.0 }).collect();
+        let data: Vec<f32> = (0..60).map(|n| if n % 7 == 0 { 0.0 } else { rng.uniform() * 2.0 }).collect();
         let coarse = Grid3::from_vec(dims, data, "test").unwrap();
         for k in [3, 5] {
             let fine = coarse.refine(k);
@@ -207,7 +207,7 @@ mod tests {
             }
             // Anywhere in the box, clamped sides included, the same field.
             for _ in 0..2000 {
-                let p: [f32; 3] = std::array::from_fn(|a| rng.uniform() as f32 * dims[a] as f32);
+                let p: [f32; 3] = std::array::from_fn(|a| rng.uniform() * dims[a] as f32);
                 let (want, got) = (coarse.trilinear(p), fine.trilinear(p.map(|x| x * k as f32)));
                 assert!((got - want).abs() <= 2e-6 * (1.0 + want), "k = {k} at {p:?}: {got} vs {want}");
             }

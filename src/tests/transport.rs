@@ -375,7 +375,14 @@ fn thick_cube(tau: f32, albedo: f32, k: usize) -> Medium {
         }
     }
     let h = 10.0 / k as f32;
-    Medium::new(g.refine(k), Vec3::new(-50.0, 50.0, -50.0), Vec3::splat(h), tau / 10.0, Rgb::splat(albedo), 0.85)
+    Medium::new(
+        g.refine(k),
+        Vec3::new(-50.0, 50.0, -50.0),
+        Vec3::splat(h),
+        tau / 10.0,
+        Rgb::splat(albedo),
+        0.85,
+    )
 }
 
 /// Light that enters through voxels many optical depths thick leaves from a layer thinner than
@@ -404,7 +411,12 @@ fn thick_entry_voxels_are_dark_and_refining_them_resolves_the_layer() {
         .collect();
     let mean = |img: &Image| cloud.iter().map(|&p| luminance(img.pixels[p]) as f64).sum::<f64>() / cloud.len() as f64;
     let (r, c, f) = (mean(&reference), mean(&coarse), mean(&fine));
-    eprintln!("{} cloud pixels: reference {r:.4}, transport {c:.4} ({:+.1} %), refined 3× {f:.4} ({:+.1} %)", cloud.len(), 100.0 * (c / r - 1.0), 100.0 * (f / r - 1.0));
+    eprintln!(
+        "{} cloud pixels: reference {r:.4}, transport {c:.4} ({:+.1} %), refined 3× {f:.4} ({:+.1} %)",
+        cloud.len(),
+        100.0 * (c / r - 1.0),
+        100.0 * (f / r - 1.0)
+    );
     assert!(cloud.len() > 50, "{} cloud pixels", cloud.len());
     assert!(c < 0.9 * r, "voxels of 12 optical depths: transport {c} against reference {r}");
     assert!((f / r - 1.0).abs() < 0.04, "refined 3×: transport {f} against reference {r}");

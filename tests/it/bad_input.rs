@@ -124,8 +124,14 @@ fn bad_medium_values() {
         ("[medium]\nrefine = 0\n", &["s.toml", "medium.refine", "odd"]),
         ("[medium]\nrefine = 2\n", &["s.toml", "medium.refine", "odd"]),
         ("[medium]\nrefine = 9\n", &["s.toml", "medium.refine", "7"]),
-        ("[medium]\nrefine = 3\ndownsample = 2\n", &["s.toml", "medium.refine", "medium.downsample"]),
-        ("[medium]\nrefine = 7\nmax_voxels = 1000000\n", &["medium.refine = 7", "medium.max_voxels"]),
+        (
+            "[medium]\nrefine = 3\ndownsample = 2\n",
+            &["s.toml", "medium.refine", "medium.downsample"],
+        ),
+        (
+            "[medium]\nrefine = 7\nmax_voxels = 1000000\n",
+            &["medium.refine = 7", "medium.max_voxels"],
+        ),
         ("[medium]\nmax_voxels = 0\n", &["s.toml", "medium.max_voxels"]),
         ("[medium]\nresolution = [0, 10, 10]\n", &["s.toml", "medium.resolution"]),
         ("[medium]\nresolution = [5000, 10, 10]\n", &["s.toml", "medium.resolution"]),
@@ -1122,7 +1128,14 @@ fn warns(files: &[File], args: &[&str], expect: &[&str]) {
 /// (with the refinement that resolves them), `reference` is not, and refined the cloud is quiet.
 #[test]
 fn thick_entry_voxels_are_warned_about() {
-    let thick = |extra: &str| vec![("s.toml", format!("{SCENE}sigma_t = 0.05\n{extra}").replace("sigma_t = 0.01\n", "").into_bytes())];
+    let thick = |extra: &str| {
+        vec![(
+            "s.toml",
+            format!("{SCENE}sigma_t = 0.05\n{extra}")
+                .replace("sigma_t = 0.01\n", "")
+                .into_bytes(),
+        )]
+    };
     let warning = ["optical depths thick", "--method reference", "medium.refine = 3"];
     warns(&thick(""), &["--method", "transport"], &warning);
     warns(&thick(""), &["--method", "single"], &warning);
