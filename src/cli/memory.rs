@@ -221,15 +221,24 @@ pub fn check_solver_fits(scene: &Scene, available: Option<u64>, warm: u64) -> Re
         &scene.source,
         "medium",
         format!(
-            "method {} needs about {} ({} grid voxels × {} B{per_cloud}) but {what} is {}; coarsen the cloud (medium.downsample, medium.resolution or \
-             medium.max_voxels){other}",
+            "method {} needs about {} ({} grid voxels × {} B{per_cloud}) but {what} is {}; coarsen the cloud ({}medium.downsample, \
+             medium.resolution or medium.max_voxels){other}",
             r.method.name(),
             gib(need),
             size.grid,
             model.per_grid,
-            gib(beside)
+            gib(beside),
+            coarser_refine(scene)
         ),
     ))
+}
+
+/// "a lower medium.refine (now K: K³ the voxels), " where the scene refines its grid, else "".
+fn coarser_refine(scene: &Scene) -> String {
+    match scene.desc.medium.refine {
+        1 => String::new(),
+        k => format!("a lower medium.refine (now {k}: {}× the file's voxels), ", k.pow(3)),
+    }
 }
 
 /// The diffusion solver (of `diffusion`, `full` and `transport`'s acceleration) takes clouds at
@@ -247,8 +256,9 @@ fn check_solver_row(scene: &Scene) -> Result<()> {
         "medium",
         format!(
             "the cloud spans {row} voxels along x, and method {}'s diffusion solver takes at most {MAX_BOX_ROW_CELLS}; \
-             coarsen the cloud (medium.downsample or medium.resolution), or use --method single or reference",
-            scene.render.method.name()
+             coarsen the cloud ({}medium.downsample or medium.resolution), or use --method single or reference",
+            scene.render.method.name(),
+            coarser_refine(scene)
         ),
     ))
 }
@@ -360,8 +370,16 @@ mod tests {
             let sparse = method != Method::Single;
             assert_eq!(e.contains("--method transport"), sparse, "{e}");
             assert_eq!(e.contains(&format!("{} full voxels", size.full)), sparse, "{e}");
+            assert!(!e.contains("medium.refine"), "{e}");
             assert!(check_solver_fits(&scene, Some(image + need), 0).is_ok());
         }
+        // A refined grid is told to refine less first.
+        scene.desc.medium.refine = 3;
+        let e = check_solver_fits(&scene, Some(1), 0).unwrap_err().to_string();
+        assert!(
+            e.contains("a lower medium.refine (now 3: 27× the file's voxels), medium.downsample"),
+            "{e}"
+        );
     }
 
     #[test]
