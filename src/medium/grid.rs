@@ -2,6 +2,7 @@
 
 use super::sparse::FullIndex;
 use crate::error::{Error, Result};
+use rayon::prelude::*;
 use std::sync::{Arc, OnceLock};
 
 /// A dense grid of `f32` values, index (i, j, k) = (x, y, z), x fastest in memory.
@@ -147,15 +148,19 @@ impl Grid3 {
         let [nx, ny, nz] = self.dims;
         // A fine centre in coarse voxel coordinates: (m + ½)/k, i + ½ (a coarse centre) at m = k i + (k − 1)/2.
         let at = |m: usize| ((m as f64 + 0.5) / k as f64) as f32;
-        let mut out = Grid3::filled([nx * k, ny * k, nz * k], 0.0);
-        for kk in 0..nz * k {
-            for jj in 0..ny * k {
-                for ii in 0..nx * k {
-                    out.set(ii, jj, kk, self.trilinear([at(ii), at(jj), at(kk)]));
-                }
+        let dims = [nx * k, ny * k, nz * k];
+        let mut data = vec![0f32; dims[0] * dims[1] * dims[2]];
+        // One z slice of the new grid per task.
+        data.par_chunks_mut(dims[0] * dims[1]).enumerate().for_each(|(kk, slice)| {
+            for (n, v) in slice.iter_mut().enumerate() {
+                *v = self.trilinear([at(n % dims[0]), at(n / dims[0]), at(kk)]);
             }
+        });
+        Grid3 {
+            dims,
+            data,
+            full: OnceLock::new(),
         }
-        out
     }
 
     /// Average `n`×`n`×`n` blocks into one voxel (the paper averaged 200×160×120 down to
