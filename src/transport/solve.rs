@@ -3,7 +3,7 @@
 //! with diffusion synthetic acceleration. [`solve_warm`] sets up, iterates and hands back the field;
 //! the stages live beside it:
 //!
-//! - **Sweep** (src/transport/sweep.rs, [`sweep`](super::sweep::sweep)). For an ordinate Ω, the
+//! - **Sweep** (src/transport/sweep/mod.rs, [`sweep`](super::sweep::sweep)). For an ordinate Ω, the
 //!   axis a with the largest |Ω_a|/h_a orders the voxel planes upwind. A voxel's centre looks back
 //!   along −Ω to the plane of the previous centres, a distance s = h_a/|Ω_a|; there, the radiance,
 //!   source and density are bilinear in the four upwind centres (the offsets are ≤ 1 voxel because
