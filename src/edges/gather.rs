@@ -559,9 +559,9 @@ impl<'a> EdgeGather<'a> {
     /// The ray's top-level edge segments: maximal contiguous runs of pieces with ρ < T (the
     /// paper's S_j) or in the surface layer (pieces `0..surface_end`). A segment that holds
     /// surface pieces (optical depth up to D_s) has its cube at the depth where the eye sees its
-    /// light scattered, [`eye_weighted_depth`], not at its optical midpoint: across the layer the
-    /// diffuse field grows with depth where the sun enters steeply, and the midpoint read it too
-    /// bright (docs/edges.md, "Where the layer's cube stands"). The paper's thin segments keep
+    /// light scattered, [`eye_weighted_depth`], not at its optical midpoint: where the sun enters
+    /// steeply the diffuse field grows with depth across the layer, and the midpoint would read it
+    /// too bright (docs/edges.md, "Where the layer's cube stands"). The paper's thin segments keep
     /// their midpoint (the two agree to D²/12).
     pub fn top_segments(&self, profile: &RayProfile, surface_end: usize) -> Vec<LowSegment> {
         let t = self.settings.threshold;
