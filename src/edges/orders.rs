@@ -90,10 +90,10 @@ mod tests {
                 den += (-t).exp();
             }
             let want = num / den;
-            assert!((eye_weighted_depth(d) - want).abs() < 1e-8 * (1.0 + want), "D = {d}: {} vs {want}", eye_weighted_depth(d));
+            assert!((eye_weighted_depth(d) - want).abs() < 1e-6 * want, "D = {d}: {} vs {want}", eye_weighted_depth(d));
         }
-        // Thin: the paper's midpoint; the layer's D = 4: 0.925, well short of 2.
-        assert!((eye_weighted_depth(1e-5) - 0.5e-5).abs() < 1e-15);
+        // Thin: the paper's midpoint less D²/12; the layer's D = 4: 0.925, well short of 2.
+        assert!((eye_weighted_depth(1e-5) - (0.5e-5 - 1e-10 / 12.0)).abs() < 1e-18);
         assert!((eye_weighted_depth(4.0) - 0.92537).abs() < 1e-5);
         assert_eq!(eye_weighted_depth(0.0), 0.0);
     }
