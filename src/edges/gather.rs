@@ -34,6 +34,7 @@
 //! segment instead of switching abruptly when the gap closes.
 
 use super::escape::SunChord;
+use super::orders::eye_weighted_depth;
 use super::orders_kernel::{edge_radiance, segment_orders, OrderKernel, DEFAULT_TAIL};
 use super::segments::{density_bounds, depth_from_samples, LowSegment, RayProfile};
 use crate::cube::CubeImage;
@@ -556,13 +557,22 @@ impl<'a> EdgeGather<'a> {
     }
 
     /// The ray's top-level edge segments: maximal contiguous runs of pieces with ρ < T (the
-    /// paper's S_j) or in the surface layer (pieces `0..surface_end`).
+    /// paper's S_j) or in the surface layer (pieces `0..surface_end`). A segment that holds
+    /// surface pieces (optical depth up to D_s) has its cube at the depth where the eye sees its
+    /// light scattered, [`eye_weighted_depth`], not at its optical midpoint: where the sun enters
+    /// steeply the diffuse field grows with depth across the layer, and the midpoint would read it
+    /// too bright (docs/edges.md, "Where the layer's cube stands"). The paper's thin segments keep
+    /// their midpoint (the two agree to D²/12).
     pub fn top_segments(&self, profile: &RayProfile, surface_end: usize) -> Vec<LowSegment> {
         let t = self.settings.threshold;
         if t <= 0.0 && surface_end == 0 {
             return Vec::new();
         }
-        profile.segments_where(self.medium, |k, p| k < surface_end || p.rho[1] < t)
+        let mut segs = profile.segments_where(self.medium, |k, p| k < surface_end || p.rho[1] < t);
+        for s in segs.iter_mut().filter(|s| s.first < surface_end) {
+            s.t_center = profile.t_at_depth(self.medium, s.first, s.end, eye_weighted_depth(s.depth));
+        }
+        segs
     }
 
     /// Edge weight of the surface layer at optical depth `tau` from the ray's start: 1, falling

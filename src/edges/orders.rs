@@ -27,6 +27,22 @@ pub fn poisson_weights(d: f64, tail: f64) -> Vec<f64> {
     q
 }
 
+/// The mean optical depth, from a segment's near end, of the light it scatters towards the eye:
+/// τ̄ = ∫₀ᴰ τ e^{−τ} dτ / ∫₀ᴰ e^{−τ} dτ = 1 − D/(e^D − 1). A cube read there gives the exact
+/// ∫₀ᴰ e^{−τ} S(τ) dτ = (1 − e^{−D}) S(τ̄) for a source linear in depth, where the optical midpoint
+/// D/2 does not. D/2 − D²/12 + D⁴/720 for thin segments (the paper's midpoint as D → 0); 0.925
+/// for the surface layer's D = 4, where the eye sees the field at depth ~1 (Eddington–Barbier), not
+/// at 2.
+pub fn eye_weighted_depth(d: f64) -> f64 {
+    let d = d.max(0.0);
+    if d < 1e-3 {
+        // The closed form cancels here; the series' next term is below 10⁻¹⁶·D.
+        let d2 = d * d;
+        return d * (0.5 - d / 12.0 + d2 * d / 720.0);
+    }
+    1.0 - d / d.exp_m1()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -60,6 +76,26 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn eye_weighted_depth_is_the_mean_depth_under_the_eyes_attenuation() {
+        for &d in &[1e-6, 1e-4, 9.99e-4, 1.001e-3, 0.01, 0.3, 1.0, 4.0, 20.0] {
+            // Midpoint rule for ∫ τ e^{−τ} / ∫ e^{−τ} over [0, D].
+            let n = 20_000;
+            let (mut num, mut den) = (0.0, 0.0);
+            for k in 0..n {
+                let t = d * (k as f64 + 0.5) / n as f64;
+                num += t * (-t).exp();
+                den += (-t).exp();
+            }
+            let want = num / den;
+            assert!((eye_weighted_depth(d) - want).abs() < 1e-6 * want, "D = {d}: {} vs {want}", eye_weighted_depth(d));
+        }
+        // Thin: the paper's midpoint less D²/12; the layer's D = 4: 0.925, well short of 2.
+        assert!((eye_weighted_depth(1e-5) - (0.5e-5 - 1e-10 / 12.0)).abs() < 1e-18);
+        assert!((eye_weighted_depth(4.0) - 0.92537).abs() < 1e-5);
+        assert_eq!(eye_weighted_depth(0.0), 0.0);
     }
 
     /// (p ∗ p)(cos θ) = ∫ p(ω·ω′) p(ω′·ẑ) dω′ by quadrature on the sphere.

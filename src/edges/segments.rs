@@ -48,7 +48,8 @@ pub struct LowSegment {
     pub t1: f64,
     /// Optical depth D_j (unitless).
     pub depth: f64,
-    /// Distance (m) where the optical depth from t0 reaches D_j/2: the cube centre c_j.
+    /// Distance (m) of the cube centre c_j: where the optical depth from t0 reaches D_j/2 (a
+    /// surface-layer segment: `orders::eye_weighted_depth`, set by `EdgeGather::top_segments`).
     pub t_center: f64,
     /// Pieces `first..end` of the profile.
     pub first: usize,
