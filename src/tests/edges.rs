@@ -75,6 +75,17 @@ fn sunlit_gather<'a>(
     EdgeGather::new(m, settings, cubes, sun, dense)
 }
 
+/// Edge settings with a surface layer `surface_depth` optical depths deep and no band.
+fn surface_layer_settings(surface_depth: f32) -> EdgeSettings {
+    EdgeSettings {
+        threshold: 0.3,
+        cube_res: 8,
+        surface_depth,
+        surface_band: 0.0,
+        ..Default::default()
+    }
+}
+
 /// A gather without sun.
 fn unlit_gather<'a>(
     m: &'a Medium,
@@ -559,14 +570,7 @@ fn surface_layer_of_a_thick_slab_is_the_poisson_segment_of_its_first_optical_dep
     let tau_p = (sigma_t * h / u.y) as f64;
     for ds in [0.0f64, 3.0] {
         let cubes = Recording(Mutex::new(Vec::new()), l);
-        let settings = EdgeSettings {
-            threshold: 0.3,
-            cube_res: 8,
-            surface_depth: ds as f32,
-            surface_band: 0.0,
-            ..Default::default()
-        };
-        let gather = unlit_gather(&m, settings, &cubes, &dense);
+        let gather = unlit_gather(&m, surface_layer_settings(ds as f32), &cubes, &dense);
         let px = gather.radiance(o, u, f32::INFINITY, b);
         let e = |x: f64| (-x).exp() as f32;
         let edge = l * (e(ds * (1.0 - a as f64)) - e(ds));
@@ -615,14 +619,7 @@ fn surface_layer_of_a_field_growing_with_depth_is_the_eyes_integral_over_it() {
     let u = Vec3::new(0.5, 3f32.sqrt() / 2.0, 0.0);
     let (l0, l1, ds) = (0.4f32, 0.6f32, 3.0f64);
     let cubes = Growing(l0, l1, sigma_t, u);
-    let settings = EdgeSettings {
-        threshold: 0.3,
-        cube_res: 8,
-        surface_depth: ds as f32,
-        surface_band: 0.0,
-        ..Default::default()
-    };
-    let gather = unlit_gather(&m, settings, &cubes, &dense);
+    let gather = unlit_gather(&m, surface_layer_settings(ds as f32), &cubes, &dense);
     let px = gather.radiance(Vec3::new(0.0, -1.0, 0.0), u, f32::INFINITY, Rgb::ZERO);
     let e = (-ds).exp();
     let want = l0 as f64 * (1.0 - e) + l1 as f64 * (1.0 - (1.0 + ds) * e);
