@@ -60,7 +60,8 @@ impl Scene {
         Scene::build(desc, crate::scene::BUILTIN, Path::new("."))
     }
 
-    /// Resolution `[nx, ny, nz]` of the density grid as loaded (after `medium.downsample`).
+    /// Resolution `[nx, ny, nz]` of the density grid as loaded (after `medium.downsample` or
+    /// `medium.refine`).
     ///
     /// ```
     /// let scene = cloudgi::Scene::from_toml("[medium]\nresolution = [10, 8, 6]").unwrap();
@@ -88,7 +89,7 @@ impl Image {
 }
 
 /// A density grid in memory: it replaces `medium.grid` (see [`Scene::build_with`]); the scene's
-/// `medium.downsample`, `max_voxels` and optical properties still apply.
+/// `medium.downsample`, `medium.refine`, `max_voxels` and optical properties still apply.
 #[derive(Clone, Debug)]
 pub struct Density {
     grid: Grid3,
@@ -142,7 +143,7 @@ impl Density {
 
     /// Read grid `grid_name` of a grid file as a scene's `medium.grid` would be read (`.vdb`
     /// placed by its own transform; `.npy`, `.raw`, `.vol` as their formats say), without
-    /// `medium.downsample`.
+    /// `medium.downsample` or `medium.refine`.
     ///
     /// ```
     /// let dir = tempfile::tempdir().unwrap();
