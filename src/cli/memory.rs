@@ -194,7 +194,7 @@ pub fn check_solver_fits(scene: &Scene, available: Option<u64>, warm: u64) -> Re
         "the memory available beside the image".to_string()
     };
     if r.method == Method::Transport {
-        return TransportMemory::of(&scene.medium, &r.transport).check(&scene.source, beside, &what);
+        return TransportMemory::of(&scene.medium, &r.transport).check(&scene.source, beside, &what, &scene.desc.medium.coarser_refine());
     }
     let size = CloudSize::of(&scene.medium.density);
     let model = grid_memory(r.method);
@@ -228,17 +228,9 @@ pub fn check_solver_fits(scene: &Scene, available: Option<u64>, warm: u64) -> Re
             size.grid,
             model.per_grid,
             gib(beside),
-            coarser_refine(scene)
+            scene.desc.medium.coarser_refine()
         ),
     ))
-}
-
-/// "a lower medium.refine (now K: K³ the voxels), " where the scene refines its grid, else "".
-fn coarser_refine(scene: &Scene) -> String {
-    match scene.desc.medium.refine {
-        1 => String::new(),
-        k => format!("a lower medium.refine (now {k}: {}× the file's voxels), ", k.pow(3)),
-    }
 }
 
 /// The diffusion solver (of `diffusion`, `full` and `transport`'s acceleration) takes clouds at
@@ -258,7 +250,7 @@ fn check_solver_row(scene: &Scene) -> Result<()> {
             "the cloud spans {row} voxels along x, and method {}'s diffusion solver takes at most {MAX_BOX_ROW_CELLS}; \
              coarsen the cloud ({}medium.downsample or medium.resolution), or use --method single or reference",
             scene.render.method.name(),
-            coarser_refine(scene)
+            scene.desc.medium.coarser_refine()
         ),
     ))
 }
@@ -373,13 +365,16 @@ mod tests {
             assert!(!e.contains("medium.refine"), "{e}");
             assert!(check_solver_fits(&scene, Some(image + need), 0).is_ok());
         }
-        // A refined grid is told to refine less first.
+        // A refined grid is told to refine less first, by every method's guard.
         scene.desc.medium.refine = 3;
-        let e = check_solver_fits(&scene, Some(1), 0).unwrap_err().to_string();
-        assert!(
-            e.contains("a lower medium.refine (now 3: 27× the file's voxels), medium.downsample"),
-            "{e}"
-        );
+        for method in [Method::Single, Method::Transport] {
+            scene.render.method = method;
+            let e = check_solver_fits(&scene, Some(1), 0).unwrap_err().to_string();
+            assert!(
+                e.contains("a lower medium.refine (now 3: 27× the file's voxels), medium.downsample"),
+                "{e}"
+            );
+        }
     }
 
     #[test]

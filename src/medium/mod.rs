@@ -106,6 +106,17 @@ impl Default for MediumDesc {
     }
 }
 
+impl MediumDesc {
+    /// The first way to coarsen a refined cloud, for the memory guards' messages: "a lower
+    /// medium.refine (now K: K³× the file's voxels), " where `refine` is above 1, else "".
+    pub fn coarser_refine(&self) -> String {
+        match self.refine {
+            1 => String::new(),
+            k => format!("a lower medium.refine (now {k}: {}× the file's voxels), ", k.pow(3)),
+        }
+    }
+}
+
 /// Largest `medium.refine` (each voxel becomes refine³: 343 at 7).
 pub const MAX_REFINE: usize = 7;
 
@@ -205,32 +216,19 @@ impl Medium {
             grid = grid.downsample(d.downsample);
             voxel *= d.downsample as f32;
         }
-        if d.refine > 1 {
-            let n = (grid.len() as u64).saturating_mul((d.refine as u64).pow(3));
-            check(
-                &loaded.name,
-                "medium.max_voxels",
-                n <= d.max_voxels,
-                n,
-                &format!(
-                    "medium.refine = {} makes {n} voxels, more than medium.max_voxels = {}; lower medium.refine or raise medium.max_voxels",
-                    d.refine, d.max_voxels
-                ),
-            )?;
-            grid = grid.refine(d.refine);
-            voxel /= d.refine as f32;
-        }
-        let (grid, origin, voxel) = up_axis::to_y_up(d.up_axis, (grid, loaded.origin, voxel));
-        let n = grid.len() as u64;
+        let (mut grid, origin, mut voxel) = up_axis::to_y_up(d.up_axis, (grid, loaded.origin, voxel));
+        // Counted with the refinement, before it allocates.
+        let n = (grid.len() as u64).saturating_mul((d.refine as u64).pow(3));
+        let fix = match d.refine {
+            1 => "raise it or set medium.downsample".to_string(),
+            k => format!("lower medium.refine (= {k}: {}× the file's voxels) or raise medium.max_voxels", k.pow(3)),
+        };
         check(
             &loaded.name,
             "medium.max_voxels",
             n <= d.max_voxels,
             n,
-            &format!(
-                "the grid has {n} voxels, more than medium.max_voxels = {}; raise it or set medium.downsample",
-                d.max_voxels
-            ),
+            &format!("the grid has {n} voxels, more than medium.max_voxels = {}; {fix}", d.max_voxels),
         )?;
         if let Some((idx, v)) = grid.data().iter().enumerate().find(|(_, v)| !v.is_finite() || **v < 0.0) {
             let dims = grid.dims();
@@ -252,6 +250,12 @@ impl Medium {
                 crate::limits::MAX_SIGMA_T
             ),
         )?;
+        // The file's voxels checked (refining keeps the largest density), each split into
+        // refine³ holding the same trilinear field.
+        if d.refine > 1 {
+            grid = grid.refine(d.refine);
+            voxel /= d.refine as f32;
+        }
         check(
             &loaded.name,
             "medium.voxel_size",

@@ -204,7 +204,7 @@ pub fn render_with(scene: &Scene, progress: &dyn Progress, timings: &mut Timings
     let s = &scene.render.transport;
     // Refuse, with the fix, a cloud whose arrays would not fit (rather than abort).
     let memory = TransportMemory::of(m, s);
-    memory.check(&scene.source, MAX_BYTES, "the library's limit")?;
+    memory.check(&scene.source, MAX_BYTES, "the library's limit", &scene.desc.medium.coarser_refine())?;
     let keep = warm.as_ref().is_some_and(|w| w.enabled);
     let start = warm.as_ref().and_then(|w| w.transport.as_ref()).filter(|_| keep);
     // A live view sees each iteration's iterate through the same gather (without its bar).

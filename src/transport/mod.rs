@@ -137,8 +137,9 @@ impl TransportMemory {
     }
 
     /// Refuse, naming the fixes, an estimate over `limit` bytes (`what` says what the limit is,
-    /// e.g. "the memory available"); `file` names the scene.
-    pub fn check(&self, file: &str, limit: u64, what: &str) -> Result<()> {
+    /// e.g. "the memory available"; `coarser` leads the ways to coarsen the cloud,
+    /// [`crate::medium::MediumDesc::coarser_refine`]); `file` names the scene.
+    pub fn check(&self, file: &str, limit: u64, what: &str, coarser: &str) -> Result<()> {
         if self.bytes <= limit {
             return Ok(());
         }
@@ -149,7 +150,7 @@ impl TransportMemory {
             format!(
                 "method transport needs about {:.1} GiB ({} full voxels × {} B at render.transport_order = {}, \
                  plus the grid and the acceleration's box) but {what} is {:.1} GiB; coarsen the cloud \
-                 (medium.downsample, medium.resolution or medium.max_voxels), lower \
+                 ({coarser}medium.downsample, medium.resolution or medium.max_voxels), lower \
                  render.transport_order, or use --method full",
                 gib(self.bytes),
                 self.full_voxels,

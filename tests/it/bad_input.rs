@@ -130,7 +130,7 @@ fn bad_medium_values() {
         ),
         (
             "[medium]\nrefine = 7\nmax_voxels = 1000000\n",
-            &["medium.refine = 7", "medium.max_voxels"],
+            &["medium.refine (= 7", "medium.max_voxels"],
         ),
         ("[medium]\nmax_voxels = 0\n", &["s.toml", "medium.max_voxels"]),
         ("[medium]\nresolution = [0, 10, 10]\n", &["s.toml", "medium.resolution"]),
