@@ -38,7 +38,7 @@ fn main() {
     );
     for mu0 in [1.0, 0.69, 0.4, 0.2] {
         let diffusion = collimated_profile(THICKNESS, dm.albedo, dm.g, mu0, cells);
-        let exact = exact_profile(THICKNESS, dm.albedo, dm.g, mu0, cells, photons);
+        let (exact, exact_once) = exact_profiles(THICKNESS, dm.albedo, dm.g, mu0, cells, photons);
         // The rows at ten times finer cells, averaged back over each cell.
         let fine = collimated_profile(THICKNESS, dm.albedo, dm.g, mu0, 10 * cells);
         let fine: Vec<f64> = fine.chunks(10).map(|c| c.iter().sum::<f64>() / 10.0).collect();
@@ -46,29 +46,32 @@ fn main() {
         let local = pn_profile(THICKNESS, dm.albedo, dm.g, mu0, cells, Closure::LocalSecondMoment);
         let p3 = pn_profile(THICKNESS, dm.albedo, dm.g, mu0, cells, Closure::P3);
         let worst = diffusion.iter().zip(&p1).map(|(d, p)| (d - p).abs() / p.abs()).fold(0.0, f64::max);
-        println!("μ0 = {mu0}: I0 / exact by depth along the normal: the diffusion's rows, the same at cells 10× finer, P1 with φ2 = S2/σ2, P3 (exact I0 per unit sun irradiance); P1 = the rows within {worst:.1e}");
+        let first = first_collision_profile(THICKNESS, dm.albedo, dm.g, mu0, cells, Closure::P1);
+        let first_p3 = first_collision_profile(THICKNESS, dm.albedo, dm.g, mu0, cells, Closure::P3);
+        println!("μ0 = {mu0}: I0 / exact by depth along the normal: the diffusion's rows, the same at cells 10× finer, P1 with φ2 = S2/σ2, P3, the first-collision source with P1, with P3 (exact I0 per unit sun irradiance); P1 = the rows within {worst:.1e}");
+        let once: Vec<f64> = once_scattered_moments(THICKNESS, dm.albedo, dm.g, mu0, cells)
+            .iter()
+            .zip(&exact_once)
+            .map(|(m, e)| m[0] / (4.0 * std::f64::consts::PI) / e)
+            .collect();
+        let worst_once = once.iter().take((1.0 / CELL) as usize).map(|r| (r - 1.0).abs()).fold(0.0, f64::max);
+        println!("  the once-scattered I0 against its Monte Carlo share, first optical depth: within {worst_once:.3}");
+        let columns = [&diffusion, &fine, &local, &p3, &first, &first_p3];
         let mut lo = 0.0;
         for hi in DEPTHS {
-            let (mut d, mut e, mut q, mut o, mut r, mut m) = (0.0, 0.0, 0.0, 0.0, 0.0, 0);
+            let (mut sums, mut e, mut m) = ([0.0; 6], 0.0, 0);
             for k in 0..cells {
                 let mid = (k as f64 + 0.5) * CELL;
                 if mid >= lo && mid < hi {
-                    d += diffusion[k];
+                    for (s, c) in sums.iter_mut().zip(columns) {
+                        *s += c[k];
+                    }
                     e += exact[k];
-                    q += p3[k];
-                    o += local[k];
-                    r += fine[k];
                     m += 1;
                 }
             }
-            println!(
-                "  τ′ {lo:>5}–{hi:<5} {:.3}  {:.3}  {:.3}  {:.3}  ({:.4})",
-                d / e,
-                r / e,
-                o / e,
-                q / e,
-                e / m as f64
-            );
+            let ratios: Vec<String> = sums.iter().map(|s| format!("{:.3}", s / e)).collect();
+            println!("  τ′ {lo:>5}–{hi:<5} {}  ({:.4})", ratios.join("  "), e / m as f64);
             lo = hi;
         }
     }
@@ -99,27 +102,36 @@ fn main() {
 /// keep a′ of their weight at each collision (Russian roulette below 10⁻³), and scatter by HG(g);
 /// path length after the first collision is tallied per cell (φ = Σℓ/Δτ, I0 = φ/4π).
 fn exact_profile(tau: f64, a: f64, g: f64, mu0: f64, cells: usize, photons: u64) -> Vec<f64> {
+    exact_profiles(tau, a, g, mu0, cells, photons).0
+}
+
+/// [`exact_profile`], and beside it the once-scattered light's share alone (the flights between
+/// the first and the second collision).
+fn exact_profiles(tau: f64, a: f64, g: f64, mu0: f64, cells: usize, photons: u64) -> (Vec<f64>, Vec<f64>) {
     let dtau = tau / cells as f64;
     let hg = Hg::new(g as f32);
     const CHUNK: u64 = 4096;
     let sums: Vec<Vec<f64>> = (0..photons.div_ceil(CHUNK))
         .into_par_iter()
         .map(|c| {
-            let mut tally = vec![0.0; cells];
+            let mut tally = vec![0.0; 2 * cells];
             for i in c * CHUNK..((c + 1) * CHUNK).min(photons) {
                 let mut rng = Rng::new(7, i);
-                let (mut z, mut mu, mut w, mut scattered) = (0.0f64, mu0, 1.0f64, false);
+                let (mut z, mut mu, mut w, mut collisions) = (0.0f64, mu0, 1.0f64, 0);
                 loop {
                     let s = -(1.0 - rng.uniform_f64()).ln();
                     let z1 = (z + s * mu).clamp(0.0, tau);
-                    if scattered {
-                        deposit(&mut tally, z, z1, mu, w, dtau);
+                    if collisions > 0 {
+                        deposit(&mut tally[..cells], z, z1, mu, w, dtau);
+                    }
+                    if collisions == 1 {
+                        deposit(&mut tally[cells..], z, z1, mu, w, dtau);
                     }
                     if z + s * mu <= 0.0 || z + s * mu >= tau {
                         break;
                     }
                     z = z1;
-                    scattered = true;
+                    collisions += 1;
                     w *= a;
                     if w < 1e-3 {
                         if rng.uniform_f64() < 0.1 {
@@ -138,7 +150,8 @@ fn exact_profile(tau: f64, a: f64, g: f64, mu0: f64, cells: usize, photons: u64)
         })
         .collect();
     let scale = mu0 / (photons as f64 * dtau * 4.0 * std::f64::consts::PI);
-    (0..cells).map(|k| sums.iter().map(|t| t[k]).sum::<f64>() * scale).collect()
+    let total = |k: usize| sums.iter().map(|t| t[k]).sum::<f64>() * scale;
+    ((0..cells).map(total).collect(), (cells..2 * cells).map(total).collect())
 }
 
 /// Adds weight × the path length of the segment z0 → z1 (direction cosine `mu`) inside each cell.
@@ -168,13 +181,19 @@ enum Closure {
 /// finite volumes with φ0, φ2 at cell centres and φ1, φ3 at faces, Marshak's conditions
 /// ∫₀¹ I P_{1,3}(μ) dμ = 0 for the inward μ at both faces (P1: the diffusion's rows exactly).
 fn pn_profile(tau: f64, a: f64, g: f64, mu0: f64, cells: usize, closure: Closure) -> Vec<f64> {
+    let h = tau / cells as f64;
+    let p_mu0 = [1.0, mu0, 0.5 * (3.0 * mu0 * mu0 - 1.0), 0.5 * (5.0 * mu0.powi(3) - 3.0 * mu0)];
+    let t_mean = |k: usize| (-(k as f64) * h / mu0).exp() * (-(-h / mu0).exp_m1()) * mu0 / h;
+    pn_solve(tau, a, g, cells, closure, &|l, k| a * t_mean(k) * g.powi(l as i32) * p_mu0[l])
+}
+
+/// The P_N equations of [`pn_profile`] with the source moments S_l of cell k given by `src(l, k)`
+/// (l = 0…3, φ_l units: 2π∫S P_l dμ per unit optical depth); I0 per cell.
+fn pn_solve(tau: f64, a: f64, g: f64, cells: usize, closure: Closure, src: &dyn Fn(usize, usize) -> f64) -> Vec<f64> {
     let p3 = closure == Closure::P3;
     let n = cells;
     let h = tau / n as f64;
     let sigma: Vec<f64> = (0..4).map(|l| 1.0 - a * g.powi(l)).collect();
-    let p_mu0 = [1.0, mu0, 0.5 * (3.0 * mu0 * mu0 - 1.0), 0.5 * (5.0 * mu0.powi(3) - 3.0 * mu0)];
-    let t_mean = |k: usize| (-(k as f64) * h / mu0).exp() * (-(-h / mu0).exp_m1()) * mu0 / h;
-    let src = |l: usize, k: usize| a * t_mean(k) * g.powi(l as i32) * p_mu0[l];
     // Unknowns: top face (φ0, φ2), cells (φ0, φ2)…, bottom face (φ0, φ2).
     let size = 2 * n + 4;
     let (top, cell, bot) = (0usize, |k: usize| 2 + 2 * k, 2 * n + 2);
@@ -259,6 +278,70 @@ fn pn_profile(tau: f64, a: f64, g: f64, mu0: f64, cells: usize, closure: Closure
     }
     let x = gauss(m);
     (0..n).map(|k| x[cell(k)] / (4.0 * std::f64::consts::PI)).collect()
+}
+
+/// The sun's once-scattered light, exactly: cell means of its Legendre moments φ_l = 2π∫I P_l dμ
+/// (l = 0…3, per unit sun irradiance across the rays) in the slab lit at μ0. Its source is
+/// a e^{−t/μ0} p̄(μ, μ0) per unit optical depth, p̄ the azimuthal mean of HG(g) (its Legendre
+/// series to l = 150); downwards I(τ, μ) = a p̄ μ0 (e^{−τ/μ} − e^{−τ/μ0})/(μ − μ0), upwards
+/// a p̄ μ0/(μ0 + |μ|) (e^{−τ/μ0} − e^{−T/μ0} e^{−(T−τ)/|μ|}); 1024 Gauss nodes in μ.
+fn once_scattered_moments(tau: f64, a: f64, g: f64, mu0: f64, cells: usize) -> Vec<[f64; 4]> {
+    use std::f64::consts::PI;
+    let h = tau / cells as f64;
+    const X: [f64; 4] = [-0.861_136_311_594_052_6, -0.339_981_043_584_856_3, 0.339_981_043_584_856_3, 0.861_136_311_594_052_6];
+    const W: [f64; 4] = [0.347_854_845_137_453_9, 0.652_145_154_862_546_1, 0.652_145_154_862_546_1, 0.347_854_845_137_453_9];
+    let legendre = |x: f64, n: usize| {
+        let mut p = vec![1.0, x];
+        for l in 1..n {
+            p.push(((2 * l + 1) as f64 * x * p[l] - l as f64 * p[l - 1]) / (l + 1) as f64);
+        }
+        p
+    };
+    let pl0 = legendre(mu0, 150);
+    let mut nodes = Vec::new();
+    for k in 0..256 {
+        let (lo, hi) = (-1.0 + 2.0 * k as f64 / 256.0, -1.0 + 2.0 * (k + 1) as f64 / 256.0);
+        for (x, w) in X.iter().zip(W) {
+            nodes.push((0.5 * (lo + hi) + 0.5 * (hi - lo) * x, w * 0.5 * (hi - lo)));
+        }
+    }
+    // Cell mean of e^{−τ/m} over [t0, t0 + h].
+    let mean = |m: f64, t0: f64| m * ((-t0 / m).exp() - (-(t0 + h) / m).exp()) / h;
+    let mut out = vec![[0.0; 4]; cells];
+    for (mu, w) in nodes {
+        let pl = legendre(mu, 150);
+        let p_bar: f64 = (0..=150).map(|l| (2 * l + 1) as f64 * g.powi(l as i32) * pl[l] * pl0[l]).sum::<f64>() / (4.0 * PI);
+        for (k, o) in out.iter_mut().enumerate() {
+            let t0 = k as f64 * h;
+            let i = if mu > 0.0 {
+                if (mu - mu0).abs() < 1e-9 {
+                    // τ e^{−τ/μ0}/μ0, its cell mean.
+                    let s = 16;
+                    (0..s).map(|j| { let t = t0 + (j as f64 + 0.5) * h / s as f64; t * (-t / mu0).exp() / mu0 }).sum::<f64>() / s as f64
+                } else {
+                    mu0 * (mean(mu, t0) - mean(mu0, t0)) / (mu - mu0)
+                }
+            } else {
+                let m = -mu;
+                let far = m * ((-(tau - t0 - h) / m).exp() - (-(tau - t0) / m).exp()) / h;
+                mu0 / (mu0 + m) * (mean(mu0, t0) - (-tau / mu0).exp() * far)
+            };
+            let pm = [1.0, mu, 0.5 * (3.0 * mu * mu - 1.0), 0.5 * (5.0 * mu.powi(3) - 3.0 * mu)];
+            for l in 0..4 {
+                o[l] += 2.0 * PI * w * a * p_bar * i * pm[l];
+            }
+        }
+    }
+    out
+}
+
+/// The first-collision source: the sun's once-scattered light exactly ([`once_scattered_moments`])
+/// plus the `closure`'s solution for the orders ≥ 2, whose source is the once-scattered light
+/// scattered again, S_l = a g^l φ_l^(1). I0 per cell.
+fn first_collision_profile(tau: f64, a: f64, g: f64, mu0: f64, cells: usize, closure: Closure) -> Vec<f64> {
+    let once = once_scattered_moments(tau, a, g, mu0, cells);
+    let rest = pn_solve(tau, a, g, cells, closure, &|l, k| a * g.powi(l as i32) * once[k][l]);
+    rest.iter().zip(&once).map(|(r, o)| r + o[0] / (4.0 * std::f64::consts::PI)).collect()
 }
 
 /// Solves the augmented system (each row: coefficients, then the right-hand side) by Gaussian
