@@ -3,8 +3,10 @@
 //! (the cumulus's g = 0.9 and albedo 0.999 after δ-M with f = g⁴), per depth bin along the normal
 //! and per μ0: I0 of the diffusion's own rows ([`cloudgi::diffusion::slab::collimated_profile`],
 //! cells as thick as one of the cumulus's 10-m voxels at density 1; and at cells ten times finer),
-//! of P1 with the sun's l = 2 moment from its local balance, and of P3, each over the exact mean
-//! diffuse radiance by Monte Carlo (track-length estimator, the same δ-M medium, HG(g′)). Then the
+//! of P1 with the sun's l = 2 moment from its local balance, of P3, and of the first-collision
+//! source (the once-scattered light exact, P1 or P3 for the orders ≥ 2; docs/accuracy.md, "The
+//! first-collision source and the beam's first moment"), each over the exact mean diffuse
+//! radiance by Monte Carlo (track-length estimator, the same δ-M medium, HG(g′)). Then the
 //! 3-D solver (stage 1's sun and `solve_diffusion`) on a slab whose faces are axis-aligned and on
 //! one tilted 45° to the grid (a staircase), against the same Monte Carlo.
 //!
@@ -288,8 +290,18 @@ fn pn_solve(tau: f64, a: f64, g: f64, cells: usize, closure: Closure, src: &dyn 
 fn once_scattered_moments(tau: f64, a: f64, g: f64, mu0: f64, cells: usize) -> Vec<[f64; 4]> {
     use std::f64::consts::PI;
     let h = tau / cells as f64;
-    const X: [f64; 4] = [-0.861_136_311_594_052_6, -0.339_981_043_584_856_3, 0.339_981_043_584_856_3, 0.861_136_311_594_052_6];
-    const W: [f64; 4] = [0.347_854_845_137_453_9, 0.652_145_154_862_546_1, 0.652_145_154_862_546_1, 0.347_854_845_137_453_9];
+    const X: [f64; 4] = [
+        -0.861_136_311_594_052_6,
+        -0.339_981_043_584_856_3,
+        0.339_981_043_584_856_3,
+        0.861_136_311_594_052_6,
+    ];
+    const W: [f64; 4] = [
+        0.347_854_845_137_453_9,
+        0.652_145_154_862_546_1,
+        0.652_145_154_862_546_1,
+        0.347_854_845_137_453_9,
+    ];
     let legendre = |x: f64, n: usize| {
         let mut p = vec![1.0, x];
         for l in 1..n {
@@ -310,14 +322,23 @@ fn once_scattered_moments(tau: f64, a: f64, g: f64, mu0: f64, cells: usize) -> V
     let mut out = vec![[0.0; 4]; cells];
     for (mu, w) in nodes {
         let pl = legendre(mu, 150);
-        let p_bar: f64 = (0..=150).map(|l| (2 * l + 1) as f64 * g.powi(l as i32) * pl[l] * pl0[l]).sum::<f64>() / (4.0 * PI);
+        let p_bar: f64 = (0..=150)
+            .map(|l| (2 * l + 1) as f64 * g.powi(l as i32) * pl[l] * pl0[l])
+            .sum::<f64>()
+            / (4.0 * PI);
         for (k, o) in out.iter_mut().enumerate() {
             let t0 = k as f64 * h;
             let i = if mu > 0.0 {
                 if (mu - mu0).abs() < 1e-9 {
                     // τ e^{−τ/μ0}/μ0, its cell mean.
                     let s = 16;
-                    (0..s).map(|j| { let t = t0 + (j as f64 + 0.5) * h / s as f64; t * (-t / mu0).exp() / mu0 }).sum::<f64>() / s as f64
+                    (0..s)
+                        .map(|j| {
+                            let t = t0 + (j as f64 + 0.5) * h / s as f64;
+                            t * (-t / mu0).exp() / mu0
+                        })
+                        .sum::<f64>()
+                        / s as f64
                 } else {
                     mu0 * (mean(mu, t0) - mean(mu0, t0)) / (mu - mu0)
                 }
@@ -341,7 +362,10 @@ fn once_scattered_moments(tau: f64, a: f64, g: f64, mu0: f64, cells: usize) -> V
 fn first_collision_profile(tau: f64, a: f64, g: f64, mu0: f64, cells: usize, closure: Closure) -> Vec<f64> {
     let once = once_scattered_moments(tau, a, g, mu0, cells);
     let rest = pn_solve(tau, a, g, cells, closure, &|l, k| a * g.powi(l as i32) * once[k][l]);
-    rest.iter().zip(&once).map(|(r, o)| r + o[0] / (4.0 * std::f64::consts::PI)).collect()
+    rest.iter()
+        .zip(&once)
+        .map(|(r, o)| r + o[0] / (4.0 * std::f64::consts::PI))
+        .collect()
 }
 
 /// Solves the augmented system (each row: coefficients, then the right-hand side) by Gaussian
