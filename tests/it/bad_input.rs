@@ -217,6 +217,8 @@ fn bad_lights_ground_camera_and_render_keys() {
             "[render]\npropagation_tolerance = -1.0\n",
             &["s.toml", "render.propagation_tolerance"],
         ),
+        // A step too fine to end: the march would take 5e31 samples per voxel.
+        ("[render]\nstep = 1e-30\n", &["s.toml", "render.step", "0.01"]),
         ("[render]\nsolver_tolerance = 2.0\n", &["s.toml", "render.solver_tolerance"]),
         ("[render]\nsolver_max_iterations = 0\n", &["s.toml", "render.solver_max_iterations"]),
         ("[render]\ntransport_order = 0\n", &["s.toml", "render.transport_order", "1 to 15"]),
