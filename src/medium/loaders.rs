@@ -26,6 +26,9 @@ pub struct Loaded {
     pub downsampled: bool,
 }
 
+/// The smallest `.raw` sidecar, for messages.
+const RAW_SIDECAR_EXAMPLE: &str = r#"{"resolution": [nx, ny, nz], "dtype": "float32"}"#;
+
 /// Load the grid `[medium]` describes.
 pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
     if d.grid == "procedural" {
@@ -84,11 +87,20 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
         "vdb" => load_vdb(d, file, &read(&path)?, name),
         "raw" => {
             let sidecar = path.with_extension("json");
+            if !sidecar.is_file() {
+                return Err(Error::format(
+                    &name,
+                    format!(
+                        "a .raw grid needs its sidecar `{}` beside it, a file holding {RAW_SIDECAR_EXAMPLE} (docs/scene.md)",
+                        sidecar.display()
+                    ),
+                ));
+            }
             let text = crate::io::read_capped(&sidecar, crate::io::MAX_TEXT_BYTES, "a .json sidecar")?;
             let meta: RawMeta = serde_json::from_slice(&text).map_err(|e| {
                 Error::format(
                     sidecar.display().to_string(),
-                    format!("{e}; expected {{\"resolution\": [nx, ny, nz], \"dtype\": \"float32\"}}"),
+                    format!("{e}; expected {RAW_SIDECAR_EXAMPLE}"),
                 )
             })?;
             placed(d, file, name.clone(), || parse_raw(&read_dense(&path, d, file)?, &meta, &name))

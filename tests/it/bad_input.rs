@@ -400,7 +400,17 @@ fn corrupt_npy_raw_and_vdb_files() {
         grid_fails("g.npy", &[("g.npy", bytes)], expect);
     }
     let raw = |json: &str, data: Vec<u8>| vec![("g.raw", data), ("g.json", json.as_bytes().to_vec())];
-    grid_fails("g.raw", &[("g.raw", four.clone())], &["g.json"]);
+    // A missing sidecar, or a folder in its place: what the .raw needs, not an OS error.
+    grid_fails(
+        "g.raw",
+        &[("g.raw", four.clone())],
+        &["g.raw", "needs its sidecar", "g.json", "resolution"],
+    );
+    grid_fails(
+        "g.raw",
+        &[("g.raw", four.clone()), ("g.json/", vec![])],
+        &["g.raw", "needs its sidecar", "g.json"],
+    );
     grid_fails("g.raw", &raw("{\"resolution\": [2, 2", four.clone()), &["g.json", "resolution"]);
     grid_fails(
         "g.raw",
