@@ -404,14 +404,7 @@ pub fn parse_npy(b: &[u8], name: &str) -> Result<Grid3> {
         }
         "<f8" | ">f8" => {
             need(n, 8, body.len(), name, "float64")?;
-            let be = descr.starts_with('>');
-            body[..8 * n]
-                .chunks_exact(8)
-                .map(|c| {
-                    let a: [u8; 8] = c.try_into().expect("chunk of 8");
-                    (if be { f64::from_be_bytes(a) } else { f64::from_le_bytes(a) }) as f32
-                })
-                .collect()
+            float64_values(&body[..8 * n], descr.starts_with('>'), name)?
         }
         other => {
             return Err(Error::format(
@@ -421,6 +414,29 @@ pub fn parse_npy(b: &[u8], name: &str) -> Result<Grid3> {
         }
     };
     Grid3::from_vec([shape[2] as usize, shape[1] as usize, shape[0] as usize], data, name)
+}
+
+/// float64 values as the f32 densities are held in. A finite value past f32's range is named as
+/// such: cast, it would be reported as an infinite density the file does not hold.
+fn float64_values(b: &[u8], big_endian: bool, name: &str) -> Result<Vec<f32>> {
+    b.chunks_exact(8)
+        .enumerate()
+        .map(|(k, c)| {
+            let a: [u8; 8] = c.try_into().expect("chunk of 8");
+            let v = if big_endian { f64::from_be_bytes(a) } else { f64::from_le_bytes(a) };
+            let narrow = v as f32;
+            if v.is_finite() && !narrow.is_finite() {
+                return Err(Error::format(
+                    name,
+                    format!(
+                        "value {k} is {v:e}, beyond float32's ±3.4e38 that densities are held in; scale the \
+                         densities down and medium.sigma_t (extinction at density 1) up"
+                    ),
+                ));
+            }
+            Ok(narrow)
+        })
+        .collect()
 }
 
 /// Write a float32 `.npy` of shape (nz, ny, nx).
@@ -531,13 +547,7 @@ pub fn parse_raw(b: &[u8], meta: &RawMeta, name: &str) -> Result<Grid3> {
         }
         "float64" => {
             need(n, 8, b.len(), name, "float64")?;
-            b[..8 * n]
-                .chunks_exact(8)
-                .map(|c| {
-                    let a: [u8; 8] = c.try_into().expect("chunk of 8");
-                    (if be { f64::from_be_bytes(a) } else { f64::from_le_bytes(a) }) as f32
-                })
-                .collect()
+            float64_values(&b[..8 * n], be, name)?
         }
         "uint8" => {
             need(n, 1, b.len(), name, "uint8")?;

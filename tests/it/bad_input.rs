@@ -8,6 +8,11 @@ use crate::common::{data, f32s, npy, BIN};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+/// Little-endian bytes of `v`.
+fn f64s(v: &[f64]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
 /// A file a row writes into its folder first: name and bytes.
 type File = (&'static str, Vec<u8>);
 
@@ -400,6 +405,14 @@ fn corrupt_npy_raw_and_vdb_files() {
         grid_fails("g.npy", &[("g.npy", bytes)], expect);
     }
     let raw = |json: &str, data: Vec<u8>| vec![("g.raw", data), ("g.json", json.as_bytes().to_vec())];
+        // A finite float64 past f32's range: named as what the file holds, not as an infinity.
+        (
+            npy(
+                "{'descr': '<f8', 'fortran_order': False, 'shape': (1, 2, 2), }",
+                &f64s(&[1.0, 1e300, 1.0, 1.0]),
+            ),
+            &["g.npy", "value 1 is 1e300", "float32", "medium.sigma_t"],
+        ),
     // A missing sidecar, or a folder in its place: what the .raw needs, not an OS error.
     grid_fails(
         "g.raw",
@@ -421,6 +434,13 @@ fn corrupt_npy_raw_and_vdb_files() {
         "g.raw",
         &raw("{\"resolution\": [1, 2, 2], \"dtype\": \"int7\"}", four.clone()),
         &["g.raw", "sidecar field `dtype`", "int7"],
+    );
+    grid_fails(
+        "g.raw",
+        &raw("{\"resolution\": [1, 1, 2], \"dtype\": \"float64\", \"endian\": \"big\"}", {
+            [1.0f64, -1e300].iter().flat_map(|v| v.to_be_bytes()).collect()
+        }),
+        &["g.raw", "value 1 is -1e300", "float32"],
     );
     grid_fails(
         "g.raw",
