@@ -477,6 +477,17 @@ impl Scene {
         check(f, "render.spp", r.spp >= 1, r.spp, "samples per pixel must be at least 1")?;
         check(
             f,
+            "render.stderr",
+            !(r.stderr && r.method == Method::Reference && r.spp < 2),
+            r.stderr,
+            &format!(
+                "the standard error needs at least 2 samples per pixel, and render.spp is {}; raise render.spp \
+                 (--spp 2 or more) or leave render.stderr (--stderr) out",
+                r.spp
+            ),
+        )?;
+        check(
+            f,
             "render.aa_samples",
             (1..=1024).contains(&r.aa_samples),
             r.aa_samples,

@@ -208,6 +208,11 @@ fn bad_lights_ground_camera_and_render_keys() {
         ("[camera]\nfov_deg = 0.0\n", &["s.toml", "camera.fov_deg"]),
         ("[camera]\nfov_deg = 180.0\n", &["s.toml", "camera.fov_deg"]),
         ("[render]\nspp = 0\n", &["s.toml", "render.spp"]),
+        // One sample has no standard error: the whole layer would be infinite.
+        (
+            "[render]\nmethod = \"reference\"\nstderr = true\n",
+            &["s.toml", "render.stderr", "--spp 2"],
+        ),
         ("[render]\naa_samples = 0\n", &["s.toml", "render.aa_samples"]),
         ("[render]\nexposure = nan\n", &["s.toml", "render.exposure"]),
         ("[render]\nstep = 0.0\n", &["s.toml", "render.step"]),
