@@ -697,7 +697,10 @@ fn a_full_disk_or_a_closed_pipe_is_no_panic() {
     );
     assert_eq!(code, 0, "a full stderr loses only the notes: {err}");
     assert!(dir.path().join("a.exr").is_file() && dir.path().join("a.png").is_file());
-    let commands: [&[&str]; 5] = [
+    let commands: [&[&str]; 7] = [
+        // Help and version are results on stdout too.
+        &["--help"],
+        &["--version"],
         &["info", "g.vdb", "--json"],
         &["info", "g.vdb"],
         &[
