@@ -878,6 +878,14 @@ fn bad_render_arguments_and_outputs() {
         &["--output", "sky.path"],
     );
     fails(&[s()], &render(&["--threads", "0"]), &["--threads"]);
+    // --exposure holds render.exposure's bound: 2^1e30 is no scale factor.
+    fails(&[s()], &render(&["--exposure", "1e30"]), &["--exposure", "±64"]);
+    let exr = cloudgi::Image::new(4, 2).to_exr_bytes().unwrap();
+    fails(
+        &[("a.exr", exr)],
+        &["tonemap", "a.exr", "-o", "a.png", "--exposure", "-65"],
+        &["--exposure", "±64"],
+    );
     fails(&[s()], &render(&["--threads", "10000"]), &["--threads", "10000", "per core"]);
     // Names that are no file, or that no file system accepts, fail before the render.
     fails(&[s()], &render(&["-o", ".exr"]), &["--output", "no name before .exr"]);
