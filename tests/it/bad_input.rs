@@ -1033,6 +1033,17 @@ fn bad_arguments_of_the_other_commands() {
     let img = cloudgi::Image::new(4, 4).to_exr_bytes().unwrap();
     let small = cloudgi::Image::new(2, 2).to_exr_bytes().unwrap();
     fails(&[("a.exr", img.clone())], &["compare", "a.exr", "nope.exr"], &["nope.exr"]);
+    // A NaN or an infinity would score as `null`, or as a clean 0 in the relative metrics.
+    let mut bad = cloudgi::Image::new(4, 4);
+    bad.pixels[6] = cloudgi::Rgb::new(0.5, f32::NAN, 0.5);
+    let bad = bad.to_exr_bytes().unwrap();
+    for args in [["compare", "a.exr", "n.exr"], ["compare", "n.exr", "a.exr"]] {
+        fails(
+            &[("a.exr", img.clone()), ("n.exr", bad.clone())],
+            &args,
+            &["n.exr", "pixel (2, 1)", "NaN", "finite"],
+        );
+    }
     fails(
         &[("a.exr", img.clone()), ("b.exr", b"junk".to_vec())],
         &["compare", "a.exr", "b.exr"],
