@@ -1117,6 +1117,24 @@ fn bad_arguments_of_the_other_commands() {
         &["thickness"],
     );
     fails(&[], &slab(&["--samples", "1"]), &["--samples"]);
+    // The transport mesh's layer count grows with τ: 1e30 would never end.
+    fails(
+        &[],
+        &[
+            "slab",
+            "--thickness",
+            "1e30",
+            "--albedo",
+            "0.5",
+            "--g",
+            "0",
+            "--incidence",
+            "diffuse",
+            "--method",
+            "transport",
+        ],
+        &["--thickness", "--method reference"],
+    );
     fails(
         &[],
         &["slab", "--thickness", "1", "--albedo", "0.5", "--g", "0", "--incidence", "sideways"],
