@@ -146,13 +146,13 @@ fn bad_medium_values() {
             &["s.toml", "field `medium.resolution`", "medium.max_voxels = 200000000"],
         ),
         ("[medium]\nvoxel_size = 0.0\n", &["s.toml", "medium.voxel_size"]),
+        // Too small for f32 positions 500 m out: said so, not blamed on the framed camera.
+        ("[medium]\nvoxel_size = 1e-30\n", &["s.toml", "medium.voxel_size", "units"]),
         ("[medium]\nvoxel_size = -1.0\n", &["s.toml", "medium.voxel_size"]),
         (
             "[medium]\nresolution = [4, 4, 4]\nvoxel_size = 1e20\n",
             &["s.toml", "medium.voxel_size", "1e6 m"],
         ),
-        // Too small for f32 positions 500 m out: said so, not blamed on the framed camera.
-        ("[medium]\nvoxel_size = 1e-30\n", &["s.toml", "medium.voxel_size", "units"]),
         (
             "[medium]\nresolution = [8, 8, 8]\norigin = [nan, 0.0, 0.0]\n",
             &["s.toml", "medium.origin"],
@@ -217,6 +217,8 @@ fn bad_lights_ground_camera_and_render_keys() {
         ("[render]\nexposure = nan\n", &["s.toml", "render.exposure"]),
         ("[render]\nstep = 0.0\n", &["s.toml", "render.step"]),
         ("[render]\nstep = 5.0\n", &["s.toml", "render.step"]),
+        // A step too fine to end: the march would take 5e31 samples per voxel.
+        ("[render]\nstep = 1e-30\n", &["s.toml", "render.step", "0.01"]),
         ("[render]\ntime_limit = -1.0\n", &["s.toml", "render.time_limit"]),
         ("[render]\ncube_resolution = 6\n", &["s.toml", "render.cube_resolution"]),
         ("[render]\nground_samples = 0\n", &["s.toml", "render.ground_samples"]),
@@ -229,8 +231,6 @@ fn bad_lights_ground_camera_and_render_keys() {
             "[render]\npropagation_tolerance = -1.0\n",
             &["s.toml", "render.propagation_tolerance"],
         ),
-        // A step too fine to end: the march would take 5e31 samples per voxel.
-        ("[render]\nstep = 1e-30\n", &["s.toml", "render.step", "0.01"]),
         ("[render]\nsolver_tolerance = 2.0\n", &["s.toml", "render.solver_tolerance"]),
         ("[render]\nsolver_max_iterations = 0\n", &["s.toml", "render.solver_max_iterations"]),
         ("[render]\ntransport_order = 0\n", &["s.toml", "render.transport_order", "1 to 15"]),
@@ -405,11 +405,6 @@ fn corrupt_npy_raw_and_vdb_files() {
             ),
             &["g.npy", "finite"],
         ),
-    ];
-    for (bytes, expect) in npy_rows {
-        grid_fails("g.npy", &[("g.npy", bytes)], expect);
-    }
-    let raw = |json: &str, data: Vec<u8>| vec![("g.raw", data), ("g.json", json.as_bytes().to_vec())];
         // A finite float64 past f32's range: named as what the file holds, not as an infinity.
         (
             npy(
@@ -418,6 +413,11 @@ fn corrupt_npy_raw_and_vdb_files() {
             ),
             &["g.npy", "value 1 is 1e300", "float32", "medium.sigma_t"],
         ),
+    ];
+    for (bytes, expect) in npy_rows {
+        grid_fails("g.npy", &[("g.npy", bytes)], expect);
+    }
+    let raw = |json: &str, data: Vec<u8>| vec![("g.raw", data), ("g.json", json.as_bytes().to_vec())];
     // A missing sidecar, or a folder in its place: what the .raw needs, not an OS error.
     grid_fails(
         "g.raw",
@@ -437,15 +437,15 @@ fn corrupt_npy_raw_and_vdb_files() {
     );
     grid_fails(
         "g.raw",
-        &raw("{\"resolution\": [1, 2, 2], \"dtype\": \"int7\"}", four.clone()),
-        &["g.raw", "sidecar field `dtype`", "int7"],
-    );
-    grid_fails(
-        "g.raw",
         &raw("{\"resolution\": [1, 1, 2], \"dtype\": \"float64\", \"endian\": \"big\"}", {
             [1.0f64, -1e300].iter().flat_map(|v| v.to_be_bytes()).collect()
         }),
         &["g.raw", "value 1 is -1e300", "float32"],
+    );
+    grid_fails(
+        "g.raw",
+        &raw("{\"resolution\": [1, 2, 2], \"dtype\": \"int7\"}", four.clone()),
+        &["g.raw", "sidecar field `dtype`", "int7"],
     );
     grid_fails(
         "g.raw",
