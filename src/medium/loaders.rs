@@ -87,7 +87,8 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
         "vdb" => load_vdb(d, file, &read(&path)?, name),
         "raw" => {
             let sidecar = path.with_extension("json");
-            if !sidecar.is_file() {
+            // Missing or a folder; a device is cut off by the read's cap below.
+            if !sidecar.exists() || sidecar.is_dir() {
                 return Err(Error::format(
                     &name,
                     format!(
