@@ -111,6 +111,17 @@ fn scene_text_that_is_not_a_scene() {
         &["s.toml", "not UTF-8", "TOML"],
     );
     fails(&[], &["render", "nope.toml", "-q"], &["nope.toml"]);
+    // Neither .toml nor a grid type: read as a scene, and the message says so.
+    fails(
+        &[("g.xyz", b"abc".to_vec())],
+        &["render", "g.xyz", "-q"],
+        &["g.xyz", "TOML", ".vdb, .npy, .vol or .raw"],
+    );
+    fails(
+        &[("g.vdb.gz", vec![0x1f, 0x8b, 0x08, 0xff])],
+        &["render", "g.vdb.gz", "-q"],
+        &["g.vdb.gz", "not UTF-8", ".vdb, .npy, .vol or .raw"],
+    );
 }
 
 #[test]
