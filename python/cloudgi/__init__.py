@@ -201,6 +201,10 @@ def write_exr(path: Union[str, "os.PathLike[str]"], images: Mapping[str, np.ndar
             raise FormatError(
                 f"{os.fspath(path)}: image `{name}` has shape {arr.shape}; every image must be (H, W, 3) like rgb's {shape}"
             )
+        if arr.size == 0:
+            raise FormatError(f"{os.fspath(path)}: the images have shape {shape}, no pixel; an EXR needs at least 1×1")
+        if name == "":
+            raise FormatError(f"{os.fspath(path)}: an image named \"\" would be a second RGB; name it (its layer is NAME.R/G/B)")
         layers.append((name, np.ascontiguousarray(arr, dtype="<f4").tobytes()))
     _cloudgi.write_exr(os.fspath(path), shape[1], shape[0], layers)
 

@@ -262,6 +262,11 @@ def test_write_exr_checks_shapes(tmp_path):
         cloudgi.write_exr(tmp_path / "x.exr", {"rgb": np.zeros((4, 5, 3), np.float32), "aov": np.zeros((4, 4, 3))})
     with pytest.raises(cloudgi.SceneError):
         cloudgi.write_exr(tmp_path / "x.exr", {"aov": np.zeros((4, 4, 3))})
+    # No pixel, or a layer without a name: the file is named, not the EXR encoder.
+    with pytest.raises(cloudgi.FormatError, match="x.exr.*at least 1×1"):
+        cloudgi.write_exr(tmp_path / "x.exr", {"rgb": np.zeros((0, 4, 3), np.float32)})
+    with pytest.raises(cloudgi.FormatError, match="x.exr.*second RGB"):
+        cloudgi.write_exr(tmp_path / "x.exr", {"rgb": np.zeros((2, 2, 3)), "": np.zeros((2, 2, 3))})
     assert not (tmp_path / "x.exr").exists()
 
 
