@@ -26,6 +26,15 @@ impl Ray {
     }
 }
 
+/// `v` scaled to unit length, computed in f64: f32's squared length overflows past 1.8e19 and
+/// underflows below 1e-19, so a valid direction such as `[1e30, 1e30, 0]` or `[1e-30, 0, 1e-30]`
+/// would otherwise become NaN or zero. `None` for a zero or non-finite `v`.
+pub fn unit_vector(v: [f32; 3]) -> Option<Vec3> {
+    let d = glam::DVec3::new(v[0].into(), v[1].into(), v[2].into());
+    let len = d.length();
+    (len.is_finite() && len > 0.0).then(|| (d / len).as_vec3())
+}
+
 /// An orthonormal frame (t, b, n) with `n` given; used to turn local directions into world ones.
 #[derive(Clone, Copy, Debug)]
 pub struct Frame {
@@ -348,6 +357,19 @@ mod tests {
             for (k, (a, b)) in sh9(d).iter().zip(want).enumerate() {
                 assert!((*a as f64 - b).abs() < 1e-6, "{d:?} coefficient {k}: {a} vs {b}");
             }
+        }
+    }
+
+    #[test]
+    fn unit_vector_keeps_huge_and_tiny_directions() {
+        let s = std::f32::consts::FRAC_1_SQRT_2;
+        for v in [[1e30, 1e30, 0.0], [1e-30, 1e-30, 0.0], [3e38, 3e38, 0.0], [1e-45, 1e-45, 0.0]] {
+            let u = unit_vector(v).unwrap();
+            assert!((u - Vec3::new(s, s, 0.0)).length() < 1e-6, "{v:?} -> {u}");
+        }
+        assert_eq!(unit_vector([0.0, -2.0, 0.0]), Some(Vec3::NEG_Y));
+        for v in [[0.0; 3], [f32::NAN, 1.0, 0.0], [f32::INFINITY, 0.0, 0.0]] {
+            assert_eq!(unit_vector(v), None, "{v:?}");
         }
     }
 

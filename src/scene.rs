@@ -20,6 +20,9 @@ use crate::transport::solve::TransportSettings;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
+/// Finest `render.step` (voxels): 100 samples per voxel edge; the march time grows as 1/step.
+const MIN_STEP_VOXELS: f32 = 0.01;
+
 /// Rendering method.
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
@@ -474,6 +477,17 @@ impl Scene {
         check(f, "render.spp", r.spp >= 1, r.spp, "samples per pixel must be at least 1")?;
         check(
             f,
+            "render.stderr",
+            !(r.stderr && r.method == Method::Reference && r.spp < 2),
+            r.stderr,
+            &format!(
+                "the standard error needs at least 2 samples per pixel, and render.spp is {}; raise render.spp \
+                 (--spp 2 or more) or leave render.stderr (--stderr) out",
+                r.spp
+            ),
+        )?;
+        check(
+            f,
             "render.aa_samples",
             (1..=1024).contains(&r.aa_samples),
             r.aa_samples,
@@ -489,9 +503,10 @@ impl Scene {
         check(
             f,
             "render.step",
-            r.step.is_finite() && r.step > 0.0 && r.step <= 4.0,
+            (MIN_STEP_VOXELS..=4.0).contains(&r.step),
             r.step,
-            "the march step is a fraction of a voxel in (0, 4]",
+            "the march step is a fraction of a voxel in [0.01, 4]; the march's time grows as 1/step \
+             (1e-30 would never end)",
         )?;
         if let Some(t) = r.time_limit {
             check(

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import os
 from typing import Any, Callable, Dict, Mapping, Optional, Sequence, Union
 
@@ -57,12 +58,35 @@ SceneLike = Union[str, "os.PathLike[str]", Mapping[str, Any]]
 ProgressCallback = Callable[[str, int, int], Any]
 
 
+# JSON has no NaN or infinity: a non-finite float travels as this prefix and its repr, and the
+# extension turns it back into a float, so the scene parser names the key as the command line does.
+_NON_FINITE = "\x00float:"
+
+
+def _json(value: Any) -> str:
+    """``value`` as JSON: numpy scalars and arrays as Python numbers and lists, non-finite floats
+    marked with :data:`_NON_FINITE`; a ``None`` (TOML has no null) raises naming its key."""
+    def mark(v: Any, key: str) -> Any:
+        if isinstance(v, (np.generic, np.ndarray)):
+            v = v.tolist()
+        if v is None:
+            raise SceneError(f"`{key}` is None: TOML has no null; leave the key out for its default")
+        if isinstance(v, float) and not math.isfinite(v):
+            return _NON_FINITE + repr(v)
+        if isinstance(v, Mapping):
+            return {k: mark(x, f"{key}.{k}" if key else str(k)) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [mark(x, f"{key}[{i}]") for i, x in enumerate(v)]
+        return v
+    return json.dumps(mark(value, ""), allow_nan=False)
+
+
 def _scene_input(scene: Optional[SceneLike]) -> "tuple[str, str]":
     """(kind, payload) of a scene: the built-in one, a path, TOML text or a dict (sent as JSON)."""
     if scene is None:
         return "builtin", ""
     if isinstance(scene, Mapping):
-        return "dict", json.dumps(scene)
+        return "dict", _json(scene)
     if isinstance(scene, os.PathLike):
         return "path", os.fspath(scene)
     if isinstance(scene, str):
@@ -93,7 +117,7 @@ def _overrides(method: Optional[str], width: Optional[int], height: Optional[int
     ):
         if value is not None:
             over.setdefault(table, {})[key] = value
-    return json.dumps(over)
+    return _json(over)
 
 
 def _npy_bytes(density: Any) -> bytes:
@@ -101,7 +125,9 @@ def _npy_bytes(density: Any) -> bytes:
     if not isinstance(density, np.ndarray):
         raise TypeError(f"density must be a numpy.ndarray, not {type(density).__name__}")
     buf = io.BytesIO()
-    np.save(buf, np.ascontiguousarray(density), allow_pickle=False)
+    # C order, as the reader requires; a 0-d array stays 0-d (ascontiguousarray would make it 1-d
+    # and the message would count the wrong dimensions).
+    np.save(buf, density if density.flags.c_contiguous else np.ascontiguousarray(density), allow_pickle=False)
     return buf.getvalue()
 
 
@@ -175,6 +201,10 @@ def write_exr(path: Union[str, "os.PathLike[str]"], images: Mapping[str, np.ndar
             raise FormatError(
                 f"{os.fspath(path)}: image `{name}` has shape {arr.shape}; every image must be (H, W, 3) like rgb's {shape}"
             )
+        if arr.size == 0:
+            raise FormatError(f"{os.fspath(path)}: the images have shape {shape}, no pixel; an EXR needs at least 1×1")
+        if name == "":
+            raise FormatError(f"{os.fspath(path)}: an image named \"\" would be a second RGB; name it (its layer is NAME.R/G/B)")
         layers.append((name, np.ascontiguousarray(arr, dtype="<f4").tobytes()))
     _cloudgi.write_exr(os.fspath(path), shape[1], shape[0], layers)
 

@@ -35,8 +35,9 @@ impl SceneInput {
             "dict" => Source::Dict(payload.to_string()),
             other => return Err(Error::invalid("cloudgi.render", "scene", format!("unknown scene kind `{other}`"))),
         };
-        let overrides: toml::Table =
+        let mut overrides: toml::Table =
             serde_json::from_str(overrides).map_err(|e| Error::invalid("cloudgi.render", "keyword arguments", e.to_string()))?;
+        unmark_non_finite(&mut overrides);
         Ok(SceneInput { source, overrides })
     }
 
@@ -67,10 +68,11 @@ impl SceneInput {
             }
             Source::Toml(t) => (t.clone(), cloudgi::TOML_SOURCE.to_string(), PathBuf::from(".")),
             Source::Dict(json) => {
-                let value: toml::Table = serde_json::from_str(json).map_err(|e| Error::Parse {
+                let mut value: toml::Table = serde_json::from_str(json).map_err(|e| Error::Parse {
                     file: DICT_SOURCE.to_string(),
                     message: format!("{e} (values must be strings, numbers, booleans, lists or dicts; no None)"),
                 })?;
+                unmark_non_finite(&mut value);
                 let text = toml::to_string(&value).map_err(|e| Error::Parse {
                     file: DICT_SOURCE.to_string(),
                     message: e.to_string(),
@@ -93,6 +95,28 @@ impl SceneInput {
         })?;
         Ok((SceneDesc::from_toml(&merged, &name)?, name, base))
     }
+}
+
+/// Prefix of a non-finite float that Python sent as a string (JSON has no NaN or infinity);
+/// `python/cloudgi/__init__.py` writes it.
+const NON_FINITE: &str = "\0float:";
+
+/// Turn Python's marked non-finite floats back into floats (`nan`, `inf`, `-inf`), so the scene
+/// parser refuses them naming the key, as it does in a scene file.
+fn unmark_non_finite(table: &mut toml::Table) {
+    fn unmark(v: &mut toml::Value) {
+        match v {
+            toml::Value::String(s) => {
+                if let Some(x) = s.strip_prefix(NON_FINITE).and_then(|r| r.parse::<f64>().ok()) {
+                    *v = toml::Value::Float(x);
+                }
+            }
+            toml::Value::Array(a) => a.iter_mut().for_each(unmark),
+            toml::Value::Table(t) => t.iter_mut().for_each(|(_, v)| unmark(v)),
+            _ => {}
+        }
+    }
+    table.iter_mut().for_each(|(_, v)| unmark(v));
 }
 
 /// Set every `table.key` of `over` in `base`, keeping the table's other keys.

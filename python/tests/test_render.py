@@ -86,8 +86,10 @@ def npy_message(tmp_path, array) -> str:
         np.ones((4, 4, 4), np.int32),  # wrong dtype
         np.ones((4, 4), np.float32),  # 2-D
         np.where(np.arange(64).reshape(4, 4, 4) == 21, np.nan, 1.0).astype(np.float32),  # NaN
+        np.array(1.0, np.float32),  # 0-d: counted as 0 dimensions, as np.save writes it
+        np.full((1, 2, 2), 1e300),  # float64 past float32's range: named, not called inf
     ],
-    ids=["dtype", "2d", "nan"],
+    ids=["dtype", "2d", "nan", "0d", "float64-huge"],
 )
 def test_a_bad_density_raises_format_error_with_the_cli_message(tmp_path, array):
     with pytest.raises(cloudgi.FormatError) as e:
@@ -164,6 +166,34 @@ def test_an_out_of_range_value_names_the_field(tmp_path):
     assert str(e.value) == cli
 
 
+@pytest.mark.parametrize("value, toml", [(float("nan"), "nan"), (float("-inf"), "-inf")])
+def test_a_non_finite_float_in_a_dict_or_overrides_is_the_cli_message(tmp_path, value, toml):
+    # JSON has no NaN or infinity; they must still reach the parser as floats, not as a JSON error.
+    (tmp_path / "s.toml").write_text(f"[medium]\nsigma_t = {toml}\n")
+    cli = cli_error("render", tmp_path / "s.toml", "-o", tmp_path / "x.exr")
+    with pytest.raises(cloudgi.SceneError) as e:
+        cloudgi.render({"medium": {"sigma_t": value}})
+    assert str(e.value) == cli.replace(str(tmp_path / "s.toml"), "scene dict")
+    with pytest.raises(cloudgi.SceneError) as e:
+        cloudgi.render(overrides={"sun": {"irradiance": [1.0, value, 1.0]}})
+    assert "field `sun.irradiance`" in str(e.value)
+    # A string that merely starts like the marker is no float.
+    with pytest.raises(cloudgi.SceneError) as e:
+        cloudgi.render({"sky": {"model": "nan"}})
+    assert "unknown variant `nan`" in str(e.value)
+
+
+def test_numpy_scalars_and_arrays_in_a_dict_are_numbers_and_none_names_its_key():
+    plain = cloudgi.scene_toml({"medium": {"sigma_t": 0.25, "origin": [0.0, 1.0, 2.0]}, "camera": {"width": 8}})
+    numpy = cloudgi.scene_toml(
+        {"medium": {"sigma_t": np.float64(0.25), "origin": np.array([0.0, 1.0, 2.0])}, "camera": {"width": np.int64(8)}}
+    )
+    assert numpy == plain
+    with pytest.raises(cloudgi.SceneError) as e:
+        cloudgi.render(overrides={"medium": {"sigma_t": None}})
+    assert "`medium.sigma_t` is None" in str(e.value)
+
+
 def test_a_missing_scene_file_is_the_cli_message(tmp_path):
     missing = tmp_path / "missing.toml"
     cli = cli_error("render", missing, "-o", tmp_path / "x.exr")
@@ -232,6 +262,11 @@ def test_write_exr_checks_shapes(tmp_path):
         cloudgi.write_exr(tmp_path / "x.exr", {"rgb": np.zeros((4, 5, 3), np.float32), "aov": np.zeros((4, 4, 3))})
     with pytest.raises(cloudgi.SceneError):
         cloudgi.write_exr(tmp_path / "x.exr", {"aov": np.zeros((4, 4, 3))})
+    # No pixel, or a layer without a name: the file is named, not the EXR encoder.
+    with pytest.raises(cloudgi.FormatError, match="x.exr.*at least 1×1"):
+        cloudgi.write_exr(tmp_path / "x.exr", {"rgb": np.zeros((0, 4, 3), np.float32)})
+    with pytest.raises(cloudgi.FormatError, match="x.exr.*second RGB"):
+        cloudgi.write_exr(tmp_path / "x.exr", {"rgb": np.zeros((2, 2, 3)), "": np.zeros((2, 2, 3))})
     assert not (tmp_path / "x.exr").exists()
 
 

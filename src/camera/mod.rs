@@ -89,15 +89,9 @@ impl Camera {
             "must differ from camera.position",
         )?;
         let forward = to.normalize();
-        let up_hint = Vec3::from(d.up);
-        check(
-            file,
-            "camera.up",
-            finite3(d.up) && up_hint.length() > 1e-12,
-            d.up,
-            "must be a non-zero vector",
-        )?;
-        let cross = forward.cross(up_hint.normalize());
+        let up_hint = crate::math::unit_vector(d.up);
+        check(file, "camera.up", up_hint.is_some(), d.up, "must be a finite non-zero vector")?;
+        let cross = forward.cross(up_hint.unwrap_or(Vec3::Y));
         check(
             file,
             "camera.up",

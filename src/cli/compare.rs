@@ -5,7 +5,7 @@ use crate::error::{Error, Result};
 use crate::tools::compare::{budget, choose_mask, compare, narrow_mask, write_diff_png, PixelCondition};
 use crate::Image;
 use clap::Args;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
 pub struct CompareArgs {
@@ -78,6 +78,8 @@ pub fn run(a: CompareArgs) -> Result<()> {
         // The standard errors are the image's, not the layer's.
         reference.layers.retain(|l| l.0 != crate::reference::STDERR_LAYER);
     }
+    refuse_non_finite(&test, &a.test, None)?;
+    refuse_non_finite(&reference, &a.reference, a.ref_layer.as_deref())?;
     let mask_img = match &a.mask {
         Some(p) => Some(Image::read_exr(p)?),
         None => None,
@@ -154,4 +156,22 @@ pub fn run(a: CompareArgs) -> Result<()> {
     }
     super::console::print(&format!("{line}\n"))?;
     Ok(())
+}
+
+/// Refuse an image whose compared pixels hold a NaN or an infinity: the error sums would be NaN
+/// (written as `null`) or, in the relative ones, skip the pixel and report a clean score.
+fn refuse_non_finite(img: &Image, path: &Path, layer: Option<&str>) -> Result<()> {
+    let Some((i, p)) = img.pixels.iter().enumerate().find(|(_, p)| !p.is_finite()) else {
+        return Ok(());
+    };
+    let which = layer.map_or("RGB".to_string(), |l| format!("layer `{l}`"));
+    Err(Error::format(
+        path.display().to_string(),
+        format!(
+            "{which} pixel ({}, {}) is {p}: every metric needs finite values; render the image again \
+             (cloudgi writes none that are not) or compare another layer",
+            i % img.width as usize,
+            i / img.width as usize
+        ),
+    ))
 }

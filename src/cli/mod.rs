@@ -176,7 +176,13 @@ fn shortened(message: &str) -> String {
 #[doc(hidden)]
 pub fn main() {
     allocator::large_arrays_mapped();
-    match run(Cli::parse()) {
+    let result = match Cli::try_parse() {
+        Ok(cli) => run(cli),
+        // `--help` and `--version` are results on stdout: a full disk is an error there too.
+        Err(e) if !e.use_stderr() => console::print(&e.render().to_string()),
+        Err(e) => e.exit(),
+    };
+    match result {
         Ok(()) => {}
         Err(e) if console::is_broken_pipe(&e) => std::process::exit(console::EXIT_BROKEN_PIPE),
         Err(e) => {

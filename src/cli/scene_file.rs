@@ -1,7 +1,7 @@
 //! The scene file as the command line reads it: the description, where it came from, and which
 //! keys the file really sets (for the "does not apply" warnings, which must not fire on defaults).
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::scene::{SceneDesc, SkyModel, BUILTIN};
 use std::path::{Path, PathBuf};
 
@@ -41,7 +41,7 @@ impl SceneFile {
                 keys: vec!["medium.grid".to_string()],
             });
         }
-        let desc = SceneDesc::from_file(p)?;
+        let desc = SceneDesc::from_file(p).map_err(|e| with_extension_hint(p, e))?;
         // The file parsed as a scene, so it is readable TOML text.
         let table: toml::Table = crate::io::read_capped(p, crate::io::MAX_TEXT_BYTES, "a scene file")
             .ok()
@@ -89,5 +89,25 @@ impl SceneFile {
             }
         }
         v
+    }
+}
+
+/// A file that does not parse as a scene and whose name ends neither in `.toml` nor in a grid
+/// type was read as a scene by default: say so, and which endings make a grid file.
+fn with_extension_hint(p: &Path, e: Error) -> Error {
+    if p.extension().is_some_and(|x| x.eq_ignore_ascii_case("toml")) {
+        return e;
+    }
+    let hint = "(read as a scene file, TOML, because the name does not end in a grid type: .vdb, .npy, .vol or .raw)";
+    match e {
+        Error::Parse { file, message } => Error::Parse {
+            file,
+            message: format!("{message}\n{hint}"),
+        },
+        Error::Format { file, message } => Error::Format {
+            file,
+            message: format!("{message} {hint}"),
+        },
+        other => other,
     }
 }

@@ -58,6 +58,9 @@ pub struct SlabArgs {
     seed: u64,
 }
 
+/// Thickest slab `--method transport` meshes (optical depths): its layer count grows as τ.
+const MAX_TRANSPORT_THICKNESS: f64 = 1e4;
+
 pub fn run(a: SlabArgs) -> Result<()> {
     let p = SlabParams {
         thickness: a.thickness,
@@ -73,6 +76,18 @@ pub fn run(a: SlabArgs) -> Result<()> {
         SlabMethod::Reference => slab(&p, a.samples, a.seed)?,
         SlabMethod::Transport => {
             let s = crate::transport::slab::SlabSettings::default();
+            if a.thickness > MAX_TRANSPORT_THICKNESS {
+                return Err(Error::invalid(
+                    "command line",
+                    "--thickness",
+                    format!(
+                        "{} is too thick for --method transport: its mesh has layers of at most {} optical \
+                         depths, so time grows with τ (1e4 takes about a minute, 1e30 would never end); \
+                         use --method reference or diffusion, or at most {MAX_TRANSPORT_THICKNESS:e}",
+                        a.thickness, s.max_layer
+                    ),
+                ));
+            }
             let x = crate::transport::slab::solve_slab(a.thickness, a.albedo, a.g, p.incidence, &s);
             SlabResult {
                 r: x.r,

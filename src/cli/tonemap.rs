@@ -6,6 +6,7 @@
 
 use super::scene_file::SceneFile;
 use crate::error::{Error, Result};
+use crate::limits::MAX_EXPOSURE;
 use crate::Image;
 use clap::Args;
 use std::path::{Path, PathBuf};
@@ -22,13 +23,18 @@ pub struct TonemapArgs {
     exposure: Option<f32>,
 }
 
-/// `--exposure` must be a finite number of stops.
+/// `--exposure` must be a finite number of stops within the scene key's ±64 (`limits.rs`).
 pub fn check_flag(exposure: Option<f32>) -> Result<()> {
     match exposure {
         Some(s) if !s.is_finite() => Err(Error::invalid(
             "command line",
             "--exposure",
             format!("{s} is not a finite number of stops (e.g. --exposure -2.5)"),
+        )),
+        Some(s) if s.abs() > MAX_EXPOSURE => Err(Error::invalid(
+            "command line",
+            "--exposure",
+            format!("{s} stops is beyond ±{MAX_EXPOSURE}: past 127 the preview's scale factor overflows f32"),
         )),
         _ => Ok(()),
     }

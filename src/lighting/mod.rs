@@ -6,7 +6,7 @@ pub mod desc;
 pub mod envmap;
 
 use crate::error::Result;
-use crate::error::{check, finite3, rgb_in_unit, rgb_nonneg};
+use crate::error::{check, rgb_in_unit, rgb_nonneg};
 use crate::image::Image;
 use crate::math::{Rgb, Vec3};
 pub use desc::{GroundDesc, SkyDesc, SkyModel, SunDesc};
@@ -33,14 +33,15 @@ impl Sun {
     pub fn from_desc(d: &SunDesc, file: &str) -> Result<Sun> {
         let dir = match (d.direction, d.elevation_deg, d.azimuth_deg) {
             (Some(v), None, None) => {
+                let unit = crate::math::unit_vector(v);
                 check(
                     file,
                     "sun.direction",
-                    finite3(v) && Vec3::from(v).length() > 1e-12,
+                    unit.is_some(),
                     v,
                     "must be a finite non-zero vector towards the sun",
                 )?;
-                Vec3::from(v).normalize()
+                unit.unwrap_or(Vec3::Y)
             }
             (None, Some(el), az) => {
                 let az = az.unwrap_or(0.0);

@@ -26,6 +26,9 @@ pub struct Loaded {
     pub downsampled: bool,
 }
 
+/// The smallest `.raw` sidecar, for messages.
+const RAW_SIDECAR_EXAMPLE: &str = r#"{"resolution": [nx, ny, nz], "dtype": "float32"}"#;
+
 /// Load the grid `[medium]` describes.
 pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
     if d.grid == "procedural" {
@@ -84,11 +87,21 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
         "vdb" => load_vdb(d, file, &read(&path)?, name),
         "raw" => {
             let sidecar = path.with_extension("json");
+            // Missing or a folder; a device is cut off by the read's cap below.
+            if !sidecar.exists() || sidecar.is_dir() {
+                return Err(Error::format(
+                    &name,
+                    format!(
+                        "a .raw grid needs its sidecar `{}` beside it, a file holding {RAW_SIDECAR_EXAMPLE} (docs/scene.md)",
+                        sidecar.display()
+                    ),
+                ));
+            }
             let text = crate::io::read_capped(&sidecar, crate::io::MAX_TEXT_BYTES, "a .json sidecar")?;
             let meta: RawMeta = serde_json::from_slice(&text).map_err(|e| {
                 Error::format(
                     sidecar.display().to_string(),
-                    format!("{e}; expected {{\"resolution\": [nx, ny, nz], \"dtype\": \"float32\"}}"),
+                    format!("{e}; expected {RAW_SIDECAR_EXAMPLE}"),
                 )
             })?;
             placed(d, file, name.clone(), || parse_raw(&read_dense(&path, d, file)?, &meta, &name))
@@ -392,14 +405,7 @@ pub fn parse_npy(b: &[u8], name: &str) -> Result<Grid3> {
         }
         "<f8" | ">f8" => {
             need(n, 8, body.len(), name, "float64")?;
-            let be = descr.starts_with('>');
-            body[..8 * n]
-                .chunks_exact(8)
-                .map(|c| {
-                    let a: [u8; 8] = c.try_into().expect("chunk of 8");
-                    (if be { f64::from_be_bytes(a) } else { f64::from_le_bytes(a) }) as f32
-                })
-                .collect()
+            float64_values(&body[..8 * n], descr.starts_with('>'), name)?
         }
         other => {
             return Err(Error::format(
@@ -409,6 +415,29 @@ pub fn parse_npy(b: &[u8], name: &str) -> Result<Grid3> {
         }
     };
     Grid3::from_vec([shape[2] as usize, shape[1] as usize, shape[0] as usize], data, name)
+}
+
+/// float64 values as the f32 densities are held in. A finite value past f32's range is named as
+/// such: cast, it would be reported as an infinite density the file does not hold.
+fn float64_values(b: &[u8], big_endian: bool, name: &str) -> Result<Vec<f32>> {
+    b.chunks_exact(8)
+        .enumerate()
+        .map(|(k, c)| {
+            let a: [u8; 8] = c.try_into().expect("chunk of 8");
+            let v = if big_endian { f64::from_be_bytes(a) } else { f64::from_le_bytes(a) };
+            let narrow = v as f32;
+            if v.is_finite() && !narrow.is_finite() {
+                return Err(Error::format(
+                    name,
+                    format!(
+                        "value {k} is {v:e}, beyond float32's ±3.4e38 that densities are held in; scale the \
+                         densities down and medium.sigma_t (extinction at density 1) up"
+                    ),
+                ));
+            }
+            Ok(narrow)
+        })
+        .collect()
 }
 
 /// Write a float32 `.npy` of shape (nz, ny, nx).
@@ -519,13 +548,7 @@ pub fn parse_raw(b: &[u8], meta: &RawMeta, name: &str) -> Result<Grid3> {
         }
         "float64" => {
             need(n, 8, b.len(), name, "float64")?;
-            b[..8 * n]
-                .chunks_exact(8)
-                .map(|c| {
-                    let a: [u8; 8] = c.try_into().expect("chunk of 8");
-                    (if be { f64::from_be_bytes(a) } else { f64::from_le_bytes(a) }) as f32
-                })
-                .collect()
+            float64_values(&b[..8 * n], be, name)?
         }
         "uint8" => {
             need(n, 1, b.len(), name, "uint8")?;

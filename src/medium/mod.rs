@@ -46,6 +46,15 @@ pub use up_axis::UpAxis;
 /// sizes overflow f32; no cloud has voxels of 1000 km.
 pub const MAX_VOXEL_SIZE: f32 = 1.0e6;
 
+/// Smallest voxel edge accepted, as a fraction of the grid's farthest coordinate: 2⁻²⁰, so an
+/// f32 position resolves at least 8 steps across a voxel (at the 1e7-m limit, voxels of 9.5 m);
+/// smaller voxels collapse the box and the camera framing it.
+const MIN_VOXEL_OF_COORDINATE: f32 = 1.0 / (1 << 20) as f32;
+
+/// Smallest voxel edge accepted near the world's origin (m): 0.1 mm, well below any cloud's and
+/// a unit mistake's (a file in metres read as kilometres), above the camera's 1e-6-m framing.
+const MIN_VOXEL_SIZE: f32 = 1e-4;
+
 /// Optical depth beyond which exp(−τ) rounds to 0 in f32 (its smallest subnormal is e^{−103.3}).
 const TAU_ZERO: f64 = 110.0;
 
@@ -266,10 +275,15 @@ impl Medium {
         check(
             &loaded.name,
             "medium.origin",
-            finite3(origin.to_array()),
+            finite3(origin.to_array()) && origin.abs().max_element() <= crate::limits::MAX_COORDINATE,
             origin,
-            "origin must be finite (m)",
+            &format!(
+                "the grid's minimum corner must be finite and within ±{:e} m of the world's origin (m); \
+                 move the cloud nearer 0",
+                crate::limits::MAX_COORDINATE
+            ),
         )?;
+        check_voxel_resolvable(&loaded.name, grid.dims(), origin, voxel)?;
         Ok(Medium::new(grid, origin, voxel, d.sigma_t, Rgb::from(d.albedo), d.g))
     }
 
@@ -491,6 +505,25 @@ impl Medium {
     }
 }
 
+/// Refuse voxels too small for f32 positions where the grid lies (`MIN_VOXEL_OF_COORDINATE`,
+/// `MIN_VOXEL_SIZE`): such a box collapses to a point and every method renders it wrongly.
+fn check_voxel_resolvable(file: &str, dims: [usize; 3], origin: Vec3, voxel: Vec3) -> Result<()> {
+    let far_corner = origin + voxel * Vec3::new(dims[0] as f32, dims[1] as f32, dims[2] as f32);
+    let farthest = origin.abs().max(far_corner.abs()).max_element();
+    let smallest = (farthest * MIN_VOXEL_OF_COORDINATE).max(MIN_VOXEL_SIZE);
+    check(
+        file,
+        "medium.voxel_size",
+        voxel.min_element() >= smallest,
+        voxel,
+        &format!(
+            "a voxel must be at least {smallest:.1e} m here ({MIN_VOXEL_SIZE:e} m, and 2⁻²⁰ of the grid's farthest \
+             coordinate, {farthest:.0} m, for f32 positions to resolve it); check the grid's units \
+             (medium.voxel_size, or medium.scale for a .vdb) or move medium.origin nearer 0"
+        ),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -504,6 +537,38 @@ mod tests {
             Rgb::ONE,
             0.0,
         )
+    }
+
+    #[test]
+    fn a_given_grid_far_from_the_origin_is_refused_naming_medium_origin() {
+        // The API's and Python's densities bring their own origin, past the scene file's check.
+        let medium = |origin: Vec3| {
+            let given = loaders::Loaded {
+                grid: Grid3::filled([2, 2, 2], 1.0),
+                origin,
+                voxel_size: Vec3::splat(10.0),
+                name: "in-memory density".into(),
+                downsampled: false,
+            };
+            Medium::from_desc_with(&MediumDesc::default(), "s.toml", Path::new("."), Some(given))
+        };
+        assert!(medium(Vec3::new(-1e7, 0.0, 0.0)).is_ok());
+        let e = medium(Vec3::new(1e30, 0.0, 0.0)).unwrap_err().to_string();
+        assert!(e.contains("in-memory density") && e.contains("medium.origin") && e.contains("1e7"), "{e}");
+    }
+
+    #[test]
+    fn voxels_too_small_for_f32_positions_are_refused_naming_the_fix() {
+        let dims = [20, 16, 12];
+        let ok = |origin: [f32; 3], voxel: f32| check_voxel_resolvable("s.toml", dims, Vec3::from(origin), Vec3::splat(voxel));
+        assert!(ok([0.0; 3], 1e-4).is_ok());
+        assert!(ok([-500.0, 0.0, -300.0], 1e-3).is_ok());
+        assert!(ok([1e7, 0.0, 0.0], 10.0).is_ok(), "10-m voxels at the coordinate limit");
+        // A voxel of 1e-30 m once reached the camera's framing and was blamed on camera.look_at.
+        for (origin, voxel) in [([0.0; 3], 1e-30), ([0.0; 3], 5e-5), ([-500.0, 0.0, -300.0], 1e-6), ([1e7, 0.0, 0.0], 1.0)] {
+            let e = ok(origin, voxel).unwrap_err().to_string();
+            assert!(e.contains("medium.voxel_size") && e.contains("units"), "{origin:?} {voxel}: {e}");
+        }
     }
 
     #[test]

@@ -80,3 +80,25 @@ fn spp_does_not_multiply_the_deterministic_methods() {
         assert_ne!(img(1, 4), base, "{m:?}: render.aa_samples anti-aliases");
     }
 }
+
+#[test]
+fn huge_and_tiny_direction_vectors_keep_their_direction() {
+    // f32's squared length overflows at 1e30 and underflows at 1e-30: such a sun once marched NaN
+    // (or was refused as a zero vector) although its direction is plain.
+    let unit = build(&small(&format!("{SCENE}[sun]\ndirection = [1.0, 1.0, 0.0]\n")));
+    let base = render_as(&unit, Method::Single);
+    for v in ["1e30", "1e-30", "3e38"] {
+        let s = build(&small(&format!("{SCENE}[sun]\ndirection = [{v}, {v}, 0.0]\n")));
+        assert!(
+            (s.sun.dir - unit.sun.dir).length() < 1e-6,
+            "sun.direction [{v}, {v}, 0]: {}",
+            s.sun.dir
+        );
+        let img = render_as(&s, Method::Single);
+        for (a, b) in img.pixels.iter().zip(&base.pixels) {
+            assert!((*a - *b).abs().max_element() <= 1e-5 * b.max_element(), "{v}: {a} vs {b}");
+        }
+        let up = |y: &str| build(&format!("{SCENE}[camera]\nup = [0.0, {y}, 0.0]\n")).camera.up;
+        assert!((up(v) - up("1.0")).length() < 1e-6, "camera.up [0, {v}, 0]: {}", up(v));
+    }
+}

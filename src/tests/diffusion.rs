@@ -431,6 +431,10 @@ fn bad_solver_settings_name_the_field() {
             Box::new(|d: &mut crate::SceneDesc| d.render.solver_tolerance = f64::NAN),
         ),
         (
+            "render.solver_tolerance",
+            Box::new(|d: &mut crate::SceneDesc| d.render.solver_tolerance = 1e-30),
+        ),
+        (
             "render.solver_max_iterations",
             Box::new(|d: &mut crate::SceneDesc| d.render.solver_max_iterations = 0),
         ),

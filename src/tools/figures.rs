@@ -226,7 +226,8 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
         if method == Method::Reference {
             d.render.spp = opts.reference_spp;
             d.render.time_limit = opts.reference_time;
-            d.render.stderr = true;
+            // One sample has no standard error; the report's noise is then unknown.
+            d.render.stderr = opts.reference_spp >= 2;
         }
         Scene::build(d, &s.source, &base_dir(scene_path))
     };

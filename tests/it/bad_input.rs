@@ -8,6 +8,11 @@ use crate::common::{data, f32s, npy, BIN};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+/// Little-endian bytes of `v`.
+fn f64s(v: &[f64]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
 /// A file a row writes into its folder first: name and bytes.
 type File = (&'static str, Vec<u8>);
 
@@ -106,6 +111,17 @@ fn scene_text_that_is_not_a_scene() {
         &["s.toml", "not UTF-8", "TOML"],
     );
     fails(&[], &["render", "nope.toml", "-q"], &["nope.toml"]);
+    // Neither .toml nor a grid type: read as a scene, and the message says so.
+    fails(
+        &[("g.xyz", b"abc".to_vec())],
+        &["render", "g.xyz", "-q"],
+        &["g.xyz", "TOML", ".vdb, .npy, .vol or .raw"],
+    );
+    fails(
+        &[("g.vdb.gz", vec![0x1f, 0x8b, 0x08, 0xff])],
+        &["render", "g.vdb.gz", "-q"],
+        &["g.vdb.gz", "not UTF-8", ".vdb, .npy, .vol or .raw"],
+    );
 }
 
 #[test]
@@ -141,6 +157,8 @@ fn bad_medium_values() {
             &["s.toml", "field `medium.resolution`", "medium.max_voxels = 200000000"],
         ),
         ("[medium]\nvoxel_size = 0.0\n", &["s.toml", "medium.voxel_size"]),
+        // Too small for f32 positions 500 m out: said so, not blamed on the framed camera.
+        ("[medium]\nvoxel_size = 1e-30\n", &["s.toml", "medium.voxel_size", "units"]),
         ("[medium]\nvoxel_size = -1.0\n", &["s.toml", "medium.voxel_size"]),
         (
             "[medium]\nresolution = [4, 4, 4]\nvoxel_size = 1e20\n",
@@ -201,10 +219,17 @@ fn bad_lights_ground_camera_and_render_keys() {
         ("[camera]\nfov_deg = 0.0\n", &["s.toml", "camera.fov_deg"]),
         ("[camera]\nfov_deg = 180.0\n", &["s.toml", "camera.fov_deg"]),
         ("[render]\nspp = 0\n", &["s.toml", "render.spp"]),
+        // One sample has no standard error: the whole layer would be infinite.
+        (
+            "[render]\nmethod = \"reference\"\nstderr = true\n",
+            &["s.toml", "render.stderr", "--spp 2"],
+        ),
         ("[render]\naa_samples = 0\n", &["s.toml", "render.aa_samples"]),
         ("[render]\nexposure = nan\n", &["s.toml", "render.exposure"]),
         ("[render]\nstep = 0.0\n", &["s.toml", "render.step"]),
         ("[render]\nstep = 5.0\n", &["s.toml", "render.step"]),
+        // A step too fine to end: the march would take 5e31 samples per voxel.
+        ("[render]\nstep = 1e-30\n", &["s.toml", "render.step", "0.01"]),
         ("[render]\ntime_limit = -1.0\n", &["s.toml", "render.time_limit"]),
         ("[render]\ncube_resolution = 6\n", &["s.toml", "render.cube_resolution"]),
         ("[render]\nground_samples = 0\n", &["s.toml", "render.ground_samples"]),
@@ -391,17 +416,42 @@ fn corrupt_npy_raw_and_vdb_files() {
             ),
             &["g.npy", "finite"],
         ),
+        // A finite float64 past f32's range: named as what the file holds, not as an infinity.
+        (
+            npy(
+                "{'descr': '<f8', 'fortran_order': False, 'shape': (1, 2, 2), }",
+                &f64s(&[1.0, 1e300, 1.0, 1.0]),
+            ),
+            &["g.npy", "value 1 is 1e300", "float32", "medium.sigma_t"],
+        ),
     ];
     for (bytes, expect) in npy_rows {
         grid_fails("g.npy", &[("g.npy", bytes)], expect);
     }
     let raw = |json: &str, data: Vec<u8>| vec![("g.raw", data), ("g.json", json.as_bytes().to_vec())];
-    grid_fails("g.raw", &[("g.raw", four.clone())], &["g.json"]);
+    // A missing sidecar, or a folder in its place: what the .raw needs, not an OS error.
+    grid_fails(
+        "g.raw",
+        &[("g.raw", four.clone())],
+        &["g.raw", "needs its sidecar", "g.json", "resolution"],
+    );
+    grid_fails(
+        "g.raw",
+        &[("g.raw", four.clone()), ("g.json/", vec![])],
+        &["g.raw", "needs its sidecar", "g.json"],
+    );
     grid_fails("g.raw", &raw("{\"resolution\": [2, 2", four.clone()), &["g.json", "resolution"]);
     grid_fails(
         "g.raw",
         &raw("{\"resolution\": [2, 2, 2], \"dtype\": \"float32\"}", four.clone()),
         &["g.raw", "needs 32 bytes"],
+    );
+    grid_fails(
+        "g.raw",
+        &raw("{\"resolution\": [1, 1, 2], \"dtype\": \"float64\", \"endian\": \"big\"}", {
+            [1.0f64, -1e300].iter().flat_map(|v| v.to_be_bytes()).collect()
+        }),
+        &["g.raw", "value 1 is -1e300", "float32"],
     );
     grid_fails(
         "g.raw",
@@ -658,7 +708,10 @@ fn a_full_disk_or_a_closed_pipe_is_no_panic() {
     );
     assert_eq!(code, 0, "a full stderr loses only the notes: {err}");
     assert!(dir.path().join("a.exr").is_file() && dir.path().join("a.png").is_file());
-    let commands: [&[&str]; 5] = [
+    let commands: [&[&str]; 7] = [
+        // Help and version are results on stdout too.
+        &["--help"],
+        &["--version"],
         &["info", "g.vdb", "--json"],
         &["info", "g.vdb"],
         &[
@@ -836,6 +889,14 @@ fn bad_render_arguments_and_outputs() {
         &["--output", "sky.path"],
     );
     fails(&[s()], &render(&["--threads", "0"]), &["--threads"]);
+    // --exposure holds render.exposure's bound: 2^1e30 is no scale factor.
+    fails(&[s()], &render(&["--exposure", "1e30"]), &["--exposure", "±64"]);
+    let exr = cloudgi::Image::new(4, 2).to_exr_bytes().unwrap();
+    fails(
+        &[("a.exr", exr)],
+        &["tonemap", "a.exr", "-o", "a.png", "--exposure", "-65"],
+        &["--exposure", "±64"],
+    );
     fails(&[s()], &render(&["--threads", "10000"]), &["--threads", "10000", "per core"]);
     // Names that are no file, or that no file system accepts, fail before the render.
     fails(&[s()], &render(&["-o", ".exr"]), &["--output", "no name before .exr"]);
@@ -983,6 +1044,17 @@ fn bad_arguments_of_the_other_commands() {
     let img = cloudgi::Image::new(4, 4).to_exr_bytes().unwrap();
     let small = cloudgi::Image::new(2, 2).to_exr_bytes().unwrap();
     fails(&[("a.exr", img.clone())], &["compare", "a.exr", "nope.exr"], &["nope.exr"]);
+    // A NaN or an infinity would score as `null`, or as a clean 0 in the relative metrics.
+    let mut bad = cloudgi::Image::new(4, 4);
+    bad.pixels[6] = cloudgi::Rgb::new(0.5, f32::NAN, 0.5);
+    let bad = bad.to_exr_bytes().unwrap();
+    for args in [["compare", "a.exr", "n.exr"], ["compare", "n.exr", "a.exr"]] {
+        fails(
+            &[("a.exr", img.clone()), ("n.exr", bad.clone())],
+            &args,
+            &["n.exr", "pixel (2, 1)", "NaN", "finite"],
+        );
+    }
     fails(
         &[("a.exr", img.clone()), ("b.exr", b"junk".to_vec())],
         &["compare", "a.exr", "b.exr"],
@@ -1056,6 +1128,24 @@ fn bad_arguments_of_the_other_commands() {
         &["thickness"],
     );
     fails(&[], &slab(&["--samples", "1"]), &["--samples"]);
+    // The transport mesh's layer count grows with τ: 1e30 would never end.
+    fails(
+        &[],
+        &[
+            "slab",
+            "--thickness",
+            "1e30",
+            "--albedo",
+            "0.5",
+            "--g",
+            "0",
+            "--incidence",
+            "diffuse",
+            "--method",
+            "transport",
+        ],
+        &["--thickness", "--method reference"],
+    );
     fails(
         &[],
         &["slab", "--thickness", "1", "--albedo", "0.5", "--g", "0", "--incidence", "sideways"],
