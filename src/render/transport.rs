@@ -95,8 +95,8 @@ fn voxel_source(scene: &Scene, f: &TransportField, peak: &PeakSpread, fi: usize,
 /// Within this many voxel edges of the eye the directions from a voxel's centre to the eye and
 /// the rays through it part by more than about 1/8 rad (everywhere, for an eye inside the cloud):
 /// the source there is evaluated along each ray ([`RaySource`]), blended into the per-voxel one
-/// over the outer half. The per-voxel source near an eye inside fog put the sun's forward peak
-/// in the wrong directions: a homogeneous fog seen from inside +11.5 % against `reference`.
+/// over the outer half. The per-voxel source there puts the sun's forward peak into the wrong
+/// pixels: a homogeneous fog seen from inside would read +11.5 % against `reference`.
 const NEAR_EYE_VOXELS: f32 = 8.0;
 
 /// The source along one camera ray near the eye: Y_lm(−d) and the scattering angle, once per ray.

@@ -120,12 +120,13 @@ impl EyeGround {
 
 /// Half-width (m) of the box that filters the map at horizontal distances `dx`, `dz` (m) from the
 /// cloud's footprint, for a cloud bottom `height` (m) above the ground and ordinates `spacing`
-/// (rad) apart, on the map's columns of size `column` (m). Two ordinates a polar step apart, leaving the bottom, land (H² + X²)/H Δθ apart at
-/// horizontal distance X (and X Δφ apart sideways, less). Beside the footprint the box stops short
-/// of it (it reaches no column centre under it: half-width at most the distance to it less half a
-/// column, as [`filtered`] rounds to whole columns; at least the width under the cloud): under a cloud
-/// near the ground the columns hold its glow, far brighter than the light beside it (a fog bank's
-/// ground in front of it +23 % against `reference` when the box reached under it).
+/// (rad) apart, on the map's columns of size `column` (m). Two ordinates a polar step apart,
+/// leaving the bottom, land (H² + X²)/H Δθ apart at horizontal distance X (and X Δφ apart
+/// sideways, less). Beside the footprint the box stops short of it (it reaches no column centre
+/// under it: half-width at most the distance to it less half a column, as [`filtered`] rounds to
+/// whole columns; at least the width under the cloud): under a cloud near the ground the columns
+/// hold its glow, far brighter than the light beside it (a box reaching under a fog bank makes
+/// the ground in front of it +23 % against `reference`).
 fn filter_half_width(height: f64, spacing: f64, dx: f64, dz: f64, column: f64) -> f64 {
     let landing = (height * height + dx * dx + dz * dz) / height * spacing;
     landing.min((dx.max(dz) - 0.5 * column).max(height * spacing))

@@ -181,8 +181,8 @@ fn single_render_is_identical_with_any_thread_count() {
 }
 
 /// A ground that cuts through the grid: the scene holds no density a voxel or more under the
-/// plane (the opaque ground hides it from every method; transport and full lit it and let it
-/// shine into the cloud), and the same density as the file from the plane up.
+/// plane (the opaque ground hides it from every path; transport and full would light it and let
+/// it shine into the cloud), and the same density as the file from the plane up.
 #[test]
 fn the_scene_empties_the_density_under_its_ground() {
     let mut desc = SceneDesc::default();

@@ -424,8 +424,8 @@ fn thick_entry_voxels_are_dark_and_refining_them_resolves_the_layer() {
 
 /// The eye inside the cloud (fog): near the eye the directions from voxel centres to it part from
 /// the rays through them, so the source is evaluated along each ray there
-/// (`render::transport::NEAR_EYE_VOXELS`); with the per-voxel source the sun's forward peak went
-/// into the wrong pixels (+11 % over a homogeneous fog). The mean against `reference`.
+/// (`render::transport::NEAR_EYE_VOXELS`); the per-voxel source puts the sun's forward peak into
+/// the wrong pixels (+11 % over a homogeneous fog). The mean against `reference`.
 #[test]
 fn the_eye_inside_the_cloud_sees_what_reference_sees() {
     let render_with = |method: Method| {
