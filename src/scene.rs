@@ -544,6 +544,11 @@ impl Scene {
         };
         let sun = crate::lighting::sun_over_ground(sun, ground.as_ref());
         let medium = Medium::from_desc_with(&desc.medium, f, base_dir, density.map(crate::Density::into_loaded))?;
+        // The ground is opaque: density under it is neither lit nor seen (every method alike).
+        let medium = match &ground {
+            Some(g) => medium.emptied_below(g.height).unwrap_or(medium),
+            None => medium,
+        };
         // camera.fit: the camera moved to frame the cloud's box (src/camera/fit.rs).
         let (desc, camera) = match desc.camera.fit {
             true => {

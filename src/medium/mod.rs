@@ -493,6 +493,30 @@ impl Medium {
         self.voxel_size.min_element()
     }
 
+    /// The medium with every voxel emptied whose density reaches only points below the plane
+    /// y = `height` (m): its centre a voxel or more below it, so the trilinear field at and above
+    /// the plane is unchanged. Under an opaque ground that density is never lit and never seen;
+    /// the methods that solve on the grid would light it and let it shine up into the cloud (a fog
+    /// bank half under the ground: `transport` +20 % over the cloud). `None` where no such voxel
+    /// holds density.
+    pub fn emptied_below(&self, height: f32) -> Option<Medium> {
+        let [nx, ny, nz] = self.dims();
+        // Rows j with centre + one voxel at or below the plane.
+        let rows = (0..ny)
+            .take_while(|&j| self.origin.y + (j as f32 + 1.5) * self.voxel_size.y <= height)
+            .count();
+        let slab = nx * ny;
+        let occupied = (0..nz).any(|k| (0..rows).any(|j| (0..nx).any(|i| self.density.get(i, j, k) > 0.0)));
+        if !occupied {
+            return None;
+        }
+        let mut grid = self.density.to_grid();
+        for plane in grid.data_mut().chunks_mut(slab) {
+            plane[..rows * nx].fill(0.0);
+        }
+        Some(Medium::with_optics(grid, self.origin, self.voxel_size, self.optics))
+    }
+
     /// Index box [lo, hi) of every non-empty voxel grown by `margin` voxels, clipped to the grid.
     pub fn active_box(&self, margin: usize) -> Option<([usize; 3], [usize; 3])> {
         let d = self.dims();
@@ -537,6 +561,23 @@ mod tests {
             Rgb::ONE,
             0.0,
         )
+    }
+
+    /// Rows 0–1 of 2-m voxels from y = 0 have centres 1 and 3 m: with the ground at 4 m only row
+    /// 0 (its field ends at 3 m) is emptied, and the field from the ground up is unchanged.
+    #[test]
+    fn emptied_below_clears_only_the_density_under_the_ground() {
+        let m = box_medium(0.5);
+        assert!(m.emptied_below(2.9).is_none() && m.emptied_below(-1.0).is_none());
+        let cut = m.emptied_below(4.0).expect("row 0 lies under the plane");
+        assert_eq!(cut.density.get(3, 0, 2), 0.0);
+        assert_eq!(cut.density.get(3, 1, 2), 0.5);
+        for y in [4.0f32, 4.5, 7.0, 9.9] {
+            let p = Vec3::new(0.1, y, 0.2);
+            assert_eq!(cut.density_at(p), m.density_at(p), "y = {y}");
+        }
+        assert!(cut.density_at(Vec3::new(0.1, 2.0, 0.2)) < 0.5);
+        assert!(cut.emptied_below(4.0).is_none());
     }
 
     #[test]

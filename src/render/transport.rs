@@ -10,7 +10,8 @@
 //!
 //! The eye-direction source is evaluated once per full voxel in the direction from the camera to
 //! the voxel's centre (a voxel subtends a small angle from the eye), then interpolated
-//! trilinearly over full voxels only, so empty neighbours do not darken the cloud's rim.
+//! trilinearly over full voxels only, so empty neighbours do not darken the cloud's rim. Within
+//! [`NEAR_EYE_VOXELS`] voxels of the eye (an eye in fog) it is evaluated along each ray instead.
 
 use crate::error::Result;
 use crate::image::Image;
@@ -40,9 +41,7 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
     let [nx, ny, _] = m.dims();
     let nsh = sh_count(f.order);
     let eye = scene.camera.position;
-    let o = &f.optics;
-    let (sun_dir, e_sun) = (scene.sun.dir, scene.sun.irradiance);
-    let peak = PeakSpread::truncated(o.g, f.order);
+    let peak = PeakSpread::truncated(f.optics.g, f.order);
     // ρ for the marches to the eye from the dense copy: the same bits, fewer instructions.
     let dense = m.dense_density();
     let voxels: Vec<usize> = f.full.full_voxels().collect();
@@ -58,31 +57,77 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
                 let d = to_voxel.normalize_or_zero();
                 // Radiance towards the eye travels along −d.
                 real_sh(f.order, -DVec3::new(d.x as f64, d.y as f64, d.z as f64), y);
-                let angle = ScatteringAngle::new(&peak, (sun_dir.dot(d) as f64).clamp(-1.0, 1.0));
+                let angle = ScatteringAngle::new(&peak, (scene.sun.dir.dot(d) as f64).clamp(-1.0, 1.0));
                 // Exact optical depth from the voxel's centre to the eye (or out of the grid).
                 let t_eye = m.transmittance_with(|v| dense.trilinear(v), centre, -d, 0.0, to_voxel.length()) as f64;
-                let (mut diffuse, mut sun) = ([0f32; 3], [0f32; 3]);
-                // The last band's phase, its albedo, optics and T′_sun: a band alike takes it.
-                let mut last: Option<(f64, &crate::transport::BandOptics, f64, f64)> = None;
-                for b in 0..3 {
-                    let base = (fi * 3 + b) * nsh;
-                    let js = &f.diffuse_source[base..base + nsh];
-                    diffuse[b] = js.iter().zip(y.iter()).map(|(j, y)| *j as f64 * y).sum::<f64>().max(0.0) as f32;
-                    let (a, band) = (o.albedo[b], &o.bands[b]);
-                    let t_sun = f.sun_t[fi][b] as f64;
-                    if t_sun > 0.0 {
-                        let p = match last {
-                            Some((la, lb, lt, p)) if la == a && lb == band && lt == t_sun => p,
-                            _ => sun_phase(&peak, o.g, band, a, &angle, t_sun, t_eye),
-                        };
-                        last = Some((a, band, t_sun, p));
-                        sun[b] = (a / (1.0 - a * band.f) * e_sun[b] as f64 * p / (4.0 * PI) * t_sun) as f32;
-                    }
-                }
-                (Rgb::from(diffuse), Rgb::from(sun))
+                voxel_source(scene, f, &peak, fi, y, &angle, t_eye)
             },
         )
         .unzip()
+}
+
+/// The source towards the eye of full voxel `fi` (its index in [`TransportField::full`]) for light
+/// leaving it along −d: the diffuse part from the harmonics `y` = Y_lm(−d), and the sun's single
+/// scattering at the scattering angle `angle` with the exact transmittance `t_eye` to the eye.
+fn voxel_source(scene: &Scene, f: &TransportField, peak: &PeakSpread, fi: usize, y: &[f64], angle: &ScatteringAngle, t_eye: f64) -> (Rgb, Rgb) {
+    let (o, nsh, e_sun) = (&f.optics, y.len(), scene.sun.irradiance);
+    let (mut diffuse, mut sun) = ([0f32; 3], [0f32; 3]);
+    // The last band's phase, its albedo, optics and T′_sun: a band alike takes it.
+    let mut last: Option<(f64, &crate::transport::BandOptics, f64, f64)> = None;
+    for b in 0..3 {
+        let base = (fi * 3 + b) * nsh;
+        let js = &f.diffuse_source[base..base + nsh];
+        diffuse[b] = js.iter().zip(y.iter()).map(|(j, y)| *j as f64 * y).sum::<f64>().max(0.0) as f32;
+        let (a, band) = (o.albedo[b], &o.bands[b]);
+        let t_sun = f.sun_t[fi][b] as f64;
+        if t_sun > 0.0 {
+            let p = match last {
+                Some((la, lb, lt, p)) if la == a && lb == band && lt == t_sun => p,
+                _ => sun_phase(peak, o.g, band, a, angle, t_sun, t_eye),
+            };
+            last = Some((a, band, t_sun, p));
+            sun[b] = (a / (1.0 - a * band.f) * e_sun[b] as f64 * p / (4.0 * PI) * t_sun) as f32;
+        }
+    }
+    (Rgb::from(diffuse), Rgb::from(sun))
+}
+
+/// Within this many voxel edges of the eye the directions from a voxel's centre to the eye and
+/// the rays through it part by more than about 1/8 rad (everywhere, for an eye inside the cloud):
+/// the source there is evaluated along each ray ([`RaySource`]), blended into the per-voxel one
+/// over the outer half. The per-voxel source there puts the sun's forward peak into the wrong
+/// pixels: a homogeneous fog seen from inside would read +11.5 % against `reference`.
+const NEAR_EYE_VOXELS: f32 = 8.0;
+
+/// The source along one camera ray near the eye: Y_lm(−d) and the scattering angle, once per ray.
+struct RaySource {
+    y: Vec<f64>,
+    angle: ScatteringAngle,
+}
+
+impl RaySource {
+    fn new(f: &TransportField, peak: &PeakSpread, sun_dir: Vec3, d: Vec3) -> RaySource {
+        let mut y = vec![0.0; sh_count(f.order)];
+        real_sh(f.order, -DVec3::new(d.x as f64, d.y as f64, d.z as f64), &mut y);
+        let angle = ScatteringAngle::new(peak, (sun_dir.dot(d) as f64).clamp(-1.0, 1.0));
+        RaySource { y, angle }
+    }
+
+    /// (diffuse, sun) at continuous voxel coordinates `v`, trilinear over full voxels as
+    /// [`full_trilinear`], each voxel's source evaluated along this ray; `t_eye` the exact
+    /// transmittance from `v` to the eye.
+    fn at(&self, scene: &Scene, f: &TransportField, peak: &PeakSpread, v: Vec3, t_eye: f64) -> (Rgb, Rgb) {
+        let mut sum = (Rgb::ZERO, Rgb::ZERO);
+        let wsum = for_full_corners(&scene.medium, &f.full, v, |fi, w| {
+            let (d, s) = voxel_source(scene, f, peak, fi, &self.y, &self.angle, t_eye);
+            sum = (sum.0 + d * w, sum.1 + s * w);
+        });
+        if wsum > 0.0 {
+            (sum.0 / wsum, sum.1 / wsum)
+        } else {
+            (Rgb::ZERO, Rgb::ZERO)
+        }
+    }
 }
 
 /// A scattering angle Θ between the sun's direction and the eye's: cos Θ and the Legendre
@@ -134,11 +179,24 @@ fn sun_phase(peak: &PeakSpread, g: f64, band: &crate::transport::BandOptics, alb
 /// coordinates `v`, over full voxels only.
 #[inline]
 fn full_trilinear(m: &Medium, full: &FullIndex, values: &[Rgb], v: Vec3) -> Rgb {
+    let mut sum = Rgb::ZERO;
+    let wsum = for_full_corners(m, full, v, |fi, w| sum += values[fi] * w);
+    if wsum > 0.0 {
+        sum / wsum
+    } else {
+        Rgb::ZERO
+    }
+}
+
+/// Calls `visit(full voxel index, trilinear weight)` for each full voxel among the eight around
+/// continuous voxel coordinates `v`; returns the sum of their weights.
+#[inline]
+fn for_full_corners(m: &Medium, full: &FullIndex, v: Vec3, mut visit: impl FnMut(usize, f32)) -> f32 {
     let d = m.dims();
     let u = v - Vec3::splat(0.5);
     let b = u.floor();
     let t = u - b;
-    let (mut sum, mut wsum) = (Rgb::ZERO, 0.0f32);
+    let mut wsum = 0.0f32;
     for dz in 0..2 {
         for dy in 0..2 {
             for dx in 0..2 {
@@ -153,16 +211,12 @@ fn full_trilinear(m: &Medium, full: &FullIndex, values: &[Rgb], v: Vec3) -> Rgb 
                 let w = (if dx == 1 { t.x } else { 1.0 - t.x })
                     * (if dy == 1 { t.y } else { 1.0 - t.y })
                     * (if dz == 1 { t.z } else { 1.0 - t.z });
-                sum += values[fi] * w;
+                visit(fi, w);
                 wsum += w;
             }
         }
     }
-    if wsum > 0.0 {
-        sum / wsum
-    } else {
-        Rgb::ZERO
-    }
+    wsum
 }
 
 /// The background along a ray: the ground as the eye sees it ([`EyeGround`]), or the sky.
@@ -255,6 +309,8 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
     // same bits as the packed density's.
     let dense = m.dense_density();
     let step = scene.render.step_voxels * m.min_voxel();
+    let peak = PeakSpread::truncated(field.optics.g, field.order);
+    let near = NEAR_EYE_VOXELS * m.voxel_size.max_element();
     // Per pixel: [diffuse source, sun single scattering, background]; the image is their sum.
     let shade = |x: u32, y: u32, spp: u32| {
         let mut sum = [Rgb::ZERO; 3];
@@ -264,10 +320,24 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
             let (o, d) = (ray.origin, ray.dir);
             let t_max = scene.ground.as_ref().and_then(|g| g.intersect(o, d)).unwrap_or(f32::INFINITY);
             let rho = |v: [f32; 3]| dense.trilinear(v);
-            let ms = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _| {
-                full_trilinear(m, &field.full, &diffuse, v)
-            });
-            let ss = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _| full_trilinear(m, &field.full, &sun, v));
+            // Near the eye the source along this ray, blended into the per-voxel one.
+            let ray_source = (near > 0.0 && m.intersect(o, d, 0.0, near).is_some()).then(|| RaySource::new(field, &peak, scene.sun.dir, d));
+            let source = |v: Vec3, table: &[Rgb], pick: fn((Rgb, Rgb)) -> Rgb| {
+                let far = full_trilinear(m, &field.full, table, v);
+                let Some(r) = &ray_source else {
+                    return far;
+                };
+                let p = m.origin + v * m.voxel_size;
+                let dist = (p - o).length();
+                let w = ((dist - 0.5 * near) / (0.5 * near)).clamp(0.0, 1.0);
+                if w >= 1.0 {
+                    return far;
+                }
+                let t_eye = m.transmittance_with(|v| dense.trilinear(v), p, -d, 0.0, dist) as f64;
+                pick(r.at(scene, field, &peak, v, t_eye)) * (1.0 - w) + far * w
+            };
+            let ms = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _| source(v, &diffuse, |s| s.0));
+            let ss = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _| source(v, &sun, |s| s.1));
             let bg = if ms.transmittance > 0.0 {
                 background(scene, ground.as_ref(), o, d)
             } else {

@@ -59,13 +59,11 @@ impl EyeGround {
         let cloud = [0.5 * (foot[0][0] + foot[0][1]), 0.5 * (foot[1][0] + foot[1][1]), centre_height];
         // Neighbouring ordinates are π/n_μ apart in angle (polar and azimuthal).
         let spacing = std::f64::consts::PI / scene.render.transport.n_mu as f64;
+        let column = map.h[0].min(map.h[1]);
         let diffuse = filtered(map, first, |x, z| {
             let dx = (foot[0][0] - x).max(x - foot[0][1]).max(0.0);
             let dz = (foot[1][0] - z).max(z - foot[1][1]).max(0.0);
-            // Two ordinates a polar step apart, leaving the cloud's bottom at height H, land
-            // (H² + X²)/H Δθ apart at horizontal distance X (and X Δφ apart sideways, less).
-            let x2 = dx * dx + dz * dz;
-            (height * height + x2) / height * spacing
+            filter_half_width(height, spacing, dx, dz, column)
         });
         Some(EyeGround {
             diffuse,
@@ -120,6 +118,20 @@ impl EyeGround {
     }
 }
 
+/// Half-width (m) of the box that filters the map at horizontal distances `dx`, `dz` (m) from the
+/// cloud's footprint, for a cloud bottom `height` (m) above the ground and ordinates `spacing`
+/// (rad) apart, on the map's columns of size `column` (m). Two ordinates a polar step apart,
+/// leaving the bottom, land (H² + X²)/H Δθ apart at horizontal distance X (and X Δφ apart
+/// sideways, less). Beside the footprint the box stops short of it (it reaches no column centre
+/// under it: half-width at most the distance to it less half a column, as [`filtered`] rounds to
+/// whole columns; at least the width under the cloud): under a cloud near the ground the columns
+/// hold its glow, far brighter than the light beside it (a box reaching under a fog bank makes
+/// the ground in front of it +23 % against `reference`).
+fn filter_half_width(height: f64, spacing: f64, dx: f64, dz: f64, column: f64) -> f64 {
+    let landing = (height * height + dx * dx + dz * dz) / height * spacing;
+    landing.min((dx.max(dz) - 0.5 * column).max(height * spacing))
+}
+
 /// The map's diffuse part, each column the mean over the square of half-width `width(x, z)` (m)
 /// around it (clipped to the map), by a summed-area table.
 fn filtered(map: &GroundMap, first: [f64; 2], width: impl Fn(f64, f64) -> f64) -> Vec<Rgb> {
@@ -172,5 +184,40 @@ mod tests {
         assert!((at(40.0) - 0.5).abs() < 1e-6 && (at(40.001) - 0.5).abs() < 1e-4);
         let (near, far) = (at(100.0), at(1000.0));
         assert!(near < 0.5 && far < near && far > 0.2 && far < 0.21, "{near} {far}");
+    }
+
+    /// A fog bank 10 m above the ground over columns 10–19 of a 40-column map, its glow under it
+    /// (5) far above the light beside it (1): the ground 50 m beside it reads its own columns,
+    /// not the glow (the landing spacing there, (H² + X²)/H Δθ ≈ 100 m, would reach under it);
+    /// under it the box is H Δθ wide.
+    #[test]
+    fn the_filter_beside_a_low_cloud_does_not_reach_under_it() {
+        let (n, h) = (40usize, 10.0);
+        let glow = |i: usize, k: usize| (10..20).contains(&i) && (10..20).contains(&k);
+        let diffuse: Vec<Rgb> = (0..n * n).map(|c| Rgb::splat(if glow(c % n, c / n) { 5.0 } else { 1.0 })).collect();
+        let map = GroundMap {
+            margin: 0,
+            dims: [n, n],
+            radiance: diffuse.clone(),
+            diffuse,
+            clear: Rgb::splat(1.0),
+            origin: [0.0, 0.0],
+            h: [h, h],
+        };
+        let (height, spacing) = (10.0, std::f64::consts::PI / 8.0);
+        let foot = [100.0, 200.0];
+        let out = filtered(&map, [5.0, 5.0], |x, z| {
+            let d = |v: f64| (foot[0] - v).max(v - foot[1]).max(0.0);
+            filter_half_width(height, spacing, d(x), d(z), h)
+        });
+        // Column 25 (centre x = 255 m) lies 55 m beside the footprint's edge at x = 200 m.
+        assert_eq!(out[25 + n * 15].x, 1.0, "beside the fog");
+        assert_eq!(out[15 + n * 15].x, 5.0, "under the fog");
+        assert_eq!(out[20 + n * 15].x, 1.0, "just beside the fog");
+        assert!((filter_half_width(height, spacing, 0.0, 0.0, h) - height * spacing).abs() < 1e-12);
+        // A cloud far above the ground: 400 m beside it the landing spacing is the narrower and
+        // stays; 100 m beside it the box is as wide as under it.
+        assert!((filter_half_width(300.0, spacing, 400.0, 0.0, h) - 25e4 / 300.0 * spacing).abs() < 1e-9);
+        assert!((filter_half_width(300.0, spacing, 100.0, 0.0, h) - 300.0 * spacing).abs() < 1e-9);
     }
 }

@@ -179,3 +179,35 @@ fn single_render_is_identical_with_any_thread_count() {
     assert_eq!(a.pixels, b.pixels);
     assert!(a.pixels.iter().all(|p| p.is_finite() && p.min_element() >= 0.0));
 }
+
+/// A ground that cuts through the grid: the scene holds no density a voxel or more under the
+/// plane (the opaque ground hides it from every path; transport and full would light it and let
+/// it shine into the cloud), and the same density as the file from the plane up.
+#[test]
+fn the_scene_empties_the_density_under_its_ground() {
+    let mut desc = SceneDesc::default();
+    desc.medium.resolution = [20, 16, 12];
+    desc.medium.voxel_size = 50.0;
+    desc.medium.origin = [-500.0, -300.0, -300.0];
+    desc.ground.as_mut().expect("the default scene has a ground").height = 0.0;
+    let loaded = Medium::from_desc_with(&desc.medium, "cut.toml", Path::new("."), None).unwrap();
+    let s = Scene::build(desc, "cut.toml", Path::new(".")).unwrap();
+    let m = &s.medium;
+    let (mut under, mut above) = (0.0f64, 0.0f64);
+    for k in 0..12 {
+        for j in 0..16 {
+            for i in 0..20 {
+                let (a, b) = (loaded.density.get(i, j, k), m.density.get(i, j, k));
+                // Row j's centre is at −275 + 50 j m; rows 0–4 end a voxel further, at or under 0.
+                if j < 5 {
+                    under += a as f64;
+                    assert_eq!(b, 0.0, "voxel ({i}, {j}, {k})");
+                } else {
+                    above += a as f64;
+                    assert_eq!(a, b, "voxel ({i}, {j}, {k})");
+                }
+            }
+        }
+    }
+    assert!(under > 0.0 && above > 0.0, "the cloud must straddle the ground: {under} {above}");
+}

@@ -421,3 +421,42 @@ fn thick_entry_voxels_are_dark_and_refining_them_resolves_the_layer() {
     assert!(c < 0.9 * r, "voxels of 12 optical depths: transport {c} against reference {r}");
     assert!((f / r - 1.0).abs() < 0.04, "refined 3×: transport {f} against reference {r}");
 }
+
+/// The eye inside the cloud (fog): near the eye the directions from voxel centres to it part from
+/// the rays through them, so the source is evaluated along each ray there
+/// (`render::transport::NEAR_EYE_VOXELS`); the per-voxel source puts the sun's forward peak into
+/// the wrong pixels (+11 % over a homogeneous fog). The mean against `reference`.
+#[test]
+fn the_eye_inside_the_cloud_sees_what_reference_sees() {
+    let render_with = |method: Method| {
+        let mut s = scene(ball(0.08, 0.999), method);
+        (s.sun, s.sky) = high_sun_and_blue_sky();
+        s.camera = crate::camera::Camera::from_desc(
+            &crate::camera::CameraDesc {
+                position: [0.0, 100.0, 0.0],
+                look_at: [-100.0, 110.0, 0.0],
+                width: 16,
+                height: 12,
+                fov_deg: 60.0,
+                ..Default::default()
+            },
+            "fog.toml",
+        )
+        .unwrap();
+        s.render.spp = 512;
+        render(&s, &NoProgress).unwrap().image
+    };
+    let (reference, transport) = (render_with(Method::Reference), render_with(Method::Transport));
+    assert_valid(&transport);
+    let mean = |img: &Image| img.pixels.iter().map(|p| luminance(*p) as f64).sum::<f64>() / img.pixels.len() as f64;
+    let (r, t) = (mean(&reference), mean(&transport));
+    eprintln!(
+        "eye in fog: transport {t:.4} against reference {r:.4}: {:+.1} %",
+        100.0 * (t / r - 1.0)
+    );
+    assert!(
+        (t / r - 1.0).abs() < 0.03,
+        "transport {t} against reference {r}: {:+.1} %",
+        100.0 * (t / r - 1.0)
+    );
+}
