@@ -286,37 +286,14 @@ fn pn_solve(tau: f64, a: f64, g: f64, cells: usize, closure: Closure, src: &dyn 
 /// (l = 0…3, per unit sun irradiance across the rays) in the slab lit at μ0. Its source is
 /// a e^{−t/μ0} p̄(μ, μ0) per unit optical depth, p̄ the azimuthal mean of HG(g) (its Legendre
 /// series to l = 150); downwards I(τ, μ) = a p̄ μ0 (e^{−τ/μ} − e^{−τ/μ0})/(μ − μ0), upwards
-/// a p̄ μ0/(μ0 + |μ|) (e^{−τ/μ0} − e^{−T/μ0} e^{−(T−τ)/|μ|}); 1024 Gauss nodes in μ.
+/// a p̄ μ0/(μ0 + |μ|) (e^{−τ/μ0} − e^{−T/μ0} e^{−(T−τ)/|μ|}); 1024 Gauss–Legendre nodes in μ.
 fn once_scattered_moments(tau: f64, a: f64, g: f64, mu0: f64, cells: usize) -> Vec<[f64; 4]> {
     use std::f64::consts::PI;
     let h = tau / cells as f64;
-    const X: [f64; 4] = [
-        -0.861_136_311_594_052_6,
-        -0.339_981_043_584_856_3,
-        0.339_981_043_584_856_3,
-        0.861_136_311_594_052_6,
-    ];
-    const W: [f64; 4] = [
-        0.347_854_845_137_453_9,
-        0.652_145_154_862_546_1,
-        0.652_145_154_862_546_1,
-        0.347_854_845_137_453_9,
-    ];
-    let legendre = |x: f64, n: usize| {
-        let mut p = vec![1.0, x];
-        for l in 1..n {
-            p.push(((2 * l + 1) as f64 * x * p[l] - l as f64 * p[l - 1]) / (l + 1) as f64);
-        }
-        p
-    };
+    let legendre = |x: f64, n: usize| cloudgi::transport::legendre(n, x);
     let pl0 = legendre(mu0, 150);
-    let mut nodes = Vec::new();
-    for k in 0..256 {
-        let (lo, hi) = (-1.0 + 2.0 * k as f64 / 256.0, -1.0 + 2.0 * (k + 1) as f64 / 256.0);
-        for (x, w) in X.iter().zip(W) {
-            nodes.push((0.5 * (lo + hi) + 0.5 * (hi - lo) * x, w * 0.5 * (hi - lo)));
-        }
-    }
+    let (xs, ws) = cloudgi::transport::gauss_legendre(1024);
+    let nodes = xs.into_iter().zip(ws);
     // Cell mean of e^{−τ/m} over [t0, t0 + h].
     let mean = |m: f64, t0: f64| m * ((-t0 / m).exp() - (-(t0 + h) / m).exp()) / h;
     let mut out = vec![[0.0; 4]; cells];
