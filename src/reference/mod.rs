@@ -35,7 +35,7 @@ use crate::math::{Rgb, Rng};
 use crate::pipeline::{Progress, Timings};
 use crate::scene::Scene;
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Instant;
 
 /// Name of the camera-ray transmittance layer.
@@ -145,6 +145,60 @@ fn mean_scattering_order(m: &crate::medium::Medium) -> f64 {
     (tau * tau).min(if a < 1.0 { 1.0 / (1.0 - a) } else { f64::INFINITY })
 }
 
+/// Seconds of path tracing after which the projected remaining time is trusted enough to warn.
+const PACE_SETTLE_S: f64 = 30.0;
+
+/// Projected remaining seconds above which a render without a time limit warns (the estimate of
+/// [`mean_scattering_order`] does not see every cost, e.g. tentative collisions in a dense cloud's
+/// thin fringe under a loose majorant).
+const PACE_WARN_S: f64 = 3600.0;
+
+/// Watches the samples' pace and warns once when, without a time limit, the render would run for
+/// more than [`PACE_WARN_S`] more seconds.
+struct Pace {
+    start: Instant,
+    total: u64,
+    done: AtomicU64,
+    warned: AtomicBool,
+}
+
+impl Pace {
+    fn new(start: Instant, total: u64) -> Pace {
+        Pace { start, total, done: AtomicU64::new(0), warned: AtomicBool::new(false) }
+    }
+
+    /// One more sample finished (a look at the clock: tens of nanoseconds against a path's
+    /// microseconds).
+    fn sample_done(&self, progress: &dyn Progress, source: &str) {
+        let done = self.done.fetch_add(1, Ordering::Relaxed) + 1;
+        if self.warned.load(Ordering::Relaxed) {
+            return;
+        }
+        let elapsed = self.start.elapsed().as_secs_f64();
+        if let Some(left) = remaining_if_long(done, self.total, elapsed) {
+            if !self.warned.swap(true, Ordering::Relaxed) {
+                progress.warn(&format!(
+                    "{source}: at this pace the reference needs about {:.1} h more ({done} of {} samples in \
+                     {elapsed:.0} s); set render.time_limit (--time-limit S) to stop it in time (each pixel \
+                     averages the samples it completed), or lower render.spp",
+                    left / 3600.0,
+                    self.total
+                ));
+            }
+        }
+    }
+}
+
+/// The projected remaining seconds when `done` of `total` samples took `elapsed` seconds, where
+/// the pace has settled ([`PACE_SETTLE_S`]) and the remainder exceeds [`PACE_WARN_S`].
+fn remaining_if_long(done: u64, total: u64, elapsed: f64) -> Option<f64> {
+    if done == 0 || elapsed < PACE_SETTLE_S {
+        return None;
+    }
+    let left = elapsed / done as f64 * total.saturating_sub(done) as f64;
+    (left > PACE_WARN_S).then_some(left)
+}
+
 /// [`render`], also returning how many samples were taken.
 ///
 /// The time limit is checked before every pixel sample and every [`integrator::DEADLINE_CHECK`]
@@ -171,6 +225,7 @@ pub fn render_with_stats(scene: &Scene, progress: &dyn Progress, timings: &mut T
             progress.log(&format!("reference: time limit {t} s"));
         }
         progress.begin("reference paths", rs.spp as u64 * (w * h) as u64);
+        let pace = rs.time_limit.is_none().then(|| Pace::new(start, rs.spp as u64 * (w * h) as u64));
         while passes < rs.spp && !stop.load(Ordering::Relaxed) {
             let s = passes;
             acc.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
@@ -195,6 +250,9 @@ pub fn render_with_stats(scene: &Scene, progress: &dyn Progress, timings: &mut T
                         }
                     }
                     progress.advance(1);
+                    if let Some(p) = &pace {
+                        p.sample_done(progress, &scene.source);
+                    }
                 }
             });
             passes += 1;
@@ -297,4 +355,22 @@ pub fn camera_transmittance(scene: &Scene) -> Vec<f32> {
         }
     });
     t
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_render_warns_only_when_its_settled_pace_leaves_more_than_an_hour() {
+        // 10 of 1,000 samples in 60 s: 5,940 s left.
+        assert_eq!(remaining_if_long(10, 1000, 60.0), Some(5940.0));
+        // The same pace over fewer samples: 3,000 s left, under the hour.
+        assert_eq!(remaining_if_long(10, 510, 60.0), None);
+        // Before the pace settles, and with nothing done, no projection.
+        assert_eq!(remaining_if_long(1, 1_000_000, PACE_SETTLE_S - 1.0), None);
+        assert_eq!(remaining_if_long(0, 1000, 1e6), None);
+        // All done: nothing left.
+        assert_eq!(remaining_if_long(1000, 1000, 1e6), None);
+    }
 }
