@@ -251,7 +251,7 @@ mod tests {
     #[test]
     fn the_examples_warn_about_nothing() {
         let mut n = 0;
-        for folder in ["examples", "examples/eval", "examples/eval/glare"] {
+        for folder in ["examples", "examples/eval", "examples/eval/glare", "examples/eval/spread"] {
             for e in std::fs::read_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join(folder)).unwrap() {
                 let p = e.unwrap().path();
                 if p.extension().is_some_and(|x| x == "toml") {
@@ -260,7 +260,7 @@ mod tests {
                 }
             }
         }
-        assert!(n >= 20, "{n} example scenes");
+        assert!(n >= 39, "{n} example scenes");
     }
 
     #[test]
