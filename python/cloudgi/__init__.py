@@ -63,6 +63,10 @@ ProgressCallback = Callable[[str, int, int], Any]
 _NON_FINITE = "\x00float:"
 
 
+# TOML's integers are 64-bit signed; the scene parser reads what a scene file can hold.
+_TOML_INT_MIN, _TOML_INT_MAX = -(2**63), 2**63 - 1
+
+
 def _json(value: Any) -> str:
     """``value`` as JSON: numpy scalars and arrays as Python numbers and lists, non-finite floats
     marked with :data:`_NON_FINITE`; a ``None`` (TOML has no null) raises naming its key."""
@@ -73,6 +77,8 @@ def _json(value: Any) -> str:
             raise SceneError(f"`{key}` is None: TOML has no null; leave the key out for its default")
         if isinstance(v, float) and not math.isfinite(v):
             return _NON_FINITE + repr(v)
+        if isinstance(v, int) and not isinstance(v, bool) and not _TOML_INT_MIN <= v <= _TOML_INT_MAX:
+            raise SceneError(f"`{key}` = {v} is beyond a scene file's integers (64-bit signed, ±9.2e18)")
         if isinstance(v, Mapping):
             return {k: mark(x, f"{key}.{k}" if key else str(k)) for k, x in v.items()}
         if isinstance(v, (list, tuple)):

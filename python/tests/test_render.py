@@ -194,6 +194,16 @@ def test_numpy_scalars_and_arrays_in_a_dict_are_numbers_and_none_names_its_key()
     assert "`medium.sigma_t` is None" in str(e.value)
 
 
+def test_an_integer_beyond_a_scene_files_names_its_key():
+    # JSON carries any integer; TOML's are 64-bit signed, and the parser's own error named no key.
+    with pytest.raises(cloudgi.SceneError) as e:
+        cloudgi.render(seed=2**63, method="single", width=8, height=6)
+    assert "`render.seed` = 9223372036854775808" in str(e.value)
+    with pytest.raises(cloudgi.SceneError) as e:
+        cloudgi.scene_toml({"camera": {"width": -(2**63) - 1}})
+    assert "`camera.width`" in str(e.value)
+
+
 def test_a_missing_scene_file_is_the_cli_message(tmp_path):
     missing = tmp_path / "missing.toml"
     cli = cli_error("render", missing, "-o", tmp_path / "x.exr")
