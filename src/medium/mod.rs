@@ -605,7 +605,7 @@ mod tests {
         assert!(ok([0.0; 3], 1e-4).is_ok());
         assert!(ok([-500.0, 0.0, -300.0], 1e-3).is_ok());
         assert!(ok([1e7, 0.0, 0.0], 10.0).is_ok(), "10-m voxels at the coordinate limit");
-        // A voxel of 1e-30 m once reached the camera's framing and was blamed on camera.look_at.
+        // A voxel of 1e-30 m would collapse the box, and the framing would blame camera.look_at.
         for (origin, voxel) in [([0.0; 3], 1e-30), ([0.0; 3], 5e-5), ([-500.0, 0.0, -300.0], 1e-6), ([1e7, 0.0, 0.0], 1.0)] {
             let e = ok(origin, voxel).unwrap_err().to_string();
             assert!(e.contains("medium.voxel_size") && e.contains("units"), "{origin:?} {voxel}: {e}");

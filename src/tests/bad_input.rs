@@ -83,8 +83,8 @@ fn spp_does_not_multiply_the_deterministic_methods() {
 
 #[test]
 fn huge_and_tiny_direction_vectors_keep_their_direction() {
-    // f32's squared length overflows at 1e30 and underflows at 1e-30: such a sun once marched NaN
-    // (or was refused as a zero vector) although its direction is plain.
+    // f32's squared length overflows at 1e30 and underflows at 1e-30: normalised in f32, such a
+    // sun would march NaN (or be refused as a zero vector) although its direction is plain.
     let unit = build(&small(&format!("{SCENE}[sun]\ndirection = [1.0, 1.0, 0.0]\n")));
     let base = render_as(&unit, Method::Single);
     for v in ["1e30", "1e-30", "3e38"] {
