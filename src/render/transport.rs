@@ -60,24 +60,31 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
                 let angle = ScatteringAngle::new(&peak, (scene.sun.dir.dot(d) as f64).clamp(-1.0, 1.0));
                 // Exact optical depth from the voxel's centre to the eye (or out of the grid).
                 let t_eye = m.transmittance_with(|v| dense.trilinear(v), centre, -d, 0.0, to_voxel.length()) as f64;
-                voxel_source(scene, f, &peak, fi, y, &angle, t_eye)
+                (voxel_diffuse(f, fi, y), voxel_sun(scene, f, &peak, fi, &angle, t_eye))
             },
         )
         .unzip()
 }
 
-/// The source towards the eye of full voxel `fi` (its index in [`TransportField::full`]) for light
-/// leaving it along −d: the diffuse part from the harmonics `y` = Y_lm(−d), and the sun's single
-/// scattering at the scattering angle `angle` with the exact transmittance `t_eye` to the eye.
-fn voxel_source(scene: &Scene, f: &TransportField, peak: &PeakSpread, fi: usize, y: &[f64], angle: &ScatteringAngle, t_eye: f64) -> (Rgb, Rgb) {
-    let (o, nsh, e_sun) = (&f.optics, y.len(), scene.sun.irradiance);
-    let (mut diffuse, mut sun) = ([0f32; 3], [0f32; 3]);
+/// The diffuse source towards the eye of full voxel `fi` (its index in [`TransportField::full`])
+/// for light leaving it along −d, from the harmonics `y` = Y_lm(−d).
+fn voxel_diffuse(f: &TransportField, fi: usize, y: &[f64]) -> Rgb {
+    let nsh = y.len();
+    Rgb::from(std::array::from_fn(|b| {
+        let base = (fi * 3 + b) * nsh;
+        let js = &f.diffuse_source[base..base + nsh];
+        js.iter().zip(y.iter()).map(|(j, y)| *j as f64 * y).sum::<f64>().max(0.0) as f32
+    }))
+}
+
+/// The sun's single scattering towards the eye at full voxel `fi`, at the scattering angle
+/// `angle`, with the exact transmittance `t_eye` to the eye.
+fn voxel_sun(scene: &Scene, f: &TransportField, peak: &PeakSpread, fi: usize, angle: &ScatteringAngle, t_eye: f64) -> Rgb {
+    let (o, e_sun) = (&f.optics, scene.sun.irradiance);
+    let mut sun = [0f32; 3];
     // The last band's phase, its albedo, optics and T′_sun: a band alike takes it.
     let mut last: Option<(f64, &crate::transport::BandOptics, f64, f64)> = None;
     for b in 0..3 {
-        let base = (fi * 3 + b) * nsh;
-        let js = &f.diffuse_source[base..base + nsh];
-        diffuse[b] = js.iter().zip(y.iter()).map(|(j, y)| *j as f64 * y).sum::<f64>().max(0.0) as f32;
         let (a, band) = (o.albedo[b], &o.bands[b]);
         let t_sun = f.sun_t[fi][b] as f64;
         if t_sun > 0.0 {
@@ -89,7 +96,7 @@ fn voxel_source(scene: &Scene, f: &TransportField, peak: &PeakSpread, fi: usize,
             sun[b] = (a / (1.0 - a * band.f) * e_sun[b] as f64 * p / (4.0 * PI) * t_sun) as f32;
         }
     }
-    (Rgb::from(diffuse), Rgb::from(sun))
+    Rgb::from(sun)
 }
 
 /// Within this many voxel edges of the eye the directions from a voxel's centre to the eye and
@@ -111,22 +118,6 @@ impl RaySource {
         real_sh(f.order, -DVec3::new(d.x as f64, d.y as f64, d.z as f64), &mut y);
         let angle = ScatteringAngle::new(peak, (sun_dir.dot(d) as f64).clamp(-1.0, 1.0));
         RaySource { y, angle }
-    }
-
-    /// (diffuse, sun) at continuous voxel coordinates `v`, trilinear over full voxels as
-    /// [`full_trilinear`], each voxel's source evaluated along this ray; `t_eye` the exact
-    /// transmittance from `v` to the eye.
-    fn at(&self, scene: &Scene, f: &TransportField, peak: &PeakSpread, v: Vec3, t_eye: f64) -> (Rgb, Rgb) {
-        let mut sum = (Rgb::ZERO, Rgb::ZERO);
-        let wsum = for_full_corners(&scene.medium, &f.full, v, |fi, w| {
-            let (d, s) = voxel_source(scene, f, peak, fi, &self.y, &self.angle, t_eye);
-            sum = (sum.0 + d * w, sum.1 + s * w);
-        });
-        if wsum > 0.0 {
-            (sum.0 / wsum, sum.1 / wsum)
-        } else {
-            (Rgb::ZERO, Rgb::ZERO)
-        }
     }
 }
 
@@ -179,24 +170,18 @@ fn sun_phase(peak: &PeakSpread, g: f64, band: &crate::transport::BandOptics, alb
 /// coordinates `v`, over full voxels only.
 #[inline]
 fn full_trilinear(m: &Medium, full: &FullIndex, values: &[Rgb], v: Vec3) -> Rgb {
-    let mut sum = Rgb::ZERO;
-    let wsum = for_full_corners(m, full, v, |fi, w| sum += values[fi] * w);
-    if wsum > 0.0 {
-        sum / wsum
-    } else {
-        Rgb::ZERO
-    }
+    full_weighted(m, full, v, |fi| values[fi])
 }
 
-/// Calls `visit(full voxel index, trilinear weight)` for each full voxel among the eight around
-/// continuous voxel coordinates `v`; returns the sum of their weights.
+/// The trilinear mean of `value(full voxel index)` over the full voxels among the eight around
+/// continuous voxel coordinates `v`, their weights renormalised (zero where none is full).
 #[inline]
-fn for_full_corners(m: &Medium, full: &FullIndex, v: Vec3, mut visit: impl FnMut(usize, f32)) -> f32 {
+fn full_weighted(m: &Medium, full: &FullIndex, v: Vec3, mut value: impl FnMut(usize) -> Rgb) -> Rgb {
     let d = m.dims();
     let u = v - Vec3::splat(0.5);
     let b = u.floor();
     let t = u - b;
-    let mut wsum = 0.0f32;
+    let (mut sum, mut wsum) = (Rgb::ZERO, 0.0f32);
     for dz in 0..2 {
         for dy in 0..2 {
             for dx in 0..2 {
@@ -211,12 +196,16 @@ fn for_full_corners(m: &Medium, full: &FullIndex, v: Vec3, mut visit: impl FnMut
                 let w = (if dx == 1 { t.x } else { 1.0 - t.x })
                     * (if dy == 1 { t.y } else { 1.0 - t.y })
                     * (if dz == 1 { t.z } else { 1.0 - t.z });
-                visit(fi, w);
+                sum += value(fi) * w;
                 wsum += w;
             }
         }
     }
-    wsum
+    if wsum > 0.0 {
+        sum / wsum
+    } else {
+        Rgb::ZERO
+    }
 }
 
 /// The background along a ray: the ground as the eye sees it ([`EyeGround`]), or the sky.
@@ -322,22 +311,30 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
             let rho = |v: [f32; 3]| dense.trilinear(v);
             // Near the eye the source along this ray, blended into the per-voxel one.
             let ray_source = (near > 0.0 && m.intersect(o, d, 0.0, near).is_some()).then(|| RaySource::new(field, &peak, scene.sun.dir, d));
-            let source = |v: Vec3, table: &[Rgb], pick: fn((Rgb, Rgb)) -> Rgb| {
-                let far = full_trilinear(m, &field.full, table, v);
-                let Some(r) = &ray_source else {
-                    return far;
-                };
+            // (the ray's source, point, distance to the eye, weight of the per-voxel source) where
+            // the ray's own source takes part.
+            let near_eye = |v: Vec3| {
+                let r = ray_source.as_ref()?;
                 let p = m.origin + v * m.voxel_size;
                 let dist = (p - o).length();
                 let w = ((dist - 0.5 * near) / (0.5 * near)).clamp(0.0, 1.0);
-                if w >= 1.0 {
-                    return far;
-                }
-                let t_eye = m.transmittance_with(|v| dense.trilinear(v), p, -d, 0.0, dist) as f64;
-                pick(r.at(scene, field, &peak, v, t_eye)) * (1.0 - w) + far * w
+                (w < 1.0).then_some((r, p, dist, w))
             };
-            let ms = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _| source(v, &diffuse, |s| s.0));
-            let ss = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _| source(v, &sun, |s| s.1));
+            let ms = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _| {
+                let far = full_trilinear(m, &field.full, &diffuse, v);
+                let Some((r, _, _, w)) = near_eye(v) else {
+                    return far;
+                };
+                full_weighted(m, &field.full, v, |fi| voxel_diffuse(field, fi, &r.y)) * (1.0 - w) + far * w
+            });
+            let ss = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _| {
+                let far = full_trilinear(m, &field.full, &sun, v);
+                let Some((r, p, dist, w)) = near_eye(v) else {
+                    return far;
+                };
+                let t_eye = m.transmittance_with(|v| dense.trilinear(v), p, -d, 0.0, dist) as f64;
+                full_weighted(m, &field.full, v, |fi| voxel_sun(scene, field, &peak, fi, &r.angle, t_eye)) * (1.0 - w) + far * w
+            });
             let bg = if ms.transmittance > 0.0 {
                 background(scene, ground.as_ref(), o, d)
             } else {
