@@ -41,7 +41,7 @@ fn solver(c: &mut Criterion) {
         let scene = Scene::from_desc({
             let mut d = SceneDesc::default();
             d.medium.resolution = r;
-            d.medium.voxel_size = h;
+            d.medium.voxel_size = h.into();
             d
         })
         .unwrap();

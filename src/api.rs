@@ -6,7 +6,7 @@ use crate::error::{Error, Result};
 use crate::image::Image;
 use crate::math::{Rgb, Vec3};
 use crate::medium::loaders::Loaded;
-use crate::medium::Grid3;
+use crate::medium::{Grid3, VoxelSize};
 use crate::pipeline::{NoProgress, Progress, Timings};
 use crate::scene::{Method, Scene, SceneDesc};
 use std::path::Path;
@@ -99,8 +99,8 @@ pub struct Density {
 
 impl Density {
     /// `values` indexed `[z][y][x]` (x fastest, the order of a C-ordered `.npy` file) for a grid
-    /// of `dims = [nx, ny, nz]` voxels of `voxel_size` metres, its minimum corner at `origin`
-    /// (m). Sizes are checked here; values (finite, ≥ 0), voxel size and origin when the scene
+    /// of `dims = [nx, ny, nz]` voxels of `voxel_size` metres (one edge, or `[x, y, z]`), its
+    /// minimum corner at `origin` (m). Sizes are checked here; values (finite, ≥ 0), voxel size and origin when the scene
     /// is built.
     ///
     /// ```
@@ -113,10 +113,10 @@ impl Density {
     /// assert_eq!(scene.grid_dims(), [4, 3, 2]);
     /// assert!(Density::new([4, 3, 2], vec![0.5; 23], 100.0, [0.0; 3]).is_err());
     /// ```
-    pub fn new(dims: [usize; 3], values: Vec<f32>, voxel_size: f32, origin: [f32; 3]) -> Result<Density> {
+    pub fn new(dims: [usize; 3], values: Vec<f32>, voxel_size: impl Into<VoxelSize>, origin: [f32; 3]) -> Result<Density> {
         Ok(Density {
             grid: Grid3::from_vec(dims, values, DENSITY_SOURCE)?,
-            voxel_size: [voxel_size; 3],
+            voxel_size: voxel_size.into().to_vec3().to_array(),
             origin,
         })
     }
@@ -133,10 +133,10 @@ impl Density {
     /// let d = cloudgi::Density::from_npy(&npy, 10.0, [0.0; 3]).unwrap();
     /// assert_eq!(d.dims(), [2, 1, 1]);
     /// ```
-    pub fn from_npy(bytes: &[u8], voxel_size: f32, origin: [f32; 3]) -> Result<Density> {
+    pub fn from_npy(bytes: &[u8], voxel_size: impl Into<VoxelSize>, origin: [f32; 3]) -> Result<Density> {
         Ok(Density {
             grid: crate::medium::loaders::parse_npy(bytes, DENSITY_SOURCE)?,
-            voxel_size: [voxel_size; 3],
+            voxel_size: voxel_size.into().to_vec3().to_array(),
             origin,
         })
     }

@@ -57,7 +57,7 @@ pub use crate::error::{Error, Result};
 pub use crate::image::Image;
 pub use crate::lighting::{GroundDesc, SkyDesc, SkyModel, SunDesc};
 pub use crate::math::Rgb;
-pub use crate::medium::{MediumDesc, UpAxis};
+pub use crate::medium::{MediumDesc, UpAxis, VoxelSize};
 pub use crate::pipeline::{NoProgress, Progress, Timings};
 pub use crate::scene::{
     AnimationDesc, CameraKey, KeyDesc, MediumKey, Method, RenderDesc, Scene, SceneDesc, SunKey, BUILTIN as BUILTIN_SOURCE,

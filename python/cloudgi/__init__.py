@@ -19,8 +19,9 @@ from __future__ import annotations
 import io
 import json
 import math
+import numbers
 import os
-from typing import Any, Callable, Dict, Mapping, Optional, Sequence, Union
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Union
 
 import numpy as np
 
@@ -151,7 +152,7 @@ def render(
     spp: Optional[int] = None,
     seed: Optional[int] = None,
     aov: Optional[bool] = None,
-    voxel_size: Optional[float] = None,
+    voxel_size: Union[float, Sequence[float], None] = None,
     origin: Optional[Sequence[float]] = None,
     overrides: Optional[Mapping[str, Mapping[str, Any]]] = None,
     progress: Optional[ProgressCallback] = None,
@@ -167,8 +168,9 @@ def render(
     applied on top of the scene after the scene itself is checked.
 
     ``density``: float32 or float64 array indexed ``[z][y][x]`` (as a ``.npy`` file), replacing
-    ``medium.grid``; its voxels are ``voxel_size`` metres (default ``medium.voxel_size``) with
-    the minimum corner at ``origin`` (default ``medium.origin``).
+    ``medium.grid``; its voxels are ``voxel_size`` metres (one edge, or ``[x, y, z]`` as
+    :func:`load_grid` returns it; default ``medium.voxel_size``) with the minimum corner at
+    ``origin`` (default ``medium.origin``).
 
     ``progress(stage, done, total)`` is called from this thread while the render runs (at most
     every 50 ms, on change), e.g. to drive a tqdm bar. The GIL is released during the render;
@@ -186,11 +188,21 @@ def render(
         payload,
         _overrides(method, width, height, spp, seed, aov, overrides),
         npy,
-        None if voxel_size is None else float(voxel_size),
+        _voxel_size(voxel_size),
         origin,
         progress,
     )
     return _images(w, h, layers)
+
+
+def _voxel_size(v: Union[float, Sequence[float], None]) -> Union[float, List[float], None]:
+    """``voxel_size`` as the extension takes it: one float, or a list of three."""
+    if v is None or isinstance(v, numbers.Real):
+        return None if v is None else float(v)
+    edges = [float(x) for x in v]
+    if len(edges) != 3:
+        raise SceneError(f"voxel_size: {len(edges)} values given; one edge in metres, or [x, y, z]")
+    return edges
 
 
 def write_exr(path: Union[str, "os.PathLike[str]"], images: Mapping[str, np.ndarray]) -> None:

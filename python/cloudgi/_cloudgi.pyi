@@ -1,6 +1,6 @@
 """Native half of cloudgi (PyO3); use the functions of the `cloudgi` package instead."""
 
-from typing import Any, Callable, List, Optional, Sequence, Tuple
+from typing import Any, Callable, List, Optional, Sequence, Tuple, Union
 
 __version__: str
 
@@ -27,7 +27,7 @@ def render(
     payload: str,
     overrides: str,
     npy: Optional[bytes] = None,
-    voxel_size: Optional[float] = None,
+    voxel_size: Union[float, Sequence[float], None] = None,
     origin: Optional[Sequence[float]] = None,
     progress: Optional[Callable[[str, int, int], Any]] = None,
 ) -> Tuple[int, int, List[Tuple[str, bytearray]]]: ...

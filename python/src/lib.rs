@@ -4,7 +4,7 @@
 
 mod scene_input;
 
-use cloudgi::{Density, Error, Image, Options, Progress};
+use cloudgi::{Density, Error, Image, Options, Progress, VoxelSize};
 use pyo3::create_exception;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
@@ -92,6 +92,22 @@ fn layer_bytes(px: &[cloudgi::Rgb]) -> Vec<u8> {
     px.iter().flat_map(|p| p.to_array()).flat_map(f32::to_le_bytes).collect()
 }
 
+/// `voxel_size` as Python passes it: one edge (m) or `[x, y, z]` (the wrapper has checked which).
+#[derive(FromPyObject)]
+enum Edges {
+    Cube(f32),
+    Box([f32; 3]),
+}
+
+impl From<Edges> for VoxelSize {
+    fn from(e: Edges) -> VoxelSize {
+        match e {
+            Edges::Cube(h) => VoxelSize::Cube(h),
+            Edges::Box(h) => VoxelSize::Box(h),
+        }
+    }
+}
+
 /// Build the scene and render it on a worker thread while this thread, holding the GIL only
 /// briefly every [`POLL`], calls `progress(stage, done, total)`, issues warnings and checks for
 /// signals (Ctrl-C raises KeyboardInterrupt here, which cancels the render).
@@ -103,7 +119,7 @@ fn render<'py>(
     payload: &str,
     overrides: &str,
     npy: Option<&[u8]>,
-    voxel_size: Option<f32>,
+    voxel_size: Option<Edges>,
     origin: Option<[f32; 3]>,
     progress: Option<Bound<'py, PyAny>>,
 ) -> PyResult<PyImages<'py>> {
@@ -116,7 +132,7 @@ fn render<'py>(
         let density = match npy {
             Some(b) => Some(Density::from_npy(
                 b,
-                voxel_size.unwrap_or(desc.medium.voxel_size),
+                voxel_size.map_or(desc.medium.voxel_size, Edges::into),
                 origin.unwrap_or(desc.medium.origin),
             )?),
             None => None,

@@ -293,3 +293,21 @@ def test_load_vdb_reads_the_grid_the_scene_renders(tmp_path):
     assert voxel[0] == voxel[1] == voxel[2]
     b = cloudgi.render(tiny_scene(), method="single", density=density, voxel_size=voxel[0], origin=origin)["rgb"]
     assert np.array_equal(a, b)
+
+
+def test_a_grid_with_cells_that_are_not_cubes_renders_as_its_file_does():
+    from conftest import ROOT
+
+    # OpenVDB's ScaleMap [0.1, 0.2, 0.1]: load_grid's three edges place it as the file does.
+    vdb = ROOT / "tests" / "data" / "vdb" / "aniso_scale_blosc.vdb"
+    density, voxel, origin = cloudgi.load_grid(vdb)
+    assert voxel[0] == voxel[2] != voxel[1]
+    scene = tiny_scene()
+    scene["medium"] = {"grid": str(vdb), "sigma_t": 2.0}
+    scene["camera"].update({"position": [3.0, 6.0, 20.0], "look_at": [3.0, 6.0, 3.0]})
+    a = cloudgi.render(scene, method="single")["rgb"]
+    del scene["medium"]["grid"]
+    b = cloudgi.render(scene, method="single", density=density, voxel_size=voxel, origin=origin)["rgb"]
+    assert a.max() > 0 and np.array_equal(a, b)
+    with pytest.raises(cloudgi.SceneError, match="voxel_size: 2 values"):
+        cloudgi.render(scene, method="single", density=density, voxel_size=[1.0, 2.0])

@@ -194,13 +194,14 @@ pub fn run(a: BenchArgs) -> Result<()> {
         ));
     }
     let base = &file.desc.medium;
-    let extent = base.voxel_size * base.resolution[0] as f32;
+    let base_x = base.resolution[0] as f32;
     let mut clouds: Vec<Cloud> = sizes
         .iter()
         .map(|size| {
             let mut desc = file.desc.clone();
             desc.medium.resolution = *size;
-            desc.medium.voxel_size = extent / size[0] as f32;
+            // The cloud's extent along x kept: every edge scaled alike.
+            desc.medium.voxel_size = base.voxel_size.scaled(base_x / size[0] as f32);
             Cloud {
                 name: format!("{}×{}×{}", size[0], size[1], size[2]),
                 desc,

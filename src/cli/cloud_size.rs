@@ -27,7 +27,7 @@ pub fn warning(scene: &Scene) -> Option<String> {
     let key = match ext.to_ascii_lowercase().as_str() {
         "vdb" => format!("medium.scale = {factor}"),
         "vol" => "a .vol file's own bounding box in metres (re-export it)".to_string(),
-        _ => format!("medium.voxel_size = {}", scene.desc.medium.voxel_size * factor),
+        _ => format!("medium.voxel_size = {}", scene.desc.medium.voxel_size.scaled(factor)),
     };
     let hint = if across < SMALLEST_M {
         "real clouds are 100 m to 10 km across; a file modelled in other units needs rescaling"
@@ -50,7 +50,7 @@ mod tests {
     fn warning_for(voxel_size: f32) -> Option<String> {
         let mut d = SceneDesc::default();
         d.medium.resolution = [8, 6, 4];
-        d.medium.voxel_size = voxel_size;
+        d.medium.voxel_size = voxel_size.into();
         warning(&Scene::build(d, "s.toml", Path::new(".")).unwrap())
     }
 

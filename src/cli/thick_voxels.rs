@@ -60,7 +60,7 @@ mod tests {
     fn warning_with(sigma_t: f32, method: Method, edit: impl FnOnce(&mut SceneDesc)) -> Option<String> {
         let mut d = SceneDesc::default();
         d.medium.resolution = [20, 16, 12];
-        d.medium.voxel_size = 25.0;
+        d.medium.voxel_size = 25.0.into();
         d.medium.sigma_t = sigma_t;
         d.render.method = method;
         edit(&mut d);

@@ -123,14 +123,14 @@ fn placed(d: &MediumDesc, file: &str, name: String, grid: impl FnOnce() -> Resul
     check(
         file,
         "medium.voxel_size",
-        d.voxel_size.is_finite() && d.voxel_size > 0.0,
+        d.voxel_size.is_valid(),
         d.voxel_size,
-        "voxel size must be positive (m)",
+        "a voxel's edges must be finite and positive (m): one number, or [x, y, z]",
     )?;
     Ok(Loaded {
         grid: grid()?,
         origin: Vec3::from(d.origin),
-        voxel_size: Vec3::splat(d.voxel_size),
+        voxel_size: d.voxel_size.to_vec3(),
         name,
         downsampled: false,
     })

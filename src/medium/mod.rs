@@ -25,6 +25,7 @@ pub mod subgrid;
 pub(crate) mod test_grids;
 pub mod up_axis;
 pub mod vdb;
+pub mod voxel_size;
 
 use crate::error::{check, finite3, rgb_in_unit};
 use crate::error::{Error, Result};
@@ -41,6 +42,7 @@ pub use grid::Grid3;
 pub use majorant::MajorantGrid;
 pub use subgrid::SubGrid;
 pub use up_axis::UpAxis;
+pub use voxel_size::VoxelSize;
 
 /// Largest voxel edge accepted (m): beyond about 1e15 m the diffusion solve's squared voxel
 /// sizes overflow f32; no cloud has voxels of 1000 km.
@@ -68,8 +70,9 @@ pub struct MediumDesc {
     pub seed: u64,
     /// Procedural resolution (nx, ny, nz).
     pub resolution: [usize; 3],
-    /// Voxel edge length (m), for `.npy`, `.raw` and procedural grids.
-    pub voxel_size: f32,
+    /// Voxel edge length (m), or one per axis `[x, y, z]` in the file's axes, for `.npy`, `.raw`
+    /// and procedural grids.
+    pub voxel_size: VoxelSize,
     /// Minimum corner of the grid (m), for `.npy`, `.raw` and procedural grids.
     pub origin: [f32; 3],
     /// Extinction coefficient at density 1 (m⁻¹).
@@ -100,7 +103,7 @@ impl Default for MediumDesc {
             grid: "procedural".into(),
             seed: 1,
             resolution: [100, 80, 60],
-            voxel_size: 10.0,
+            voxel_size: VoxelSize::Cube(10.0),
             origin: [-500.0, 0.0, -300.0],
             sigma_t: 0.05,
             albedo: [0.999, 0.999, 0.999],

@@ -196,7 +196,7 @@ mod tests {
     fn exports_every_part_and_the_same_grid() {
         let mut d = SceneDesc::default();
         d.medium.resolution = [12, 10, 8];
-        d.medium.voxel_size = 50.0;
+        d.medium.voxel_size = 50.0.into();
         let scene = Scene::build(d, "t.toml", Path::new(".")).unwrap();
         let dir = tempfile::tempdir().unwrap();
         let files = export(&scene, dir.path()).unwrap();

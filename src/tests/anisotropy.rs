@@ -97,7 +97,7 @@ fn flux_is_ficks_law_in_the_interior() {
 fn small_scene(g: f32, method: Method, aniso: bool) -> Scene {
     Scene::load(None, |d| {
         d.medium.resolution = [20, 16, 12];
-        d.medium.voxel_size = 50.0;
+        d.medium.voxel_size = 50.0.into();
         d.medium.g = g;
         d.camera.width = 16;
         d.camera.height = 12;

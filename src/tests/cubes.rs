@@ -475,7 +475,7 @@ fn bad_cube_keys_are_rejected_with_the_field_named() {
 fn clear_air_on_a_small_scene_lights_the_ground_and_fills_every_needed_bin() {
     let mut desc = crate::SceneDesc::default();
     desc.medium.resolution = [25, 20, 15];
-    desc.medium.voxel_size = 40.0;
+    desc.medium.voxel_size = 40.0.into();
     desc.render.ground_samples = 8;
     let scene = crate::Scene::build(desc, "small", std::path::Path::new(".")).unwrap();
     let sun_t = crate::lit::sunlight::SunTransmittance::compute(&scene.medium, scene.sun.dir);

@@ -228,7 +228,7 @@ fn energy_balance_with_albedo_one() {
 fn default_small() -> Scene {
     Scene::load(None, |d| {
         d.medium.resolution = [50, 40, 30];
-        d.medium.voxel_size = 20.0;
+        d.medium.voxel_size = 20.0.into();
         d.camera.width = 64;
         d.camera.height = 48;
     })

@@ -87,7 +87,7 @@ fn every_method_is_finite_on_extreme_media() {
                     let label = format!("τ/voxel {tau}, g {g}, albedo {albedo}, {}", m.name());
                     let s = Scene::load(None, |d: &mut SceneDesc| {
                         d.medium.grid = grid.to_str().unwrap().to_string();
-                        d.medium.voxel_size = voxel;
+                        d.medium.voxel_size = voxel.into();
                         d.medium.origin = [-150.0, 100.0, -150.0];
                         d.medium.sigma_t = tau / voxel;
                         d.medium.albedo = [albedo; 3];

@@ -109,6 +109,33 @@ fn loaders_round_trip() {
     }
 }
 
+/// `medium.voxel_size = [x, y, z]` (a simulation's cells that are not cubes) places an `.npy` or
+/// `.raw` grid as a `.vdb` ScaleMap would; with `up_axis = "z"` the edges turn with the grid.
+#[test]
+fn voxels_that_are_not_cubes_are_placed_per_axis() {
+    let dir = tempfile::tempdir().unwrap();
+    let g = test_grid();
+    loaders::write_npy(&dir.path().join("a.npy"), &g).unwrap();
+    loaders::write_raw(&dir.path().join("a.raw"), &g).unwrap();
+    for f in ["a.npy", "a.raw"] {
+        // The file's grid is 7 × 5 × 3; z-up, its third axis becomes the world's y.
+        for (up, edges, world, dims) in [
+            ("y", [50.0, 12.5, 40.0], [50.0, 12.5, 40.0], [7, 5, 3]),
+            ("z", [50.0, 40.0, 12.5], [50.0, 12.5, 40.0], [7, 3, 5]),
+        ] {
+            let text = format!(
+                "[medium]\ngrid = \"{f}\"\nvoxel_size = [{}, {}, {}]\nup_axis = \"{up}\"\n",
+                edges[0], edges[1], edges[2]
+            );
+            let path = dir.path().join("scene.toml");
+            std::fs::write(&path, text).unwrap();
+            let s = Scene::load(Some(&path), |_| {}).unwrap();
+            assert_eq!(s.medium.voxel_size, Vec3::from(world), "{f} {up}");
+            assert_eq!(s.medium.dims(), dims, "{f} {up}");
+        }
+    }
+}
+
 #[test]
 fn npy_float64_is_read() {
     let dir = tempfile::tempdir().unwrap();
@@ -187,7 +214,7 @@ fn single_render_is_identical_with_any_thread_count() {
 fn the_scene_empties_the_density_under_its_ground() {
     let mut desc = SceneDesc::default();
     desc.medium.resolution = [20, 16, 12];
-    desc.medium.voxel_size = 50.0;
+    desc.medium.voxel_size = 50.0.into();
     desc.medium.origin = [-500.0, -300.0, -300.0];
     desc.ground.as_mut().expect("the default scene has a ground").height = 0.0;
     let loaded = Medium::from_desc_with(&desc.medium, "cut.toml", Path::new("."), None).unwrap();

@@ -13,7 +13,7 @@ use crate::{Image, Method, NoProgress, Scene, SceneDesc};
 fn scene(method: Method, w: u32, h: u32, edit: impl FnOnce(&mut SceneDesc)) -> Scene {
     Scene::load(None, |d| {
         d.medium.resolution = [25, 20, 15];
-        d.medium.voxel_size = 40.0;
+        d.medium.voxel_size = 40.0.into();
         d.camera.width = w;
         d.camera.height = h;
         d.ground = None;
@@ -99,7 +99,7 @@ fn thin_box_single_scattering() {
     for m in METHODS {
         let mut s = scene(m, 3, 3, |d| {
             d.medium.resolution = [n, n, n];
-            d.medium.voxel_size = h;
+            d.medium.voxel_size = h.into();
             d.camera.position = [0.0, 0.0, 500.0];
             d.camera.look_at = [0.0, 0.0, 0.0];
             d.camera.fov_deg = 2.0;
@@ -241,4 +241,38 @@ fn sky_single_scattering_in_the_furnace() {
     let (off, on) = (mean_signed(false), mean_signed(true));
     assert!(on < 0.002, "the sky's single scattering makes light: {on}");
     assert!(off < -0.05 && on > -0.035, "mean signed error: off {off}, on {on}");
+}
+
+/// Voxels that are not cubes: a uniform slab 640 × 40 × 640 m held as 16 × 4 × 16 voxels of
+/// 40 × 10 × 40 m and as 64 × 4 × 64 cubes of 10 m is one medium (its trilinear field is constant
+/// in the box either way), so every method must render the two alike: a stage that took one
+/// edge for all three (a diffusion coupling, a sweep's step, a march) would be off by its
+/// squared aspect ratio, 16.
+#[test]
+fn voxels_that_are_not_cubes_render_as_cubes_of_the_same_medium() {
+    let slab = |dims: [usize; 3], edges: [f32; 3], method: Method| {
+        let mut desc = SceneDesc::default();
+        desc.sun.direction = None;
+        desc.sun.elevation_deg = Some(40.0);
+        desc.sun.azimuth_deg = Some(200.0);
+        desc.camera.position = [0.0, 900.0, 600.0];
+        desc.camera.look_at = [0.0, 520.0, 0.0];
+        desc.camera.width = 24;
+        desc.camera.height = 18;
+        desc.render.method = method;
+        let values = vec![1.0; dims.iter().product()];
+        let density = crate::Density::new(dims, values, edges, [-320.0, 500.0, -320.0]).unwrap();
+        render(&Scene::build_with(desc, "slab", ".".as_ref(), Some(density)).unwrap())
+    };
+    for m in [Method::Single, Method::Diffusion, Method::Full, Method::Transport] {
+        let boxes = slab([16, 4, 16], [40.0, 10.0, 40.0], m);
+        let cubes = slab([64, 4, 64], [10.0; 3], m);
+        let s = crate::tools::compare::compare(&boxes, &cubes, None).unwrap();
+        let (err, bias) = (s.block_mean_relative_error.unwrap(), s.block_bias.unwrap());
+        assert!(
+            err < 0.01 && bias.abs() < 0.01,
+            "{}: block error {err:.4}, bias {bias:+.4}",
+            m.name()
+        );
+    }
 }

@@ -12,7 +12,7 @@ fn scene(example: Option<&str>, method: Method, edit: impl Fn(&mut SceneDesc)) -
     let path = example.map(|e| Path::new(env!("CARGO_MANIFEST_DIR")).join("examples").join(e));
     Scene::load(path.as_deref(), |d| {
         d.medium.resolution = [25, 20, 15];
-        d.medium.voxel_size = 40.0;
+        d.medium.voxel_size = 40.0.into();
         d.sky.map_width = 64;
         d.camera.width = 24;
         d.camera.height = 18;

@@ -161,6 +161,18 @@ fn bad_medium_values() {
         ("[medium]\nvoxel_size = 1e-30\n", &["s.toml", "medium.voxel_size", "units"]),
         ("[medium]\nvoxel_size = -1.0\n", &["s.toml", "medium.voxel_size"]),
         (
+            "[medium]\nvoxel_size = [10.0, 0.0, 10.0]\n",
+            &["s.toml", "medium.voxel_size", "[x, y, z]"],
+        ),
+        (
+            "[medium]\nvoxel_size = [10.0, 10.0]\n",
+            &["s.toml", "voxel_size", "one per axis [x, y, z]"],
+        ),
+        (
+            "[medium]\nresolution = [4, 4, 4]\nvoxel_size = [10.0, 1e20, 10.0]\n",
+            &["s.toml", "medium.voxel_size", "1e6 m"],
+        ),
+        (
             "[medium]\nresolution = [4, 4, 4]\nvoxel_size = 1e20\n",
             &["s.toml", "medium.voxel_size", "1e6 m"],
         ),
