@@ -107,3 +107,67 @@ pub(super) fn step_cut(k: &Step, prev: &Plane, cur: &mut Plane, light: &mut [[f3
         light[fi as usize] = out;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::step::record;
+    use super::*;
+
+    /// A y-major step of 10 m (voxels of 10 m) between the centres of a 3 × 3 buffer.
+    fn one_cell(prev_rec: Record, rho: f32, source: [f32; 3], cut: Cut) -> ([f32; 3], Record) {
+        let k = Step {
+            weights: [1.0, 0.0, 0.0, 0.0],
+            up: 0,
+            stride: 3,
+            s: 10.0,
+            sigma_t: [0.05, 0.1, 0.2],
+            grey: false,
+        };
+        let (prev, mut cur) = (Plane::new(9, prev_rec), Plane::new(9, record([0.0; 3], 0.0, [0.0; 3])));
+        let mut light = vec![source];
+        step_cut(&k, &prev, &mut cur, &mut light, (rho, 0), 4, cut);
+        assert_eq!(cur.radiance(4), light[0], "the buffer and the full voxel hold the same radiance");
+        (light[0], cur.record(4))
+    }
+
+    #[test]
+    fn the_rows_cut_are_those_under_the_plane_and_going_up_those_stepping_from_under_it() {
+        // Centres at −5, 5, 15, … m; the plane at 0.
+        assert_eq!(cut_rows(-10.0, 10.0, 6, 0.0, -0.7, 12.0), 1, "going down: the centre under it");
+        assert_eq!(cut_rows(-10.0, 10.0, 6, 0.0, 1.0, 10.0), 2, "going up: and the row stepping from under it");
+        assert_eq!(cut_rows(-10.0, 10.0, 6, 0.0, 0.3, 10.0), 1, "going up, the back point 3 m under the centre at 5 m");
+        assert_eq!(cut_rows(20.0, 10.0, 6, 0.0, 1.0, 10.0), 0, "a box a voxel or more over the plane");
+        assert_eq!(cut_rows(-100.0, 10.0, 3, 0.0, -1.0, 10.0), 3, "a box wholly under it");
+    }
+
+    #[test]
+    fn a_cut_starts_or_ends_the_step_at_the_plane() {
+        let g = || [0.1, 0.2, 0.3];
+        assert_eq!(cut(-5.0, 0.0, 0.8, 10.0, g), Cut::Ground([0.1, 0.2, 0.3]));
+        assert_eq!(cut(5.0, 0.0, 1.0, 10.0, g), Cut::From { ground: [0.1, 0.2, 0.3], above: 0.5 });
+        assert_eq!(cut(-5.0, 0.0, -1.0, 10.0, g), Cut::To { above: 0.5 });
+        assert_eq!(cut(-5.0, 0.0, -0.4, 10.0, g), Cut::To { above: 0.0 }, "back point 1 m under the plane");
+        assert_eq!(cut(-5.0, 0.0, -0.6, 10.0, g), Cut::To { above: 1.0 / 6.0 });
+    }
+
+    #[test]
+    fn a_cut_step_integrates_only_the_segment_above_the_plane() {
+        let (rho, source) = (0.8f32, [0.4f32, 0.5, 0.6]);
+        let back = record([1.0, 2.0, 3.0], rho, source.map(|s| rho * s));
+        // Going up from a centre under the plane: the ground's radiance, whatever the medium.
+        assert_eq!(one_cell(back, rho, source, Cut::Ground([0.1, 0.2, 0.3])).0, [0.1, 0.2, 0.3]);
+        // Nothing of the segment above the plane: the ground's radiance, or the back radiance.
+        assert_eq!(one_cell(back, rho, source, Cut::From { ground: [0.1, 0.2, 0.3], above: 0.0 }).0, [0.1, 0.2, 0.3]);
+        assert_eq!(one_cell(back, rho, source, Cut::To { above: 0.0 }).0, [1.0, 2.0, 3.0]);
+        // A uniform medium and source over half the step: I = I₀ e^{−τ} + J (1 − e^{−τ}), τ = σt ρ 5 m.
+        for (cut, i0) in [(Cut::From { ground: [0.1, 0.2, 0.3], above: 0.5 }, [0.1, 0.2, 0.3]), (Cut::To { above: 0.5 }, [1.0, 2.0, 3.0])] {
+            let (got, rec) = one_cell(back, rho, source, cut);
+            for band in 0..3 {
+                let e = (-([0.05f32, 0.1, 0.2][band] * rho * 5.0)).exp();
+                let want = i0[band] * e + source[band] * (1.0 - e);
+                assert!((got[band] - want).abs() <= 1e-6 * want, "{cut:?} band {band}: {} vs {want}", got[band]);
+            }
+            assert_eq!(rec[3..], [rho, rho * source[0], rho * source[1], rho * source[2]], "the cell's own density and source");
+        }
+    }
+}

@@ -74,6 +74,12 @@ impl Plane {
         })
     }
 
+    /// Cell `i`'s record.
+    #[cfg(test)]
+    pub(in crate::transport) fn record(&self, i: usize) -> Record {
+        std::array::from_fn(|f| self.data[f * self.len + i])
+    }
+
     /// Cell `i`'s radiance per band.
     pub(in crate::transport) fn radiance(&self, i: usize) -> [f32; 3] {
         [0, 1, 2].map(|band| self.data[(I + band) * self.len + i])
