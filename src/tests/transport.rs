@@ -470,7 +470,16 @@ fn sunk_fog(deep: f32) -> Medium {
     for k in 0..dims[2] {
         for j in 0..6 {
             for i in 0..dims[0] {
-                g.set(i, j, k, if j < 2 { deep } else { 0.4 + 0.1 * ((i + 2 * k + 3 * j) % 4) as f32 });
+                g.set(
+                    i,
+                    j,
+                    k,
+                    if j < 2 {
+                        deep
+                    } else {
+                        0.4 + 0.1 * ((i + 2 * k + 3 * j) % 4) as f32
+                    },
+                );
             }
         }
     }
@@ -509,7 +518,17 @@ fn fog_under_the_ground_takes_no_part_in_the_transport() {
             scale = scale.max(a.abs());
         }
     }
-    assert!(scale > 0.0 && worst < 2e-3 * scale, "largest change of I00 at and above the plane: {}", worst / scale);
-    let ground_change = ft.ground.radiance.iter().zip(&fk.ground.radiance).map(|(a, b)| (*a - *b).abs().max_element() / a.max_element()).fold(0f32, f32::max);
+    assert!(
+        scale > 0.0 && worst < 2e-3 * scale,
+        "largest change of I00 at and above the plane: {}",
+        worst / scale
+    );
+    let ground_change = ft
+        .ground
+        .radiance
+        .iter()
+        .zip(&fk.ground.radiance)
+        .map(|(a, b)| (*a - *b).abs().max_element() / a.max_element())
+        .fold(0f32, f32::max);
     assert!(ground_change < 2e-3, "largest change of the ground's radiance: {ground_change}");
 }

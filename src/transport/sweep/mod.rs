@@ -260,11 +260,11 @@ fn sweep_kernel<V: Vector>(
             };
             if cut_lo < cut_hi {
                 let gh = c.ground_height.unwrap_or(0.0);
-                for ib in cut_lo..cut_hi {
+                for (ib, &cell) in row.iter().enumerate().take(cut_hi).skip(cut_lo) {
                     let v = coord(pa as isize, ib as isize, ic as isize);
                     let y = c.origin.y + (v[1] as f64 + 0.5) * c.h[1];
                     let at = ground_cut::cut(y, gh, om.y, s as f64, || c.boundary(om, v[0], v[1], v[2], ground, skyr));
-                    ground_cut::step_cut(&k, &prev, &mut cur, light, row[ib], l0 + ib, at);
+                    ground_cut::step_cut(&k, &prev, &mut cur, light, cell, l0 + ib, at);
                 }
             }
             if cut_hi < hi {
