@@ -91,15 +91,18 @@ impl SunTransmittance {
     /// The transmittance at the centres of the grid voxels `voxels` (grid indices of full voxels
     /// or their neighbours), rounded as [`Self::compute`]'s grid stores it: the same values as
     /// that grid's there, marching only these voxels (the transport solve reads T at its full
-    /// voxels alone, a fifth of the Disney cloud's box).
-    pub fn at_voxels(m: &Medium, sun_dir: Vec3, voxels: &[usize]) -> Vec<f32> {
+    /// voxels alone, a fifth of the Disney cloud's box). A centre under `floor` (m: the ground's
+    /// height, under which the transport solve's cells hold the light at the plane) is taken at
+    /// that height.
+    pub fn at_voxels(m: &Medium, sun_dir: Vec3, voxels: &[usize], floor: Option<f32>) -> Vec<f32> {
         let (lo, hi) = m.active_box(1).unwrap_or(([0; 3], [0; 3]));
         let rho = m.density.box_copy(lo, hi);
         let [nx, ny, _] = m.dims();
         voxels
             .par_iter()
             .map(|&v| {
-                let p = m.voxel_center(v % nx, (v / nx) % ny, v / (nx * ny));
+                let mut p = m.voxel_center(v % nx, (v / nx) % ny, v / (nx * ny));
+                p.y = floor.map_or(p.y, |f| p.y.max(f));
                 Unit16::from_f32(transmittance(m, &rho, p, sun_dir)).to_f32()
             })
             .collect()
@@ -225,7 +228,7 @@ mod tests {
         let dir = Vec3::new(0.3, 0.8, -0.5).normalize();
         let grid = SunTransmittance::compute(&m, dir).grid;
         let voxels: Vec<usize> = (0..m.density.len()).filter(|v| m.density.at(*v) > 0.0).collect();
-        let at = SunTransmittance::at_voxels(&m, dir, &voxels);
+        let at = SunTransmittance::at_voxels(&m, dir, &voxels, None);
         assert!(at.iter().any(|t| *t < 0.9), "some voxel in shadow");
         for (v, t) in voxels.iter().zip(&at) {
             assert_eq!(t.to_bits(), grid.at_index(*v).to_bits(), "voxel {v}");

@@ -460,3 +460,75 @@ fn the_eye_inside_the_cloud_sees_what_reference_sees() {
         100.0 * (t / r - 1.0)
     );
 }
+
+/// A fog layer of 12 × 7 × 12 voxels of 10 m from y = −30 m, density 0.4–0.7 in rows 2..6 and
+/// `deep` in rows 0 and 1: those lie a voxel or more under a ground at 0 (centres −25 and −15 m),
+/// row 2 (centre −5 m) straddles it.
+fn sunk_fog(deep: f32) -> Medium {
+    let dims = [12, 7, 12];
+    let mut g = Grid3::filled(dims, 0.0);
+    for k in 0..dims[2] {
+        for j in 0..6 {
+            for i in 0..dims[0] {
+                g.set(
+                    i,
+                    j,
+                    k,
+                    if j < 2 {
+                        deep
+                    } else {
+                        0.4 + 0.1 * ((i + 2 * k + 3 * j) % 4) as f32
+                    },
+                );
+            }
+        }
+    }
+    Medium::new(g, Vec3::new(-60.0, -30.0, -60.0), Vec3::splat(10.0), 0.05, Rgb::splat(0.99), 0.85)
+}
+
+#[test]
+fn fog_under_the_ground_takes_no_part_in_the_transport() {
+    // The ground bounds the transport domain: the density under the plane (given to the solver
+    // as it is here; a scene empties the voxels a voxel or more under it, `Medium::emptied_below`)
+    // must not change the solution: thin or thick, the same light at and above the plane. Swept
+    // as medium, the thick fog under the plane was lit through it and shone up into the fog.
+    use crate::lighting::Ground;
+    let (sun, sky) = high_sun_and_blue_sky();
+    let ground = Ground {
+        height: 0.0,
+        albedo: Rgb::splat(0.3),
+    };
+    let s = TransportSettings {
+        tolerance: 1e-4,
+        ..TransportSettings::default()
+    };
+    let (thin, thick) = (sunk_fog(0.05), sunk_fog(5.0));
+    let ft = solve(&thin, &sun, &sky, Some(&ground), &s, &NoProgress).unwrap();
+    let fk = solve(&thick, &sun, &sky, Some(&ground), &s, &NoProgress).unwrap();
+    assert_eq!(ft.full_voxels, fk.full_voxels);
+    let nsh = ft.diffuse_source.len() / (3 * ft.full_voxels);
+    let [nx, ny, _] = thin.dims();
+    let mut worst = 0f32;
+    let mut scale = 0f32;
+    // Every full voxel from the straddling row up.
+    for (fi, _) in ft.full.full_voxels().enumerate().filter(|(_, v)| (v / nx) % ny >= 2) {
+        for band in 0..3 {
+            let (a, b) = (ft.diffuse_source[(fi * 3 + band) * nsh], fk.diffuse_source[(fi * 3 + band) * nsh]);
+            worst = worst.max((a - b).abs());
+            scale = scale.max(a.abs());
+        }
+    }
+    assert!(
+        scale > 0.0 && worst < 2e-3 * scale,
+        "largest change of I00 at and above the plane: {}",
+        worst / scale
+    );
+    let ground_change = ft
+        .ground
+        .radiance
+        .iter()
+        .zip(&fk.ground.radiance)
+        .map(|(a, b)| (*a - *b).abs().max_element() / a.max_element())
+        .fold(0f32, f32::max);
+    assert!(ground_change < 2e-3, "largest change of the ground's radiance: {ground_change}");
+}

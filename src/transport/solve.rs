@@ -169,7 +169,7 @@ pub fn solve_warm(
         });
     }
     let index = FullVoxels::of(&m.density);
-    let sun_t = sun_transmittance(m, sun, &optics, &index.voxels);
+    let sun_t = sun_transmittance(m, sun, &optics, &index.voxels, ground.map(|g| g.height));
     let ctx = Ctx::new(m, sky, ground, &index, &sun_t, s.order, &optics.bands);
     let q = Quadrature::product(s.n_mu, 2 * s.n_mu);
     let tables = pair_tables(&q, sun, s.order, &optics);
@@ -218,9 +218,10 @@ pub fn solve_warm(
 }
 
 /// δ-M sun transmittance T′ = T^{1 − a f} = T^{σt′/σt} at the centres of the full voxels
-/// (grid indices `voxels`), per band.
-fn sun_transmittance(m: &Medium, sun: &Sun, optics: &TransportOptics, voxels: &[usize]) -> Vec<[f32; 3]> {
-    let exact = crate::lit::sunlight::SunTransmittance::at_voxels(m, sun.dir, voxels);
+/// (grid indices `voxels`), per band; a centre under the ground (height `floor`, m) is taken on
+/// the plane above it, whose light its cell holds (`sweep::ground_cut`).
+fn sun_transmittance(m: &Medium, sun: &Sun, optics: &TransportOptics, voxels: &[usize], floor: Option<f32>) -> Vec<[f32; 3]> {
+    let exact = crate::lit::sunlight::SunTransmittance::at_voxels(m, sun.dir, voxels, floor);
     let ratio = [0, 1, 2].map(|b| (optics.bands[b].sigma_t / optics.sigma_t) as f32);
     // Grey optics (every example): one power serves the three bands.
     let grey = ratio[1..].iter().all(|r| *r == ratio[0]);

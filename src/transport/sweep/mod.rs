@@ -18,6 +18,7 @@ use crate::math::Vec3;
 use glam::DVec3;
 use rayon::prelude::*;
 
+mod ground_cut;
 mod lanes;
 mod step;
 
@@ -213,6 +214,10 @@ fn sweep_kernel<V: Vector>(
         sigma_t: c.sigma_t,
         grey: c.grey,
     };
+    // Box rows (from the lowest) whose steps the ground plane cuts.
+    let cut = c.ground_height.map_or(0, |gh| {
+        ground_cut::cut_rows(c.origin.y + c.lo[1] as f64 * c.h[1], c.h[1], c.n[1], gh, om.y, s as f64)
+    });
     for step in 0..na {
         let pa = if oa > 0.0 { step } else { na - 1 - step };
         // The previous plane (the ghost plane before the box's first).
@@ -245,8 +250,25 @@ fn sweep_kernel<V: Vector>(
                 }
             }
             live_cur[ic] = (lo, hi);
-            if lo < hi {
-                step_row::<V>(&k, &prev, &mut cur, light, &row[lo..hi], &row_ahead[lo..hi], l0 + lo);
+            // The row's cells the ground plane cuts ([`ground_cut`]): a run from the row's start
+            // in x-major sweeps (rows run up along y), else the whole row or none.
+            let (cut_lo, cut_hi) = match a {
+                0 => (lo, hi.min(cut.max(lo))),
+                1 if pa < cut => (lo, hi),
+                2 if ic < cut => (lo, hi),
+                _ => (lo, lo),
+            };
+            if cut_lo < cut_hi {
+                let gh = c.ground_height.unwrap_or(0.0);
+                for (ib, &cell) in row.iter().enumerate().take(cut_hi).skip(cut_lo) {
+                    let v = coord(pa as isize, ib as isize, ic as isize);
+                    let y = c.origin.y + (v[1] as f64 + 0.5) * c.h[1];
+                    let at = ground_cut::cut(y, gh, om.y, s as f64, || c.boundary(om, v[0], v[1], v[2], ground, skyr));
+                    ground_cut::step_cut(&k, &prev, &mut cur, light, cell, l0 + ib, at);
+                }
+            }
+            if cut_hi < hi {
+                step_row::<V>(&k, &prev, &mut cur, light, &row[cut_hi..hi], &row_ahead[cut_hi..hi], l0 + cut_hi);
             }
         }
         let pa = pa as isize;
@@ -276,7 +298,9 @@ fn sweep_kernel<V: Vector>(
                     );
                 face[ax] += 0.5 * c.h[ax] * om[ax].signum();
                 let gh = c.ground_height.unwrap_or(0.0);
-                let q = face + om * ((gh - face.y).min(0.0) / om.y);
+                // Where the ray meets the plane: further on from a face above it, back from one under
+                // it (the light of a cell under the plane is that at the plane, [`ground_cut`]).
+                let q = face + om * ((gh - face.y) / om.y);
                 if let Some(col) = ground.column(q.x, q.z) {
                     let area = c.h[0] * c.h[1] * c.h[2] / c.h[ax];
                     let f = w as f32 as f64 * om[ax].abs() * area / (c.h[0] * c.h[2]);

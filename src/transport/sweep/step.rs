@@ -15,9 +15,9 @@ const LANES: usize = 8;
 
 /// Fields of a plane cell: the radiance per band ([`I`]..), the density ([`RHO`]) and the
 /// density × source per band ([`RS`]..).
-const I: usize = 0;
-const RHO: usize = 3;
-const RS: usize = 4;
+pub(super) const I: usize = 0;
+pub(super) const RHO: usize = 3;
+pub(super) const RS: usize = 4;
 const FIELDS: usize = 7;
 
 /// A plane cell's fields.
@@ -60,6 +60,26 @@ impl Plane {
         }
     }
 
+    /// The record at the back point of the cell `l` of the next plane: its four upwind cells'
+    /// ([`Step`]) bilinear mean, field by field, summed in [`step_row`]'s order.
+    pub(super) fn upwind(&self, k: &Step, l: usize) -> Record {
+        let u = usize::try_from(l as isize + k.up).expect("upwind cell inside the buffer");
+        std::array::from_fn(|f| {
+            let field = &self.data[f * self.len..(f + 1) * self.len];
+            let mut sum = 0f32;
+            for (wk, i) in k.weights.iter().zip([u, u + 1, u + k.stride, u + k.stride + 1]) {
+                sum += wk * field[i];
+            }
+            sum
+        })
+    }
+
+    /// Cell `i`'s record.
+    #[cfg(test)]
+    pub(in crate::transport) fn record(&self, i: usize) -> Record {
+        std::array::from_fn(|f| self.data[f * self.len + i])
+    }
+
     /// Cell `i`'s radiance per band.
     pub(in crate::transport) fn radiance(&self, i: usize) -> [f32; 3] {
         [0, 1, 2].map(|band| self.data[(I + band) * self.len + i])
@@ -72,7 +92,7 @@ impl Plane {
 /// weights make them smaller still) and 1/ρ overflows to inf below 2.9e-39, so it would be
 /// NaN or inf; a density of 1e-30 puts an optical depth below 1e-30·σt·h into the step, which no
 /// image can show.
-const RHO_WEIGHT_MIN: f32 = 1e-30;
+pub(super) const RHO_WEIGHT_MIN: f32 = 1e-30;
 
 /// What a sweep's steps share along one ordinate: the bilinear weights of the four upwind
 /// neighbours (offsets 0, 1, `stride`, `stride` + 1 from `up` cells off the cell), the step
@@ -260,8 +280,7 @@ const SERIES_OUT: [f32; 8] = [
 ];
 
 /// [`step_weights_lanes`] of one step.
-#[cfg(test)]
-fn step_weights(x: f32) -> (f32, f32, f32) {
+pub(super) fn step_weights(x: f32) -> (f32, f32, f32) {
     step_weights_lanes(x)
 }
 
