@@ -112,6 +112,9 @@ impl Density {
     /// let scene = Scene::build_with(desc, "example", ".".as_ref(), Some(density)).unwrap();
     /// assert_eq!(scene.grid_dims(), [4, 3, 2]);
     /// assert!(Density::new([4, 3, 2], vec![0.5; 23], 100.0, [0.0; 3]).is_err());
+    /// // Cells that are not cubes: 100 m wide, 25 m tall.
+    /// let layers = Density::new([4, 3, 2], vec![0.5; 24], [100.0, 25.0, 100.0], [0.0; 3]).unwrap();
+    /// assert_eq!(layers.voxel_size(), [100.0, 25.0, 100.0]);
     /// ```
     pub fn new(dims: [usize; 3], values: Vec<f32>, voxel_size: impl Into<VoxelSize>, origin: [f32; 3]) -> Result<Density> {
         Ok(Density {
