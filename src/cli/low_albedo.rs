@@ -1,21 +1,21 @@
 //! A warning when `full` or `diffusion` renders a medium darker (lower albedo) than the lowest at
 //! which it was measured near its accuracy budget against `reference` (≤ 12 % block error,
-//! |bias| ≤ 6 %; docs/accuracy.md, "Albedo below 1"): their images come out dark there, and the
-//! warning says by about how much and points to `transport`.
+//! |bias| ≤ 6 %; docs/accuracy.md, "Albedo below 1"): `full` comes out dark there and `diffusion`
+//! blotchy, and the warning says by about how much and points to `transport`.
 
 use crate::scene::{Method, Scene};
 
-/// The lowest albedo at which `method` was measured within budget (or just outside it), and what
-/// it measured below. From docs/accuracy.md, "Albedo below 1" (the built-in cumulus at 64×48, g =
-/// 0.9, `reference` at 2048 paths per pixel): `full` is −4.8 % at albedo 0.999 and −6.4 % at 0.99
-/// on sun035's view, −10 % at 0.97, and −13 to −20 % at 0.9 on five of six views (the eq. 9 orders'
-/// a^i and the diffusion's excess at low albedo do not cancel); `diffusion` is −4.4 / −0.4 % at 0.9
-/// on two views and −7.4 % (14.5 % block error) at 0.8. `transport` is within 3 % bias at every
-/// albedo of the sweep (0.3–0.999).
+/// The lowest albedo at which `method` was measured near its budget, and what it measured below.
+/// From docs/accuracy.md, "Albedo below 1" (the built-in cumulus at 64×48, g = 0.9, `reference`
+/// at 2048 paths per pixel): `full` is −6.3 % at albedo 0.999 and −7.8 % at 0.99 on sun035's view,
+/// −11 % at 0.97 and −20 % at 0.9, and −15 to −20 % at 0.9 on four of five views (its orders' a^i
+/// and an excess of light at low albedo do not cancel); `diffusion`'s block error is 9.6 % at
+/// 0.999, 9.9 % at 0.9, 16 % at 0.8 and 31 % at 0.5. `transport` is within 2 % bias at every
+/// albedo of the sweep (0.3–0.999; 4 % at g = 0).
 fn measured_down_to(method: Method) -> Option<(f32, &'static str)> {
     match method {
-        Method::Full => Some((0.99, "−10 % at albedo 0.97, −13 to −20 % at 0.9")),
-        Method::Diffusion => Some((0.9, "14.5 % block error and −7.4 % bias at albedo 0.8, 32 % at 0.5")),
+        Method::Full => Some((0.99, "−11 % at albedo 0.97, −15 to −20 % at 0.9")),
+        Method::Diffusion => Some((0.9, "16 % block error at albedo 0.8, 31 % at 0.5")),
         _ => None,
     }
 }
@@ -30,9 +30,9 @@ pub fn warning(scene: &Scene) -> Option<String> {
         return None;
     }
     Some(format!(
-        "{}: medium.albedo {albedo} is below {lowest}, the lowest at which method {} was measured within about 6 % \
-         of reference; below it the image comes out dark ({below}; docs/accuracy.md, \"Albedo below 1\"); render \
-         with --method transport (the default; within 3 % down to albedo 0.3)",
+        "{}: medium.albedo {albedo} is below {lowest}, the lowest at which method {} was measured near its accuracy \
+         budget against reference; below it the image comes out wrong ({below}; docs/accuracy.md, \"Albedo below 1\"); render \
+         with --method transport (the default; within 2 % down to albedo 0.3)",
         scene.source,
         m.name()
     ))
