@@ -32,7 +32,8 @@ pub fn warning(scene: &Scene) -> Option<String> {
     Some(format!(
         "{}: medium.albedo {albedo} is below {lowest}, the lowest at which method {} was measured near its accuracy \
          budget against reference; below it the image comes out wrong ({below}; docs/accuracy.md, \"Albedo below 1\"); render \
-         with --method transport (the default; within 2 % down to albedo 0.3)",
+         with --method transport (the default; within 2 % down to albedo 0.3 on the measured views, 4 % with isotropic \
+         scattering)",
         scene.source,
         m.name()
     ))
