@@ -37,6 +37,7 @@ use super::escape::SunChord;
 use super::orders::eye_weighted_depth;
 use super::orders_kernel::{edge_radiance, segment_orders, OrderKernel, DEFAULT_TAIL};
 use super::segments::{density_bounds, depth_from_samples, LowSegment, RayProfile};
+use super::tube;
 use crate::cube::CubeImage;
 use crate::math::{Rgb, Vec3};
 use crate::medium::Medium;
@@ -48,6 +49,12 @@ pub const MAX_BRIDGE_DEPTH: usize = 3;
 /// Near-gap level as a fraction of T_lo: interior stretches of a segment thinner than this fade
 /// towards a split, so two wisps joining across clear air leave no seam.
 pub const GAP_FRACTION: f32 = 0.25;
+
+/// Radius (m) of the tube around a segment that its cube leaves out (the cells the segment crosses,
+/// paper section 6): one voxel, the smallest edge.
+pub fn exclusion_radius(medium: &Medium) -> f32 {
+    medium.min_voxel()
+}
 
 /// What a cube renderer is asked for.
 #[derive(Clone, Copy, Debug)]
@@ -184,6 +191,9 @@ pub struct EdgeGather<'a> {
     medium: &'a Medium,
     settings: EdgeSettings,
     kernel: OrderKernel,
+    /// The chance that a segment's earlier collisions lie in its exclusion tube, by tube radius
+    /// and segment depth (for the albedo of the cube's orders, [`EdgeGather::tube_inside`]).
+    tube: tube::TubeTable,
     cubes: &'a dyn CubeSource,
     sun: SunInput<'a>,
     dense: &'a (dyn Fn(Vec3, Vec3) -> Rgb + Sync),
@@ -250,6 +260,7 @@ impl<'a> EdgeGather<'a> {
             medium,
             settings,
             kernel,
+            tube: tube::TubeTable::new(medium.optics.phase),
             cubes,
             sun,
             dense,
@@ -341,7 +352,7 @@ impl<'a> EdgeGather<'a> {
         let m = self.medium;
         let d = plan.d;
         let q = self.orders(seg.depth);
-        let mut e = self.cube_part(&q, k);
+        let mut e = self.cube_part(seg, &q, k);
         let es = self.segment_sun(plan, seg);
         if es.max_element() > 0.0 && q.len() >= 2 {
             // cos θ = (−ω_sun)·(−d): sunlight leaving towards the eye.
@@ -351,7 +362,9 @@ impl<'a> EdgeGather<'a> {
             let ks: Vec<Rgb> = (1..=q.len())
                 .map(|i| es * (phase.order(i).eval_cos_f64(c) * stay.powi(i as i32 - 1)) as f32)
                 .collect();
-            e += edge_radiance(&q, &ks, m.optics.albedo, 2);
+            // Every collision of the sun's orders is the segment's (the chord's factor says how
+            // many stay in the cloud): a^i.
+            e += edge_radiance(&q, &ks, m.optics.albedo, 1.0, 2);
         }
         e
     }
@@ -361,10 +374,24 @@ impl<'a> EdgeGather<'a> {
         segment_orders(depth, self.settings.tail)
     }
 
-    /// The cube's part of E_j, Σ_{i≥1} q_i a^i K_i, with the segment's Poisson weights `q`
-    /// ([`Self::orders`]); K's last order serves the orders beyond it.
-    pub fn cube_part(&self, q: &[f64], k: &[Rgb]) -> Rgb {
-        edge_radiance(q, k, self.medium.optics.albedo, 1)
+    /// The cube's part of E_j, Σ_{i≥1} q_i A_i K_i, with the segment's Poisson weights `q`
+    /// ([`Self::orders`]) and the albedo charged only for the collisions inside the segment's
+    /// exclusion tube ([`Self::tube_inside`]); K's last order serves the orders beyond it.
+    pub fn cube_part(&self, seg: &LowSegment, q: &[f64], k: &[Rgb]) -> Rgb {
+        edge_radiance(q, k, self.medium.optics.albedo, self.tube_inside(seg), 1)
+    }
+
+    /// The chance that an earlier collision of the light `seg` scatters to the eye lies inside
+    /// the tube its cube leaves out ([`tube::previous_collision_inside`]): the tube's radius
+    /// ([`exclusion_radius`]) in the segment's mean optical depth per m, the last collision at
+    /// the mean depth of the light the segment sends to the eye ([`eye_weighted_depth`]).
+    pub fn tube_inside(&self, seg: &LowSegment) -> f64 {
+        let len = seg.t1 - seg.t0;
+        if !(len > 0.0) || self.medium.optics.albedo.min_element() >= 1.0 {
+            return 1.0;
+        }
+        let radius = exclusion_radius(self.medium) as f64 * seg.depth / len;
+        self.tube.inside(radius, seg.depth)
     }
 
     /// The sun irradiance (W m⁻² per band) the segment's orders ≥ 2 start from. The paper's

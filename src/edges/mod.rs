@@ -9,6 +9,7 @@ pub(crate) mod orders;
 pub mod orders_kernel;
 pub mod segments;
 pub mod sparse;
+pub mod tube;
 
 pub use gather::{CubeRequest, CubeSource, EdgeGather, EdgeSettings, SunInput};
 pub use orders_kernel::segment_orders;

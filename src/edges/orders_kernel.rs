@@ -22,6 +22,7 @@
 
 use crate::cube::CubeImage;
 use crate::edges::orders::poisson_weights;
+use crate::edges::tube::order_albedo;
 use crate::lighting::bins::{rect_solid_angle, CUBE_FACES};
 use crate::math::Rgb;
 use crate::optics::Hg;
@@ -279,20 +280,20 @@ pub fn segment_orders(d: f64, tail: f64) -> Vec<f64> {
     q
 }
 
-/// E = Σ_{i≥1} q_i a^i K_i (eq. 9 with albedo), `q[0]` and `k[0]` being order 1; where `k` holds
-/// fewer orders than `q`, its last serves the rest (high orders are nearly isotropic). Orders with
-/// index ≥ `skip_below` only (1-based; pass 1 for all, 2 to leave out single scattering).
-pub fn edge_radiance(q: &[f64], k: &[Rgb], albedo: Rgb, skip_below: usize) -> Rgb {
-    let mut e = [0f64; 3];
-    let a = [albedo.x as f64, albedo.y as f64, albedo.z as f64];
-    let mut ai = [1f64; 3];
+/// E = Σ_{i≥1} q_i A_i K_i (eq. 9 with albedo), `q[0]` and `k[0]` being order 1; where `k` holds
+/// fewer orders than `q`, its last serves the rest (high orders are nearly isotropic). A_i is order
+/// i's albedo factor for the chance `inside` that each earlier collision lies in the segment's
+/// exclusion tube ([`super::tube::order_albedo`]: a^i at 1, where every collision is the
+/// segment's). Orders with index ≥ `skip_below` only (1-based; pass 1 for all, 2 to leave out
+/// single scattering).
+pub fn edge_radiance(q: &[f64], k: &[Rgb], albedo: Rgb, inside: f64, skip_below: usize) -> Rgb {
     let Some(last) = k.last() else {
         return Rgb::ZERO;
     };
+    let mut e = [0f64; 3];
+    let mut factors = [0, 1, 2].map(|b| order_albedo(albedo[b] as f64, inside));
     for (idx, (qi, ki)) in q.iter().zip(k.iter().chain(std::iter::repeat(last))).enumerate() {
-        for b in 0..3 {
-            ai[b] *= a[b];
-        }
+        let ai = [0, 1, 2].map(|b| factors[b].next().unwrap_or(0.0));
         if idx + 1 < skip_below {
             continue;
         }
@@ -461,17 +462,17 @@ mod tests {
         for &d in &[0.1f64, 1.0, 4.0] {
             let q = segment_orders(d, 1e-10);
             let kk = k.convolve(&cube, q.len());
-            let e = edge_radiance(&q, &kk, a, 1);
+            let e = edge_radiance(&q, &kk, a, 1.0, 1);
             for (b, (lb, ab)) in [(e.x, a.x), (e.y, a.y), (e.z, a.z)].iter().enumerate() {
                 let lin = [2.0, 1.0, 0.5][b];
                 let exact = ((-d * (1.0 - *ab as f64)).exp() - (-d).exp()) * lin;
                 assert!((*lb as f64 - exact).abs() < 1e-5, "d={d} band {b}: {lb} vs {exact}");
             }
             // Leaving out order 1 removes exactly q_1 a L.
-            let e2 = edge_radiance(&q, &kk, a, 2);
+            let e2 = edge_radiance(&q, &kk, a, 1.0, 2);
             assert!(((e - e2).x as f64 - q[0] * 2.0).abs() < 1e-5);
             // K's last order serves the orders beyond it: the same E from the first two alone.
-            assert_eq!(edge_radiance(&q, &kk[..2], a, 1), e);
+            assert_eq!(edge_radiance(&q, &kk[..2], a, 1.0, 1), e);
         }
     }
 }

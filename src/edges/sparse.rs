@@ -236,7 +236,7 @@ pub fn gather_pixels(
                             let es: Vec<Rgb> = picks
                                 .iter()
                                 .filter(|p| p.2 > 0.0)
-                                .map(|&(ci, j, _)| g.cube_part(q.get_or_insert_with(|| g.orders(job.seg.depth)), own_k(ci, j)))
+                                .map(|&(ci, j, _)| g.cube_part(&job.seg, q.get_or_insert_with(|| g.orders(job.seg.depth)), own_k(ci, j)))
                                 .collect();
                             ok = agree(&es, sp.smooth_tolerance);
                         }

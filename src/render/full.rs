@@ -255,7 +255,7 @@ impl<'a> GatherCubes<'a> {
         let cone_res = scene.render.edges.cube_res;
         GatherCubes {
             renderer,
-            exclude_radius: lit.medium.min_voxel(),
+            exclude_radius: crate::edges::gather::exclusion_radius(&lit.medium),
             rear_half_resolution: true,
             cones: face_cones(cone_res),
             cone_res,
