@@ -19,6 +19,7 @@ mod figures;
 mod frames;
 mod grid_scene;
 mod info;
+mod low_albedo;
 mod memory;
 mod output;
 mod progress;

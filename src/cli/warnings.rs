@@ -128,6 +128,7 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
     out.extend(hidden_sun_warning(scene));
     out.extend(super::cloud_size::warning(scene));
     out.extend(super::thick_voxels::warning(scene));
+    out.extend(super::low_albedo::warning(scene));
     out.extend(frame_warning(scene));
     out
 }
