@@ -6,7 +6,8 @@
 //! * the caller's **dense source** (the diffusion solution, radiance per unit optical depth) is
 //!   weighted by w(ρ) = smoothstep(T_lo, T, ρ): 0 below T_lo, 1 from T up;
 //! * each **low-density segment** S_j (0 < ρ < T, the paper's definition) gets
-//!   E_j = Σ_{i≥1} q_i a^i K_ij from a view-aligned cube at c_j (eq. 9, [`super::orders_kernel`]),
+//!   E_j = Σ_{i≥1} q_i A_i K_ij from a view-aligned cube at c_j (eq. 9, [`super::orders_kernel`];
+//!   A_i the albedo of order i's collisions inside the segment's exclusion tube, [`super::tube`]),
 //!   spread uniformly in optical depth over the segment (source E_j/(1 − e^{−D_j}), so an
 //!   unblended segment adds exactly E_j times the transmittance in front of it), weighted 1 − w(ρ);
 //! * what lies behind is attenuated by the exact transmittance, the background last.

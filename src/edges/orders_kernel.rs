@@ -14,11 +14,13 @@
 //! K_i = Σ_pixels w_i · L (eq. 9's convolution sample).
 //!
 //! **Albedo.** The Poisson weights q_i (eq. 8) count *collisions*; each collision scatters with
-//! probability a (per band) and absorbs otherwise, so the radiance that survives exactly i
-//! scatterings carries a^i: E = Σ_{i≥1} q_i a^i K_i. The paper writes eq. 9 for a ≈ 1; with
-//! absorption, Σ_{i≥0} q_i a^i = e^{−D(1−a)} is the correct transmittance of light that is only
-//! absorbed, not scattered, which checks the factor. The i = 0 term (unscattered light from behind)
-//! is not part of E: the gather composites what lies behind the segment attenuated by e^{−D}.
+//! probability a (per band) and absorbs otherwise. Light that took all i collisions on the segment
+//! carries a^i (Σ_{i≥0} q_i a^i = e^{−D(1−a)}, the transmittance for absorption alone); but the
+//! cube's light took its earlier collisions outside the segment's exclusion tube, absorbed there
+//! already, so order i carries A_i, the albedo of the collisions inside the tube only
+//! ([`super::tube`]): E = Σ_{i≥1} q_i A_i K_i, A_i = a^i where every collision is the tube's. The
+//! i = 0 term (unscattered light from behind) is not part of E: the gather composites what lies
+//! behind the segment attenuated by e^{−D}.
 
 use crate::cube::CubeImage;
 use crate::edges::orders::poisson_weights;
@@ -473,6 +475,10 @@ mod tests {
             assert!(((e - e2).x as f64 - q[0] * 2.0).abs() < 1e-5);
             // K's last order serves the orders beyond it: the same E from the first two alone.
             assert_eq!(edge_radiance(&q, &kk[..2], a, 1.0, 1), e);
+            // No earlier collision in the tube: the uniform field scattered once, a(1 − e^{−D}) L.
+            let once = edge_radiance(&q, &kk, a, 0.0, 1);
+            let exact = a.y as f64 * (1.0 - (-d).exp());
+            assert!((once.y as f64 - exact).abs() < 1e-5, "d={d}: {} vs {exact}", once.y);
         }
     }
 }

@@ -57,7 +57,7 @@ pub struct SparseSettings {
     pub partial_size: u32,
     /// Squares larger than `block`, up to this size (a power of two; ≤ `block`: none), are tried
     /// first where K is smooth: all four corners must match in depth and the cube part of E_j
-    /// their K give this pixel's segment (Σ q_i a^i K_i) agree within `smooth_tolerance`, else
+    /// their K give this pixel's segment (Σ q_i A_i K_i) agree within `smooth_tolerance`, else
     /// the square is halved as usual. Where the cloud's light changes little across a square,
     /// its inner lattice cubes are never rendered.
     pub coarse_block: u32,
