@@ -388,7 +388,7 @@ impl<'a> EdgeGather<'a> {
     /// the mean depth of the light the segment sends to the eye ([`eye_weighted_depth`]).
     pub fn tube_inside(&self, seg: &LowSegment) -> f64 {
         let len = seg.t1 - seg.t0;
-        if !(len > 0.0) || self.medium.optics.albedo.min_element() >= 1.0 {
+        if len <= 0.0 || self.medium.optics.albedo.min_element() >= 1.0 {
             return 1.0;
         }
         let radius = exclusion_radius(self.medium) as f64 * seg.depth / len;
