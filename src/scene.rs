@@ -80,7 +80,7 @@ macro_rules! render_table {
             }, )*
         ];
 
-        /// `[render]`: the flat table of the scene file (see [`RenderSettings`] for where each
+        /// `[render]`: the flat table of the scene file (see `RenderSettings` for where each
         /// key goes).
         #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
         #[serde(deny_unknown_fields, default)]

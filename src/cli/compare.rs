@@ -33,7 +33,7 @@ pub struct CompareArgs {
     #[arg(long, value_name = "NAME")]
     ref_layer: Option<String>,
     /// Keep only the pixels where a layer's luminance meets a condition (repeatable; all must
-    /// hold): LAYER<VALUE or LAYER>VALUE, LAYER a layer of REF (or of --where-from) or `image`
+    /// hold): `LAYER<VALUE` or `LAYER>VALUE`, LAYER a layer of REF (or of --where-from) or `image`
     /// for its main channels. E.g. the ground the eye sees where REF is darker than 0.15:
     /// `--all-pixels --where 'transmittance>0.99' --where 'light_ground>0' --where 'image<0.15'`.
     #[arg(long = "where", value_name = "LAYER<VALUE", value_parser = PixelCondition::parse)]

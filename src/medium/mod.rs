@@ -90,7 +90,7 @@ pub struct MediumDesc {
     /// Average N×N×N blocks after loading (1 = off).
     pub downsample: usize,
     /// Split each voxel into K×K×K after loading (K odd; 1 = off), the same trilinear density
-    /// field at K times the resolution ([`Grid3::refine`]): for clouds whose light enters through
+    /// field at K times the resolution (`Grid3::refine`): for clouds whose light enters through
     /// optically thick voxels (docs/accuracy.md, "Optically thick voxels").
     pub refine: usize,
     /// The grid file's up axis: `"y"` (this program, Houdini) or `"z"` (Blender), turned to y-up.
