@@ -7,7 +7,6 @@ pub mod empty;
 pub mod full;
 pub mod single;
 pub mod transport;
-pub mod transport_edge;
 pub mod transport_ground;
 pub mod warm;
 

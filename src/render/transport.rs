@@ -24,7 +24,6 @@ use crate::peak::PeakSpread;
 use crate::pipeline::{render_rows, NoProgress, Progress, Timings};
 use crate::render::edge_pixels::{refine_edges, EDGE_SAMPLES};
 use crate::render::single::pixel_sample;
-use crate::render::transport_edge::{edge_weighted, Corner};
 use crate::render::transport_ground::EyeGround;
 use crate::render::warm::Warm;
 use crate::scene::Scene;
@@ -34,34 +33,10 @@ use glam::DVec3;
 use rayon::prelude::*;
 use std::f64::consts::PI;
 
-/// Source per unit scaled optical depth towards the eye, per voxel: the diffuse
-/// (multiple-scattering) part and the sun's single scattering with the forward peak that δ-M
-/// truncated put back ([`sun_phase`]); at the full voxels (in grid order, as
-/// [`TransportField::full`] indexes them) and at the shell's ([`TransportField::edge`]).
-pub struct EyeSource {
-    pub diffuse: Vec<Rgb>,
-    pub sun: Vec<Rgb>,
-    pub shell_diffuse: Vec<Rgb>,
-    pub shell_sun: Vec<Rgb>,
-}
-
-/// The eye source of the solved field `f` ([`EyeSource`]).
-pub fn eye_source(scene: &Scene, f: &TransportField) -> EyeSource {
-    let voxels: Vec<usize> = f.full.full_voxels().collect();
-    let (diffuse, sun) = eye_source_at(scene, f, &voxels, &f.diffuse_source, &f.sun_t);
-    let e = &f.edge;
-    let (shell_diffuse, shell_sun) = eye_source_at(scene, f, &e.shell.voxels, &e.diffuse_source, &e.sun_t);
-    EyeSource {
-        diffuse,
-        sun,
-        shell_diffuse,
-        shell_sun,
-    }
-}
-
-/// The eye source at grid voxels `voxels` with their diffuse source coefficients `source` and
-/// δ-M sun transmittances `sun_t` (one per voxel).
-fn eye_source_at(scene: &Scene, f: &TransportField, voxels: &[usize], source: &[f32], sun_t: &[[f32; 3]]) -> (Vec<Rgb>, Vec<Rgb>) {
+/// Source per unit scaled optical depth towards the eye, per full voxel (in grid order, as
+/// [`TransportField::full`] indexes them): the diffuse (multiple-scattering) part and the sun's
+/// single scattering with the forward peak that δ-M truncated put back ([`sun_phase`]).
+pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
     let m = &scene.medium;
     let [nx, ny, _] = m.dims();
     let nsh = sh_count(f.order);
@@ -69,12 +44,13 @@ fn eye_source_at(scene: &Scene, f: &TransportField, voxels: &[usize], source: &[
     let peak = PeakSpread::truncated(f.optics.g, f.order);
     // ρ for the marches to the eye from the dense copy: the same bits, fewer instructions.
     let dense = m.dense_density();
+    let voxels: Vec<usize> = f.full.full_voxels().collect();
     voxels
         .par_iter()
         .enumerate()
         .map_init(
             || vec![0.0; nsh],
-            |y, (vi, &v)| {
+            |y, (fi, &v)| {
                 let (i, j, k) = (v % nx, (v / nx) % ny, v / (nx * ny));
                 let centre = m.voxel_center(i, j, k);
                 let to_voxel = centre - eye;
@@ -84,33 +60,33 @@ fn eye_source_at(scene: &Scene, f: &TransportField, voxels: &[usize], source: &[
                 let angle = ScatteringAngle::new(&peak, (scene.sun.dir.dot(d) as f64).clamp(-1.0, 1.0));
                 // Exact optical depth from the voxel's centre to the eye (or out of the grid).
                 let t_eye = m.transmittance_with(|v| dense.trilinear(v), centre, -d, 0.0, to_voxel.length()) as f64;
-                (voxel_diffuse(source, vi, y), voxel_sun(scene, f, &peak, sun_t[vi], &angle, t_eye))
+                (voxel_diffuse(f, fi, y), voxel_sun(scene, f, &peak, fi, &angle, t_eye))
             },
         )
         .unzip()
 }
 
-/// The diffuse source towards the eye of voxel `vi` (its index in `source`'s voxels, 3 × (order
-/// + 1)² coefficients each) for light leaving it along −d, from the harmonics `y` = Y_lm(−d).
-fn voxel_diffuse(source: &[f32], vi: usize, y: &[f64]) -> Rgb {
+/// The diffuse source towards the eye of full voxel `fi` (its index in [`TransportField::full`])
+/// for light leaving it along −d, from the harmonics `y` = Y_lm(−d).
+fn voxel_diffuse(f: &TransportField, fi: usize, y: &[f64]) -> Rgb {
     let nsh = y.len();
     Rgb::from(std::array::from_fn(|b| {
-        let base = (vi * 3 + b) * nsh;
-        let js = &source[base..base + nsh];
+        let base = (fi * 3 + b) * nsh;
+        let js = &f.diffuse_source[base..base + nsh];
         js.iter().zip(y.iter()).map(|(j, y)| *j as f64 * y).sum::<f64>().max(0.0) as f32
     }))
 }
 
-/// The sun's single scattering towards the eye at a voxel whose δ-M sun transmittance is
-/// `sun_t`, at the scattering angle `angle`, with the exact transmittance `t_eye` to the eye.
-fn voxel_sun(scene: &Scene, f: &TransportField, peak: &PeakSpread, sun_t: [f32; 3], angle: &ScatteringAngle, t_eye: f64) -> Rgb {
+/// The sun's single scattering towards the eye at full voxel `fi`, at the scattering angle
+/// `angle`, with the exact transmittance `t_eye` to the eye.
+fn voxel_sun(scene: &Scene, f: &TransportField, peak: &PeakSpread, fi: usize, angle: &ScatteringAngle, t_eye: f64) -> Rgb {
     let (o, e_sun) = (&f.optics, scene.sun.irradiance);
     let mut sun = [0f32; 3];
     // The last band's phase, its albedo, optics and T′_sun: a band alike takes it.
     let mut last: Option<(f64, &crate::transport::BandOptics, f64, f64)> = None;
     for b in 0..3 {
         let (a, band) = (o.albedo[b], &o.bands[b]);
-        let t_sun = sun_t[b] as f64;
+        let t_sun = f.sun_t[fi][b] as f64;
         if t_sun > 0.0 {
             let p = match last {
                 Some((la, lb, lt, p)) if la == a && lb == band && lt == t_sun => p,
@@ -190,16 +166,46 @@ fn sun_phase(peak: &PeakSpread, g: f64, band: &crate::transport::BandOptics, alb
     (smooth + t_eye.powf(af) * peak_part).max(0.0)
 }
 
-/// Trilinear interpolation of the eye source `e` at continuous voxel coordinates `v`, over the
-/// full and shell voxels of `f` ([`edge_weighted`]): its diffuse part (`sun` false) or the sun's
-/// single scattering.
+/// Trilinear interpolation of `values` (one per full voxel, [`eye_source`]) at continuous voxel
+/// coordinates `v`, over full voxels only.
 #[inline]
-fn eye_trilinear(m: &Medium, f: &TransportField, e: &EyeSource, sun: bool, v: Vec3) -> Rgb {
-    let (full, shell) = if sun { (&e.sun, &e.shell_sun) } else { (&e.diffuse, &e.shell_diffuse) };
-    edge_weighted(m.dims(), &f.full, &f.edge.shell, v, |c| match c {
-        Corner::Full(fi) => full[fi],
-        Corner::Shell(si) => shell[si],
-    })
+fn full_trilinear(m: &Medium, full: &FullIndex, values: &[Rgb], v: Vec3) -> Rgb {
+    full_weighted(m, full, v, |fi| values[fi])
+}
+
+/// The trilinear mean of `value(full voxel index)` over the full voxels among the eight around
+/// continuous voxel coordinates `v`, their weights renormalised (zero where none is full).
+#[inline]
+fn full_weighted(m: &Medium, full: &FullIndex, v: Vec3, mut value: impl FnMut(usize) -> Rgb) -> Rgb {
+    let d = m.dims();
+    let u = v - Vec3::splat(0.5);
+    let b = u.floor();
+    let t = u - b;
+    let (mut sum, mut wsum) = (Rgb::ZERO, 0.0f32);
+    for dz in 0..2 {
+        for dy in 0..2 {
+            for dx in 0..2 {
+                let c = [b.x as i64 + dx, b.y as i64 + dy, b.z as i64 + dz];
+                if (0..3).any(|a| c[a] < 0 || c[a] >= d[a] as i64) {
+                    continue;
+                }
+                let idx = c[0] as usize + d[0] * (c[1] as usize + d[1] * c[2] as usize);
+                let Some(fi) = full.slot(idx).checked_sub(1) else {
+                    continue;
+                };
+                let w = (if dx == 1 { t.x } else { 1.0 - t.x })
+                    * (if dy == 1 { t.y } else { 1.0 - t.y })
+                    * (if dz == 1 { t.z } else { 1.0 - t.z });
+                sum += value(fi) * w;
+                wsum += w;
+            }
+        }
+    }
+    if wsum > 0.0 {
+        sum / wsum
+    } else {
+        Rgb::ZERO
+    }
 }
 
 /// The background along a ray: the ground as the eye sees it ([`EyeGround`]), or the sky.
@@ -281,7 +287,7 @@ pub fn render_with(scene: &Scene, progress: &dyn Progress, timings: &mut Timings
 /// march per pixel.
 fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
     let m = &scene.medium;
-    let eye = timings.time("eye source", || eye_source(scene, field));
+    let (diffuse, sun) = timings.time("eye source", || eye_source(scene, field));
     let ground = EyeGround::new(scene, field);
     // March with the δ-M extinction of the middle band (the bands differ only by σt f Δa).
     let mut scaled = m.clone();
@@ -315,30 +321,19 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
                 (w < 1.0).then_some((r, p, dist, w))
             };
             let ms = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _| {
-                let far = eye_trilinear(m, field, &eye, false, v);
+                let far = full_trilinear(m, &field.full, &diffuse, v);
                 let Some((r, _, _, w)) = near_eye(v) else {
                     return far;
                 };
-                let source = |c| match c {
-                    Corner::Full(fi) => voxel_diffuse(&field.diffuse_source, fi, &r.y),
-                    Corner::Shell(si) => voxel_diffuse(&field.edge.diffuse_source, si, &r.y),
-                };
-                edge_weighted(m.dims(), &field.full, &field.edge.shell, v, source) * (1.0 - w) + far * w
+                full_weighted(m, &field.full, v, |fi| voxel_diffuse(field, fi, &r.y)) * (1.0 - w) + far * w
             });
             let ss = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _| {
-                let far = eye_trilinear(m, field, &eye, true, v);
+                let far = full_trilinear(m, &field.full, &sun, v);
                 let Some((r, p, dist, w)) = near_eye(v) else {
                     return far;
                 };
                 let t_eye = m.transmittance_with(|v| dense.trilinear(v), p, -d, 0.0, dist) as f64;
-                let source = |c| {
-                    let t_sun = match c {
-                        Corner::Full(fi) => field.sun_t[fi],
-                        Corner::Shell(si) => field.edge.sun_t[si],
-                    };
-                    voxel_sun(scene, field, &peak, t_sun, &r.angle, t_eye)
-                };
-                edge_weighted(m.dims(), &field.full, &field.edge.shell, v, source) * (1.0 - w) + far * w
+                full_weighted(m, &field.full, v, |fi| voxel_sun(scene, field, &peak, fi, &r.angle, t_eye)) * (1.0 - w) + far * w
             });
             let bg = if ms.transmittance > 0.0 {
                 background(scene, ground.as_ref(), o, d)

@@ -36,10 +36,6 @@ pub(crate) fn full_of(index: &FullIndex, g: usize) -> u32 {
     (index.slot(g) as u32).wrapping_sub(1)
 }
 
-/// The flag of a shell cell's index in a sweep's cells ([`box_cells`]): the cell steps as an
-/// empty one and records its radiance at index `i & !SHELL` (after the full voxels).
-pub(crate) const SHELL: u32 = 1 << 31;
-
 /// Cells ahead of the current one in a sweep's plane whose source and radiance are prefetched.
 pub(super) const PREFETCH_AHEAD: usize = 16;
 
@@ -89,7 +85,7 @@ impl<'a> Ctx<'a> {
         let rho = &*m.density;
         let (lo, hi) = m.active_box(1).unwrap_or(([0; 3], dims));
         let n = [0, 1, 2].map(|a| hi[a] - lo[a]);
-        let cells = [0, 1, 2].map(|a| box_cells(dims, lo, n, rho, &index.index, None, index.voxels.len(), a));
+        let cells = [0, 1, 2].map(|a| box_cells(dims, lo, n, rho, &index.index, index.voxels.len(), a));
         let spans = [0, 1, 2].map(|a| full_spans(&cells[a], n[cross_axes(a).0]));
         Ctx {
             dims,
@@ -142,12 +138,11 @@ pub(super) fn cross_axes(a: usize) -> (usize, usize) {
     }
 }
 
-/// The swept box's cells (density, full-voxel index, or with `shell` its voxels' indices after the
-/// full ones flagged [`SHELL`], or `u32::MAX`) in the order a sweep along
+/// The swept box's cells (density, full-voxel index or `u32::MAX`) in the order a sweep along
 /// major axis `a` visits them: planes of a, rows of the second cross axis, cells of the first;
 /// so the sweeps read them contiguously whichever axis they run along. [`PREFETCH_AHEAD`] empty
 /// cells follow the last, so that the sweep's look-ahead never runs off the end. Every index is
-/// checked below `voxels` (the number of full and shell voxels) here, once per solve: the sweeps index the
+/// checked below `voxels` (the number of full voxels) here, once per solve: the sweeps index the
 /// sources and radiances by it unchecked.
 pub(super) fn box_cells(
     dims: [usize; 3],
@@ -155,7 +150,6 @@ pub(super) fn box_cells(
     n: [usize; 3],
     rho: &Density,
     full: &FullIndex,
-    shell: Option<&FullIndex>,
     voxels: usize,
     a: usize,
 ) -> Vec<(f32, u32)> {
@@ -169,15 +163,8 @@ pub(super) fn box_cells(
                 v[b] += ib;
                 v[cc] += ic;
                 let vi = v[0] + dims[0] * (v[1] + dims[1] * v[2]);
-                let mut fi = full_of(full, vi);
-                if let Some(shell) = shell.filter(|_| fi == u32::MAX) {
-                    // Shell voxels follow the full ones.
-                    let si = full_of(shell, vi);
-                    if si != u32::MAX {
-                        fi = u32::try_from(full.count() + si as usize).expect("fewer than 2^31 voxels") | SHELL;
-                    }
-                }
-                assert!(fi == u32::MAX || ((fi & !SHELL) as usize) < voxels, "full-voxel index out of range");
+                let fi = full_of(full, vi);
+                assert!(fi == u32::MAX || (fi as usize) < voxels, "full-voxel index out of range");
                 out.push((rho.at(vi), fi));
             }
         }

@@ -16,7 +16,6 @@ mod dsa;
 mod grid;
 mod ground;
 mod mixing;
-pub mod shell;
 mod simd;
 pub mod slab;
 pub mod solve;

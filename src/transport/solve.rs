@@ -38,7 +38,6 @@ pub use super::ground::GroundMap;
 use super::source::{diffuse_source_of, parity_order, PairTables};
 use super::sphere::Quadrature;
 use super::start::{next_phase, start_over, Phase, StartTables};
-use super::shell::{shell_moments, Shell, ShellSource};
 use super::sweep::{sweep, BatchArrays};
 use super::warm::{TransportState, WarmStart, WarmStop};
 use super::TransportOptics;
@@ -95,9 +94,6 @@ pub struct TransportField {
     pub diffuse_source: Vec<f32>,
     /// δ-M sun transmittance T′ per full voxel's centre and band.
     pub sun_t: Vec<[f32; 3]>,
-    /// The diffuse source and T′ at the empty voxels beside the full ones (src/transport/shell.rs;
-    /// none for a live view's iterate).
-    pub edge: ShellSource,
     /// The ground's radiance.
     pub ground: GroundMap,
     /// Relative change of I0 after each iteration.
@@ -200,7 +196,7 @@ pub fn solve_warm(
     solver.check_converged(&it)?;
     progress.end();
     let Iterate {
-        mut moments,
+        moments,
         next,
         batch,
         history,
@@ -215,7 +211,6 @@ pub fn solve_warm(
     // T′ moves into the field once `ctx`, which borrows it, is dropped (below). The diffuse
     // source takes the spent `next`: a fresh array of its size would be mapped page by page.
     let mut field = solver.field(&moments, history, ground_map, Arc::clone(&index.index), Vec::new(), next);
-    field.edge = solver.edge(m, sun, ground, &mut moments, &field.ground);
     drop(ctx);
     let state = kept_ground.map(|g| TransportState::new(m, s.order, moments, 3 * nsh, g, slowest.unwrap_or(carried_ratio)));
     field.sun_t = sun_t;
@@ -504,21 +499,6 @@ impl Solver<'_> {
         })
     }
 
-    /// The shell's source for the gather ([`shell_moments`] from the converged `moments`, which
-    /// come back as they went in).
-    fn edge(&self, m: &Medium, sun: &Sun, ground: Option<&Ground>, moments: &mut Vec<f32>, map: &GroundMap) -> ShellSource {
-        let shell = Shell::of(self.ctx.full);
-        let sm = shell_moments(self.ctx, &shell, self.q, self.tables, moments, Vec::new(), map);
-        let (perm, _) = parity_order(self.s.order);
-        let diffuse_source = diffuse_source_of(&sm, &self.optics.bands, &perm, self.ctx.nsh, vec![0.0; sm.len()]);
-        let sun_t = sun_transmittance(m, sun, self.optics, &shell.voxels, ground.map(|g| g.height));
-        ShellSource {
-            shell,
-            diffuse_source,
-            sun_t,
-        }
-    }
-
     /// The field of `moments`, for the gather; its diffuse source is written over `spare` (as
     /// long as `moments`).
     fn field(
@@ -537,7 +517,6 @@ impl Solver<'_> {
             full,
             diffuse_source: diffuse_source_of(moments, &self.optics.bands, &perm, self.ctx.nsh, spare),
             sun_t,
-            edge: ShellSource::none(),
             ground,
             history,
             full_voxels: self.ctx.voxels.len(),

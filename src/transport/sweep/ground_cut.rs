@@ -15,7 +15,6 @@
 //! keeps its density, which shapes the field between the plane and the next centres (the
 //! trilinear field every method renders).
 
-use crate::transport::grid::SHELL;
 use super::step::{step_weights, Plane, Record, Step, I, RHO, RHO_WEIGHT_MIN, RS};
 
 /// How the ground plane cuts one cell's step.
@@ -62,13 +61,11 @@ pub(super) fn cut(y: f64, gh: f64, om_y: f64, s: f64, ground: impl FnOnce() -> [
 
 /// Step cell `l` of the plane buffer `cur` (density and full-voxel index `cell`) cut by the
 /// ground ([`Cut`]): its upwind record from `prev`, its source in `light` (which receives its
-/// radiance if it is full or in the shell), as [`super::step::step_row`] steps the others. Every weight is ≥ 0,
+/// radiance if it is full), as [`super::step::step_row`] steps the others. Every weight is ≥ 0,
 /// so the radiance is ≥ 0 where the sources and the ground's radiance are.
 pub(super) fn step_cut(k: &Step, prev: &Plane, cur: &mut Plane, light: &mut [[f32; 3]], cell: (f32, u32), l: usize, cut: Cut) {
     let (rho, fi) = cell;
-    // A shell cell ([`SHELL`]) steps as an empty one and records its radiance.
-    let recorded = fi != u32::MAX;
-    let full = recorded && fi & SHELL == 0;
+    let full = fi != u32::MAX;
     let own = if full { light[fi as usize] } else { [0.0; 3] };
     let back = prev.upwind(k, l);
     let rho_b = back[RHO];
@@ -106,8 +103,8 @@ pub(super) fn step_cut(k: &Step, prev: &Plane, cur: &mut Plane, light: &mut [[f3
     }
     let rec: Record = [out[0], out[1], out[2], rho, rho * own[0], rho * own[1], rho * own[2]];
     cur.set(l, rec);
-    if recorded {
-        light[(fi & !SHELL) as usize] = out;
+    if full {
+        light[fi as usize] = out;
     }
 }
 

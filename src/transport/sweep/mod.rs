@@ -464,7 +464,7 @@ mod tests {
             even,
             voxels: &voxels,
             sun_t: &sun_t,
-            cells: [0, 1, 2].map(|a| box_cells(dims, [0; 3], dims, &density, &full, None, voxels.len(), a)),
+            cells: [0, 1, 2].map(|a| box_cells(dims, [0; 3], dims, &density, &full, voxels.len(), a)),
             spans: [0, 1, 2].map(|_| Vec::new()),
             sigma_t: [0.05, 0.06, 0.07],
             grey: false,
@@ -562,7 +562,7 @@ mod tests {
         // splats' flux change per ordinate does not depend on the box: the box stepped to its
         // faces agrees with the whole grid's.
         let (lo, n) = ([1, 1, 0], [8, 7, 7]);
-        let cells = [0, 1, 2].map(|a| box_cells(dims, lo, n, &density, &full, None, voxels.len(), a));
+        let cells = [0, 1, 2].map(|a| box_cells(dims, lo, n, &density, &full, voxels.len(), a));
         let tight = Ctx {
             lo,
             n,

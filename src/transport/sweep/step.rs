@@ -8,7 +8,6 @@
 //! ordinate one cell at a time, in SSE2 and in AVX lanes).
 
 use super::lanes::{Vector, ROUND};
-use crate::transport::grid::SHELL;
 use crate::transport::simd::prefetch;
 
 /// Cells of a row stepped together: one AVX register of f32.
@@ -109,12 +108,11 @@ pub(in crate::transport) struct Step {
 }
 
 /// Step a run of cells of one plane row, [`Vector::N`] at a time: `row` holds their (density,
-/// full-voxel index, shell index with [`SHELL`] set, or `u32::MAX`), `ahead` the cells
+/// full-voxel index or `u32::MAX`), `ahead` the cells
 /// [`PREFETCH_AHEAD`](crate::transport::grid::PREFETCH_AHEAD) further on in the sweep (whose
 /// sources are prefetched), and `l0` is the first one's index in the plane buffers. Each cell
 /// reads its upwind record in `prev` and its source in `light`, writes its record in `cur` and,
-/// if full or in the shell, its radiance over its source in `light` (a shell cell steps as an
-/// empty one).
+/// if full, its radiance over its source in `light`.
 ///
 /// Panics where the run's upwind records or records lie outside the buffers; a full-voxel
 /// index must be below `light.len()` (the callers check it once per solve,
@@ -140,7 +138,7 @@ pub(in crate::transport) fn step_row<V: Vector>(
         let m = (n - start).min(V::N);
         let mut rho = [0f32; 8];
         let mut full = [0f32; 8];
-        let mut fi = [usize::MAX; 8];
+        let mut fi = [0usize; 8];
         let mut sc = [[0f32; 8]; 3];
         for j in 0..m {
             let (r, f) = row[start + j];
@@ -148,13 +146,10 @@ pub(in crate::transport) fn step_row<V: Vector>(
             // (past the L2 cache on large boxes): ask for the lines a few cells ahead.
             let fa = ahead[start + j].1;
             if fa != u32::MAX {
-                prefetch(light.as_ptr().wrapping_add((fa & !SHELL) as usize));
+                prefetch(light.as_ptr().wrapping_add(fa as usize));
             }
             rho[j] = r;
-            if f != u32::MAX && f & SHELL != 0 {
-                // A shell cell: stepped as an empty one, its radiance recorded.
-                fi[j] = (f & !SHELL) as usize;
-            } else if f != u32::MAX {
+            if f != u32::MAX {
                 full[j] = f32::from_bits(u32::MAX);
                 fi[j] = f as usize;
                 // SAFETY: a full cell's index is below light.len() (this function's contract).
@@ -201,8 +196,8 @@ pub(in crate::transport) fn step_row<V: Vector>(
             v.to_array(lanes);
         }
         for j in 0..m {
-            if fi[j] != usize::MAX {
-                // SAFETY: as the source's load above (a shell cell's index too).
+            if full[j].to_bits() != 0 {
+                // SAFETY: as the source's load above.
                 unsafe { *light.get_unchecked_mut(fi[j]) = [radiance[0][j], radiance[1][j], radiance[2][j]] };
             }
         }
