@@ -22,6 +22,7 @@ pub mod solve;
 mod source;
 pub mod sphere;
 mod start;
+pub mod sun_beam;
 mod sweep;
 pub mod warm;
 
