@@ -38,7 +38,7 @@ pub use super::ground::GroundMap;
 use super::source::{diffuse_source_of, parity_order, PairTables};
 use super::sphere::Quadrature;
 use super::start::{next_phase, start_over, Phase, StartTables};
-use super::sun_beam::{beam_factor, Side};
+use super::sun_beam::beam_factor;
 use super::sweep::{sweep, BatchArrays};
 use super::warm::{TransportState, WarmStart, WarmStop};
 use super::TransportOptics;
@@ -242,23 +242,21 @@ fn sun_transmittance(m: &Medium, sun: &Sun, optics: &TransportOptics, voxels: &[
             };
             // As the sweeps and the gather interpolate it (src/transport/sun_beam.rs).
             let rho = m.density.at(v) as f64;
-            let sides = beam_sides(&full, v, dir);
-            [0, 1, 2].map(|b| (t[b] as f64 * beam_factor(optics.bands[b].sigma_t, rho, h, dir, sides)) as f32)
+            let inside = full_neighbours(&full, v);
+            [0, 1, 2].map(|b| (t[b] as f64 * beam_factor(optics.bands[b].sigma_t, rho, h, dir, inside)) as f32)
         })
         .collect()
 }
 
-/// Per axis, what lies beside grid voxel `v` towards −a and +a ([`Side`]; `full`'s index, the
-/// direction towards the sun `dir`).
-fn beam_sides(full: &FullIndex, v: usize, dir: [f64; 3]) -> [[Side; 2]; 3] {
+/// Per axis, how many of grid voxel `v`'s two neighbours along it are full (`full`'s index).
+fn full_neighbours(full: &FullIndex, v: usize) -> [u8; 3] {
     let d = full.dims();
     let c = [v % d[0], (v / d[0]) % d[1], v / (d[0] * d[1])];
     let stride = [1, d[0], d[0] * d[1]];
     [0, 1, 2].map(|a| {
         let below = c[a] > 0 && full.is_full(v - stride[a]);
         let above = c[a] + 1 < d[a] && full.is_full(v + stride[a]);
-        let empty = |towards_plus: bool| if (dir[a] > 0.0) == towards_plus { Side::EmptySunward } else { Side::EmptyAway };
-        [if below { Side::Full } else { empty(false) }, if above { Side::Full } else { empty(true) }]
+        below as u8 + above as u8
     })
 }
 
