@@ -22,7 +22,6 @@ pub mod solve;
 mod source;
 pub mod sphere;
 mod start;
-pub mod sun_beam;
 mod sweep;
 pub mod warm;
 

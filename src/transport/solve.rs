@@ -38,7 +38,6 @@ pub use super::ground::GroundMap;
 use super::source::{diffuse_source_of, parity_order, PairTables};
 use super::sphere::Quadrature;
 use super::start::{next_phase, start_over, Phase, StartTables};
-use super::sun_beam::beam_factor;
 use super::sweep::{sweep, BatchArrays};
 use super::warm::{TransportState, WarmStart, WarmStop};
 use super::TransportOptics;
@@ -93,8 +92,7 @@ pub struct TransportField {
     /// Diffuse source coefficients a′χ′_l I_lm per full voxel, band, lm (W·m⁻²·sr⁻¹); the sun's
     /// first scattering is not in it (the gather adds it exactly).
     pub diffuse_source: Vec<f32>,
-    /// δ-M sun transmittance T′ per full voxel's centre and band, scaled for its linear
-    /// interpolation between the centres (src/transport/sun_beam.rs).
+    /// δ-M sun transmittance T′ per full voxel's centre and band.
     pub sun_t: Vec<[f32; 3]>,
     /// The ground's radiance.
     pub ground: GroundMap,
@@ -220,44 +218,23 @@ pub fn solve_warm(
 }
 
 /// δ-M sun transmittance T′ = T^{1 − a f} = T^{σt′/σt} at the centres of the full voxels
-/// (grid indices `voxels`), per band, scaled for its linear interpolation between the centres
-/// ([`beam_factor`]); a centre under the ground (height `floor`, m) is taken on the plane above
-/// it, whose light its cell holds (`sweep::ground_cut`).
+/// (grid indices `voxels`), per band; a centre under the ground (height `floor`, m) is taken on
+/// the plane above it, whose light its cell holds (`sweep::ground_cut`).
 fn sun_transmittance(m: &Medium, sun: &Sun, optics: &TransportOptics, voxels: &[usize], floor: Option<f32>) -> Vec<[f32; 3]> {
     let exact = crate::lit::sunlight::SunTransmittance::at_voxels(m, sun.dir, voxels, floor);
     let ratio = [0, 1, 2].map(|b| (optics.bands[b].sigma_t / optics.sigma_t) as f32);
     // Grey optics (every example): one power serves the three bands.
     let grey = ratio[1..].iter().all(|r| *r == ratio[0]);
-    let h = [0, 1, 2].map(|a| m.voxel_size[a] as f64);
-    let dir = [0, 1, 2].map(|a| sun.dir[a] as f64);
-    let full = m.density.full_index();
     exact
         .par_iter()
-        .zip(voxels.par_iter())
-        .map(|(&t, &v)| {
-            let t = if grey {
+        .map(|&t| {
+            if grey {
                 [t.powf(ratio[0]); 3]
             } else {
                 ratio.map(|r| t.powf(r))
-            };
-            // As the sweeps and the gather interpolate it (src/transport/sun_beam.rs).
-            let rho = m.density.at(v) as f64;
-            let inside = full_neighbours(&full, v);
-            [0, 1, 2].map(|b| (t[b] as f64 * beam_factor(optics.bands[b].sigma_t, rho, h, dir, inside)) as f32)
+            }
         })
         .collect()
-}
-
-/// Per axis, how many of grid voxel `v`'s two neighbours along it are full (`full`'s index).
-fn full_neighbours(full: &FullIndex, v: usize) -> [u8; 3] {
-    let d = full.dims();
-    let c = [v % d[0], (v / d[0]) % d[1], v / (d[0] * d[1])];
-    let stride = [1, d[0], d[0] * d[1]];
-    [0, 1, 2].map(|a| {
-        let below = c[a] > 0 && full.is_full(v - stride[a]);
-        let above = c[a] + 1 < d[a] && full.is_full(v + stride[a]);
-        below as u8 + above as u8
-    })
 }
 
 /// The per-pair tables of the sweeps for the sun's beam and the δ-M optics.
