@@ -98,7 +98,9 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
                 ));
             }
             let text = crate::io::read_capped(&sidecar, crate::io::MAX_TEXT_BYTES, "a .json sidecar")?;
-            let meta: RawMeta = serde_json::from_slice(&text).map_err(|e| {
+            // Windows editors start UTF-8 text with a byte-order mark, which JSON does not allow.
+            let text = text.strip_prefix(b"\xef\xbb\xbf").unwrap_or(&text);
+            let meta: RawMeta = serde_json::from_slice(text).map_err(|e| {
                 Error::format(
                     sidecar.display().to_string(),
                     format!("{e}; expected {RAW_SIDECAR_EXAMPLE}"),

@@ -101,7 +101,11 @@ fn loaders_round_trip() {
     loaders::write_npy(&dir.path().join("a.npy"), &g).unwrap();
     loaders::write_raw(&dir.path().join("a.raw"), &g).unwrap();
     loaders::write_vol(&dir.path().join("a.vol"), &g, Vec3::new(1.0, 2.0, 3.0), Vec3::new(15.0, 12.0, 9.0)).unwrap();
-    for f in ["a.npy", "a.raw", "a.vol"] {
+    // The same `.raw` whose sidecar a Windows editor saved with a UTF-8 byte-order mark.
+    std::fs::copy(dir.path().join("a.raw"), dir.path().join("b.raw")).unwrap();
+    let sidecar = std::fs::read(dir.path().join("a.json")).unwrap();
+    std::fs::write(dir.path().join("b.json"), [&b"\xef\xbb\xbf"[..], &sidecar].concat()).unwrap();
+    for f in ["a.npy", "a.raw", "a.vol", "b.raw"] {
         let s = scene_with_grid(dir.path(), f).unwrap();
         assert_eq!(s.medium.density.to_grid(), g, "{f}");
         assert_eq!(s.medium.origin, Vec3::new(1.0, 2.0, 3.0), "{f}");
