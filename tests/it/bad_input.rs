@@ -485,7 +485,17 @@ fn corrupt_npy_raw_and_vdb_files() {
     );
     let sphere = vdb_data("sphere64_blosc.vdb");
     grid_fails("g.vdb", &[("g.vdb", b"definitely not a vdb".to_vec())], &["g.vdb", "OpenVDB"]);
-    grid_fails("g.vdb", &[("g.vdb", sphere[..sphere.len() / 2].to_vec())], &["g.vdb"]);
+    // Cut short (a copy or download that stopped): said so, with how much of it is there.
+    grid_fails(
+        "g.vdb",
+        &[("g.vdb", sphere[..sphere.len() / 2].to_vec())],
+        &["g.vdb", "truncated", "cut short"],
+    );
+    grid_fails(
+        "g.vdb",
+        &[("g.vdb", sphere[..sphere.len() - 1].to_vec())],
+        &["g.vdb", "truncated", "ends at byte", "cut short"],
+    );
     grid_fails("g.vdb", &[("g.vdb", sphere[..40].to_vec())], &["g.vdb"]);
     render_fails(
         "[medium]\ngrid = \"g.vdb\"\ngrid_name = \"smoke\"\n",
