@@ -111,6 +111,12 @@ fn scene_text_that_is_not_a_scene() {
         &["s.toml", "not UTF-8", "TOML"],
     );
     fails(&[], &["render", "nope.toml", "-q"], &["nope.toml"]);
+    // A folder where the scene file should be: said so, not the OS's "Is a directory".
+    fails(
+        &[("d.toml/", vec![])],
+        &["render", "d.toml", "-q"],
+        &["d.toml", "a folder, not a scene file"],
+    );
     // Neither .toml nor a grid type: read as a scene, and the message says so.
     fails(
         &[("g.xyz", b"abc".to_vec())],
