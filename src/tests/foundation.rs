@@ -161,6 +161,70 @@ fn npy_float64_is_read() {
     assert_eq!(s.medium.density.get(2, 0, 1), 2.5);
 }
 
+/// A `.npy` with header `dict` and `body`.
+fn npy_bytes(dict: &str, body: &[u8]) -> Vec<u8> {
+    let mut h = dict.to_string();
+    while (10 + h.len() + 1) % 64 != 0 {
+        h.push(' ');
+    }
+    h.push('\n');
+    let mut b = b"\x93NUMPY\x01\x00".to_vec();
+    b.extend_from_slice(&(h.len() as u16).to_le_bytes());
+    b.extend_from_slice(h.as_bytes());
+    b.extend_from_slice(body);
+    b
+}
+
+/// NumPy's other numeric types (a uint8 CT stack, a float16 export, a boolean mask) are read by
+/// value, and a Fortran-order array (first index fastest) lands where a C-order one does.
+#[test]
+fn npy_of_integers_bools_halves_and_fortran_order_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    // Shape (nz, ny, nx) = (2, 1, 3): C order holds [z][y][x] = z·3 + x.
+    let c: Vec<u8> = (0..6).collect();
+    let fortran: Vec<u8> = [0, 3, 1, 4, 2, 5].to_vec(); // z fastest
+    let header = |descr: &str, fortran: bool| {
+        let f = if fortran { "True" } else { "False" };
+        format!("{{'descr': '{descr}', 'fortran_order': {f}, 'shape': (2, 1, 3), }}")
+    };
+    // 0 to 5 in binary16.
+    let halves: Vec<u8> = [0x0000u16, 0x3c00, 0x4000, 0x4200, 0x4400, 0x4500]
+        .iter()
+        .flat_map(|h| h.to_le_bytes())
+        .collect();
+    let files: [(&str, Vec<u8>); 5] = [
+        ("u1.npy", npy_bytes(&header("|u1", false), &c)),
+        (
+            "i2.npy",
+            npy_bytes(
+                &header(">i2", false),
+                &c.iter().flat_map(|&v| (v as i16).to_be_bytes()).collect::<Vec<_>>(),
+            ),
+        ),
+        ("f2.npy", npy_bytes(&header("<f2", false), &halves)),
+        ("fortran_u1.npy", npy_bytes(&header("|u1", true), &fortran)),
+        (
+            "fortran_f4.npy",
+            npy_bytes(
+                &header("<f4", true),
+                &fortran.iter().flat_map(|&v| (v as f32).to_le_bytes()).collect::<Vec<_>>(),
+            ),
+        ),
+    ];
+    for (name, bytes) in files {
+        std::fs::write(dir.path().join(name), bytes).unwrap();
+        let s = scene_with_grid(dir.path(), name).unwrap();
+        assert_eq!(s.medium.dims(), [3, 1, 2], "{name}");
+        for (x, z) in [(0, 0), (2, 0), (1, 1), (2, 1)] {
+            assert_eq!(s.medium.density.get(x, 0, z), (z * 3 + x) as f32, "{name} ({x}, 0, {z})");
+        }
+    }
+    // A boolean mask: 0 and 1.
+    std::fs::write(dir.path().join("b1.npy"), npy_bytes(&header("|b1", false), &[0, 1, 0, 1, 1, 0])).unwrap();
+    let s = scene_with_grid(dir.path(), "b1.npy").unwrap();
+    assert_eq!((s.medium.density.get(1, 0, 0), s.medium.density.get(2, 0, 1)), (1.0, 0.0));
+}
+
 #[test]
 fn procedural_cloud_is_deterministic_with_paper_proportions() {
     let a = Scene::default_scene().unwrap();

@@ -415,12 +415,13 @@ fn corrupt_npy_raw_and_vdb_files() {
             &["g.npy", "truncated"],
         ),
         (
-            npy("{'descr': '<i4', 'fortran_order': False, 'shape': (1, 2, 2), }", &four),
-            &["g.npy", "'<i4'"],
+            npy("{'descr': '<c8', 'fortran_order': False, 'shape': (1, 2, 2), }", &four),
+            &["g.npy", "'<c8'", "float16/32/64", "bool"],
         ),
+        // An integer array read by value: a negative one is not a density.
         (
-            npy("{'descr': '<f4', 'fortran_order': True, 'shape': (1, 2, 2), }", &four),
-            &["g.npy", "Fortran"],
+            npy("{'descr': '|i1', 'fortran_order': False, 'shape': (1, 2, 2), }", &[1, 0xfe, 3, 4]),
+            &["g.npy", "is -2", "non-negative"],
         ),
         (
             npy("{'descr': '<f4', 'fortran_order': False, 'shape': (2, 2), }", &four),
