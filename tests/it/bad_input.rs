@@ -304,6 +304,14 @@ fn bad_lights_ground_camera_and_render_keys() {
         &[("env.exr", bright.to_exr_bytes().unwrap())],
         &["s.toml", "sky.scale", "env.exr", "1e30"],
     );
+    // A NaN in the map: named by pixel, in the same words as the light it stands for.
+    let mut holed = cloudgi::Image::new(4, 2);
+    holed.pixels[5] = cloudgi::Rgb::new(0.1, f32::NAN, 0.1);
+    render_fails(
+        "[sky]\nmodel = \"envmap\"\npath = \"env.exr\"\n",
+        &[("env.exr", holed.to_exr_bytes().unwrap())],
+        &["env.exr", "pixel (1, 1) is [0.1, NaN, 0.1]", "finite, non-negative"],
+    );
 }
 
 // ------------------------------------------------------------------------------- grid files
