@@ -15,6 +15,12 @@ pub const MAX_TEXT_BYTES: u64 = 16 << 20;
 /// Read at most `max` bytes of `path`; more is an error that names `what` the file should be.
 pub fn read_capped(path: &Path, max: u64, what: &str) -> Result<Vec<u8>> {
     let f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    if f.metadata().is_ok_and(|m| m.is_dir()) {
+        return Err(Error::format(
+            path.display().to_string(),
+            format!("a folder, not {what}; give the path of {what}"),
+        ));
+    }
     let mut bytes = Vec::new();
     f.take(max + 1).read_to_end(&mut bytes).map_err(|e| Error::io(path, e))?;
     if bytes.len() as u64 > max {

@@ -167,7 +167,7 @@ def render(
     ``overrides``, a dict of tables in the scene file's schema (``{"sun": {"elevation_deg": 30}}``),
     applied on top of the scene after the scene itself is checked.
 
-    ``density``: float32 or float64 array indexed ``[z][y][x]`` (as a ``.npy`` file), replacing
+    ``density``: float, integer or bool array indexed ``[z][y][x]`` (as a ``.npy`` file), replacing
     ``medium.grid``; its voxels are ``voxel_size`` metres (one edge, or ``[x, y, z]`` as
     :func:`load_grid` returns it; default ``medium.voxel_size``) with the minimum corner at
     ``origin`` (default ``medium.origin``).

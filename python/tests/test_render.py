@@ -83,7 +83,7 @@ def npy_message(tmp_path, array) -> str:
 @pytest.mark.parametrize(
     "array",
     [
-        np.ones((4, 4, 4), np.int32),  # wrong dtype
+        np.ones((4, 4, 4), np.complex64),  # a dtype no density has
         np.ones((4, 4), np.float32),  # 2-D
         np.where(np.arange(64).reshape(4, 4, 4) == 21, np.nan, 1.0).astype(np.float32),  # NaN
         np.array(1.0, np.float32),  # 0-d: counted as 0 dimensions, as np.save writes it

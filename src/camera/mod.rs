@@ -62,6 +62,18 @@ pub struct Camera {
     pub height: u32,
 }
 
+/// The world axis least aligned with `v` (unit): an up that is never parallel to a view along `v`.
+fn perpendicular_axis(v: Vec3) -> Vec3 {
+    let a = v.abs();
+    if a.y <= a.x && a.y <= a.z {
+        Vec3::Y
+    } else if a.z <= a.x {
+        Vec3::NEG_Z
+    } else {
+        Vec3::X
+    }
+}
+
 impl Camera {
     /// Validate `[camera]`.
     pub fn from_desc(d: &CameraDesc, file: &str) -> Result<Camera> {
@@ -92,13 +104,23 @@ impl Camera {
         let up_hint = crate::math::unit_vector(d.up);
         check(file, "camera.up", up_hint.is_some(), d.up, "must be a finite non-zero vector")?;
         let cross = forward.cross(up_hint.unwrap_or(Vec3::Y));
-        check(
-            file,
-            "camera.up",
-            cross.length() > 1e-4,
-            d.up,
-            "is parallel to the view direction (look_at - position); choose an up vector that is not",
-        )?;
+        if cross.length() <= 1e-4 {
+            // A camera looking straight down or up with the default up: name an up that works.
+            let (a, b) = (perpendicular_axis(forward), -perpendicular_axis(forward));
+            return Err(crate::error::Error::invalid(
+                file,
+                "camera.up",
+                format!(
+                    "{:?} is not allowed: it is parallel to the view direction (look_at - position = {:?}), so \
+                     the image's top is undefined; set camera.up to the direction the top should face, e.g. \
+                     {:?} or {:?}",
+                    d.up,
+                    to.to_array(),
+                    a.to_array(),
+                    b.to_array()
+                ),
+            ));
+        }
         check(
             file,
             "camera.fov_deg",

@@ -86,6 +86,9 @@ pub fn run(a: TonemapArgs, quiet: bool) -> Result<()> {
     }
     super::output::check_files(&[&a.output], "--output", &[(a.input.clone(), "IN".to_string())])?;
     let img = Image::read_exr(&a.input)?;
+    if let Some(w) = invalid_pixels_warning(&img, &a.input) {
+        eprintln!("{w}");
+    }
     let (s, why) = stops(a.exposure, None, &img);
     img.write_png(&a.output, s)?;
     if !quiet {
@@ -94,9 +97,39 @@ pub fn run(a: TonemapArgs, quiet: bool) -> Result<()> {
     Ok(())
 }
 
+/// A warning when `img` holds pixels no render writes (NaN, infinite or negative): the preview
+/// still shows them, black or white, so the warning is what tells that the EXR is not sound.
+fn invalid_pixels_warning(img: &Image, path: &Path) -> Option<String> {
+    let bad = |p: &crate::math::Rgb| !p.is_finite() || p.min_element() < 0.0;
+    let (first, p) = img.pixels.iter().enumerate().find(|(_, p)| bad(p))?;
+    let count = img.pixels.iter().filter(|p| bad(p)).count();
+    Some(format!(
+        "warning: {}: {count} pixel(s) hold a NaN, infinite or negative value (the first at ({}, {}): {p}); \
+         the preview draws NaN and negative values black and infinite ones white. cloudgi render writes \
+         none: check what wrote this EXR",
+        path.display(),
+        first % img.width as usize,
+        first / img.width as usize
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pixels_no_render_writes_are_warned_about() {
+        let img = |v: f32| {
+            let mut i = Image::new(3, 2);
+            i.pixels.fill(crate::math::Rgb::new(0.5, v, 0.5));
+            i
+        };
+        assert_eq!(invalid_pixels_warning(&img(0.0), Path::new("a.exr")), None);
+        for v in [f32::NAN, f32::INFINITY, -1e-3] {
+            let w = invalid_pixels_warning(&img(v), Path::new("a.exr")).expect("a warning");
+            assert!(w.contains("a.exr") && w.contains("6 pixel(s)") && w.contains("(0, 0)"), "{w}");
+        }
+    }
 
     #[test]
     fn either_output_names_both_files() {

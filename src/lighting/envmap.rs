@@ -112,7 +112,7 @@ impl EnvMap {
             return Err(Error::format(
                 file,
                 format!(
-                    "pixel ({x}, {y}) is {:?}: an environment map must hold finite, non-negative radiance",
+                    "pixel ({x}, {y}) is {}: an environment map must hold finite, non-negative radiance",
                     img.pixels[k]
                 ),
             ));

@@ -98,7 +98,9 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
                 ));
             }
             let text = crate::io::read_capped(&sidecar, crate::io::MAX_TEXT_BYTES, "a .json sidecar")?;
-            let meta: RawMeta = serde_json::from_slice(&text).map_err(|e| {
+            // Windows editors start UTF-8 text with a byte-order mark, which JSON does not allow.
+            let text = text.strip_prefix(b"\xef\xbb\xbf").unwrap_or(&text);
+            let meta: RawMeta = serde_json::from_slice(text).map_err(|e| {
                 Error::format(
                     sidecar.display().to_string(),
                     format!("{e}; expected {RAW_SIDECAR_EXAMPLE}"),
@@ -310,7 +312,8 @@ pub fn write_vol(path: &Path, g: &Grid3, lo: Vec3, hi: Vec3) -> Result<()> {
 
 // ---------------------------------------------------------------- NumPy .npy
 
-/// Parse a `.npy` of float32 or float64 (either endianness), C order, shape (nz, ny, nx).
+/// Parse a `.npy` of shape (nz, ny, nx) in C or Fortran order, of any type
+/// [`NpyDtype`](super::npy_dtype::NpyDtype) reads (floats, integers, booleans; either endianness).
 pub fn parse_npy(b: &[u8], name: &str) -> Result<Grid3> {
     if b.len() < 10 || &b[0..6] != b"\x93NUMPY" {
         return Err(Error::format(name, "not a NumPy .npy file (missing the \\x93NUMPY magic)"));
@@ -350,12 +353,15 @@ pub fn parse_npy(b: &[u8], name: &str) -> Result<Grid3> {
         .and_then(|s| s.split('\'').next())
         .ok_or_else(|| Error::format(name, ".npy header has no 'descr'"))?;
     let fortran = field("fortran_order").map(|s| s.starts_with("True")).unwrap_or(false);
-    if fortran {
-        return Err(Error::format(
+    let dtype = super::npy_dtype::NpyDtype::parse(descr).ok_or_else(|| {
+        Error::format(
             name,
-            ".npy array is in Fortran order; save it in C order (numpy.ascontiguousarray) indexed [z][y][x]",
-        ));
-    }
+            format!(
+                ".npy dtype '{descr}' is not supported; save the array as {}",
+                super::npy_dtype::SUPPORTED
+            ),
+        )
+    })?;
     let shape_s = field("shape")
         .and_then(|s| s.strip_prefix('('))
         .and_then(|s| s.split(')').next())
@@ -378,7 +384,7 @@ pub fn parse_npy(b: &[u8], name: &str) -> Result<Grid3> {
     }
     let n = voxel_count([shape[2], shape[1], shape[0]], name)?;
     let body = &b[hend..];
-    let value_size = if descr.ends_with('8') { 8 } else { 4 };
+    let value_size = dtype.size;
     if n.checked_mul(value_size).is_some_and(|need| body.len() > need) {
         return Err(Error::format(
             name,
@@ -388,43 +394,32 @@ pub fn parse_npy(b: &[u8], name: &str) -> Result<Grid3> {
             ),
         ));
     }
-    let data: Vec<f32> = match descr {
-        "<f4" | "|f4" | ">f4" => {
-            need(n, 4, body.len(), name, "float32")?;
-            let be = descr.starts_with('>');
-            body[..4 * n]
-                .chunks_exact(4)
-                .map(|c| {
-                    if be {
-                        f32::from_be_bytes([c[0], c[1], c[2], c[3]])
-                    } else {
-                        f32::from_le_bytes([c[0], c[1], c[2], c[3]])
-                    }
-                })
-                .collect()
-        }
-        "<f8" | ">f8" => {
-            need(n, 8, body.len(), name, "float64")?;
-            float64_values(&body[..8 * n], descr.starts_with('>'), name)?
-        }
-        other => {
-            return Err(Error::format(
-                name,
-                format!(".npy dtype '{other}' is not supported; use float32 ('<f4') or float64 ('<f8')"),
-            ))
-        }
-    };
-    Grid3::from_vec([shape[2] as usize, shape[1] as usize, shape[0] as usize], data, name)
+    need(n, value_size, body.len(), name, descr)?;
+    let values = body[..value_size * n].chunks_exact(value_size).map(|c| dtype.value(c));
+    let data = narrowed(values, name)?;
+    let dims = [shape[2] as usize, shape[1] as usize, shape[0] as usize];
+    let data = if fortran { c_order(&data, dims) } else { data };
+    Grid3::from_vec(dims, data, name)
 }
 
-/// float64 values as the f32 densities are held in. A finite value past f32's range is named as
-/// such: cast, it would be reported as an infinite density the file does not hold.
-fn float64_values(b: &[u8], big_endian: bool, name: &str) -> Result<Vec<f32>> {
-    b.chunks_exact(8)
+/// The values of a Fortran-order array of shape (nz, ny, nx) (its first index fastest) in the C
+/// order [z][y][x] the grid holds (x fastest).
+fn c_order(fortran: &[f32], [nx, ny, nz]: [usize; 3]) -> Vec<f32> {
+    let mut out = Vec::with_capacity(fortran.len());
+    for z in 0..nz {
+        for y in 0..ny {
+            out.extend((0..nx).map(|x| fortran[z + nz * (y + ny * x)]));
+        }
+    }
+    out
+}
+
+/// Values read in f64 as the f32 densities are held in. A finite value past f32's range is named
+/// as such: cast, it would be reported as an infinite density the file does not hold.
+fn narrowed(values: impl Iterator<Item = f64>, name: &str) -> Result<Vec<f32>> {
+    values
         .enumerate()
-        .map(|(k, c)| {
-            let a: [u8; 8] = c.try_into().expect("chunk of 8");
-            let v = if big_endian { f64::from_be_bytes(a) } else { f64::from_le_bytes(a) };
+        .map(|(k, v)| {
             let narrow = v as f32;
             if v.is_finite() && !narrow.is_finite() {
                 return Err(Error::format(
@@ -438,6 +433,19 @@ fn float64_values(b: &[u8], big_endian: bool, name: &str) -> Result<Vec<f32>> {
             Ok(narrow)
         })
         .collect()
+}
+
+/// float64 values as the f32 densities are held in ([`narrowed`]).
+fn float64_values(b: &[u8], big_endian: bool, name: &str) -> Result<Vec<f32>> {
+    let values = b.chunks_exact(8).map(|c| {
+        let a: [u8; 8] = c.try_into().expect("chunk of 8");
+        if big_endian {
+            f64::from_be_bytes(a)
+        } else {
+            f64::from_le_bytes(a)
+        }
+    });
+    narrowed(values, name)
 }
 
 /// Write a float32 `.npy` of shape (nz, ny, nx).

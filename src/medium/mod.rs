@@ -16,6 +16,7 @@ pub mod grid;
 pub mod loaders;
 pub mod majorant;
 pub mod march;
+pub mod npy_dtype;
 pub mod procedural;
 pub mod remap;
 pub mod skin;

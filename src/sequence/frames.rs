@@ -21,9 +21,15 @@ impl FrameList {
             )
         };
         let number = |s: &str| -> Result<u32> {
-            s.trim()
-                .parse::<u32>()
-                .map_err(|_| bad(format!("`{}` is not a frame number (0 or more)", s.trim())))
+            let s = s.trim();
+            s.parse::<u32>().map_err(|_| {
+                // A run of digits too long for u32 is a number, just past the largest frame.
+                if !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit()) {
+                    bad(format!("frame {s} is past the largest frame number, {}", u32::MAX))
+                } else {
+                    bad(format!("`{s}` is not a frame number (0 or more)"))
+                }
+            })
         };
         let mut frames = Vec::new();
         if text.trim().is_empty() {
@@ -124,6 +130,7 @@ mod tests {
             ("1-3,2", "twice"),
             ("4x2", "needs a range"),
             ("0-4000000000", "more than"),
+            ("99999999999", "frame 99999999999 is past the largest frame number, 4294967295"),
         ] {
             let e = FrameList::parse(t, "command line", "--frames").unwrap_err().to_string();
             assert!(e.contains("--frames") && e.contains(why), "{t}: {e}");

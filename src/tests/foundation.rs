@@ -101,7 +101,11 @@ fn loaders_round_trip() {
     loaders::write_npy(&dir.path().join("a.npy"), &g).unwrap();
     loaders::write_raw(&dir.path().join("a.raw"), &g).unwrap();
     loaders::write_vol(&dir.path().join("a.vol"), &g, Vec3::new(1.0, 2.0, 3.0), Vec3::new(15.0, 12.0, 9.0)).unwrap();
-    for f in ["a.npy", "a.raw", "a.vol"] {
+    // The same `.raw` whose sidecar a Windows editor saved with a UTF-8 byte-order mark.
+    std::fs::copy(dir.path().join("a.raw"), dir.path().join("b.raw")).unwrap();
+    let sidecar = std::fs::read(dir.path().join("a.json")).unwrap();
+    std::fs::write(dir.path().join("b.json"), [&b"\xef\xbb\xbf"[..], &sidecar].concat()).unwrap();
+    for f in ["a.npy", "a.raw", "a.vol", "b.raw"] {
         let s = scene_with_grid(dir.path(), f).unwrap();
         assert_eq!(s.medium.density.to_grid(), g, "{f}");
         assert_eq!(s.medium.origin, Vec3::new(1.0, 2.0, 3.0), "{f}");
@@ -155,6 +159,70 @@ fn npy_float64_is_read() {
     let s = scene_with_grid(dir.path(), "b.npy").unwrap();
     assert_eq!(s.medium.dims(), [3, 1, 2]);
     assert_eq!(s.medium.density.get(2, 0, 1), 2.5);
+}
+
+/// A `.npy` with header `dict` and `body`.
+fn npy_bytes(dict: &str, body: &[u8]) -> Vec<u8> {
+    let mut h = dict.to_string();
+    while (10 + h.len() + 1) % 64 != 0 {
+        h.push(' ');
+    }
+    h.push('\n');
+    let mut b = b"\x93NUMPY\x01\x00".to_vec();
+    b.extend_from_slice(&(h.len() as u16).to_le_bytes());
+    b.extend_from_slice(h.as_bytes());
+    b.extend_from_slice(body);
+    b
+}
+
+/// NumPy's other numeric types (a uint8 CT stack, a float16 export, a boolean mask) are read by
+/// value, and a Fortran-order array (first index fastest) lands where a C-order one does.
+#[test]
+fn npy_of_integers_bools_halves_and_fortran_order_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    // Shape (nz, ny, nx) = (2, 1, 3): C order holds [z][y][x] = z·3 + x.
+    let c: Vec<u8> = (0..6).collect();
+    let fortran: Vec<u8> = [0, 3, 1, 4, 2, 5].to_vec(); // z fastest
+    let header = |descr: &str, fortran: bool| {
+        let f = if fortran { "True" } else { "False" };
+        format!("{{'descr': '{descr}', 'fortran_order': {f}, 'shape': (2, 1, 3), }}")
+    };
+    // 0 to 5 in binary16.
+    let halves: Vec<u8> = [0x0000u16, 0x3c00, 0x4000, 0x4200, 0x4400, 0x4500]
+        .iter()
+        .flat_map(|h| h.to_le_bytes())
+        .collect();
+    let files: [(&str, Vec<u8>); 5] = [
+        ("u1.npy", npy_bytes(&header("|u1", false), &c)),
+        (
+            "i2.npy",
+            npy_bytes(
+                &header(">i2", false),
+                &c.iter().flat_map(|&v| (v as i16).to_be_bytes()).collect::<Vec<_>>(),
+            ),
+        ),
+        ("f2.npy", npy_bytes(&header("<f2", false), &halves)),
+        ("fortran_u1.npy", npy_bytes(&header("|u1", true), &fortran)),
+        (
+            "fortran_f4.npy",
+            npy_bytes(
+                &header("<f4", true),
+                &fortran.iter().flat_map(|&v| (v as f32).to_le_bytes()).collect::<Vec<_>>(),
+            ),
+        ),
+    ];
+    for (name, bytes) in files {
+        std::fs::write(dir.path().join(name), bytes).unwrap();
+        let s = scene_with_grid(dir.path(), name).unwrap();
+        assert_eq!(s.medium.dims(), [3, 1, 2], "{name}");
+        for (x, z) in [(0, 0), (2, 0), (1, 1), (2, 1)] {
+            assert_eq!(s.medium.density.get(x, 0, z), (z * 3 + x) as f32, "{name} ({x}, 0, {z})");
+        }
+    }
+    // A boolean mask: 0 and 1.
+    std::fs::write(dir.path().join("b1.npy"), npy_bytes(&header("|b1", false), &[0, 1, 0, 1, 1, 0])).unwrap();
+    let s = scene_with_grid(dir.path(), "b1.npy").unwrap();
+    assert_eq!((s.medium.density.get(1, 0, 0), s.medium.density.get(2, 0, 1)), (1.0, 0.0));
 }
 
 #[test]

@@ -19,6 +19,9 @@
 //! * `mean_relative_error`: mean of |Y_test − Y_ref| / Y_ref over masked pixels with Y_ref > 0;
 //! * `luminance_bias`: (mean Y_test − mean Y_ref) / mean Y_ref, the relative bias of the mean luminance.
 //!
+//! A relative metric has no value against a reference that is black where it is taken (no pixel,
+//! or no block, with Y_ref > 0): it is `null` then, not 0, which would read as a perfect match.
+//!
 //! **Block means** (the scores every change of physics is judged by; per-pixel noise of a Monte
 //! Carlo reference averages down 4× in a block): the image is tiled into [`BLOCK`]×[`BLOCK`]-pixel
 //! blocks from its top-left corner (a partial block at the right or bottom edge is dropped); a
@@ -54,18 +57,20 @@ pub struct Metrics {
     pub rmse: f64,
     /// Peak signal-to-noise ratio (dB); `null` in JSON when the images are identical.
     pub psnr: f64,
-    /// Mean relative luminance error (unitless).
-    pub mean_relative_error: f64,
-    /// Relative bias of the mean luminance (unitless, signed).
-    pub luminance_bias: f64,
+    /// Mean relative luminance error (unitless); `None` when no reference pixel has luminance.
+    pub mean_relative_error: Option<f64>,
+    /// Relative bias of the mean luminance (unitless, signed); `None` when the reference is black.
+    pub luminance_bias: Option<f64>,
     /// Number of pixels compared.
     pub pixels: usize,
     /// Where the mask came from: `transmittance < 0.99` or `all` (the CLI appends its `--where`
     /// conditions, joined by ` and `).
     pub mask: String,
-    /// Mean relative luminance error of 4×4 block means (unitless); `None` when no block counts.
+    /// Mean relative luminance error of 4×4 block means (unitless); `None` when no block counts
+    /// or every counted block is black in the reference.
     pub block_mean_relative_error: Option<f64>,
-    /// Relative bias of the summed 4×4 block means (unitless, signed); `None` when no block counts.
+    /// Relative bias of the summed 4×4 block means (unitless, signed); `None` when no block counts
+    /// or the reference's blocks sum to 0.
     pub block_bias: Option<f64>,
     /// Number of 4×4 blocks compared.
     pub blocks: usize,
@@ -105,11 +110,8 @@ pub fn block_means(values: &[f64], blocks: &[[usize; BLOCK * BLOCK]]) -> Vec<f64
 }
 
 /// (mean relative error over blocks with B_ref > 0, relative bias of the sums) of block means;
-/// `None` when there is no block.
-pub fn block_scores(test: &[f64], reference: &[f64]) -> Option<(f64, f64)> {
-    if reference.is_empty() {
-        return None;
-    }
+/// each `None` when no block has B_ref > 0 (a black reference has no error relative to it).
+pub fn block_scores(test: &[f64], reference: &[f64]) -> (Option<f64>, Option<f64>) {
     let (mut rel, mut n) = (0f64, 0usize);
     for (t, r) in test.iter().zip(reference) {
         if *r > 0.0 {
@@ -118,10 +120,7 @@ pub fn block_scores(test: &[f64], reference: &[f64]) -> Option<(f64, f64)> {
         }
     }
     let (st, sr) = (test.iter().sum::<f64>(), reference.iter().sum::<f64>());
-    Some((
-        if n > 0 { rel / n as f64 } else { 0.0 },
-        if sr > 0.0 { (st - sr) / sr } else { 0.0 },
-    ))
+    ((n > 0).then(|| rel / n as f64), (sr > 0.0).then(|| (st - sr) / sr))
 }
 
 /// Luminance of every pixel, in f64.
@@ -308,7 +307,7 @@ pub fn compare(test: &Image, reference: &Image, mask: Option<&[bool]>) -> Result
     let rmse = (se / (3 * n) as f64).sqrt();
     let psnr = if rmse > 0.0 { 20.0 * (peak / rmse).log10() } else { f64::INFINITY };
     let blocks = cloud_blocks(reference.width, reference.height, mask);
-    let scores = block_scores(
+    let (block_mre, block_bias) = block_scores(
         &block_means(&luminances(&test.pixels), &blocks),
         &block_means(&luminances(&reference.pixels), &blocks),
     );
@@ -318,16 +317,16 @@ pub fn compare(test: &Image, reference: &Image, mask: Option<&[bool]>) -> Result
     Ok(Metrics {
         rmse,
         psnr,
-        mean_relative_error: if nrel > 0 { rel / nrel as f64 } else { 0.0 },
-        luminance_bias: if yr > 0.0 { (yt - yr) / yr } else { 0.0 },
+        mean_relative_error: (nrel > 0).then(|| rel / nrel as f64),
+        luminance_bias: (yr > 0.0).then(|| (yt - yr) / yr),
         pixels: n,
         mask: if mask.is_some() {
             "transmittance < 0.99".into()
         } else {
             "all".into()
         },
-        block_mean_relative_error: scores.map(|s| s.0),
-        block_bias: scores.map(|s| s.1),
+        block_mean_relative_error: block_mre,
+        block_bias,
         blocks: blocks.len(),
         reference_block_noise: noise,
     })
@@ -603,7 +602,7 @@ mod tests {
         let t = img(&[0.2, 0.3, 0.1, 0.1]);
         let m = compare(&t, &i, got.as_deref()).unwrap();
         assert_eq!(m.pixels, 2);
-        assert!((m.luminance_bias - (0.2 / 0.15 - 1.0)).abs() < 1e-6, "{m:?}");
+        assert!((m.luminance_bias.unwrap() - (0.2 / 0.15 - 1.0)).abs() < 1e-6, "{m:?}");
         // Nothing left, or a layer the image lacks: an error naming --where and the fix.
         let e = narrow_mask(Some(vec![false, true, false, false]), &i, "r.exr", &[dark]).unwrap_err().to_string();
         assert!(e.contains("--where") && e.contains("image<0.15") && e.contains("loosen"), "{e}");
@@ -617,9 +616,26 @@ mod tests {
         let m = compare(&a, &a, None).unwrap();
         assert_eq!(m.rmse, 0.0);
         assert!(m.psnr.is_infinite());
-        assert_eq!(m.mean_relative_error, 0.0);
-        assert_eq!(m.luminance_bias, 0.0);
+        assert_eq!(m.mean_relative_error, Some(0.0));
+        assert_eq!(m.luminance_bias, Some(0.0));
         assert_eq!(m.mask, "all");
+    }
+
+    #[test]
+    fn a_black_reference_has_no_relative_error() {
+        // Nothing to be relative to: the relative metrics are unknown (null), never a perfect 0;
+        // the absolute ones still say how far the test is.
+        let black = flat(8, 4, 0.0);
+        let lit = flat(8, 4, 0.5);
+        let m = compare(&lit, &black, None).unwrap();
+        assert_eq!((m.mean_relative_error, m.luminance_bias), (None, None), "{m:?}");
+        assert_eq!((m.block_mean_relative_error, m.block_bias, m.blocks), (None, None, 2), "{m:?}");
+        assert!((m.rmse - 0.5).abs() < 1e-9, "{m:?}");
+        let json = serde_json::to_string(&m).unwrap();
+        assert!(json.contains("\"mean_relative_error\":null") && json.contains("\"block_bias\":null"), "{json}");
+        // Against a lit reference the same call scores.
+        let m = compare(&black, &lit, None).unwrap();
+        assert_eq!((m.mean_relative_error, m.luminance_bias, m.block_bias), (Some(1.0), Some(-1.0), Some(-1.0)));
     }
 
     #[test]
@@ -629,8 +645,8 @@ mod tests {
         // The last pixel is outside the mask and must not count.
         let mask = [true, true, true, false];
         let m = compare(&t, &r, Some(&mask)).unwrap();
-        assert!((m.mean_relative_error - 0.1).abs() < 1e-6, "{m:?}");
-        assert!((m.luminance_bias - 0.1).abs() < 1e-6, "{m:?}");
+        assert!((m.mean_relative_error.unwrap() - 0.1).abs() < 1e-6, "{m:?}");
+        assert!((m.luminance_bias.unwrap() - 0.1).abs() < 1e-6, "{m:?}");
         let rmse = ((0.01f64 + 0.04 + 0.16) / 3.0).sqrt();
         assert!((m.rmse - rmse).abs() < 1e-6, "{m:?}");
         assert!((m.psnr - 20.0 * (4.0 / rmse).log10()).abs() < 1e-4);
@@ -666,7 +682,7 @@ mod tests {
         assert_eq!(m.blocks, 2);
         assert!((m.block_mean_relative_error.unwrap() - 0.25).abs() < 1e-12, "{m:?}");
         assert!((m.block_bias.unwrap() - 0.25).abs() < 1e-12, "{m:?}");
-        assert!((m.mean_relative_error - 0.75).abs() < 1e-6, "{m:?}");
+        assert!((m.mean_relative_error.unwrap() - 0.75).abs() < 1e-6, "{m:?}");
         // A block counts with 12 of 16 pixels in the mask, not with 11; partial blocks never.
         let mut mask = vec![true; 32];
         for i in [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11].map(|k| 4 + (k / 4) * 8 + k % 4) {

@@ -360,8 +360,12 @@ fn edge_mask_name() -> String {
     format!("{EDGE_T_MIN} ≤ reference transmittance ≤ {EDGE_T_MAX}")
 }
 
-fn pct(x: f64) -> String {
-    format!("{:.1} %", 100.0 * x)
+fn pct(x: Option<f64>) -> String {
+    x.map_or("n/a".into(), |x| format!("{:.1} %", 100.0 * x))
+}
+
+fn signed_pct(x: Option<f64>) -> String {
+    x.map_or("n/a".into(), |x| format!("{:+.1} %", 100.0 * x))
 }
 
 /// The error table of `report` as Markdown (one row per method).
@@ -374,13 +378,13 @@ pub fn table_markdown(report: &FigureReport) -> String {
             Some(e) => (
                 pct(e.mean_relative_error),
                 format!("{:.4}", e.rmse),
-                format!("{:+.1} %", 100.0 * e.luminance_bias),
+                signed_pct(e.luminance_bias),
             ),
             None => ("n/a".into(), "n/a".into(), "n/a".into()),
         };
         let _ = writeln!(
             s,
-            "| {} | {} | {:.1} | {} | {} | {:.4} | {} | {:+.1} % | {} |",
+            "| {} | {} | {:.1} | {} | {} | {:.4} | {} | {} | {} |",
             f.figure,
             f.title,
             f.seconds,
@@ -388,7 +392,7 @@ pub fn table_markdown(report: &FigureReport) -> String {
             me,
             f.cloud.rmse,
             re,
-            100.0 * f.cloud.luminance_bias,
+            signed_pct(f.cloud.luminance_bias),
             be
         );
     }
@@ -415,8 +419,8 @@ fn index_markdown(r: &FigureReport) -> String {
             rf.seconds,
             rf.cloud_pixels,
             rf.edge_pixels,
-            pct(rf.cloud_noise),
-            pct(rf.edge_noise)
+            pct(Some(rf.cloud_noise)),
+            pct(Some(rf.edge_noise))
         );
     }
     s.push('\n');

@@ -111,6 +111,12 @@ fn scene_text_that_is_not_a_scene() {
         &["s.toml", "not UTF-8", "TOML"],
     );
     fails(&[], &["render", "nope.toml", "-q"], &["nope.toml"]);
+    // A folder where the scene file should be: said so, not the OS's "Is a directory".
+    fails(
+        &[("d.toml/", vec![])],
+        &["render", "d.toml", "-q"],
+        &["d.toml", "a folder, not a scene file"],
+    );
     // Neither .toml nor a grid type: read as a scene, and the message says so.
     fails(
         &[("g.xyz", b"abc".to_vec())],
@@ -220,7 +226,7 @@ fn bad_lights_ground_camera_and_render_keys() {
         ("[ground]\nheight = nan\n", &["s.toml", "ground.height"]),
         (
             "[camera]\nposition = [0.0, 100.0, 0.0]\nlook_at = [0.0, 0.0, 0.0]\nup = [0.0, 1.0, 0.0]\n",
-            &["s.toml", "camera.up", "parallel"],
+            &["s.toml", "camera.up", "parallel", "[0.0, -100.0, 0.0]", "[0.0, 0.0, -1.0]"],
         ),
         ("[camera]\nup = [0.0, 0.0, 0.0]\n", &["s.toml", "camera.up"]),
         (
@@ -297,6 +303,14 @@ fn bad_lights_ground_camera_and_render_keys() {
         "[sky]\nmodel = \"envmap\"\npath = \"env.exr\"\nscale = 1e20\n",
         &[("env.exr", bright.to_exr_bytes().unwrap())],
         &["s.toml", "sky.scale", "env.exr", "1e30"],
+    );
+    // A NaN in the map: named by pixel, in the same words as the light it stands for.
+    let mut holed = cloudgi::Image::new(4, 2);
+    holed.pixels[5] = cloudgi::Rgb::new(0.1, f32::NAN, 0.1);
+    render_fails(
+        "[sky]\nmodel = \"envmap\"\npath = \"env.exr\"\n",
+        &[("env.exr", holed.to_exr_bytes().unwrap())],
+        &["env.exr", "pixel (1, 1) is [0.1, NaN, 0.1]", "finite, non-negative"],
     );
 }
 
@@ -409,12 +423,13 @@ fn corrupt_npy_raw_and_vdb_files() {
             &["g.npy", "truncated"],
         ),
         (
-            npy("{'descr': '<i4', 'fortran_order': False, 'shape': (1, 2, 2), }", &four),
-            &["g.npy", "'<i4'"],
+            npy("{'descr': '<c8', 'fortran_order': False, 'shape': (1, 2, 2), }", &four),
+            &["g.npy", "'<c8'", "float16/32/64", "bool"],
         ),
+        // An integer array read by value: a negative one is not a density.
         (
-            npy("{'descr': '<f4', 'fortran_order': True, 'shape': (1, 2, 2), }", &four),
-            &["g.npy", "Fortran"],
+            npy("{'descr': '|i1', 'fortran_order': False, 'shape': (1, 2, 2), }", &[1, 0xfe, 3, 4]),
+            &["g.npy", "is -2", "non-negative"],
         ),
         (
             npy("{'descr': '<f4', 'fortran_order': False, 'shape': (2, 2), }", &four),
@@ -485,7 +500,17 @@ fn corrupt_npy_raw_and_vdb_files() {
     );
     let sphere = vdb_data("sphere64_blosc.vdb");
     grid_fails("g.vdb", &[("g.vdb", b"definitely not a vdb".to_vec())], &["g.vdb", "OpenVDB"]);
-    grid_fails("g.vdb", &[("g.vdb", sphere[..sphere.len() / 2].to_vec())], &["g.vdb"]);
+    // Cut short (a copy or download that stopped): said so, with how much of it is there.
+    grid_fails(
+        "g.vdb",
+        &[("g.vdb", sphere[..sphere.len() / 2].to_vec())],
+        &["g.vdb", "truncated", "cut short"],
+    );
+    grid_fails(
+        "g.vdb",
+        &[("g.vdb", sphere[..sphere.len() - 1].to_vec())],
+        &["g.vdb", "truncated", "ends at byte", "cut short"],
+    );
     grid_fails("g.vdb", &[("g.vdb", sphere[..40].to_vec())], &["g.vdb"]);
     render_fails(
         "[medium]\ngrid = \"g.vdb\"\ngrid_name = \"smoke\"\n",

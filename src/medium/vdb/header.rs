@@ -122,10 +122,17 @@ pub(crate) fn read_header(c: &mut Cursor) -> Result<FileHeader> {
         let grid_pos = c.i64("grid offset")?;
         let _block_pos = c.i64("grid block offset")?;
         let end_pos = c.i64("grid end offset")?;
-        if grid_pos < 0 || end_pos < grid_pos || end_pos as u64 > c.pos() as u64 + c.remaining() as u64 {
+        let file_len = c.pos() + c.remaining();
+        if grid_pos < 0 || end_pos < grid_pos {
             return Err(c.err(format!(
-                "corrupt grid table: grid `{name}` spans bytes {grid_pos}..{end_pos}, outside the {}-byte file",
-                c.pos() + c.remaining()
+                "corrupt grid table: grid `{name}` spans bytes {grid_pos}..{end_pos}, outside the {file_len}-byte file"
+            )));
+        }
+        // A table that names bytes past the end is what a copy or download cut short leaves.
+        if end_pos as u64 > file_len as u64 {
+            return Err(c.err(format!(
+                "truncated: grid `{name}` ends at byte {end_pos}, but the file has {file_len} bytes: it was cut \
+                 short (a copy or download that stopped); copy or export it again"
             )));
         }
         descriptors.push(GridDescriptor {
