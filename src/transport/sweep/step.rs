@@ -166,7 +166,6 @@ pub(in crate::transport) fn step_row<V: Vector>(
         let mut fi = [0usize; 8];
         let mut sc = [[0f32; 8]; 3];
         let mut sun = [[0f32; 8]; 3];
-        let mut beam = [[0f32; 8]; 3];
         for j in 0..m {
             let (r, f) = row[start + j];
             // The full voxels' sources and radiances lie a grid row apart in x-major sweeps
@@ -186,7 +185,6 @@ pub(in crate::transport) fn step_row<V: Vector>(
                 for band in 0..3 {
                     sc[band][j] = diffuse[band];
                     sun[band][j] = share[band];
-                    beam[band][j] = t_own[band];
                 }
             }
         }
@@ -209,8 +207,7 @@ pub(in crate::transport) fn step_row<V: Vector>(
         let (rho_v, full_v) = (V::from_array(&rho), V::from_array(&full));
         let sc_v = [V::from_array(&sc[0]), V::from_array(&sc[1]), V::from_array(&sc[2])];
         let sun_v = [V::from_array(&sun[0]), V::from_array(&sun[1]), V::from_array(&sun[2])];
-        let beam_v = [V::from_array(&beam[0]), V::from_array(&beam[1]), V::from_array(&beam[2])];
-        let out = cells(k, &acc, rho_v, full_v, &sc_v, &sun_v, &beam_v);
+        let out = cells(k, &acc, rho_v, full_v, &sc_v, &sun_v);
         let rs = [rho_v.mul(sc_v[0]), rho_v.mul(sc_v[1]), rho_v.mul(sc_v[2])];
         let rsun = [rho_v.mul(sun_v[0]), rho_v.mul(sun_v[1]), rho_v.mul(sun_v[2])];
         // A short run's last cells: its m lanes, the buffer's own values in the others.
@@ -244,12 +241,9 @@ pub(in crate::transport) fn step_row<V: Vector>(
 /// radiance per band. The diffuse source is linear in optical path along the step; the sun's
 /// share of a full cell follows the beam, T′(x) = T′(c) e^{−μ u} at the optical distance u before
 /// the centre c (μ = Ω·ŝ; exact for a step of uniform density), so its step integral is
-/// S_sun (1 − e^{−(1+μ)τ})/(1 + μ). Where that beam would exceed the sun's unattenuated one at
-/// the back point (T′(c) e^{−μτ} > 1, `beam` T′(c): the step leaves the cloud towards the sun),
-/// the sun share is linear between the back point's and the cell's, as the diffuse source. An
-/// empty cell holds the back point's sun share over the step.
+/// S_sun (1 − e^{−(1+μ)τ})/(1 + μ). An empty cell holds the back point's sun share over the step.
 #[inline(always)]
-fn cells<V: Vector>(k: &Step, acc: &[V; FIELDS], rho: V, full: V, sc: &[V; 3], sun: &[V; 3], beam: &[V; 3]) -> [V; 3] {
+fn cells<V: Vector>(k: &Step, acc: &[V; FIELDS], rho: V, full: V, sc: &[V; 3], sun: &[V; 3]) -> [V; 3] {
     let rb = acc[RHO];
     let rm = V::splat(0.5).mul(rb.add(rho)).mul(V::splat(k.s));
     let stepping = rm.gt(V::splat(0.0));
@@ -258,24 +252,20 @@ fn cells<V: Vector>(k: &Step, acc: &[V; FIELDS], rho: V, full: V, sc: &[V; 3], s
     let tau0 = V::splat(k.sigma_t[0]).mul(rm);
     let grey = step_weights_lanes(tau0);
     let grey_sun = beam_weight_lanes(tau0, k.mu_sun);
-    let rising = V::splat((-k.mu_sun).max(0.0));
-    let grey_rise = exp_neg(rising.mul(tau0));
     // A loop, not `array::from_fn` (its closure is not inlined into the AVX kernel).
     let mut out = [V::splat(0.0); 3];
     for (band, o) in out.iter_mut().enumerate() {
-        let ((e, wi, wo), ws, rise) = if band == 0 || k.grey {
-            (grey, grey_sun, grey_rise)
+        let ((e, wi, wo), ws) = if band == 0 || k.grey {
+            (grey, grey_sun)
         } else {
             let tau = V::splat(k.sigma_t[band]).mul(rm);
-            (step_weights_lanes(tau), beam_weight_lanes(tau, k.mu_sun), exp_neg(rising.mul(tau)))
+            (step_weights_lanes(tau), beam_weight_lanes(tau, k.mu_sun))
         };
         let ib = acc[I + band];
         let sb = V::select(weighted, acc[RS + band].mul(inv_rb), sc[band]);
         let se = V::select(full, sc[band], sb);
         let sun_b = V::select(weighted, acc[SUN + band].mul(inv_rb), sun[band]);
-        let overshoot = beam[band].gt(rise);
-        let sun_linear = wi.mul(sun_b).add(wo.mul(V::select(full, sun[band], sun_b)));
-        let sun_step = V::select(full, V::select(overshoot, sun_linear, ws.mul(sun[band])), sun_linear);
+        let sun_step = V::select(full, ws.mul(sun[band]), wi.add(wo).mul(sun_b));
         let stepped = ib.mul(e).add(wi.mul(sb)).add(wo.mul(se)).add(sun_step);
         *o = V::select(stepping, stepped, ib);
     }
@@ -432,26 +422,14 @@ mod tests {
         };
         let (rho, i_b, d_b, sun_b, d, sun) = (2.0f32, 0.5f32, 0.3f32, 0.9f32, 0.2f32, 0.7f32);
         let acc = split_record([i_b; 3], rho, [rho * d_b; 3], [rho * sun_b; 3]);
-        let full = f32::from_bits(u32::MAX);
-        let got = cells::<f32>(&k, &acc, rho, full, &[d; 3], &[sun; 3], &[0.9; 3]);
+        let got = cells::<f32>(&k, &acc, rho, f32::from_bits(u32::MAX), &[d; 3], &[sun; 3]);
         let (e, wi, wo) = step_weights(1.0);
         let want = i_b * e + wi * d_b + wo * d + sun * (1.0 - (-1.6f32).exp()) / 1.6;
         assert!((got[0] - want).abs() < 1e-6, "{} vs {want}", got[0]);
         // An empty cell holds the back point's sources over the step (τ = 0.5).
-        let got = cells::<f32>(&k, &acc, 0.0, 0.0, &[0.0; 3], &[0.0; 3], &[0.0; 3]);
+        let got = cells::<f32>(&k, &acc, 0.0, 0.0, &[0.0; 3], &[0.0; 3]);
         let (e, wi, wo) = step_weights(0.5);
         let want = i_b * e + (wi + wo) * (d_b + sun_b);
-        assert!((got[0] - want).abs() < 1e-6, "{} vs {want}", got[0]);
-        // Away from the sun (μ = −0.6), T′ = 0.9: the beam at the back point would be
-        // 0.9 e^{0.6} > 1, so the sun share is linear like the diffuse source.
-        let k = Step { mu_sun: -0.6, ..k };
-        let got = cells::<f32>(&k, &acc, rho, full, &[d; 3], &[sun; 3], &[0.9; 3]);
-        let (e, wi, wo) = step_weights(1.0);
-        let want = i_b * e + wi * (d_b + sun_b) + wo * (d + sun);
-        assert!((got[0] - want).abs() < 1e-6, "{} vs {want}", got[0]);
-        // T′ = 0.5 < e^{−0.6}: the beam, (1 − e^{−0.4})/0.4.
-        let got = cells::<f32>(&k, &acc, rho, full, &[d; 3], &[sun; 3], &[0.5; 3]);
-        let want = i_b * e + wi * d_b + wo * d + sun * (1.0 - (-0.4f32).exp()) / 0.4;
         assert!((got[0] - want).abs() < 1e-6, "{} vs {want}", got[0]);
     }
 
