@@ -67,8 +67,6 @@ pub(super) struct Ctx<'a> {
     /// Grid origin (m) and the ground's height (m), if any.
     pub(super) origin: DVec3,
     pub(super) ground_height: Option<f64>,
-    /// Unit direction towards the sun.
-    pub(super) sun_dir: DVec3,
 }
 
 impl<'a> Ctx<'a> {
@@ -80,7 +78,6 @@ impl<'a> Ctx<'a> {
         ground: Option<&Ground>,
         index: &'a FullVoxels,
         sun_t: &'a [[f32; 3]],
-        sun_dir: DVec3,
         order: usize,
         bands: &[BandOptics; 3],
     ) -> Ctx<'a> {
@@ -108,7 +105,6 @@ impl<'a> Ctx<'a> {
             sky,
             origin: DVec3::new(m.origin.x as f64, m.origin.y as f64, m.origin.z as f64),
             ground_height: ground.map(|g| g.height as f64),
-            sun_dir,
         }
     }
 

@@ -170,7 +170,7 @@ pub fn solve_warm(
     }
     let index = FullVoxels::of(&m.density);
     let sun_t = sun_transmittance(m, sun, &optics, &index.voxels, ground.map(|g| g.height));
-    let ctx = Ctx::new(m, sky, ground, &index, &sun_t, sun_dir(sun), s.order, &optics.bands);
+    let ctx = Ctx::new(m, sky, ground, &index, &sun_t, s.order, &optics.bands);
     let q = Quadrature::product(s.n_mu, 2 * s.n_mu);
     let tables = pair_tables(&q, sun, s.order, &optics);
     let start = StartTables::new(&tables, s.order);
@@ -215,11 +215,6 @@ pub fn solve_warm(
     let state = kept_ground.map(|g| TransportState::new(m, s.order, moments, 3 * nsh, g, slowest.unwrap_or(carried_ratio)));
     field.sun_t = sun_t;
     Ok((field, state))
-}
-
-/// The unit direction towards `sun`, in f64.
-fn sun_dir(sun: &Sun) -> DVec3 {
-    DVec3::new(sun.dir.x as f64, sun.dir.y as f64, sun.dir.z as f64).normalize()
 }
 
 /// δ-M sun transmittance T′ = T^{1 − a f} = T^{σt′/σt} at the centres of the full voxels

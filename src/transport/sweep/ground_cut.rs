@@ -15,7 +15,7 @@
 //! keeps its density, which shapes the field between the plane and the next centres (the
 //! trilinear field every method renders).
 
-use super::step::{split_record, step_weights, sun_share, Plane, Record, Step, I, RHO, RHO_WEIGHT_MIN, RS, SUN};
+use super::step::{step_weights, Plane, Record, Step, I, RHO, RHO_WEIGHT_MIN, RS};
 
 /// How the ground plane cuts one cell's step.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -63,27 +63,16 @@ pub(super) fn cut(y: f64, gh: f64, om_y: f64, s: f64, ground: impl FnOnce() -> [
 /// ground ([`Cut`]): its upwind record from `prev`, its source in `light` (which receives its
 /// radiance if it is full), as [`super::step::step_row`] steps the others. Every weight is ≥ 0,
 /// so the radiance is ≥ 0 where the sources and the ground's radiance are.
-pub(super) fn step_cut(
-    k: &Step,
-    prev: &Plane,
-    cur: &mut Plane,
-    light: &mut [[f32; 3]],
-    sun_t: &[[f32; 3]],
-    cell: (f32, u32),
-    l: usize,
-    cut: Cut,
-) {
+pub(super) fn step_cut(k: &Step, prev: &Plane, cur: &mut Plane, light: &mut [[f32; 3]], cell: (f32, u32), l: usize, cut: Cut) {
     let (rho, fi) = cell;
     let full = fi != u32::MAX;
     let own = if full { light[fi as usize] } else { [0.0; 3] };
-    let (diffuse, share) = if full { sun_share(own, sun_t[fi as usize], k.k_sun) } else { ([0.0; 3], [0.0; 3]) };
     let back = prev.upwind(k, l);
     let rho_b = back[RHO];
     let mut out = [0f32; 3];
     for (band, o) in out.iter_mut().enumerate() {
         // The sources at the back point and the centre, as the row step takes them.
-        // (The sun's share linear with the rest: the cut rows lie under the cloud's base.)
-        let j_b = if rho_b > RHO_WEIGHT_MIN { (back[RS + band] + back[SUN + band]) / rho_b } else { own[band] };
+        let j_b = if rho_b > RHO_WEIGHT_MIN { back[RS + band] / rho_b } else { own[band] };
         let j_c = if full { own[band] } else { j_b };
         let sigma = k.sigma_t[band];
         *o = match cut {
@@ -112,7 +101,7 @@ pub(super) fn step_cut(
             }
         };
     }
-    let rec: Record = split_record(out, rho, diffuse.map(|d| rho * d), share.map(|x| rho * x));
+    let rec: Record = [out[0], out[1], out[2], rho, rho * own[0], rho * own[1], rho * own[2]];
     cur.set(l, rec);
     if full {
         light[fi as usize] = out;
@@ -133,12 +122,10 @@ mod tests {
             s: 10.0,
             sigma_t: [0.05, 0.1, 0.2],
             grey: false,
-            k_sun: [0.0; 3],
-            mu_sun: 0.0,
         };
         let (prev, mut cur) = (Plane::new(9, prev_rec), Plane::new(9, record([0.0; 3], 0.0, [0.0; 3])));
         let mut light = vec![source];
-        step_cut(&k, &prev, &mut cur, &mut light, &[[0.5; 3]], (rho, 0), 4, cut);
+        step_cut(&k, &prev, &mut cur, &mut light, (rho, 0), 4, cut);
         assert_eq!(cur.radiance(4), light[0], "the buffer and the full voxel hold the same radiance");
         (light[0], cur.record(4))
     }
@@ -180,7 +167,7 @@ mod tests {
                 let want = i0[band] * e + source[band] * (1.0 - e);
                 assert!((got[band] - want).abs() <= 1e-6 * want, "{cut:?} band {band}: {} vs {want}", got[band]);
             }
-            assert_eq!(rec[3..7], [rho, rho * source[0], rho * source[1], rho * source[2]], "the cell's own density and source");
+            assert_eq!(rec[3..], [rho, rho * source[0], rho * source[1], rho * source[2]], "the cell's own density and source");
         }
     }
 }

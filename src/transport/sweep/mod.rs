@@ -86,12 +86,7 @@ pub(super) fn sweep(
         let splats: Vec<Splats> = dirs
             .par_iter()
             .zip(light.par_chunks_mut(nfull.max(1)))
-            .enumerate()
-            .map(|(slot, (d, ld))| {
-                // Slot 2p holds pair p's ordinate, 2p + 1 its opposite ([`PairTables::sun`]).
-                let k_sun = [0, 1, 2].map(|b| t.sun[bi * 3 + b][slot % 2][slot / 2]);
-                sweep_ordinate(c, q.dirs[*d], q.weights[*d], k_sun, ground, ld)
-            })
+            .map(|(d, ld)| sweep_ordinate(c, q.dirs[*d], q.weights[*d], ground, ld))
             .collect();
         let radiance = &**light;
         for splats in &splats {
@@ -122,9 +117,8 @@ pub(super) fn sweep(
 /// One ordinate's ground splats (map column, change of the downward irradiance in W/m² per band).
 pub(super) type Splats = Vec<(usize, [f64; 3])>;
 
-/// Sweep one ordinate `om` (weight `w`, sr; the sun's first scattering per unit T′ in it `k_sun`,
-/// W·m⁻²·sr⁻¹ per band) through the box upwind plane by plane: the radiance at every full voxel's
-/// centre, and the ground splats (column, change of downward irradiance, W/m²)
+/// Sweep one ordinate `om` (weight `w`, sr) through the box upwind plane by plane: the radiance at
+/// every full voxel's centre, and the ground splats (column, change of downward irradiance, W/m²)
 /// of the light leaving the box downwards. `light` holds the source in this ordinate per full
 /// voxel and receives the radiance there (all lie in the box): a cell reads its source before it
 /// writes its radiance, and each full voxel is one cell of the sweep. The cells of a row are
@@ -134,7 +128,6 @@ fn sweep_kernel<V: Vector>(
     c: &Ctx,
     om: DVec3,
     w: f64,
-    k_sun: [f32; 3],
     ground: &GroundMap,
     light: &mut [[f32; 3]],
 ) -> Splats {
@@ -220,8 +213,6 @@ fn sweep_kernel<V: Vector>(
         s,
         sigma_t: c.sigma_t,
         grey: c.grey,
-        k_sun,
-        mu_sun: om.dot(c.sun_dir).clamp(-1.0, 1.0) as f32,
     };
     // Box rows (from the lowest) whose steps the ground plane cuts.
     let cut = c.ground_height.map_or(0, |gh| {
@@ -273,11 +264,11 @@ fn sweep_kernel<V: Vector>(
                     let v = coord(pa as isize, ib as isize, ic as isize);
                     let y = c.origin.y + (v[1] as f64 + 0.5) * c.h[1];
                     let at = ground_cut::cut(y, gh, om.y, s as f64, || c.boundary(om, v[0], v[1], v[2], ground, skyr));
-                    ground_cut::step_cut(&k, &prev, &mut cur, light, c.sun_t, cell, l0 + ib, at);
+                    ground_cut::step_cut(&k, &prev, &mut cur, light, cell, l0 + ib, at);
                 }
             }
             if cut_hi < hi {
-                step_row::<V>(&k, &prev, &mut cur, light, c.sun_t, &row[cut_hi..hi], &row_ahead[cut_hi..hi], l0 + cut_hi);
+                step_row::<V>(&k, &prev, &mut cur, light, &row[cut_hi..hi], &row_ahead[cut_hi..hi], l0 + cut_hi);
             }
         }
         let pa = pa as isize;
@@ -371,24 +362,24 @@ fn needed_cells(next: &[(usize, usize)], ic: isize, fc: isize, fb: isize, full: 
 
 /// [`sweep_kernel`] in AVX lanes where the processor has it, else in SSE2 lanes (x86-64) or one
 /// lane at a time: the same bits.
-pub(super) fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, k_sun: [f32; 3], ground: &GroundMap, light: &mut [[f32; 3]]) -> Splats {
+pub(super) fn sweep_ordinate(c: &Ctx, om: DVec3, w: f64, ground: &GroundMap, light: &mut [[f32; 3]]) -> Splats {
     #[cfg(target_arch = "x86_64")]
     if has_avx() {
         // SAFETY: the processor has AVX.
-        return unsafe { sweep_ordinate_avx(c, om, w, k_sun, ground, light) };
+        return unsafe { sweep_ordinate_avx(c, om, w, ground, light) };
     }
     #[cfg(target_arch = "x86_64")]
-    return sweep_kernel::<lanes::Sse2>(c, om, w, k_sun, ground, light);
+    return sweep_kernel::<lanes::Sse2>(c, om, w, ground, light);
     #[cfg(not(target_arch = "x86_64"))]
-    sweep_kernel::<f32>(c, om, w, k_sun, ground, light)
+    sweep_kernel::<f32>(c, om, w, ground, light)
 }
 
 /// [`sweep_kernel`] compiled for AVX: the row steps' eight lanes in one register ([`lanes::Avx`],
 /// made only here).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
-unsafe fn sweep_ordinate_avx(c: &Ctx, om: DVec3, w: f64, k_sun: [f32; 3], ground: &GroundMap, light: &mut [[f32; 3]]) -> Splats {
-    sweep_kernel::<lanes::Avx>(c, om, w, k_sun, ground, light)
+unsafe fn sweep_ordinate_avx(c: &Ctx, om: DVec3, w: f64, ground: &GroundMap, light: &mut [[f32; 3]]) -> Splats {
+    sweep_kernel::<lanes::Avx>(c, om, w, ground, light)
 }
 
 #[cfg(test)]
@@ -400,9 +391,6 @@ mod tests {
     use crate::transport::grid::{box_cells, full_spans};
     use crate::transport::source::{moments_kernel, parity_order, source_kernel};
     use crate::transport::BandOptics;
-
-    /// The sun's first scattering per unit T′ the tests' sweeps take in every ordinate.
-    const K_SUN: [f32; 3] = [0.4, 0.3, 0.2];
 
     /// A sweep's total splatted change Σ e per band (W/m² × columns).
     fn splat_total(splats: &Splats) -> [f64; 3] {
@@ -483,7 +471,6 @@ mod tests {
             sky: &sky,
             origin: DVec3::ZERO,
             ground_height: None,
-            sun_dir: DVec3::new(-0.2, 0.9, -0.3).normalize(),
         };
         let c = Ctx {
             spans: [0, 1, 2].map(|a| full_spans(&c.cells[a], dims[cross_axes(a).0])),
@@ -527,12 +514,12 @@ mod tests {
         for c in [&c, &grey] {
             for d in 0..q.dirs.len() {
                 let (mut one, mut ra, mut rb) = (plain[..nfull].to_vec(), plain[..nfull].to_vec(), plain[..nfull].to_vec());
-                sweep_kernel::<f32>(c, q.dirs[d], q.weights[d], K_SUN, &ground, &mut one);
+                sweep_kernel::<f32>(c, q.dirs[d], q.weights[d], &ground, &mut one);
                 #[cfg(target_arch = "x86_64")]
-                sweep_kernel::<lanes::Sse2>(c, q.dirs[d], q.weights[d], K_SUN, &ground, &mut ra);
+                sweep_kernel::<lanes::Sse2>(c, q.dirs[d], q.weights[d], &ground, &mut ra);
                 #[cfg(not(target_arch = "x86_64"))]
-                sweep_kernel::<f32>(c, q.dirs[d], q.weights[d], K_SUN, &ground, &mut ra);
-                sweep_ordinate(c, q.dirs[d], q.weights[d], K_SUN, &ground, &mut rb);
+                sweep_kernel::<f32>(c, q.dirs[d], q.weights[d], &ground, &mut ra);
+                sweep_ordinate(c, q.dirs[d], q.weights[d], &ground, &mut rb);
                 assert_eq!(bits(&one), bits(&ra), "ordinate {d}, grey {}", c.grey);
                 assert_eq!(bits(&ra), bits(&rb), "ordinate {d}, grey {}", c.grey);
                 assert!(ra.iter().flatten().any(|x| *x > 0.0));
@@ -564,8 +551,8 @@ mod tests {
         for (skipping, stepping, g) in [(&c, &every, &ground), (&c_lit, &every_lit, &lit)] {
             for d in 0..q.dirs.len() {
                 let (mut skip, mut all) = (plain[..nfull].to_vec(), plain[..nfull].to_vec());
-                sweep_ordinate(skipping, q.dirs[d], q.weights[d], K_SUN, g, &mut skip);
-                sweep_ordinate(stepping, q.dirs[d], q.weights[d], K_SUN, g, &mut all);
+                sweep_ordinate(skipping, q.dirs[d], q.weights[d], g, &mut skip);
+                sweep_ordinate(stepping, q.dirs[d], q.weights[d], g, &mut all);
                 for (x, y) in skip.iter().flatten().zip(all.iter().flatten()) {
                     assert!((x - y).abs() <= 1e-6 * y.abs(), "ordinate {d}: {x} vs {y}");
                 }
@@ -591,8 +578,8 @@ mod tests {
             ..lit.clone()
         };
         for d in (0..q.dirs.len()).filter(|d| q.dirs[*d].y < 0.0) {
-            let tt = splat_total(&sweep_ordinate(&tight, q.dirs[d], q.weights[d], K_SUN, &wide, &mut plain[..nfull].to_vec()));
-            let tw = splat_total(&sweep_ordinate(&c_lit, q.dirs[d], q.weights[d], K_SUN, &wide, &mut plain[..nfull].to_vec()));
+            let tt = splat_total(&sweep_ordinate(&tight, q.dirs[d], q.weights[d], &wide, &mut plain[..nfull].to_vec()));
+            let tw = splat_total(&sweep_ordinate(&c_lit, q.dirs[d], q.weights[d], &wide, &mut plain[..nfull].to_vec()));
             for band in 0..3 {
                 assert!((tt[band] - tw[band]).abs() <= 1e-5 * tw[band].abs(), "ordinate {d}: {tt:?} vs {tw:?}");
             }

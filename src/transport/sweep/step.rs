@@ -13,39 +13,19 @@ use crate::transport::simd::prefetch;
 /// Cells of a row stepped together: one AVX register of f32.
 const LANES: usize = 8;
 
-/// Fields of a plane cell: the radiance per band ([`I`]..), the density ([`RHO`]), the density ×
-/// diffuse source per band ([`RS`]..) and the density × the sun's share of the source per band
-/// ([`SUN`]..; [`sun_share`]).
+/// Fields of a plane cell: the radiance per band ([`I`]..), the density ([`RHO`]) and the
+/// density × source per band ([`RS`]..).
 pub(super) const I: usize = 0;
 pub(super) const RHO: usize = 3;
 pub(super) const RS: usize = 4;
-pub(super) const SUN: usize = 7;
-const FIELDS: usize = 10;
+const FIELDS: usize = 7;
 
 /// A plane cell's fields.
 pub(in crate::transport) type Record = [f32; FIELDS];
 
-/// The record of a cell holding radiance `i`, density `rho` and density × source `rs`, none of
-/// it the sun's.
+/// The record of a cell holding radiance `i`, density `rho` and density × source `rs`.
 pub(in crate::transport) fn record(i: [f32; 3], rho: f32, rs: [f32; 3]) -> Record {
-    split_record(i, rho, rs, [0.0; 3])
-}
-
-/// The record of a cell holding radiance `i`, density `rho`, density × diffuse source `rs` and
-/// density × the sun's share of the source `rsun`.
-pub(super) fn split_record(i: [f32; 3], rho: f32, rs: [f32; 3], rsun: [f32; 3]) -> Record {
-    [i[0], i[1], i[2], rho, rs[0], rs[1], rs[2], rsun[0], rsun[1], rsun[2]]
-}
-
-/// A full cell's source `j` (≥ 0) split into (diffuse, sun) per band: the sun's share is its first
-/// scattering T′·K(Ω) (`sun_t` T′, `k_sun` K), kept within [0, j] so that both parts stay ≥ 0
-/// where the truncated expansions dip (the source's clamp at 0, [`source_block`]).
-///
-/// [`source_block`]: crate::transport::source::source_block
-#[inline(always)]
-pub(super) fn sun_share(j: [f32; 3], sun_t: [f32; 3], k_sun: [f32; 3]) -> ([f32; 3], [f32; 3]) {
-    let share: [f32; 3] = std::array::from_fn(|b| (sun_t[b] * k_sun[b]).max(0.0).min(j[b]));
-    (std::array::from_fn(|b| j[b] - share[b]), share)
+    [i[0], i[1], i[2], rho, rs[0], rs[1], rs[2]]
 }
 
 /// A sweep's plane buffer: per field, one array over the plane's cells (with the ghost ring),
@@ -116,9 +96,7 @@ pub(super) const RHO_WEIGHT_MIN: f32 = 1e-30;
 
 /// What a sweep's steps share along one ordinate: the bilinear weights of the four upwind
 /// neighbours (offsets 0, 1, `stride`, `stride` + 1 from `up` cells off the cell), the step
-/// length `s` (m), the δ-M extinction σt′ per band (1/m per unit density), the sun's first
-/// scattering per unit T′ in the ordinate per band (`k_sun`, W·m⁻²·sr⁻¹) and the cosine between
-/// the ordinate and the direction towards the sun (`mu_sun`).
+/// length `s` (m) and the δ-M extinction σt′ per band (1/m per unit density).
 pub(in crate::transport) struct Step {
     pub(in crate::transport) weights: [f32; 4],
     pub(in crate::transport) up: isize,
@@ -127,16 +105,14 @@ pub(in crate::transport) struct Step {
     pub(in crate::transport) sigma_t: [f32; 3],
     /// All bands share σt′ (one set of step weights serves them).
     pub(in crate::transport) grey: bool,
-    pub(in crate::transport) k_sun: [f32; 3],
-    pub(in crate::transport) mu_sun: f32,
 }
 
 /// Step a run of cells of one plane row, [`Vector::N`] at a time: `row` holds their (density,
 /// full-voxel index or `u32::MAX`), `ahead` the cells
 /// [`PREFETCH_AHEAD`](crate::transport::grid::PREFETCH_AHEAD) further on in the sweep (whose
 /// sources are prefetched), and `l0` is the first one's index in the plane buffers. Each cell
-/// reads its upwind record in `prev`, its source in `light` and its sun transmittance T′ in
-/// `sun_t`, writes its record in `cur` and, if full, its radiance over its source in `light`.
+/// reads its upwind record in `prev` and its source in `light`, writes its record in `cur` and,
+/// if full, its radiance over its source in `light`.
 ///
 /// Panics where the run's upwind records or records lie outside the buffers; a full-voxel
 /// index must be below `light.len()` (the callers check it once per solve,
@@ -147,7 +123,6 @@ pub(in crate::transport) fn step_row<V: Vector>(
     prev: &Plane,
     cur: &mut Plane,
     light: &mut [[f32; 3]],
-    sun_t: &[[f32; 3]],
     row: &[(f32, u32)],
     ahead: &[(f32, u32)],
     l0: usize,
@@ -155,7 +130,7 @@ pub(in crate::transport) fn step_row<V: Vector>(
     // The loads below reach cells l0 + up .. l0 + n + stride + N of `prev`; the stores cells
     // l0 .. l0 + n of `cur`.
     let n = row.len();
-    assert!(ahead.len() >= n && V::N <= LANES && sun_t.len() == light.len());
+    assert!(ahead.len() >= n && V::N <= LANES);
     assert!(l0 as isize + k.up >= 0 && l0 + n + k.stride < prev.cells() && prev.len == cur.len);
     let w = [V::splat(k.weights[0]), V::splat(k.weights[1]), V::splat(k.weights[2]), V::splat(k.weights[3])];
     let mut start = 0;
@@ -165,7 +140,6 @@ pub(in crate::transport) fn step_row<V: Vector>(
         let mut full = [0f32; 8];
         let mut fi = [0usize; 8];
         let mut sc = [[0f32; 8]; 3];
-        let mut sun = [[0f32; 8]; 3];
         for j in 0..m {
             let (r, f) = row[start + j];
             // The full voxels' sources and radiances lie a grid row apart in x-major sweeps
@@ -178,13 +152,10 @@ pub(in crate::transport) fn step_row<V: Vector>(
             if f != u32::MAX {
                 full[j] = f32::from_bits(u32::MAX);
                 fi[j] = f as usize;
-                // SAFETY: a full cell's index is below light.len() = sun_t.len() (this
-                // function's contract, asserted above).
-                let (j_own, t_own) = unsafe { (*light.get_unchecked(f as usize), *sun_t.get_unchecked(f as usize)) };
-                let (diffuse, share) = sun_share(j_own, t_own, k.k_sun);
+                // SAFETY: a full cell's index is below light.len() (this function's contract).
+                let s = unsafe { *light.get_unchecked(f as usize) };
                 for band in 0..3 {
-                    sc[band][j] = diffuse[band];
-                    sun[band][j] = share[band];
+                    sc[band][j] = s[band];
                 }
             }
         }
@@ -193,27 +164,25 @@ pub(in crate::transport) fn step_row<V: Vector>(
         // Radiance and density bilinear; the source (per unit extinction, defined only where
         // ρ > 0) density-weighted, so that empty neighbours do not pull it towards 0 (a uniform
         // source stays uniform: the furnace holds). From 0, the neighbours in order.
-        // A loop, not `array::from_fn`: its closure is not inlined into the AVX kernel at ten fields.
-        let mut acc = [V::splat(0.0); FIELDS];
-        for (f, sum) in acc.iter_mut().enumerate() {
+        let acc: [V; FIELDS] = std::array::from_fn(|f| {
             let field = prev.data[f * prev.len..].as_ptr();
             // SAFETY: u ≥ 0 and u + stride + 1 + N ≤ l0 + n + stride + N ≤ the field's length
             // (the spare cells included), asserted above.
             let at = |i: usize| unsafe { V::load(field.add(i)) };
+            let mut sum = V::splat(0.0);
             for (wk, i) in w.iter().zip([u, u + 1, u + k.stride, u + k.stride + 1]) {
-                *sum = sum.add(wk.mul(at(i)));
+                sum = sum.add(wk.mul(at(i)));
             }
-        }
+            sum
+        });
         let (rho_v, full_v) = (V::from_array(&rho), V::from_array(&full));
         let sc_v = [V::from_array(&sc[0]), V::from_array(&sc[1]), V::from_array(&sc[2])];
-        let sun_v = [V::from_array(&sun[0]), V::from_array(&sun[1]), V::from_array(&sun[2])];
-        let out = cells(k, &acc, rho_v, full_v, &sc_v, &sun_v);
+        let out = cells(k, &acc, rho_v, full_v, &sc_v);
         let rs = [rho_v.mul(sc_v[0]), rho_v.mul(sc_v[1]), rho_v.mul(sc_v[2])];
-        let rsun = [rho_v.mul(sun_v[0]), rho_v.mul(sun_v[1]), rho_v.mul(sun_v[2])];
         // A short run's last cells: its m lanes, the buffer's own values in the others.
         let part = m < V::N;
         let keep = V::splat(m as f32).gt(V::from_array(&[0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]));
-        for (f, v) in [out[0], out[1], out[2], rho_v, rs[0], rs[1], rs[2], rsun[0], rsun[1], rsun[2]].into_iter().enumerate() {
+        for (f, v) in [out[0], out[1], out[2], rho_v, rs[0], rs[1], rs[2]].into_iter().enumerate() {
             // SAFETY: l + N ≤ l0 + n + N ≤ the field's length (the spare cells included),
             // asserted above.
             unsafe {
@@ -237,55 +206,27 @@ pub(in crate::transport) fn step_row<V: Vector>(
 }
 
 /// The cells' step (module docs of [`super`]) from their upwind records `acc`, densities `rho`,
-/// whether full (a mask), diffuse sources `sc` and the sun's shares `sun` (0 where empty): their
-/// radiance per band. The diffuse source is linear in optical path along the step; the sun's
-/// share of a full cell follows the beam, T′(x) = T′(c) e^{−μ u} at the optical distance u before
-/// the centre c (μ = Ω·ŝ; exact for a step of uniform density), so its step integral is
-/// S_sun (1 − e^{−(1+μ)τ})/(1 + μ). An empty cell holds the back point's sun share over the step.
+/// whether full (a mask) and sources `sc` (0 where empty): their radiance per band.
 #[inline(always)]
-fn cells<V: Vector>(k: &Step, acc: &[V; FIELDS], rho: V, full: V, sc: &[V; 3], sun: &[V; 3]) -> [V; 3] {
+fn cells<V: Vector>(k: &Step, acc: &[V; FIELDS], rho: V, full: V, sc: &[V; 3]) -> [V; 3] {
     let rb = acc[RHO];
     let rm = V::splat(0.5).mul(rb.add(rho)).mul(V::splat(k.s));
     let stepping = rm.gt(V::splat(0.0));
     let weighted = rb.gt(V::splat(RHO_WEIGHT_MIN));
     let inv_rb = V::splat(1.0).div(rb);
-    let tau0 = V::splat(k.sigma_t[0]).mul(rm);
-    let grey = step_weights_lanes(tau0);
-    let grey_sun = beam_weight_lanes(tau0, k.mu_sun);
-    // A loop, not `array::from_fn` (its closure is not inlined into the AVX kernel).
-    let mut out = [V::splat(0.0); 3];
-    for (band, o) in out.iter_mut().enumerate() {
-        let ((e, wi, wo), ws) = if band == 0 || k.grey {
-            (grey, grey_sun)
+    let grey = step_weights_lanes(V::splat(k.sigma_t[0]).mul(rm));
+    std::array::from_fn(|band| {
+        let (e, wi, wo) = if band == 0 || k.grey {
+            grey
         } else {
-            let tau = V::splat(k.sigma_t[band]).mul(rm);
-            (step_weights_lanes(tau), beam_weight_lanes(tau, k.mu_sun))
+            step_weights_lanes(V::splat(k.sigma_t[band]).mul(rm))
         };
         let ib = acc[I + band];
         let sb = V::select(weighted, acc[RS + band].mul(inv_rb), sc[band]);
         let se = V::select(full, sc[band], sb);
-        let sun_b = V::select(weighted, acc[SUN + band].mul(inv_rb), sun[band]);
-        let sun_step = V::select(full, ws.mul(sun[band]), wi.add(wo).mul(sun_b));
-        let stepped = ib.mul(e).add(wi.mul(sb)).add(wo.mul(se)).add(sun_step);
-        *o = V::select(stepping, stepped, ib);
-    }
-    out
-}
-
-/// The weight (1 − e^{−(1+μ)τ})/(1 + μ) of a full cell's sun share over a step of optical length
-/// τ ≥ 0 whose ordinate makes cosine μ with the direction towards the sun ([`cells`]): τ·m(y) with
-/// y = (1 + μ)τ and m(y) = (1 − e^{−y})/y = 1 − w_out(y) ([`step_weights_lanes`]: its series
-/// where y is small, so μ → −1 stays finite).
-#[inline(always)]
-fn beam_weight_lanes<V: Vector>(tau: V, mu: f32) -> V {
-    let y = V::splat(1.0 + mu).mul(tau);
-    let (_, _, wo) = step_weights_lanes(y);
-    tau.mul(V::splat(1.0).sub(wo))
-}
-
-/// [`beam_weight_lanes`] of one step.
-pub(super) fn beam_weight(tau: f32, mu: f32) -> f32 {
-    beam_weight_lanes(tau, mu)
+        let stepped = ib.mul(e).add(wi.mul(sb)).add(wo.mul(se));
+        V::select(stepping, stepped, ib)
+    })
 }
 
 /// Optical lengths below which the step weights are their series (the closed form cancels).
@@ -388,55 +329,6 @@ mod tests {
         assert!(worst <= 2.0, "{worst} ulp");
         assert_eq!(exp_neg(0f32), 1.0);
         assert_eq!([87.5, 1e30, f32::INFINITY].map(exp_neg), [0.0; 3]);
-    }
-
-    #[test]
-    fn beam_weight_integrates_the_sun_beam_along_the_step() {
-        // ∫₀^τ e^{−μu} e^{−u} du = (1 − e^{−(1+μ)τ})/(1 + μ); τ as μ → −1.
-        for tau in [1e-6f32, 0.01, 0.3, 1.0, 4.0, 30.0] {
-            for mu in [-1.0f32, -0.999, -0.5, 0.0, 0.3, 1.0] {
-                let (t, m) = (tau as f64, mu as f64);
-                let want = if mu == -1.0 { t } else { (1.0 - (-(1.0 + m) * t).exp()) / (1.0 + m) };
-                let got = beam_weight(tau, mu) as f64;
-                assert!((got - want).abs() <= 1e-6 * want, "τ={tau} μ={mu}: {got} vs {want}");
-            }
-        }
-        // μ = 0: the beam uniform along the step, the linear step's weights.
-        let (_, wi, wo) = step_weights(0.7);
-        assert!((beam_weight(0.7, 0.0) - (wi + wo)).abs() < 1e-6);
-    }
-
-    #[test]
-    fn a_full_cell_steps_its_sun_share_along_the_beam_and_its_diffuse_source_linearly() {
-        // A cell of density 2 after a back point of density 2 (τ = σ s ρ = 0.05·10·2 = 1), ordinate at
-        // μ = 0.6 to the sun: I = I_b e^{−τ} + w_in D_b + w_out D + S_sun (1 − e^{−1.6})/1.6.
-        let k = Step {
-            weights: [1.0, 0.0, 0.0, 0.0],
-            up: 0,
-            stride: 3,
-            s: 10.0,
-            sigma_t: [0.05; 3],
-            grey: true,
-            k_sun: [1.0; 3],
-            mu_sun: 0.6,
-        };
-        let (rho, i_b, d_b, sun_b, d, sun) = (2.0f32, 0.5f32, 0.3f32, 0.9f32, 0.2f32, 0.7f32);
-        let acc = split_record([i_b; 3], rho, [rho * d_b; 3], [rho * sun_b; 3]);
-        let got = cells::<f32>(&k, &acc, rho, f32::from_bits(u32::MAX), &[d; 3], &[sun; 3]);
-        let (e, wi, wo) = step_weights(1.0);
-        let want = i_b * e + wi * d_b + wo * d + sun * (1.0 - (-1.6f32).exp()) / 1.6;
-        assert!((got[0] - want).abs() < 1e-6, "{} vs {want}", got[0]);
-        // An empty cell holds the back point's sources over the step (τ = 0.5).
-        let got = cells::<f32>(&k, &acc, 0.0, 0.0, &[0.0; 3], &[0.0; 3]);
-        let (e, wi, wo) = step_weights(0.5);
-        let want = i_b * e + (wi + wo) * (d_b + sun_b);
-        assert!((got[0] - want).abs() < 1e-6, "{} vs {want}", got[0]);
-    }
-
-    #[test]
-    fn the_sun_share_stays_within_the_source() {
-        assert_eq!(sun_share([1.0, 0.5, 0.0], [0.5; 3], [1.0; 3]), ([0.5, 0.0, 0.0], [0.5, 0.5, 0.0]));
-        assert_eq!(sun_share([1.0; 3], [0.5; 3], [-1.0; 3]), ([1.0; 3], [0.0; 3]), "a dipping K: no share");
     }
 
     #[test]
