@@ -1,7 +1,9 @@
-//! `cloudgi export mitsuba [SCENE] -o DIR`: write the scene for an independent renderer.
+//! `cloudgi export mitsuba [SCENE] -o DIR [--frame N]`: write the scene (one frame of a sequence) for
+//! an independent renderer.
 
-use crate::error::Result;
-use crate::scene::Scene;
+use crate::error::{Error, Result};
+use crate::scene::{Scene, SceneDesc};
+use crate::sequence::Sequence;
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
 
@@ -25,18 +27,45 @@ struct MitsubaArgs {
     /// Output folder (created if missing).
     #[arg(short, long)]
     output: PathBuf,
+    /// The frame to export of a sequence (a frame pattern in `medium.grid`, or `[animation]`).
+    #[arg(long, value_name = "N")]
+    frame: Option<u32>,
+}
+
+/// The description of the one frame `export` writes: the scene's own, or `frame`'s of a sequence.
+fn frame_desc(desc: &SceneDesc, source: &str, base: &std::path::Path, frame: Option<u32>) -> Result<SceneDesc> {
+    let seq = Sequence::new(desc, source)?;
+    match (seq.is_animated(), frame) {
+        (false, None) => Ok(desc.clone()),
+        (true, Some(f)) => {
+            seq.check_grid_files(&[f], base, source)?;
+            Ok(seq.desc_at(f))
+        }
+        (true, None) => Err(Error::invalid(
+            source,
+            "--frame",
+            "is missing: the scene is a sequence (a frame pattern in medium.grid, or [animation]) and export \
+             writes one frame; pass --frame N",
+        )),
+        (false, Some(f)) => Err(Error::invalid(
+            "command line",
+            "--frame",
+            format!("{f} is not allowed: {source} is not a sequence (no frame pattern in medium.grid, no [animation]); leave --frame out"),
+        )),
+    }
 }
 
 pub fn run(a: ExportArgs, quiet: bool) -> Result<()> {
     match a.target {
         Target::Mitsuba(m) => {
             let file = super::SceneFile::read(m.scene.as_deref())?;
+            let desc = frame_desc(&file.desc, &file.source, &file.base, m.frame)?;
             let ours = |p: &std::path::Path| {
                 p.file_name()
                     .is_some_and(|n| n == "scene.xml" || n == "density.vol" || n == crate::reference::mitsuba::SKY_FILE)
             };
-            super::output::check_folder(&m.output, "--output", &file.inputs(&file.desc), ours)?;
-            let scene = Scene::build(file.desc, &file.source, &file.base)?;
+            super::output::check_folder(&m.output, "--output", &file.inputs(&desc), ours)?;
+            let scene = Scene::build(desc, &file.source, &file.base)?;
             let files = crate::reference::mitsuba::export(&scene, &m.output)?;
             if !quiet {
                 for f in files {

@@ -1225,6 +1225,24 @@ fn bad_arguments_of_the_other_commands() {
         &["export", "mitsuba", "s.toml", "-o", ".", "-q"],
         &["--output", "medium.grid"],
     );
+    // A sequence exports one frame, named by --frame; a still scene takes none.
+    let frames = || ("c.0001.vol", vol([2, 2, 2], &[1.0; 8], 0));
+    let pattern = || ("p.toml", b"[medium]\ngrid = \"c.####.vol\"\n".to_vec());
+    fails(
+        &[pattern(), frames()],
+        &["export", "mitsuba", "p.toml", "-o", "d", "-q"],
+        &["--frame", "sequence"],
+    );
+    fails(
+        &[pattern(), frames()],
+        &["export", "mitsuba", "p.toml", "-o", "d", "--frame", "2", "-q"],
+        &["frame 2", "c.0002.vol"],
+    );
+    fails(
+        &[s()],
+        &["export", "mitsuba", "s.toml", "-o", "d", "--frame", "1", "-q"],
+        &["--frame", "not a sequence"],
+    );
 }
 
 // ------------------------------------------------------------------------- warnings and help

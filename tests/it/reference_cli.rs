@@ -1,6 +1,6 @@
 //! The command line of the reference tools: `render --method reference`, `compare`, `export mitsuba`.
 
-use crate::common::cloudgi;
+use crate::common::{cloudgi, npy_grid, ok};
 
 const SCENE: &str = r#"
 [medium]
@@ -95,4 +95,29 @@ fn render_compare_and_export() {
     let out = cloudgi(d, &["export", "mitsuba", "s.toml", "-o", "mi", "-q"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(d.join("mi/scene.xml").exists() && d.join("mi/density.vol").exists());
+}
+
+#[test]
+fn export_writes_one_frame_of_a_sequence_as_the_frame_file_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // Frame 3 of a pattern, keyed `sigma_t`: the same export as a scene naming that file and value.
+    std::fs::write(d.join("c.0003.npy"), npy_grid([4, 3, 5], |i, j, k| (i + 2 * j + k) as f32 / 8.0)).unwrap();
+    let medium = "[medium]\nvoxel_size = 50.0\n";
+    std::fs::write(
+        d.join("seq.toml"),
+        format!(
+            "{medium}grid = \"c.####.npy\"\n[[animation.key]]\nframe = 1\nmedium.sigma_t = 0.02\n\
+             [[animation.key]]\nframe = 5\nmedium.sigma_t = 0.06\n"
+        ),
+    )
+    .unwrap();
+    std::fs::write(d.join("one.toml"), format!("{medium}grid = \"c.0003.npy\"\nsigma_t = 0.04\n")).unwrap();
+    ok(d, &["export", "mitsuba", "seq.toml", "--frame", "3", "-o", "a", "-q"]);
+    ok(d, &["export", "mitsuba", "one.toml", "-o", "b", "-q"]);
+    let read = |f: &str| std::fs::read(d.join(f)).unwrap();
+    assert_eq!(read("a/density.vol"), read("b/density.vol"));
+    // The same XML but for the comment naming the scene file exported.
+    let xml = |f: &str| String::from_utf8(read(f)).unwrap();
+    assert_eq!(xml("a/scene.xml").replace("seq.toml", "one.toml"), xml("b/scene.xml"));
 }
