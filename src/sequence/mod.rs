@@ -102,7 +102,7 @@ impl Sequence {
             file,
             "medium.grid",
             format!(
-                "{} missing: {}{}; the pattern `{}` names frame {first} `{}`; render the frames that exist with --frames",
+                "{} missing: {}{}; the pattern `{}` names frame {first} `{}`; choose frames that exist (render --frames, export --frame)",
                 if missing.len() == 1 { "a frame file is" } else { "frame files are" },
                 listed.join(", "),
                 if more > 0 { format!(" and {more} more") } else { String::new() },
