@@ -47,3 +47,17 @@ pub fn assert_finite_nonnegative(label: &str, img: &Image, skip: &[&str]) {
         }
     }
 }
+
+/// A `.npy` (format 1.0) with header `dict` (padded here) and `body`.
+pub fn npy_bytes(dict: &str, body: &[u8]) -> Vec<u8> {
+    let mut h = dict.to_string();
+    while (10 + h.len() + 1) % 64 != 0 {
+        h.push(' ');
+    }
+    h.push('\n');
+    let mut b = b"\x93NUMPY\x01\x00".to_vec();
+    b.extend_from_slice(&(h.len() as u16).to_le_bytes());
+    b.extend_from_slice(h.as_bytes());
+    b.extend_from_slice(body);
+    b
+}

@@ -64,14 +64,9 @@ fn write_grid(dir: &Path) -> std::path::PathBuf {
         }
     }
     let header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': ({n}, {n}, {n}), }}");
-    let pad = 64 - (10 + header.len() + 1) % 64;
-    let header = format!("{header}{}\n", " ".repeat(pad));
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend((header.len() as u16).to_le_bytes());
-    bytes.extend(header.as_bytes());
-    vals.iter().for_each(|v: &f32| bytes.extend(v.to_le_bytes()));
+    let body: Vec<u8> = vals.iter().flat_map(|v: &f32| v.to_le_bytes()).collect();
     let p = dir.join("grid.npy");
-    std::fs::write(&p, bytes).unwrap();
+    std::fs::write(&p, super::common::npy_bytes(&header, &body)).unwrap();
     p
 }
 

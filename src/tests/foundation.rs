@@ -1,5 +1,6 @@
 //! Foundation checks: analytic transport cases, loaders, determinism and the procedural cloud.
 
+use super::common::npy_bytes;
 use crate::lighting::{Sky, Sun};
 use crate::lit::sunlight::SunTransmittance;
 use crate::math::{Rgb, Vec3};
@@ -144,35 +145,11 @@ fn voxels_that_are_not_cubes_are_placed_per_axis() {
 fn npy_float64_is_read() {
     let dir = tempfile::tempdir().unwrap();
     let header = "{'descr': '<f8', 'fortran_order': False, 'shape': (2, 1, 3), }";
-    let mut b = b"\x93NUMPY\x01\x00".to_vec();
-    let mut h = header.to_string();
-    while (10 + h.len() + 1) % 64 != 0 {
-        h.push(' ');
-    }
-    h.push('\n');
-    b.extend_from_slice(&(h.len() as u16).to_le_bytes());
-    b.extend_from_slice(h.as_bytes());
-    for v in [0.0f64, 0.5, 1.0, 1.5, 2.0, 2.5] {
-        b.extend_from_slice(&v.to_le_bytes());
-    }
-    std::fs::write(dir.path().join("b.npy"), b).unwrap();
+    let body: Vec<u8> = [0.0f64, 0.5, 1.0, 1.5, 2.0, 2.5].iter().flat_map(|v| v.to_le_bytes()).collect();
+    std::fs::write(dir.path().join("b.npy"), npy_bytes(header, &body)).unwrap();
     let s = scene_with_grid(dir.path(), "b.npy").unwrap();
     assert_eq!(s.medium.dims(), [3, 1, 2]);
     assert_eq!(s.medium.density.get(2, 0, 1), 2.5);
-}
-
-/// A `.npy` with header `dict` and `body`.
-fn npy_bytes(dict: &str, body: &[u8]) -> Vec<u8> {
-    let mut h = dict.to_string();
-    while (10 + h.len() + 1) % 64 != 0 {
-        h.push(' ');
-    }
-    h.push('\n');
-    let mut b = b"\x93NUMPY\x01\x00".to_vec();
-    b.extend_from_slice(&(h.len() as u16).to_le_bytes());
-    b.extend_from_slice(h.as_bytes());
-    b.extend_from_slice(body);
-    b
 }
 
 /// NumPy's other numeric types (a uint8 CT stack, a float16 export, a boolean mask) are read by
