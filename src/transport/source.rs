@@ -148,7 +148,12 @@ fn lanes_dot(m: &[f32], y: &[[f32; PAIRS]]) -> [f32; PAIRS] {
             a0[p] += mk * yk[p];
         }
     }
-    std::array::from_fn(|p| a0[p] + a1[p])
+    // A loop, not `array::from_fn`: its closure would not be compiled for the AVX copy
+    // (src/transport/sweep/step.rs).
+    for p in 0..PAIRS {
+        a0[p] += a1[p];
+    }
+    a0
 }
 
 /// acc[k] += Σ_p s[p] y_p[k] (the pairs in order, in a sum from 0 per k, then added), eight k

@@ -5,7 +5,10 @@
 //! ([`Plane`]), so the eight cells' upwind values are one eight-lane load per field and
 //! neighbour. The step is written once over a lane type ([`Vector`]: AVX, SSE2 or one `f32`),
 //! every operation per lane in a fixed order, so each gives the same bits (a test steps every
-//! ordinate one cell at a time, in SSE2 and in AVX lanes).
+//! ordinate one cell at a time, in SSE2 and in AVX lanes). The step has no closures
+//! (`array::from_fn`, iterator adaptors): a closure is a function of its own, not compiled for
+//! the AVX copy's target feature, and where LLVM leaves one outlined every intrinsic inside it
+//! becomes a call (measured: the solve 3× slower). Plain loops and `#[inline(always)]` functions.
 
 use super::lanes::{Vector, ROUND};
 use crate::transport::simd::prefetch;
@@ -164,17 +167,18 @@ pub(in crate::transport) fn step_row<V: Vector>(
         // Radiance and density bilinear; the source (per unit extinction, defined only where
         // ρ > 0) density-weighted, so that empty neighbours do not pull it towards 0 (a uniform
         // source stays uniform: the furnace holds). From 0, the neighbours in order.
-        let acc: [V; FIELDS] = std::array::from_fn(|f| {
+        // Loops, not `array::from_fn` or closures: a closure does not inherit the AVX copy's
+        // target feature, and where LLVM leaves one outlined every intrinsic in it becomes a call
+        // (the solve 3× slower; module docs).
+        let mut acc = [V::splat(0.0); FIELDS];
+        for (f, sum) in acc.iter_mut().enumerate() {
             let field = prev.data[f * prev.len..].as_ptr();
-            // SAFETY: u ≥ 0 and u + stride + 1 + N ≤ l0 + n + stride + N ≤ the field's length
-            // (the spare cells included), asserted above.
-            let at = |i: usize| unsafe { V::load(field.add(i)) };
-            let mut sum = V::splat(0.0);
             for (wk, i) in w.iter().zip([u, u + 1, u + k.stride, u + k.stride + 1]) {
-                sum = sum.add(wk.mul(at(i)));
+                // SAFETY: u ≥ 0 and u + stride + 1 + N ≤ l0 + n + stride + N ≤ the field's
+                // length (the spare cells included), asserted above.
+                *sum = sum.add(wk.mul(unsafe { V::load(field.add(i)) }));
             }
-            sum
-        });
+        }
         let (rho_v, full_v) = (V::from_array(&rho), V::from_array(&full));
         let sc_v = [V::from_array(&sc[0]), V::from_array(&sc[1]), V::from_array(&sc[2])];
         let out = cells(k, &acc, rho_v, full_v, &sc_v);
@@ -215,7 +219,9 @@ fn cells<V: Vector>(k: &Step, acc: &[V; FIELDS], rho: V, full: V, sc: &[V; 3]) -
     let weighted = rb.gt(V::splat(RHO_WEIGHT_MIN));
     let inv_rb = V::splat(1.0).div(rb);
     let grey = step_weights_lanes(V::splat(k.sigma_t[0]).mul(rm));
-    std::array::from_fn(|band| {
+    // A loop, not `array::from_fn` (its closure may be left outside the AVX copy: step_row).
+    let mut out = [V::splat(0.0); 3];
+    for (band, o) in out.iter_mut().enumerate() {
         let (e, wi, wo) = if band == 0 || k.grey {
             grey
         } else {
@@ -225,8 +231,9 @@ fn cells<V: Vector>(k: &Step, acc: &[V; FIELDS], rho: V, full: V, sc: &[V; 3]) -
         let sb = V::select(weighted, acc[RS + band].mul(inv_rb), sc[band]);
         let se = V::select(full, sc[band], sb);
         let stepped = ib.mul(e).add(wi.mul(sb)).add(wo.mul(se));
-        V::select(stepping, stepped, ib)
-    })
+        *o = V::select(stepping, stepped, ib);
+    }
+    out
 }
 
 /// Optical lengths below which the step weights are their series (the closed form cancels).
