@@ -92,19 +92,28 @@ fn bench_times_transport_with_its_iterations_and_memory_and_skips_what_would_tak
 /// The solver's AVX copies keep their intrinsics inlined. A closure (`array::from_fn`, an
 /// iterator adaptor) or a helper left outlined inside a kernel is not compiled for the copy's
 /// target feature, so its intrinsics become calls: the same bits, the solve 3× slower
-/// (src/transport/sweep/step.rs). An outlined AVX intrinsic leaves its symbol in the binary; a
-/// structural check, not a timing. Debug builds inline nothing, so only optimised ones are read.
+/// (docs/transport.md, "AVX"). An outlined intrinsic is a function of its own in the binary's
+/// symbol table (`nm`, binutils, which links the binary); a structural check, not a timing.
+/// Debug builds inline nothing, so only optimised ones are read.
 #[test]
-#[cfg(target_arch = "x86_64")]
+#[cfg(all(target_arch = "x86_64", target_os = "linux"))]
 #[cfg_attr(debug_assertions, ignore = "unoptimised builds keep every intrinsic outlined")]
 fn the_avx_kernels_keep_their_intrinsics_inlined() {
-    let bin = std::fs::read(BIN).unwrap();
-    let holds = |s: &[u8]| bin.windows(s.len()).any(|w| w == s);
+    let out = std::process::Command::new("nm")
+        .args(["--defined-only", BIN])
+        .output()
+        .unwrap_or_else(|e| panic!("this check reads the binary's symbols with `nm` (binutils): {e}"));
+    assert!(out.status.success(), "nm {BIN}: {}", String::from_utf8_lossy(&out.stderr));
+    let symbols = String::from_utf8_lossy(&out.stdout);
     // The symbols are there to be read (a stripped binary would pass without a look).
-    assert!(holds(b"sweep_ordinate_avx"), "{BIN} has no symbol table: the check cannot see");
     assert!(
-        !holds(b"core_arch3x863avx"),
-        "{BIN} holds an outlined core::arch AVX intrinsic: part of a transport kernel runs outside its \
-         #[target_feature] copy (`nm -C {BIN} | grep core_arch::x86::avx` names it)"
+        symbols.contains("sweep_ordinate_avx"),
+        "{BIN} has no symbol table: the check cannot see"
+    );
+    let outlined: Vec<&str> = symbols.lines().filter(|l| l.contains("core_arch3x863avx")).collect();
+    assert!(
+        outlined.is_empty(),
+        "{BIN} holds outlined core::arch AVX intrinsics: part of a transport kernel runs outside its \
+         #[target_feature] copy (`nm -C {BIN} | grep core_arch::x86::avx`): {outlined:?}"
     );
 }
