@@ -1,5 +1,6 @@
 """cloudgi from Python against the command line: same images, same messages."""
 
+import platform
 import signal
 import subprocess
 import sys
@@ -15,6 +16,21 @@ from conftest import cli_error, run_cli, tiny_scene
 
 def test_version_is_the_crates():
     assert cloudgi.__version__ == "0.1.0"
+
+
+@pytest.mark.skipif(
+    not (sys.platform.startswith("linux") and platform.machine() == "x86_64"), reason="reads an x86-64 ELF symbol table"
+)
+def test_the_extension_keeps_the_avx_kernels_intrinsics_inlined():
+    # The same structural check as tests/it/transport.rs makes on the binary: the extension is
+    # its own link of the library, and an outlined core::arch AVX intrinsic (a kernel's closure
+    # left outside its #[target_feature] copy) makes `transport` 3x slower with the same bits.
+    so = cloudgi._cloudgi.__file__
+    nm = subprocess.run(["nm", "--defined-only", so], capture_output=True, text=True)
+    assert nm.returncode == 0, nm.stderr
+    assert "sweep_ordinate_avx" in nm.stdout, f"{so} has no symbol table: the check cannot see"
+    outlined = [line for line in nm.stdout.splitlines() if "core_arch3x863avx" in line]
+    assert not outlined, f"{so} holds outlined AVX intrinsics: {outlined}"
 
 
 def test_default_scene_equals_the_cli_exr_bit_for_bit(tmp_path):
