@@ -18,7 +18,7 @@
 //! memory peak, at 2 B per voxel of the grown box instead of 4.
 
 use crate::half::Unit16;
-use crate::math::{Trilinear, Vec3};
+use crate::math::Vec3;
 use crate::medium::{Medium, SubGrid};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -120,23 +120,7 @@ impl SunTransmittance {
     pub fn at_voxel(&self, v: Vec3) -> f32 {
         self.grid.trilinear(v.to_array())
     }
-
-    /// The transmittance raised to `power` (σt′/σt: the δ-M beam T′ = T^{σt′/σt}) at continuous
-    /// voxel coordinates `v`, with the optical depth −ln T trilinear between the centres rather
-    /// than T: exact where τ is linear, as along a segment of uniform density, where T's chord
-    /// lies above its exponential by (τ/2)·coth(τ/2) (+8 % over a voxel one optical depth across).
-    /// A centre whose code reads 0 or its floor takes the floor's depth (2⁻³¹: 21.5).
-    #[inline]
-    pub fn beam_at_voxel(&self, v: Vec3, power: f32) -> f32 {
-        let (lo, hi, f) = Trilinear::corners(self.grid.dims(), v.to_array());
-        let t = self.grid.corner_values(lo, hi);
-        let tau = Trilinear { idx: [0, 1, 2, 3, 4, 5, 6, 7], f }.blend(|c| -t[c].max(BEAM_FLOOR).ln());
-        (-tau * power).exp()
-    }
 }
-
-/// The least transmittance a 16-bit code holds above 0 ([`Unit16`]: 2⁻³¹).
-const BEAM_FLOOR: f32 = 4.656_613e-10;
 
 /// Optical depth beyond which exp(−τ) is 0 in f32 (its smallest subnormal is e^{−103.3}).
 const TAU_ZERO: f64 = 110.0;

@@ -300,8 +300,6 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
     let step = scene.render.step_voxels * m.min_voxel();
     let peak = PeakSpread::truncated(field.optics.g, field.order);
     let near = NEAR_EYE_VOXELS * m.voxel_size.max_element();
-    let beam = crate::lit::sunlight::SunTransmittance::compute(m, scene.sun.dir);
-    let ratio = (field.optics.bands[1].sigma_t / field.optics.sigma_t) as f32;
     // Per pixel: [diffuse source, sun single scattering, background]; the image is their sum.
     let shade = |x: u32, y: u32, spp: u32| {
         let mut sum = [Rgb::ZERO; 3];
@@ -330,14 +328,7 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
                 full_weighted(m, &field.full, v, |fi| voxel_diffuse(field, fi, &r.y)) * (1.0 - w) + far * w
             });
             let ss = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _| {
-                let far = if std::env::var_os("CLOUDGI_LOGBEAM").is_some() {
-                    full_weighted(m, &field.full, v, |fi| {
-                        let t = field.sun_t[fi];
-                        Rgb::from([0, 1, 2].map(|b| if t[b] > 0.0 { sun[fi][b] / t[b] } else { 0.0 }))
-                    }) * beam.beam_at_voxel(v, ratio)
-                } else {
-                    full_trilinear(m, &field.full, &sun, v)
-                };
+                let far = full_trilinear(m, &field.full, &sun, v);
                 let Some((r, p, dist, w)) = near_eye(v) else {
                     return far;
                 };
