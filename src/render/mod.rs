@@ -7,6 +7,7 @@ pub mod empty;
 pub mod full;
 pub mod single;
 pub mod transport;
+pub mod transport_beam;
 pub mod transport_ground;
 pub mod warm;
 

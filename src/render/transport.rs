@@ -24,6 +24,7 @@ use crate::peak::PeakSpread;
 use crate::pipeline::{render_rows, NoProgress, Progress, Timings};
 use crate::render::edge_pixels::{refine_edges, EDGE_SAMPLES};
 use crate::render::single::pixel_sample;
+use crate::render::transport_beam::{self, BeamCheck, BeamSums};
 use crate::render::transport_ground::EyeGround;
 use crate::render::warm::Warm;
 use crate::scene::Scene;
@@ -176,7 +177,7 @@ fn full_trilinear(m: &Medium, full: &FullIndex, values: &[Rgb], v: Vec3) -> Rgb 
 /// The trilinear mean of `value(full voxel index)` over the full voxels among the eight around
 /// continuous voxel coordinates `v`, their weights renormalised (zero where none is full).
 #[inline]
-fn full_weighted(m: &Medium, full: &FullIndex, v: Vec3, mut value: impl FnMut(usize) -> Rgb) -> Rgb {
+pub(super) fn full_weighted(m: &Medium, full: &FullIndex, v: Vec3, mut value: impl FnMut(usize) -> Rgb) -> Rgb {
     let d = m.dims();
     let u = v - Vec3::splat(0.5);
     let b = u.floor();
@@ -253,7 +254,7 @@ pub fn render_with(scene: &Scene, progress: &dyn Progress, timings: &mut Timings
     // A live view sees each iteration's iterate through the same gather (without its bar).
     let show = |f: &TransportField| {
         let mut t = Timings::default();
-        if let Ok(img) = gather(scene, f, &NoProgress, &mut t) {
+        if let Ok(img) = gather(scene, f, &NoProgress, &mut t, false) {
             progress.image(&img);
         }
     };
@@ -280,12 +281,13 @@ pub fn render_with(scene: &Scene, progress: &dyn Progress, timings: &mut Timings
     if let Some(w) = unconverged(&scene.source, &field.history, s) {
         progress.warn(&w);
     }
-    gather(scene, &field, progress, timings)
+    gather(scene, &field, progress, timings, true)
 }
 
 /// The image of a solved (or, for a live view, partly solved) field: the eye source and the
-/// march per pixel.
-fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timings: &mut Timings) -> Result<Image> {
+/// march per pixel; with `check`, the check on the sun's beam between centres
+/// ([`transport_beam`]) and its warning.
+fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timings: &mut Timings, check: bool) -> Result<Image> {
     let m = &scene.medium;
     let (diffuse, sun) = timings.time("eye source", || eye_source(scene, field));
     let ground = EyeGround::new(scene, field);
@@ -300,6 +302,7 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
     let step = scene.render.step_voxels * m.min_voxel();
     let peak = PeakSpread::truncated(field.optics.g, field.order);
     let near = NEAR_EYE_VOXELS * m.voxel_size.max_element();
+    let ratio = (field.optics.bands[1].sigma_t / field.optics.sigma_t) as f32;
     // Per pixel: [diffuse source, sun single scattering, background]; the image is their sum.
     let shade = |x: u32, y: u32, spp: u32| {
         let mut sum = [Rgb::ZERO; 3];
@@ -353,6 +356,41 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
         timings.time("gather: edges", || {
             refine_edges(&mut px, cam.width, |x, y| shade(x, y, EDGE_SAMPLES));
         });
+    }
+    if check {
+        let beam = BeamCheck::new(&sun, &field.sun_t);
+        let share = timings.time("gather: beam check", || {
+            // Every second pixel's centre each way: an estimate over the cloud, not an image.
+            let (w, h) = (cam.width.div_ceil(2), cam.height.div_ceil(2));
+            let sums = render_rows(w, h, &NoProgress, "beam check", |x, y| {
+                let (x, y) = (2 * x, 2 * y);
+                let ray = cam.ray(x as f32 + 0.5, y as f32 + 0.5);
+                let (o, d) = (ray.origin, ray.dir);
+                let t_max = scene.ground.as_ref().and_then(|g| g.intersect(o, d)).unwrap_or(f32::INFINITY);
+                let rho = |v: [f32; 3]| dense.trilinear(v);
+                // Both with the per-voxel source (near the eye the image takes it along each ray).
+                let gathered = march_with(&scaled, rho, o, d, 0.0, t_max, step, 0.5, |v, _| full_trilinear(m, &field.full, &sun, v));
+                let exponential = march_with(&scaled, rho, o, d, 0.0, t_max, step, 0.5, |v, _| Rgb::splat(beam.source(m, &field.full, v)));
+                let p = px[(x + y * cam.width) as usize];
+                // The pixels `cloudgi compare` scores: the exact transmittance T = T′^(σt/σt′) below 0.99.
+                let in_cloud = gathered.transmittance.powf(1.0 / ratio) < 0.99;
+                BeamSums::pixel(gathered.radiance.y, exponential.radiance.y, (p[0] + p[1] + p[2]).y, in_cloud)
+            });
+            // Summed in pixel order: the same for any thread count.
+            let total = sums.iter().fold(BeamSums::default(), |a, s| BeamSums {
+                excess: a.excess + s.excess,
+                light: a.light + s.light,
+            });
+            total.share()
+        });
+        progress.log(&format!(
+            "transport: the sun's beam between voxel centres adds an estimated {:.1} % to the cloud's light (a warning above {:.0} %)",
+            share * 100.0,
+            transport_beam::BEAM_EXCESS * 100.0
+        ));
+        if let Some(w) = transport_beam::warning(scene, share) {
+            progress.warn(&w);
+        }
     }
     let mut img = Image::new(cam.width, cam.height);
     img.pixels = px.iter().map(|p| p[0] + p[1] + p[2]).collect();
