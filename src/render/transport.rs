@@ -384,7 +384,7 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
             total.share()
         });
         progress.log(&format!(
-            "transport: the sun's beam between voxel centres adds an estimated {:.1} % to the cloud's light (a warning above {:.0} %)",
+            "transport: the sun's beam between voxel centres adds an estimated {:.1} % to the cloud's light (above {:.0} % is warned about)",
             share * 100.0,
             transport_beam::BEAM_EXCESS * 100.0
         ));

@@ -147,8 +147,11 @@ fn a_low_sun_through_coarse_voxels_is_warned_about() {
         String::from_utf8_lossy(&r.stderr).into_owned()
     };
     let err = run("[0.0, 0.011, -1.0]");
-    assert!(err.contains("between voxel centres") && err.contains("medium.refine = 3"), "{err}");
+    assert!(
+        err.contains("warning: ") && err.contains("between the voxel centres") && err.contains("medium.refine = 3"),
+        "{err}"
+    );
     // The default sun, high and to the side: no such warning.
     let err = run("[0.3, 0.8, 0.5]");
-    assert!(!err.contains("between voxel centres"), "{err}");
+    assert!(!err.contains("between the voxel centres"), "{err}");
 }
