@@ -1,7 +1,7 @@
 //! `--method transport` through the binary: the scene's keys reach the solver, its AOVs are
 //! written, and `cloudgi bench` times it.
 
-use crate::common::BIN;
+use crate::common::{ok, BIN};
 use cloudgi::Image;
 
 fn assert_valid(img: &Image) {
@@ -130,21 +130,9 @@ fn a_low_sun_through_coarse_voxels_is_warned_about() {
                 fov_deg = 40.0\nwidth = 32\nheight = 24\n";
     let run = |sun: &str| {
         std::fs::write(&scene, format!("{base}[sun]\ndirection = {sun}\n")).unwrap();
-        let out = dir.path().join("t.exr");
-        let r = std::process::Command::new(BIN)
-            .args([
-                "render",
-                scene.to_str().unwrap(),
-                "--method",
-                "transport",
-                "-o",
-                out.to_str().unwrap(),
-                "-q",
-            ])
-            .output()
-            .unwrap();
-        assert!(r.status.success() && out.exists(), "{}", String::from_utf8_lossy(&r.stderr));
-        String::from_utf8_lossy(&r.stderr).into_owned()
+        let err = ok(dir.path(), &["render", "graze.toml", "--method", "transport", "-o", "t.exr", "-q"]);
+        assert!(dir.path().join("t.exr").exists());
+        err
     };
     let err = run("[0.0, 0.011, -1.0]");
     assert!(
