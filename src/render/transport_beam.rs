@@ -58,7 +58,9 @@ impl BeamCheck {
 /// with the beam interpolated exponentially, and the whole image, both of the middle band.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct BeamSums {
+    /// Σ (the gather's sun single scattering − the check's), W·m⁻²·sr⁻¹ summed over pixels.
     pub excess: f64,
+    /// Σ the image, the same units.
     pub light: f64,
 }
 
