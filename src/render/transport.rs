@@ -368,7 +368,9 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
                 let (o, d) = (ray.origin, ray.dir);
                 let t_max = scene.ground.as_ref().and_then(|g| g.intersect(o, d)).unwrap_or(f32::INFINITY);
                 let rho = |v: [f32; 3]| dense.trilinear(v);
-                // Both with the per-voxel source (near the eye the image takes it along each ray).
+                // Both marched here, at the pixel's centre with the per-voxel source, rather than
+                // the image's own sun layer against one march: that layer is jittered, re-shaded at
+                // edges and blended near the eye, and the difference would carry all of that.
                 let gathered = march_with(&scaled, rho, o, d, 0.0, t_max, step, 0.5, |v, _| full_trilinear(m, &field.full, &sun, v));
                 let exponential = march_with(&scaled, rho, o, d, 0.0, t_max, step, 0.5, |v, _| Rgb::splat(beam.source(m, &field.full, v)));
                 let p = px[(x + y * cam.width) as usize];
