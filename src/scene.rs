@@ -208,6 +208,10 @@ render_table! {
     /// `transport`: Gauss–Legendre ordinates in cos θ, even, 2 to 32; the azimuths are twice as
     /// many (8: 8 × 16 = 128 ordinates). Exact for order L when ≥ L + 1.
     transport_polar_ordinates: usize => transport.n_mu, for [Transport];
+    /// `transport`: fewer azimuths on the rings of ordinates towards the poles, about 2·n·sin θ
+    /// and at least 8 (SHDOM's reduced grid: 96 ordinates at the default 8; exact for harmonics
+    /// with |m| ≤ 3); false: 2·n on every ring (128), exact for every harmonic of order ≤ n − 1.
+    transport_reduced_azimuths: bool => transport.reduced_azimuths, for [Transport];
     /// `transport`: stop iterating once I0 changes by less than this fraction of its largest
     /// value between iterations (unitless, 0 < t < 1).
     transport_tolerance: f64 => transport.tolerance, for [Transport];

@@ -23,12 +23,14 @@ pub struct March {
 /// sub-interval at fraction `xi` ∈ [0, 1). `source(p_voxel, rho)` returns S (W·m⁻²·sr⁻¹) at a
 /// point given in continuous voxel coordinates with density ρ > 0.
 #[inline]
-pub fn march(m: &Medium, o: Vec3, d: Vec3, t_min: f32, t_max: f32, step_m: f32, xi: f32, source: impl FnMut(Vec3, f32) -> Rgb) -> March {
-    march_with(m, |v| m.density.trilinear(v), o, d, t_min, t_max, step_m, xi, source)
+pub fn march(m: &Medium, o: Vec3, d: Vec3, t_min: f32, t_max: f32, step_m: f32, xi: f32, mut source: impl FnMut(Vec3, f32) -> Rgb) -> March {
+    march_with(m, |v| m.density.trilinear(v), o, d, t_min, t_max, step_m, xi, |v, rho, _| source(v, rho))
 }
 
 /// [`march`] with ρ at continuous voxel coordinates (clamped to the box) from `rho`, which must
-/// give the medium's trilinear density (e.g. from [`Medium::dense_density`], the same bits).
+/// give the medium's trilinear density (e.g. from [`Medium::dense_density`], the same bits), and
+/// the source also given the transmittance from `o` to its sample point (`source(p_voxel, rho,
+/// t)`), for a source that depends on how much of the medium lies between it and the eye.
 #[inline]
 pub fn march_with(
     m: &Medium,
@@ -39,7 +41,7 @@ pub fn march_with(
     t_max: f32,
     step_m: f32,
     xi: f32,
-    mut source: impl FnMut(Vec3, f32) -> Rgb,
+    mut source: impl FnMut(Vec3, f32, f32) -> Rgb,
 ) -> March {
     let mut out = March {
         radiance: Rgb::ZERO,
@@ -69,7 +71,8 @@ pub fn march_with(
             }
             let delta = sigma_t * rho * len;
             let e = (-delta).exp();
-            l += t_acc * (1.0 - e) * source(v, rho);
+            // (The transmittance to the sample is unused by most sources, and then not computed.)
+            l += t_acc * (1.0 - e) * source(v, rho, t_acc * (-delta * xi).exp());
             t_acc *= e;
             if t_acc < T_CUTOFF {
                 t_acc = 0.0;

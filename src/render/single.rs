@@ -53,7 +53,7 @@ pub fn radiance(scene: &Scene, sun_t: &SunTransmittance, o: Vec3, d: Vec3, xi: f
         t_max,
         step,
         xi,
-        |v, _| sun_term * sun_t.at_voxel(v),
+        |v, _, _| sun_term * sun_t.at_voxel(v),
     );
     if r.transmittance <= 0.0 {
         return r.radiance;

@@ -12,6 +12,8 @@
 //! the voxel's centre (a voxel subtends a small angle from the eye), then interpolated
 //! trilinearly over full voxels only, so empty neighbours do not darken the cloud's rim. Within
 //! [`NEAR_EYE_VOXELS`] voxels of the eye (an eye in fog) it is evaluated along each ray instead.
+//! The sun's part is kept in two pieces, the smooth phase's and the forward peak's, which the
+//! march weights by the transmittance between its sample and the eye ([`SunSource::seen`]).
 
 use crate::error::Result;
 use crate::image::Image;
@@ -33,18 +35,17 @@ use crate::transport::TransportMemory;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::f64::consts::PI;
+use std::ops::{Add, AddAssign, Div, Mul};
 
 /// Source per unit scaled optical depth towards the eye, per full voxel (in grid order, as
 /// [`TransportField::full`] indexes them): the diffuse (multiple-scattering) part and the sun's
 /// single scattering with the forward peak that δ-M truncated put back ([`sun_phase`]).
-pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
+pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<SunSource>) {
     let m = &scene.medium;
     let [nx, ny, _] = m.dims();
     let nsh = sh_count(f.order);
     let eye = scene.camera.position;
     let peak = PeakSpread::truncated(f.optics.g, f.order);
-    // ρ for the marches to the eye from the dense copy: the same bits, fewer instructions.
-    let dense = m.dense_density();
     let voxels: Vec<usize> = f.full.full_voxels().collect();
     voxels
         .par_iter()
@@ -59,9 +60,7 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<Rgb>) {
                 // Radiance towards the eye travels along −d.
                 real_sh(f.order, -DVec3::new(d.x as f64, d.y as f64, d.z as f64), y);
                 let angle = ScatteringAngle::new(&peak, (scene.sun.dir.dot(d) as f64).clamp(-1.0, 1.0));
-                // Exact optical depth from the voxel's centre to the eye (or out of the grid).
-                let t_eye = m.transmittance_with(|v| dense.trilinear(v), centre, -d, 0.0, to_voxel.length()) as f64;
-                (voxel_diffuse(f, fi, y), voxel_sun(scene, f, &peak, fi, &angle, t_eye))
+                (voxel_diffuse(f, fi, y), voxel_sun(scene, f, &peak, fi, &angle))
             },
         )
         .unzip()
@@ -78,26 +77,88 @@ fn voxel_diffuse(f: &TransportField, fi: usize, y: &[f64]) -> Rgb {
     }))
 }
 
+/// The sun's single scattering towards the eye at a point, per band, in its two parts
+/// ([`sun_phase`]): what the smooth phase scatters, and what the forward peak scatters, which the
+/// light's own peak scatterings on its way to the eye take out of the ray (weight T_eye^{af}).
+/// Per unit scaled optical depth (W·m⁻²·sr⁻¹).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SunSource {
+    /// The smooth phase's part.
+    pub smooth: Rgb,
+    /// The forward peak's part, before the eye's leg takes its share.
+    pub peak: Rgb,
+}
+
+impl SunSource {
+    /// The radiance seen through `t_eye_af` = T_eye^{a f} per band, T_eye the exact
+    /// transmittance from the point to the eye: the sum, at least 0 (p′'s truncated series dips
+    /// below 0 at some angles, as the solver's source, clamped there too).
+    pub fn seen(&self, t_eye_af: Rgb) -> Rgb {
+        (self.smooth + self.peak * t_eye_af).max(Rgb::ZERO)
+    }
+}
+
+impl Add for SunSource {
+    type Output = SunSource;
+    fn add(self, o: SunSource) -> SunSource {
+        SunSource {
+            smooth: self.smooth + o.smooth,
+            peak: self.peak + o.peak,
+        }
+    }
+}
+
+impl AddAssign for SunSource {
+    fn add_assign(&mut self, o: SunSource) {
+        *self = *self + o;
+    }
+}
+
+impl Mul<f32> for SunSource {
+    type Output = SunSource;
+    fn mul(self, w: f32) -> SunSource {
+        SunSource {
+            smooth: self.smooth * w,
+            peak: self.peak * w,
+        }
+    }
+}
+
+impl Div<f32> for SunSource {
+    type Output = SunSource;
+    fn div(self, w: f32) -> SunSource {
+        SunSource {
+            smooth: self.smooth / w,
+            peak: self.peak / w,
+        }
+    }
+}
+
 /// The sun's single scattering towards the eye at full voxel `fi`, at the scattering angle
-/// `angle`, with the exact transmittance `t_eye` to the eye.
-fn voxel_sun(scene: &Scene, f: &TransportField, peak: &PeakSpread, fi: usize, angle: &ScatteringAngle, t_eye: f64) -> Rgb {
+/// `angle`.
+fn voxel_sun(scene: &Scene, f: &TransportField, peak: &PeakSpread, fi: usize, angle: &ScatteringAngle) -> SunSource {
     let (o, e_sun) = (&f.optics, scene.sun.irradiance);
-    let mut sun = [0f32; 3];
-    // The last band's phase, its albedo, optics and T′_sun: a band alike takes it.
-    let mut last: Option<(f64, &crate::transport::BandOptics, f64, f64)> = None;
+    let (mut smooth, mut peaked) = ([0f32; 3], [0f32; 3]);
+    // The last band's phase parts, its albedo, optics and T′_sun: a band alike takes them.
+    let mut last: Option<(f64, &crate::transport::BandOptics, f64, (f64, f64))> = None;
     for b in 0..3 {
         let (a, band) = (o.albedo[b], &o.bands[b]);
         let t_sun = f.sun_t[fi][b] as f64;
         if t_sun > 0.0 {
             let p = match last {
                 Some((la, lb, lt, p)) if la == a && lb == band && lt == t_sun => p,
-                _ => sun_phase(peak, o.g, band, a, angle, t_sun, t_eye),
+                _ => sun_phase(peak, o.g, band, a, angle, t_sun),
             };
             last = Some((a, band, t_sun, p));
-            sun[b] = (a / (1.0 - a * band.f) * e_sun[b] as f64 * p / (4.0 * PI) * t_sun) as f32;
+            let k = a / (1.0 - a * band.f) * e_sun[b] as f64 / (4.0 * PI) * t_sun;
+            smooth[b] = (k * p.0) as f32;
+            peaked[b] = (k * p.1) as f32;
         }
     }
-    Rgb::from(sun)
+    SunSource {
+        smooth: Rgb::from(smooth),
+        peak: Rgb::from(peaked),
+    }
 }
 
 /// Within this many voxel edges of the eye the directions from a voxel's centre to the eye and
@@ -152,7 +213,10 @@ impl ScatteringAngle {
 /// λ = af τ_sun peak scatterings before it spread its angle (moments g^{l−L−1} per scattering
 /// beyond order L). Only where nothing is on either leg is it TMS. No other stage changes:
 /// the solver, the march and the diffuse source keep δ-M's medium (σt′, a′, p′).
-fn sun_phase(peak: &PeakSpread, g: f64, band: &crate::transport::BandOptics, albedo: f64, angle: &ScatteringAngle, t_sun: f64, t_eye: f64) -> f64 {
+///
+/// The phase in its two parts (smooth, peak): the phase is smooth + T_eye^{af} peak, at least 0
+/// ([`SunSource::seen`]).
+fn sun_phase(peak: &PeakSpread, g: f64, band: &crate::transport::BandOptics, albedo: f64, angle: &ScatteringAngle, t_sun: f64) -> (f64, f64) {
     let cos_theta = angle.cos_theta;
     let hg = {
         let denom = 1.0 + g * g - 2.0 * g * cos_theta;
@@ -162,27 +226,29 @@ fn sun_phase(peak: &PeakSpread, g: f64, band: &crate::transport::BandOptics, alb
     let smooth = (1.0 - band.f) * band.phase(cos_theta);
     // T′_sun = e^{−(1 − af) τ_sun}: the expected number of peak scatterings on the sun's leg.
     let lambda = -af * t_sun.ln() / (1.0 - af);
-    let peak_part = hg - smooth + peak.spread_with(lambda, &angle.legendre);
-    // p′'s truncated series dips below 0 at some angles (as the solver's source, clamped there too).
-    (smooth + t_eye.powf(af) * peak_part).max(0.0)
+    (smooth, hg - smooth + peak.spread_with(lambda, &angle.legendre))
 }
 
 /// Trilinear interpolation of `values` (one per full voxel, [`eye_source`]) at continuous voxel
 /// coordinates `v`, over full voxels only.
 #[inline]
-fn full_trilinear(m: &Medium, full: &FullIndex, values: &[Rgb], v: Vec3) -> Rgb {
+fn full_trilinear<T: Weighted>(m: &Medium, full: &FullIndex, values: &[T], v: Vec3) -> T {
     full_weighted(m, full, v, |fi| values[fi])
 }
+
+/// A value per full voxel that [`full_weighted`] interpolates.
+pub(super) trait Weighted: Copy + Default + AddAssign + Mul<f32, Output = Self> + Div<f32, Output = Self> {}
+impl<T: Copy + Default + AddAssign + Mul<f32, Output = T> + Div<f32, Output = T>> Weighted for T {}
 
 /// The trilinear mean of `value(full voxel index)` over the full voxels among the eight around
 /// continuous voxel coordinates `v`, their weights renormalised (zero where none is full).
 #[inline]
-pub(super) fn full_weighted(m: &Medium, full: &FullIndex, v: Vec3, mut value: impl FnMut(usize) -> Rgb) -> Rgb {
+pub(super) fn full_weighted<T: Weighted>(m: &Medium, full: &FullIndex, v: Vec3, mut value: impl FnMut(usize) -> T) -> T {
     let d = m.dims();
     let u = v - Vec3::splat(0.5);
     let b = u.floor();
     let t = u - b;
-    let (mut sum, mut wsum) = (Rgb::ZERO, 0.0f32);
+    let (mut sum, mut wsum) = (T::default(), 0.0f32);
     for dz in 0..2 {
         for dy in 0..2 {
             for dx in 0..2 {
@@ -205,7 +271,7 @@ pub(super) fn full_weighted(m: &Medium, full: &FullIndex, v: Vec3, mut value: im
     if wsum > 0.0 {
         sum / wsum
     } else {
-        Rgb::ZERO
+        T::default()
     }
 }
 
@@ -296,13 +362,16 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
     scaled.optics.sigma_t = field.optics.bands[1].sigma_t as f32;
     let cam = &scene.camera;
     let spp = scene.render.aa_samples;
-    // ρ from the dense copy on the cloud's box (built by the eye source, after the solve): the
+    // ρ from the dense copy on the cloud's box (built here, after the solve): the
     // same bits as the packed density's.
     let dense = m.dense_density();
     let step = scene.render.step_voxels * m.min_voxel();
     let peak = PeakSpread::truncated(field.optics.g, field.order);
     let near = NEAR_EYE_VOXELS * m.voxel_size.max_element();
     let ratio = (field.optics.bands[1].sigma_t / field.optics.sigma_t) as f32;
+    // T_eye^{af} per band from the march's T′ (the middle band's): T_eye = T′^{σt/σt′}.
+    let seen_powers = Rgb::from([0, 1, 2].map(|b| (field.optics.albedo[b] * field.optics.bands[b].f) as f32 / ratio));
+    let t_eye_af = |t_march: f32| Rgb::new(t_march.powf(seen_powers.x), t_march.powf(seen_powers.y), t_march.powf(seen_powers.z));
     // Per pixel: [diffuse source, sun single scattering, background]; the image is their sum.
     let shade = |x: u32, y: u32, spp: u32| {
         let mut sum = [Rgb::ZERO; 3];
@@ -314,29 +383,27 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
             let rho = |v: [f32; 3]| dense.trilinear(v);
             // Near the eye the source along this ray, blended into the per-voxel one.
             let ray_source = (near > 0.0 && m.intersect(o, d, 0.0, near).is_some()).then(|| RaySource::new(field, &peak, scene.sun.dir, d));
-            // (the ray's source, point, distance to the eye, weight of the per-voxel source) where
-            // the ray's own source takes part.
+            // (the ray's source, weight of the per-voxel source) where the ray's own source takes part.
             let near_eye = |v: Vec3| {
                 let r = ray_source.as_ref()?;
-                let p = m.origin + v * m.voxel_size;
-                let dist = (p - o).length();
+                let dist = (m.origin + v * m.voxel_size - o).length();
                 let w = ((dist - 0.5 * near) / (0.5 * near)).clamp(0.0, 1.0);
-                (w < 1.0).then_some((r, p, dist, w))
+                (w < 1.0).then_some((r, w))
             };
-            let ms = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _| {
+            let ms = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _, _| {
                 let far = full_trilinear(m, &field.full, &diffuse, v);
-                let Some((r, _, _, w)) = near_eye(v) else {
+                let Some((r, w)) = near_eye(v) else {
                     return far;
                 };
                 full_weighted(m, &field.full, v, |fi| voxel_diffuse(field, fi, &r.y)) * (1.0 - w) + far * w
             });
-            let ss = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _| {
+            let ss = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _, t| {
                 let far = full_trilinear(m, &field.full, &sun, v);
-                let Some((r, p, dist, w)) = near_eye(v) else {
-                    return far;
+                let source = match near_eye(v) {
+                    None => far,
+                    Some((r, w)) => full_weighted(m, &field.full, v, |fi| voxel_sun(scene, field, &peak, fi, &r.angle)) * (1.0 - w) + far * w,
                 };
-                let t_eye = m.transmittance_with(|v| dense.trilinear(v), p, -d, 0.0, dist) as f64;
-                full_weighted(m, &field.full, v, |fi| voxel_sun(scene, field, &peak, fi, &r.angle, t_eye)) * (1.0 - w) + far * w
+                source.seen(t_eye_af(t))
             });
             let bg = if ms.transmittance > 0.0 {
                 background(scene, ground.as_ref(), o, d)
@@ -371,8 +438,12 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
                 // Both marched here, at the pixel's centre with the per-voxel source, rather than
                 // the image's own sun layer against one march: that layer is jittered, re-shaded at
                 // edges and blended near the eye, and the difference would carry all of that.
-                let gathered = march_with(&scaled, rho, o, d, 0.0, t_max, step, 0.5, |v, _| full_trilinear(m, &field.full, &sun, v));
-                let exponential = march_with(&scaled, rho, o, d, 0.0, t_max, step, 0.5, |v, _| Rgb::splat(beam.source(m, &field.full, v)));
+                let gathered = march_with(&scaled, rho, o, d, 0.0, t_max, step, 0.5, |v, _, t| {
+                    full_trilinear(m, &field.full, &sun, v).seen(t_eye_af(t))
+                });
+                let exponential = march_with(&scaled, rho, o, d, 0.0, t_max, step, 0.5, |v, _, t| {
+                    Rgb::splat(beam.source(m, &field.full, v, t_eye_af(t).y))
+                });
                 let p = px[(x + y * cam.width) as usize];
                 // The pixels `cloudgi compare` scores: the exact transmittance T = T′^(σt/σt′) below 0.99.
                 let in_cloud = gathered.transmittance.powf(1.0 / ratio) < 0.99;
@@ -414,8 +485,17 @@ mod tests {
         let band = crate::transport::BandOptics::delta_m(0.05, a, g, order);
         let peak = PeakSpread::truncated(g, order);
         let hg = |c: f64| (1.0 - g * g) / (1.0 + g * g - 2.0 * g * c).powf(1.5);
+        // The phase seen through T_eye^{af}, as the gather takes it.
+        let phase = |c: f64, t_sun: f64, t_eye: f64| {
+            let (smooth, peaked) = sun_phase(&peak, g, &band, a, &ScatteringAngle::new(&peak, c), t_sun);
+            let parts = SunSource {
+                smooth: Rgb::splat(smooth as f32),
+                peak: Rgb::splat(peaked as f32),
+            };
+            parts.seen(Rgb::splat(t_eye.powf(a * band.f) as f32)).x as f64
+        };
         for c in [-1.0, -0.3, 0.2, 0.9, 0.99, 1.0] {
-            let p = sun_phase(&peak, g, &band, a, &ScatteringAngle::new(&peak, c), 1.0, 1.0);
+            let p = phase(c, 1.0, 1.0);
             assert!((p - hg(c)).abs() < 1e-6 * hg(c).max(1.0), "cos {c}: {p} vs {}", hg(c));
         }
         // Spread by peak scatterings on the sun's leg: the same light in all (½∫ p dμ = 1), less
@@ -427,14 +507,14 @@ mod tests {
             let norm: f64 = x
                 .iter()
                 .zip(&w)
-                .map(|(x, w)| 0.5 * w * sun_phase(&peak, g, &band, a, &ScatteringAngle::new(&peak, *x), t_sun, 1.0))
+                .map(|(x, w)| 0.5 * w * phase(*x, t_sun, 1.0))
                 .sum();
             assert!((norm - 1.0).abs() < 1e-3, "T′ {t_sun}: {norm}");
-            assert!(sun_phase(&peak, g, &band, a, &ScatteringAngle::new(&peak, 1.0), t_sun, 1.0) < hg(1.0));
+            assert!(phase(1.0, t_sun, 1.0) < hg(1.0));
         }
         // A peak scattering on the eye's leg removes the peak's share: only the smooth part is left.
         let smooth = (1.0 - band.f) * band.phase(0.95);
-        assert!((sun_phase(&peak, g, &band, a, &ScatteringAngle::new(&peak, 0.95), 0.5, 0.0) - smooth).abs() < 1e-9);
+        assert!((phase(0.95, 0.5, 0.0) - smooth).abs() < 1e-6 * smooth);
     }
 
     #[test]

@@ -12,7 +12,7 @@
 //! (Not used for the image itself: with the chord's excess taken out there, a deficit of the
 //! solve's diffuse light on other scenes comes to light; docs/accuracy.md.)
 
-use super::transport::full_weighted;
+use super::transport::{full_weighted, SunSource};
 use crate::math::Rgb;
 use crate::medium::sparse::FullIndex;
 use crate::medium::Medium;
@@ -24,32 +24,33 @@ use crate::scene::Scene;
 pub const BEAM_EXCESS: f64 = 0.05;
 
 /// Per full voxel (in [`FullIndex`] order) the middle band's sun single scattering towards the eye
-/// per unit T′, and ln T′.
+/// per unit T′, its smooth and peak parts ([`SunSource`]), and ln T′.
 pub struct BeamCheck {
     per_beam_and_ln: Vec<Rgb>,
 }
 
 impl BeamCheck {
     /// From the eye source's sun part `sun` and the δ-M beam `sun_t` at the full voxels.
-    pub fn new(sun: &[Rgb], sun_t: &[[f32; 3]]) -> BeamCheck {
+    pub fn new(sun: &[SunSource], sun_t: &[[f32; 3]]) -> BeamCheck {
         let per_beam_and_ln = sun
             .iter()
             .zip(sun_t)
             .map(|(s, t)| {
                 let t = t[1];
                 // A voxel the beam does not reach adds nothing whatever its log.
-                let per_beam = if t > 0.0 { s.y / t } else { 0.0 };
-                Rgb::new(per_beam, t.max(f32::MIN_POSITIVE).ln(), 0.0)
+                let per_beam = |part: f32| if t > 0.0 { part / t } else { 0.0 };
+                Rgb::new(per_beam(s.smooth.y), per_beam(s.peak.y), t.max(f32::MIN_POSITIVE).ln())
             })
             .collect();
         BeamCheck { per_beam_and_ln }
     }
 
-    /// The middle band's sun single scattering at continuous voxel coordinates `v` with the beam's
-    /// optical depth trilinear over the full voxels (as the gather's own source is).
-    pub fn source(&self, m: &Medium, full: &FullIndex, v: crate::math::Vec3) -> f32 {
+    /// The middle band's sun single scattering at continuous voxel coordinates `v`, seen through
+    /// `t_eye_af` ([`SunSource::seen`]), with the beam's optical depth trilinear over the full
+    /// voxels (as the gather's own source is).
+    pub fn source(&self, m: &Medium, full: &FullIndex, v: crate::math::Vec3, t_eye_af: f32) -> f32 {
         let c = full_weighted(m, full, v, |fi| self.per_beam_and_ln[fi]);
-        c.x * c.y.exp()
+        (c.x + c.y * t_eye_af).max(0.0) * c.z.exp()
     }
 }
 
@@ -122,12 +123,16 @@ mod tests {
     #[test]
     fn the_check_source_is_the_gather_s_where_the_beam_is_uniform() {
         // One full voxel: the normalised weights give its own values, and ln T′ back exp'd.
-        let check = BeamCheck::new(&[Rgb::new(0.0, 0.3, 0.0)], &[[0.5, 0.6, 0.7]]);
+        let sun = SunSource {
+            smooth: Rgb::new(0.0, 0.3, 0.0),
+            peak: Rgb::new(0.0, 0.2, 0.0),
+        };
+        let check = BeamCheck::new(&[sun], &[[0.5, 0.6, 0.7]]);
         let c = check.per_beam_and_ln[0];
-        assert!((c.x * c.y.exp() - 0.3).abs() < 1e-6, "{c:?}");
+        assert!(((c.x + 0.5 * c.y) * c.z.exp() - 0.4).abs() < 1e-6, "{c:?}");
         // A voxel the beam does not reach: no source, a finite log.
-        let dark = BeamCheck::new(&[Rgb::new(0.0, 0.0, 0.0)], &[[0.0; 3]]).per_beam_and_ln[0];
-        assert_eq!(dark.x, 0.0);
-        assert!(dark.y.is_finite());
+        let dark = BeamCheck::new(&[SunSource::default()], &[[0.0; 3]]).per_beam_and_ln[0];
+        assert_eq!((dark.x, dark.y), (0.0, 0.0));
+        assert!(dark.z.is_finite());
     }
 }

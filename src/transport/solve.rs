@@ -57,8 +57,11 @@ use std::sync::Arc;
 pub struct TransportSettings {
     /// Legendre/SH truncation order L of the δ-M phase function and of the source.
     pub order: usize,
-    /// Ordinates in cos θ (the azimuths are 2× this).
+    /// Ordinates in cos θ (the azimuths are 2× this on the rings near the horizon).
     pub n_mu: usize,
+    /// Fewer azimuths on the rings towards the poles ([`Quadrature::reduced`]); false: 2·`n_mu`
+    /// on every ring ([`Quadrature::product`]).
+    pub reduced_azimuths: bool,
     /// Convergence: max over full voxels of |ΔI0| / max I0 between iterations.
     pub tolerance: f64,
     /// Iteration cap.
@@ -67,11 +70,23 @@ pub struct TransportSettings {
     pub acceleration: bool,
 }
 
+impl TransportSettings {
+    /// The sweeps' ordinates.
+    pub(super) fn quadrature(&self) -> Quadrature {
+        if self.reduced_azimuths {
+            Quadrature::reduced(self.n_mu, 2 * self.n_mu)
+        } else {
+            Quadrature::product(self.n_mu, 2 * self.n_mu)
+        }
+    }
+}
+
 impl Default for TransportSettings {
     fn default() -> Self {
         TransportSettings {
             order: 7,
             n_mu: 8,
+            reduced_azimuths: true,
             tolerance: 5e-3,
             max_iterations: 60,
             acceleration: true,
@@ -171,7 +186,7 @@ pub fn solve_warm(
     let index = FullVoxels::of(&m.density);
     let sun_t = sun_transmittance(m, sun, &optics, &index.voxels, ground.map(|g| g.height));
     let ctx = Ctx::new(m, sky, ground, &index, &sun_t, s.order, &optics.bands);
-    let q = Quadrature::product(s.n_mu, 2 * s.n_mu);
+    let q = s.quadrature();
     let tables = pair_tables(&q, sun, s.order, &optics);
     let start = StartTables::new(&tables, s.order);
     let ground_light = GroundLight::new(m, sun, sky, ground, &optics);

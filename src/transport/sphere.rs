@@ -19,15 +19,34 @@ impl Quadrature {
     /// is axis-aligned). Exact for spherical polynomials of degree < 2·n_mu in θ and < n_phi in φ:
     /// products Y_lm Y_l′m′ with l, l′ ≤ L need n_mu ≥ L + 1 and n_phi ≥ 2L + 1.
     pub fn product(n_mu: usize, n_phi: usize) -> Quadrature {
+        Self::rings(n_mu, |_| n_phi)
+    }
+
+    /// `n_mu` Gauss nodes in cos θ, each ring with fewer azimuths towards the poles, where the
+    /// rings are shorter (SHDOM's reduced grid, Evans 1998): ring j gets the even count
+    /// ⌊1.9 + (n_phi − 1) sin θ_j⌋, at least 8 (or `n_phi` when fewer), so its ordinates are
+    /// about as far apart along the ring as on the horizon's. Exact for the products Y_lm Y_l′m′
+    /// with |m| + |m′| below every ring's count: every harmonic of order ≤ L with |m| ≤ 3 for
+    /// n_mu ≥ L + 1 (the higher |m| at the poles, where those harmonics are ∝ sin^|m| θ, carry
+    /// little of a cloud's light: docs/transport.md, "Ordinates"). Even counts keep every
+    /// ordinate's opposite.
+    pub fn reduced(n_mu: usize, n_phi: usize) -> Quadrature {
+        Self::rings(n_mu, |sin_theta| (((1.9 + (n_phi as f64 - 1.0) * sin_theta) as usize) & !1).clamp(8.min(n_phi), n_phi))
+    }
+
+    /// `n_mu` Gauss nodes in cos θ, the ring at sin θ with `azimuths(sin θ)` azimuths offset by
+    /// half a step (so no ordinate is axis-aligned), each weighted by its node's share of 4π.
+    fn rings(n_mu: usize, azimuths: impl Fn(f64) -> usize) -> Quadrature {
         let (x, w) = gauss_legendre(n_mu);
-        let mut dirs = Vec::with_capacity(n_mu * n_phi);
-        let mut weights = Vec::with_capacity(n_mu * n_phi);
+        let mut dirs = Vec::new();
+        let mut weights = Vec::new();
         for (mu, wm) in x.iter().zip(&w) {
             let s = (1.0 - mu * mu).max(0.0).sqrt();
-            for k in 0..n_phi {
-                let phi = 2.0 * PI * (k as f64 + 0.5) / n_phi as f64;
+            let n = azimuths(s);
+            for k in 0..n {
+                let phi = 2.0 * PI * (k as f64 + 0.5) / n as f64;
                 dirs.push(DVec3::new(s * phi.cos(), *mu, s * phi.sin()));
-                weights.push(wm * 2.0 * PI / n_phi as f64);
+                weights.push(wm * 2.0 * PI / n as f64);
             }
         }
         Quadrature { dirs, weights }
@@ -45,6 +64,11 @@ mod tests {
         let l = 5;
         let q = Quadrature::product(l + 1, 2 * l + 2);
         assert!((q.weights.iter().sum::<f64>() - 4.0 * PI).abs() < 1e-12);
+        assert!(orthonormality_error(&q, l, l) < 1e-10);
+    }
+
+    /// max |Σ_d w_d Y_a(d) Y_b(d) − δ_ab| over the harmonics a, b of order ≤ `l` with |m| ≤ `m_max`.
+    fn orthonormality_error(q: &Quadrature, l: usize, m_max: usize) -> f64 {
         let n = sh_count(l);
         let ys: Vec<Vec<f64>> = q
             .dirs
@@ -55,13 +79,36 @@ mod tests {
                 y
             })
             .collect();
-        for a in 0..n {
-            for b in 0..n {
+        // real_sh's index of (l, m) is l² + l + m.
+        let m_of = |k: usize| (k as i64 - ((k as f64).sqrt() as i64).pow(2) - (k as f64).sqrt() as i64).unsigned_abs() as usize;
+        let mut worst: f64 = 0.0;
+        for a in (0..n).filter(|a| m_of(*a) <= m_max) {
+            for b in (0..n).filter(|b| m_of(*b) <= m_max) {
                 let s: f64 = ys.iter().zip(&q.weights).map(|(y, w)| w * y[a] * y[b]).sum();
-                let want = if a == b { 1.0 } else { 0.0 };
-                assert!((s - want).abs() < 1e-10, "({a}, {b}): {s}");
+                worst = worst.max((s - if a == b { 1.0 } else { 0.0 }).abs());
             }
         }
+        worst
+    }
+
+    #[test]
+    fn the_reduced_grid_is_symmetric_and_exact_up_to_m_3() {
+        for (n_mu, ordinates) in [(2, 8), (4, 32), (6, 60), (8, 96), (16, 348)] {
+            let q = Quadrature::reduced(n_mu, 2 * n_mu);
+            assert_eq!(q.dirs.len(), ordinates, "n_mu {n_mu}");
+            assert!((q.weights.iter().sum::<f64>() - 4.0 * PI).abs() < 1e-12);
+            // Every ordinate's opposite is in the set, with its weight.
+            for (d, w) in q.dirs.iter().zip(&q.weights) {
+                let o = q.dirs.iter().position(|e| (*e + *d).length() < 1e-12).expect("opposite");
+                assert_eq!(q.weights[o], *w);
+            }
+            let l = n_mu - 1;
+            assert!(orthonormality_error(&q, l, 3) < 1e-12, "n_mu {n_mu}");
+        }
+        // The higher |m| are not integrated exactly: the product rule is.
+        let l = 7;
+        assert!(orthonormality_error(&Quadrature::reduced(8, 16), l, l) > 1e-2);
+        assert!(orthonormality_error(&Quadrature::product(8, 16), l, l) < 1e-12);
     }
 
     #[test]

@@ -12,34 +12,38 @@ fn assert_valid(img: &Image) {
 fn cli_renders_with_method_transport_and_reports_iterations() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("small.toml");
-    std::fs::write(
-        &scene,
-        "[medium]\nresolution = [20, 16, 12]\norigin = [-100.0, 0.0, -60.0]\n\
+    let text = "[medium]\nresolution = [20, 16, 12]\norigin = [-100.0, 0.0, -60.0]\n\
          [camera]\nposition = [0.0, 80.0, 400.0]\nlook_at = [0.0, 80.0, 0.0]\nwidth = 16\nheight = 12\n\
-         [render]\ntransport_order = 5\ntransport_polar_ordinates = 6\n",
-    )
-    .unwrap();
+         [render]\ntransport_order = 5\ntransport_polar_ordinates = 6\n";
     let out = dir.path().join("t.exr");
-    let r = std::process::Command::new(BIN)
-        .args([
-            "render",
-            scene.to_str().unwrap(),
-            "--method",
-            "transport",
-            "--aov",
-            "-o",
-            out.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&r.stderr);
-    assert!(r.status.success(), "{err}");
+    let render = |text: &str| {
+        std::fs::write(&scene, text).unwrap();
+        let r = std::process::Command::new(BIN)
+            .args([
+                "render",
+                scene.to_str().unwrap(),
+                "--method",
+                "transport",
+                "--aov",
+                "-o",
+                out.to_str().unwrap(),
+            ])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&r.stderr).into_owned();
+        assert!(r.status.success(), "{err}");
+        err
+    };
+    let err = render(text);
     assert!(err.contains("iterations") && err.contains("transport solve"), "{err}");
-    // The scene's keys reach the solver: 6 × 12 ordinates at order 5.
-    assert!(err.contains("72 ordinates, order 5") && !err.contains("warning"), "{err}");
+    // The scene's keys reach the solver: 6 rings of 8, 10 and 12 azimuths each way at order 5;
+    // without the reduced grid 6 × 12.
+    assert!(err.contains("60 ordinates, order 5") && !err.contains("warning"), "{err}");
     let img = Image::read_exr(&out).unwrap();
     assert_valid(&img);
     assert!(img.layer("sun_single").is_some());
+    let err = render(&format!("{text}transport_reduced_azimuths = false\n"));
+    assert!(err.contains("72 ordinates, order 5"), "{err}");
 }
 
 #[test]

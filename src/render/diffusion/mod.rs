@@ -203,7 +203,7 @@ pub fn render_warm(scene: &Scene, progress: &dyn Progress, timings: &mut Timings
                     t_max,
                     step,
                     xi,
-                    |v, rho| src.at(v, rho),
+                    |v, rho, _| src.at(v, rho),
                 );
                 sum += r.radiance;
                 if r.transmittance > 0.0 {
