@@ -82,28 +82,47 @@ impl PeakSpread {
     /// The Legendre polynomials P_l(cos Θ) of this series' orders, for [`Self::spread_with`]
     /// (one ray, many points).
     pub fn legendre(&self, cos_theta: f64) -> Vec<f64> {
-        let mut all = self.legendre_all(cos_theta);
-        all.drain(..self.first.min(all.len()));
-        all
+        let [p] = self.legendre_from(self.first, [cos_theta]);
+        p
+    }
+
+    /// [`Self::legendre`] at `K` angles at once: the same values, the `K` recurrences side by
+    /// side (each is a chain of dependent divisions, which then overlap).
+    pub fn legendre_lanes<const K: usize>(&self, cos_theta: [f64; K]) -> [Vec<f64>; K] {
+        self.legendre_from(self.first, cos_theta)
     }
 
     /// The Legendre polynomials P_l(cos Θ) from order 0 to this series' last, for
     /// [`Self::peak_with`].
     pub fn legendre_all(&self, cos_theta: f64) -> Vec<f64> {
+        let [p] = self.legendre_from(0, [cos_theta]);
+        p
+    }
+
+    /// P_l at each of `cos_theta` for l from `from` to this series' last order (Bonnet's
+    /// recurrence, (l + 1) P_{l+1} = (2l + 1) x P_l − l P_{l−1}).
+    fn legendre_from<const K: usize>(&self, from: usize, cos_theta: [f64; K]) -> [Vec<f64>; K] {
         let n = self.first + self.weight.len();
-        let mut out = Vec::with_capacity(n);
-        let (mut p0, mut p1) = (1.0, cos_theta);
+        let mut out: [Vec<f64>; K] = std::array::from_fn(|_| Vec::with_capacity(n.saturating_sub(from)));
+        let (mut p0, mut p1) = ([1.0; K], cos_theta);
         for l in 0..n {
             let p = match l {
-                0 => 1.0,
+                0 => [1.0; K],
                 1 => cos_theta,
                 _ => {
-                    let p2 = ((2 * l - 1) as f64 * cos_theta * p1 - (l - 1) as f64 * p0) / l as f64;
+                    let mut p2 = [0.0; K];
+                    for k in 0..K {
+                        p2[k] = ((2 * l - 1) as f64 * cos_theta[k] * p1[k] - (l - 1) as f64 * p0[k]) / l as f64;
+                    }
                     (p0, p1) = (p1, p2);
                     p2
                 }
             };
-            out.push(p);
+            if l >= from {
+                for (o, pk) in out.iter_mut().zip(p) {
+                    o.push(pk);
+                }
+            }
         }
         out
     }

@@ -47,23 +47,36 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<SunSource
     let eye = scene.camera.position;
     let peak = PeakSpread::truncated(f.optics.g, f.order);
     let voxels: Vec<usize> = f.full.full_voxels().collect();
+    // Four voxels at a time: their peaks' Legendre series side by side.
+    const LANES: usize = 4;
     voxels
-        .par_iter()
+        .par_chunks(LANES)
         .enumerate()
-        .map_init(
-            || vec![0.0; nsh],
-            |y, (fi, &v)| {
-                let (i, j, k) = (v % nx, (v / nx) % ny, v / (nx * ny));
-                let centre = m.voxel_center(i, j, k);
-                let to_voxel = centre - eye;
-                let d = to_voxel.normalize_or_zero();
-                // Radiance towards the eye travels along −d.
-                real_sh(f.order, -DVec3::new(d.x as f64, d.y as f64, d.z as f64), y);
-                let angle = ScatteringAngle::new(&peak, (scene.sun.dir.dot(d) as f64).clamp(-1.0, 1.0));
-                (voxel_diffuse(f, fi, y), voxel_sun(scene, f, &peak, fi, &angle))
-            },
-        )
+        .flat_map_iter(|(ci, chunk)| {
+            let mut y = vec![0.0; nsh];
+            let d: [Vec3; LANES] = std::array::from_fn(|k| chunk.get(k).map_or(Vec3::Y, |&v| (voxel_centre(m, v, nx, ny) - eye).normalize_or_zero()));
+            let cos_theta = d.map(|d| (scene.sun.dir.dot(d) as f64).clamp(-1.0, 1.0));
+            let legendre = peak.legendre_lanes(cos_theta);
+            let peak = &peak;
+            chunk
+                .iter()
+                .zip(d.into_iter().zip(cos_theta).zip(legendre))
+                .enumerate()
+                .map(move |(k, (_, ((d, cos_theta), legendre)))| {
+                    let fi = ci * LANES + k;
+                    // Radiance towards the eye travels along −d.
+                    real_sh(f.order, -DVec3::new(d.x as f64, d.y as f64, d.z as f64), &mut y);
+                    let angle = ScatteringAngle { cos_theta, legendre };
+                    (voxel_diffuse(f, fi, &y), voxel_sun(scene, f, peak, fi, &angle))
+                })
+                .collect::<Vec<_>>()
+        })
         .unzip()
+}
+
+/// The centre of grid voxel `v` (m); `nx`, `ny` the grid's first two dimensions.
+fn voxel_centre(m: &Medium, v: usize, nx: usize, ny: usize) -> Vec3 {
+    m.voxel_center(v % nx, (v / nx) % ny, v / (nx * ny))
 }
 
 /// The diffuse source towards the eye of full voxel `fi` (its index in [`TransportField::full`])
