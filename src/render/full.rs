@@ -32,6 +32,7 @@ use crate::image::Image;
 use crate::incident::IncidentLight;
 use crate::lit::ground::LitGround;
 use crate::lit::sunlight::SunTransmittance;
+use crate::render::{full_beam, transport_beam};
 use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
 use crate::scene::Scene;
@@ -390,7 +391,7 @@ pub fn gather(scene: &Scene, lit: &LitVolume, progress: &dyn Progress) -> Image 
         albedo * lit.diffuse_at(p, to_eye)
     };
     let mut settings = scene.render.edges;
-    settings.step_m = settings.step_m.max(GATHER_STEP_VOXELS * m.min_voxel());
+    settings.step_m = gather_step(scene, lit);
     let edge = EdgeGather::new(m, settings, &cubes, sun, &dense).with_peak_spread(sun_e);
     // The sun's chord weights the surface layer's sun orders ≥ 2 (docs/edges.md); the paper's
     // scheme (no layer, D_s = 0) keeps eq. 8 alone.
@@ -532,5 +533,13 @@ pub fn render_warm(scene: &Scene, progress: &dyn Progress, timings: &mut Timings
         first_state: state,
         ..
     } = p;
-    Ok((timings.time("final gather", || gather(scene, &lit, progress)), state, cg_iterations))
+    let img = timings.time("final gather", || gather(scene, &lit, progress));
+    let share = timings.time("final gather: beam check", || full_beam::share(scene, &lit, &img, gather_step(scene, &lit)));
+    transport_beam::report(scene, "full", share, progress);
+    Ok((img, state, cg_iterations))
+}
+
+/// The final gather's march step (m): the edges' step, at least [`GATHER_STEP_VOXELS`] voxels.
+fn gather_step(scene: &Scene, lit: &LitVolume) -> f32 {
+    scene.render.edges.step_m.max(GATHER_STEP_VOXELS * lit.medium.min_voxel())
 }

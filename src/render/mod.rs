@@ -5,6 +5,7 @@ pub mod diffusion;
 pub mod edge_pixels;
 pub mod empty;
 pub mod full;
+pub mod full_beam;
 pub mod single;
 pub mod transport;
 pub mod transport_beam;

@@ -440,13 +440,7 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
     if check {
         let beam = BeamCheck::new(&sun, &field.sun_t);
         let share = timings.time("gather: beam check", || {
-            // Every second pixel's centre each way: an estimate over the cloud, not an image.
-            let (w, h) = (cam.width.div_ceil(2), cam.height.div_ceil(2));
-            let sums = render_rows(w, h, &NoProgress, "beam check", |x, y| {
-                let (x, y) = (2 * x, 2 * y);
-                let ray = cam.ray(x as f32 + 0.5, y as f32 + 0.5);
-                let (o, d) = (ray.origin, ray.dir);
-                let t_max = scene.ground.as_ref().and_then(|g| g.intersect(o, d)).unwrap_or(f32::INFINITY);
+            transport_beam::share_over_pixels(scene, |x, y, o, d, t_max| {
                 let rho = |v: [f32; 3]| dense.trilinear(v);
                 // Both marched here, at the pixel's centre with the per-voxel source, rather than
                 // the image's own sun layer against one march: that layer is jittered, re-shaded at
@@ -461,22 +455,9 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
                 // The pixels `cloudgi compare` scores: the exact transmittance T = T′^(σt/σt′) below 0.99.
                 let in_cloud = gathered.transmittance.powf(1.0 / ratio) < 0.99;
                 BeamSums::pixel(gathered.radiance.y, exponential.radiance.y, (p[0] + p[1] + p[2]).y, in_cloud)
-            });
-            // Summed in pixel order: the same for any thread count.
-            let total = sums.iter().fold(BeamSums::default(), |a, s| BeamSums {
-                excess: a.excess + s.excess,
-                light: a.light + s.light,
-            });
-            total.share()
+            })
         });
-        progress.log(&format!(
-            "transport: the sun's beam between voxel centres adds an estimated {:.1} % to the cloud's light (above {:.0} % is warned about)",
-            share * 100.0,
-            transport_beam::BEAM_EXCESS * 100.0
-        ));
-        if let Some(w) = transport_beam::warning(scene, share) {
-            progress.warn(&w);
-        }
+        transport_beam::report(scene, "transport", share, progress);
     }
     let mut img = Image::new(cam.width, cam.height);
     img.pixels = px.iter().map(|p| p[0] + p[1] + p[2]).collect();
