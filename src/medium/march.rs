@@ -6,15 +6,16 @@
 
 use crate::math::{Rgb, Vec3};
 use crate::medium::Medium;
+use std::ops::{AddAssign, Mul};
 
 /// Transmittance below which a march stops (its remaining contribution is below this fraction).
 pub const T_CUTOFF: f32 = 1e-6;
 
-/// Result of a march.
+/// Result of a march: `S` the radiance's type (one [`Rgb`], or several layers marched at once).
 #[derive(Clone, Copy, Debug)]
-pub struct March {
+pub struct March<S = Rgb> {
     /// Radiance gathered in the medium (W·m⁻²·sr⁻¹).
-    pub radiance: Rgb,
+    pub radiance: S,
     /// Transmittance of the whole marched interval (0 if cut off).
     pub transmittance: f32,
 }
@@ -30,9 +31,11 @@ pub fn march(m: &Medium, o: Vec3, d: Vec3, t_min: f32, t_max: f32, step_m: f32, 
 /// [`march`] with ρ at continuous voxel coordinates (clamped to the box) from `rho`, which must
 /// give the medium's trilinear density (e.g. from [`Medium::dense_density`], the same bits), and
 /// the source also given the transmittance from `o` to its sample point (`source(p_voxel, rho,
-/// t)`), for a source that depends on how much of the medium lies between it and the eye.
+/// t)`), for a source that depends on how much of the medium lies between it and the eye. The
+/// source may be several radiances at once (`S`, e.g. an image's layers), each composited as one
+/// [`Rgb`] alone would be (the same bits).
 #[inline]
-pub fn march_with(
+pub fn march_with<S: Copy + Default + AddAssign + Mul<f32, Output = S>>(
     m: &Medium,
     rho: impl Fn([f32; 3]) -> f32,
     o: Vec3,
@@ -41,10 +44,10 @@ pub fn march_with(
     t_max: f32,
     step_m: f32,
     xi: f32,
-    mut source: impl FnMut(Vec3, f32, f32) -> Rgb,
-) -> March {
+    mut source: impl FnMut(Vec3, f32, f32) -> S,
+) -> March<S> {
     let mut out = March {
-        radiance: Rgb::ZERO,
+        radiance: S::default(),
         transmittance: 1.0,
     };
     let Some((t0, t1)) = m.intersect(o, d, t_min, t_max) else {
@@ -54,7 +57,7 @@ pub fn march_with(
     let inv_h = Vec3::ONE / m.voxel_size;
     let sigma_t = m.optics.sigma_t;
     let mut t_acc = 1.0f32;
-    let mut l = Rgb::ZERO;
+    let mut l = S::default();
     m.majorant.for_each_block(m, o, d, t0, t1, |ta, tb, maj| {
         if maj <= 0.0 {
             return true;
@@ -72,7 +75,7 @@ pub fn march_with(
             let delta = sigma_t * rho * len;
             let e = (-delta).exp();
             // (The transmittance to the sample is unused by most sources, and then not computed.)
-            l += t_acc * (1.0 - e) * source(v, rho, t_acc * (-delta * xi).exp());
+            l += source(v, rho, t_acc * (-delta * xi).exp()) * (t_acc * (1.0 - e));
             t_acc *= e;
             if t_acc < T_CUTOFF {
                 t_acc = 0.0;

@@ -147,6 +147,31 @@ impl Div<f32> for SunSource {
     }
 }
 
+/// The gather's two layers at a sample, marched together: the diffuse source and the sun's
+/// single scattering (W·m⁻²·sr⁻¹).
+#[derive(Clone, Copy, Debug, Default)]
+struct Layers {
+    diffuse: Rgb,
+    sun: Rgb,
+}
+
+impl AddAssign for Layers {
+    fn add_assign(&mut self, o: Layers) {
+        self.diffuse += o.diffuse;
+        self.sun += o.sun;
+    }
+}
+
+impl Mul<f32> for Layers {
+    type Output = Layers;
+    fn mul(self, w: f32) -> Layers {
+        Layers {
+            diffuse: self.diffuse * w,
+            sun: self.sun * w,
+        }
+    }
+}
+
 /// The sun's single scattering towards the eye at full voxel `fi`, at the scattering angle
 /// `angle`.
 fn voxel_sun(scene: &Scene, f: &TransportField, peak: &PeakSpread, fi: usize, angle: &ScatteringAngle) -> SunSource {
@@ -403,29 +428,29 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
                 let w = ((dist - 0.5 * near) / (0.5 * near)).clamp(0.0, 1.0);
                 (w < 1.0).then_some((r, w))
             };
-            let ms = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _, _| {
-                let far = full_trilinear(m, &field.full, &diffuse, v);
-                let Some((r, w)) = near_eye(v) else {
-                    return far;
+            // The diffuse and the sun's layers in one march (each composited as alone).
+            let march = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _, t| {
+                let (diffuse_far, sun_far) = (full_trilinear(m, &field.full, &diffuse, v), full_trilinear(m, &field.full, &sun, v));
+                let (diffuse, sun) = match near_eye(v) {
+                    None => (diffuse_far, sun_far),
+                    Some((r, w)) => (
+                        full_weighted(m, &field.full, v, |fi| voxel_diffuse(field, fi, &r.y)) * (1.0 - w) + diffuse_far * w,
+                        full_weighted(m, &field.full, v, |fi| voxel_sun(scene, field, &peak, fi, &r.angle)) * (1.0 - w) + sun_far * w,
+                    ),
                 };
-                full_weighted(m, &field.full, v, |fi| voxel_diffuse(field, fi, &r.y)) * (1.0 - w) + far * w
+                Layers {
+                    diffuse,
+                    sun: sun.seen(t_eye_af(t)),
+                }
             });
-            let ss = march_with(&scaled, rho, o, d, 0.0, t_max, step, xi, |v, _, t| {
-                let far = full_trilinear(m, &field.full, &sun, v);
-                let source = match near_eye(v) {
-                    None => far,
-                    Some((r, w)) => full_weighted(m, &field.full, v, |fi| voxel_sun(scene, field, &peak, fi, &r.angle)) * (1.0 - w) + far * w,
-                };
-                source.seen(t_eye_af(t))
-            });
-            let bg = if ms.transmittance > 0.0 {
+            let bg = if march.transmittance > 0.0 {
                 background(scene, ground.as_ref(), o, d)
             } else {
                 Rgb::ZERO
             };
-            sum[0] += ms.radiance;
-            sum[1] += ss.radiance;
-            sum[2] += bg * ms.transmittance;
+            sum[0] += march.radiance.diffuse;
+            sum[1] += march.radiance.sun;
+            sum[2] += bg * march.transmittance;
         }
         sum.map(|c| (c / spp as f32).max(Rgb::ZERO))
     };
