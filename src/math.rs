@@ -310,12 +310,8 @@ pub fn real_sh(l_max: usize, dir: glam::DVec3, out: &mut [f64]) {
             p[at(l, m)] = ((2 * l - 1) as f64 * x * p[at(l - 1, m)] - (l + m - 1) as f64 * p[at(l - 2, m)]) / (l - m) as f64;
         }
     }
-    // cos mφ and sin mφ once per m (each l reads them; past 32 made where read).
-    let mut trig = [(0.0, 0.0); 32];
-    let trig = &mut trig[..n.min(32)];
-    for (m, cs) in trig.iter_mut().enumerate() {
-        *cs = ((m as f64 * phi).cos(), (m as f64 * phi).sin());
-    }
+    // cos mφ and sin mφ once per m (each l reads them).
+    let trig: Vec<(f64, f64)> = (0..n).map(|m| ((m as f64 * phi).cos(), (m as f64 * phi).sin())).collect();
     for l in 0..n {
         let mut fact = 1.0; // (l − m)!/(l + m)!, built up as m grows
         for m in 0..=l {
@@ -327,7 +323,7 @@ pub fn real_sh(l_max: usize, dir: glam::DVec3, out: &mut [f64]) {
                 out[l * l + l] = k * p[at(l, 0)];
             } else {
                 let c = std::f64::consts::SQRT_2 * k * p[at(l, m)];
-                let (cos, sin) = trig.get(m).copied().unwrap_or_else(|| ((m as f64 * phi).cos(), (m as f64 * phi).sin()));
+                let (cos, sin) = trig[m];
                 out[l * l + l + m] = c * cos;
                 out[l * l + l - m] = c * sin;
             }

@@ -7,9 +7,9 @@
 /// holds, so a fixed 1 MiB threshold keeps that peak near its live heap for a little more system
 /// time (docs/performance.md, "Memory of `full`"). Below that size freed memory stays with its
 /// heap up to 64 MiB (the default, once the mapping threshold is fixed, is 128 KiB): `transport`'s
-/// sweeps free and take again their plane buffers (about 0.5 MiB each) every ordinate, and each
-/// trim handed them back to the system to be faulted in afresh (the Disney cloud at 1/16: 577 k
-/// → 424 k page faults, 2.4 → 1.9 s of system time; `full`'s peak at 200×160×120 +0.3 MB).
+/// sweeps free and take again their plane buffers (about 0.5 MiB each) every ordinate, and a trim
+/// hands them back to the system to be faulted in afresh (docs/performance.md, "`transport`
+/// against `single`").
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 pub(super) fn large_arrays_mapped() {
     unsafe extern "C" {

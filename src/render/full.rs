@@ -32,7 +32,7 @@ use crate::image::Image;
 use crate::incident::IncidentLight;
 use crate::lit::ground::LitGround;
 use crate::lit::sunlight::SunTransmittance;
-use crate::render::{full_beam, transport_beam};
+use crate::render::{full_beam, beam_check};
 use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
 use crate::scene::Scene;
@@ -535,7 +535,7 @@ pub fn render_warm(scene: &Scene, progress: &dyn Progress, timings: &mut Timings
     } = p;
     let img = timings.time("final gather", || gather(scene, &lit, progress));
     let share = timings.time("final gather: beam check", || full_beam::share(scene, &lit, &img, gather_step(scene, &lit)));
-    transport_beam::report(scene, "full", share, progress);
+    beam_check::report(scene, "full", share, progress);
     Ok((img, state, cg_iterations))
 }
 

@@ -1,13 +1,13 @@
-//! The check of [`super::transport_beam`] for `full`: its gather takes the sun's transmittance
+//! [`super::beam_check`] for `full`: its gather takes the sun's transmittance
 //! trilinear between the voxel centres of the sun grid ([`LitVolume::sun_t`]), whose chord lies
 //! above the beam's exponential fall-off where the voxels are optically thick along the sun's
 //! path (a cloud of 40-m voxels with the sun 0.6° behind it: `full` +30 % against `reference`).
 //! Every second pixel's centre ray marches the middle band's sun single scattering (the exact HG
-//! phase, `Optics::sun_single`) twice, with T_sun trilinear and with ln T_sun trilinear (exact where τ is linear); the
-//! difference over the cloud's pixels, as a share of their light, is logged and warned about as
-//! `transport`'s is.
+//! phase, `Optics::sun_single`) twice, with T_sun trilinear and with ln T_sun trilinear (exact
+//! where τ is linear); the difference over the cloud's pixels, as a share of their light, is
+//! logged and warned about as `transport`'s is.
 
-use super::transport_beam::{self, BeamSums};
+use super::beam_check::{self, BeamSums};
 use crate::image::Image;
 use crate::lit::LitVolume;
 use crate::math::Rgb;
@@ -26,7 +26,7 @@ pub fn share(scene: &Scene, lit: &LitVolume, image: &Image, step_m: f32) -> f64 
     // (`Optics::sun_single`); the middle band's a·E, the phase per ray.
     let (albedo, phase) = m.optics.sun_single;
     let k = albedo.y * lit.sun.irradiance.y;
-    transport_beam::share_over_pixels(scene, |x, y, o, d, t_max| {
+    beam_check::share_over_pixels(scene, |x, y, o, d, t_max| {
         let rho = |v: [f32; 3]| dense.trilinear(v);
         let linear = march_with(m, rho, o, d, 0.0, t_max, step_m, 0.5, |v, _, _| Rgb::splat(sun_t.trilinear(v.to_array())));
         let exponential = march_with(m, rho, o, d, 0.0, t_max, step_m, 0.5, |v, _, _| Rgb::splat(sun_t.trilinear_log(v.to_array())));

@@ -1,6 +1,7 @@
 //! The methods (`single`, `diffusion`, `full`; `reference` in [`crate::reference`]) and their
 //! dispatch. Progress, timings and the row loop live below the stages, in [`crate::pipeline`].
 
+pub mod beam_check;
 pub mod diffusion;
 pub mod edge_pixels;
 pub mod empty;
@@ -8,7 +9,6 @@ pub mod full;
 pub mod full_beam;
 pub mod single;
 pub mod transport;
-pub mod transport_beam;
 pub mod transport_ground;
 pub mod warm;
 

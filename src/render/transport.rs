@@ -26,7 +26,7 @@ use crate::peak::PeakSpread;
 use crate::pipeline::{render_rows, NoProgress, Progress, Timings};
 use crate::render::edge_pixels::{refine_edges, EDGE_SAMPLES};
 use crate::render::single::pixel_sample;
-use crate::render::transport_beam::{self, BeamCheck, BeamSums};
+use crate::render::beam_check::{self, BeamCheck, BeamSums};
 use crate::render::transport_ground::EyeGround;
 use crate::render::warm::Warm;
 use crate::scene::Scene;
@@ -58,11 +58,12 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<SunSource
             let cos_theta = d.map(|d| (scene.sun.dir.dot(d) as f64).clamp(-1.0, 1.0));
             let legendre = peak.legendre_lanes(cos_theta);
             let peak = &peak;
-            chunk
-                .iter()
-                .zip(d.into_iter().zip(cos_theta).zip(legendre))
+            d.into_iter()
+                .zip(cos_theta)
+                .zip(legendre)
+                .take(chunk.len())
                 .enumerate()
-                .map(move |(k, (_, ((d, cos_theta), legendre)))| {
+                .map(move |(k, ((d, cos_theta), legendre))| {
                     let fi = ci * LANES + k;
                     // Radiance towards the eye travels along −d.
                     real_sh(f.order, -DVec3::new(d.x as f64, d.y as f64, d.z as f64), &mut y);
@@ -390,7 +391,7 @@ pub fn render_with(scene: &Scene, progress: &dyn Progress, timings: &mut Timings
 
 /// The image of a solved (or, for a live view, partly solved) field: the eye source and the
 /// march per pixel; with `check`, the check on the sun's beam between centres
-/// ([`transport_beam`]) and its warning.
+/// ([`beam_check`]) and its warning.
 fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timings: &mut Timings, check: bool) -> Result<Image> {
     let m = &scene.medium;
     let (diffuse, sun) = timings.time("eye source", || eye_source(scene, field));
@@ -465,7 +466,7 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
     if check {
         let beam = BeamCheck::new(&sun, &field.sun_t);
         let share = timings.time("gather: beam check", || {
-            transport_beam::share_over_pixels(scene, |x, y, o, d, t_max| {
+            beam_check::share_over_pixels(scene, |x, y, o, d, t_max| {
                 let rho = |v: [f32; 3]| dense.trilinear(v);
                 // Both marched here, at the pixel's centre with the per-voxel source, rather than
                 // the image's own sun layer against one march: that layer is jittered, re-shaded at
@@ -482,7 +483,7 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
                 BeamSums::pixel(gathered.radiance.y, exponential.radiance.y, (p[0] + p[1] + p[2]).y, in_cloud)
             })
         });
-        transport_beam::report(scene, "transport", share, progress);
+        beam_check::report(scene, "transport", share, progress);
     }
     let mut img = Image::new(cam.width, cam.height);
     img.pixels = px.iter().map(|p| p[0] + p[1] + p[2]).collect();

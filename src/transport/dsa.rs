@@ -57,10 +57,8 @@ pub(super) fn hierarchies(m: &Medium, bands: &[BandOptics; 3], index: &FullVoxel
 /// `voxels`: the grid index of every full voxel (the unknowns), in grid order.
 pub(super) fn accelerate(c: &Ctx, voxels: &[usize], hier: &[Hierarchy], bands: &[BandOptics], moments: &[f32], next: &mut [f32]) {
     let rhs: Vec<Vec<f64>> = (0..3).map(|b| dsa_rhs(c, voxels, &bands[b], b, moments, next)).collect();
-    // The correction need only remove most of the slow error: solved to a residual of 1e-1
-    // rather than 1e-2, every one of 32 scenes took the same transport iterations, each image
-    // within 3e-4 of the other (docs/transport.md, "The DSA's own tolerance"), with 3-4 CG
-    // iterations per DSA instead of 7-11 on the Disney cloud.
+    // The correction need only remove most of the slow error, not converge: looser than this,
+    // thick clouds take more transport iterations (docs/transport.md, "The DSA's own tolerance").
     let (tol, cap) = (1e-1, 100);
     let mut deltas: Vec<Vec<f64>> = if let [h] = hier {
         h.solve_many([&rhs[0][..], &rhs[1][..], &rhs[2][..]], None, tol, cap)

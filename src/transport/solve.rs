@@ -310,8 +310,7 @@ struct Iterate {
 
 /// `n` zeros written, not left to the allocator's zero pages: the first iteration reads the cold
 /// start's moments, and a page first read maps the shared zero page, so the second iteration's
-/// writes into the same array would take a second fault per page (68 k of the Disney cloud's
-/// 577 k page faults).
+/// writes into the same array would take a second fault per page.
 fn written_zeros(n: usize) -> Vec<f32> {
     let mut v = Vec::with_capacity(n);
     v.resize(n, 0.0);

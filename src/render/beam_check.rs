@@ -1,28 +1,29 @@
-//! A check on how the `transport` gather carries the sun's beam between voxel centres. The gather
-//! takes the sun's single scattering trilinear between the full voxels' centres, where the δ-M
-//! beam T′ falls off exponentially: over a stretch τ optical depths long along the sun, T′'s
-//! chord lies above it by (τ/2)·coth(τ/2) (+8 % at τ = 1). Where the voxels are optically thick
-//! along the sun's path (coarse voxels under a low sun), the image's sunlit light comes out too
-//! bright: +19 % against `reference` with the sun 0.6° behind a cloud of 40-m voxels
-//! (docs/accuracy.md, "The sun's beam between centres: a check"). So the sun single scattering
-//! of every second pixel's centre ray, each way, is also marched with the beam's optical depth
-//! −ln T′ trilinear (exact where τ is linear), and the two are compared over the cloud's pixels:
-//! the difference estimates the chord's excess in the image, and above [`BEAM_EXCESS`] of the
-//! cloud's light a warning names the fix.
-//! (Not used for the image itself: with the chord's excess taken out there, a deficit of the
-//! solve's diffuse light on other scenes comes to light; docs/accuracy.md.)
+//! A check on how the gathers of `transport` and `full` carry the sun's beam between voxel
+//! centres. Each takes the sun's light trilinear between the centres, where the beam falls off
+//! exponentially: over a stretch τ optical depths long along the sun, the chord lies above it by
+//! (τ/2)·coth(τ/2) (+8 % at τ = 1). Where the voxels are optically thick along the sun's path
+//! (coarse voxels under a low sun), the image's sunlit light comes out too bright: +19 %
+//! (`transport`) and +30 % (`full`) against `reference` with the sun 0.6° behind a cloud of 40-m
+//! voxels (docs/accuracy.md, "The sun's beam between centres: a check"). So the sun single
+//! scattering of every second pixel's centre ray, each way, is also marched with the beam's
+//! optical depth −ln T trilinear (exact where τ is linear), and the two are compared over the
+//! cloud's pixels ([`share_over_pixels`]): the difference estimates the chord's excess in the
+//! image, and above [`BEAM_EXCESS`] of the cloud's light a warning names the fix ([`report`]).
+//! Here: the shared sums and report, and [`BeamCheck`], `transport`'s per-voxel source for it;
+//! `full`'s is [`super::full_beam`].
+//! (Not used for `transport`'s image itself: with the chord's excess taken out there, a deficit
+//! of the solve's diffuse light on other scenes comes to light; docs/accuracy.md.)
 
 use super::transport::{full_weighted, SunSource};
-use crate::math::Rgb;
+use crate::math::{Rgb, Vec3};
 use crate::medium::sparse::FullIndex;
-use crate::math::Vec3;
 use crate::medium::Medium;
 use crate::pipeline::{render_rows, NoProgress, Progress};
 use crate::scene::Scene;
 
 /// The share of the cloud's light by which the gather's sun single scattering may exceed the one
 /// with the beam interpolated exponentially before a warning: above every scene of the evaluation
-/// sets (at most 2.3 %, docs/accuracy.md), below the 40-m, low-sun case (8–17 % by image size).
+/// sets (at most 2.4 %, docs/accuracy.md), below the 40-m, low-sun case (7–29 % by image size).
 pub const BEAM_EXCESS: f64 = 0.05;
 
 /// Per full voxel (in [`FullIndex`] order) the middle band's sun single scattering towards the eye
