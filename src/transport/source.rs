@@ -44,6 +44,12 @@ pub(crate) const ORDINATE_BATCH: usize = 16;
 /// Opposite pairs per batch: the lanes of the source evaluation.
 pub(super) const PAIRS: usize = ORDINATE_BATCH / 2;
 
+/// A batch's pairs side by side, one AVX register: 32-byte aligned, so the AVX kernels load it
+/// whole (an unaligned 256-bit load is split into two 128-bit ones).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C, align(32))]
+pub(super) struct PairLanes(pub(super) [f32; PAIRS]);
+
 /// Per ordinate pair, what the sweeps' per-voxel steps read (inner harmonic order, f32).
 #[derive(Clone)]
 pub(super) struct PairTables {
@@ -54,13 +60,13 @@ pub(super) struct PairTables {
     /// Y_lm(Ω_d) for the moments, per batch in blocks of eight harmonics with the batch's pairs
     /// side by side ([`accumulate`]): the even ones' blocks, then the odd ones' (zero past each
     /// part's end).
-    pub(super) y_acc: Vec<[[f32; 8]; PAIRS]>,
+    pub(super) y_acc: Vec<[PairLanes; PAIRS]>,
     /// a′χ′_l Y_lm(Ω_d) per batch of pairs, band and lm, the batch's pairs in lanes (0 past the
     /// last pair): the source in Ω_d is Σ I_lm times this.
-    pub(super) y_src: Vec<[f32; PAIRS]>,
+    pub(super) y_src: Vec<PairLanes>,
     /// The reduced sun's first scattering per unit T′ in Ω_d and in −Ω_d per batch and band, in
     /// lanes: Σ_lm a′χ′_l E Y_lm(Ω_sun) Y_lm(±Ω_d) (W·m⁻²·sr⁻¹).
-    pub(super) sun: Vec<[[f32; PAIRS]; 2]>,
+    pub(super) sun: Vec<[PairLanes; 2]>,
     /// The even and odd harmonics the source kernel reads and the moment kernel accumulates: a
     /// prefix of each parity part, all of them or those of a lower order
     /// ([`PairTables::truncated`]).
@@ -76,9 +82,9 @@ impl PairTables {
         let batches = pairs.len().div_ceil(PAIRS);
         let ne = perm.iter().filter(|k| l_of(**k) % 2 == 0).count();
         let (nbe, nblk) = (ne.div_ceil(8), ne.div_ceil(8) + (nsh - ne).div_ceil(8));
-        let mut y_acc = vec![[[0f32; 8]; PAIRS]; batches * nblk];
-        let mut y_src = vec![[0f32; PAIRS]; batches * 3 * nsh];
-        let mut sun = vec![[[0f32; PAIRS]; 2]; batches * 3];
+        let mut y_acc = vec![[PairLanes::default(); PAIRS]; batches * nblk];
+        let mut y_src = vec![PairLanes::default(); batches * 3 * nsh];
+        let mut sun = vec![[PairLanes::default(); 2]; batches * 3];
         let mut yd = vec![0.0; nsh];
         for (p, [d, _]) in pairs.iter().enumerate() {
             real_sh(order, q.dirs[*d], &mut yd);
@@ -89,19 +95,19 @@ impl PairTables {
                 } else {
                     (nbe + (i - ne) / 8, (i - ne) % 8)
                 };
-                y_acc[bi * nblk + kb][lane][l] = yd[*k] as f32;
+                y_acc[bi * nblk + kb][lane].0[l] = yd[*k] as f32;
             }
             for (b, bo) in bands.iter().enumerate() {
                 for (i, k) in perm.iter().enumerate() {
-                    y_src[(bi * 3 + b) * nsh + i][lane] = (bo.albedo * bo.chi[l_of(*k)] * yd[*k]) as f32;
+                    y_src[(bi * 3 + b) * nsh + i].0[lane] = (bo.albedo * bo.chi[l_of(*k)] * yd[*k]) as f32;
                 }
                 let term = |k: usize| bo.albedo * bo.chi[l_of(k)] * e_sun[b] * y_sun[k] * yd[k];
                 let (e, o) = (0..nsh).fold(
                     (0.0, 0.0),
                     |(e, o), k| if l_of(k) % 2 == 0 { (e + term(k), o) } else { (e, o + term(k)) },
                 );
-                sun[bi * 3 + b][0][lane] = (e + o) as f32;
-                sun[bi * 3 + b][1][lane] = (e - o) as f32;
+                sun[bi * 3 + b][0].0[lane] = (e + o) as f32;
+                sun[bi * 3 + b][1].0[lane] = (e - o) as f32;
             }
         }
         let weights = pairs.iter().map(|[d, o]| [q.weights[*d] as f32, q.weights[*o] as f32]).collect();
@@ -134,18 +140,21 @@ impl PairTables {
 
 /// Σ_k m[k] y[k] for every lane (a batch's pairs), two k at a time in independent sums.
 #[inline(always)]
-fn lanes_dot(m: &[f32], y: &[[f32; PAIRS]]) -> [f32; PAIRS] {
+fn lanes_dot(m: &[f32], y: &[PairLanes]) -> [f32; PAIRS] {
     let (mut a0, mut a1) = ([0f32; PAIRS], [0f32; PAIRS]);
     for (mk, yk) in m.chunks_exact(2).zip(y.chunks_exact(2)) {
+        // Whole lanes copied out: an aligned load of each (indexed in place, each lane is a load
+        // of unknown alignment, which the AVX copy splits).
+        let (y0, y1) = (yk[0].0, yk[1].0);
         for p in 0..PAIRS {
-            a0[p] += mk[0] * yk[0][p];
-            a1[p] += mk[1] * yk[1][p];
+            a0[p] += mk[0] * y0[p];
+            a1[p] += mk[1] * y1[p];
         }
     }
     if m.len() % 2 == 1 {
-        let (mk, yk) = (m[m.len() - 1], y[m.len() - 1]);
-        for p in 0..PAIRS {
-            a0[p] += mk * yk[p];
+        let (mk, yk) = (m[m.len() - 1], y[m.len() - 1].0);
+        for (a, yp) in a0.iter_mut().zip(yk) {
+            *a += mk * yp;
         }
     }
     // A loop, not `array::from_fn`: its closure would not be compiled for the AVX copy
@@ -156,25 +165,51 @@ fn lanes_dot(m: &[f32], y: &[[f32; PAIRS]]) -> [f32; PAIRS] {
     a0
 }
 
-/// acc[k] += Σ_p s[p] y_p[k] (the pairs in order, in a sum from 0 per k, then added), eight k
-/// at a time: `blocks[kb][p]` holds y_p[8kb..8kb + 8]; the same order for any thread count.
+/// acc[k] += Σ_p s[p] y_p[k] (pairs 0–3 and 4–7 each summed in order from 0, the two sums
+/// added, then added to acc[k]), eight k at a time: `blocks[kb][p]` holds y_p[8kb..8kb + 8]; the
+/// same order for any thread count.
 /// Lanes past a short batch's last pair hold s = y = 0 and add +0 (a sum from +0 never is −0).
 /// `FIRST`: acc[k] = the sum instead, the same bits as adding it to +0 (the sum is never −0).
 #[inline(always)]
-fn accumulate<const FIRST: bool>(acc: &mut [f32], s: &[f32; PAIRS], blocks: &[[[f32; 8]; PAIRS]]) {
+fn accumulate<const FIRST: bool>(acc: &mut [f32], s: &[f32; PAIRS], blocks: &[[PairLanes; PAIRS]]) {
     for (a, blk) in acc.chunks_mut(8).zip(blocks) {
-        let mut r = [0f32; 8];
-        for (sp, y) in s.iter().zip(blk) {
+        // Two sums of four pairs each, then added: two chains of dependent adds, not one of eight.
+        let (mut r, mut r1) = ([0f32; 8], [0f32; 8]);
+        let half = PAIRS / 2;
+        for (sp, y) in s[..half].iter().zip(&blk[..half]) {
+            let y = y.0;
             for (rl, yl) in r.iter_mut().zip(y) {
                 *rl += sp * yl;
             }
         }
-        for (al, rl) in a.iter_mut().zip(r) {
-            if FIRST {
-                *al = rl;
-            } else {
-                *al += rl;
+        for (sp, y) in s[half..].iter().zip(&blk[half..]) {
+            let y = y.0;
+            for (rl, yl) in r1.iter_mut().zip(y) {
+                *rl += sp * yl;
             }
+        }
+        for (rl, r1l) in r.iter_mut().zip(r1) {
+            *rl += r1l;
+        }
+        // A whole block as one vector (its length known), a part's short last block lane by lane.
+        if a.len() == 8 {
+            let whole: &mut [f32; 8] = a.try_into().expect("a block of eight");
+            add_lanes::<FIRST>(whole, &r);
+        } else {
+            let n = a.len();
+            add_lanes::<FIRST>(a, &r[..n]);
+        }
+    }
+}
+
+/// a = r (`FIRST`) or a += r, lane by lane.
+#[inline(always)]
+fn add_lanes<const FIRST: bool>(a: &mut [f32], r: &[f32]) {
+    for (al, rl) in a.iter_mut().zip(r) {
+        if FIRST {
+            *al = *rl;
+        } else {
+            *al += *rl;
         }
     }
 }
@@ -188,19 +223,20 @@ pub(super) fn source_kernel(c: &Ctx, t: &PairTables, bi: usize, pairs: usize, bl
     for (k, mom) in block.chunks_exact(3 * nsh).enumerate() {
         let f = f0 + k;
         let tf = c.sun_t[f];
-        let (mut plus, mut minus) = ([[0f32; 3]; PAIRS], [[0f32; 3]; PAIRS]);
+        // Per band, the pairs in lanes (computed as vectors), then per slot its three bands.
+        let (mut plus, mut minus) = ([[0f32; PAIRS]; 3], [[0f32; PAIRS]; 3]);
         for b in 0..3 {
             let (m, y) = (&mom[b * nsh..(b + 1) * nsh], &t.y_src[(bi * 3 + b) * nsh..(bi * 3 + b + 1) * nsh]);
             let (e, o) = (lanes_dot(&m[..ae], &y[..ae]), lanes_dot(&m[ne..ne + ao], &y[ne..ne + ao]));
-            let [sp_, sm_] = t.sun[bi * 3 + b];
+            let [sp_, sm_] = &t.sun[bi * 3 + b];
             for p in 0..PAIRS {
-                plus[p][b] = (e[p] + o[p] + tf[b] * sp_[p]).max(0.0);
-                minus[p][b] = (e[p] - o[p] + tf[b] * sm_[p]).max(0.0);
+                plus[b][p] = (e[p] + o[p] + tf[b] * sp_.0[p]).max(0.0);
+                minus[b][p] = (e[p] - o[p] + tf[b] * sm_.0[p]).max(0.0);
             }
         }
         for slot in 0..pairs {
-            out[2 * slot][k] = plus[slot];
-            out[2 * slot + 1][k] = minus[slot];
+            out[2 * slot][k] = [plus[0][slot], plus[1][slot], plus[2][slot]];
+            out[2 * slot + 1][k] = [minus[0][slot], minus[1][slot], minus[2][slot]];
         }
     }
 }
@@ -228,7 +264,7 @@ pub(super) struct Lanes<'a> {
     pub(super) nfull: usize,
     pub(super) wts: &'a [f32],
     pub(super) radiance: &'a [[f32; 3]],
-    pub(super) y: &'a [[[f32; 8]; PAIRS]],
+    pub(super) y: &'a [[PairLanes; PAIRS]],
     /// The sweep's first batch: it writes the new moments instead of adding to them.
     pub(super) first: bool,
     /// The even and odd harmonics accumulated ([`PairTables::moment_active`]); the others are
@@ -392,8 +428,8 @@ mod tests {
                 let ys = &t.y_src[(bi * 3 + b) * nsh..(bi * 3 + b + 1) * nsh];
                 let (e, od) = (lanes_dot(&m[..ne], &ys[..ne])[lane], lanes_dot(&m[ne..], &ys[ne..])[lane]);
                 let got = [
-                    e + od + tf[b] * t.sun[bi * 3 + b][0][lane],
-                    e - od + tf[b] * t.sun[bi * 3 + b][1][lane],
+                    e + od + tf[b] * t.sun[bi * 3 + b][0].0[lane],
+                    e - od + tf[b] * t.sun[bi * 3 + b][1].0[lane],
                 ];
                 for (dir, g) in [*d, *o].iter().zip(got) {
                     real_sh(order, q.dirs[*dir], &mut y);
