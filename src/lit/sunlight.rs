@@ -72,7 +72,7 @@ impl SunTransmittance {
                         }
                         if near {
                             let p = m.voxel_center(i, j, k);
-                            let t = transmittance(m, &rho, p, sun_dir);
+                            let t = transmittance(m, &rho, p, sun_dir, TAU_UNIT16);
                             if !t.is_finite() {
                                 let _ = bad.compare_exchange(u32::MAX, t.to_bits(), Ordering::Relaxed, Ordering::Relaxed);
                             }
@@ -103,7 +103,7 @@ impl SunTransmittance {
             .map(|&v| {
                 let mut p = m.voxel_center(v % nx, (v / nx) % ny, v / (nx * ny));
                 p.y = floor.map_or(p.y, |f| p.y.max(f));
-                Unit16::from_f32(transmittance(m, &rho, p, sun_dir)).to_f32()
+                Unit16::from_f32(transmittance(m, &rho, p, sun_dir, TAU_UNIT16)).to_f32()
             })
             .collect()
     }
@@ -123,11 +123,17 @@ impl SunTransmittance {
 }
 
 /// Optical depth beyond which exp(−τ) is 0 in f32 (its smallest subnormal is e^{−103.3}).
+#[cfg(test)]
 const TAU_ZERO: f64 = 110.0;
 
-/// exp(−τ) from `o` along unit `d` to the medium's box (all of it), as [`Medium::transmittance`];
-/// `rho` holds the medium's density on a box around all of its full voxels.
-fn transmittance(m: &Medium, rho: &SubGrid, o: Vec3, d: Vec3) -> f32 {
+/// Optical depth beyond which exp(−τ) is below [`crate::half::UNIT16_MIN`] = 2⁻³¹ = e^{−21.49}, which a
+/// [`Unit16`] holds as 2⁻³¹ whatever the value: a march that only stores it stops there.
+const TAU_UNIT16: f64 = 22.0;
+
+/// exp(−τ) from `o` along unit `d` to the medium's box (all of it), as [`Medium::transmittance`],
+/// the march stopped once τ ≥ `tau_cut` (then exp(−τ) ≤ e^{−tau_cut}); `rho` holds the medium's
+/// density on a box around all of its full voxels.
+fn transmittance(m: &Medium, rho: &SubGrid, o: Vec3, d: Vec3, tau_cut: f64) -> f32 {
     let sigma_t = m.optics.sigma_t as f64;
     let Some((t0, t1)) = m.intersect(o, d, 0.0, f32::INFINITY) else {
         return 1.0;
@@ -136,7 +142,7 @@ fn transmittance(m: &Medium, rho: &SubGrid, o: Vec3, d: Vec3) -> f32 {
     let h = m.voxel_size.as_dvec3();
     let orig = m.origin.as_dvec3();
     let dims = m.dims();
-    let limit = TAU_ZERO / sigma_t;
+    let limit = tau_cut / sigma_t;
     let mut sum = 0.0;
     // Simpson over the dual cells crossed in [ta, tb]; false once exp(−τ) is 0.
     let mut walk = |ta: f64, tb: f64| {
@@ -214,7 +220,7 @@ mod tests {
         for n in 0..3000 {
             let p = m.origin + m.voxel_size * Vec3::new(rng.uniform() * 11.0 - 1.0, rng.uniform() * 9.0 - 1.0, rng.uniform() * 10.0 - 1.0);
             let d = crate::math::uniform_sphere(rng.uniform(), rng.uniform());
-            let (got, want) = (transmittance(&m, &box_of(&m), p, d), m.transmittance(p, d, 0.0, f32::INFINITY));
+            let (got, want) = (transmittance(&m, &box_of(&m), p, d, TAU_ZERO), m.transmittance(p, d, 0.0, f32::INFINITY));
             assert!((got - want).abs() <= 2e-6 * want + 1e-30, "{n}: {got} vs {want}");
         }
     }
@@ -240,10 +246,10 @@ mod tests {
     fn deep_rays_read_zero() {
         let m = Medium::new(Grid3::filled([4, 4, 40], 1.0), Vec3::ZERO, Vec3::ONE, 5.0, Rgb::ONE, 0.0);
         let p = Vec3::new(2.0, 2.0, 0.5);
-        assert_eq!(transmittance(&m, &box_of(&m), p, Vec3::Z), 0.0);
+        assert_eq!(transmittance(&m, &box_of(&m), p, Vec3::Z, TAU_ZERO), 0.0);
         assert_eq!(m.transmittance(p, Vec3::Z, 0.0, f32::INFINITY), 0.0);
         let q = Vec3::new(2.0, 2.0, 39.0);
         let exact = (-5.0f32).exp();
-        assert!((transmittance(&m, &box_of(&m), q, Vec3::Z) - exact).abs() < 1e-6 * exact);
+        assert!((transmittance(&m, &box_of(&m), q, Vec3::Z, TAU_ZERO) - exact).abs() < 1e-6 * exact);
     }
 }
