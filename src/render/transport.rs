@@ -410,7 +410,15 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
     let ratio = (field.optics.bands[1].sigma_t / field.optics.sigma_t) as f32;
     // T_eye^{af} per band from the march's T′ (the middle band's): T_eye = T′^{σt/σt′}.
     let seen_powers = Rgb::from([0, 1, 2].map(|b| (field.optics.albedo[b] * field.optics.bands[b].f) as f32 / ratio));
-    let t_eye_af = |t_march: f32| Rgb::new(t_march.powf(seen_powers.x), t_march.powf(seen_powers.y), t_march.powf(seen_powers.z));
+    // Grey optics (every example): one power per sample serves the three bands.
+    let grey = seen_powers.x == seen_powers.y && seen_powers.y == seen_powers.z;
+    let t_eye_af = |t_march: f32| {
+        if grey {
+            Rgb::splat(t_march.powf(seen_powers.y))
+        } else {
+            Rgb::new(t_march.powf(seen_powers.x), t_march.powf(seen_powers.y), t_march.powf(seen_powers.z))
+        }
+    };
     // Per pixel: [diffuse source, sun single scattering, background]; the image is their sum.
     let shade = |x: u32, y: u32, spp: u32| {
         let mut sum = [Rgb::ZERO; 3];
