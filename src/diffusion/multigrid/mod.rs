@@ -27,7 +27,7 @@
 //!   then red after it, so the cycle is a symmetric preconditioner. A level stores its red
 //!   unknowns first, then its black ones, so a colour's pass streams through its own rows.
 //! * **Cycle:** a W-cycle whose coarse correction is scaled by [`OVER_CORRECTION`].
-//! * **Coarsest level** (≤ [`COARSE_CELLS`] unknowns): dense Cholesky, exact.
+//! * **Coarsest level** (≤ [`COARSE_CELLS`] unknowns): Cholesky within the envelope, exact.
 //! * **Krylov:** CG with the iterate in f64 and its other vectors in f32, stopped on the true
 //!   residual in f64 ([`Hierarchy::solve_many`]); its operator is the finest level's rows (16-bit
 //!   couplings and row sums, ≤ 2⁻¹² relative, products summed in f64). It stops on the relative

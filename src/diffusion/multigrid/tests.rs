@@ -1,7 +1,7 @@
 //! The assembled operator (eq. 4 with eq. 7) and the solver, against dense linear algebra
 //! (moved here from tests/ so the solver's internals need not be public).
 
-use super::coarse::cholesky_in_place;
+use super::coarse::{cholesky_in_place, envelope};
 use super::codec::{pow2, Mg, Rows};
 use super::cycle::Work;
 use super::level::{less_couplings, with_rows, Coded, Level};
@@ -131,7 +131,7 @@ fn operator_is_symmetric_positive_definite() {
         }
         // Cholesky must succeed with positive pivots.
         let mut l = a.clone();
-        let smallest = cholesky_in_place(&mut l, n);
+        let smallest = cholesky_in_place(&mut l, n, &envelope(&a, n));
         assert!(smallest > 0.0, "smallest pivot {smallest}: not positive definite");
     }
 }
