@@ -303,7 +303,7 @@ fn time_limit_holds_inside_a_pass_on_a_dense_medium() {
     // ~1e8 vertices before it escapes, so only a clock inside the path can stop it. Before that
     // check this test ran for hours.
     let mut s = scene(ball(1e4, 1.0, 0.9), Rgb::splat(2.0), Rgb::splat(0.3), 0.5, 30.0, (6, 4), 1);
-    s.render.time_limit = Some(0.5);
+    s.render.time_limit = Some(0.2);
     // No pixel finished its first path: only the clock inside the path can have ended the render
     // (without it, it runs for hours); no wall-clock bound, which a loaded machine would break.
     let (img, stats) = render_with_stats(&s, &NoProgress, &mut Timings::default());
@@ -312,7 +312,7 @@ fn time_limit_holds_inside_a_pass_on_a_dense_medium() {
     assert!(img.layer(SAMPLES_LAYER).is_some());
     // σt = 1e6 at albedo 0.999, and --max-depth bounding a path without a limit.
     let mut d = scene(ball(1e6, 0.999, 0.9), Rgb::splat(2.0), Rgb::splat(0.3), 40.0, 30.0, (6, 4), 1);
-    d.render.time_limit = Some(0.5);
+    d.render.time_limit = Some(0.2);
     let (dense_img, dense) = render_with_stats(&d, &NoProgress, &mut Timings::default());
     assert!(dense.spp <= 1, "{dense:?}");
     assert!(dense_img.pixels.iter().all(|p| p.is_finite() && p.min_element() >= 0.0));
