@@ -478,17 +478,18 @@ fn gather(scene: &Scene, field: &TransportField, progress: &dyn Progress, timing
                 let rho = |v: [f32; 3]| dense.trilinear(v);
                 // Both marched here, at the pixel's centre with the per-voxel source, rather than
                 // the image's own sun layer against one march: that layer is jittered, re-shaded at
-                // edges and blended near the eye, and the difference would carry all of that.
-                let gathered = march_with(&scaled, rho, o, d, 0.0, t_max, step, 0.5, |v, _, t| {
-                    full_trilinear(m, &field.full, &sun, v).seen(t_eye_af(t))
-                });
-                let exponential = march_with(&scaled, rho, o, d, 0.0, t_max, step, 0.5, |v, _, t| {
-                    Rgb::splat(beam.source(m, &field.full, v, t_eye_af(t).y))
+                // edges and blended near the eye, and the difference would carry all of that. One
+                // march carries both middle-band sources side by side (x: the beam exponential, y:
+                // the gather's), the same samples and the same scalar attenuation for both.
+                let both = march_with(&scaled, rho, o, d, 0.0, t_max, step, 0.5, |v, _, t| {
+                    let seen = t_eye_af(t);
+                    let gathered = full_trilinear(m, &field.full, &sun, v).seen(seen);
+                    Rgb::new(beam.source(m, &field.full, v, seen.y), gathered.y, 0.0)
                 });
                 let p = px[(x + y * cam.width) as usize];
                 // The pixels `cloudgi compare` scores: the exact transmittance T = T′^(σt/σt′) below 0.99.
-                let in_cloud = gathered.transmittance.powf(1.0 / ratio) < 0.99;
-                BeamSums::pixel(gathered.radiance.y, exponential.radiance.y, (p[0] + p[1] + p[2]).y, in_cloud)
+                let in_cloud = both.transmittance.powf(1.0 / ratio) < 0.99;
+                BeamSums::pixel(both.radiance.y, both.radiance.x, (p[0] + p[1] + p[2]).y, in_cloud)
             })
         });
         beam_check::report(scene, "transport", share, progress);
