@@ -3,8 +3,8 @@
 //! above the beam's exponential fall-off where the voxels are optically thick along the sun's
 //! path (a cloud of 40-m voxels with the sun 0.6° behind it: `full` +30 % against `reference`).
 //! Every second pixel's centre ray marches the middle band's sun single scattering (the exact HG
-//! phase, `Optics::sun_single`) twice, with T_sun trilinear and with ln T_sun trilinear (exact
-//! where τ is linear); the difference over the cloud's pixels, as a share of their light, is
+//! phase, `Optics::sun_single`) with T_sun trilinear and with ln T_sun trilinear (exact where τ
+//! is linear), both in one march; the difference over the cloud's pixels, as a share of their light, is
 //! logged and warned about as `transport`'s is.
 
 use super::beam_check::{self, BeamSums};
@@ -28,11 +28,14 @@ pub fn share(scene: &Scene, lit: &LitVolume, image: &Image, step_m: f32) -> f64 
     let k = albedo.y * lit.sun.irradiance.y;
     beam_check::share_over_pixels(scene, |x, y, o, d, t_max| {
         let rho = |v: [f32; 3]| dense.trilinear(v);
-        let linear = march_with(m, rho, o, d, 0.0, t_max, step_m, 0.5, |v, _, _| Rgb::splat(sun_t.trilinear(v.to_array())));
-        let exponential = march_with(m, rho, o, d, 0.0, t_max, step_m, 0.5, |v, _, _| Rgb::splat(sun_t.trilinear_log(v.to_array())));
+        // One march, the two interpolations side by side (x: linear, y: exponential).
+        let both = march_with(m, rho, o, d, 0.0, t_max, step_m, 0.5, |v, _, _| {
+            let v = v.to_array();
+            Rgb::new(sun_t.trilinear(v), sun_t.trilinear_log(v), 0.0)
+        });
         // Light from the sun scattered back along the ray (sr⁻¹).
         let p = phase.eval(lit.sun.dir, -d);
         let total = image.pixels[(x + y * cam.width) as usize].y;
-        BeamSums::pixel(k * p * linear.radiance.y, k * p * exponential.radiance.y, total, linear.transmittance < 0.99)
+        BeamSums::pixel(k * p * both.radiance.x, k * p * both.radiance.y, total, both.transmittance < 0.99)
     })
 }
