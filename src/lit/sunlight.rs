@@ -122,10 +122,6 @@ impl SunTransmittance {
     }
 }
 
-/// Optical depth beyond which exp(−τ) is 0 in f32 (its smallest subnormal is e^{−103.3}).
-#[cfg(test)]
-const TAU_ZERO: f64 = 110.0;
-
 /// Optical depth beyond which exp(−τ) is below [`crate::half::UNIT16_MIN`] = 2⁻³¹ = e^{−21.49}, which a
 /// [`Unit16`] holds as 2⁻³¹ whatever the value: a march that only stores it stops there.
 const TAU_UNIT16: f64 = 22.0;
@@ -201,7 +197,7 @@ fn transmittance(m: &Medium, rho: &SubGrid, o: Vec3, d: Vec3, tau_cut: f64) -> f
 mod tests {
     use super::*;
     use crate::math::{Rgb, Rng};
-    use crate::medium::Grid3;
+    use crate::medium::{Grid3, TAU_ZERO};
 
     /// ρ on the medium's grown active box, as `compute` marches it.
     fn box_of(m: &Medium) -> SubGrid {

@@ -59,7 +59,7 @@ const MIN_VOXEL_OF_COORDINATE: f32 = 1.0 / (1 << 20) as f32;
 const MIN_VOXEL_SIZE: f32 = 1e-4;
 
 /// Optical depth beyond which exp(−τ) rounds to 0 in f32 (its smallest subnormal is e^{−103.3}).
-const TAU_ZERO: f64 = 110.0;
+pub(crate) const TAU_ZERO: f64 = 110.0;
 
 /// `[medium]`: the cloud's density grid and its optical properties.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -354,6 +354,12 @@ impl Medium {
     pub fn dense_density_at(&self, p: Vec3) -> f32 {
         let dense = self.dense_density();
         self.inside_voxel(p).map_or(0.0, |v| dense.trilinear(v))
+    }
+
+    /// [`Self::transmittance`] (the same bits) from [`Self::dense_density`].
+    pub fn dense_transmittance(&self, o: Vec3, d: Vec3, t_min: f32, t_max: f32) -> f32 {
+        let dense = self.dense_density();
+        self.transmittance_with(|v| dense.trilinear(v), o, d, t_min, t_max)
     }
 
     /// The continuous voxel coordinates of world point `p` if it lies in the box.

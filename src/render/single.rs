@@ -32,9 +32,7 @@ pub fn pixel_sample(scene: &Scene, x: u32, y: u32, s: u32, spp: u32) -> (f32, f3
 /// the ground (sun shadowed exactly by the cloud, marched on the dense copy of the density as
 /// the eye rays are: the same bits) or the sky.
 pub fn background(scene: &Scene, o: Vec3, d: Vec3) -> Rgb {
-    let m = &scene.medium;
-    let dense = m.dense_density();
-    scene.background(o, d, |p| m.transmittance_with(|v| dense.trilinear(v), p, scene.sun.dir, 0.0, f32::INFINITY))
+    scene.background(o, d, |p| scene.medium.dense_transmittance(p, scene.sun.dir, 0.0, f32::INFINITY))
 }
 
 /// Single-scattering radiance along one camera ray.

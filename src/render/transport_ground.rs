@@ -80,8 +80,7 @@ impl EyeGround {
     /// Radiance of the ground point `p` (on the plane) towards the eye.
     pub fn radiance(&self, scene: &Scene, p: Vec3) -> Rgb {
         // Marched on the dense copy of the density, as the eye rays are (the same bits).
-        let (m, dense) = (&scene.medium, scene.medium.dense_density());
-        let t = m.transmittance_with(|v| dense.trilinear(v), p, scene.sun.dir, 0.0, f32::INFINITY) as f64;
+        let t = scene.medium.dense_transmittance(p, scene.sun.dir, 0.0, f32::INFINITY) as f64;
         let t_scaled = Rgb::from(self.scale.map(|s| t.powf(s) as f32));
         self.sun * t_scaled + self.diffuse_at(p.x as f64, p.z as f64)
     }
