@@ -95,7 +95,7 @@ use crate::medium::Medium;
 use boundary::face_index;
 pub use boundary::BoundaryLight;
 use multigrid::{Hierarchy, Operator, Stencil, Stencils, NONE};
-use rayon::prelude::*;
+use crate::par;
 use std::sync::Arc;
 
 /// Solver settings.
@@ -334,10 +334,13 @@ impl<'a> BandOperator<'a> {
 impl BandOperator<'_> {
     /// The operator assembled once (48 B per unknown).
     fn assembled(&self) -> Operator {
-        Operator {
-            dims: self.dom.dims,
-            nodes: (0..self.len()).into_par_iter().map(|u| self.node(u)).collect(),
-        }
+        let mut nodes = vec![multigrid::Node::at(0); self.len()];
+        par::for_chunks(&mut nodes, par::CHUNK, &|ci, ns| {
+            for (k, n) in ns.iter_mut().enumerate() {
+                *n = self.node(ci * par::CHUNK + k);
+            }
+        });
+        Operator { dims: self.dom.dims, nodes }
     }
 }
 
@@ -450,20 +453,16 @@ fn band_rhs(m: &Medium, inc: &IncidentLight, bl: &BoundaryLight, c: usize, tau_m
     // Fixed chunks summed in order: the norms do not depend on the thread count.
     const CHUNK: usize = 4096;
     let mut values = vec![0f32; full.len()];
-    let parts: Vec<[f64; 2]> = values
-        .par_chunks_mut(CHUNK)
-        .zip(full.par_chunks(CHUNK))
-        .map(|(out, idxs)| {
-            let mut sums = [0.0; 2];
-            for (o, &idx) in out.iter_mut().zip(idxs) {
-                let (r, b, d) = row(idx);
-                *o = r as f32;
-                sums[0] += b * b / d;
-                sums[1] += r * r / d;
-            }
-            sums
-        })
-        .collect();
+    let parts: Vec<[f64; 2]> = par::map_chunks(&mut values, CHUNK, &|ci, out| {
+        let mut sums = [0.0; 2];
+        for (o, &idx) in out.iter_mut().zip(&full[ci * CHUNK..]) {
+            let (r, b, d) = row(idx);
+            *o = r as f32;
+            sums[0] += b * b / d;
+            sums[1] += r * r / d;
+        }
+        sums
+    });
     let [b2, r2] = parts.iter().fold([0.0; 2], |s, p| [s[0] + p[0], s[1] + p[1]]);
     Rhs {
         values,

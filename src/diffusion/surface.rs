@@ -20,7 +20,7 @@ use super::DiffusionSolution;
 use crate::incident::IncidentLight;
 use crate::medium::field16::Field16;
 use crate::medium::Medium;
-use rayon::prelude::*;
+use crate::par::{self, CHUNK};
 
 /// Optical depth ρσt h of a voxel across a face up to which the eye's mean free path reaches its
 /// centre from that face (half the voxel's depth: one optical depth).
@@ -45,7 +45,7 @@ fn fill_hidden(
     slot: impl Fn(usize) -> usize,
 ) -> Vec<f32> {
     let mut out = values.to_vec();
-    let mut done: Vec<bool> = (0..full.len()).into_par_iter().map(&kept).collect();
+    let mut done: Vec<bool> = par::map_items(full.len(), CHUNK, &kept);
     let neighbours = |r: usize| {
         let g = full[r];
         let c = [g % gd[0], (g / gd[0]) % gd[1], g / (gd[0] * gd[1])];
@@ -101,10 +101,8 @@ pub fn visible_i0(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, tau_
     let full: Vec<usize> = index.full_voxels().collect();
     std::array::from_fn(|c| {
         let sigma_tr = m.optics.sigma_tr(c);
-        let packed: Vec<f32> = full
-            .par_iter()
-            .enumerate()
-            .map(|(r, &idx)| {
+        let packed: Vec<f32> = par::map_items(full.len(), CHUNK, &|r| {
+                let idx = full[r];
                 let ip = sol.i0[c].packed_at(r) as f64;
                 let sp = index.slot(idx);
                 let rp = rho.at_slot(sp) as f64;
@@ -137,16 +135,13 @@ pub fn visible_i0(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, tau_
                 } else {
                     (sum / faces as f64) as f32
                 }
-            })
-            .collect();
+            });
         // A thick voxel with no boundary face but an empty voxel among its 26 neighbours (in a
         // concave corner or along an edge of the surface) lies inside the trilinear blend the eye
         // samples there: it takes the mean of its boundary face-neighbours' visible values.
         let first = packed;
-        let packed: Vec<f32> = full
-            .par_iter()
-            .enumerate()
-            .map(|(r, &idx)| {
+        let packed: Vec<f32> = par::map_items(full.len(), CHUNK, &|r| {
+                let idx = full[r];
                 let cell = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])];
                 let neighbour = |d: [i64; 3]| -> Option<usize> {
                     let c: Vec<i64> = (0..3).map(|a| cell[a] as i64 + d[a]).collect();
@@ -182,8 +177,7 @@ pub fn visible_i0(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, tau_
                 } else {
                     (sum / n as f64) as f32
                 }
-            })
-            .collect();
+            });
         let packed = fill_hidden(
             &packed,
             &full,

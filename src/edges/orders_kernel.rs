@@ -25,7 +25,7 @@ use crate::edges::orders::poisson_weights;
 use crate::lighting::bins::{rect_solid_angle, CUBE_FACES};
 use crate::math::Rgb;
 use crate::optics::Hg;
-use rayon::prelude::*;
+use crate::par;
 
 /// Sub-pixels per rectangle edge in one step of the adaptive pixel integration.
 const SUB: usize = 3;
@@ -125,7 +125,7 @@ impl OrderKernel {
         // cube's symmetries about the x axis map onto each other (8 per ±x face, the four side
         // faces alike): each class is integrated once, at its first pixel.
         let (class, reps) = symmetry_classes(res);
-        let unique: Vec<Vec<f64>> = reps.par_iter().map(|&p| pixel_integrals(res, p, &orders)).collect();
+        let unique: Vec<Vec<f64>> = par::map_range(reps.len(), &|c| pixel_integrals(res, reps[c], &orders));
         let raw: Vec<&Vec<f64>> = class.iter().map(|&c| &unique[c]).collect();
         let mut weights = Vec::with_capacity(max_order * n);
         for i in 0..max_order {

@@ -21,12 +21,16 @@
 use super::gather::{EdgeAov, EdgeGather};
 use super::segments::LowSegment;
 use crate::math::{Rgb, Vec3};
-use rayon::prelude::*;
+use crate::par;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::OnceLock;
 
+/// Pixels per parallel task: a row of 480 in about eight tasks, enough tasks to balance the
+/// pixels' uneven cost (a pixel through the cloud gathers cubes, one beside it none).
+const PIXELS_PER_TASK: usize = 64;
+
 /// One pixel's camera ray.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub struct PixelRay {
     /// Origin (m).
     pub o: Vec3,
@@ -118,16 +122,13 @@ pub fn gather_pixels(
     let interp = AtomicU64::new(0);
     let direct = AtomicU64::new(0);
     let Some(sp) = sparse else {
-        let px: Vec<EdgeAov> = (0..w * h)
-            .into_par_iter()
-            .map(|i| {
-                if !wanted(i) {
-                    return EdgeAov::default();
-                }
-                let r = ray((i % w) as u32, (i / w) as u32);
-                g.radiance(r.o, r.d, r.t_max, r.background)
-            })
-            .collect();
+        let px: Vec<EdgeAov> = par::map_items(w * h, PIXELS_PER_TASK, &|i| {
+            if !wanted(i) {
+                return EdgeAov::default();
+            }
+            let r = ray((i % w) as u32, (i / w) as u32);
+            g.radiance(r.o, r.d, r.t_max, r.background)
+        });
         let n: u64 = px.iter().map(|a| a.cubes as u64).sum();
         return (
             px,
@@ -138,7 +139,7 @@ pub fn gather_pixels(
             },
         );
     };
-    let rays: Vec<PixelRay> = (0..w * h).into_par_iter().map(|i| ray((i % w) as u32, (i / w) as u32)).collect();
+    let rays: Vec<PixelRay> = par::map_items(w * h, PIXELS_PER_TASK, &|i| ray((i % w) as u32, (i / w) as u32));
     // Top-level segments of a pixel (no cubes) with a K cache per segment, made on first use: only
     // the quadtree's corners and the pixels that fall back to their own cube ever need them
     // (a quarter of the profiles a pass over every pixel would trace).
@@ -167,9 +168,7 @@ pub fn gather_pixels(
     };
     let block = sp.block.max(1).next_power_of_two() as usize;
     let coarse = (sp.coarse_block.max(1).next_power_of_two() as usize).max(block);
-    let px: Vec<EdgeAov> = (0..w * h)
-        .into_par_iter()
-        .map(|i| {
+    let px: Vec<EdgeAov> = par::map_items(w * h, PIXELS_PER_TASK, &|i| {
             if !wanted(i) {
                 return EdgeAov::default();
             }
@@ -277,8 +276,7 @@ pub fn gather_pixels(
             let mut a = g.composite(&plan, &e, r.background);
             a.cubes = n_cubes;
             a
-        })
-        .collect();
+        });
     (
         px,
         GatherStats {

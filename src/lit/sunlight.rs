@@ -21,7 +21,7 @@ use crate::half::Unit16;
 use crate::math::Vec3;
 use crate::medium::{Medium, SubGrid};
 use glam::DVec3;
-use rayon::prelude::*;
+use crate::par;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
@@ -52,7 +52,7 @@ impl SunTransmittance {
         // The first non-finite value's bits (u32::MAX: none seen; a NaN's bits are never that).
         let bad = std::sync::atomic::AtomicU32::new(u32::MAX);
         if nx * ny > 0 {
-            grid.box_values_mut().par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
+            par::for_chunks(grid.box_values_mut(), nx * ny, &|k, slab| {
                 let k = k + lo[2];
                 for j in 0..ny {
                     for i in 0..nx {
@@ -98,14 +98,13 @@ impl SunTransmittance {
         let (lo, hi) = m.active_box(1).unwrap_or(([0; 3], [0; 3]));
         let rho = m.density.box_copy(lo, hi);
         let [nx, ny, _] = m.dims();
-        voxels
-            .par_iter()
-            .map(|&v| {
-                let mut p = m.voxel_center(v % nx, (v / nx) % ny, v / (nx * ny));
-                p.y = floor.map_or(p.y, |f| p.y.max(f));
-                Unit16::from_f32(transmittance(m, &rho, p, sun_dir, TAU_UNIT16)).to_f32()
-            })
-            .collect()
+        // A march per voxel: a few hundred voxels per task.
+        par::map_items(voxels.len(), 256, &|n| {
+            let v = voxels[n];
+            let mut p = m.voxel_center(v % nx, (v / nx) % ny, v / (nx * ny));
+            p.y = floor.map_or(p.y, |f| p.y.max(f));
+            Unit16::from_f32(transmittance(m, &rho, p, sun_dir, TAU_UNIT16)).to_f32()
+        })
     }
 
     /// Refuse a transmittance that was non-finite at some voxel centre (before its 16-bit code

@@ -2,7 +2,6 @@
 
 use super::sparse::FullIndex;
 use crate::error::{Error, Result};
-use rayon::prelude::*;
 use std::sync::{Arc, OnceLock};
 
 /// A dense grid of `f32` values, index (i, j, k) = (x, y, z), x fastest in memory.
@@ -151,7 +150,7 @@ impl Grid3 {
         let dims = [nx * k, ny * k, nz * k];
         let mut data = vec![0f32; dims[0] * dims[1] * dims[2]];
         // One z slice of the new grid per task.
-        data.par_chunks_mut(dims[0] * dims[1]).enumerate().for_each(|(kk, slice)| {
+        crate::par::for_chunks(&mut data, dims[0] * dims[1], &|kk, slice| {
             for (n, v) in slice.iter_mut().enumerate() {
                 *v = self.trilinear([at(n % dims[0]), at(n / dims[0]), at(kk)]);
             }

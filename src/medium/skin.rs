@@ -8,7 +8,6 @@
 //! (docs/accuracy.md, "Optically thick voxels").
 
 use super::Medium;
-use rayon::prelude::*;
 
 /// The optical depths (σt · h · mean ρ, unitless) of the dual cells in which light entering along
 /// a grid line first reaches one optical depth: one per grid line and direction that reaches it.
@@ -24,9 +23,7 @@ pub fn entry_cell_depths(m: &Medium) -> Vec<f32> {
             (lo[b]..hi[b]).flat_map(move |jb| (lo[c]..hi[c]).map(move |jc| (a, jb, jc)))
         })
         .collect();
-    lines
-        .par_iter()
-        .flat_map_iter(|&(a, jb, jc)| {
+    let line_depths = |&(a, jb, jc): &(usize, usize, usize)| {
             let (b, c) = ((a + 1) % 3, (a + 2) % 3);
             // The line's densities from one empty centre before the active box to one after.
             let rho: Vec<f64> = (lo[a] as isize - 1..=hi[a] as isize)
@@ -42,8 +39,13 @@ pub fn entry_cell_depths(m: &Medium) -> Vec<f32> {
             let forward = first_cell_past_one(rho.windows(2).map(|w| cell(w[0], w[1])));
             let backward = first_cell_past_one(rho.windows(2).rev().map(|w| cell(w[0], w[1])));
             forward.into_iter().chain(backward)
-        })
-        .collect()
+    };
+    // Lines per task: a few hundred; the tasks' depths joined in the lines' order.
+    const LINES: usize = 256;
+    crate::par::map_range(lines.len().div_ceil(LINES), &|ci| {
+        lines[ci * LINES..((ci + 1) * LINES).min(lines.len())].iter().flat_map(line_depths).collect::<Vec<f32>>()
+    })
+    .concat()
 }
 
 /// The first of `cells` (optical depths, in the order light crosses them) in which the optical

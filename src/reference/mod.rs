@@ -34,7 +34,6 @@ use crate::image::Image;
 use crate::math::{Rgb, Rng};
 use crate::pipeline::{Progress, Timings};
 use crate::scene::Scene;
-use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Instant;
 
@@ -228,7 +227,7 @@ pub fn render_with_stats(scene: &Scene, progress: &dyn Progress, timings: &mut T
         let pace = rs.time_limit.is_none().then(|| Pace::new(start, rs.spp as u64 * (w * h) as u64));
         while passes < rs.spp && !stop.load(Ordering::Relaxed) {
             let s = passes;
-            acc.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            crate::par::for_chunks(&mut acc, w, &|y, row| {
                 for (x, a) in row.iter_mut().enumerate() {
                     if stop.load(Ordering::Relaxed) || deadline.is_some_and(|t| Instant::now() >= t) || progress.cancelled() {
                         stop.store(true, Ordering::Relaxed);
@@ -343,7 +342,7 @@ pub fn camera_transmittance(scene: &Scene) -> Vec<f32> {
     let cam = &scene.camera;
     let (w, h) = (cam.width as usize, cam.height as usize);
     let mut t = vec![1f32; w * h];
-    t.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+    crate::par::for_chunks(&mut t, w, &|y, row| {
         for (x, v) in row.iter_mut().enumerate() {
             let ray = cam.ray(x as f32 + 0.5, y as f32 + 0.5);
             let t_max = scene

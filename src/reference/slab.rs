@@ -16,7 +16,6 @@ pub use crate::diffusion::slab::{Incidence, SlabResult};
 use crate::error::{Error, Result};
 use crate::math::Rng;
 use crate::optics::Hg;
-use rayon::prelude::*;
 
 /// A slab case.
 #[derive(Clone, Copy, Debug)]
@@ -109,9 +108,8 @@ pub fn slab(p: &SlabParams, samples: u64, seed: u64) -> Result<SlabResult> {
         ));
     }
     let chunks = samples.div_ceil(CHUNK);
-    let counts: Vec<(u64, u64)> = (0..chunks)
-        .into_par_iter()
-        .map(|c| {
+    let counts: Vec<(u64, u64)> = crate::par::map_range(chunks as usize, &|c| {
+            let c = c as u64;
             let (mut r, mut t) = (0u64, 0u64);
             for i in c * CHUNK..((c + 1) * CHUNK).min(samples) {
                 let mut rng = Rng::new(seed, i);
@@ -122,8 +120,7 @@ pub fn slab(p: &SlabParams, samples: u64, seed: u64) -> Result<SlabResult> {
                 }
             }
             (r, t)
-        })
-        .collect();
+        });
     let (r, t) = counts.iter().fold((0u64, 0u64), |a, b| (a.0 + b.0, a.1 + b.1));
     let n = samples as f64;
     // Each photon scores 0 or 1: the sample variance of a Bernoulli mean is p(1 − p)/(n − 1).

@@ -4,7 +4,6 @@
 //! bright base (+45 % on that row, +2.6 % over the cloud for `transport`).
 
 use crate::math::Rgb;
-use rayon::prelude::*;
 
 /// Sub-pixels per pixel edge where a one-sample image has an edge: a stratified grid of
 /// [`EDGE_SAMPLES`] = `EDGE_GRID`² samples ([`crate::render::single::pixel_sample`]'s strata,
@@ -47,7 +46,7 @@ pub fn edge_pixels<const N: usize>(px: &[[Rgb; N]], width: u32) -> Vec<usize> {
 pub fn refine_edges<const N: usize>(px: &mut [[Rgb; N]], width: u32, shade: impl Fn(u32, u32) -> [Rgb; N] + Sync) -> usize {
     let w = width.max(1) as usize;
     let edges = edge_pixels(px, width);
-    let shaded: Vec<[Rgb; N]> = edges.par_iter().map(|&i| shade((i % w) as u32, (i / w) as u32)).collect();
+    let shaded: Vec<[Rgb; N]> = crate::par::map_range(edges.len(), &|e| shade((edges[e] % w) as u32, (edges[e] / w) as u32));
     let n = edges.len();
     for (i, p) in edges.into_iter().zip(shaded) {
         px[i] = p;

@@ -33,7 +33,6 @@ use crate::scene::Scene;
 use crate::transport::solve::{solve_warm, SolveOptions, TransportField, TransportSettings};
 use crate::transport::TransportMemory;
 use glam::DVec3;
-use rayon::prelude::*;
 use std::f64::consts::PI;
 use std::ops::{Add, AddAssign, Div, Mul};
 
@@ -47,32 +46,29 @@ pub fn eye_source(scene: &Scene, f: &TransportField) -> (Vec<Rgb>, Vec<SunSource
     let eye = scene.camera.position;
     let peak = PeakSpread::truncated(f.optics.g, f.order);
     let voxels: Vec<usize> = f.full.full_voxels().collect();
-    // Four voxels at a time: their peaks' Legendre series side by side.
+    // Four voxels at a time: their peaks' Legendre series side by side; 64 such groups per task.
     const LANES: usize = 4;
-    voxels
-        .par_chunks(LANES)
-        .enumerate()
-        .flat_map_iter(|(ci, chunk)| {
-            let mut y = vec![0.0; nsh];
+    const PER_TASK: usize = 64 * LANES;
+    let mut diffuse = vec![Rgb::ZERO; voxels.len()];
+    let mut sun = vec![SunSource::default(); voxels.len()];
+    let tasks: Vec<(&mut [Rgb], &mut [SunSource])> = diffuse.chunks_mut(PER_TASK).zip(sun.chunks_mut(PER_TASK)).collect();
+    crate::par::map_each(tasks, &|task, (diffuse, sun)| {
+        let mut y = vec![0.0; nsh];
+        let first = task * PER_TASK;
+        for (g, chunk) in voxels[first..first + diffuse.len()].chunks(LANES).enumerate() {
             let d: [Vec3; LANES] = std::array::from_fn(|k| chunk.get(k).map_or(Vec3::Y, |&v| (voxel_centre(m, v, nx, ny) - eye).normalize_or_zero()));
             let cos_theta = d.map(|d| (scene.sun.dir.dot(d) as f64).clamp(-1.0, 1.0));
             let legendre = peak.legendre_lanes(cos_theta);
-            let peak = &peak;
-            d.into_iter()
-                .zip(cos_theta)
-                .zip(legendre)
-                .take(chunk.len())
-                .enumerate()
-                .map(move |(k, ((d, cos_theta), legendre))| {
-                    let fi = ci * LANES + k;
-                    // Radiance towards the eye travels along −d.
-                    real_sh(f.order, -DVec3::new(d.x as f64, d.y as f64, d.z as f64), &mut y);
-                    let angle = ScatteringAngle { cos_theta, legendre };
-                    (voxel_diffuse(f, fi, &y), voxel_sun(scene, f, peak, fi, &angle))
-                })
-                .collect::<Vec<_>>()
-        })
-        .unzip()
+            for (k, ((d, cos_theta), legendre)) in d.into_iter().zip(cos_theta).zip(legendre).take(chunk.len()).enumerate() {
+                let (i, fi) = (g * LANES + k, first + g * LANES + k);
+                // Radiance towards the eye travels along −d.
+                real_sh(f.order, -DVec3::new(d.x as f64, d.y as f64, d.z as f64), &mut y);
+                let angle = ScatteringAngle { cos_theta, legendre };
+                (diffuse[i], sun[i]) = (voxel_diffuse(f, fi, &y), voxel_sun(scene, f, &peak, fi, &angle));
+            }
+        }
+    });
+    (diffuse, sun)
 }
 
 /// The centre of grid voxel `v` (m); `nx`, `ny` the grid's first two dimensions.

@@ -13,7 +13,7 @@ use super::BandOptics;
 use crate::diffusion::multigrid::Hierarchy;
 use crate::diffusion::{interior_coupling, Domain, DEFAULT_MIN_OPTICAL_DEPTH};
 use crate::medium::Medium;
-use rayon::prelude::*;
+use crate::par;
 use std::f64::consts::PI;
 
 /// The DSA operators' multigrid hierarchies: the diffusion operator of medium `m` with each
@@ -77,7 +77,7 @@ pub(super) fn accelerate(c: &Ctx, voxels: &[usize], hier: &[Hierarchy], bands: &
     }
     // Each voxel's update writes only its own entries: voxels in parallel, the same bits.
     let chunk = 1024;
-    next.par_chunks_mut(chunk * 3 * c.nsh).enumerate().for_each(|(ci, block)| {
+    par::for_chunks(next, chunk * 3 * c.nsh, &|ci, block| {
         let f0 = ci * chunk;
         dsa_apply(c, &voxels[f0..f0 + block.len() / (3 * c.nsh)], f0, bands, &deltas, block);
     });
@@ -87,14 +87,10 @@ pub(super) fn accelerate(c: &Ctx, voxels: &[usize], hier: &[Hierarchy], bands: &
 fn dsa_rhs(c: &Ctx, voxels: &[usize], bo: &BandOptics, b: usize, moments: &[f32], next: &[f32]) -> Vec<f64> {
     let nsh = c.nsh;
     let y00 = 1.0 / (4.0 * PI).sqrt();
-    voxels
-        .par_iter()
-        .enumerate()
-        .map(|(f, &v)| {
-            let d0 = (next[(f * 3 + b) * nsh] - moments[(f * 3 + b) * nsh]) as f64 * y00;
-            c.rho.at(v) as f64 * bo.sigma_t * bo.albedo * d0
-        })
-        .collect()
+    par::map_items(voxels.len(), par::CHUNK, &|f| {
+        let d0 = (next[(f * 3 + b) * nsh] - moments[(f * 3 + b) * nsh]) as f64 * y00;
+        c.rho.at(voxels[f]) as f64 * bo.sigma_t * bo.albedo * d0
+    })
 }
 
 /// Add each band's correction δ (per full voxel, `deltas`) as its P1 radiance (see

@@ -8,7 +8,6 @@ use super::TransportOptics;
 use crate::lighting::{Ground, Sky, Sun};
 use crate::math::{Rgb, Vec3};
 use crate::medium::Medium;
-use rayon::prelude::*;
 use std::f64::consts::PI;
 
 /// Radiance of the Lambertian ground (W·m⁻²·sr⁻¹) on columns of the grid's horizontal spacing,
@@ -88,17 +87,15 @@ impl<'a> GroundLight<'a> {
             (m.origin.x as f64 + (i + 0.5) * hx, m.origin.z as f64 + (k + 0.5) * hz)
         };
         let bands = &optics.bands;
-        let sun_t = (0..dims[0] * dims[1])
-            .into_par_iter()
-            .map(|c| match ground {
-                Some(g) => {
-                    let (x, z) = col_xz(c);
-                    let t = m.transmittance(Vec3::new(x as f32, g.height, z as f32), sun.dir, 0.0, f32::INFINITY) as f64;
-                    [0, 1, 2].map(|b| t.powf(bands[b].sigma_t / optics.sigma_t))
-                }
-                None => [0.0; 3],
-            })
-            .collect();
+        // A march per column: a few dozen columns per task.
+        let sun_t = crate::par::map_items(dims[0] * dims[1], 64, &|c| match ground {
+            Some(g) => {
+                let (x, z) = col_xz(c);
+                let t = m.transmittance(Vec3::new(x as f32, g.height, z as f32), sun.dir, 0.0, f32::INFINITY) as f64;
+                [0, 1, 2].map(|b| t.powf(bands[b].sigma_t / optics.sigma_t))
+            }
+            None => [0.0; 3],
+        });
         GroundLight {
             ground,
             margin,

@@ -9,7 +9,7 @@
 //! scenes (docs/transport.md, "Iteration and acceleration"): 159 → 132 iterations, every image
 //! within 0.24·tolerance of a solve to 10⁻⁵.
 
-use rayon::prelude::*;
+use crate::par;
 use std::collections::VecDeque;
 
 /// Earlier maps combined with the newest: 1 took 8 iterations where 2 and 3 took 7.
@@ -22,6 +22,9 @@ pub(super) const MIXED_ORDER: usize = 2;
 /// Values summed per chunk of the inner products; the chunks' sums are added in order, so the
 /// coefficients are the same for any thread count.
 const CHUNK: usize = 4096;
+
+/// Rows (a voxel's band) per task of the mixing's update.
+const ROWS: usize = 1024;
 
 /// Bytes per full voxel the mixing holds: per earlier map, its harmonics of order ≤
 /// [`MIXED_ORDER`] and its I_00 residual, for 3 bands in f32 (240 B at depth 2).
@@ -57,7 +60,7 @@ impl Mixing {
     /// remember G(x) and its residual.
     pub(super) fn mix(&mut self, moments: &[f32], next: &mut [f32]) {
         let nsh = self.nsh;
-        let residual: Vec<f32> = next.par_iter().step_by(nsh).zip(moments.par_iter().step_by(nsh)).map(|(g, x)| g - x).collect();
+        let residual: Vec<f32> = par::map_items(next.len().div_ceil(nsh), CHUNK, &|i| next[i * nsh] - moments[i * nsh]);
         let alpha = self.coefficients(&residual);
         let k = self.mixed.len();
         // The newest map goes into a fresh slot while the history fills, then into the oldest
@@ -74,8 +77,11 @@ impl Mixing {
         let (earlier, newest) = self.maps.make_contiguous().split_at_mut(n - 1);
         let slot = &mut newest[0];
         let mixed = &self.mixed;
-        next.par_chunks_mut(nsh).zip(slot.par_chunks_mut(k)).enumerate().for_each(|(r, (row, keep))| {
-            for (j, &i) in mixed.iter().enumerate() {
+        let tasks: Vec<(&mut [f32], &mut [f32])> = next.chunks_mut(ROWS * nsh).zip(slot.chunks_mut(ROWS * k)).collect();
+        par::map_each(tasks, &|task, (rows, keeps)| {
+            for (rr, (row, keep)) in rows.chunks_mut(nsh).zip(keeps.chunks_mut(k)).enumerate() {
+                let r = task * ROWS + rr;
+                for (j, &i) in mixed.iter().enumerate() {
                 let g = row[i];
                 if !alpha.is_empty() {
                     let mut v = alpha[alpha.len() - 1] * g as f64;
@@ -87,9 +93,10 @@ impl Mixing {
                     for (e, c) in earlier.iter().zip(&alpha[a..alpha.len() - 1]) {
                         v += c * e[r * k + j] as f64;
                     }
-                    row[i] = v as f32;
+                        row[i] = v as f32;
+                    }
+                    keep[j] = g;
                 }
-                keep[j] = g;
             }
         });
         self.residuals.push_back(residual);
@@ -135,13 +142,10 @@ impl Mixing {
 
 /// (a − b)·(c − d) (d = 0 when None), summed in fixed chunks.
 fn diff_dot(a: &[f32], b: &[f32], c: &[f32], d: Option<&[f32]>) -> f64 {
-    let parts: Vec<f64> = (0..a.len().div_ceil(CHUNK))
-        .into_par_iter()
-        .map(|ci| {
-            let r = ci * CHUNK..((ci + 1) * CHUNK).min(a.len());
-            r.map(|e| (a[e] - b[e]) as f64 * (c[e] - d.map_or(0.0, |d| d[e])) as f64).sum::<f64>()
-        })
-        .collect();
+    let parts: Vec<f64> = par::map_range(a.len().div_ceil(CHUNK), &|ci| {
+        let r = ci * CHUNK..((ci + 1) * CHUNK).min(a.len());
+        r.map(|e| (a[e] - b[e]) as f64 * (c[e] - d.map_or(0.0, |d| d[e])) as f64).sum::<f64>()
+    });
     parts.iter().sum()
 }
 

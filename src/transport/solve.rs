@@ -49,7 +49,6 @@ use crate::medium::sparse::FullIndex;
 use crate::medium::Medium;
 use crate::pipeline::Progress;
 use glam::DVec3;
-use rayon::prelude::*;
 use std::sync::Arc;
 
 /// Settings of the 3-D solver.
@@ -240,16 +239,14 @@ fn sun_transmittance(m: &Medium, sun: &Sun, optics: &TransportOptics, voxels: &[
     let ratio = [0, 1, 2].map(|b| (optics.bands[b].sigma_t / optics.sigma_t) as f32);
     // Grey optics (every example): one power serves the three bands.
     let grey = ratio[1..].iter().all(|r| *r == ratio[0]);
-    exact
-        .par_iter()
-        .map(|&t| {
-            if grey {
-                [t.powf(ratio[0]); 3]
-            } else {
-                ratio.map(|r| t.powf(r))
-            }
-        })
-        .collect()
+    crate::par::map_items(exact.len(), crate::par::CHUNK, &|i| {
+        let t = exact[i];
+        if grey {
+            [t.powf(ratio[0]); 3]
+        } else {
+            ratio.map(|r| t.powf(r))
+        }
+    })
 }
 
 /// The per-pair tables of the sweeps for the sun's beam and the δ-M optics.
@@ -417,10 +414,12 @@ impl Solver<'_> {
                 .flatten();
             if let Some(mode) = mode {
                 let k = mode.factor();
-                it.next
-                    .par_iter_mut()
-                    .zip(it.moments.par_iter())
-                    .for_each(|(x, o)| *x += k * (*x - o));
+                let moments = &it.moments;
+                crate::par::for_chunks(&mut it.next, crate::par::CHUNK, &|ci, xs| {
+                    for (x, o) in xs.iter_mut().zip(&moments[ci * crate::par::CHUNK..]) {
+                        *x += k * (*x - o);
+                    }
+                });
                 it.extrapolated = it.history.len();
                 it.slowest = Some(it.slowest.map_or(mode.ratio, |r| r.max(mode.ratio)));
             }

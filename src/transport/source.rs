@@ -8,7 +8,6 @@ use super::simd::has_avx;
 use super::sphere::Quadrature;
 use super::BandOptics;
 use crate::math::real_sh;
-use rayon::prelude::*;
 
 /// The order of the harmonics inside the solver: every even-l one first, then the odd-l ones
 /// (each l's block in `real_sh`'s order). Y_lm(−Ω) = (−1)^l Y_lm(Ω), so one pass over a voxel's
@@ -330,15 +329,17 @@ pub(super) fn diffuse_source_of(moments: &[f32], bands: &[BandOptics], perm: &[u
         .map(|bo| perm.iter().map(|&k| (k, bo.albedo * bo.chi[(k as f64).sqrt().floor() as usize])).collect())
         .collect();
     assert_eq!(out.len(), moments.len(), "the diffuse source's array as long as the moments");
-    out.par_chunks_mut(3 * nsh)
-        .zip(moments.par_chunks(3 * nsh))
-        .for_each(|(o, mf)| {
+    // Voxels per task: a few hundred.
+    let per_task = 256 * 3 * nsh;
+    crate::par::for_chunks(&mut out, per_task, &|ci, os| {
+        for (o, mf) in os.chunks_mut(3 * nsh).zip(moments[ci * per_task..].chunks(3 * nsh)) {
             for (band, fb) in factors.iter().enumerate() {
                 for (i, &(k, a_chi)) in fb.iter().enumerate() {
                     o[band * nsh + k] = (a_chi * mf[band * nsh + i] as f64) as f32;
                 }
             }
-        });
+        }
+    });
     out
 }
 

@@ -6,12 +6,12 @@ use super::codec::Rows;
 use super::codec::{pow2, Mg, Real};
 use super::cycle::Work;
 use super::level::{with_rows, Coded, Level};
-use super::par::{for_chunks, map_chunks, map_each, map_range};
+use crate::par::{for_chunks, map_chunks, map_each, map_range};
 use super::{Hierarchy, CHUNK, PAD};
 
 /// Deterministic dot products per system: per-chunk partial sums added in order.
 pub(super) fn dot<A: Real, B: Real, const K: usize>(a: &[[A; K]], b: &[[B; K]]) -> [f64; K] {
-    let parts: Vec<[f64; K]> = map_range(a.len().div_ceil(CHUNK), |ci| {
+    let parts: Vec<[f64; K]> = map_range(a.len().div_ceil(CHUNK), &|ci| {
         let chunk = ci * CHUNK..a.len().min((ci + 1) * CHUNK);
         let mut s = [0.0; K];
         for (p, q) in a[chunk.clone()].iter().zip(&b[chunk]) {
@@ -37,7 +37,7 @@ pub(super) fn sum_parts<const K: usize>(parts: &[[f64; K]]) -> [f64; K] {
 /// The CG step y += α p (in f64), r −= α q per system.
 pub(super) fn cg_step<const K: usize>(y: &mut [[f64; K]], r: &mut [[Mg; K]], p: &[[Mg; K]], q: &[[Mg; K]], alpha: [f64; K]) {
     let chunks = y.chunks_mut(CHUNK).zip(r.chunks_mut(CHUNK)).collect();
-    map_each(chunks, |ci, (ys, rs)| {
+    map_each(chunks, &|ci, (ys, rs)| {
         let first = ci * CHUNK;
         let (ps, qs) = (&p[first..first + ys.len()], &q[first..first + ys.len()]);
         for (((yv, rv), pv), qv) in ys.iter_mut().zip(rs.iter_mut()).zip(ps).zip(qs) {
@@ -72,7 +72,7 @@ impl Hierarchy {
     /// step's residual (made before α is known), rᵀD⁻¹r, rᵀD⁻¹q and qᵀD⁻¹q (q as stored): D is
     /// not stored, so the norm is taken where the rows are read.
     pub(super) fn apply<const K: usize>(&self, p: &[[Mg; K]], q: &mut [[Mg; K]], r: &[[Mg; K]]) -> [[f64; K]; 4] {
-        let parts: Vec<[[f64; K]; 4]> = with_rows!(&self.levels[0], |fine| map_chunks(q, CHUNK, |ci, qs| {
+        let parts: Vec<[[f64; K]; 4]> = with_rows!(&self.levels[0], |fine| map_chunks(q, CHUNK, &|ci, qs| {
                 let first = ci * CHUNK;
                 let mut sums = [[0.0; K]; 4];
                 fine.each_row_into(first, qs, |e, row, qv| {
@@ -102,7 +102,7 @@ impl Hierarchy {
         r: &mut [[Mg; K]],
         which: [bool; K],
     ) -> [f64; K] {
-        let parts: Vec<[f64; K]> = with_rows!(&self.levels[0], |fine| map_chunks(r, CHUNK, |ci, rs| {
+        let parts: Vec<[f64; K]> = with_rows!(&self.levels[0], |fine| map_chunks(r, CHUNK, &|ci, rs| {
                 let first = ci * CHUNK;
                 let mut rr = [0.0; K];
                 fine.each_row_into(first, rs, |e, row, rv| {
@@ -147,7 +147,7 @@ impl Hierarchy {
                 assert!(x.iter().all(|v| v.len() == a.unknowns()), "one value per unknown");
                 let unk = a.unknowns_in_order();
                 let mut start = vec![[0.0; K]; unk.len()];
-                for_chunks(&mut start, CHUNK, |ci, xs| {
+                for_chunks(&mut start, CHUNK, &|ci, xs| {
                     for (xv, u) in xs.iter_mut().zip(&unk[ci * CHUNK..]) {
                         if *u != PAD {
                             *xv = x.map(|v| v[*u as usize].into());
@@ -196,7 +196,7 @@ impl Hierarchy {
     ) -> [SolveStats; K] {
         let a = &self.levels[0];
         let n = a.len();
-        let parts: Vec<[f64; K]> = with_rows!(a, |fine| map_range(n.div_ceil(CHUNK), |ci| {
+        let parts: Vec<[f64; K]> = with_rows!(a, |fine| map_range(n.div_ceil(CHUNK), &|ci| {
                 let mut s = [0.0; K];
                 fine.each_row(ci * CHUNK..n.min((ci + 1) * CHUNK), |e, row| {
                     let (v, w) = (be(fine.unknown_of(e, &row)), inverse(fine.finest_row(e, &row).2));
@@ -234,7 +234,7 @@ impl Hierarchy {
         // bit: A 0 = 0 exactly, and the same chunks add in the same order).
         let mut r = vec![[0.0; K]; n];
         let rr = if cold {
-            with_rows!(a, |fine| for_chunks(&mut r, CHUNK, |ci, rs| {
+            with_rows!(a, |fine| for_chunks(&mut r, CHUNK, &|ci, rs| {
                 let first = ci * CHUNK;
                 fine.each_row_into(first, rs, |e, row, rv| *rv = be(fine.unknown_of(e, &row)).map(Mg::of));
             }));
@@ -331,7 +331,7 @@ impl Hierarchy {
                 let rz_new = dot(&r, &q);
                 let beta: [f64; K] = std::array::from_fn(|k| if active[k] && !restart[k] { rz_new[k] / rz[k] } else { 0.0 });
                 rz = rz_new;
-                for_chunks(&mut p, CHUNK, |ci, ps| {
+                for_chunks(&mut p, CHUNK, &|ci, ps| {
                     for (pv, zz) in ps.iter_mut().zip(&q[ci * CHUNK..]) {
                         *pv = std::array::from_fn(|k| Mg::of(zz[k].get() + beta[k] * pv[k].get()));
                     }

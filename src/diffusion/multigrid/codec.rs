@@ -2,7 +2,7 @@
 //! coding once per run of entries that share it ([`Runs`]), narrow (u16) or wide (u32) ±z
 //! distances ([`Rows`]), and the hierarchy's power-of-two scale ([`unit_of`]).
 
-use super::par::map_chunks;
+use crate::par::map_chunks;
 use super::CHUNK;
 use crate::half::Scaled16;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -368,7 +368,7 @@ pub(super) fn code_row<Z: Dz>(e: usize, unk: &[u32], plain: &impl Fn(usize, u32)
 pub(super) fn code_rows<Z: Dz>(unk: &[u32], plain: &(impl Fn(usize, u32) -> Plain + Sync), unit: i32, k: [i32; 2]) -> Option<Runs<Z>> {
     let fits = AtomicBool::new(true);
     let mut codes = vec![Codes::default(); unk.len()];
-    let parts: Vec<Vec<Run<Z>>> = map_chunks(&mut codes, CHUNK, |ci, cs| {
+    let parts: Vec<Vec<Run<Z>>> = map_chunks(&mut codes, CHUNK, &|ci, cs| {
             let mut runs = Vec::new();
             for (t, c) in cs.iter_mut().enumerate() {
                 let e = ci * CHUNK + t;

@@ -4,7 +4,7 @@
 
 use super::codec::{code_rows, pow2, unit_of, Codes, Dz, Mg, Plain, Real, RowAt, Rows, Run, Runs};
 use super::operator::{row_sum, Maxima, Operator, Stencils};
-use super::par::{for_chunks, map_each};
+use crate::par::{for_chunks, map_each};
 use super::{CHUNK, NONE, PAD};
 use crate::half::Scaled16;
 
@@ -429,7 +429,7 @@ impl Level {
         let plane_cells = (op.dims[0] * op.dims[1]) as u32;
         let plane = |cu: u32| (op.nodes[cu as usize].cell / plane_cells) as usize;
         let mut parents = vec![0; self.red];
-        for_chunks(&mut parents, CHUNK, |ci, ps| {
+        for_chunks(&mut parents, CHUNK, &|ci, ps| {
             for (p, e) in ps.iter_mut().zip(ci * CHUNK..) {
                 *p = coarse_entry[parent[self.unknown(e) as usize] as usize];
             }
@@ -473,7 +473,7 @@ impl Level {
         let split = self.red as u32;
         with_rows!(fine, |rows| with_diagonal!(fine, |diag| map_each(
             tasks,
-            |_, (start, end, red, black)| {
+            &|_, (start, end, red, black)| {
                 red.fill([0.0; K]);
                 black.fill([0.0; K]);
                 let xb = OtherColour::of(&rows, xb, fine.red + 1);
@@ -497,8 +497,8 @@ impl Level {
     /// level's diagonals from its rows' sums and couplings: this pass reads its rows).
     pub(super) fn smooth_red_from_zero<const K: usize>(&self, x: &mut [[Mg; K]], b: &[[Mg; K]]) {
         let red = self.red;
-        for_chunks(&mut x[red..], CHUNK, |_, xs| xs.fill([0.0; K]));
-        with_rows!(self, |rows| for_chunks(&mut x[..red], CHUNK, |ci, xs| {
+        for_chunks(&mut x[red..], CHUNK, &|_, xs| xs.fill([0.0; K]));
+        with_rows!(self, |rows| for_chunks(&mut x[..red], CHUNK, &|ci, xs| {
             let first = ci * CHUNK;
             rows.each_row_into(first, xs, |e, row, xv| {
                 let d = if self.row_sums {
@@ -522,7 +522,7 @@ impl Level {
         } else {
             (&mut xb[..black], &*xr, red + 1, 0)
         };
-        with_rows!(self, |coded| with_diagonal!(self, |diag| for_chunks(mine, CHUNK, |ci, xs| {
+        with_rows!(self, |coded| with_diagonal!(self, |diag| for_chunks(mine, CHUNK, &|ci, xs| {
                 let start = first + ci * CHUNK;
                 let other = OtherColour::of(&coded, other, off);
                 coded.each_row_into(start, xs, |e, row, xv| {
@@ -536,7 +536,7 @@ impl Level {
     /// x += w P xc on the red unknowns, each adding its parent's correction: a black pass
     /// follows, which overwrites the black ones whatever they hold.
     pub(super) fn prolong_red<const K: usize>(&self, x: &mut [[Mg; K]], xc: &[[Mg; K]], w: Mg) {
-        for_chunks(&mut x[..self.red], CHUNK, |ci, xs| {
+        for_chunks(&mut x[..self.red], CHUNK, &|ci, xs| {
             for (v, p) in xs.iter_mut().zip(&self.parent[ci * CHUNK..]) {
                 let c = &xc[*p as usize];
                 for k in 0..K {

@@ -42,7 +42,7 @@ mod codec;
 mod cycle;
 mod level;
 mod operator;
-mod par;
+
 #[cfg(test)]
 mod tests;
 
@@ -50,7 +50,7 @@ use coarse::Dense;
 pub use codec::MAX_BOX_ROW_CELLS;
 use level::Level;
 use operator::{coarsen, Maxima};
-pub use operator::{Operator, Stencil, Stencils};
+pub use operator::{Node, Operator, Stencil, Stencils};
 
 /// The cycle is a W-cycle: each level above the coarsest direct one visits the next coarser
 /// level twice (a V-cycle, once, needs about twice the CG iterations: docs/diffusion.md).

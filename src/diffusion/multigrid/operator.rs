@@ -1,7 +1,7 @@
 //! The operator the hierarchy is built from: a symmetric 7-point stencil on its unknowns, read
 //! row by row ([`Stencils`]), and its Galerkin coarsening by 2×2×2 aggregation ([`coarsen`]).
 
-use super::par::{for_chunks, map_chunks, map_each, map_range};
+use crate::par::{for_chunks, map_chunks, map_each, map_range};
 use super::{CHUNK, NONE};
 
 /// One unknown of an [`Operator`].
@@ -180,7 +180,7 @@ pub(super) fn coarsen(a: &impl Stencils) -> (Operator, Vec<u32>, Maxima) {
         .map(|k| first_at(a, 2 * k * nx * ny)..first_at(a, (2 * k + 2) * nx * ny))
         .collect();
     let mut rank = vec![NONE; plane * cd[2]];
-    let counts: Vec<u32> = map_chunks(&mut rank, plane, |k, r| {
+    let counts: Vec<u32> = map_chunks(&mut rank, plane, &|k, r| {
             for u in fine_planes[k].clone() {
                 r[key(a.ijk(u)) as usize - k * plane] = 0;
             }
@@ -198,16 +198,16 @@ pub(super) fn coarsen(a: &impl Stencils) -> (Operator, Vec<u32>, Maxima) {
             Some(*s - c)
         })
         .collect();
-    for_chunks(&mut rank, plane, |k, r| {
+    for_chunks(&mut rank, plane, &|k, r| {
         r.iter_mut().filter(|v| **v != NONE).for_each(|v| *v += offsets[k]);
     });
     let mut parent = vec![0; a.len()];
-    for_chunks(&mut parent, CHUNK, |ci, ps| {
+    for_chunks(&mut parent, CHUNK, &|ci, ps| {
         for (p, u) in ps.iter_mut().zip(ci * CHUNK..) {
             *p = rank[key(a.ijk(u)) as usize];
         }
     });
-    let node_chunks = map_range(rank.len().div_ceil(CHUNK), |ci| {
+    let node_chunks = map_range(rank.len().div_ceil(CHUNK), &|ci| {
         (ci * CHUNK..rank.len().min((ci + 1) * CHUNK))
             .filter(|c| rank[*c] != NONE)
             .map(|c| Node::at(c as u32))
@@ -222,7 +222,7 @@ pub(super) fn coarsen(a: &impl Stencils) -> (Operator, Vec<u32>, Maxima) {
         planes.push((fine, base, mine));
         (rest, base) = (more, base + here as usize);
     }
-    let maxima = map_each(planes, |_, (fine, base, mine)| {
+    let maxima = map_each(planes, &|_, (fine, base, mine)| {
             let mut m = Maxima::default();
             for u in fine {
                 let st = a.stencil(u);
@@ -286,7 +286,7 @@ impl Maxima {
 
     /// Those of all of `a`'s rows (a pass over them: for a level not read by [`coarsen`]).
     pub(super) fn all(a: &impl Stencils) -> Maxima {
-        map_range(a.len().div_ceil(CHUNK), |ci| {
+        map_range(a.len().div_ceil(CHUNK), &|ci| {
             (ci * CHUNK..a.len().min((ci + 1) * CHUNK)).fold(Maxima::default(), |m, u| m.max(Maxima::of(&a.stencil(u))))
         })
         .into_iter()

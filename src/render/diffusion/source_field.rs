@@ -19,7 +19,7 @@ use crate::medium::field16::Field16;
 use crate::medium::sparse::{FullIndex, VoxelField};
 use crate::medium::Medium;
 use crate::optics::Optics;
-use rayon::prelude::*;
+use crate::par;
 use std::sync::Arc;
 
 /// Floats per band in a record without the sky's single scattering: ρ·I0, ρ·g·I1 (x, y, z).
@@ -160,7 +160,7 @@ const CHUNK: usize = 4096;
 /// built in parallel.
 fn packed_field<const N: usize>(index: Arc<FullIndex>, at: impl Fn(usize) -> [f32; N] + Sync) -> VoxelField<[f32; N]> {
     let mut slots = vec![[0.0; N]; index.count() + 1];
-    slots[1..].par_chunks_mut(CHUNK).enumerate().for_each(|(c, chunk)| {
+    par::for_chunks(&mut slots[1..], CHUNK, &|c, chunk| {
         for (i, s) in chunk.iter_mut().enumerate() {
             *s = at(c * CHUNK + i);
         }

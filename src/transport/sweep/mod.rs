@@ -16,7 +16,6 @@ use lanes::Vector;
 use step::{record, step_row, Plane, Step};
 use crate::math::Vec3;
 use glam::DVec3;
-use rayon::prelude::*;
 
 mod ground_cut;
 mod lanes;
@@ -75,19 +74,19 @@ pub(super) fn sweep(
         let outs: Vec<Vec<&mut [[f32; 3]]>> = (0..nfull.div_ceil(chunk))
             .map(|_| slots.iter_mut().filter_map(Iterator::next).collect())
             .collect();
-        moments
-            .par_chunks(chunk * 3 * nsh)
-            .zip(outs)
-            .enumerate()
-            .for_each(|(ci, (block, mut out))| source_block(c, t, bi, batch.len(), block, ci * chunk, &mut out));
+        let block_len = chunk * 3 * nsh;
+        crate::par::map_each(outs, &|ci, mut out| {
+            let block = &moments[ci * block_len..((ci + 1) * block_len).min(moments.len())];
+            source_block(c, t, bi, batch.len(), block, ci * chunk, &mut out)
+        });
         // (2) The sweeps.
         let dirs: Vec<usize> = batch.clone().flat_map(|p| t.pairs[p]).collect();
         let wts: Vec<f32> = batch.clone().flat_map(|p| t.weights[p]).collect();
-        let splats: Vec<Splats> = dirs
-            .par_iter()
-            .zip(light.par_chunks_mut(nfull.max(1)))
-            .map(|(d, ld)| sweep_ordinate(c, q.dirs[*d], q.weights[*d], ground, ld))
-            .collect();
+        // One task per ordinate of the batch, each on its own slot of `light`.
+        let swept = (dirs.len() * nfull.max(1)).min(light.len());
+        let splats: Vec<Splats> = crate::par::map_chunks(&mut light[..swept], nfull.max(1), &|o, ld| {
+            sweep_ordinate(c, q.dirs[dirs[o]], q.weights[dirs[o]], ground, ld)
+        });
         let radiance = &**light;
         for splats in &splats {
             for (col, e) in splats {
@@ -107,9 +106,7 @@ pub(super) fn sweep(
             first: bi == 0,
             active: t.moment_active,
         };
-        next.par_chunks_mut(chunk * 3 * nsh)
-            .enumerate()
-            .for_each(|(ci, block)| moments_block(c, &lanes, block, ci * chunk));
+        crate::par::for_chunks(next, chunk * 3 * nsh, &|ci, block| moments_block(c, &lanes, block, ci * chunk));
     }
     e_down
 }
