@@ -102,82 +102,82 @@ pub fn visible_i0(m: &Medium, inc: &IncidentLight, sol: &DiffusionSolution, tau_
     std::array::from_fn(|c| {
         let sigma_tr = m.optics.sigma_tr(c);
         let packed: Vec<f32> = par::map_items(full.len(), CHUNK, &|r| {
-                let idx = full[r];
-                let ip = sol.i0[c].packed_at(r) as f64;
-                let sp = index.slot(idx);
-                let rp = rho.at_slot(sp) as f64;
-                let cell = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])];
-                let (mut sum, mut faces) = (0.0, 0usize);
-                for a in 0..3 {
-                    // F = Q1/(ρσtr), the first scattering's part of the flux (eq. 7's f).
-                    let fp = inc.scattering.q1_at_slot(a, sp, c) as f64 / (rp * sigma_tr);
-                    for side in [-1i64, 1] {
-                        let nc = cell[a] as i64 + side;
-                        let nidx = (nc >= 0 && nc < gd[a] as i64).then(|| (idx as i64 + side * gstride[a] as i64) as usize);
-                        if nidx.is_some_and(|g| index.slot(g) != 0) {
-                            continue;
-                        }
-                        faces += 1;
-                        let tau = rp * sigma_t * h[a];
-                        if tau <= CENTRE_VISIBLE_DEPTH {
-                            sum += ip;
-                            continue;
-                        }
-                        let l = sol.boundary.at(nidx, face_index(a, side), c);
-                        let beta = 2.0 / (3.0 * (rp * sigma_tr * h[a]).max(tau_min));
-                        let flux = (beta * (ip - l) + fp * side as f64) / (1.0 + 2.0 * beta);
-                        let face = l + 2.0 * flux;
-                        sum += face + (ip - face) * CENTRE_VISIBLE_DEPTH / tau;
+            let idx = full[r];
+            let ip = sol.i0[c].packed_at(r) as f64;
+            let sp = index.slot(idx);
+            let rp = rho.at_slot(sp) as f64;
+            let cell = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])];
+            let (mut sum, mut faces) = (0.0, 0usize);
+            for a in 0..3 {
+                // F = Q1/(ρσtr), the first scattering's part of the flux (eq. 7's f).
+                let fp = inc.scattering.q1_at_slot(a, sp, c) as f64 / (rp * sigma_tr);
+                for side in [-1i64, 1] {
+                    let nc = cell[a] as i64 + side;
+                    let nidx = (nc >= 0 && nc < gd[a] as i64).then(|| (idx as i64 + side * gstride[a] as i64) as usize);
+                    if nidx.is_some_and(|g| index.slot(g) != 0) {
+                        continue;
                     }
+                    faces += 1;
+                    let tau = rp * sigma_t * h[a];
+                    if tau <= CENTRE_VISIBLE_DEPTH {
+                        sum += ip;
+                        continue;
+                    }
+                    let l = sol.boundary.at(nidx, face_index(a, side), c);
+                    let beta = 2.0 / (3.0 * (rp * sigma_tr * h[a]).max(tau_min));
+                    let flux = (beta * (ip - l) + fp * side as f64) / (1.0 + 2.0 * beta);
+                    let face = l + 2.0 * flux;
+                    sum += face + (ip - face) * CENTRE_VISIBLE_DEPTH / tau;
                 }
-                if faces == 0 {
-                    ip as f32
-                } else {
-                    (sum / faces as f64) as f32
-                }
-            });
+            }
+            if faces == 0 {
+                ip as f32
+            } else {
+                (sum / faces as f64) as f32
+            }
+        });
         // A thick voxel with no boundary face but an empty voxel among its 26 neighbours (in a
         // concave corner or along an edge of the surface) lies inside the trilinear blend the eye
         // samples there: it takes the mean of its boundary face-neighbours' visible values.
         let first = packed;
         let packed: Vec<f32> = par::map_items(full.len(), CHUNK, &|r| {
-                let idx = full[r];
-                let cell = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])];
-                let neighbour = |d: [i64; 3]| -> Option<usize> {
-                    let c: Vec<i64> = (0..3).map(|a| cell[a] as i64 + d[a]).collect();
-                    (0..3)
-                        .all(|a| c[a] >= 0 && c[a] < gd[a] as i64)
-                        .then(|| (0..3).map(|a| c[a] as usize * gstride[a]).sum())
-                };
-                let is_full = |d: [i64; 3]| neighbour(d).is_some_and(|g| index.slot(g) != 0);
-                let offsets = (-1..=1).flat_map(|z| (-1..=1).flat_map(move |y| (-1..=1).map(move |x| [x, y, z])));
-                let axis = |a: usize, side: i64| std::array::from_fn(|k| if k == a { side } else { 0 });
-                let faces: Vec<[i64; 3]> = (0..3).flat_map(|a| [axis(a, -1), axis(a, 1)]).collect();
-                let thick = rho.at_slot(index.slot(idx)) as f64 * sigma_t * h_min > CENTRE_VISIBLE_DEPTH;
-                if !thick || !faces.iter().all(|d| is_full(*d)) || offsets.clone().all(is_full) {
-                    return first[r];
+            let idx = full[r];
+            let cell = [idx % gd[0], (idx / gd[0]) % gd[1], idx / (gd[0] * gd[1])];
+            let neighbour = |d: [i64; 3]| -> Option<usize> {
+                let c: Vec<i64> = (0..3).map(|a| cell[a] as i64 + d[a]).collect();
+                (0..3)
+                    .all(|a| c[a] >= 0 && c[a] < gd[a] as i64)
+                    .then(|| (0..3).map(|a| c[a] as usize * gstride[a]).sum())
+            };
+            let is_full = |d: [i64; 3]| neighbour(d).is_some_and(|g| index.slot(g) != 0);
+            let offsets = (-1..=1).flat_map(|z| (-1..=1).flat_map(move |y| (-1..=1).map(move |x| [x, y, z])));
+            let axis = |a: usize, side: i64| std::array::from_fn(|k| if k == a { side } else { 0 });
+            let faces: Vec<[i64; 3]> = (0..3).flat_map(|a| [axis(a, -1), axis(a, 1)]).collect();
+            let thick = rho.at_slot(index.slot(idx)) as f64 * sigma_t * h_min > CENTRE_VISIBLE_DEPTH;
+            if !thick || !faces.iter().all(|d| is_full(*d)) || offsets.clone().all(is_full) {
+                return first[r];
+            }
+            // Face neighbours with a boundary face of their own.
+            let (mut sum, mut n) = (0.0, 0usize);
+            for d in &faces {
+                let g = neighbour(*d).unwrap_or(idx);
+                let on_surface = faces.iter().any(|e| {
+                    let gc = [g % gd[0], (g / gd[0]) % gd[1], g / (gd[0] * gd[1])];
+                    let c: Vec<i64> = (0..3).map(|a| gc[a] as i64 + e[a]).collect();
+                    !(0..3).all(|a| c[a] >= 0 && c[a] < gd[a] as i64)
+                        || index.slot((0..3).map(|a| c[a] as usize * gstride[a]).sum()) == 0
+                });
+                if on_surface {
+                    sum += first[index.slot(g) - 1] as f64;
+                    n += 1;
                 }
-                // Face neighbours with a boundary face of their own.
-                let (mut sum, mut n) = (0.0, 0usize);
-                for d in &faces {
-                    let g = neighbour(*d).unwrap_or(idx);
-                    let on_surface = faces.iter().any(|e| {
-                        let gc = [g % gd[0], (g / gd[0]) % gd[1], g / (gd[0] * gd[1])];
-                        let c: Vec<i64> = (0..3).map(|a| gc[a] as i64 + e[a]).collect();
-                        !(0..3).all(|a| c[a] >= 0 && c[a] < gd[a] as i64)
-                            || index.slot((0..3).map(|a| c[a] as usize * gstride[a]).sum()) == 0
-                    });
-                    if on_surface {
-                        sum += first[index.slot(g) - 1] as f64;
-                        n += 1;
-                    }
-                }
-                if n == 0 {
-                    first[r]
-                } else {
-                    (sum / n as f64) as f32
-                }
-            });
+            }
+            if n == 0 {
+                first[r]
+            } else {
+                (sum / n as f64) as f32
+            }
+        });
         let packed = fill_hidden(
             &packed,
             &full,

@@ -169,114 +169,114 @@ pub fn gather_pixels(
     let block = sp.block.max(1).next_power_of_two() as usize;
     let coarse = (sp.coarse_block.max(1).next_power_of_two() as usize).max(block);
     let px: Vec<EdgeAov> = par::map_items(w * h, PIXELS_PER_TASK, &|i| {
-            if !wanted(i) {
-                return EdgeAov::default();
-            }
-            let (x, y) = (i % w, i / w);
-            let r = rays[i];
-            let plan = g.plan(r.o, r.d, r.t_max);
-            let mut n_cubes = 0u32;
-            let e: Vec<Rgb> = plan
-                .jobs
-                .iter()
-                .map(|job| {
-                    let Some(_) = job.top else {
+        if !wanted(i) {
+            return EdgeAov::default();
+        }
+        let (x, y) = (i % w, i / w);
+        let r = rays[i];
+        let plan = g.plan(r.o, r.d, r.t_max);
+        let mut n_cubes = 0u32;
+        let e: Vec<Rgb> = plan
+            .jobs
+            .iter()
+            .map(|job| {
+                let Some(_) = job.top else {
+                    n_cubes += 1;
+                    cubes.fetch_add(1, Ordering::Relaxed);
+                    direct.fetch_add(1, Ordering::Relaxed);
+                    return g.segment_radiance(&plan, &job.seg);
+                };
+                // The plan's top segments are the same as `top(i).segs` (same threshold and surface
+                // layer) but its profile is also cut at T_lo: match by centre distance.
+                let tc = job.seg.t_center;
+                let mut q = None;
+                let mut s = coarse;
+                while s > 1 {
+                    let (x0, y0) = ((x / s) * s, (y / s) * s);
+                    if x0 == x && y0 == y {
+                        break;
+                    }
+                    let (x1, y1) = ((x0 + s).min(w - 1), (y0 + s).min(h - 1));
+                    let fx = if x1 > x0 { (x - x0) as f32 / (x1 - x0) as f32 } else { 0.0 };
+                    let fy = if y1 > y0 { (y - y0) as f32 / (y1 - y0) as f32 } else { 0.0 };
+                    let corners = [
+                        (x0, y0, (1.0 - fx) * (1.0 - fy)),
+                        (x1, y0, fx * (1.0 - fy)),
+                        (x0, y1, (1.0 - fx) * fy),
+                        (x1, y1, fx * fy),
+                    ];
+                    let mut ok = true;
+                    let mut picks = [(0usize, 0usize, 0f32); 4];
+                    // On small squares (corners at most `partial_size` pixels away) the
+                    // corners that match are enough: their weights are renormalised.
+                    let partial = s <= sp.partial_size as usize;
+                    // Above `block` only a whole square whose corners' K agree.
+                    let smooth_only = s > block;
+                    let mut matched = 0f32;
+                    for (c, &(cx, cy, wt)) in corners.iter().enumerate() {
+                        if wt <= 0.0 {
+                            continue;
+                        }
+                        let ci = cy * w + cx;
+                        match nearest(&top(ci).segs, tc) {
+                            Some((j, dist)) if dist <= sp.depth_tolerance as f64 => {
+                                picks[c] = (ci, j, wt);
+                                matched += wt;
+                            }
+                            _ => {
+                                ok = false;
+                                if !partial {
+                                    break;
+                                }
+                            }
+                        }
+                    }
+                    if ok && smooth_only {
+                        let es: Vec<Rgb> = picks
+                            .iter()
+                            .filter(|p| p.2 > 0.0)
+                            .map(|&(ci, j, _)| g.cube_part(q.get_or_insert_with(|| g.orders(job.seg.depth)), own_k(ci, j)))
+                            .collect();
+                        ok = agree(&es, sp.smooth_tolerance);
+                    }
+                    if !ok && partial && matched > 0.0 {
+                        for p in &mut picks {
+                            p.2 /= matched;
+                        }
+                        ok = true;
+                    }
+                    if ok {
+                        let mut k: Vec<Rgb> = Vec::new();
+                        for &(ci, j, wt) in picks.iter().filter(|p| p.2 > 0.0) {
+                            let kc = own_k(ci, j);
+                            if k.len() < kc.len() {
+                                let last = k.last().copied().unwrap_or(Rgb::ZERO);
+                                k.resize(kc.len(), last);
+                            }
+                            for (a, b) in k.iter_mut().zip(kc.iter().chain(std::iter::repeat(&kc[kc.len() - 1]))) {
+                                *a += *b * wt;
+                            }
+                        }
+                        interp.fetch_add(1, Ordering::Relaxed);
+                        return g.segment_radiance_from_k(&plan, &job.seg, &k);
+                    }
+                    s /= 2;
+                }
+                direct.fetch_add(1, Ordering::Relaxed);
+                match nearest(&top(i).segs, tc).map(|(j, _)| j) {
+                    Some(j) => g.segment_radiance_from_k(&plan, &job.seg, own_k(i, j)),
+                    None => {
                         n_cubes += 1;
                         cubes.fetch_add(1, Ordering::Relaxed);
-                        direct.fetch_add(1, Ordering::Relaxed);
-                        return g.segment_radiance(&plan, &job.seg);
-                    };
-                    // The plan's top segments are the same as `top(i).segs` (same threshold and surface
-                    // layer) but its profile is also cut at T_lo: match by centre distance.
-                    let tc = job.seg.t_center;
-                    let mut q = None;
-                    let mut s = coarse;
-                    while s > 1 {
-                        let (x0, y0) = ((x / s) * s, (y / s) * s);
-                        if x0 == x && y0 == y {
-                            break;
-                        }
-                        let (x1, y1) = ((x0 + s).min(w - 1), (y0 + s).min(h - 1));
-                        let fx = if x1 > x0 { (x - x0) as f32 / (x1 - x0) as f32 } else { 0.0 };
-                        let fy = if y1 > y0 { (y - y0) as f32 / (y1 - y0) as f32 } else { 0.0 };
-                        let corners = [
-                            (x0, y0, (1.0 - fx) * (1.0 - fy)),
-                            (x1, y0, fx * (1.0 - fy)),
-                            (x0, y1, (1.0 - fx) * fy),
-                            (x1, y1, fx * fy),
-                        ];
-                        let mut ok = true;
-                        let mut picks = [(0usize, 0usize, 0f32); 4];
-                        // On small squares (corners at most `partial_size` pixels away) the
-                        // corners that match are enough: their weights are renormalised.
-                        let partial = s <= sp.partial_size as usize;
-                        // Above `block` only a whole square whose corners' K agree.
-                        let smooth_only = s > block;
-                        let mut matched = 0f32;
-                        for (c, &(cx, cy, wt)) in corners.iter().enumerate() {
-                            if wt <= 0.0 {
-                                continue;
-                            }
-                            let ci = cy * w + cx;
-                            match nearest(&top(ci).segs, tc) {
-                                Some((j, dist)) if dist <= sp.depth_tolerance as f64 => {
-                                    picks[c] = (ci, j, wt);
-                                    matched += wt;
-                                }
-                                _ => {
-                                    ok = false;
-                                    if !partial {
-                                        break;
-                                    }
-                                }
-                            }
-                        }
-                        if ok && smooth_only {
-                            let es: Vec<Rgb> = picks
-                                .iter()
-                                .filter(|p| p.2 > 0.0)
-                                .map(|&(ci, j, _)| g.cube_part(q.get_or_insert_with(|| g.orders(job.seg.depth)), own_k(ci, j)))
-                                .collect();
-                            ok = agree(&es, sp.smooth_tolerance);
-                        }
-                        if !ok && partial && matched > 0.0 {
-                            for p in &mut picks {
-                                p.2 /= matched;
-                            }
-                            ok = true;
-                        }
-                        if ok {
-                            let mut k: Vec<Rgb> = Vec::new();
-                            for &(ci, j, wt) in picks.iter().filter(|p| p.2 > 0.0) {
-                                let kc = own_k(ci, j);
-                                if k.len() < kc.len() {
-                                    let last = k.last().copied().unwrap_or(Rgb::ZERO);
-                                    k.resize(kc.len(), last);
-                                }
-                                for (a, b) in k.iter_mut().zip(kc.iter().chain(std::iter::repeat(&kc[kc.len() - 1]))) {
-                                    *a += *b * wt;
-                                }
-                            }
-                            interp.fetch_add(1, Ordering::Relaxed);
-                            return g.segment_radiance_from_k(&plan, &job.seg, &k);
-                        }
-                        s /= 2;
+                        g.segment_radiance(&plan, &job.seg)
                     }
-                    direct.fetch_add(1, Ordering::Relaxed);
-                    match nearest(&top(i).segs, tc).map(|(j, _)| j) {
-                        Some(j) => g.segment_radiance_from_k(&plan, &job.seg, own_k(i, j)),
-                        None => {
-                            n_cubes += 1;
-                            cubes.fetch_add(1, Ordering::Relaxed);
-                            g.segment_radiance(&plan, &job.seg)
-                        }
-                    }
-                })
-                .collect();
-            let mut a = g.composite(&plan, &e, r.background);
-            a.cubes = n_cubes;
-            a
-        });
+                }
+            })
+            .collect();
+        let mut a = g.composite(&plan, &e, r.background);
+        a.cubes = n_cubes;
+        a
+    });
     (
         px,
         GatherStats {

@@ -24,21 +24,21 @@ pub fn entry_cell_depths(m: &Medium) -> Vec<f32> {
         })
         .collect();
     let line_depths = |&(a, jb, jc): &(usize, usize, usize)| {
-            let (b, c) = ((a + 1) % 3, (a + 2) % 3);
-            // The line's densities from one empty centre before the active box to one after.
-            let rho: Vec<f64> = (lo[a] as isize - 1..=hi[a] as isize)
-                .map(|ka| {
-                    let mut v = [0isize; 3];
-                    v[a] = ka;
-                    v[b] = jb as isize;
-                    v[c] = jc as isize;
-                    m.density.get_or_zero(v[0], v[1], v[2]) as f64
-                })
-                .collect();
-            let cell = |p: f64, q: f64| sigma_t * h[a] * 0.5 * (p + q);
-            let forward = first_cell_past_one(rho.windows(2).map(|w| cell(w[0], w[1])));
-            let backward = first_cell_past_one(rho.windows(2).rev().map(|w| cell(w[0], w[1])));
-            forward.into_iter().chain(backward)
+        let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+        // The line's densities from one empty centre before the active box to one after.
+        let rho: Vec<f64> = (lo[a] as isize - 1..=hi[a] as isize)
+            .map(|ka| {
+                let mut v = [0isize; 3];
+                v[a] = ka;
+                v[b] = jb as isize;
+                v[c] = jc as isize;
+                m.density.get_or_zero(v[0], v[1], v[2]) as f64
+            })
+            .collect();
+        let cell = |p: f64, q: f64| sigma_t * h[a] * 0.5 * (p + q);
+        let forward = first_cell_past_one(rho.windows(2).map(|w| cell(w[0], w[1])));
+        let backward = first_cell_past_one(rho.windows(2).rev().map(|w| cell(w[0], w[1])));
+        forward.into_iter().chain(backward)
     };
     // Lines per task: a few hundred; the tasks' depths joined in the lines' order.
     const LINES: usize = 256;

@@ -109,18 +109,18 @@ pub fn slab(p: &SlabParams, samples: u64, seed: u64) -> Result<SlabResult> {
     }
     let chunks = samples.div_ceil(CHUNK);
     let counts: Vec<(u64, u64)> = crate::par::map_range(chunks as usize, &|c| {
-            let c = c as u64;
-            let (mut r, mut t) = (0u64, 0u64);
-            for i in c * CHUNK..((c + 1) * CHUNK).min(samples) {
-                let mut rng = Rng::new(seed, i);
-                match photon(p, &mut rng) {
-                    Fate::Reflected => r += 1,
-                    Fate::Transmitted => t += 1,
-                    Fate::Absorbed => {}
-                }
+        let c = c as u64;
+        let (mut r, mut t) = (0u64, 0u64);
+        for i in c * CHUNK..((c + 1) * CHUNK).min(samples) {
+            let mut rng = Rng::new(seed, i);
+            match photon(p, &mut rng) {
+                Fate::Reflected => r += 1,
+                Fate::Transmitted => t += 1,
+                Fate::Absorbed => {}
             }
-            (r, t)
-        });
+        }
+        (r, t)
+    });
     let (r, t) = counts.iter().fold((0u64, 0u64), |a, b| (a.0 + b.0, a.1 + b.1));
     let n = samples as f64;
     // Each photon scores 0 or 1: the sample variance of a Bernoulli mean is p(1 − p)/(n − 1).
