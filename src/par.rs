@@ -64,11 +64,7 @@ pub(crate) fn for_chunks<T: Send>(v: &mut [T], size: usize, f: &(dyn Fn(usize, &
 
 /// `f(i)` for every i in `0..tasks` in parallel, one task each; the results in order.
 pub(crate) fn map_range<R: Send>(tasks: usize, f: &(dyn Fn(usize) -> R + Sync)) -> Vec<R> {
-    let mut slots: Vec<Option<R>> = Vec::with_capacity(tasks);
-    slots.resize_with(tasks, || None);
-    for_chunks(&mut slots, 1, &|i, slot| slot[0] = Some(f(i)));
-    // Rayon runs every task once (a task's panic is raised by `run`): every slot is filled.
-    slots.into_iter().flatten().collect()
+    map_each(vec![(); tasks], &|i, ()| f(i))
 }
 
 /// `f(i)` for every i in `0..n` in parallel, `size` items per task; the results in order.

@@ -82,17 +82,17 @@ impl Mixing {
             for (rr, (row, keep)) in rows.chunks_mut(nsh).zip(keeps.chunks_mut(k)).enumerate() {
                 let r = task * ROWS + rr;
                 for (j, &i) in mixed.iter().enumerate() {
-                let g = row[i];
-                if !alpha.is_empty() {
-                    let mut v = alpha[alpha.len() - 1] * g as f64;
-                    let mut a = 0;
-                    if recycled {
-                        v += alpha[0] * keep[j] as f64;
-                        a = 1;
-                    }
-                    for (e, c) in earlier.iter().zip(&alpha[a..alpha.len() - 1]) {
-                        v += c * e[r * k + j] as f64;
-                    }
+                    let g = row[i];
+                    if !alpha.is_empty() {
+                        let mut v = alpha[alpha.len() - 1] * g as f64;
+                        let mut a = 0;
+                        if recycled {
+                            v += alpha[0] * keep[j] as f64;
+                            a = 1;
+                        }
+                        for (e, c) in earlier.iter().zip(&alpha[a..alpha.len() - 1]) {
+                            v += c * e[r * k + j] as f64;
+                        }
                         row[i] = v as f32;
                     }
                     keep[j] = g;
