@@ -7,7 +7,10 @@
 //! moments f χ_l e^{−λ(1 − χ_l)} (the mean of χ_l^{k+1} under Poisson weights, with T′'s e^{λ}).
 //! [`PeakSpread::spread`] is what that takes from f P = p − (1 − f) p′ at a given λ. Two
 //! transforms use it: `transport`'s δ-M truncated after order L (χ_l = 1 for l ≤ L, g^{l−L−1}
-//! beyond) and `full`'s forward fraction f with HG(g′) (χ_l = (g^l − (1 − f) g′^l)/f).
+//! beyond) and `full`'s forward fraction f with HG(g′) (χ_l = (g^l − (1 − f) g′^l)/f). In
+//! `full`'s, χ_l < 1 where HG(g′) has orders too, so the smooth part (1 − f) HG(g′) is spread as
+//! well: by the sun's leg's peak scatterings and by those on the eye's leg, which δ-M's T′ to the
+//! eye carries as unscattered ([`PeakSpread::spread_split_with`]).
 
 /// The Legendre series of a δ-M peak beyond the orders its transform keeps exactly.
 pub struct PeakSpread {
@@ -47,13 +50,15 @@ impl PeakSpread {
         let f_chi = move |l: usize| g.powi(l as i32) - (1.0 - f) * gp.powi(l as i32);
         // χ_0 = χ_1 = 1 (δ-M keeps the normalisation and the mean cosine).
         let mut s = Self::from_moments(g, 2, f_chi, move |l| f_chi(l) / f);
-        // P's χ_l < 1 from l = 2 on, where HG(g′) has orders too: the light peak-scattered on the
-        // sun's leg reaches the smooth part's scattering spread as well.
+        // P's χ_l < 1 from l = 2 on, where HG(g′) has orders too: the light peak-scattered on
+        // either leg reaches the eye through the smooth part spread as well. Its series ends
+        // sooner than the peak's (g′ < g): where (2l + 1)(1 − f) g′^l < 10⁻⁶.
         s.smooth = (0..s.weight.len())
             .map(|i| {
                 let l = s.first + i;
                 (2 * l + 1) as f64 * (1.0 - f) * gp.powi(l as i32)
             })
+            .take_while(|w| w.abs() >= 1e-6)
             .collect();
         s
     }
@@ -165,20 +170,28 @@ impl PeakSpread {
             .sum()
     }
 
-    /// ([`Self::spread_with`], the same for the smooth part): with the λ peak scatterings on the
-    /// sun's leg before it, the scattering towards the eye is spread in both parts, f P and
-    /// (1 − f) HG(g′): Σ_l (2l + 1)(1 − f) g′^l (e^{−λ(1 − χ_l)} − 1) P_l(cos Θ) is what the smooth
-    /// part loses (0 where the peak leaves the smooth part's orders alone, as `transport`'s does).
-    pub fn spread_split_with(&self, lambda: f64, legendre: &[f64]) -> (f64, f64) {
-        if lambda <= 0.0 {
+    /// ([`Self::spread_with`], the same for the smooth part): the scattering towards the eye
+    /// spread in both parts, f P by the `lambda_sun` peak scatterings on the sun's leg, and
+    /// (1 − f) HG(g′) by those and the `lambda_eye` on the eye's leg: Σ_l (2l + 1)(1 − f) g′^l
+    /// (e^{−(λ_sun + λ_eye)(1 − χ_l)} − 1) P_l(cos Θ) is what the smooth part loses (0 where the
+    /// peak leaves the smooth part's orders alone, as `transport`'s does). The peak part is the
+    /// last scattering before the eye (weighted by T_eye^{af}, no peak scattering after it), so
+    /// only the sun's leg spreads it; the smooth part reaches the eye through δ-M's T′, which
+    /// carries the light peak-scattered on the way as if unscattered: each of those scatterings
+    /// multiplies the angular distribution's moments by χ_l, as on the sun's leg (small-angle
+    /// spreads around the two legs' directions compose as a product of zonal kernels).
+    pub fn spread_split_with(&self, lambda_sun: f64, lambda_eye: f64, legendre: &[f64]) -> (f64, f64) {
+        let lambda_smooth = lambda_sun + lambda_eye;
+        if lambda_smooth <= 0.0 {
             return (0.0, 0.0);
         }
-        let (mut smooth, mut peak) = (0.0, 0.0);
-        for (i, ((w, m), p)) in self.weight.iter().zip(&self.moment).zip(legendre).enumerate() {
-            let lost = ((-lambda * (1.0 - m)).exp() - 1.0) * p;
-            peak += w * lost;
-            smooth += self.smooth.get(i).map_or(0.0, |ws| ws * lost);
-        }
+        let lost = |lambda: f64, (w, (m, p)): (&f64, (&f64, &f64))| w * (((-lambda * (1.0 - m)).exp() - 1.0) * p);
+        let peak = if lambda_sun > 0.0 {
+            self.weight.iter().zip(self.moment.iter().zip(legendre)).map(|x| lost(lambda_sun, x)).sum()
+        } else {
+            0.0
+        };
+        let smooth = self.smooth.iter().zip(self.moment.iter().zip(legendre)).map(|x| lost(lambda_smooth, x)).sum();
         (smooth, peak)
     }
 }
@@ -224,22 +237,34 @@ mod tests {
         let (g, f, gp, s) = similarity_case();
         let (x, w) = crate::transport::gauss_legendre(600);
         for lambda in [0.5, 3.0] {
-            let parts: Vec<(f64, f64)> = x.iter().map(|c| s.spread_split_with(lambda, &s.legendre(*c))).collect();
+            let parts: Vec<(f64, f64)> = x.iter().map(|c| s.spread_split_with(lambda, 0.0, &s.legendre(*c))).collect();
             let e: f64 = parts.iter().zip(&w).map(|(p, w)| 0.5 * w * p.0).sum();
             let mu: f64 = parts.iter().zip(&w).zip(&x).map(|((p, w), x)| 0.5 * w * x * p.0).sum();
             assert!(e.abs() < 1e-9 && mu.abs() < 1e-9, "λ {lambda}: {e} {mu}");
-            let (smooth, peak) = s.spread_split_with(lambda, &s.legendre(1.0));
+            let (smooth, peak) = s.spread_split_with(lambda, 0.0, &s.legendre(1.0));
             assert!(smooth < 0.0 && (peak - s.spread(lambda, 1.0)).abs() < 1e-9 * peak.abs());
         }
         for c in [-0.9, 0.0, 0.5, 0.9] {
-            let (smooth, peak) = s.spread_split_with(1e4, &s.legendre(c));
+            let (smooth, peak) = s.spread_split_with(1e4, 0.0, &s.legendre(c));
             let left = hg(g, c) + smooth + peak;
             assert!((left - (1.0 + 3.0 * g * c)).abs() < 1e-5, "cos {c}: {left}");
             assert!((hg(gp, c) * (1.0 - f) + smooth - (1.0 - f) * (1.0 + 3.0 * gp * c)).abs() < 1e-5);
         }
+        // The eye's leg spreads the smooth part as the sun's does, and the peak part not at all:
+        // at λ_sun = 0 the peak is unspread, and the smooth part takes the two legs' sum.
+        for c in [-0.5, 0.3, 0.95, 1.0] {
+            let legendre = s.legendre(c);
+            let (smooth, peak) = s.spread_split_with(0.0, 1.5, &legendre);
+            assert_eq!(peak, 0.0);
+            assert!((smooth - s.spread_split_with(1.5, 0.0, &legendre).0).abs() < 1e-12);
+            let (smooth, peak) = s.spread_split_with(0.5, 1.0, &legendre);
+            assert!((smooth - s.spread_split_with(1.5, 0.0, &legendre).0).abs() < 1e-12);
+            assert!((peak - s.spread_split_with(0.5, 0.0, &legendre).1).abs() < 1e-12);
+        }
+        assert_eq!(s.spread_split_with(0.0, 0.0, &s.legendre(0.9)), (0.0, 0.0));
         // `transport`'s truncation leaves its smooth part (orders ≤ L) alone.
         let t = PeakSpread::truncated(0.9, 7);
-        assert_eq!(t.spread_split_with(2.0, &t.legendre(0.8)).0, 0.0);
+        assert_eq!(t.spread_split_with(2.0, 1.0, &t.legendre(0.8)).0, 0.0);
     }
 
     /// The similarity transform's peak, p − (1 − f) HG(g′), is its series' sum at λ → ∞ taken

@@ -7,14 +7,14 @@ use crate::scene::{Method, Scene};
 
 /// The lowest albedo at which `method` was measured near its budget, and what it measured below.
 /// From docs/accuracy.md, "Albedo below 1" (the built-in cumulus at 64×48, g = 0.9, `reference`
-/// at 2048 paths per pixel): `full` is −6.3 % at albedo 0.999 and −7.8 % at 0.99 on sun035's view,
-/// −11 % at 0.97 and −20 % at 0.9, and −15 to −20 % at 0.9 on four of five views (its orders' a^i
+/// at 2048 paths per pixel): `full` is −5.1 % at albedo 0.999 and −6.6 % at 0.99 on sun035's view,
+/// −10 % at 0.97 and −19 % at 0.9, and −15 to −20 % at 0.9 on four of five views (its orders' a^i
 /// and an excess of light at low albedo do not cancel); `diffusion`'s block error is 9.6 % at
 /// 0.999, 9.9 % at 0.9, 16 % at 0.8 and 31 % at 0.5. `transport` is within 2 % bias at every
 /// albedo of the sweep (0.3–0.999; 4 % at g = 0).
 fn measured_down_to(method: Method) -> Option<(f32, &'static str)> {
     match method {
-        Method::Full => Some((0.99, "−11 % at albedo 0.97, −15 to −20 % at 0.9")),
+        Method::Full => Some((0.99, "−10 % at albedo 0.97, −15 to −20 % at 0.9")),
         Method::Diffusion => Some((0.9, "16 % block error at albedo 0.8, 31 % at 0.5")),
         _ => None,
     }

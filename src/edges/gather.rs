@@ -620,7 +620,7 @@ impl<'a> EdgeGather<'a> {
         }
         // The peak's part counted once: weighted by T_eye^{af} = T′^k (Optics::sun_scatter_split).
         let (sun_smooth, sun_peak, peak_k) = m.optics.sun_scatter_split(self.sun.dir, -d);
-        // The spread on the sun's leg (4π-normalised series, per band's albedo factor).
+        // The peak scatterings' spread (4π-normalised series, per band's albedo factor).
         let spread = self.peak.as_ref().map(|(s, e)| {
             (
                 s,
@@ -629,13 +629,14 @@ impl<'a> EdgeGather<'a> {
                 m.optics.sun_single.0 / (4.0 * std::f32::consts::PI),
             )
         });
-        // (smooth, peak) parts at a point the sun reaches with E_⊙: both spread by the λ peak
-        // scatterings before them.
-        let sun_at = |sun: Rgb| -> (Rgb, Rgb) {
+        // (smooth, peak) parts at a point the sun reaches with E_⊙ and seen through the δ-M
+        // transmittance `tr_eye`: both spread by the λ = k τ′_⊙ peak scatterings on the sun's leg,
+        // the smooth part also by the k τ′_eye on the eye's leg (`PeakSpread::spread_split_with`).
+        let sun_at = |sun: Rgb, tr_eye: f64| -> (Rgb, Rgb) {
             match &spread {
                 Some((s, legendre, e, a)) if sun.y > 0.0 && *e > 0.0 => {
                     let lambda = peak_k as f64 * -(sun.y as f64 / *e as f64).min(1.0).ln();
-                    let (smooth, peak) = s.spread_split_with(lambda, legendre);
+                    let (smooth, peak) = s.spread_split_with(lambda, peak_k as f64 * -tr_eye.ln(), legendre);
                     (sun_smooth + *a * smooth as f32, sun_peak + *a * peak as f32)
                 }
                 _ => (sun_smooth, sun_peak),
@@ -685,7 +686,7 @@ impl<'a> EdgeGather<'a> {
                 }
                 let sun = if n == 1 { plan.sun[k] } else { (self.sun.irradiance_at)(pos) };
                 // The spread series dips below 0 in places (as transport's sun_phase): clamped there.
-                let (smooth, peak) = sun_at(sun);
+                let (smooth, peak) = sun_at(sun, tr);
                 aov.sun_single += f * sun * (smooth + peak * (tr as f32).powf(peak_k)).max(Rgb::ZERO);
                 tr *= 1.0 + em1;
                 if tr < crate::medium::march::T_CUTOFF as f64 {

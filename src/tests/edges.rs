@@ -662,3 +662,52 @@ fn surface_layer_sun_orders_start_from_the_layers_mean_sun() {
         px.edge
     );
 }
+
+/// δ-M's smooth part (1 − f) HG(g′) reaches the eye through the transformed transmittance T′,
+/// which carries the light peak-scattered on the eye's leg as if unscattered: the composite
+/// spreads it by those k τ′ peak scatterings as it spreads both parts by the sun's leg's
+/// (`PeakSpread::spread_split_with`); the peak's own part, the last scattering before the eye, is
+/// weighted by T_eye^{af} = T′^k instead. Through a homogeneous box, the sun 35° off the line of
+/// sight and its irradiance the same everywhere (no peak scattering on its leg), the sun's single
+/// scattering is the integral of e^{−τ′} E [smooth + a/4π · spread_smooth(k τ′) + peak · e^{−kτ′}]
+/// over the box's δ-M depth.
+#[test]
+fn the_suns_smooth_part_is_spread_by_the_peak_scatterings_on_the_eyes_leg() {
+    use crate::peak::PeakSpread;
+    let (f, g) = (0.65f32, 0.9f32);
+    let mut m = Medium::new(Grid3::filled([6, 6, 6], 1.0), Vec3::ZERO, Vec3::ONE, 0.3, Rgb::splat(0.999), g);
+    m.optics = m.optics.delta_m(f);
+    let e_sun = Rgb::splat(2.0);
+    let sun = move |_: Vec3| e_sun;
+    let dense = |_: Vec3, _: Vec3| Rgb::ZERO;
+    let settings = EdgeSettings {
+        threshold: 0.0,
+        surface_depth: 0.0,
+        step_m: 0.005,
+        ..Default::default()
+    };
+    // The sun 35° off the line of sight (the glare sweep's sun035).
+    let d = Vec3::X;
+    let to_sun = Vec3::new(35f32.to_radians().cos(), 35f32.to_radians().sin(), 0.0);
+    let gather = sunlit_gather(&m, settings, &NoCubes, to_sun, &sun, &dense).with_peak_spread(e_sun);
+    let aov = gather.radiance(Vec3::new(-1.0, 3.0, 3.0), d, f32::INFINITY, Rgb::ZERO);
+    let (smooth, peak, k) = m.optics.sun_scatter_split(to_sun, -d);
+    let (smooth, peak, k) = (smooth.y as f64, peak.y as f64, k as f64);
+    let a = m.optics.sun_single.0.y as f64 / (4.0 * std::f64::consts::PI);
+    let spread = PeakSpread::similarity(g as f64, f as f64);
+    let legendre = spread.legendre(to_sun.dot(d) as f64);
+    let depth = (m.optics.sigma_t * 6.0) as f64;
+    let n = 20_000;
+    let (mut with_eye, mut without) = (0.0, 0.0);
+    for i in 0..n {
+        let t = (i as f64 + 0.5) / n as f64 * depth;
+        let w = (-t).exp() * depth / n as f64;
+        let peak_part = peak * (-k * t).exp();
+        with_eye += w * (smooth + a * spread.spread_split_with(0.0, k * t, &legendre).0 + peak_part);
+        without += w * (smooth + peak_part);
+    }
+    let got = (aov.sun_single.y / e_sun.y) as f64;
+    assert!((got - with_eye).abs() < 1e-3 * with_eye, "{got} vs {with_eye} (unspread {without})");
+    // The spread moves light from near the sun out to 35°: 5 % more there.
+    assert!(with_eye > 1.04 * without, "{with_eye} vs {without}");
+}
