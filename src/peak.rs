@@ -185,14 +185,14 @@ impl PeakSpread {
         if lambda_smooth <= 0.0 {
             return (0.0, 0.0);
         }
-        let lost = |lambda: f64, (w, (m, p)): (&f64, (&f64, &f64))| w * (((-lambda * (1.0 - m)).exp() - 1.0) * p);
-        let peak = if lambda_sun > 0.0 {
-            self.weight.iter().zip(self.moment.iter().zip(legendre)).map(|x| lost(lambda_sun, x)).sum()
-        } else {
-            0.0
-        };
-        let smooth = self.smooth.iter().zip(self.moment.iter().zip(legendre)).map(|x| lost(lambda_smooth, x)).sum();
-        (smooth, peak)
+        let smooth = self
+            .smooth
+            .iter()
+            .zip(&self.moment)
+            .zip(legendre)
+            .map(|((w, m), p)| w * ((-lambda_smooth * (1.0 - m)).exp() - 1.0) * p)
+            .sum();
+        (smooth, self.spread_with(lambda_sun, legendre))
     }
 }
 
