@@ -18,6 +18,17 @@ pub const MAX_COORDINATE: f32 = 1e7;
 /// across any grid of at most 1e6-m voxels with densities up to 1e15.
 pub const MAX_SIGMA_T: f32 = 1e9;
 
+/// Largest density a grid may hold (unitless, in units of `medium.sigma_t`): 1e30. Only the
+/// product σt·ρ is physical, but the methods also form density products and sums on their own
+/// (weights ρ·X and trilinear(ρ), squared densities, 16-bit codes of ρ-weighted fields) in f32:
+/// a grid at 1e38 overflowed them (`full` and `transport` gave inf, NaN or a 27 % error at 1e37).
+pub const MAX_DENSITY: f32 = 1e30;
+
+/// Smallest non-zero extinction σt (m⁻¹): 1e-30. Below f32's normal range (1.2e-38) a σt
+/// carries fewer bits and its products underflow; a medium that thin across the largest grid
+/// (1e6-m voxels, densities up to [`MAX_DENSITY`]) is still described above it.
+pub const MIN_SIGMA_T: f32 = 1e-30;
+
 /// Largest |exposure| of the PNG preview (stops): 2^64 spans any radiance from 1e-19 to 1e19;
 /// past 2^127 the f32 scale factor itself overflows.
 pub const MAX_EXPOSURE: f32 = 64.0;

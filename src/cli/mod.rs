@@ -9,6 +9,7 @@ macro_rules! note {
 }
 
 mod allocator;
+mod back_scattering;
 mod bench;
 mod cloud_size;
 mod compare;

@@ -89,6 +89,24 @@ pub fn run(a: SlabArgs) -> Result<()> {
                 ));
             }
             let x = crate::transport::slab::solve_slab(a.thickness, a.albedo, a.g, p.incidence, &s);
+            if !(x.change <= s.tolerance && x.r.is_finite() && x.t.is_finite() && x.r >= 0.0 && x.t >= 0.0) {
+                let cause = if a.g < -0.9 {
+                    format!(
+                        ": its expansion of a phase function this strongly backwards (--g {}) makes the iteration unstable",
+                        a.g
+                    )
+                } else {
+                    String::new()
+                };
+                return Err(Error::Numerical {
+                    stage: "slab --method transport".into(),
+                    message: format!(
+                        "the iteration did not converge (R {:.3e}, T {:.3e}, relative change {:.1e} after {} \
+                         iterations, tolerance {:.0e}){cause}; use --method reference, or diffusion",
+                        x.r, x.t, x.change, x.iterations, s.tolerance
+                    ),
+                });
+            }
             SlabResult {
                 r: x.r,
                 t: x.t,

@@ -111,24 +111,11 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
              set render.sky_boundary = false for the paper's stage-1 sky)",
         );
     }
-    let t = &scene.render.transport;
-    if m == Method::Transport && t.n_mu < t.order + 1 {
-        out.push(format!(
-            "{}: render.transport_polar_ordinates = {} is less than render.transport_order + 1 = {}: \
-             the ordinates do not integrate the order-{} source exactly (docs/transport.md measures \
-             the cost); raise render.transport_polar_ordinates to {} or lower render.transport_order",
-            scene.source,
-            t.n_mu,
-            t.order + 1,
-            t.order,
-            (t.order + 1).next_multiple_of(2)
-        ));
-    }
-
     out.extend(hidden_sun_warning(scene));
     out.extend(super::cloud_size::warning(scene));
     out.extend(super::thick_voxels::warning(scene));
     out.extend(super::low_albedo::warning(scene));
+    out.extend(super::back_scattering::warning(scene));
     out.extend(frame_warning(scene));
     out
 }

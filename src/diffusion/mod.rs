@@ -654,8 +654,15 @@ fn solve_bands(
             (BandSolves::Together, n) => {
                 // Speed first: the right-hand sides and the starts in f32, one solve for all.
                 let x0s: Vec<Option<Field16>> = group.iter().map(|&c| i0[c].take()).collect();
-                let starts: Vec<Option<Vec<f32>>> = x0s.iter().map(|f| f.as_ref().map(Field16::decoded)).collect();
-                let bs: Vec<Vec<f32>> = group.iter().map(|&c| rhs(c, None).values).collect();
+                let mut starts: Vec<Option<Vec<f32>>> = x0s.iter().map(|f| f.as_ref().map(Field16::decoded)).collect();
+                let mut bs: Vec<Vec<f32>> = group.iter().map(|&c| rhs(c, None).values).collect();
+                // Each band's system divided by a power of two near its largest value (exact, the
+                // same solution bits): light as dim as 1e-37 W/m² would leave f32's normal range in
+                // the W-cycle, and its CG stall.
+                let units: Vec<f64> = bs.iter().map(|b| power_of_two_near_max(b)).collect();
+                for ((b, start), unit) in bs.iter_mut().zip(&mut starts).zip(&units) {
+                    b.iter_mut().chain(start.iter_mut().flatten()).for_each(|v| *v = (f64::from(*v) / unit) as f32);
+                }
                 let b = |k: usize| bs[k].as_slice();
                 let x = |k: usize| starts[k].as_deref();
                 let res: Vec<(Vec<f64>, SolveStats)> = if n == 2 {
@@ -665,7 +672,8 @@ fn solve_bands(
                         .into()
                 };
                 drop((bs, starts));
-                for ((&c, (sol, st)), old) in group.iter().zip(res).zip(&x0s) {
+                for (((&c, (mut sol, st)), old), unit) in group.iter().zip(res).zip(&x0s).zip(&units) {
+                    sol.iter_mut().for_each(|v| *v *= unit);
                     converged(c, &st, settings)?;
                     finite_i0(c, &sol)?;
                     i0[c] = Some(store(&index, old.as_ref(), &sol, &mut change, &mut norm));
@@ -709,6 +717,16 @@ fn solve_from(h: &Hierarchy, rhs: Rhs, x0: Option<&Field16>, tol: f64, max: usiz
         *v = start.map_or(0.0, |f| f64::from(f.packed_at(u))) + s * *v;
     }
     (x, st)
+}
+
+/// The power of two at or just below the largest |v| (1 for all zeros): dividing by it is exact.
+fn power_of_two_near_max(values: &[f32]) -> f64 {
+    let max = values.iter().fold(0f32, |m, v| m.max(v.abs()));
+    if max > 0.0 && max.is_finite() {
+        2f64.powi(f64::from(max).log2().floor() as i32)
+    } else {
+        1.0
+    }
 }
 
 /// An error unless band `c`'s solve reached the tolerance.

@@ -68,6 +68,9 @@ pub fn expint(n: i32, x: f64) -> f64 {
 
 /// R and T of a slab of optical thickness `tau`, albedo `a`, HG `g`, discretised with `cells` cells.
 pub fn solve_slab(tau: f64, a: f64, g: f64, incidence: Incidence, cells: usize) -> SlabResult {
+    if tau * (1.0 - a * g) < EMPTY_SLAB_DEPTH {
+        return SlabResult { r: 0.0, t: 1.0, r_stderr: 0.0, t_stderr: 0.0 };
+    }
     let n = cells.max(1);
     let h = 1.0;
     let sigma_t = tau / n as f64; // ρ = 1, h = 1 m
@@ -206,15 +209,41 @@ pub fn slab_forward_fraction(g: f64) -> f64 {
     }
 }
 
-/// Cells used for a slab of optical thickness `tau`: at most 0.05 optical depth per cell, at least 40.
+/// Cells used for a slab of optical thickness `tau`: at most 0.05 optical depth per cell, at
+/// least 40, but none thinner than [`MIN_CELL_DEPTH`].
 pub fn default_cells(tau: f64) -> usize {
-    ((tau / 0.05).ceil() as usize).clamp(40, 4000)
+    let cells = ((tau / 0.05).ceil() as usize).clamp(40, 4000);
+    cells.min(((tau / MIN_CELL_DEPTH) as usize).max(1))
 }
+
+/// The thinnest cell (optical depth): the face coupling 1/(3Δτ) of thinner cells is so much larger
+/// than the absorption on the diagonal that the tridiagonal elimination cancels to 0/0 (at
+/// Δτ ≈ 1e-16); a slab this thin is one cell, whose R and T are the thin limit's.
+const MIN_CELL_DEPTH: f64 = 1e-9;
+
+/// Below this optical depth (with the transport extinction σt(1 − a g)) R is under 1e-300 and
+/// T rounds to 1: the slab is returned as empty (R = 0, T = 1, exact at τ = 0), where the
+/// boundary's β = 2/(3τ) would overflow.
+const EMPTY_SLAB_DEPTH: f64 = 1e-300;
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use std::f64::consts::PI;
+
+    #[test]
+    fn thin_and_empty_slabs_reflect_nothing_and_transmit_everything() {
+        for incidence in [Incidence::Collimated, Incidence::Diffuse] {
+            assert_eq!(solve_slab_similar(0.0, 0.5, 0.0, 0.0, incidence), SlabResult { r: 0.0, t: 1.0, r_stderr: 0.0, t_stderr: 0.0 });
+            // R ≈ a τ/2 (collimated) or a τ (diffuse), T ≈ 1 − 2τ at most; 2E₃'s quadrature rounds
+            // within 1e-15 of 1.
+            for tau in [1e-12, 1e-15, 1e-20, 1e-45, 1e-300] {
+                let s = solve_slab_similar(tau, 0.5, 0.0, 0.0, incidence);
+                assert!(s.r.is_finite() && s.t.is_finite(), "τ {tau}: {s:?}");
+                assert!((0.0..=2.0 * tau).contains(&s.r) && (s.t - 1.0).abs() <= 4.0 * tau + 1e-15, "τ {tau}: {s:?}");
+            }
+        }
+    }
 
     /// The diffuse outflow 4π φ through the top and bottom faces of the column `i0` (τ in
     /// `cells` cells, albedo `a`, HG `g`, sun at `mu0`): eq. 7's flux (β I_P + f)/(1 + 2β) with

@@ -29,7 +29,7 @@ pub mod tracking;
 
 pub use integrator::{radiance, Light, PathOptions};
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::image::Image;
 use crate::math::{Rgb, Rng};
 use crate::pipeline::{Progress, Timings};
@@ -119,6 +119,7 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
         ));
     }
     let (img, stats) = render_with_stats(scene, progress, timings);
+    check_samples(scene, &stats, progress)?;
     let spp = if stats.min_spp == stats.spp {
         format!("{} spp", stats.spp)
     } else {
@@ -126,6 +127,33 @@ pub fn render(scene: &Scene, progress: &dyn Progress, timings: &mut Timings) -> 
     };
     progress.log(&format!("reference: {spp} in {:.2} s", stats.seconds));
     Ok(img)
+}
+
+/// A time limit that ended the render before any pixel completed a sample leaves nothing to
+/// show: an error naming the limit (no image is written). One that ended the first pass part-way
+/// leaves pixels that read 0: a warning (the `samples` layer marks them). A cancelled render
+/// reports its cancellation instead.
+fn check_samples(scene: &Scene, stats: &ReferenceStats, progress: &dyn Progress) -> Result<()> {
+    if stats.min_spp > 0 || progress.cancelled() {
+        return Ok(());
+    }
+    let limit = scene.render.time_limit.unwrap_or(f64::INFINITY);
+    if stats.spp == 0 {
+        return Err(Error::invalid(
+            &scene.source,
+            "render.time_limit",
+            format!(
+                "{limit} s ended the reference before any pixel completed a sample, so there is no image: \
+                 raise render.time_limit (--time-limit S)"
+            ),
+        ));
+    }
+    progress.warn(&format!(
+        "{}: render.time_limit {limit} s ended the reference inside its first pass: pixels without a \
+         sample read 0 (layer `samples` counts each pixel's); raise render.time_limit (--time-limit S)",
+        scene.source
+    ));
+    Ok(())
 }
 
 /// Estimated scatterings per path above which `render` warns that it may not finish without a

@@ -298,6 +298,20 @@ fn order_and_light_layers_sum_to_the_image() {
 }
 
 #[test]
+fn a_time_limit_ended_before_any_sample_is_an_error_naming_it() {
+    let mut s = scene(ball(1e4, 1.0, 0.9), Rgb::splat(2.0), Rgb::splat(0.3), 0.5, 30.0, (6, 4), 1);
+    s.source = "t.toml".into();
+    s.render.time_limit = Some(1e-9);
+    let e = crate::reference::render(&s, &NoProgress, &mut Timings::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("t.toml") && e.contains("render.time_limit") && e.contains("raise"),
+        "{e}"
+    );
+}
+
+#[test]
 fn time_limit_holds_inside_a_pass_on_a_dense_medium() {
     // The camera inside a ball of albedo 1 and optical radius 7e4: each path random-walks for
     // ~1e8 vertices before it escapes, so only a clock inside the path can stop it. Before that

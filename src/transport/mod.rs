@@ -58,6 +58,23 @@ impl TransportSettings {
                  at least render.transport_order + 1 integrates the source exactly)"
             ),
         )?;
+        // Fewer rings than L + 1 do not integrate the source's products Y_lm Y_l′m′, and the
+        // iteration can diverge (order 11 on 8 rings, order 7 on 2).
+        if self.n_mu < self.order + 1 {
+            return Err(Error::invalid(
+                file,
+                "render.transport_polar_ordinates",
+                format!(
+                    "{} is less than render.transport_order + 1 = {}: the ordinates do not integrate the \
+                     order-{} source and the iteration can diverge; set render.transport_polar_ordinates = {} \
+                     or lower render.transport_order",
+                    self.n_mu,
+                    self.order + 1,
+                    self.order,
+                    (self.order + 1).next_multiple_of(2)
+                ),
+            ));
+        }
         check(
             file,
             "render.transport_tolerance",

@@ -63,6 +63,10 @@ pub struct SlabSolution {
     pub layers: usize,
 }
 
+/// Iterations after which a relative change of M_0 of 1 or more stops the iteration as diverging
+/// (a converging one changes by less from its second iteration on).
+const DIVERGED_AFTER: usize = 5;
+
 /// Layer boundaries τ′_0 = 0 < … < τ′_n = `tau`: `surface` thick at both faces, growing by 1.15
 /// per layer inward, capped at `max`, mirrored about the middle.
 fn mesh(tau: f64, surface: f64, max: f64) -> Vec<f64> {
@@ -283,8 +287,18 @@ pub fn solve_slab(tau: f64, albedo: f64, g: f64, incidence: Incidence, s: &SlabS
             }
         }
         let scale = next.iter().map(|m| m[0].abs()).fold(1e-300, f64::max);
-        change = next.iter().zip(&moments).map(|(a, b)| (a[0] - b[0]).abs()).fold(0.0, f64::max) / scale;
+        change = if scale.is_finite() {
+            next.iter().zip(&moments).map(|(a, b)| (a[0] - b[0]).abs()).fold(0.0, f64::max) / scale
+        } else {
+            f64::INFINITY
+        };
         moments = next;
+        // Past the first iterations a change as large as the solution itself is divergence (a
+        // strongly back-scattering phase function's truncated series): stop, and let the caller
+        // see `change`.
+        if !(change < 1.0 || iterations < DIVERGED_AFTER) {
+            break;
+        }
     }
     // Hemispherical fluxes 2π Σ w μ I.
     let flux = |v: &[f64]| 2.0 * PI * v.iter().zip(&mu).zip(&wh).map(|((i, m), w)| i * m * w).sum::<f64>();
@@ -293,8 +307,8 @@ pub fn solve_slab(tau: f64, albedo: f64, g: f64, incidence: Incidence, s: &SlabS
         Incidence::Diffuse => (PI, 0.0),
     };
     SlabSolution {
-        r: (flux(&up0) / e_in).max(0.0),
-        t: (flux(&down_n) / e_in + direct).max(0.0),
+        r: flux(&up0) / e_in,
+        t: flux(&down_n) / e_in + direct,
         iterations,
         change,
         layers: n - 1,

@@ -508,11 +508,18 @@ impl Solver<'_> {
             return Ok(());
         };
         let tau = max_voxel_optical_depth(self.ctx, self.ctx.voxels, &self.optics.bands);
+        // χ′_1 is g itself for a back-scattering phase function (no δ-M there).
+        let g = self.optics.bands[0].chi.get(1).copied().unwrap_or(0.0);
+        let backwards = if g < -0.9 {
+            format!(" (a phase function this strongly backwards, g = {g:.4}, unsettles the iteration too: --method reference renders it)")
+        } else {
+            String::new()
+        };
         Err(Error::Numerical {
             stage: "transport solve".into(),
             message: format!(
                 "the diffusion acceleration diverged at iteration {at} (voxels up to {tau:.3e} optical depths \
-                 thick), and plain source iteration, which needs of the order of (optical depth)² sweeps, had not \
+                 thick){backwards}, and plain source iteration, which needs of the order of (optical depth)² sweeps, had not \
                  converged after render.transport_max_iterations = {} (last change of I0 {last:.1e}, error left \
                  estimated above render.transport_tolerance = {:.1e}); render this medium with --method full or \
                  reference, or give it voxels of at most a few optical depths (a smaller medium.voxel_size or \

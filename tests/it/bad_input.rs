@@ -138,7 +138,8 @@ fn bad_medium_values() {
         ("[medium]\nsigma_t = inf\n", &["s.toml", "medium.sigma_t"]),
         ("[medium]\nalbedo = [0.5, 1.2, 0.5]\n", &["s.toml", "medium.albedo", "[0, 1]"]),
         ("[medium]\nalbedo = [nan, 0.5, 0.5]\n", &["s.toml", "medium.albedo"]),
-        ("[medium]\ng = 1.0\n", &["s.toml", "medium.g", "|g| < 1"]),
+        ("[medium]\ng = 1.0\n", &["s.toml", "medium.g", "within ±0.999"]),
+        ("[medium]\ng = -0.9999\n", &["s.toml", "medium.g", "within ±0.999", "too bright"]),
         ("[medium]\ng = -1.5\n", &["s.toml", "medium.g"]),
         ("[medium]\ng = nan\n", &["s.toml", "medium.g"]),
         ("[medium]\ndownsample = 0\n", &["s.toml", "medium.downsample"]),
@@ -264,6 +265,15 @@ fn bad_lights_ground_camera_and_render_keys() {
         ("[render]\nsolver_max_iterations = 0\n", &["s.toml", "render.solver_max_iterations"]),
         ("[render]\ntransport_order = 0\n", &["s.toml", "render.transport_order", "1 to 15"]),
         ("[render]\ntransport_order = 16\n", &["s.toml", "render.transport_order", "1 to 15"]),
+        (
+            "[render]\ntransport_order = 9\n",
+            &[
+                "s.toml",
+                "render.transport_polar_ordinates",
+                "8 is less than render.transport_order + 1 = 10",
+                "= 10",
+            ],
+        ),
         (
             "[render]\ntransport_polar_ordinates = 7\n",
             &["s.toml", "render.transport_polar_ordinates", "even"],
@@ -1341,11 +1351,6 @@ fn settings_that_do_not_apply_are_named() {
             "relative change of I0 of 1.0e0",
             "raise render.transport_max_iterations",
         ],
-    );
-    warns(
-        &scene("[render]\ntransport_order = 9\ntransport_max_iterations = 2\n"),
-        &[],
-        &["render.transport_polar_ordinates = 8 is less than render.transport_order + 1 = 10"],
     );
     warns(
         &scene("[sky]\nscale = 2.0\naltitude_m = 10.0\n"),
