@@ -17,8 +17,9 @@
 //! the sun were at that height, so a grazing sun cannot stretch the grid without bound).
 
 use super::ground_peak::GroundPeak;
-use super::render::{BinMask, CubeOptions, CubeRenderer, LevelTables};
-use crate::lighting::Ground;
+use super::render::{BinMask, CubeOptions, CubeRenderer, LevelTables, PixelTable};
+use crate::lighting::bins::face_uv;
+use crate::lighting::{EnvMap, Ground, Sky};
 pub use crate::lit::ground::{GroundGrid, LitGround};
 use crate::lit::LitVolume;
 use crate::math::{Rgb, Vec3};
@@ -100,28 +101,108 @@ pub fn hemicube_weights(res: usize) -> Vec<f64> {
     out
 }
 
+/// A hemicube's pixels at one resolution: each one's exact cosine-weighted solid angle
+/// ([`hemicube_weights`]) and the sky's mean radiance over it, weighted likewise. The sky lies at
+/// infinity, so every ground point sees it through the same pixels: built once per ground.
+#[derive(Clone, Debug)]
+pub struct Hemicube {
+    /// Pixels per face edge.
+    pub res: usize,
+    /// ∫ max(ω·y, 0) dω per pixel (sr), index as [`super::CubeImage::index`].
+    pub weights: Vec<f64>,
+    /// The sky's cosine-weighted mean radiance per pixel (W·m⁻²·sr⁻¹), same index (unused below
+    /// the horizon, where the weight is 0).
+    pub sky: Vec<Rgb>,
+}
+
+impl Hemicube {
+    /// The hemicube at `res` under `sky`.
+    pub fn new(res: usize, sky: &Sky) -> Hemicube {
+        let weights = hemicube_weights(res);
+        let sky = match sky.map() {
+            Some(map) => sky_cosine_means(map, res, &weights),
+            // A constant sky is its value on every pixel's axis.
+            None => PixelTable::new(res).dirs.iter().map(|d| sky.radiance(*d)).collect(),
+        };
+        Hemicube { res, weights, sky }
+    }
+}
+
+/// Row bands of the map integrated in parallel (fixed, so the sums do not depend on the threads).
+const SKY_BANDS: usize = 16;
+
+/// The map's cosine-weighted mean radiance over each upper-hemisphere pixel of a `res` hemicube
+/// (`weights` its [`hemicube_weights`]): the pixel's share of the map's irradiance over its exact
+/// weight, so the pixels together hold the whole of it. A sample on the pixel's axis would miss a
+/// sun one map pixel wide, or count it over the whole pixel's solid angle.
+fn sky_cosine_means(map: &EnvMap, res: usize, weights: &[f64]) -> Vec<Rgb> {
+    sky_cosine_power(map, res)
+        .iter()
+        .zip(weights)
+        .map(|([r, g, b], w)| if *w > 0.0 { Rgb::new((r / w) as f32, (g / w) as f32, (b / w) as f32) } else { Rgb::ZERO })
+        .collect()
+}
+
+/// ∫ L cosθ dω (W/m² per band) of the map over each pixel of a `res` cube: the map's sub-pixels,
+/// each added to the pixel its centre falls in.
+fn sky_cosine_power(map: &EnvMap, res: usize) -> Vec<[f64; 3]> {
+    // Sub-pixels an eighth of the narrowest cube pixel (a third of its edge 2/res, in rad, at a
+    // face's corner) wide: a pixel's edge misplaces at most an eighth of its width.
+    let k = map.subpixels_within(2.0 / (3.0 * res as f64) / 8.0);
+    let upper_rows = map.height.div_ceil(2);
+    let bands = par::map_range(SKY_BANDS, &|band| {
+        let mut power = vec![[0f64; 3]; 6 * res * res];
+        let rows = band * upper_rows / SKY_BANDS..(band + 1) * upper_rows / SKY_BANDS;
+        map.for_each_subpixel(rows, k, &mut |dir, l, solid_angle| {
+            if dir.y > 0.0 {
+                let c = solid_angle * dir.y as f64;
+                for (s, x) in power[cube_pixel(res, dir)].iter_mut().zip([l.x, l.y, l.z]) {
+                    *s += x as f64 * c;
+                }
+            }
+        });
+        power
+    });
+    let mut power = vec![[0f64; 3]; 6 * res * res];
+    for band in &bands {
+        for (sum, p) in power.iter_mut().zip(band) {
+            for (s, x) in sum.iter_mut().zip(p) {
+                *s += x;
+            }
+        }
+    }
+    power
+}
+
+/// Index ([`super::CubeImage::index`]) of the `res` cube pixel that direction `dir` falls in.
+fn cube_pixel(res: usize, dir: Vec3) -> usize {
+    let (face, u, v) = face_uv(dir);
+    let at = |x: f32| (((x + 1.0) * 0.5 * res as f32) as usize).min(res - 1);
+    (face * res + at(v)) * res + at(u)
+}
+
 /// Irradiance (W/m²) on an upward-facing ground point `p` from the hemicube plus the sun and its
-/// peak. `weights` are [`hemicube_weights`] at the renderer's `opts.res`.
-pub fn hemicube_irradiance(renderer: &CubeRenderer<'_>, weights: &[f64], p: Vec3) -> Rgb {
+/// peak. `hemicube` is at the renderer's `opts.res`.
+pub fn hemicube_irradiance(renderer: &CubeRenderer<'_>, hemicube: &Hemicube, p: Vec3) -> Rgb {
     let lit = renderer.lit;
     let peak = GroundPeak::new(lit).map_or(Rgb::ZERO, |k| k.irradiance(lit, p));
-    hemicube_sky(renderer, weights, p) + sun_irradiance(lit, p) + peak
+    hemicube_sky(renderer, hemicube, p) + sun_irradiance(lit, p) + peak
 }
 
 /// The hemicube's part of [`hemicube_irradiance`]: Σ L·w over the upper hemisphere's pixels
 /// (cloud and sky, W/m²).
-fn hemicube_sky(renderer: &CubeRenderer<'_>, weights: &[f64], p: Vec3) -> Rgb {
+fn hemicube_sky(renderer: &CubeRenderer<'_>, hemicube: &Hemicube, p: Vec3) -> Rgb {
     let res = renderer.opts.res;
-    assert_eq!(weights.len(), 6 * res * res, "hemicube weights are for another resolution");
+    assert_eq!(hemicube.res, res, "the hemicube is for another resolution");
     let mut acc = [0f64; 3];
     for b in BinMask::upper_hemisphere().iter() {
         for (face, i, j) in renderer.pixels.bin_pixels(b) {
             let k = (face * res + j) * res + i;
-            let w = weights[k];
+            let w = hemicube.weights[k];
             if w <= 0.0 {
                 continue;
             }
-            let l = renderer.trace(p, renderer.pixels.dirs[k], renderer.pixels.cone[j * res + i]);
+            let l = renderer.trace_to_sky(p, renderer.pixels.dirs[k], renderer.pixels.cone[j * res + i], hemicube.sky[k]);
             acc[0] += l.x as f64 * w;
             acc[1] += l.y as f64 * w;
             acc[2] += l.z as f64 * w;
@@ -185,7 +266,7 @@ pub fn render_ground_with(renderer: &CubeRenderer<'_>, ground: &Ground, progress
         return out;
     };
     let n = renderer.opts.ground_samples;
-    let weights = hemicube_weights(renderer.opts.res);
+    let hemicube = Hemicube::new(renderer.opts.res, &lit.sky);
     let mut grid = GroundGrid {
         min,
         max,
@@ -207,11 +288,44 @@ pub fn render_ground_with(renderer: &CubeRenderer<'_>, ground: &Ground, progress
     let (sky, traced) = super::refine::refine(n, GROUND_COARSE, GROUND_TOLERANCE, &sun, &|a, b| {
         progress.advance(1);
         let p = at(a, b);
-        hemicube_sky(renderer, &weights, p) + peak.as_ref().map_or(Rgb::ZERO, |g| g.irradiance(lit, p))
+        hemicube_sky(renderer, &hemicube, p) + peak.as_ref().map_or(Rgb::ZERO, |g| g.irradiance(lit, p))
     });
     progress.advance((n * n - traced) as u64);
     progress.end();
     grid.irradiance = sky.iter().zip(&sun).map(|(d, s)| *d + *s).collect();
     out.grid = Some(grid);
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lighting::Sun;
+    use crate::medium::{Grid3, Medium};
+
+    /// An empty scene under a map sky of 0.5 W·m⁻²·sr⁻¹ with a sun one map pixel wide (10⁸ times
+    /// brighter; a map pixel is a fifteenth of a cube pixel there): the hemicube gives the map's
+    /// irradiance, the sun's power whatever cube pixel's axis it lies near.
+    #[test]
+    fn a_sun_one_map_pixel_wide_lights_the_hemicube_by_its_power() {
+        let (w, h) = (256, 128);
+        let mut pixels = vec![Rgb::splat(0.5); w * h];
+        pixels[30 * w + 20] = Rgb::splat(5e7);
+        let sky = Sky::from_envmap(EnvMap::new(w, h, pixels));
+        let sun = Sun {
+            dir: Vec3::Y,
+            irradiance: Rgb::ZERO,
+        };
+        let empty = Medium::new(Grid3::filled([2, 2, 2], 0.0), Vec3::ZERO, Vec3::ONE, 1.0, Rgb::ONE, 0.0);
+        let lit = LitVolume::new(empty, vec![Rgb::ZERO; 8], Grid3::filled([2, 2, 2], 1.0), sun, sky, None);
+        let res = CubeOptions::default().ground_res;
+        let renderer = CubeRenderer::new(&lit, &ground_options(&CubeOptions::default()));
+        let e = hemicube_irradiance(&renderer, &Hemicube::new(res, &lit.sky), Vec3::new(3.0, -1.0, 2.0));
+        // The sky's π·0.5 and the sun pixel's power: its radiance over the map pixel
+        // (dω = 2π² sinθ du dv) times cosθ, at its centre θ (exact to 10⁻³ for one pixel).
+        let theta = std::f64::consts::PI * 30.5 / h as f64;
+        let sun_power = 5e7 * 2.0 * std::f64::consts::PI.powi(2) * theta.sin() * theta.cos() / (w * h) as f64;
+        let exact = Rgb::splat((0.5 * std::f64::consts::PI + sun_power) as f32);
+        assert!(((e - exact).abs() / exact).max_element() < 2e-3, "{e} vs {exact}");
+    }
 }

@@ -418,6 +418,18 @@ impl<'a> CubeRenderer<'a> {
         self.finish(o, d, t_ground, l, tr)
     }
 
+    /// [`Self::trace`] with `sky` (W·m⁻²·sr⁻¹) behind the ray where it leaves the scene instead
+    /// of the sky on its axis: the caller's mean of the sky over the cone's pixel.
+    pub fn trace_to_sky(&self, o: Vec3, d: Vec3, cone: f32, sky: Rgb) -> Rgb {
+        let t_ground = self.lit.ground_hit(o, d);
+        let (mut l, tr) = self.march(o, d, cone, t_ground, 0.0..f32::INFINITY);
+        if tr > 0.0 {
+            let behind = if t_ground.is_some() { self.lit.background(o, d, t_ground) } else { sky };
+            l += behind * tr;
+        }
+        l
+    }
+
     /// Distance (m) at which a cone of width `cone` is one finest voxel wide: where
     /// [`Self::trace`] leaves the finest level for the next it is twice that.
     pub fn footprint_distance(&self, cone: f32) -> f32 {

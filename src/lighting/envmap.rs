@@ -220,6 +220,41 @@ impl EnvMap {
         self.pdf_pixel(i, j, dir.x.hypot(dir.z))
     }
 
+    /// Sub-pixels per pixel edge for [`EnvMap::for_each_subpixel`] no wider than `max_rad` (in θ,
+    /// and in φ on the equator): an even number, so that the bilinear radiance bends (at pixel
+    /// centres) only at sub-pixel edges and their midpoints integrate it to second order.
+    pub fn subpixels_within(&self, max_rad: f64) -> usize {
+        let pi = std::f64::consts::PI;
+        let pixel_rad = (pi / self.height as f64).max(2.0 * pi / self.width as f64);
+        ((pixel_rad / max_rad / 2.0).ceil() as usize).max(1) * 2
+    }
+
+    /// `visit(direction, radiance, solid angle in sr)` at the centre of every one of `k` × `k`
+    /// sub-pixels per pixel of the map's rows `rows`: bilinear radiance, exact solid angles (the
+    /// whole map's sum to 4π). Integrals over regions of the sky that hold few map pixels, or a
+    /// part of one, take the map's power where it is instead of point samples.
+    pub fn for_each_subpixel(&self, rows: std::ops::Range<usize>, k: usize, visit: &mut dyn FnMut(Vec3, Rgb, f64)) {
+        let (w, h) = (self.width * k, self.height * k);
+        let dphi = 2.0 * std::f64::consts::PI / w as f64;
+        let columns: Vec<(f32, f32, f32)> = (0..w)
+            .map(|a| {
+                let u = (a as f64 + 0.5) / w as f64;
+                let (sp, cp) = (2.0 * std::f64::consts::PI * u).sin_cos();
+                (u as f32, sp as f32, cp as f32)
+            })
+            .collect();
+        for b in rows.start * k..rows.end.min(self.height) * k {
+            let theta = |b: usize| std::f64::consts::PI * b as f64 / h as f64;
+            let solid_angle = dphi * (theta(b).cos() - theta(b + 1).cos());
+            let v = (b as f64 + 0.5) / h as f64;
+            let (st, ct) = (std::f64::consts::PI * v).sin_cos();
+            for &(u, sp, cp) in &columns {
+                let dir = Vec3::new(st as f32 * cp, ct as f32, st as f32 * sp);
+                visit(dir, self.lookup(u, v as f32), solid_angle);
+            }
+        }
+    }
+
     /// Irradiance (W/m² per band) on an upward-facing plane from the upper hemisphere of the map:
     /// midpoint rule in (cos θ, φ) on a 128 × 512 grid of bilinear lookups.
     pub fn irradiance_up(&self) -> Rgb {

@@ -3,7 +3,7 @@
 //! renderer against the brute-force march, border-voxel detection and the stage-1 sign convention.
 
 use crate::cube::border::{find_border_voxels, render_border_cubes};
-use crate::cube::ground::{hemicube_irradiance, hemicube_weights, render_ground, LitGround};
+use crate::cube::ground::{hemicube_irradiance, hemicube_weights, render_ground, Hemicube, LitGround};
 use crate::cube::render::{opposite_bin, render_cube_brute, BinMask, CubeOptions, CubeRenderer};
 use crate::cube::{clear_air, BorderKeep, BorderLight};
 use crate::diffusion::boundary::hemisphere_radiance;
@@ -343,10 +343,10 @@ fn hemicube_irradiance_without_cloud_is_sky_plus_sun() {
         let total: f64 = hemicube_weights(res).iter().sum();
         assert!((total - PI).abs() < 1e-9, "{total}");
     }
-    let w = hemicube_weights(CubeOptions::default().res);
     let l = Rgb::new(0.3, 0.45, 0.8);
     let s = sun(Vec3::new(0.3, 0.8, 0.5), 3.0);
     let v = empty_lit(s.clone(), l, None);
+    let w = Hemicube::new(CubeOptions::default().res, &v.sky);
     let r = CubeRenderer::new(&v, &CubeOptions::default());
     let e = hemicube_irradiance(&r, &w, Vec3::new(10.0, -3.0, 2.0));
     let exact = l * std::f32::consts::PI + s.irradiance * s.dir.y;
@@ -378,7 +378,7 @@ fn hemicube_under_a_furnace_cloud_reads_pi_l() {
             ..opts.clone()
         },
     );
-    let w = hemicube_weights(opts.ground_res);
+    let w = Hemicube::new(opts.ground_res, &v.sky);
     for p in [Vec3::new(0.0, 0.0, 0.0), Vec3::new(3.0, 0.0, -2.0), Vec3::new(30.0, 0.0, 0.0)] {
         let e = hemicube_irradiance(&r, &w, p);
         assert!(rel(e, l * std::f32::consts::PI) < 2e-3, "{p}: {e}");
@@ -416,7 +416,7 @@ fn ground_under_an_opaque_slab_is_shadowed() {
         ..Default::default()
     };
     let r = CubeRenderer::new(&v, &opts);
-    let e = hemicube_irradiance(&r, &hemicube_weights(opts.res), Vec3::new(0.0, 1e-3, 0.0));
+    let e = hemicube_irradiance(&r, &Hemicube::new(opts.res, &v.sky), Vec3::new(0.0, 1e-3, 0.0));
     assert_eq!(opts.ground_res, 16, "the tolerance below is for res-16 hemicubes");
     // Only the cut-off (1e-3 of the sky behind) separates it from the exact value.
     assert!(rel(e, exact) < 2e-3, "{e} vs {exact}");
