@@ -113,7 +113,12 @@ pub fn run(a: CompareArgs) -> Result<()> {
         }
         mask
     };
-    let described = if mask.is_some() { "transmittance < 0.99" } else { "all" };
+    // A --mask image without a `transmittance` layer masks by its own luminance.
+    let described = match (&mask, &mask_img) {
+        (None, _) => "all",
+        (Some(_), Some(m)) if m.layer(crate::reference::TRANSMITTANCE_LAYER).is_none() => "mask luminance < 0.99",
+        (Some(_), _) => "transmittance < 0.99",
+    };
     let mask = if a.conditions.is_empty() {
         mask
     } else {

@@ -63,8 +63,8 @@ pub struct Metrics {
     pub luminance_bias: Option<f64>,
     /// Number of pixels compared.
     pub pixels: usize,
-    /// Where the mask came from: `transmittance < 0.99` or `all` (the CLI appends its `--where`
-    /// conditions, joined by ` and `).
+    /// Where the mask came from: `transmittance < 0.99` or `all` (the CLI names a `--mask` image's
+    /// luminance, `mask luminance < 0.99`, and appends its `--where` conditions, joined by ` and `).
     pub mask: String,
     /// Mean relative luminance error of 4×4 block means (unitless); `None` when no block counts
     /// or every counted block is black in the reference.

@@ -50,6 +50,10 @@ fn render_compare_and_export() {
         "{text}"
     );
     assert!(d.join("diff.png").exists());
+    // A mask image without a `transmittance` layer masks by its luminance, and says so.
+    let out = cloudgi(d, &["compare", "single.exr", "ref.exr", "--mask", "single.exr"]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["mask"], "mask luminance < 0.99");
     // --budget: by region, with the reference's order shares; `single` has no AOVs, so only the total.
     let out = cloudgi(d, &["compare", "single.exr", "ref.exr", "--budget"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
