@@ -255,23 +255,24 @@ impl EnvMap {
         }
     }
 
-    /// Irradiance (W/m² per band) on an upward-facing plane from the upper hemisphere of the map:
-    /// midpoint rule in (cos θ, φ) on a 128 × 512 grid of bilinear lookups.
+    /// Irradiance (W/m² per band) on an upward-facing plane from the upper hemisphere of the map,
+    /// each pixel's radiance over its whole cell: Σ L_ij ∫ cos θ dω, where a cell of row j (θ from
+    /// πj/h to π(j + 1)/h, cut at the horizon) has ∫ cos θ dω = (π/w)(sin²θ₁ − sin²θ₀). Exact
+    /// for a sun one pixel wide, which samples on a fixed grid would miss or count too often.
     pub fn irradiance_up(&self) -> Rgb {
-        let (nt, np) = (128usize, 512usize);
+        let (w, h) = (self.width, self.height);
+        let horizon = std::f64::consts::FRAC_PI_2;
+        let theta = |j: usize| (std::f64::consts::PI * j as f64 / h as f64).min(horizon);
         let mut e = [0f64; 3];
-        for a in 0..nt {
-            let mu = (a as f32 + 0.5) / nt as f32;
-            let v = mu.acos() / PI;
-            for b in 0..np {
-                let l = self.lookup((b as f32 + 0.5) / np as f32, v);
+        for j in (0..h).take_while(|&j| theta(j) < horizon) {
+            let weight = std::f64::consts::PI / w as f64 * (theta(j + 1).sin().powi(2) - theta(j).sin().powi(2));
+            for p in &self.pixels[j * w..(j + 1) * w] {
                 for c in 0..3 {
-                    e[c] += (l[c] * mu) as f64;
+                    e[c] += p[c] as f64 * weight;
                 }
             }
         }
-        let k = 2.0 * std::f64::consts::PI / (nt * np) as f64;
-        Rgb::new((e[0] * k) as f32, (e[1] * k) as f32, (e[2] * k) as f32)
+        Rgb::new(e[0] as f32, e[1] as f32, e[2] as f32)
     }
 }
 
@@ -303,6 +304,22 @@ mod tests {
         assert!((direction(0.0, 0.5) - Vec3::X).length() < 1e-6);
         assert!((direction(0.25, 0.5) - Vec3::Z).length() < 1e-6);
         assert!((direction(0.5, 0.0) - Vec3::Y).length() < 1e-6);
+    }
+
+    #[test]
+    fn irradiance_up_holds_a_uniform_sky_and_a_sun_one_pixel_wide() {
+        // Odd height: the middle row straddles the horizon.
+        let (w, h) = (64, 33);
+        assert!(((EnvMap::new(w, h, vec![Rgb::ONE; w * h]).irradiance_up().x as f64 - PI as f64).abs()) < 1e-5);
+        // A bright pixel between the axis samples of a fixed grid: its power, the radiance times its
+        // cell's ∫ cos θ dω.
+        let (w, h) = (2048, 1024);
+        let mut px = vec![Rgb::ZERO; w * h];
+        px[300 * w + 700] = Rgb::splat(1e6);
+        let (t0, t1) = (std::f64::consts::PI * 300.0 / h as f64, std::f64::consts::PI * 301.0 / h as f64);
+        let exact = 1e6 * std::f64::consts::PI / w as f64 * (t1.sin().powi(2) - t0.sin().powi(2));
+        let e = EnvMap::new(w, h, px).irradiance_up().x as f64;
+        assert!((e - exact).abs() < 1e-5 * exact, "{e} vs {exact}");
     }
 
     #[test]
