@@ -21,6 +21,7 @@ mod frames;
 mod grid_scene;
 mod info;
 mod low_albedo;
+mod map_sun;
 mod memory;
 mod output;
 mod progress;

@@ -116,6 +116,7 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
     out.extend(super::thick_voxels::warning(scene));
     out.extend(super::low_albedo::warning(scene));
     out.extend(super::back_scattering::warning(scene));
+    out.extend(super::map_sun::warning(scene));
     out.extend(frame_warning(scene));
     out
 }

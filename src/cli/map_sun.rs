@@ -1,0 +1,92 @@
+//! A warning when an environment map holds a sun of its own (a compact source carrying much of
+//! its light): `transport` takes the sky's light along its ordinates, `full` and `diffusion`
+//! along their bins' samples, directions degrees apart, so a source a few map pixels wide is
+//! missed or smeared; `reference` samples the map exactly. The warning gives the `[sun]` that
+//! would carry it exactly.
+
+use crate::lighting::SkyModel;
+use crate::scene::{Method, Scene};
+
+/// Share of the map's light above which a compact source is warned about.
+const SHARE: f64 = 0.2;
+
+/// Largest solid angle (sr) of a compact source: a cap about 3° in radius.
+const SOLID_ANGLE: f64 = 0.01;
+
+/// What each method measured under a map with a sun (docs/sky.md, "A sun in the map").
+fn measured(method: Method) -> Option<&'static str> {
+    match method {
+        Method::Transport => Some("transport −52 % on the cloud"),
+        Method::Full => Some("full 96 % block error on the cloud"),
+        Method::Diffusion => Some("diffusion 27 % block error on the cloud"),
+        Method::Single | Method::Reference => None,
+    }
+}
+
+/// The warning for `scene`, if its sky is an environment map whose compact source carries more
+/// than [`SHARE`] of its light and its method takes the map at fixed directions.
+pub fn warning(scene: &Scene) -> Option<String> {
+    let measured = measured(scene.render.method)?;
+    if scene.desc.sky.model != SkyModel::Envmap {
+        return None;
+    }
+    let c = scene.sky.map()?.compact_source()?;
+    if c.share < SHARE || c.solid_angle > SOLID_ANGLE {
+        return None;
+    }
+    let (d, e) = (c.direction, c.irradiance * scene.desc.sky.scale);
+    Some(format!(
+        "{}: the sky map holds a sun ({:.0} % of its light in {:.1e} sr), which method {} takes at directions degrees \
+         apart, missing or smearing it (a 3×3-pixel sun in a 512×256 map: {measured}; docs/sky.md, \"A sun in the \
+         map\"); paint it out of the map and give it as the scene's [sun]: direction = [{:.4}, {:.4}, {:.4}], irradiance = \
+         [{:.4e}, {:.4e}, {:.4e}] (W/m²), or render with --method reference",
+        scene.source,
+        100.0 * c.share,
+        c.solid_angle,
+        scene.render.method.name(),
+        d.x,
+        d.y,
+        d.z,
+        e.x,
+        e.y,
+        e.z
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::Image;
+    use crate::math::Rgb;
+    use crate::scene::SceneDesc;
+
+    #[test]
+    fn a_map_with_a_sun_warns_the_methods_that_sample_it_at_fixed_directions() {
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (128, 64);
+        let mut img = Image::new(w, h);
+        img.pixels = vec![Rgb::splat(0.5); (w * h) as usize];
+        let uniform = dir.path().join("uniform.exr");
+        img.write_exr(&uniform).unwrap();
+        img.pixels[20 * w as usize + 30] = Rgb::splat(1e6);
+        let sunny = dir.path().join("sun.exr");
+        img.write_exr(&sunny).unwrap();
+        let warning_for = |map: &std::path::Path, method: Method| {
+            let mut d = SceneDesc::default();
+            d.medium.resolution = [20, 16, 12];
+            d.sky.model = SkyModel::Envmap;
+            d.sky.path = Some(map.to_string_lossy().into_owned());
+            d.render.method = method;
+            warning(&Scene::build(d, "s.toml", dir.path()).unwrap())
+        };
+        for m in [Method::Transport, Method::Full, Method::Diffusion] {
+            let w = warning_for(&sunny, m).expect("a sun in the map");
+            assert!(
+                w.contains("s.toml") && w.contains("[sun]: direction") && w.contains("--method reference"),
+                "{w}"
+            );
+            assert_eq!(warning_for(&uniform, m), None);
+        }
+        assert_eq!(warning_for(&sunny, Method::Reference), None);
+    }
+}
