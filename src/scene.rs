@@ -341,6 +341,14 @@ fn check_array_lengths(table: &toml::Table, prefix: &str, file: &str) -> Result<
         let name = format!("{prefix}{key}");
         match value {
             toml::Value::Table(t) => check_array_lengths(t, &format!("{name}."), file)?,
+            // An array of tables (`[[animation.key]]`) holds any number of them.
+            toml::Value::Array(a) if a.iter().all(toml::Value::is_table) => {
+                for (i, item) in a.iter().enumerate() {
+                    if let toml::Value::Table(t) = item {
+                        check_array_lengths(t, &format!("{name}[{i}]."), file)?;
+                    }
+                }
+            }
             toml::Value::Array(a) if a.len() > 3 => {
                 return Err(Error::invalid(
                     file,

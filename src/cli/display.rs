@@ -47,7 +47,7 @@ impl Display {
                 created: Mutex::new(None),
             }),
             Err(e) => {
-                eprintln!(
+                note!(
                     "warning: --display-server {addr}: cannot reach a tev viewer ({e}); rendering without the live view \
                      (start one with `tev --hostname {addr}`)"
                 );
@@ -89,7 +89,7 @@ impl Display {
             });
         }
         if let Err(e) = sent {
-            eprintln!("warning: --display-server: the tev viewer went away ({e}); rendering goes on without it");
+            note!("warning: --display-server: the tev viewer went away ({e}); rendering goes on without it");
             *client = None;
         }
     }

@@ -163,7 +163,7 @@ pub fn render(a: &RenderArgs, file: &SceneFile, quiet: bool) -> Result<()> {
         } else {
             String::new()
         };
-        eprintln!("{task}frames {frames} of {all}: {} to render{skip}", todo.len());
+        note!("{task}frames {frames} of {all}: {} to render{skip}", todo.len());
     }
     let start = Instant::now();
     let mut warm = Warm::new(!a.frames.cold);
@@ -174,12 +174,14 @@ pub fn render(a: &RenderArgs, file: &SceneFile, quiet: bool) -> Result<()> {
         memory::check_solver(&scene, kept).map_err(|e| at_frame(e, frame.number))?;
         if i == 0 {
             for w in warnings::warnings(file, &a.flags(), &scene) {
-                eprintln!("warning: {w}");
+                note!("warning: {w}");
             }
         }
         let was_warm = warm.is_warm();
         let out = render_warm(&scene, &progress::Bars::new(quiet), &mut warm)?;
-        write_exr_and_png(&out.image, &frame.exr, &frame.png, scene.render.exposure)?;
+        // Each frame's preview as a still's: --exposure, render.exposure, or its own automatic one.
+        let (stops, _) = super::tonemap::stops(a.exposure, Some(file), &out.image);
+        write_exr_and_png(&out.image, &frame.exr, &frame.png, stops)?;
         if !quiet {
             let done = i + 1;
             let elapsed = start.elapsed().as_secs_f64();
@@ -192,7 +194,7 @@ pub fn render(a: &RenderArgs, file: &SceneFile, quiet: bool) -> Result<()> {
                 Some(n) => format!(" · {n} {kind}{}", if was_warm { " (warm)" } else { " (cold)" }),
                 None => String::new(),
             };
-            eprintln!(
+            note!(
                 "frame {} ({done} of {}): {} {}×{} → {} + {} · {:.2} s{solve} · sequence {elapsed:.1} s, eta {eta:.0} s",
                 frame.number,
                 todo.len(),

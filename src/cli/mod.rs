@@ -336,6 +336,14 @@ fn render(a: RenderArgs, quiet: bool) -> Result<()> {
     let viewer = a.display_server.as_deref().map(display::parse).transpose()?;
     let file = SceneFile::read(a.scene.as_deref())?;
     if frames::is_sequence(&a, &file) {
+        if viewer.is_some() {
+            return Err(Error::invalid(
+                "command line",
+                "--display-server",
+                "shows a still render live, and this is a sequence: leave it out (open the frames' EXRs in tev \
+                 afterwards) or render one frame as a still",
+            ));
+        }
         return frames::render(&a, &file, quiet);
     }
     let mut desc = file.desc.clone();

@@ -87,12 +87,12 @@ pub fn run(a: TonemapArgs, quiet: bool) -> Result<()> {
     super::output::check_files(&[&a.output], "--output", &[(a.input.clone(), "IN".to_string())])?;
     let img = Image::read_exr(&a.input)?;
     if let Some(w) = invalid_pixels_warning(&img, &a.input) {
-        eprintln!("{w}");
+        note!("{w}");
     }
     let (s, why) = stops(a.exposure, None, &img);
     img.write_png(&a.output, s)?;
     if !quiet {
-        eprintln!("{} → {} (exposure {s:+.2} stops, {why})", a.input.display(), a.output.display());
+        note!("{} → {} (exposure {s:+.2} stops, {why})", a.input.display(), a.output.display());
     }
     Ok(())
 }

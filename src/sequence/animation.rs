@@ -211,6 +211,15 @@ mod tests {
     }
 
     #[test]
+    fn any_number_of_keys_is_read() {
+        let keys: String = (1..=5).map(|f| format!("[[animation.key]]\nframe = {f}\nsun.elevation_deg = {}.0\nsun.azimuth_deg = 90.0\n", 10 * f)).collect();
+        let a = animation(&format!("[animation]\nframes = \"1-5\"\n{keys}")).unwrap();
+        let mut d = SceneDesc::default();
+        a.apply(&mut d, 4);
+        assert_eq!(d.sun.elevation_deg, Some(40.0));
+    }
+
+    #[test]
     fn bad_keys_name_the_field() {
         for (text, field) in [
             (

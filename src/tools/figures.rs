@@ -240,6 +240,17 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
         let mut timings = Timings::default();
         let t0 = Instant::now();
         let (img, stats) = crate::reference::render_with_stats(&scene, progress, &mut timings);
+        if stats.spp == 0 && !progress.cancelled() {
+            return Err(Error::invalid(
+                "command line",
+                "--reference-time",
+                format!(
+                    "{} s ended the reference before any pixel completed a sample, so there is nothing to \
+                     measure against; raise --reference-time (0: no limit)",
+                    opts.reference_time.unwrap_or(0.0)
+                ),
+            ));
+        }
         let seconds = t0.elapsed().as_secs_f64();
         progress.log(&format!("{id}: {} spp in {seconds:.1} s", stats.spp));
         write_pair(dir, id, &img, scene.render.exposure)?;

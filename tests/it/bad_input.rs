@@ -1002,6 +1002,10 @@ fn bad_frames_patterns_keys_and_tasks() {
             &["--task-count", "at least 1"],
         ),
         (&["--frames", "1-2", "--task-index", "0"], &["--task-count"]),
+        (
+            &["--frames", "1-2", "--display-server", "127.0.0.1:14158"],
+            &["--display-server", "sequence"],
+        ),
     ];
     for (extra, expect) in rows {
         fails(&frames, &render(extra), expect);

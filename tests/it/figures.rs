@@ -118,6 +118,24 @@ fn bad_arguments_are_reported() {
     let out = cloudgi(dir.path(), &["figures", "-o", "x", "--reference-spp", "0"]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--reference-spp"));
+    // A time limit that ends the reference before its first sample leaves nothing to measure.
+    let out = cloudgi(
+        dir.path(),
+        &[
+            "figures",
+            "-o",
+            "x",
+            "--width",
+            "8",
+            "--height",
+            "6",
+            "--reference-time",
+            "1e-9",
+            "-q",
+        ],
+    );
+    assert!(!out.status.success() && !dir.path().join("x").exists());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("raise --reference-time"));
 }
 
 #[test]
