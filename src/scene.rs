@@ -305,7 +305,7 @@ impl SceneDesc {
 pub use crate::limits::{MAX_COORDINATE, MAX_EXPOSURE, MAX_LIGHT, MAX_SIGMA_T};
 
 /// Refuse finite magnitudes no f32 render can hold (the owners refuse NaN, inf and negatives).
-fn check_magnitudes(d: &SceneDesc, f: &str) -> Result<()> {
+pub(crate) fn check_magnitudes(d: &SceneDesc, f: &str) -> Result<()> {
     let light = format!("at most {MAX_LIGHT:e}; the sun gives 1361 W/m² (default 3), larger values overflow f32 in the methods");
     let place = format!("each coordinate within ±{MAX_COORDINATE:e} m; move the scene near the origin");
     let rows: [(&str, Vec<f32>, f32, &str); 7] = [

@@ -5,7 +5,7 @@
 //! [`crate::sequence`].
 
 use super::scene_file::SceneFile;
-use super::{memory, output, png_beside, progress, warnings, write_exr_and_png, RenderArgs};
+use super::{memory, output, progress, warnings, write_exr_and_png, RenderArgs};
 use crate::camera::Camera;
 use crate::error::{Error, Result};
 use crate::render::warm::{render_warm, Warm};
@@ -138,8 +138,9 @@ pub fn render(a: &RenderArgs, file: &SceneFile, quiet: bool) -> Result<()> {
     let mut todo = Vec::new();
     let mut skipped = 0;
     for &n in frames.frames() {
-        let exr = out_pattern.as_ref().map_or_else(|| a.output.clone(), |p| PathBuf::from(p.name(n)));
-        let png = png_beside(&exr);
+        let name = out_pattern.as_ref().map_or_else(|| a.output.clone(), |p| PathBuf::from(p.name(n)));
+        // `-o out.####.png` names the PNG: the EXR goes beside it, as for a still.
+        let (exr, png) = super::tonemap::outputs(&name)?;
         if a.frames.skip_existing && exr.is_file() && png.is_file() {
             skipped += 1;
             continue;
@@ -147,6 +148,8 @@ pub fn render(a: &RenderArgs, file: &SceneFile, quiet: bool) -> Result<()> {
         let mut desc = seq.desc_at(n);
         a.apply(&mut desc);
         output::check_files(&[&exr, &png], "--output", &file.inputs(&desc))?;
+        // Each frame's keyed values within the scene's limits before any frame renders.
+        crate::scene::check_magnitudes(&desc, &file.source).map_err(|e| at_frame(e, n))?;
         memory::check_image(&desc, &file.source).map_err(|e| at_frame(e, n))?;
         Camera::from_desc(&desc.camera, &file.source).map_err(|e| at_frame(e, n))?;
         todo.push(Frame { number: n, desc, exr, png });

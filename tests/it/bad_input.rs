@@ -1010,6 +1010,10 @@ fn bad_frames_patterns_keys_and_tasks() {
     for (extra, expect) in rows {
         fails(&frames, &render(extra), expect);
     }
+    // A keyed value past the scene's limits on a later frame is refused before frame 1 renders.
+    let late = "[medium]\nresolution = [8, 6, 4]\nvoxel_size = 100.0\n[animation]\nframes = \"1-3\"\n\
+        [[animation.key]]\nframe = 1\nmedium.sigma_t = 0.05\n[[animation.key]]\nframe = 3\nmedium.sigma_t = 1e12\n";
+    fails(&[("s.toml", late.into())], &render(&[]), &["s.toml", "medium.sigma_t", "frame 2"]);
     // Several frames need a frame pattern in --output; a bad one is named.
     fails(
         &frames,

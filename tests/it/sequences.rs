@@ -86,6 +86,14 @@ fn chunks_write_the_bits_of_the_whole_range_and_skip_existing_resumes() {
     );
     assert!(err.contains("2 to render, 6 skipped"), "{err}");
     same_frames(whole.path(), chunks.path(), 1..=8);
+    // A PNG pattern names the previews: each frame's EXR goes beside its PNG, as for a still.
+    let png = tempfile::tempdir().unwrap();
+    std::fs::write(png.path().join("s.toml"), SUNSET).unwrap();
+    cloudgi(
+        png.path(),
+        &["render", "s.toml", "-o", "sun.####.png", "--cold", "--frames", "7-8", "-q"],
+    );
+    same_frames(whole.path(), png.path(), 7..=8);
 }
 
 /// `cloudgi compare`'s block mean relative error of `test` against `reference`.
