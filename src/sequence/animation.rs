@@ -156,6 +156,16 @@ impl Animation {
                 "sun.from_atmosphere = true derives the irradiance from the sun's elevation; key sun.elevation_deg instead, or set from_atmosphere = false",
             ));
         }
+        // camera.fit places the camera on every frame and would replace a keyed one.
+        let camera = SCALARS[2].keyed(&keys) || VECTORS[1..].iter().any(|c| c.keyed(&keys));
+        if camera && scene.camera.fit {
+            return Err(Error::invalid(
+                file,
+                "animation.key.camera",
+                "camera.fit frames the cloud on every frame, which would replace the keyed camera: give the scene a \
+                 [camera] table (camera.fit = false) to key it, or leave the camera unkeyed",
+            ));
+        }
         Ok(Animation { keys })
     }
 
@@ -238,6 +248,11 @@ mod tests {
             (
                 "[sun]\nfrom_atmosphere = true\n[[animation.key]]\nframe = 1\nsun.irradiance = [1.0, 1.0, 1.0]\n",
                 "animation.key.sun.irradiance",
+            ),
+            // No [camera] table: camera.fit would replace the keyed camera.
+            (
+                "[[animation.key]]\nframe = 1\ncamera.position = [0.0, 350.0, 600.0]\n",
+                "animation.key.camera",
             ),
         ] {
             let e = animation(text).unwrap_err().to_string();
