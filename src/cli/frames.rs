@@ -118,6 +118,18 @@ fn chunk(f: &FrameArgs, all: &FrameList) -> Result<FrameList> {
     Ok(all.chunk(i, n))
 }
 
+/// The first bytes of an OpenEXR file and of a PNG.
+const EXR_MAGIC: &[u8] = &[0x76, 0x2f, 0x31, 0x01];
+const PNG_MAGIC: &[u8] = &[0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a];
+
+/// Whether `path` is a file that begins with `magic`: `--skip-existing` takes an empty or foreign
+/// file in a frame's place as not done (the frames themselves are renamed into place whole).
+fn starts_with(path: &std::path::Path, magic: &[u8]) -> bool {
+    use std::io::Read;
+    let mut head = vec![0u8; magic.len()];
+    std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut head)).is_ok() && head == magic
+}
+
 /// Render the frames `a` asks for.
 pub fn render(a: &RenderArgs, file: &SceneFile, quiet: bool) -> Result<()> {
     let seq = Sequence::new(&file.desc, &file.source)?;
@@ -141,7 +153,7 @@ pub fn render(a: &RenderArgs, file: &SceneFile, quiet: bool) -> Result<()> {
         let name = out_pattern.as_ref().map_or_else(|| a.output.clone(), |p| PathBuf::from(p.name(n)));
         // `-o out.####.png` names the PNG: the EXR goes beside it, as for a still.
         let (exr, png) = super::tonemap::outputs(&name)?;
-        if a.frames.skip_existing && exr.is_file() && png.is_file() {
+        if a.frames.skip_existing && starts_with(&exr, EXR_MAGIC) && starts_with(&png, PNG_MAGIC) {
             skipped += 1;
             continue;
         }

@@ -80,11 +80,13 @@ fn chunks_write_the_bits_of_the_whole_range_and_skip_existing_resumes() {
     for f in ["sun.0003.exr", "sun.0006.png"] {
         std::fs::remove_file(chunks.path().join(f)).unwrap();
     }
+    // An empty file in a frame's place is not a frame.
+    std::fs::write(chunks.path().join("sun.0004.exr"), b"").unwrap();
     let err = cloudgi(
         chunks.path(),
         &["render", "s.toml", "-o", "sun.####.exr", "--cold", "--skip-existing"],
     );
-    assert!(err.contains("2 to render, 6 skipped"), "{err}");
+    assert!(err.contains("3 to render, 5 skipped"), "{err}");
     same_frames(whole.path(), chunks.path(), 1..=8);
     // A PNG pattern names the previews: each frame's EXR goes beside its PNG, as for a still.
     let png = tempfile::tempdir().unwrap();
