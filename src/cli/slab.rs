@@ -101,8 +101,8 @@ pub fn run(a: SlabArgs) -> Result<()> {
                 return Err(Error::Numerical {
                     stage: "slab --method transport".into(),
                     message: format!(
-                        "the iteration did not converge (R {:.3e}, T {:.3e}, relative change {:.1e} after {} \
-                         iterations, tolerance {:.0e}){cause}; use --method reference, or diffusion",
+                        "the iteration gave no physical result (R {:.3e}, T {:.3e}, relative change {:.1e} after \
+                         {} iterations, tolerance {:.0e}){cause}; use --method reference, or diffusion",
                         x.r, x.t, x.change, x.iterations, s.tolerance
                     ),
                 });

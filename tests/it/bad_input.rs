@@ -1183,6 +1183,25 @@ fn bad_arguments_of_the_other_commands() {
         &["thickness"],
     );
     fails(&[], &slab(&["--samples", "1"]), &["--samples"]);
+    // A phase function this strongly backwards makes the slab's transport iteration diverge: an
+    // error, not a number.
+    fails(
+        &[],
+        &[
+            "slab",
+            "--thickness",
+            "10",
+            "--albedo",
+            "1",
+            "--g",
+            "-0.98",
+            "--incidence",
+            "collimated",
+            "--method",
+            "transport",
+        ],
+        &["slab --method transport", "no physical result", "--g -0.98", "--method reference"],
+    );
     // The transport mesh's layer count grows with τ: 1e30 would never end.
     fails(
         &[],
