@@ -719,14 +719,11 @@ fn solve_from(h: &Hierarchy, rhs: Rhs, x0: Option<&Field16>, tol: f64, max: usiz
     (x, st)
 }
 
-/// The power of two at or just below the largest |v| (1 for all zeros): dividing by it is exact.
+/// The power of two near the largest |v| ([`crate::half::power_of_two_scale`]; 1 for all zeros):
+/// dividing by it is exact.
 fn power_of_two_near_max(values: &[f32]) -> f64 {
     let max = values.iter().fold(0f32, |m, v| m.max(v.abs()));
-    if max > 0.0 && max.is_finite() {
-        2f64.powi(f64::from(max).log2().floor() as i32)
-    } else {
-        1.0
-    }
+    f64::from(crate::half::power_of_two_scale(f64::from(max)))
 }
 
 /// An error unless band `c`'s solve reached the tolerance.

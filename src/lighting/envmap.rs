@@ -235,7 +235,6 @@ impl EnvMap {
     /// part of one, take the map's power where it is instead of point samples.
     pub fn for_each_subpixel(&self, rows: std::ops::Range<usize>, k: usize, visit: &mut dyn FnMut(Vec3, Rgb, f64)) {
         let (w, h) = (self.width * k, self.height * k);
-        let dphi = 2.0 * std::f64::consts::PI / w as f64;
         let columns: Vec<(f32, f32, f32)> = (0..w)
             .map(|a| {
                 let u = (a as f64 + 0.5) / w as f64;
@@ -244,8 +243,7 @@ impl EnvMap {
             })
             .collect();
         for b in rows.start * k..rows.end.min(self.height) * k {
-            let theta = |b: usize| std::f64::consts::PI * b as f64 / h as f64;
-            let solid_angle = dphi * (theta(b).cos() - theta(b + 1).cos());
+            let solid_angle = row_solid_angle(b, h, w);
             let v = (b as f64 + 0.5) / h as f64;
             let (st, ct) = (std::f64::consts::PI * v).sin_cos();
             for &(u, sp, cp) in &columns {
@@ -276,6 +274,13 @@ impl EnvMap {
     }
 }
 
+/// The solid angle (sr) of one cell of row `j` of an equirectangular grid of `rows` × `columns`
+/// cells: (2π/columns)(cos θ_j − cos θ_{j+1}), θ_j = πj/rows (the whole grid's sum to 4π).
+fn row_solid_angle(j: usize, rows: usize, columns: usize) -> f64 {
+    let theta = |j: usize| std::f64::consts::PI * j as f64 / rows as f64;
+    2.0 * std::f64::consts::PI / columns as f64 * (theta(j).cos() - theta(j + 1).cos())
+}
+
 /// A compact bright source in a map (a sun painted into an HDRI): the pixels brighter than
 /// [`BRIGHT_OVER_MEAN`] times the map's mean radiance.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -298,11 +303,7 @@ impl EnvMap {
     /// sphere): their share of its light and their solid angle; `None` for a black map.
     pub fn compact_source(&self) -> Option<CompactSource> {
         let (w, h) = (self.width, self.height);
-        let cell = |j: usize| {
-            let theta = |j: usize| std::f64::consts::PI * j as f64 / h as f64;
-            2.0 * std::f64::consts::PI / w as f64 * (theta(j).cos() - theta(j + 1).cos())
-        };
-        let rows = || (0..h).map(|j| (cell(j), &self.pixels[j * w..(j + 1) * w]));
+        let rows = || (0..h).map(|j| (row_solid_angle(j, h, w), &self.pixels[j * w..(j + 1) * w]));
         let total: f64 = rows().map(|(dw, row)| dw * row.iter().map(|p| luminance(*p) as f64).sum::<f64>()).sum();
         if total.is_nan() || total <= 0.0 {
             return None;
