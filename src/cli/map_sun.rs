@@ -1,17 +1,15 @@
 //! A warning when an environment map holds a sun of its own (a compact source carrying much of
 //! its light): `transport` takes the sky's light along its ordinates, `full` and `diffusion`
 //! along their bins' samples, directions degrees apart, so a source a few map pixels wide is
-//! missed or smeared; `reference` samples the map exactly. The warning gives the `[sun]` that
-//! would carry it exactly.
+//! missed or smeared; `reference` samples the map exactly. The warning points to
+//! `sky.extract_sun`, which takes it out of the map as the scene's sun, carried exactly.
 
+use crate::lighting::map_sun::MAX_SUN_SOLID_ANGLE;
 use crate::lighting::SkyModel;
 use crate::scene::{Method, Scene};
 
 /// Share of the map's light above which a compact source is warned about.
 const SHARE: f64 = 0.2;
-
-/// Largest solid angle (sr) of a compact source: a cap about 3° in radius.
-const SOLID_ANGLE: f64 = 0.01;
 
 /// What each method measured under a map with a sun (docs/sky.md, "A sun in the map").
 fn measured(method: Method) -> Option<&'static str> {
@@ -31,25 +29,24 @@ pub fn warning(scene: &Scene) -> Option<String> {
         return None;
     }
     let c = scene.sky.map()?.compact_source()?;
-    if c.share < SHARE || c.solid_angle > SOLID_ANGLE {
+    if c.share < SHARE || c.solid_angle > MAX_SUN_SOLID_ANGLE {
         return None;
     }
-    let (d, e) = (c.direction, c.irradiance * scene.desc.sky.scale);
+    let fix = match scene.desc.sky.extract_sun {
+        false => "set [sky] extract_sun = true, which makes it the scene's sun (docs/sky.md)",
+        true => "it is another than the sun sky.extract_sun took out; paint it out of the map",
+    };
     Some(format!(
-        "{}: the sky map holds a sun ({:.0} % of its light in {:.1e} sr), which method {} takes at directions degrees \
-         apart, missing or smearing it (a 3×3-pixel sun in a 512×256 map: {measured}; docs/sky.md, \"A sun in the \
-         map\"); paint it out of the map and give it as the scene's [sun]: direction = [{:.4}, {:.4}, {:.4}], irradiance = \
-         [{:.4e}, {:.4e}, {:.4e}] (W/m²), or render with --method reference",
+        "{}: the sky map holds a sun ({:.0} % of its light in {:.1e} sr towards [{:.3}, {:.3}, {:.3}]), which method {} \
+         takes at directions degrees apart, missing or smearing it (a 3×3-pixel sun in a 512×256 map: {measured}; \
+         docs/sky.md, \"A sun in the map\"); {fix}, or render with --method reference",
         scene.source,
         100.0 * c.share,
         c.solid_angle,
+        c.direction.x,
+        c.direction.y,
+        c.direction.z,
         scene.render.method.name(),
-        d.x,
-        d.y,
-        d.z,
-        e.x,
-        e.y,
-        e.z
     ))
 }
 
@@ -82,7 +79,7 @@ mod tests {
         for m in [Method::Transport, Method::Full, Method::Diffusion] {
             let w = warning_for(&sunny, m).expect("a sun in the map");
             assert!(
-                w.contains("s.toml") && w.contains("[sun]: direction") && w.contains("--method reference"),
+                w.contains("s.toml") && w.contains("extract_sun = true") && w.contains("--method reference"),
                 "{w}"
             );
             assert_eq!(warning_for(&uniform, m), None);

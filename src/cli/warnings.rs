@@ -126,13 +126,20 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
 /// ([`crate::lighting::sun_over_ground`]).
 fn hidden_sun_warning(scene: &Scene) -> Option<String> {
     let d = &scene.desc.sun;
-    let given = !d.from_atmosphere && d.irradiance.iter().any(|&e| e > 0.0);
+    let extracted = scene.desc.sky.extract_sun;
+    let given = extracted || (!d.from_atmosphere && d.irradiance.iter().any(|&e| e > 0.0));
     let hidden = scene.ground.is_some() && scene.sun.irradiance == crate::math::Rgb::ZERO;
+    let raise = match extracted {
+        true => "the map's sun (sky.extract_sun) lies there; set ground.enabled = false to light the cloud from below",
+        false => {
+            "raise sun.direction's y (or sun.elevation_deg) above 0, or set ground.enabled = false to light the \
+             cloud from below"
+        }
+    };
     (given && hidden).then(|| {
         format!(
             "{}: the sun is {:.2}° below the horizon and the ground hides it: it lights nothing directly, \
-             only the sky lights the scene; raise sun.direction's y (or sun.elevation_deg) above 0, or set \
-             ground.enabled = false to light the cloud from below",
+             only the sky lights the scene; {raise}",
             scene.source,
             -scene.sun.dir.y.asin().to_degrees()
         )

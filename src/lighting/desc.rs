@@ -68,6 +68,9 @@ pub struct SkyDesc {
     pub path: Option<String>,
     /// Envmap: factor on the file's radiance (unitless).
     pub scale: f32,
+    /// Envmap: take the map's sun out of it and make it the scene's sun
+    /// ([`crate::lighting::EnvMap::extract_sun`]).
+    pub extract_sun: bool,
 }
 
 impl Default for SkyDesc {
@@ -80,6 +83,7 @@ impl Default for SkyDesc {
             planet_albedo: [0.3, 0.3, 0.3],
             path: None,
             scale: 1.0,
+            extract_sun: false,
         }
     }
 }

@@ -276,59 +276,9 @@ impl EnvMap {
 
 /// The solid angle (sr) of one cell of row `j` of an equirectangular grid of `rows` × `columns`
 /// cells: (2π/columns)(cos θ_j − cos θ_{j+1}), θ_j = πj/rows (the whole grid's sum to 4π).
-fn row_solid_angle(j: usize, rows: usize, columns: usize) -> f64 {
+pub(super) fn row_solid_angle(j: usize, rows: usize, columns: usize) -> f64 {
     let theta = |j: usize| std::f64::consts::PI * j as f64 / rows as f64;
     2.0 * std::f64::consts::PI / columns as f64 * (theta(j).cos() - theta(j + 1).cos())
-}
-
-/// A compact bright source in a map (a sun painted into an HDRI): the pixels brighter than
-/// [`BRIGHT_OVER_MEAN`] times the map's mean radiance.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CompactSource {
-    /// Their share of the map's whole ∫ L dω (luminance).
-    pub share: f64,
-    /// Their solid angle (sr).
-    pub solid_angle: f64,
-    /// Their light's mean direction (unit; towards the source).
-    pub direction: Vec3,
-    /// Their ∫ L dω per band: the irradiance they give a surface facing them (W/m²).
-    pub irradiance: Rgb,
-}
-
-/// How many times the map's mean radiance a pixel of a [`CompactSource`] is.
-pub const BRIGHT_OVER_MEAN: f64 = 100.0;
-
-impl EnvMap {
-    /// The map's pixels brighter than [`BRIGHT_OVER_MEAN`] times its mean (luminance, over the
-    /// sphere): their share of its light and their solid angle; `None` for a black map.
-    pub fn compact_source(&self) -> Option<CompactSource> {
-        let (w, h) = (self.width, self.height);
-        let rows = || (0..h).map(|j| (row_solid_angle(j, h, w), &self.pixels[j * w..(j + 1) * w]));
-        let total: f64 = rows().map(|(dw, row)| dw * row.iter().map(|p| luminance(*p) as f64).sum::<f64>()).sum();
-        if total.is_nan() || total <= 0.0 {
-            return None;
-        }
-        let threshold = BRIGHT_OVER_MEAN * total / (4.0 * std::f64::consts::PI);
-        let (mut power, mut solid_angle, mut toward, mut irradiance) = (0.0, 0.0, glam::DVec3::ZERO, glam::DVec3::ZERO);
-        for (j, (dw, row)) in rows().enumerate() {
-            for (i, p) in row.iter().enumerate() {
-                let y = luminance(*p) as f64;
-                if y > threshold {
-                    power += y * dw;
-                    solid_angle += dw;
-                    irradiance += p.as_dvec3() * dw;
-                    let d = direction((i as f32 + 0.5) / w as f32, (j as f32 + 0.5) / h as f32);
-                    toward += d.as_dvec3() * (y * dw);
-                }
-            }
-        }
-        Some(CompactSource {
-            share: power / total,
-            solid_angle,
-            direction: toward.normalize_or_zero().as_vec3(),
-            irradiance: irradiance.as_vec3(),
-        })
-    }
 }
 
 /// Largest index k with cdf[k] <= target (cdf ascending, cdf[0] = 0), skipping empty cells.
@@ -375,25 +325,6 @@ mod tests {
         let exact = 1e6 * std::f64::consts::PI / w as f64 * (t1.sin().powi(2) - t0.sin().powi(2));
         let e = EnvMap::new(w, h, px).irradiance_up().x as f64;
         assert!((e - exact).abs() < 1e-5 * exact, "{e} vs {exact}");
-    }
-
-    #[test]
-    fn a_sun_in_the_map_is_found_with_its_share_and_solid_angle() {
-        let (w, h) = (512, 256);
-        let mut px = vec![Rgb::splat(0.5); w * h];
-        assert_eq!(EnvMap::new(w, h, px.clone()).compact_source().map(|c| c.share), Some(0.0));
-        for j in 60..63 {
-            for i in 100..103 {
-                px[j * w + i] = Rgb::splat(2e5);
-            }
-        }
-        let c = EnvMap::new(w, h, px).compact_source().unwrap();
-        // Nine pixels of about 1.2e-4 sr each hold nearly all the light.
-        assert!(c.share > 0.9 && (5e-4..2e-3).contains(&c.solid_angle), "{c:?}");
-        // Towards pixel (101, 61)'s centre, with the nine pixels' power.
-        assert!((c.direction - direction(101.5 / w as f32, 61.5 / h as f32)).length() < 1e-3, "{c:?}");
-        assert!((c.irradiance.x as f64 / (2e5 * c.solid_angle) - 1.0).abs() < 1e-6, "{c:?}");
-        assert_eq!(EnvMap::new(2, 1, vec![Rgb::ZERO; 2]).compact_source(), None);
     }
 
     #[test]

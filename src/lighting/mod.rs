@@ -4,6 +4,7 @@ pub mod atmosphere;
 pub mod bins;
 pub mod desc;
 pub mod envmap;
+pub mod map_sun;
 
 use crate::error::Result;
 use crate::error::{check, rgb_in_unit, rgb_nonneg};
@@ -141,6 +142,9 @@ pub const DEFAULT_MAP_WIDTH: u32 = 512;
 pub fn sun_and_sky(sun: &SunDesc, sky: &SkyDesc, file: &str, base_dir: &Path) -> Result<(Sun, Sky)> {
     let mut s = Sun::from_desc(sun, file)?;
     let k = Sky::from_desc_with_sun(sky, s.dir, file, base_dir)?;
+    if sky.extract_sun {
+        return map_sun_and_sky(sun, sky, &k, file);
+    }
     if sun.from_atmosphere {
         let atm = match &k.kind {
             SkyKind::Atmosphere { atmosphere, .. } => atmosphere.clone(),
@@ -150,6 +154,54 @@ pub fn sun_and_sky(sun: &SunDesc, sky: &SkyDesc, file: &str, base_dir: &Path) ->
         s.irradiance = atm.sun_irradiance(sky.altitude_m as f64, s.dir.as_dvec3()).as_vec3();
     }
     Ok((s, k))
+}
+
+/// `sky.extract_sun`: the map's sun taken out of it ([`EnvMap::extract_sun`]) as the scene's one
+/// sun, so a `[sun]` other than the default (the table left out) with light of its own is refused.
+fn map_sun_and_sky(sun: &SunDesc, sky: &SkyDesc, built: &Sky, file: &str) -> Result<(Sun, Sky)> {
+    let key = "sky.extract_sun";
+    let map = match (sky.model, built.map()) {
+        (SkyModel::Envmap, Some(map)) => map,
+        _ => {
+            return Err(crate::Error::invalid(
+                file,
+                key,
+                "takes a sun out of an environment map: it needs sky.model = \"envmap\" (the atmosphere's sun is \
+                 the scene's [sun] already); leave sky.extract_sun out",
+            ))
+        }
+    };
+    let own_light = sun.from_atmosphere || sun.irradiance.iter().any(|&e| e > 0.0);
+    if *sun != SunDesc::default() && own_light {
+        return Err(crate::Error::invalid(
+            file,
+            key,
+            "makes the map's sun the scene's sun, and the [sun] table gives another; a scene has one sun: leave \
+             the [sun] table out (or set sun.irradiance = [0, 0, 0]), or leave sky.extract_sun out",
+        ));
+    }
+    let path = sky.path.as_deref().unwrap_or_default();
+    let why = match map.extract_sun() {
+        Ok(x) => {
+            let sun = Sun {
+                dir: x.direction,
+                irradiance: x.irradiance,
+            };
+            return Ok((sun, Sky::from_envmap(x.map)));
+        }
+        Err(map_sun::NoSun::Black) => format!("`{path}` is black: it holds no sun"),
+        Err(map_sun::NoSun::NotBright(ratio)) => format!(
+            "the brightest pixel of `{path}` is {ratio:.1} times the map's mean radiance; a sun's pixels are over {} \
+             times it",
+            map_sun::BRIGHT_OVER_MEAN
+        ),
+        Err(map_sun::NoSun::TooWide(sr)) => format!(
+            "the bright pixels around the brightest one of `{path}` cover {sr:.2e} sr, more than a sun's {:.0e} sr (a \
+             cap about 3° in radius): a directional sun would not stand for them",
+            map_sun::MAX_SUN_SOLID_ANGLE
+        ),
+    };
+    Err(crate::Error::invalid(file, key, format!("{why}; leave sky.extract_sun out")))
 }
 
 fn check_altitude(d: &SkyDesc, file: &str) -> Result<()> {

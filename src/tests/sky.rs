@@ -609,3 +609,61 @@ fn example_scenes_build_and_the_sunset_sun_is_red() {
     let expect = p.solar_irradiance * p.transmittance_to_top(p.bottom_radius, 1.0);
     assert!(((sun.irradiance.as_dvec3() - expect) / expect).abs().max_element() < 1e-6);
 }
+
+#[test]
+fn extract_sun_makes_the_maps_sun_the_scenes_sun_or_says_why_not() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A 256×128 map of 0.5 with a 2×2-pixel sun of 10⁵ at 35° elevation.
+    let (w, h) = (256u32, 128u32);
+    let mut img = crate::Image::new(w, h);
+    img.pixels = vec![Rgb::splat(0.5); (w * h) as usize];
+    for j in 38..40 {
+        for i in 60..62 {
+            img.pixels[(j * w + i) as usize] = Rgb::splat(1e5);
+        }
+    }
+    img.write_exr(&d.join("sunny.exr")).unwrap();
+    crate::Image::new(w, h).write_exr(&d.join("black.exr")).unwrap();
+    let env = |p: &str, extract_sun| SkyDesc {
+        model: SkyModel::Envmap,
+        path: Some(p.into()),
+        extract_sun,
+        ..Default::default()
+    };
+    let (_, kept) = sun_and_sky(&SunDesc::default(), &env("sunny.exr", false), "s.toml", d).unwrap();
+    let (sun, sky) = sun_and_sky(&SunDesc::default(), &env("sunny.exr", true), "s.toml", d).unwrap();
+    // The default [sun] is replaced: towards the map's sun, with the light the map lost, so the
+    // ground's unoccluded irradiance is the same.
+    let towards = crate::lighting::envmap::direction(61.0 / w as f32, 39.0 / h as f32);
+    assert!((sun.dir - towards).length() < 1e-3, "{:?} vs {towards:?}", sun.dir);
+    let ground = sky.irradiance_up + sun.irradiance * sun.dir.y;
+    let rel = ((ground - kept.irradiance_up) / kept.irradiance_up).abs().max_element();
+    assert!(rel < 2e-3, "{ground} vs {}: {rel}", kept.irradiance_up);
+    assert!(sky.map().unwrap().pixels.iter().all(|p| *p == Rgb::splat(0.5)));
+    // A [sun] with light of its own is a second sun: refused; one without light is replaced.
+    let lit = SunDesc {
+        irradiance: [1.0, 1.0, 1.0],
+        ..Default::default()
+    };
+    invalid(lit, env("sunny.exr", true), "sky.extract_sun", d);
+    let dark = SunDesc {
+        irradiance: [0.0; 3],
+        ..Default::default()
+    };
+    assert_eq!(
+        sun_and_sky(&dark, &env("sunny.exr", true), "s.toml", d).unwrap().0.irradiance,
+        sun.irradiance
+    );
+    // No map, or a map with no sun: errors naming the key and the file.
+    let constant = SkyDesc {
+        extract_sun: true,
+        ..Default::default()
+    };
+    invalid(SunDesc::default(), constant, "sky.extract_sun", d);
+    let e = sun_and_sky(&SunDesc::default(), &env("black.exr", true), "s.toml", d).unwrap_err();
+    assert!(
+        e.to_string().contains("sky.extract_sun") && e.to_string().contains("black.exr"),
+        "{e}"
+    );
+}
