@@ -18,7 +18,7 @@
 
 use super::ground_peak::GroundPeak;
 use super::render::{BinMask, CubeOptions, CubeRenderer, LevelTables, PixelTable};
-use crate::lighting::bins::face_uv;
+use crate::lighting::bins::cube_pixel;
 use crate::lighting::{EnvMap, Ground, Sky};
 pub use crate::lit::ground::{GroundGrid, LitGround};
 use crate::lit::LitVolume;
@@ -172,13 +172,6 @@ fn sky_cosine_power(map: &EnvMap, res: usize) -> Vec<[f64; 3]> {
         }
     }
     power
-}
-
-/// Index ([`super::CubeImage::index`]) of the `res` cube pixel that direction `dir` falls in.
-fn cube_pixel(res: usize, dir: Vec3) -> usize {
-    let (face, u, v) = face_uv(dir);
-    let at = |x: f32| (((x + 1.0) * 0.5 * res as f32) as usize).min(res - 1);
-    (face * res + at(v)) * res + at(u)
 }
 
 /// Irradiance (W/m²) on an upward-facing ground point `p` from the hemicube plus the sun and its

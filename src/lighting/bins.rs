@@ -81,6 +81,14 @@ pub fn face_uv(dir: Vec3) -> (usize, f32, f32) {
     (face, d.dot(f.tu).clamp(-1.0, 1.0), d.dot(f.tv).clamp(-1.0, 1.0))
 }
 
+/// Index ([`crate::cube::CubeImage::index`]) of the pixel of a `res` cube that direction `dir`
+/// falls in (in the cube's own frame).
+pub fn cube_pixel(res: usize, dir: Vec3) -> usize {
+    let (face, u, v) = face_uv(dir);
+    let at = |x: f32| (((x + 1.0) * 0.5 * res as f32) as usize).min(res - 1);
+    (face * res + at(v)) * res + at(u)
+}
+
 /// Exact solid angle (sr) subtended by the rectangle [u0, u1]×[v0, v1] on a cube face at unit distance.
 #[inline]
 pub fn rect_solid_angle(u0: f64, u1: f64, v0: f64, v1: f64) -> f64 {

@@ -12,6 +12,7 @@
 //! directions from a piecewise-constant density proportional to (luminance + ε)·sin θ per pixel
 //! (ε = 10⁻³ × the mean luminance keeps the density positive wherever radiance can be).
 
+use super::bins::cube_pixel;
 use crate::error::{Error, Result};
 use crate::image::Image;
 use crate::math::{luminance, Rgb, Vec3};
@@ -152,6 +153,12 @@ impl EnvMap {
     /// Bilinear radiance at map coordinates (u, v).
     #[inline]
     pub fn lookup(&self, u: f32, v: f32) -> Rgb {
+        self.bilinear(u, v, |k| self.pixels[k])
+    }
+
+    /// Bilinear interpolation at (u, v) of the values `at(pixel index)` on the map's grid.
+    #[inline]
+    fn bilinear(&self, u: f32, v: f32, at: impl Fn(usize) -> Rgb) -> Rgb {
         let (w, h) = (self.width as f32, self.height as f32);
         let x = u * w - 0.5;
         let y = (v * h - 0.5).clamp(0.0, h - 1.0);
@@ -162,7 +169,7 @@ impl EnvMap {
         let y0 = y.floor() as usize;
         let y1 = (y0 + 1).min(self.height - 1);
         let fy = y - y0 as f32;
-        let at = |i: usize, j: usize| self.pixels[j * self.width + i];
+        let at = |i: usize, j: usize| at(j * self.width + i);
         (at(x0, y0) * (1.0 - fx) + at(x1, y0) * fx) * (1.0 - fy) + (at(x0, y1) * (1.0 - fx) + at(x1, y1) * fx) * fy
     }
 
@@ -235,20 +242,11 @@ impl EnvMap {
     /// part of one, take the map's power where it is instead of point samples.
     pub fn for_each_subpixel(&self, rows: std::ops::Range<usize>, k: usize, visit: &mut dyn FnMut(Vec3, Rgb, f64)) {
         let (w, h) = (self.width * k, self.height * k);
-        let columns: Vec<(f32, f32, f32)> = (0..w)
-            .map(|a| {
-                let u = (a as f64 + 0.5) / w as f64;
-                let (sp, cp) = (2.0 * std::f64::consts::PI * u).sin_cos();
-                (u as f32, sp as f32, cp as f32)
-            })
-            .collect();
+        let columns: Vec<SubColumn> = (0..w).map(|a| SubColumn::new(a, w)).collect();
         for b in rows.start * k..rows.end.min(self.height) * k {
-            let solid_angle = row_solid_angle(b, h, w);
-            let v = (b as f64 + 0.5) / h as f64;
-            let (st, ct) = (std::f64::consts::PI * v).sin_cos();
-            for &(u, sp, cp) in &columns {
-                let dir = Vec3::new(st as f32 * cp, ct as f32, st as f32 * sp);
-                visit(dir, self.lookup(u, v as f32), solid_angle);
+            let row = SubRow::new(b, h, w);
+            for c in &columns {
+                visit(row.direction(c), self.lookup(c.u, row.v), row.solid_angle);
             }
         }
     }
@@ -279,6 +277,140 @@ impl EnvMap {
 pub(super) fn row_solid_angle(j: usize, rows: usize, columns: usize) -> f64 {
     let theta = |j: usize| std::f64::consts::PI * j as f64 / rows as f64;
     2.0 * std::f64::consts::PI / columns as f64 * (theta(j).cos() - theta(j + 1).cos())
+}
+
+/// Column `a` of `w` sub-pixel columns: its centre's u and (sin φ, cos φ).
+struct SubColumn {
+    u: f32,
+    sin_phi: f32,
+    cos_phi: f32,
+}
+
+impl SubColumn {
+    fn new(a: usize, w: usize) -> SubColumn {
+        let u = (a as f64 + 0.5) / w as f64;
+        let (sp, cp) = (2.0 * std::f64::consts::PI * u).sin_cos();
+        SubColumn {
+            u: u as f32,
+            sin_phi: sp as f32,
+            cos_phi: cp as f32,
+        }
+    }
+}
+
+/// Row `b` of an `h` × `w` sub-pixel grid: its centre's v, (sin θ, cos θ) and a cell's solid angle.
+struct SubRow {
+    v: f32,
+    sin_theta: f64,
+    cos_theta: f64,
+    solid_angle: f64,
+}
+
+impl SubRow {
+    fn new(b: usize, h: usize, w: usize) -> SubRow {
+        let v = (b as f64 + 0.5) / h as f64;
+        let (st, ct) = (std::f64::consts::PI * v).sin_cos();
+        SubRow {
+            v: v as f32,
+            sin_theta: st,
+            cos_theta: ct,
+            solid_angle: row_solid_angle(b, h, w),
+        }
+    }
+
+    /// The direction of the sub-pixel at column `c` of this row.
+    #[inline]
+    fn direction(&self, c: &SubColumn) -> Vec3 {
+        let st = self.sin_theta as f32;
+        Vec3::new(st * c.cos_phi, self.cos_theta as f32, st * c.sin_phi)
+    }
+}
+
+impl EnvMap {
+    /// ∫ luminance dω over the sphere, each pixel's over its cell; `None` for a black map.
+    pub(super) fn luminance_integral(&self) -> Option<f64> {
+        let (w, h) = (self.width, self.height);
+        let total: f64 = (0..h)
+            .map(|j| row_solid_angle(j, h, w) * self.pixels[j * w..(j + 1) * w].iter().map(|p| luminance(*p) as f64).sum::<f64>())
+            .sum();
+        (total > 0.0).then_some(total)
+    }
+
+    /// The map split into a base, the map less its pixels brighter than `over_mean` times its
+    /// mean luminance, and those pixels as points: their bilinear radiance integrated in
+    /// sub-pixels no wider than `max_rad` (an even number per pixel edge,
+    /// [`EnvMap::subpixels_within`]), merged per cell of a cube map whose narrowest cell is no
+    /// wider than `max_rad`. A renderer that takes the sky at fixed directions can take
+    /// the base there and add the points' power where they fall: a sun one map pixel wide is then
+    /// neither missed nor counted over a whole sample's solid angle. `None`: no pixel is brighter.
+    pub fn split_bright(&self, over_mean: f64, max_rad: f64) -> Option<BrightSplit<'_>> {
+        let threshold = over_mean * self.luminance_integral()? / (4.0 * std::f64::consts::PI);
+        let bright: Vec<usize> = (0..self.pixels.len()).filter(|&n| luminance(self.pixels[n]) as f64 > threshold).collect();
+        if bright.is_empty() {
+            return None;
+        }
+        let (w, h) = (self.width, self.height);
+        // The cells a bright pixel's bilinear radiance reaches: its own and its eight neighbours.
+        let mut cells: Vec<usize> = bright
+            .iter()
+            .flat_map(|&n| {
+                let (i, j) = (n % w, n / w);
+                (j.saturating_sub(1)..(j + 2).min(h)).flat_map(move |jj| (0..3).map(move |di| jj * w + (i + w + di - 1) % w))
+            })
+            .collect();
+        cells.sort_unstable();
+        cells.dedup();
+        let excess = |n: usize| if bright.binary_search(&n).is_ok() { self.pixels[n] } else { Rgb::ZERO };
+        let k = self.subpixels_within(max_rad);
+        let grid = (2.0 / (3.0 * max_rad)).ceil() as usize;
+        // Per merge cell: Σ direction·weight and Σ power per band (ordered: the same points for any threads).
+        let mut merged: std::collections::BTreeMap<usize, (glam::DVec3, [f64; 3])> = Default::default();
+        let (sw, sh) = (w * k, h * k);
+        for n in cells {
+            let (i, j) = (n % w, n / w);
+            for b in j * k..(j + 1) * k {
+                let row = SubRow::new(b, sh, sw);
+                for a in i * k..(i + 1) * k {
+                    let c = SubColumn::new(a, sw);
+                    let e = self.bilinear(c.u, row.v, excess);
+                    if e == Rgb::ZERO {
+                        continue;
+                    }
+                    let dir = row.direction(&c);
+                    let power = e.as_dvec3() * row.solid_angle;
+                    let m = merged.entry(cube_pixel(grid, dir)).or_default();
+                    m.0 += dir.as_dvec3() * power.element_sum();
+                    for (s, x) in m.1.iter_mut().zip(power.to_array()) {
+                        *s += x;
+                    }
+                }
+            }
+        }
+        let points = merged.into_values().map(|(d, p)| (d.normalize().as_vec3(), p)).collect();
+        Some(BrightSplit { map: self, bright, points })
+    }
+}
+
+/// An [`EnvMap`] as a base and the power of its brightest pixels as points
+/// ([`EnvMap::split_bright`]).
+#[derive(Clone, Debug)]
+pub struct BrightSplit<'a> {
+    map: &'a EnvMap,
+    /// The indices of the pixels brighter than the threshold, in order.
+    bright: Vec<usize>,
+    /// (unit direction, ∫ L dω per band in W/m²) of those pixels' bilinear radiance; the points'
+    /// powers add up to its integral over the sphere.
+    pub points: Vec<(Vec3, [f64; 3])>,
+}
+
+impl BrightSplit<'_> {
+    /// The base's bilinear radiance from unit direction `dir` (the bright pixels black): the
+    /// map's less the points'.
+    pub fn base_radiance(&self, dir: Vec3) -> Rgb {
+        let (u, v) = uv(dir);
+        let map = self.map;
+        map.bilinear(u, v, |n| if self.bright.binary_search(&n).is_ok() { Rgb::ZERO } else { map.pixels[n] })
+    }
 }
 
 /// Largest index k with cdf[k] <= target (cdf ascending, cdf[0] = 0), skipping empty cells.

@@ -57,11 +57,7 @@ pub enum NoSun {
 impl EnvMap {
     /// The map's mean luminance over the sphere (∫ Y dω / 4π); `None` for a black map.
     fn mean_luminance(&self) -> Option<f64> {
-        let (w, h) = (self.width, self.height);
-        let total: f64 = (0..h)
-            .map(|j| row_solid_angle(j, h, w) * self.pixels[j * w..(j + 1) * w].iter().map(|p| luminance(*p) as f64).sum::<f64>())
-            .sum();
-        (total > 0.0).then(|| total / (4.0 * std::f64::consts::PI))
+        Some(self.luminance_integral()? / (4.0 * std::f64::consts::PI))
     }
 
     /// The map's pixels brighter than [`BRIGHT_OVER_MEAN`] times its mean: their share of its

@@ -30,6 +30,9 @@ use crate::error::check_finite_field;
 use crate::error::Result;
 use crate::image::Image;
 use crate::incident::IncidentLight;
+use crate::lighting::bins::cube_pixel;
+use crate::lighting::envmap::BrightSplit;
+use crate::lighting::SkyKind;
 use crate::lit::ground::LitGround;
 use crate::lit::sunlight::SunTransmittance;
 use crate::render::{full_beam, beam_check};
@@ -226,15 +229,36 @@ pub struct GatherCubes<'a> {
     /// cubes; the ring 25 % fewer traces per cube, images within 6.4·10⁻⁴ block MRE
     /// (docs/performance.md, "Approximations made for speed").
     pub rear_half_resolution: bool,
-    /// Cone width (rad) of each pixel of a face at `cone_res` pixels per edge (the scene's cube
-    /// resolution): the same for every cube, so computed once (four `atan` per pixel).
-    cones: Vec<f32>,
+    /// Solid angle (sr) and cone width (rad, its square root) of each pixel of a face at
+    /// `cone_res` pixels per edge (the scene's cube resolution): the same for every cube, so
+    /// computed once (four `atan` per pixel).
+    faces: FacePixels,
     cone_res: usize,
+    /// A file map sky as its base and its brightest pixels' power as points
+    /// ([`crate::lighting::EnvMap::split_bright`]): a cube pixel that sees the sky sees the base
+    /// on its axis plus the points' power in it over its solid angle. None: the sky on the axis.
+    sky: Option<BrightSplit<'a>>,
 }
 
-/// Cone width (rad) of each pixel of a face at `res` pixels per edge: √(solid angle).
-fn face_cones(res: usize) -> Vec<f32> {
-    CubeImage::face_solid_angles(res).iter().map(|w| (*w as f32).sqrt()).collect()
+/// Pixels brighter than this many times a file map's mean luminance are taken as points by the
+/// gather cubes. The base left is at most this bright, so a cube pixel's axis sample of it is off
+/// by less than 10·mean·Ω: 1.3 % of the sky's ∫ L dω for a full-resolution pixel of a res-16 cube
+/// (Ω ≤ 0.016 sr), 5 % for a 2×2 block that one trace fills. At most a tenth of the sphere is this bright, so at most about a tenth of the
+/// merge grid's cells hold points.
+const SKY_POINTS_OVER_MEAN: f64 = 10.0;
+
+/// Per face pixel at one resolution, index j·res + i: solid angle (sr) and cone width (rad).
+struct FacePixels {
+    solid_angle: Vec<f64>,
+    cone: Vec<f32>,
+}
+
+impl FacePixels {
+    fn new(res: usize) -> FacePixels {
+        let solid_angle = CubeImage::face_solid_angles(res);
+        let cone = solid_angle.iter().map(|w| (*w as f32).sqrt()).collect();
+        FacePixels { solid_angle, cone }
+    }
 }
 
 impl<'a> GatherCubes<'a> {
@@ -254,12 +278,19 @@ impl<'a> GatherCubes<'a> {
         renderer.gather_source = surface;
         renderer.sun_transformed = surface;
         let cone_res = scene.render.edges.cube_res;
+        // Points no wider than an eighth of the narrowest cube pixel (a third of its edge 2/res, in
+        // rad, at a face's corner), as the ground's hemicubes take the map.
+        let sky = match &lit.sky.kind {
+            SkyKind::EnvMap { map } => map.split_bright(SKY_POINTS_OVER_MEAN, 2.0 / (3.0 * cone_res as f64) / 8.0),
+            _ => None,
+        };
         GatherCubes {
             renderer,
             exclude_radius: lit.medium.min_voxel(),
             rear_half_resolution: true,
-            cones: face_cones(cone_res),
+            faces: FacePixels::new(cone_res),
             cone_res,
+            sky,
         }
     }
 
@@ -304,19 +335,45 @@ impl CubeSource for GatherCubes<'_> {
         let mut cube = CubeImage::along(req.res, req.x_axis);
         let res = req.res;
         let own;
-        let cones = if res == self.cone_res {
-            &self.cones
+        let faces = if res == self.cone_res {
+            &self.faces
         } else {
-            own = face_cones(res);
+            own = FacePixels::new(res);
             &own
         };
-        let trace = |d: Vec3, cone: f32| {
+        let cones = &faces.cone;
+        // The sky points' power (W/m² per band) in each pixel of this cube.
+        let points = self.sky.as_ref().map(|split| {
+            let mut power = vec![[0f64; 3]; 6 * res * res];
+            let to_local = cube.axes.transpose();
+            for (d, p) in &split.points {
+                for (s, x) in power[cube_pixel(res, to_local * *d)].iter_mut().zip(p) {
+                    *s += x;
+                }
+            }
+            (split, power)
+        });
+        // Radiance from `d` for pixels `ks` (one, or a block that one trace fills): with a split
+        // map, the sky behind is its base on `d` plus the points' mean over the pixels.
+        let trace = |d: Vec3, cone: f32, ks: &[usize]| {
             let t0 = self.exclusion_start(req, d);
-            self.renderer.trace(req.center + d * t0, d, cone)
+            let o = req.center + d * t0;
+            let Some((split, power)) = &points else {
+                return self.renderer.trace(o, d, cone);
+            };
+            let (mut sum, mut area) = ([0f64; 3], 0f64);
+            for &k in ks {
+                for (s, x) in sum.iter_mut().zip(power[k]) {
+                    *s += x;
+                }
+                area += faces.solid_angle[k % (res * res)];
+            }
+            let mean = Rgb::new((sum[0] / area) as f32, (sum[1] / area) as f32, (sum[2] / area) as f32);
+            self.renderer.trace_to_sky(o, d, cone, split.base_radiance(d) + mean)
         };
         let pixel = |cube: &mut CubeImage, face: usize, i: usize, j: usize| {
             let k = cube.index(face, i, j);
-            cube.pixels[k] = trace(cube.direction(face, i, j), cones[j * res + i]);
+            cube.pixels[k] = trace(cube.direction(face, i, j), cones[j * res + i], &[k]);
         };
         if res < 2 || res % 2 != 0 || !self.rear_half_resolution {
             for face in 0..6 {
@@ -343,9 +400,9 @@ impl CubeSource for GatherCubes<'_> {
                     }
                     let local = CubeImage::local_direction(half, face, bi, bj);
                     let d = (cube.axes * local).normalize();
-                    let l = trace(d, 2.0 * cones[(2 * bj) * res + 2 * bi]);
-                    for (i, j) in block_pixels(bi, bj) {
-                        let k = cube.index(face, i, j);
+                    let ks = block_pixels(bi, bj).map(|(i, j)| cube.index(face, i, j));
+                    let l = trace(d, 2.0 * cones[(2 * bj) * res + 2 * bi], &ks);
+                    for k in ks {
                         cube.pixels[k] = l;
                     }
                 }
@@ -542,4 +599,50 @@ pub fn render_warm(scene: &Scene, progress: &dyn Progress, timings: &mut Timings
 /// The final gather's march step (m): the edges' step, at least [`GATHER_STEP_VOXELS`] voxels.
 fn gather_step(scene: &Scene, lit: &LitVolume) -> f32 {
     scene.render.edges.step_m.max(GATHER_STEP_VOXELS * lit.medium.min_voxel())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lighting::{EnvMap, Sky, Sun};
+    use crate::medium::{Grid3, Medium};
+
+    /// An empty scene under a map sky of 0.5 W·m⁻²·sr⁻¹ with a sun one map pixel wide (10⁸ times
+    /// brighter; a map pixel is 1/20 to 1/40 of a res-16 cube pixel's solid angle): a gather cube
+    /// holds the map's ∫ L dω whatever pixel's axis the sun lies near, for any orientation. A
+    /// sample on each pixel's axis misses the sun (2π against 20,505 for the first) or counts it
+    /// over the pixel's whole solid angle.
+    #[test]
+    fn a_sun_one_map_pixel_wide_reaches_a_gather_cube_by_its_power() {
+        let scene = Scene::from_toml("[medium]\nresolution = [4, 4, 4]").unwrap();
+        let res = scene.render.edges.cube_res;
+        let (w, h) = (256, 128);
+        let centre = Vec3::new(3.0, -1.0, 2.0);
+        for (i, j) in [(20, 30), (101, 61), (200, 90)] {
+            let mut pixels = vec![Rgb::splat(0.5); w * h];
+            pixels[j * w + i] = Rgb::splat(5e7);
+            let map = EnvMap::new(w, h, pixels);
+            // ∫ L dω of the bilinear map, in sub-pixels far finer than the cubes'.
+            let mut exact = 0.0;
+            map.for_each_subpixel(0..h, 16, &mut |_, l, dw| exact += l.x as f64 * dw);
+            let sun = Sun {
+                dir: Vec3::Y,
+                irradiance: Rgb::ZERO,
+            };
+            let empty = Medium::new(Grid3::filled([2, 2, 2], 0.0), Vec3::ZERO, Vec3::ONE, 1.0, Rgb::ONE, 0.0);
+            let lit = LitVolume::new(empty, vec![Rgb::ZERO; 8], Grid3::filled([2, 2, 2], 1.0), sun, Sky::from_envmap(map), None);
+            let cubes = GatherCubes::new(&lit, &scene);
+            for x_axis in [Vec3::X, Vec3::new(0.3, -0.5, 0.81), Vec3::new(-0.7, 0.2, -0.3)] {
+                let cube = cubes.render_cube(&CubeRequest {
+                    center: centre,
+                    x_axis: x_axis.normalize(),
+                    res,
+                    exclude: (centre, centre),
+                });
+                assert!(cube.pixels.iter().all(|p| p.is_finite() && p.min_element() >= 0.0));
+                let total = cube.integrate(|_| 1.0)[0];
+                assert!((total / exact - 1.0).abs() < 2e-3, "sun at ({i}, {j}), x {x_axis}: {total} vs {exact}");
+            }
+        }
+    }
 }
