@@ -113,8 +113,10 @@ mod resident {
     }
 
     /// Restart the peak (writing 5 to /proc/self/clear_refs sets it to the resident memory
-    /// now) and return the resident memory now.
+    /// now) and return the resident memory now, the heap's free memory handed back first: a
+    /// run that reused a larger run's freed pages would otherwise raise no peak at all.
     pub(super) fn restart_peak() -> Option<u64> {
+        super::super::allocator::release_free_memory();
         std::fs::write("/proc/self/clear_refs", "5").ok()?;
         status("VmRSS:")
     }
@@ -160,10 +162,7 @@ fn table(rows: &[Row]) -> String {
             .collect();
         let ratio = base.filter(|b| *b > 0.0).map_or("–".into(), |b| format!("{:.1}", r.total / b));
         let (peak, per_voxel) = r.memory.map_or(("–".into(), "–".into()), |p| {
-            (
-                format!("{:.1} MB", p.bytes as f64 / 1e6),
-                format!("{:.0}", p.bytes as f64 / p.full_voxels.max(1) as f64),
-            )
+            (megabytes(p.bytes), format!("{:.0}", p.bytes as f64 / p.full_voxels.max(1) as f64))
         });
         out += &format!(
             "| {} | {} | {} | {:.2} s | {ratio} | {peak} | {per_voxel} |\n",
@@ -174,6 +173,15 @@ fn table(rows: &[Row]) -> String {
         );
     }
     out
+}
+
+/// `bytes` in MB to 0.1 MB, or in kB below 0.1 MB (a small run's peak never reads 0.0 MB).
+fn megabytes(bytes: u64) -> String {
+    if bytes >= 100_000 {
+        format!("{:.1} MB", bytes as f64 / 1e6)
+    } else {
+        format!("{:.0} kB", bytes as f64 / 1e3)
+    }
 }
 
 pub fn run(a: BenchArgs) -> Result<()> {
@@ -332,5 +340,6 @@ mod tests {
         );
         assert_eq!(lines[2], "| 2×2×2 | single | 0.50 s | – | 0.50 s | 1.0 | – | – |");
         assert_eq!(lines[3], "| 2×2×2 | diffusion | 1.00 s | 1.00 s | 2.00 s | 4.0 | 2.5 MB | 500000 |");
+        assert_eq!(megabytes(56_000), "56 kB");
     }
 }

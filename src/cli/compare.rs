@@ -2,7 +2,7 @@
 //! an optional false-colour difference PNG (see `crate::tools::compare` for the mask and metrics).
 
 use crate::error::{Error, Result};
-use crate::tools::compare::{budget, choose_mask, compare, narrow_mask, write_diff_png, PixelCondition};
+use crate::tools::compare::{budget, choose_mask, compare, missing_layer, narrow_mask, write_diff_png, PixelCondition};
 use crate::Image;
 use clap::Args;
 use std::path::{Path, PathBuf};
@@ -67,12 +67,8 @@ pub fn run(a: CompareArgs) -> Result<()> {
     let mut reference = full_reference.clone();
     if let Some(name) = &a.ref_layer {
         let Some(px) = reference.layer(name) else {
-            let have: Vec<&str> = reference.layers.iter().map(|l| l.0.as_str()).collect();
-            return Err(Error::invalid(
-                a.reference.display().to_string(),
-                "--ref-layer",
-                format!("no layer `{name}`; it has: {}", have.join(", ")),
-            ));
+            let source = a.reference.display().to_string();
+            return Err(missing_layer(&reference, name, &source, "--ref-layer"));
         };
         reference.pixels = px.to_vec();
         // The standard errors are the image's, not the layer's.

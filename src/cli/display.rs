@@ -25,15 +25,25 @@ pub struct Display {
     created: Mutex<Option<(u32, u32)>>,
 }
 
-/// The address `--display-server` names; an error names the flag and the form.
+/// The address `--display-server` names; an error names the flag and says whether the text is
+/// not HOST:PORT or its host could not be resolved.
 pub fn parse(addr: &str) -> Result<SocketAddr> {
-    addr.to_socket_addrs().ok().and_then(|mut a| a.next()).ok_or_else(|| {
-        Error::invalid(
-            "command line",
-            "--display-server",
-            format!("`{addr}` is not HOST:PORT of a tev viewer (e.g. 127.0.0.1:14158, tev's default)"),
-        )
-    })
+    let bad = |why: String| Error::invalid("command line", "--display-server", why);
+    let Some((host, _)) = addr.rsplit_once(':').filter(|(h, p)| !h.is_empty() && p.parse::<u16>().is_ok()) else {
+        return Err(bad(format!(
+            "`{addr}` is not HOST:PORT of a tev viewer (e.g. 127.0.0.1:14158, tev's default)"
+        )));
+    };
+    let unresolved = |why: String| {
+        bad(format!(
+            "the host `{host}` could not be resolved ({why}); check its name, or give the viewer's IP address \
+             (e.g. 127.0.0.1:14158)"
+        ))
+    };
+    match addr.to_socket_addrs() {
+        Ok(mut found) => found.next().ok_or_else(|| unresolved("it has no address".into())),
+        Err(e) => Err(unresolved(e.to_string())),
+    }
 }
 
 impl Display {
@@ -92,5 +102,25 @@ impl Display {
             note!("warning: --display-server: the tev viewer went away ({e}); rendering goes on without it");
             *client = None;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_malformed_address_and_an_unknown_host_are_told_apart() {
+        assert_eq!(parse("127.0.0.1:14158").unwrap().port(), 14158);
+        for malformed in ["nowhere", "localhost:", ":14158", "localhost:99999", "localhost:port"] {
+            let e = parse(malformed).unwrap_err().to_string();
+            assert!(e.contains("--display-server") && e.contains("is not HOST:PORT"), "{malformed}: {e}");
+        }
+        // `.invalid` never resolves (RFC 2606).
+        let e = parse("viewer.invalid:14158").unwrap_err().to_string();
+        assert!(
+            e.contains("the host `viewer.invalid` could not be resolved") && !e.contains("HOST:PORT"),
+            "{e}"
+        );
     }
 }

@@ -32,8 +32,9 @@ struct MitsubaArgs {
     frame: Option<u32>,
 }
 
-/// The description of the one frame `export` writes: the scene's own, or `frame`'s of a sequence.
-fn frame_desc(desc: &SceneDesc, source: &str, base: &std::path::Path, frame: Option<u32>) -> Result<SceneDesc> {
+/// The description of the one frame a command writes: the scene's own, or `frame`'s of a
+/// sequence; `one` says why the command needs one frame (`export writes one frame`).
+pub(super) fn frame_desc(desc: &SceneDesc, source: &str, base: &std::path::Path, frame: Option<u32>, one: &str) -> Result<SceneDesc> {
     let seq = Sequence::new(desc, source)?;
     match (seq.is_animated(), frame) {
         (false, None) => Ok(desc.clone()),
@@ -44,8 +45,7 @@ fn frame_desc(desc: &SceneDesc, source: &str, base: &std::path::Path, frame: Opt
         (true, None) => Err(Error::invalid(
             source,
             "--frame",
-            "is missing: the scene is a sequence (a frame pattern in medium.grid, or [animation]) and export \
-             writes one frame; pass --frame N",
+            format!("is missing: the scene is a sequence (a frame pattern in medium.grid, or [animation]) and {one}; pass --frame N"),
         )),
         (false, Some(f)) => Err(Error::invalid(
             "command line",
@@ -59,7 +59,7 @@ pub fn run(a: ExportArgs, quiet: bool) -> Result<()> {
     match a.target {
         Target::Mitsuba(m) => {
             let file = super::SceneFile::read(m.scene.as_deref())?;
-            let desc = frame_desc(&file.desc, &file.source, &file.base, m.frame)?;
+            let desc = frame_desc(&file.desc, &file.source, &file.base, m.frame, "export writes one frame")?;
             let ours = |p: &std::path::Path| {
                 p.file_name()
                     .is_some_and(|n| n == "scene.xml" || n == "density.vol" || n == crate::reference::mitsuba::SKY_FILE)

@@ -180,6 +180,16 @@ pub fn render(a: &RenderArgs, file: &SceneFile, quiet: bool) -> Result<()> {
         };
         note!("{task}frames {frames} of {all}: {} to render{skip}", todo.len());
     }
+    // Each frame's warnings (its keyed sun, extinction and camera, its grid file), each printed
+    // once with the frames it holds for, before the first frame renders.
+    let mut per_frame = Vec::with_capacity(todo.len());
+    for f in &todo {
+        let scene = Scene::build(f.desc.clone(), &file.source, &file.base).map_err(|e| at_frame(e, f.number))?;
+        per_frame.push((f.number, warnings::warnings(file, &a.flags(), &scene)));
+    }
+    for w in warnings::over_frames(&per_frame) {
+        note!("warning: {w}");
+    }
     let start = Instant::now();
     let mut warm = Warm::new(!a.frames.cold);
     for (i, frame) in todo.iter().enumerate() {
@@ -187,11 +197,6 @@ pub fn render(a: &RenderArgs, file: &SceneFile, quiet: bool) -> Result<()> {
         let scene = Scene::build(frame.desc.clone(), &file.source, &file.base).map_err(|e| at_frame(e, frame.number))?;
         let kept = memory::warm_state_bytes(&scene, warm.bytes(), warm.enabled);
         memory::check_solver(&scene, kept).map_err(|e| at_frame(e, frame.number))?;
-        if i == 0 {
-            for w in warnings::warnings(file, &a.flags(), &scene) {
-                note!("warning: {w}");
-            }
-        }
         let was_warm = warm.is_warm();
         let out = render_warm(&scene, &progress::Bars::new(quiet), &mut warm)?;
         // Each frame's preview as a still's: --exposure, render.exposure, or its own automatic one.

@@ -1,6 +1,6 @@
 //! Checks on where a command will write, made before any work: the folder exists and is
-//! writable, no output is a folder, and no output is one of the scene's own input files (which
-//! the atomic rename would replace).
+//! writable, no output is a folder or an existing read-only file, and no output is one of the
+//! scene's own input files (the atomic rename would replace either).
 
 use crate::error::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -93,8 +93,8 @@ fn check_not_input(path: &Path, flag: &str, inputs: &[(PathBuf, String)]) -> Res
     Ok(())
 }
 
-/// Every file in `files` can be written: its folder exists and is writable, it is not a folder,
-/// and it is none of the scene's `inputs`. `flag` names the option the paths come from.
+/// Every file in `files` can be written: its folder exists and is writable, it is not a folder
+/// nor an existing read-only file, and it is none of the scene's `inputs`. `flag` names the option the paths come from.
 pub fn check_files(files: &[&Path], flag: &str, inputs: &[(PathBuf, String)]) -> Result<()> {
     for f in files {
         check_file_name(f, flag)?;
@@ -103,6 +103,18 @@ pub fn check_files(files: &[&Path], flag: &str, inputs: &[(PathBuf, String)]) ->
                 "command line",
                 flag,
                 format!("`{}` is a folder; the output must be a file name", f.display()),
+            ));
+        }
+        // The atomic write renames a new file over the old one, which its own permission would
+        // not stop.
+        if std::fs::metadata(f).is_ok_and(|m| m.permissions().readonly()) {
+            return Err(Error::invalid(
+                "command line",
+                flag,
+                format!(
+                    "`{}` exists and is read-only; make it writable (chmod u+w) to replace it, or choose another output name",
+                    f.display()
+                ),
             ));
         }
         check_writable_folder(folder_of(f), flag)?;
@@ -166,6 +178,19 @@ mod tests {
         let e = check_files(&[&other], "--output", &inputs).unwrap_err().to_string();
         assert!(e.contains("sky.path"), "{e}");
         assert!(check_files(&[&dir.path().join("out.exr")], "--output", &inputs).is_ok());
+    }
+
+    #[test]
+    fn a_read_only_output_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out.exr");
+        std::fs::write(&out, b"x").unwrap();
+        assert!(check_files(&[&out], "--output", &[]).is_ok());
+        let mut p = std::fs::metadata(&out).unwrap().permissions();
+        p.set_readonly(true);
+        std::fs::set_permissions(&out, p).unwrap();
+        let e = check_files(&[&out], "--output", &[]).unwrap_err().to_string();
+        assert!(e.contains("--output") && e.contains("out.exr") && e.contains("read-only"), "{e}");
     }
 
     #[test]

@@ -1,9 +1,12 @@
-//! `cloudgi sky [SCENE] -o sky.exr [--width W]`: export the scene's sky as an equirectangular
-//! EXR (row 0 = +y, u = atan2(z, x)/2π; see docs/sky.md) plus a tone-mapped PNG beside it. The
-//! sun is not in the map (it is carried separately); its direction and irradiance are printed.
+//! `cloudgi sky [SCENE] -o sky.exr [--width W] [--frame N]`: export the scene's sky as an
+//! equirectangular EXR (row 0 = +y, u = atan2(z, x)/2π; see docs/sky.md) plus a tone-mapped PNG
+//! beside it. The sun is not in the map (it is carried separately); its direction and irradiance
+//! are printed. A sequence whose keys move the sun needs `--frame`, as `export` does.
 
+use super::export::frame_desc;
 use crate::error::{Error, Result};
 use crate::lighting::sun_and_sky;
+use crate::sequence::Sequence;
 use clap::Args;
 use std::path::PathBuf;
 
@@ -19,6 +22,9 @@ pub struct SkyArgs {
     /// (`sky.map_width` for the atmosphere, the file's for an envmap, 512 for a constant sky).
     #[arg(long)]
     width: Option<u32>,
+    /// The frame of a sequence whose sun and sky to export (needed when `[animation]` keys the sun).
+    #[arg(long, value_name = "N")]
+    frame: Option<u32>,
 }
 
 /// Run `cloudgi sky`.
@@ -34,7 +40,14 @@ pub fn run(a: SkyArgs, quiet: bool) -> Result<()> {
         }
     }
     let file = super::SceneFile::read(a.scene.as_deref())?;
-    let desc = &file.desc;
+    // Without keys on the sun every frame has the scene's sky.
+    let keyed = Sequence::new(&file.desc, &file.source)?.keys_sun();
+    let desc = &if a.frame.is_some() || keyed {
+        let one = "[animation] keys the sun, so `sky` exports one frame's sun and sky";
+        frame_desc(&file.desc, &file.source, &file.base, a.frame, one)?
+    } else {
+        file.desc.clone()
+    };
     let png = super::png_beside(&a.output);
     super::output::check_files(&[&a.output, &png], "--output", &file.inputs(desc))?;
     let t = std::time::Instant::now();

@@ -4,6 +4,7 @@
 use super::scene_file::SceneFile;
 use crate::math::Vec3;
 use crate::scene::{Method, Scene, SkyModel, RENDER_KEYS};
+use crate::sequence::FrameList;
 
 /// What kind of grid `medium.grid` names.
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -118,6 +119,71 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
     out.extend(super::back_scattering::warning(scene));
     out.extend(super::map_sun::warning(scene));
     out.extend(frame_warning(scene));
+    out
+}
+
+/// A sequence's warnings, each once: `per_frame` holds each frame's number and warnings, in
+/// frame order. A warning on every frame reads as a still's; one on some frames names them
+/// (`frames 3-7: …`). Warnings that differ only in their numbers (a keyed sun's elevation, a
+/// keyed extinction's optical depths) are one warning, shown with the numbers of its first frame.
+pub fn over_frames(per_frame: &[(u32, Vec<String>)]) -> Vec<String> {
+    struct Seen<'a> {
+        shape: String,
+        first: &'a str,
+        frames: Vec<u32>,
+        varies: bool,
+    }
+    let mut seen: Vec<Seen> = Vec::new();
+    for (frame, warnings) in per_frame {
+        for w in warnings {
+            let shape = without_numbers(w);
+            // Two warnings of one frame stay two, whatever their shape.
+            match seen.iter_mut().find(|s| s.shape == shape && s.frames.last() != Some(frame)) {
+                Some(s) => {
+                    s.frames.push(*frame);
+                    s.varies |= s.first != w;
+                }
+                None => seen.push(Seen {
+                    shape,
+                    first: w,
+                    frames: vec![*frame],
+                    varies: false,
+                }),
+            }
+        }
+    }
+    seen.into_iter()
+        .map(|s| {
+            if s.frames.len() == per_frame.len() && !s.varies {
+                return s.first.to_string();
+            }
+            let at = if s.varies {
+                format!(" (the numbers are frame {}'s)", s.frames[0])
+            } else {
+                String::new()
+            };
+            let frames = FrameList::of(s.frames);
+            let which = if frames.frames().len() == 1 { "frame" } else { "frames" };
+            format!("{which} {frames}{at}: {}", s.first)
+        })
+        .collect()
+}
+
+/// `text` with each number (`-2.86`, `19`) written `#`: the shape warnings of one kind share.
+fn without_numbers(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut chars = text.chars().peekable();
+    let mut in_number = false;
+    while let Some(c) = chars.next() {
+        let starts = c.is_ascii_digit() || (c == '-' && chars.peek().is_some_and(char::is_ascii_digit));
+        let digit = starts || (in_number && c == '.');
+        if !digit {
+            out.push(c);
+        } else if !in_number {
+            out.push('#');
+        }
+        in_number = digit;
+    }
     out
 }
 
@@ -311,6 +377,27 @@ mod tests {
             let w = warnings_for(&format!("{grid}{rest}"));
             assert_eq!(w.iter().any(|m| m.contains("2.86° below the horizon")), warned, "{rest}: {w:?}");
         }
+    }
+
+    #[test]
+    fn a_sequence_names_each_warning_once_with_its_frames() {
+        let w = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let per_frame = vec![
+            (1, w(&["a", "the sun is 0.50° below"])),
+            (2, w(&["a", "the sun is 10.00° below", "c 3"])),
+            (3, w(&["a", "the sun is 20.00° below"])),
+            (5, w(&["a", "c 3", "c 4"])),
+        ];
+        assert_eq!(
+            over_frames(&per_frame),
+            [
+                "a",
+                "frames 1-3 (the numbers are frame 1's): the sun is 0.50° below",
+                "frames 2,5: c 3",
+                "frame 5: c 4"
+            ]
+        );
+        assert_eq!(without_numbers("at -2.86° and [1.0, -3]; x-ray"), "at #° and [#, #]; x-ray");
     }
 
     #[test]

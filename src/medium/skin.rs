@@ -9,9 +9,15 @@
 
 use super::Medium;
 
-/// The optical depths (σt · h · mean ρ, unitless) of the dual cells in which light entering along
-/// a grid line first reaches one optical depth: one per grid line and direction that reaches it.
+/// The optical depths (σt · h · mean ρ, unitless, h the voxel's side along the line) of the dual
+/// cells in which light entering along a grid line first reaches one optical depth: one per grid
+/// line and direction that reaches it.
 pub fn entry_cell_depths(m: &Medium) -> Vec<f32> {
+    entry_cells(m).into_iter().map(|(depth, _)| depth).collect()
+}
+
+/// [`entry_cell_depths`], each with the axis of its grid line (0, 1, 2: x, y, z).
+fn entry_cells(m: &Medium) -> Vec<(f32, usize)> {
     let Some((lo, hi)) = m.active_box(0) else {
         return Vec::new();
     };
@@ -38,12 +44,12 @@ pub fn entry_cell_depths(m: &Medium) -> Vec<f32> {
         let cell = |p: f64, q: f64| sigma_t * h[a] * 0.5 * (p + q);
         let forward = first_cell_past_one(rho.windows(2).map(|w| cell(w[0], w[1])));
         let backward = first_cell_past_one(rho.windows(2).rev().map(|w| cell(w[0], w[1])));
-        forward.into_iter().chain(backward)
+        forward.into_iter().chain(backward).map(move |d| (d, a))
     };
     // Lines per task: a few hundred; the tasks' depths joined in the lines' order.
     const LINES: usize = 256;
     crate::par::map_range(lines.len().div_ceil(LINES), &|ci| {
-        lines[ci * LINES..((ci + 1) * LINES).min(lines.len())].iter().flat_map(line_depths).collect::<Vec<f32>>()
+        lines[ci * LINES..((ci + 1) * LINES).min(lines.len())].iter().flat_map(line_depths).collect::<Vec<_>>()
     })
     .concat()
 }
@@ -61,15 +67,28 @@ fn first_cell_past_one(cells: impl Iterator<Item = f64>) -> Option<f32> {
     None
 }
 
-/// The median of [`entry_cell_depths`] (`None`: no grid line reaches one optical depth).
+/// The median of [`entry_cell_depths`] over the cloud's surface (`None`: no grid line reaches one
+/// optical depth): each line stands for the voxel face it enters through, of area h_b · h_c across
+/// its axis, so light entering a cloud of flat voxels through their broad faces counts for their
+/// area and the thin edges their few square metres. With cubic voxels every line weighs the same.
 pub fn median_entry_cell_depth(m: &Medium) -> Option<f32> {
-    let mut depths = entry_cell_depths(m);
-    if depths.is_empty() {
+    let mut cells = entry_cells(m);
+    if cells.is_empty() {
         return None;
     }
-    let mid = depths.len() / 2;
-    let (_, median, _) = depths.select_nth_unstable_by(mid, f32::total_cmp);
-    Some(*median)
+    let h = m.voxel_size.to_array().map(f64::from);
+    let face = |a: usize| h[(a + 1) % 3] * h[(a + 2) % 3];
+    let largest = face(0).max(face(1)).max(face(2));
+    // Relative to the largest face: 1 exactly for cubic voxels, where the sums below then count.
+    let weight = [0, 1, 2].map(|a| face(a) / largest);
+    cells.sort_unstable_by(|p, q| p.0.total_cmp(&q.0));
+    let half = 0.5 * cells.iter().map(|c| weight[c.1]).sum::<f64>();
+    let mut below = 0.0;
+    // The first cell past half the surface: the upper median for cubic voxels, as `len / 2`.
+    cells.iter().find(|c| {
+        below += weight[c.1];
+        below > half
+    }).map(|c| c.0)
 }
 
 #[cfg(test)]
@@ -80,6 +99,11 @@ mod tests {
 
     /// A box of density 1 with one empty voxel around it, `sigma_t` per metre, 2-m voxels.
     fn uniform_box(sigma_t: f32) -> Medium {
+        box_of(sigma_t, Vec3::splat(2.0))
+    }
+
+    /// [`uniform_box`] with voxels of edges `voxel`.
+    fn box_of(sigma_t: f32, voxel: Vec3) -> Medium {
         let dims = [8, 7, 6];
         let mut g = Grid3::filled(dims, 0.0);
         for k in 1..dims[2] - 1 {
@@ -89,7 +113,7 @@ mod tests {
                 }
             }
         }
-        Medium::new(g, Vec3::ZERO, Vec3::splat(2.0), sigma_t, Rgb::ONE, 0.0)
+        Medium::new(g, Vec3::ZERO, voxel, sigma_t, Rgb::ONE, 0.0)
     }
 
     #[test]
@@ -100,6 +124,17 @@ mod tests {
         assert_eq!(depths.len(), 2 * (5 * 4 + 4 * 6 + 6 * 5));
         assert!(depths.iter().all(|d| *d == 5.0), "{depths:?}");
         assert_eq!(median_entry_cell_depth(&uniform_box(5.0)), Some(5.0));
+    }
+
+    #[test]
+    fn flat_voxels_count_the_light_entering_through_their_broad_faces() {
+        // 1 × 1 × 0.05 m voxels: σt·h is 1 across the thin axis and 20 along the others.
+        let flat = box_of(20.0, Vec3::new(1.0, 1.0, 0.05));
+        // Most grid lines run along x and y, entering in a half voxel 10 optical depths thick,
+        // but through the 0.05-m² edges; the 1-m² faces take the light in cells of 1.
+        let depths = entry_cell_depths(&flat);
+        assert_eq!(depths.iter().filter(|d| **d == 10.0).count(), 2 * (5 * 4 + 4 * 6), "{depths:?}");
+        assert_eq!(median_entry_cell_depth(&flat), Some(1.0));
     }
 
     #[test]

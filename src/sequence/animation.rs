@@ -174,6 +174,11 @@ impl Animation {
         SCALARS.iter().any(|c| c.keyed(&self.keys)) || VECTORS.iter().any(|c| c.keyed(&self.keys))
     }
 
+    /// Whether any key sets a channel of the sun (its direction or irradiance).
+    pub fn keys_sun(&self) -> bool {
+        SCALARS[..2].iter().any(|c| c.keyed(&self.keys)) || VECTORS[0].keyed(&self.keys)
+    }
+
     /// `desc` with every keyed channel set to its value at `frame`.
     pub fn apply(&self, desc: &mut SceneDesc, frame: u32) {
         let [elevation, azimuth, fov, sigma_t] = SCALARS.each_ref().map(|c| c.at(&self.keys, frame).map(|v| v[0]));

@@ -66,6 +66,13 @@ impl FrameList {
         Ok(FrameList(frames))
     }
 
+    /// The frames of `frames`, sorted, each once.
+    pub fn of(mut frames: Vec<u32>) -> FrameList {
+        frames.sort_unstable();
+        frames.dedup();
+        FrameList(frames)
+    }
+
     /// One frame.
     pub fn single(frame: u32) -> FrameList {
         FrameList(vec![frame])
@@ -87,14 +94,21 @@ impl FrameList {
 }
 
 impl std::fmt::Display for FrameList {
-    /// `1-8` for a contiguous list, else the frames with commas.
+    /// Runs of consecutive frames as `A-B`, the runs and single frames with commas: `1-8`,
+    /// `1,3`, `3-5,9`.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self.0.as_slice() {
-            [] => write!(f, "none"),
-            [a] => write!(f, "{a}"),
-            [a, .., b] if (*b - *a) as usize + 1 == self.0.len() => write!(f, "{a}-{b}"),
-            all => write!(f, "{}", all.iter().map(u32::to_string).collect::<Vec<_>>().join(",")),
+        if self.0.is_empty() {
+            return write!(f, "none");
         }
+        let runs: Vec<String> = self
+            .0
+            .chunk_by(|a, b| a.checked_add(1) == Some(*b))
+            .map(|run| match run {
+                [a, .., b] => format!("{a}-{b}"),
+                _ => run[0].to_string(),
+            })
+            .collect();
+        write!(f, "{}", runs.join(","))
     }
 }
 
@@ -116,6 +130,7 @@ mod tests {
         assert_eq!(frames("12,3"), [3, 12]);
         assert_eq!(FrameList::parse("1-4", "f", "k").unwrap().to_string(), "1-4");
         assert_eq!(FrameList::parse("1,3", "f", "k").unwrap().to_string(), "1,3");
+        assert_eq!(FrameList::of(vec![9, 3, 4, 5, 4]).to_string(), "3-5,9");
     }
 
     #[test]

@@ -55,6 +55,11 @@ impl Sequence {
         self.grid.is_some() || self.animation.is_keyed()
     }
 
+    /// Whether the sun changes from frame to frame (a key sets its direction or irradiance).
+    pub fn keys_sun(&self) -> bool {
+        self.animation.keys_sun()
+    }
+
     /// The scene's own frames (`animation.frames`).
     pub fn frames(&self) -> Option<&FrameList> {
         self.frames.as_ref()

@@ -163,6 +163,23 @@ pub fn choose_mask(reference: &Image, mask_img: Option<&Image>) -> Option<Vec<bo
 /// The name `--where` gives an image's main channels (its other names are its layers').
 pub const IMAGE_LAYER: &str = "image";
 
+/// The error for a layer `name` that `img` (read from `source`) lacks, asked for by `flag`: it
+/// lists the layers the image has, or says it has none beyond its RGB image.
+pub fn missing_layer(img: &Image, name: &str, source: &str, flag: &str) -> Error {
+    let have = if img.layers.is_empty() {
+        "it has no layers beyond its RGB image (`render --aov` writes the method's layers)".to_string()
+    } else {
+        let names: Vec<&str> = img.layers.iter().map(|l| l.0.as_str()).collect();
+        format!("it has: {}", names.join(", "))
+    };
+    let image = if flag == "--where" {
+        format!("; `{IMAGE_LAYER}` names its RGB image")
+    } else {
+        String::new()
+    };
+    Error::invalid(source, flag, format!("no layer `{name}`; {have}{image}"))
+}
+
 /// A condition on each pixel's luminance in one layer of an image: `LAYER<VALUE` or
 /// `LAYER>VALUE` (`cloudgi compare --where`), LAYER one of the image's layers or [`IMAGE_LAYER`].
 #[derive(Clone, Debug, PartialEq)]
@@ -205,10 +222,8 @@ impl PixelCondition {
         let px = if self.layer == IMAGE_LAYER {
             &img.pixels[..]
         } else {
-            img.layer(&self.layer).ok_or_else(|| {
-                let have: Vec<&str> = std::iter::once(IMAGE_LAYER).chain(img.layers.iter().map(|l| l.0.as_str())).collect();
-                Error::invalid(source, "--where", format!("no layer `{}`; it has: {}", self.layer, have.join(", ")))
-            })?
+            img.layer(&self.layer)
+                .ok_or_else(|| missing_layer(img, &self.layer, source, "--where"))?
         };
         Ok(px
             .iter()

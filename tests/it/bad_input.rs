@@ -1133,7 +1133,13 @@ fn bad_arguments_of_the_other_commands() {
     fails(
         &[("a.exr", img.clone())],
         &["compare", "a.exr", "a.exr", "--where", "light_sun<1"],
-        &["a.exr", "--where", "no layer `light_sun`", "it has: image"],
+        &[
+            "a.exr",
+            "--where",
+            "no layer `light_sun`",
+            "no layers beyond its RGB image",
+            "`image` names its RGB image",
+        ],
     );
     fails(
         &[("a.exr", img.clone())],

@@ -81,6 +81,12 @@ fn render_compare_and_export() {
     );
     let out = cloudgi(d, &["compare", "single.exr", "ref.exr", "--ref-layer", "nope"]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("order0"), "lists the layers");
+    let out = cloudgi(d, &["compare", "ref.exr", "single.exr", "--ref-layer", "order1_sun"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("single.exr") && err.contains("no layers beyond its RGB image"),
+        "{err}"
+    );
     let out = cloudgi(d, &["compare", "ref.exr", "single.exr", "--budget"]);
     assert!(
         String::from_utf8_lossy(&out.stderr).contains("REF.exr"),

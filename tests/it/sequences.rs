@@ -238,3 +238,21 @@ fn a_slurm_array_job_renders_the_frames_of_a_local_render() {
     wait_for(&again);
     same_frames(local.path(), farm.path(), 1..=8);
 }
+
+#[test]
+fn a_warning_of_some_frames_is_printed_once_naming_them() {
+    let dir = tempfile::tempdir().unwrap();
+    // The sun sets behind the ground from frame 3 on (-5°, -15°, -25°).
+    let scene = "[medium]\nresolution = [8, 8, 8]\nvoxel_size = 100.0\n[camera]\nwidth = 8\nheight = 6\n[ground]\n\
+        [animation]\nframes = \"1-5\"\n\
+        [[animation.key]]\nframe = 1\nsun.elevation_deg = 15.0\nsun.azimuth_deg = 40.0\n\
+        [[animation.key]]\nframe = 5\nsun.elevation_deg = -25.0\nsun.azimuth_deg = 40.0\n";
+    std::fs::write(dir.path().join("s.toml"), scene).unwrap();
+    let err = cloudgi(dir.path(), &["render", "s.toml", "--method", "single", "-o", "f.####.exr"]);
+    let hidden: Vec<&str> = err.lines().filter(|l| l.contains("below the horizon")).collect();
+    assert_eq!(hidden.len(), 1, "{err}");
+    assert!(
+        hidden[0].starts_with("warning: frames 3-5 (the numbers are frame 3's): ") && hidden[0].contains("5.00° below"),
+        "{err}"
+    );
+}

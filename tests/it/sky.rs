@@ -20,3 +20,30 @@ fn sky_writes_the_map_and_its_png_and_refuses_a_bad_width() {
     assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("--width"));
     assert!(!d.join("x.exr").exists());
 }
+
+#[test]
+fn sky_of_a_sequence_shows_the_sun_of_the_frame_asked_for() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let sky = "[sky]\nmodel = \"atmosphere\"\nmap_width = 32\n";
+    let keys = "[animation]\nframes = \"1-5\"\n[[animation.key]]\nframe = 1\nsun.elevation_deg = 60.0\n\
+        [[animation.key]]\nframe = 5\nsun.elevation_deg = 10.0\n";
+    let sun = |elevation: &str| format!("[sun]\nelevation_deg = {elevation}\nazimuth_deg = 30.0\nfrom_atmosphere = true\n{sky}");
+    std::fs::write(d.join("seq.toml"), format!("{}{keys}", sun("60.0"))).unwrap();
+    std::fs::write(d.join("still.toml"), sun("35.0")).unwrap();
+    // The keyed sun differs by frame: which one is asked for.
+    let out = cloudgi(d, &["sky", "seq.toml", "-o", "a.exr", "--quiet"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("--frame") && err.contains("keys the sun"),
+        "{err}"
+    );
+    assert!(!d.join("a.exr").exists());
+    // Frame 3, halfway between the keys: the still scene's sun at 35°.
+    ok(d, &["sky", "seq.toml", "--frame", "3", "-o", "f3.exr", "--quiet"]);
+    ok(d, &["sky", "still.toml", "-o", "still.exr", "--quiet"]);
+    assert!(std::fs::read(d.join("f3.exr")).unwrap() == std::fs::read(d.join("still.exr")).unwrap());
+    let out = cloudgi(d, &["sky", "still.toml", "--frame", "3", "-o", "b.exr", "--quiet"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("not a sequence"), "{err}");
+}
