@@ -180,23 +180,24 @@ pub fn render(a: &RenderArgs, file: &SceneFile, quiet: bool) -> Result<()> {
         };
         note!("{task}frames {frames} of {all}: {} to render{skip}", todo.len());
     }
-    // Each frame's warnings (its keyed sun, extinction and camera, its grid file), each printed
-    // once with the frames it holds for, before the first frame renders.
-    let mut per_frame = Vec::with_capacity(todo.len());
-    for f in &todo {
-        let scene = Scene::build(f.desc.clone(), &file.source, &file.base).map_err(|e| at_frame(e, f.number))?;
-        per_frame.push((f.number, warnings::warnings(file, &a.flags(), &scene)));
-    }
-    for w in warnings::over_frames(&per_frame) {
-        note!("warning: {w}");
-    }
     let start = Instant::now();
     let mut warm = Warm::new(!a.frames.cold);
+    let (mut shown, mut per_frame) = (std::collections::HashSet::new(), Vec::with_capacity(todo.len()));
     for (i, frame) in todo.iter().enumerate() {
         let t = Instant::now();
         let scene = Scene::build(frame.desc.clone(), &file.source, &file.base).map_err(|e| at_frame(e, frame.number))?;
         let kept = memory::warm_state_bytes(&scene, warm.bytes(), warm.enabled);
         memory::check_solver(&scene, kept).map_err(|e| at_frame(e, frame.number))?;
+        // Each warning the first time its kind comes (its keyed sun, extinction and camera, its
+        // grid file), before the frame renders; at the end, those that held on only some frames.
+        let frame_warnings = warnings::warnings(file, &a.flags(), &scene);
+        for w in frame_warnings.iter().filter(|w| shown.insert(warnings::kind(w))) {
+            match i {
+                0 => note!("warning: {w}"),
+                _ => note!("warning: frame {}: {w}", frame.number),
+            }
+        }
+        per_frame.push((frame.number, frame_warnings));
         let was_warm = warm.is_warm();
         let out = render_warm(&scene, &progress::Bars::new(quiet), &mut warm)?;
         // Each frame's preview as a still's: --exposure, render.exposure, or its own automatic one.
@@ -226,6 +227,9 @@ pub fn render(a: &RenderArgs, file: &SceneFile, quiet: bool) -> Result<()> {
                 t.elapsed().as_secs_f64()
             );
         }
+    }
+    for w in warnings::over_some_frames(&per_frame) {
+        note!("warning: {w}");
     }
     Ok(())
 }

@@ -122,11 +122,12 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
     out
 }
 
-/// A sequence's warnings, each once: `per_frame` holds each frame's number and warnings, in
-/// frame order. A warning on every frame reads as a still's; one on some frames names them
-/// (`frames 3-7: …`). Warnings that differ only in their numbers (a keyed sun's elevation, a
-/// keyed extinction's optical depths) are one warning, shown with the numbers of its first frame.
-pub fn over_frames(per_frame: &[(u32, Vec<String>)]) -> Vec<String> {
+/// The warnings of a sequence's frames that did not hold unchanged on every one of them, each
+/// once, naming its frames (`frames 3-7: …`): `per_frame` holds each frame's number and
+/// warnings, in frame order. Warnings of one [`kind`] (differing only in their numbers: a keyed
+/// sun's elevation, a keyed extinction's optical depths) are one, shown with its first frame's
+/// numbers.
+pub fn over_some_frames(per_frame: &[(u32, Vec<String>)]) -> Vec<String> {
     struct Seen<'a> {
         shape: String,
         first: &'a str,
@@ -136,7 +137,7 @@ pub fn over_frames(per_frame: &[(u32, Vec<String>)]) -> Vec<String> {
     let mut seen: Vec<Seen> = Vec::new();
     for (frame, warnings) in per_frame {
         for w in warnings {
-            let shape = without_numbers(w);
+            let shape = kind(w);
             // Two warnings of one frame stay two, whatever their shape.
             match seen.iter_mut().find(|s| s.shape == shape && s.frames.last() != Some(frame)) {
                 Some(s) => {
@@ -153,10 +154,8 @@ pub fn over_frames(per_frame: &[(u32, Vec<String>)]) -> Vec<String> {
         }
     }
     seen.into_iter()
+        .filter(|s| s.frames.len() < per_frame.len() || s.varies)
         .map(|s| {
-            if s.frames.len() == per_frame.len() && !s.varies {
-                return s.first.to_string();
-            }
             let at = if s.varies {
                 format!(" (the numbers are frame {}'s)", s.frames[0])
             } else {
@@ -169,8 +168,8 @@ pub fn over_frames(per_frame: &[(u32, Vec<String>)]) -> Vec<String> {
         .collect()
 }
 
-/// `text` with each number (`-2.86`, `19`) written `#`: the shape warnings of one kind share.
-fn without_numbers(text: &str) -> String {
+/// A warning's kind: its text with each number (`-2.86`, `19`) written `#`.
+pub fn kind(text: &str) -> String {
     let mut out = String::with_capacity(text.len());
     let mut chars = text.chars().peekable();
     let mut in_number = false;
@@ -389,15 +388,14 @@ mod tests {
             (5, w(&["a", "c 3", "c 4"])),
         ];
         assert_eq!(
-            over_frames(&per_frame),
+            over_some_frames(&per_frame),
             [
-                "a",
                 "frames 1-3 (the numbers are frame 1's): the sun is 0.50° below",
                 "frames 2,5: c 3",
                 "frame 5: c 4"
             ]
         );
-        assert_eq!(without_numbers("at -2.86° and [1.0, -3]; x-ray"), "at #° and [#, #]; x-ray");
+        assert_eq!(kind("at -2.86° and [1.0, -3]; x-ray"), "at #° and [#, #]; x-ray");
     }
 
     #[test]

@@ -240,7 +240,7 @@ fn a_slurm_array_job_renders_the_frames_of_a_local_render() {
 }
 
 #[test]
-fn a_warning_of_some_frames_is_printed_once_naming_them() {
+fn a_warning_of_some_frames_is_printed_as_it_comes_and_at_the_end_naming_them() {
     let dir = tempfile::tempdir().unwrap();
     // The sun sets behind the ground from frame 3 on (-5°, -15°, -25°).
     let scene = "[medium]\nresolution = [8, 8, 8]\nvoxel_size = 100.0\n[camera]\nwidth = 8\nheight = 6\n[ground]\n\
@@ -249,10 +249,20 @@ fn a_warning_of_some_frames_is_printed_once_naming_them() {
         [[animation.key]]\nframe = 5\nsun.elevation_deg = -25.0\nsun.azimuth_deg = 40.0\n";
     std::fs::write(dir.path().join("s.toml"), scene).unwrap();
     let err = cloudgi(dir.path(), &["render", "s.toml", "--method", "single", "-o", "f.####.exr"]);
+    // Printed as frame 3 comes, and at the end with every frame it held on.
     let hidden: Vec<&str> = err.lines().filter(|l| l.contains("below the horizon")).collect();
-    assert_eq!(hidden.len(), 1, "{err}");
+    assert_eq!(hidden.len(), 2, "{err}");
     assert!(
-        hidden[0].starts_with("warning: frames 3-5 (the numbers are frame 3's): ") && hidden[0].contains("5.00° below"),
+        hidden[0].starts_with("warning: frame 3: ") && hidden[0].contains("5.00° below"),
+        "{err}"
+    );
+    assert!(
+        hidden[1].starts_with("warning: frames 3-5 (the numbers are frame 3's): ") && hidden[1].contains("5.00° below"),
+        "{err}"
+    );
+    let frame_3 = err.find("warning: frame 3: ").unwrap();
+    assert!(
+        err[..frame_3].contains("frame 2 (2 of 5)") && !err[..frame_3].contains("frame 3 (3 of 5)"),
         "{err}"
     );
 }
