@@ -243,8 +243,8 @@ pub struct GatherCubes<'a> {
 /// Pixels brighter than this many times a file map's mean luminance are taken as points by the
 /// gather cubes. The base left is at most this bright, so a cube pixel's axis sample of it is off
 /// by less than 10·mean·Ω: 1.3 % of the sky's ∫ L dω for a full-resolution pixel of a res-16 cube
-/// (Ω ≤ 0.016 sr), 5 % for a 2×2 block that one trace fills. At most a tenth of the sphere is this bright, so at most about a tenth of the
-/// merge grid's cells hold points.
+/// (Ω ≤ 0.016 sr), 5 % for a 2×2 block that one trace fills. At most a tenth of the sphere is
+/// this bright, so at most about a tenth of the merge grid's cells hold points.
 const SKY_POINTS_OVER_MEAN: f64 = 10.0;
 
 /// Per face pixel at one resolution, index j·res + i: solid angle (sr) and cone width (rad).
