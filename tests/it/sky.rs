@@ -47,3 +47,39 @@ fn sky_of_a_sequence_shows_the_sun_of_the_frame_asked_for() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("not a sequence"), "{err}");
 }
+
+#[test]
+fn a_maps_sun_is_warned_about_and_taken_out_with_extract_sun() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A 256×128 map of 0.5 with a 2×2-pixel sun of 10⁵ about 35° up, towards +z.
+    let (w, h) = (256u32, 128u32);
+    let mut map = cloudgi::Image::new(w, h);
+    map.pixels = vec![cloudgi::Rgb::splat(0.5); (w * h) as usize];
+    for j in 38..40 {
+        for i in 60..62 {
+            map.pixels[(j * w + i) as usize] = cloudgi::Rgb::splat(1e5);
+        }
+    }
+    map.write_exr(&d.join("sunny.exr")).unwrap();
+    let scene = |extract: bool| {
+        format!(
+            "[medium]\nresolution = [8, 8, 8]\nvoxel_size = 100.0\n[sun]\nirradiance = [0.0, 0.0, 0.0]\n\
+             [sky]\nmodel = \"envmap\"\npath = \"sunny.exr\"\nextract_sun = {extract}\n[camera]\nwidth = 8\nheight = 6\n"
+        )
+    };
+    std::fs::write(d.join("kept.toml"), scene(false)).unwrap();
+    std::fs::write(d.join("taken.toml"), scene(true)).unwrap();
+    let render = |file: &str| {
+        let out = cloudgi(d, &["render", file, "--method", "transport", "-o", "x.exr"]);
+        assert!(out.status.success(), "{out:?}");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    assert!(render("kept.toml").contains("extract_sun = true"));
+    assert!(!render("taken.toml").contains("holds a sun"));
+    // `cloudgi sky` shows the map without it and the sun it became.
+    let shown = ok(d, &["sky", "taken.toml", "-o", "painted.exr"]);
+    assert!(shown.contains("sun (not in the map): direction [0.060"), "{shown}");
+    let painted = cloudgi::Image::read_exr(&d.join("painted.exr")).unwrap();
+    assert!(painted.pixels.iter().all(|p| *p == cloudgi::Rgb::splat(0.5)));
+}
