@@ -1,5 +1,6 @@
 //! `cloudgi sky`: the sky exported as an EXR with its PNG, at the scene's width or `--width`, and a
-//! bad width refused without writing anything (the map's content is checked in `src/tests/sky.rs`).
+//! bad width refused without writing anything (the map's content is checked in `src/tests/sky.rs`);
+//! a sequence's sky by frame; a map's sun warned about and taken out by `sky.extract_sun`.
 
 use crate::common::{cloudgi, ok};
 
