@@ -9,8 +9,11 @@
 //!   φ is the scene file's `sun.azimuth_deg`, and u = atan2(z, x)/2π (wrapped to [0, 1)).
 //!
 //! Radiance between pixel centres is bilinear (wrapping in u, clamped in v). Sampling draws
-//! directions from a piecewise-constant density proportional to (luminance + ε)·sin θ per pixel
-//! (ε = 10⁻³ × the mean luminance keeps the density positive wherever radiance can be).
+//! directions from a piecewise-constant density proportional to (Y_max + ε)·sin θ per pixel, Y_max
+//! the largest luminance of the pixel and its eight neighbours: the bilinear radiance anywhere in
+//! a pixel blends those nine centres, so radiance over density stays bounded even where a sun's
+//! light bleeds into the pixels around it (ε = 10⁻³ × the mean luminance keeps the density
+//! positive wherever radiance can be).
 
 use super::bins::cube_pixel;
 use crate::error::{Error, Result};
@@ -28,7 +31,7 @@ pub struct EnvMap {
     pub height: usize,
     /// Radiance (W·m⁻²·sr⁻¹ per band), row-major, row 0 = +y.
     pub pixels: Vec<Rgb>,
-    /// Sampling weight f_ij = (luminance + ε)·sin θ_j per pixel.
+    /// Sampling weight f_ij = (Y_max + ε)·sin θ_j per pixel, Y_max over the pixel and its neighbours.
     weight: Vec<f64>,
     /// Per row: cumulative weights over columns (length W + 1), unnormalised.
     row_cdf: Vec<f64>,
@@ -74,12 +77,23 @@ impl EnvMap {
         let mut row_cdf = Vec::with_capacity((width + 1) * height);
         let mut marginal_cdf = Vec::with_capacity(height + 1);
         marginal_cdf.push(0.0);
+        let lum: Vec<f32> = pixels.iter().map(|p| luminance(*p).max(0.0)).collect();
+        // The largest luminance of each pixel's row neighbours (wrapping), then of its column's.
+        let row_max: Vec<f32> = (0..width * height)
+            .map(|k| {
+                let (i, j) = (k % width, k / width);
+                let at = |di: usize| lum[j * width + (i + width + di - 1) % width];
+                at(0).max(at(1)).max(at(2))
+            })
+            .collect();
         for j in 0..height {
             let sin_t = (std::f64::consts::PI * (j as f64 + 0.5) / height as f64).sin();
             let mut acc = 0.0;
             row_cdf.push(0.0);
+            let rows = j.saturating_sub(1)..(j + 2).min(height);
             for i in 0..width {
-                let f = (luminance(pixels[j * width + i]).max(0.0) as f64 + eps) * sin_t;
+                let y_max = rows.clone().map(|r| row_max[r * width + i]).fold(0.0_f32, f32::max);
+                let f = (y_max as f64 + eps) * sin_t;
                 weight.push(f);
                 acc += f;
                 row_cdf.push(acc);
@@ -214,8 +228,9 @@ impl EnvMap {
         let uu = ((i as f64 + fu) / self.width as f64) as f32;
         let vv = ((j as f64 + fv) / self.height as f64) as f32;
         let dir = direction(uu.min(1.0 - f32::EPSILON), vv);
-        let pdf = self.pdf_pixel(i, j, dir.x.hypot(dir.z));
-        (dir, self.radiance(dir), pdf)
+        // The density of the pixel the direction lies in as `pdf` finds it (f32 rounding can put
+        // a draw at its pixel's edge on the neighbour's side), so MIS weighs both alike.
+        (dir, self.radiance(dir), self.pdf(dir))
     }
 
     /// Solid-angle density (sr⁻¹) with which [`EnvMap::sample`] draws unit direction `dir`.

@@ -373,7 +373,8 @@ impl Sky {
 
     /// Draw a direction from two uniforms in [0, 1): (unit direction, its radiance, its
     /// solid-angle density in sr⁻¹). Constant sky: uniform on the sphere; map skies: density
-    /// ∝ (luminance + ε)·sin θ per pixel (see [`envmap`]). The sun is never sampled here.
+    /// ∝ (Y_max + ε)·sin θ per pixel, Y_max over the pixel and its neighbours (see [`envmap`]).
+    /// The sun is never sampled here.
     pub fn sample(&self, u: Vec2) -> (Vec3, Rgb, f32) {
         match &self.kind {
             SkyKind::Constant(l) => (crate::math::uniform_sphere(u.x, u.y), *l, 1.0 / (4.0 * PI)),

@@ -1,8 +1,9 @@
 //! Importance sampling of the sky for next-event estimation.
 //!
 //! [`SkySampler`] forwards to `Sky::sample` / `Sky::pdf`: the uniform sphere for the constant sky
-//! (every direction equally bright), and a piecewise-constant luminance·sin θ distribution over the
-//! equirectangular map for the atmosphere and environment maps (src/lighting/envmap.rs). MIS with
+//! (every direction equally bright), and a piecewise-constant distribution over the
+//! equirectangular map for the atmosphere and environment maps, each pixel's weight bounding its
+//! bilinear radiance (src/lighting/envmap.rs). MIS with
 //! the phase function (or the ground's cosine lobe) takes care of the rest.
 
 use crate::lighting::Sky;

@@ -384,7 +384,7 @@ fn sampling_pdf_is_normalised_and_matches_histogram() {
     let (_, sky) = atmosphere_sky(10.0, 128);
     let bins = DirectionBins::new();
     // ∫ pdf dω over the sphere = 1 (piecewise-constant pdf on 32×32 sub-rectangles per bin).
-    let integral: f32 = bins.integrate(32, &|d| Rgb::splat(sky.pdf(d))).iter().map(|p| p.x).sum();
+    let integral: f32 = bins.integrate(128, &|d| Rgb::splat(sky.pdf(d))).iter().map(|p| p.x).sum();
     assert!((integral - 1.0).abs() < 2e-3, "∫pdf = {integral}");
     let expected: Vec<f64> = bins.integrate(32, &|d| Rgb::splat(sky.pdf(d))).iter().map(|p| p.x as f64).collect();
     let n = 200_000u32;
