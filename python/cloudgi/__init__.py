@@ -205,39 +205,59 @@ def _voxel_size(v: Union[float, Sequence[float], None]) -> Union[float, List[flo
     return edges
 
 
-def write_exr(path: Union[str, "os.PathLike[str]"], images: Mapping[str, np.ndarray]) -> None:
+def write_exr(path: Union[str, bytes, "os.PathLike[str]"], images: Mapping[str, np.ndarray]) -> None:
     """Write ``images`` (``"rgb"`` and any AOVs, each ``(H, W, 3)``) as one OpenEXR file,
     atomically: RGB as the R, G, B channels and each AOV as ``NAME.R/G/B``, exactly as the
-    command line writes a render."""
+    command line writes a render. A path that is a folder, in a folder that does not exist or
+    cannot be written raises :class:`FileError` before anything is converted or written."""
+    path = _path("path", path)
+    if not isinstance(images, Mapping):
+        raise TypeError(f"images must be a dict {{name: (H, W, 3) array}} as render returns, not {type(images).__name__}")
+    for name in images:
+        if not isinstance(name, str):
+            raise TypeError(f"{path}: image names must be str (the EXR's layer names), not {type(name).__name__} {name!r}")
     if "rgb" not in images:
-        raise SceneError(f"{os.fspath(path)}: images need an \"rgb\" entry (got {sorted(images)})")
+        raise SceneError(f"{path}: images need an \"rgb\" entry (got {sorted(images)})")
+    _cloudgi.check_output(path, "cloudgi.write_exr", "path")
     shape = np.shape(images["rgb"])
     layers = []
     for name, img in images.items():
         arr = np.asarray(img)
+        if arr.dtype.kind not in "fiub":
+            raise TypeError(f"{path}: image `{name}` has dtype {arr.dtype}; an image holds real numbers (float, int or bool)")
         if arr.ndim != 3 or arr.shape[2] != 3 or arr.shape != shape:
             raise FormatError(
-                f"{os.fspath(path)}: image `{name}` has shape {arr.shape}; every image must be (H, W, 3) like rgb's {shape}"
+                f"{path}: image `{name}` has shape {arr.shape}; every image must be (H, W, 3) like rgb's {shape}"
             )
         if arr.size == 0:
-            raise FormatError(f"{os.fspath(path)}: the images have shape {shape}, no pixel; an EXR needs at least 1×1")
+            raise FormatError(f"{path}: the images have shape {shape}, no pixel; an EXR needs at least 1×1")
         if name == "":
-            raise FormatError(f"{os.fspath(path)}: an image named \"\" would be a second RGB; name it (its layer is NAME.R/G/B)")
+            raise FormatError(f"{path}: an image named \"\" would be a second RGB; name it (its layer is NAME.R/G/B)")
         layers.append((name, np.ascontiguousarray(arr, dtype="<f4").tobytes()))
-    _cloudgi.write_exr(os.fspath(path), shape[1], shape[0], layers)
+    _cloudgi.write_exr(path, shape[1], shape[0], layers)
 
 
-def load_vdb(path: Union[str, "os.PathLike[str]"], grid: str = "density") -> np.ndarray:
+def _path(name: str, path: Any) -> str:
+    """A path argument as str: a str, bytes (decoded as the file system names) or os.PathLike."""
+    try:
+        return os.fsdecode(path)
+    except TypeError:
+        raise TypeError(f"{name} must be a path (str, bytes or os.PathLike), not {type(path).__name__} {path!r}") from None
+
+
+def load_vdb(path: Union[str, bytes, "os.PathLike[str]"], grid: str = "density") -> np.ndarray:
     """Read grid ``grid`` of an OpenVDB file densely over its active voxels: a float32 array
     indexed ``[z][y][x]``, ready for ``render(density=...)`` (its voxel size and origin are the
     file's transform; see :func:`load_grid` for them)."""
     return load_grid(path, grid)[0]
 
 
-def load_grid(path: Union[str, "os.PathLike[str]"], grid: str = "density"):
+def load_grid(path: Union[str, bytes, "os.PathLike[str]"], grid: str = "density"):
     """Read a grid file (``.vdb``, ``.npy``, ``.raw`` with its ``.json``, ``.vol``) as the scene's
     ``medium.grid`` would be read: ``(array [z][y][x] float32, voxel_size (m, x y z), origin (m))``."""
-    dims, data, voxel, origin = _cloudgi.load_grid(os.fspath(path), grid)
+    if not isinstance(grid, str):
+        raise TypeError(f"grid must be a str, the grid's name in the file, not {type(grid).__name__} {grid!r}")
+    dims, data, voxel, origin = _cloudgi.load_grid(_path("path", path), grid)
     nx, ny, nz = dims
     return np.frombuffer(data, dtype="<f4").reshape(nz, ny, nx), tuple(voxel), tuple(origin)
 

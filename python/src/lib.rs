@@ -231,6 +231,14 @@ fn write_exr(py: Python<'_>, path: std::path::PathBuf, width: u32, height: u32, 
     py.detach(|| image.write_exr(&path)).map_err(to_py)
 }
 
+/// Check, before any work, that `path` can be written as an output file (see
+/// `cloudgi::check_output_file`); `source` and `field` name the function and argument it came
+/// from. A [`FileError`], whatever the check finds.
+#[pyfunction]
+fn check_output(path: std::path::PathBuf, source: &str, field: &str) -> PyResult<()> {
+    cloudgi::check_output_file(&path, source, field).map_err(|e| FileError::new_err(e.to_string()))
+}
+
 /// Read grid `grid` of a grid file (`.vdb`, `.npy`, `.raw`, `.vol`): (nx, ny, nz), float32
 /// little-endian bytes indexed [z][y][x], voxel size (m) and origin (m).
 #[pyfunction]
@@ -265,6 +273,7 @@ fn _cloudgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("CancelledError", py.get_type::<CancelledError>())?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(write_exr, m)?)?;
+    m.add_function(wrap_pyfunction!(check_output, m)?)?;
     m.add_function(wrap_pyfunction!(load_grid, m)?)?;
     m.add_function(wrap_pyfunction!(scene_toml, m)?)?;
     Ok(())

@@ -296,12 +296,47 @@ def test_write_exr_checks_shapes(tmp_path):
     assert not (tmp_path / "x.exr").exists()
 
 
+@pytest.mark.parametrize(
+    "where, words",
+    [
+        (".", ["cloudgi.write_exr", "`.` is a folder"]),
+        ("{tmp}", ["cloudgi.write_exr", "{tmp}` is a folder"]),
+        ("{tmp}/sub/", ["ends in a path separator"]),
+        ("{tmp}/missing/x.exr", ["the folder `{tmp}/missing` does not exist"]),
+        ("", ["the path is empty"]),
+    ],
+)
+def test_write_exr_to_a_folder_raises_file_error_naming_it_and_writes_nothing(tmp_path, where, words):
+    images = {"rgb": np.ones((2, 2, 3), np.float32)}
+    before = sorted(tmp_path.iterdir())
+    with pytest.raises(cloudgi.FileError) as e:
+        cloudgi.write_exr(where.format(tmp=tmp_path), images)
+    assert all(w.format(tmp=tmp_path) in str(e.value) for w in words), str(e.value)
+    assert sorted(tmp_path.iterdir()) == before
+
+
+def test_write_exr_takes_bytes_and_unicode_paths_and_refuses_what_is_no_image(tmp_path):
+    images = {"rgb": np.ones((2, 2, 3), np.float32)}
+    cloudgi.write_exr(bytes(tmp_path / "b.exr"), images)
+    cloudgi.write_exr(tmp_path / "wolke-☁.exr", images)
+    assert (tmp_path / "b.exr").read_bytes() == (tmp_path / "wolke-☁.exr").read_bytes()
+    with pytest.raises(TypeError, match="images must be a dict"):
+        cloudgi.write_exr(tmp_path / "x.exr", images["rgb"])
+    with pytest.raises(TypeError, match="image names must be str.*int 5"):
+        cloudgi.write_exr(tmp_path / "x.exr", {"rgb": images["rgb"], 5: images["rgb"]})
+    for rgb in (np.ones((2, 2, 3), complex), np.ones((2, 2, 3), object), np.full((2, 2, 3), "a")):
+        with pytest.raises(TypeError, match=f"image `rgb` has dtype {rgb.dtype}"):
+            cloudgi.write_exr(tmp_path / "x.exr", {"rgb": rgb})
+    assert not (tmp_path / "x.exr").exists()
+
+
 def test_load_vdb_reads_the_grid_the_scene_renders(tmp_path):
     from conftest import ROOT
 
     vdb = ROOT / "tests" / "data" / "vdb" / "multi_grid_blosc.vdb"
     density, voxel, origin = cloudgi.load_grid(vdb)
     assert np.array_equal(cloudgi.load_vdb(vdb), density)
+    assert np.array_equal(cloudgi.load_grid(bytes(vdb))[0], density)
     assert density.dtype == np.float32 and density.ndim == 3 and density.max() > 0
     scene = tiny_scene()
     scene["medium"] = {"grid": str(vdb)}
@@ -309,6 +344,21 @@ def test_load_vdb_reads_the_grid_the_scene_renders(tmp_path):
     assert voxel[0] == voxel[1] == voxel[2]
     b = cloudgi.render(tiny_scene(), method="single", density=density, voxel_size=voxel[0], origin=origin)["rgb"]
     assert np.array_equal(a, b)
+
+
+def test_load_grid_of_a_missing_file_or_a_folder_names_the_path_not_a_scene_key(tmp_path, monkeypatch):
+    # It said "field `medium.grid`: ... (paths are relative to the scene file)", and
+    # load_grid("procedural") gave the scene's built-in cloud.
+    with pytest.raises(cloudgi.FileError) as e:
+        cloudgi.load_grid(tmp_path / "missing.vdb")
+    assert str(e.value).startswith(f"{tmp_path / 'missing.vdb'}: ") and "medium.grid" not in str(e.value)
+    with pytest.raises(cloudgi.FormatError, match="not a regular file"):
+        cloudgi.load_vdb(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(cloudgi.FileError, match="procedural"):
+        cloudgi.load_grid("procedural")
+    with pytest.raises(TypeError, match="grid must be a str"):
+        cloudgi.load_grid(tmp_path / "missing.vdb", None)
 
 
 def test_a_grid_with_cells_that_are_not_cubes_renders_as_its_file_does():
