@@ -220,6 +220,28 @@ def test_an_integer_beyond_a_scene_files_names_its_key():
     assert "`camera.width`" in str(e.value)
 
 
+def test_a_keyword_argument_keeps_a_scene_without_camera_framing_its_cloud(tmp_path):
+    # No [camera] table: camera.fit frames the cloud; width= made a table and turned that off.
+    scene = tmp_path / "s.toml"
+    scene.write_text('[medium]\nresolution = [10, 8, 6]\nvoxel_size = 25.0\n[render]\nmethod = "single"\n')
+    r = run_cli("render", "--quiet", scene, "--width", 16, "--height", 12, "-o", tmp_path / "cli.exr")
+    assert r.returncode == 0, r.stderr
+    cloudgi.write_exr(tmp_path / "py.exr", cloudgi.render(scene, width=16, height=12))
+    assert (tmp_path / "py.exr").read_bytes() == (tmp_path / "cli.exr").read_bytes()
+    assert "fit = true" in cloudgi.scene_toml(str(scene), width=16)
+    assert "fit = false" in cloudgi.scene_toml(str(scene), overrides={"camera": {"fit": False}})
+
+
+def test_a_bad_override_value_is_blamed_on_the_keyword_arguments_not_the_scene_file(tmp_path):
+    scene = tmp_path / "s.toml"
+    scene.write_text("[camera]\nwidth = 8\nheight = 6\n")
+    with pytest.raises(cloudgi.SceneError) as e:
+        cloudgi.render(scene, overrides={"camera": {"width": "8"}})
+    msg = str(e.value)
+    assert msg.startswith(f"keyword arguments on {scene}: ") and 'width = "8"' in msg, msg
+    assert msg.endswith('invalid type: string "8", expected u32'), msg
+
+
 def test_a_missing_scene_file_is_the_cli_message(tmp_path):
     missing = tmp_path / "missing.toml"
     cli = cli_error("render", missing, "-o", tmp_path / "x.exr")
