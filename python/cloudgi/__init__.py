@@ -76,14 +76,27 @@ def _json(value: Any) -> str:
             v = v.tolist()
         if v is None:
             raise SceneError(f"`{key}` is None: TOML has no null; leave the key out for its default")
+        if isinstance(v, os.PathLike):
+            v = os.fsdecode(v)
+        if isinstance(v, numbers.Integral) and not isinstance(v, bool):
+            v = int(v)
+        elif isinstance(v, numbers.Real) and not isinstance(v, bool):
+            v = float(v)
         if isinstance(v, float) and not math.isfinite(v):
             return _NON_FINITE + repr(v)
         if isinstance(v, int) and not isinstance(v, bool) and not _TOML_INT_MIN <= v <= _TOML_INT_MAX:
             raise SceneError(f"`{key}` = {v} is beyond a scene file's integers (64-bit signed, ±9.2e18)")
         if isinstance(v, Mapping):
-            return {k: mark(x, f"{key}.{k}" if key else str(k)) for k, x in v.items()}
+            for k in v:
+                if not isinstance(k, str):
+                    raise TypeError(f"`{key}` has the key {k!r} ({type(k).__name__}); keys of a scene's tables are str")
+            return {k: mark(x, f"{key}.{k}" if key else k) for k, x in v.items()}
         if isinstance(v, (list, tuple)):
             return [mark(x, f"{key}[{i}]") for i, x in enumerate(v)]
+        if not isinstance(v, (str, bool, int, float)):
+            raise TypeError(
+                f"`{key}` is {type(v).__name__} {v!r}; a scene value is a str, number, bool, list or dict"
+            )
         return v
     return json.dumps(mark(value, ""), allow_nan=False)
 
@@ -95,10 +108,12 @@ def _scene_input(scene: Optional[SceneLike]) -> "tuple[str, str]":
     if isinstance(scene, Mapping):
         return "dict", _json(scene)
     if isinstance(scene, os.PathLike):
-        return "path", os.fspath(scene)
+        return "path", os.fsdecode(scene)
     if isinstance(scene, str):
+        if scene == "":
+            raise ValueError("scene is an empty string: give a scene file's path, TOML text or a dict (None: the built-in scene)")
         # TOML text has a newline, a `=` or a `[`; a path has none of them (or names a file).
-        looks_like_toml = any(c in scene for c in "\n=[") or scene == ""
+        looks_like_toml = any(c in scene for c in "\n=[")
         if looks_like_toml and not os.path.isfile(scene):
             return "toml", scene
         return "path", scene
@@ -108,22 +123,33 @@ def _scene_input(scene: Optional[SceneLike]) -> "tuple[str, str]":
 def _overrides(method: Optional[str], width: Optional[int], height: Optional[int],
                spp: Optional[int], seed: Optional[int], aov: Optional[bool],
                extra: Optional[Mapping[str, Mapping[str, Any]]] = None) -> str:
-    """The keyword arguments as scene keys (checked by the scene file's own parser)."""
+    """The keyword arguments as scene keys: their types checked here, their values by the scene
+    file's own parser."""
     over: Dict[str, Dict[str, Any]] = {}
+    if extra is not None and not isinstance(extra, Mapping):
+        raise TypeError(
+            f"overrides must be a dict of scene tables, e.g. {{'sun': {{'elevation_deg': 30}}}}, not {type(extra).__name__} {extra!r}"
+        )
     for table, keys in (extra or {}).items():
         if not isinstance(keys, Mapping):
-            raise SceneError(f"overrides: `{table}` must be a dict of keys (a table of the scene file)")
+            raise TypeError(
+                f"overrides[{table!r}] must be a dict of the table's keys, e.g. {{'width': 64}}, not {type(keys).__name__} {keys!r}"
+            )
         over.setdefault(table, {}).update(keys)
-    for table, key, value in (
-        ("render", "method", method),
-        ("camera", "width", width),
-        ("camera", "height", height),
-        ("render", "spp", spp),
-        ("render", "seed", seed),
-        ("render", "aov", aov),
+    for table, key, value, kind in (
+        ("render", "method", method, str),
+        ("camera", "width", width, numbers.Integral),
+        ("camera", "height", height, numbers.Integral),
+        ("render", "spp", spp, numbers.Integral),
+        ("render", "seed", seed, numbers.Integral),
+        ("render", "aov", aov, (bool, np.bool_)),
     ):
-        if value is not None:
-            over.setdefault(table, {})[key] = value
+        if value is None:
+            continue
+        if not isinstance(value, kind) or (kind is numbers.Integral and isinstance(value, bool)):
+            expected = {str: "a str", numbers.Integral: "an int"}.get(kind, "a bool")
+            raise TypeError(f"{key} must be {expected} (the scene's {table}.{key}), not {type(value).__name__} {value!r}")
+        over.setdefault(table, {})[key] = value
     return _json(over)
 
 
@@ -161,7 +187,8 @@ def render(
 
     ``scene``: a path to a scene file, TOML text, or a dict in the scene file's schema (tables
     and keys it leaves out take the defaults, and no ``ground`` table means no ground, as in a
-    scene file); ``None``: the built-in default scene (the command line without a scene file). ``method`` (``"transport"``, ``"single"``,
+    scene file); ``None``: the built-in default scene (the command line without a scene file;
+    ``""`` raises ValueError). ``method`` (``"transport"``, ``"single"``,
     ``"diffusion"``, ``"full"``, ``"reference"``; default: the scene's ``render.method``),
     ``width``, ``height``, ``spp``, ``seed`` and ``aov`` override the scene's keys, and so does
     ``overrides``, a dict of tables in the scene file's schema (``{"sun": {"elevation_deg": 30}}``),
@@ -170,39 +197,65 @@ def render(
     ``density``: float, integer or bool array indexed ``[z][y][x]`` (as a ``.npy`` file), replacing
     ``medium.grid``; its voxels are ``voxel_size`` metres (one edge, or ``[x, y, z]`` as
     :func:`load_grid` returns it; default ``medium.voxel_size``) with the minimum corner at
-    ``origin`` (default ``medium.origin``).
+    ``origin`` (default ``medium.origin``); either one without ``density`` raises ValueError.
 
     ``progress(stage, done, total)`` is called from this thread while the render runs (at most
     every 50 ms, on change), e.g. to drive a tqdm bar. The GIL is released during the render;
     Ctrl-C cancels it (KeyboardInterrupt). Solver warnings are issued as RuntimeWarning.
 
-    Raises :class:`SceneError` (bad scene or argument), :class:`FormatError` (bad grid data),
+    Raises TypeError or ValueError for an argument of the wrong type or shape, naming it,
+    :class:`SceneError` (bad scene or scene value), :class:`FormatError` (bad grid data),
     :class:`FileError`, :class:`SolverError`, each with the command line's message.
     """
     kind, payload = _scene_input(scene)
+    over = _overrides(method, width, height, spp, seed, aov, overrides)
+    if density is None:
+        for name, value in (("voxel_size", voxel_size), ("origin", origin)):
+            if value is not None:
+                raise ValueError(
+                    f"{name} places the density array, and no density is given; set the scene's "
+                    f"medium.{name} instead, e.g. overrides={{'medium': {{'{name}': ...}}}}"
+                )
+    if progress is not None and not callable(progress):
+        raise TypeError(f"progress must be a callable progress(stage, done, total), not {type(progress).__name__}")
     npy = None if density is None else _npy_bytes(density)
-    if origin is not None:
-        origin = [float(v) for v in origin]
     w, h, layers = _cloudgi.render(
         kind,
         payload,
-        _overrides(method, width, height, spp, seed, aov, overrides),
+        over,
         npy,
         _voxel_size(voxel_size),
-        origin,
+        None if origin is None else _vec3("origin", origin, "[x, y, z] in metres"),
         progress,
     )
     return _images(w, h, layers)
 
 
+def _real(name: str, v: Any) -> float:
+    """``v`` as a float; a bool, a str or anything not a real number raises naming ``name``."""
+    if isinstance(v, np.ndarray) and v.ndim == 0:
+        v = v.item()
+    if isinstance(v, bool) or not isinstance(v, numbers.Real):
+        raise TypeError(f"{name} must be a number, not {type(v).__name__} {v!r}")
+    return float(v)
+
+
+def _vec3(name: str, v: Any, expected: str) -> List[float]:
+    """``v`` as three floats; anything else raises naming ``name`` and ``expected``."""
+    if isinstance(v, (str, bytes)) or not isinstance(v, (Sequence, np.ndarray)):
+        raise TypeError(f"{name} must be {expected}, not {type(v).__name__} {v!r}")
+    if len(v) != 3:
+        raise ValueError(f"{name} has {len(v)} values, {list(v)!r}; it must be {expected}")
+    return [_real(f"{name}[{i}]", x) for i, x in enumerate(v)]
+
+
 def _voxel_size(v: Union[float, Sequence[float], None]) -> Union[float, List[float], None]:
     """``voxel_size`` as the extension takes it: one float, or a list of three."""
-    if v is None or isinstance(v, numbers.Real):
-        return None if v is None else float(v)
-    edges = [float(x) for x in v]
-    if len(edges) != 3:
-        raise SceneError(f"voxel_size: {len(edges)} values given; one edge in metres, or [x, y, z]")
-    return edges
+    if v is None:
+        return None
+    if isinstance(v, numbers.Real) or (isinstance(v, np.ndarray) and v.ndim == 0):
+        return _real("voxel_size", v)
+    return _vec3("voxel_size", v, "one edge in metres, or [x, y, z]")
 
 
 def write_exr(path: Union[str, bytes, "os.PathLike[str]"], images: Mapping[str, np.ndarray]) -> None:

@@ -220,6 +220,47 @@ def test_an_integer_beyond_a_scene_files_names_its_key():
     assert "`camera.width`" in str(e.value)
 
 
+def test_an_empty_scene_string_is_an_error_not_a_default_scene():
+    # None is the built-in scene; "" is no path and no TOML a user means.
+    for f in (cloudgi.render, cloudgi.scene_toml):
+        with pytest.raises(ValueError, match="scene is an empty string"):
+            f("")
+
+
+@pytest.mark.parametrize(
+    "kwargs, error, words",
+    [
+        ({"overrides": [1, 2]}, TypeError, ["overrides", "list [1, 2]", "dict of scene tables"]),
+        ({"overrides": {"camera": 5}}, TypeError, ["overrides['camera']", "int 5", "dict of the table's keys"]),
+        ({"width": "8"}, TypeError, ["width", "str '8'", "an int"]),
+        ({"spp": 2.0}, TypeError, ["spp", "float 2.0", "an int"]),
+        ({"aov": 1}, TypeError, ["aov", "int 1", "a bool"]),
+        ({"method": 3}, TypeError, ["method", "int 3", "a str"]),
+        ({"density": np.ones((2, 2, 2)), "origin": [0, 0]}, ValueError, ["origin", "2 values", "[x, y, z]"]),
+        ({"density": np.ones((2, 2, 2)), "origin": "abc"}, TypeError, ["origin", "str 'abc'", "[x, y, z]"]),
+        ({"density": np.ones((2, 2, 2)), "origin": [0, None, 0]}, TypeError, ["origin[1]", "None", "a number"]),
+        ({"density": np.ones((2, 2, 2)), "voxel_size": "x"}, TypeError, ["voxel_size", "str 'x'", "one edge"]),
+        ({"density": np.ones((2, 2, 2)), "voxel_size": True}, TypeError, ["voxel_size", "bool True", "a number"]),
+        ({"origin": [0, 0, 0]}, ValueError, ["origin", "no density", "medium.origin"]),
+        ({"voxel_size": 10.0}, ValueError, ["voxel_size", "no density", "medium.voxel_size"]),
+        ({"progress": 5}, TypeError, ["progress", "int", "callable"]),
+        ({"overrides": {"medium": {"grid": b"g.npy"}}}, TypeError, ["`medium.grid`", "bytes b'g.npy'", "a str, number"]),
+        ({"overrides": {"sun": {"irradiance": {1, 2, 3}}}}, TypeError, ["`sun.irradiance`", "set", "a str, number"]),
+        ({"overrides": {"camera": {1: 5}}}, TypeError, ["`camera`", "key 1", "str"]),
+    ],
+)
+def test_a_wrong_argument_type_names_the_key_what_was_given_and_what_is_expected(kwargs, error, words):
+    with pytest.raises(error) as e:
+        cloudgi.render(tiny_scene(), **kwargs)
+    assert all(w in str(e.value) for w in words), str(e.value)
+
+
+def test_a_path_value_in_a_dict_is_its_string(tmp_path):
+    np.save(tmp_path / "g.npy", np.ones((2, 3, 4), np.float32))
+    as_path = cloudgi.scene_toml({"medium": {"grid": tmp_path / "g.npy"}})
+    assert as_path == cloudgi.scene_toml({"medium": {"grid": str(tmp_path / "g.npy")}})
+
+
 def test_a_keyword_argument_keeps_a_scene_without_camera_framing_its_cloud(tmp_path):
     # No [camera] table: camera.fit frames the cloud; width= made a table and turned that off.
     scene = tmp_path / "s.toml"
@@ -397,5 +438,5 @@ def test_a_grid_with_cells_that_are_not_cubes_renders_as_its_file_does():
     del scene["medium"]["grid"]
     b = cloudgi.render(scene, method="single", density=density, voxel_size=voxel, origin=origin)["rgb"]
     assert a.max() > 0 and np.array_equal(a, b)
-    with pytest.raises(cloudgi.SceneError, match="voxel_size: 2 values"):
+    with pytest.raises(ValueError, match="voxel_size has 2 values"):
         cloudgi.render(scene, method="single", density=density, voxel_size=[1.0, 2.0])
