@@ -157,7 +157,13 @@ def _npy_bytes(density: Any) -> bytes:
     """The bytes of ``density`` as a ``.npy`` file, so the grid is checked exactly as one."""
     if not isinstance(density, np.ndarray):
         raise TypeError(f"density must be a numpy.ndarray, not {type(density).__name__}")
+    if isinstance(density, np.ma.MaskedArray):
+        raise TypeError("density is a masked array, whose mask a grid cannot hold; give density.filled(0)")
     buf = io.BytesIO()
+    if density.dtype.hasobject:
+        # np.save refuses Python objects; the header alone has the reader name the dtype.
+        np.lib.format.write_array_header_1_0(buf, np.lib.format.header_data_from_array_1_0(density))
+        return buf.getvalue()
     # C order, as the reader requires; a 0-d array stays 0-d (ascontiguousarray would make it 1-d
     # and the message would count the wrong dimensions).
     np.save(buf, density if density.flags.c_contiguous else np.ascontiguousarray(density), allow_pickle=False)

@@ -104,14 +104,26 @@ def npy_message(tmp_path, array) -> str:
         np.where(np.arange(64).reshape(4, 4, 4) == 21, np.nan, 1.0).astype(np.float32),  # NaN
         np.array(1.0, np.float32),  # 0-d: counted as 0 dimensions, as np.save writes it
         np.full((1, 2, 2), 1e300),  # float64 past float32's range: named, not called inf
+        np.ones((2, 2, 2), object),  # numpy.save refuses it without pickle: the dtype is named
+        np.zeros((2, 2, 2), [("density", "<f4")]),  # structured: named so, not "no 'descr'"
     ],
-    ids=["dtype", "2d", "nan", "0d", "float64-huge"],
+    ids=["dtype", "2d", "nan", "0d", "float64-huge", "object", "structured"],
 )
 def test_a_bad_density_raises_format_error_with_the_cli_message(tmp_path, array):
     with pytest.raises(cloudgi.FormatError) as e:
         cloudgi.render(tiny_scene(), density=array)
     assert str(e.value) == "in-memory density: " + npy_message(tmp_path, array)
     assert isinstance(e.value, cloudgi.CloudgiError)
+    assert "'descr'" not in str(e.value)
+
+
+def test_a_masked_density_is_refused_and_a_0d_voxel_size_is_a_number():
+    density = np.ones((2, 2, 2), np.float32)
+    with pytest.raises(TypeError, match="masked array.*filled"):
+        cloudgi.render(tiny_scene(), method="single", density=np.ma.masked_array(density))
+    a = cloudgi.render(tiny_scene(), method="single", density=density, voxel_size=np.array(30.0))["rgb"]
+    b = cloudgi.render(tiny_scene(), method="single", density=density, voxel_size=30.0)["rgb"]
+    assert np.array_equal(a, b)
 
 
 def test_an_unknown_dict_key_raises_scene_error_with_the_cli_message(tmp_path):
