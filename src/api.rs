@@ -273,7 +273,10 @@ pub struct Stats {
     pub seconds: f64,
 }
 
-/// Render `scene` with `method` (instead of its `render.method`).
+/// Render `scene` with `method` (instead of its `render.method`). Before any work it refuses
+/// ([`Error::Invalid`]), as the command line does, an image or a solver too large for this
+/// machine's available memory and a cloud wider than the diffusion solver takes, which would
+/// otherwise abort or panic midway.
 ///
 /// ```
 /// use cloudgi::{render, Method, Options, Scene};
@@ -302,6 +305,7 @@ pub fn render(scene: &Scene, method: Method, options: &Options) -> Result<Render
         chosen = s;
         &chosen
     };
+    crate::cli::memory::check_scene(scene)?;
     let out = crate::render::render(scene, &progress)?;
     if cancelled() {
         return Err(Error::Cancelled);
@@ -479,6 +483,16 @@ mod tests {
             render(&s, Method::Single, &Options::default()).unwrap().stats.method,
             Method::Single
         );
+    }
+
+    #[test]
+    fn a_cloud_wider_than_the_diffusion_solver_takes_is_an_error_not_a_panic() {
+        // Two rows of 131 071 voxels: the solver's u16 row distances overflowed and it panicked.
+        let n = crate::diffusion::MAX_BOX_ROW_CELLS + 1;
+        let d = Density::new([n, 2, 1], vec![1.0; 2 * n], 0.01, [0.0; 3]).unwrap();
+        let scene = Scene::build_with(tiny().desc, "x", Path::new("."), Some(d)).unwrap();
+        let e = render(&scene, Method::Diffusion, &Options::default()).unwrap_err().to_string();
+        assert!(e.contains("diffusion solver takes at most 131070"), "{e}");
     }
 
     #[test]

@@ -117,6 +117,16 @@ def test_a_bad_density_raises_format_error_with_the_cli_message(tmp_path, array)
     assert "'descr'" not in str(e.value)
 
 
+def test_what_the_cli_refuses_for_memory_or_the_solver_is_an_error_not_a_crash_or_a_hang():
+    # The command line's guards did not run for Python: a cloud wider than the diffusion solver's
+    # rows panicked in the render's thread and the call never returned; an image larger than the
+    # memory aborted the interpreter ("memory allocation of ... failed").
+    with pytest.raises(cloudgi.SceneError, match="diffusion solver takes at most 131070"):
+        cloudgi.render(tiny_scene(), method="diffusion", density=np.ones((2, 2, 300000), np.float32), voxel_size=0.01)
+    with pytest.raises(cloudgi.SceneError, match=r"camera.width, camera.height.*32768×32768 image.*GiB"):
+        cloudgi.render(tiny_scene(), method="full", width=32768, height=32768)
+
+
 def test_a_masked_density_is_refused_and_a_0d_voxel_size_is_a_number():
     density = np.ones((2, 2, 2), np.float32)
     with pytest.raises(TypeError, match="masked array.*filled"):

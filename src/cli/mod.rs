@@ -22,7 +22,7 @@ mod grid_scene;
 mod info;
 mod low_albedo;
 mod map_sun;
-mod memory;
+pub(crate) mod memory;
 mod output;
 mod progress;
 mod scene_file;
