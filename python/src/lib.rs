@@ -153,6 +153,9 @@ fn render<'py>(
     let rx = Mutex::new(rx);
     let result = std::thread::scope(|s| {
         s.spawn(|| {
+            // Owned here: a panic in the render drops it, so the wait below ends (and the scope
+            // raises the panic) instead of waiting for a result that never comes.
+            let tx = tx;
             let _ = tx.send(work());
         });
         loop {
