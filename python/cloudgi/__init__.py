@@ -42,6 +42,7 @@ __all__ = [
     "render",
     "write_exr",
     "load_vdb",
+    "load_grid",
     "scene_toml",
     "METHODS",
     "CloudgiError",

@@ -18,6 +18,12 @@ def test_version_is_the_crates():
     assert cloudgi.__version__ == "0.1.0"
 
 
+def test_every_public_function_is_exported():
+    # load_grid was missing from __all__, so `from cloudgi import *` left it out.
+    public = {n for n, v in vars(cloudgi).items() if callable(v) and not n.startswith("_") and v.__module__ == "cloudgi"}
+    assert public <= set(cloudgi.__all__), public - set(cloudgi.__all__)
+
+
 @pytest.mark.skipif(
     not (sys.platform.startswith("linux") and platform.machine() == "x86_64"), reason="reads an x86-64 ELF symbol table"
 )
