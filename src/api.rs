@@ -88,6 +88,19 @@ impl Image {
     }
 }
 
+/// Check, before any work, that `path` can be written as an output file, as the command line
+/// checks its outputs: a file name (not empty, not ending in a separator, within the file
+/// systems' 255 bytes), not a folder, in an existing folder this process can create files in.
+/// `source` and `field` name where the path came from, in the message ([`Error::Invalid`]).
+///
+/// ```
+/// let e = cloudgi::check_output_file(".", "my tool", "--out").unwrap_err();
+/// assert_eq!(e.to_string(), "my tool: field `--out`: `.` is a folder; the output must be a file name");
+/// ```
+pub fn check_output_file(path: impl AsRef<Path>, source: &str, field: &str) -> Result<()> {
+    crate::io::check_output_file(path.as_ref(), source, field)
+}
+
 /// A density grid in memory: it replaces `medium.grid` (see [`Scene::build_with`]); the scene's
 /// `medium.downsample`, `medium.refine`, `max_voxels` and optical properties still apply.
 #[derive(Clone, Debug)]
@@ -146,16 +159,27 @@ impl Density {
 
     /// Read grid `grid_name` of a grid file as a scene's `medium.grid` would be read (`.vdb`
     /// placed by its own transform; `.npy`, `.raw`, `.vol` as their formats say), without
-    /// `medium.downsample` or `medium.refine`.
+    /// `medium.downsample` or `medium.refine`. `path` is a file (relative: to the current folder),
+    /// never the scene's `procedural`.
     ///
     /// ```
     /// let dir = tempfile::tempdir().unwrap();
     /// let path = dir.path().join("missing.vdb");
     /// let err = cloudgi::Density::load(&path, "density").unwrap_err();
-    /// assert!(err.to_string().contains("is not a file"));
+    /// assert!(matches!(err, cloudgi::Error::Io { .. }) && err.to_string().contains("missing.vdb"));
+    /// let err = cloudgi::Density::load(dir.path(), "density").unwrap_err();
+    /// assert!(err.to_string().contains("not a regular file"));
     /// ```
     pub fn load(path: impl AsRef<Path>, grid_name: &str) -> Result<Density> {
         let path = path.as_ref();
+        // The scene's messages would name `medium.grid`, paths relative to a scene file, and
+        // take `procedural` for the built-in cloud: none of which a caller with a path meant.
+        if !std::fs::metadata(path).map_err(|e| Error::io(path, e))?.is_file() {
+            return Err(Error::format(
+                path.display().to_string(),
+                "not a regular file (a folder, device or pipe); give the path of a grid file (.vdb, .npy, .raw or .vol)",
+            ));
+        }
         let desc = crate::medium::MediumDesc {
             grid: path.display().to_string(),
             grid_name: grid_name.to_string(),
@@ -249,7 +273,10 @@ pub struct Stats {
     pub seconds: f64,
 }
 
-/// Render `scene` with `method` (instead of its `render.method`).
+/// Render `scene` with `method` (instead of its `render.method`). Before any work it refuses
+/// ([`Error::Invalid`]), as the command line does, an image or a solver too large for this
+/// machine's available memory and a cloud wider than the diffusion solver takes, which would
+/// otherwise abort or panic midway.
 ///
 /// ```
 /// use cloudgi::{render, Method, Options, Scene};
@@ -278,6 +305,7 @@ pub fn render(scene: &Scene, method: Method, options: &Options) -> Result<Render
         chosen = s;
         &chosen
     };
+    crate::cli::memory::check_scene(scene)?;
     let out = crate::render::render(scene, &progress)?;
     if cancelled() {
         return Err(Error::Cancelled);
@@ -455,6 +483,16 @@ mod tests {
             render(&s, Method::Single, &Options::default()).unwrap().stats.method,
             Method::Single
         );
+    }
+
+    #[test]
+    fn a_cloud_wider_than_the_diffusion_solver_takes_is_an_error_not_a_panic() {
+        // Two rows of 131 071 voxels: the solver's u16 row distances overflowed and it panicked.
+        let n = crate::diffusion::MAX_BOX_ROW_CELLS + 1;
+        let d = Density::new([n, 2, 1], vec![1.0; 2 * n], 0.01, [0.0; 3]).unwrap();
+        let scene = Scene::build_with(tiny().desc, "x", Path::new("."), Some(d)).unwrap();
+        let e = render(&scene, Method::Diffusion, &Options::default()).unwrap_err().to_string();
+        assert!(e.contains("diffusion solver takes at most 131070"), "{e}");
     }
 
     #[test]

@@ -48,6 +48,98 @@ pub fn read_regular(path: &Path, what: &str) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
+/// The folder a file path lives in (`.` for a bare name).
+pub fn folder_of(path: &Path) -> &Path {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    }
+}
+
+/// `dir` must be an existing folder this process can create files in (tried with a probe file,
+/// which is removed again). `source` and `field` say where the path came from, in the message
+/// (`command line`, `--output`).
+pub fn check_writable_folder(dir: &Path, source: &str, field: &str) -> Result<()> {
+    if !dir.is_dir() {
+        let message = if dir.exists() {
+            format!("`{}` is a file, not a folder to write in", dir.display())
+        } else {
+            format!("the folder `{}` does not exist; create it first", dir.display())
+        };
+        return Err(Error::invalid(source, field, message));
+    }
+    let probe = dir.join(format!(".cloudgi-write-test-{}", std::process::id()));
+    match std::fs::OpenOptions::new().write(true).create_new(true).open(&probe) {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) => Err(Error::invalid(
+            source,
+            field,
+            format!("cannot write in the folder `{}`: {e}", dir.display()),
+        )),
+    }
+}
+
+/// Longest file name (bytes) Linux, macOS and Windows file systems accept.
+const NAME_MAX: usize = 255;
+
+/// `path` names a file a command can create: it is not empty, does not end in a `/` (a folder)
+/// and its name fits the file system's limit of [`NAME_MAX`] bytes.
+pub fn check_file_name(path: &Path, source: &str, field: &str) -> Result<()> {
+    let text = path.as_os_str().as_encoded_bytes();
+    if text.is_empty() {
+        return Err(Error::invalid(source, field, "the path is empty; give a file name, e.g. cloud.exr"));
+    }
+    if text.ends_with(b"/") || text.ends_with(std::path::MAIN_SEPARATOR_STR.as_bytes()) {
+        return Err(Error::invalid(
+            source,
+            field,
+            format!(
+                "`{}` ends in a path separator, so it names a folder; give a file name, e.g. cloud.exr",
+                path.display()
+            ),
+        ));
+    }
+    let len = path.file_name().map_or(0, |n| n.as_encoded_bytes().len());
+    if len > NAME_MAX {
+        return Err(Error::invalid(
+            source,
+            field,
+            format!("the file name is {len} bytes long; file systems allow at most {NAME_MAX}: choose a shorter name"),
+        ));
+    }
+    Ok(())
+}
+
+/// `path` can be written as an output file, checked before any work: a file name
+/// ([`check_file_name`]), not a folder nor an existing read-only file, in an existing folder
+/// this process can write in.
+pub fn check_output_file(path: &Path, source: &str, field: &str) -> Result<()> {
+    check_file_name(path, source, field)?;
+    if path.is_dir() {
+        return Err(Error::invalid(
+            source,
+            field,
+            format!("`{}` is a folder; the output must be a file name", path.display()),
+        ));
+    }
+    // The atomic write renames a new file over the old one, which its own permission would not
+    // stop.
+    if std::fs::metadata(path).is_ok_and(|m| m.permissions().readonly()) {
+        return Err(Error::invalid(
+            source,
+            field,
+            format!(
+                "`{}` exists and is read-only; make it writable (chmod u+w) to replace it, or choose another output name",
+                path.display()
+            ),
+        ));
+    }
+    check_writable_folder(folder_of(path), source, field)
+}
+
 /// `n` bytes in the largest whole unit.
 fn size_text(n: u64) -> String {
     if n >= 1 << 20 && n % (1 << 20) == 0 {
@@ -238,6 +330,35 @@ mod tests {
         assert!(temp_name(&long).file_name().unwrap().len() < 40);
         write_atomic(&long, b"x").unwrap();
         assert_eq!(std::fs::read(&long).unwrap(), b"x");
+    }
+
+    #[test]
+    fn names_no_file_system_accepts_are_refused() {
+        let e = check_file_name(Path::new("out.exr/"), "command line", "--output").unwrap_err().to_string();
+        assert!(e.contains("names a folder"), "{e}");
+        let long = format!("{}.exr", "n".repeat(300));
+        let e = check_file_name(Path::new(&long), "command line", "--output").unwrap_err().to_string();
+        assert!(e.contains("304 bytes") && e.contains("shorter"), "{e}");
+        assert!(check_file_name(Path::new(&format!("{}.exr", "n".repeat(251))), "command line", "--output").is_ok());
+        let e = check_file_name(Path::new(""), "cloudgi.write_exr", "path").unwrap_err().to_string();
+        assert_eq!(e, "cloudgi.write_exr: field `path`: the path is empty; give a file name, e.g. cloud.exr");
+    }
+
+    #[test]
+    fn an_output_that_is_a_folder_is_refused_naming_it() {
+        let dir = tempfile::tempdir().unwrap();
+        for folder in [Path::new("."), dir.path()] {
+            let e = check_output_file(folder, "cloudgi.write_exr", "path").unwrap_err().to_string();
+            let want = format!("cloudgi.write_exr: field `path`: `{}` is a folder; the output must be a file name", folder.display());
+            assert_eq!(e, want);
+        }
+        assert!(check_output_file(&dir.path().join("x.exr"), "cloudgi.write_exr", "path").is_ok());
+        let file = dir.path().join("f.txt");
+        std::fs::write(&file, b"x").unwrap();
+        let e = check_output_file(&file.join("x.exr"), "cloudgi.write_exr", "path").unwrap_err().to_string();
+        assert!(e.ends_with(&format!("`{}` is a file, not a folder to write in", file.display())), "{e}");
+        std::fs::remove_file(&file).unwrap();
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "the probe file is removed");
     }
 
     #[test]

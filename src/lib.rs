@@ -51,7 +51,7 @@ mod par;
 #[cfg(test)]
 mod tests;
 
-pub use crate::api::{render, Density, Event, FnProgress, Options, Render, Stats, DENSITY_SOURCE, TOML_SOURCE};
+pub use crate::api::{check_output_file, render, Density, Event, FnProgress, Options, Render, Stats, DENSITY_SOURCE, TOML_SOURCE};
 pub use crate::camera::CameraDesc;
 pub use crate::error::{Error, Result};
 pub use crate::image::Image;

@@ -42,6 +42,7 @@ __all__ = [
     "render",
     "write_exr",
     "load_vdb",
+    "load_grid",
     "scene_toml",
     "METHODS",
     "CloudgiError",
@@ -76,14 +77,27 @@ def _json(value: Any) -> str:
             v = v.tolist()
         if v is None:
             raise SceneError(f"`{key}` is None: TOML has no null; leave the key out for its default")
+        if isinstance(v, os.PathLike):
+            v = os.fsdecode(v)
+        if isinstance(v, numbers.Integral) and not isinstance(v, bool):
+            v = int(v)
+        elif isinstance(v, numbers.Real) and not isinstance(v, bool):
+            v = float(v)
         if isinstance(v, float) and not math.isfinite(v):
             return _NON_FINITE + repr(v)
         if isinstance(v, int) and not isinstance(v, bool) and not _TOML_INT_MIN <= v <= _TOML_INT_MAX:
             raise SceneError(f"`{key}` = {v} is beyond a scene file's integers (64-bit signed, ±9.2e18)")
         if isinstance(v, Mapping):
-            return {k: mark(x, f"{key}.{k}" if key else str(k)) for k, x in v.items()}
+            for k in v:
+                if not isinstance(k, str):
+                    raise TypeError(f"`{key}` has the key {k!r} ({type(k).__name__}); keys of a scene's tables are str")
+            return {k: mark(x, f"{key}.{k}" if key else k) for k, x in v.items()}
         if isinstance(v, (list, tuple)):
             return [mark(x, f"{key}[{i}]") for i, x in enumerate(v)]
+        if not isinstance(v, (str, bool, int, float)):
+            raise TypeError(
+                f"`{key}` is {type(v).__name__} {v!r}; a scene value is a str, number, bool, list or dict"
+            )
         return v
     return json.dumps(mark(value, ""), allow_nan=False)
 
@@ -95,10 +109,12 @@ def _scene_input(scene: Optional[SceneLike]) -> "tuple[str, str]":
     if isinstance(scene, Mapping):
         return "dict", _json(scene)
     if isinstance(scene, os.PathLike):
-        return "path", os.fspath(scene)
+        return "path", os.fsdecode(scene)
     if isinstance(scene, str):
+        if scene == "":
+            raise ValueError("scene is an empty string: give a scene file's path, TOML text or a dict (None: the built-in scene)")
         # TOML text has a newline, a `=` or a `[`; a path has none of them (or names a file).
-        looks_like_toml = any(c in scene for c in "\n=[") or scene == ""
+        looks_like_toml = any(c in scene for c in "\n=[")
         if looks_like_toml and not os.path.isfile(scene):
             return "toml", scene
         return "path", scene
@@ -108,22 +124,33 @@ def _scene_input(scene: Optional[SceneLike]) -> "tuple[str, str]":
 def _overrides(method: Optional[str], width: Optional[int], height: Optional[int],
                spp: Optional[int], seed: Optional[int], aov: Optional[bool],
                extra: Optional[Mapping[str, Mapping[str, Any]]] = None) -> str:
-    """The keyword arguments as scene keys (checked by the scene file's own parser)."""
+    """The keyword arguments as scene keys: their types checked here, their values by the scene
+    file's own parser."""
     over: Dict[str, Dict[str, Any]] = {}
+    if extra is not None and not isinstance(extra, Mapping):
+        raise TypeError(
+            f"overrides must be a dict of scene tables, e.g. {{'sun': {{'elevation_deg': 30}}}}, not {type(extra).__name__} {extra!r}"
+        )
     for table, keys in (extra or {}).items():
         if not isinstance(keys, Mapping):
-            raise SceneError(f"overrides: `{table}` must be a dict of keys (a table of the scene file)")
+            raise TypeError(
+                f"overrides[{table!r}] must be a dict of the table's keys, e.g. {{'width': 64}}, not {type(keys).__name__} {keys!r}"
+            )
         over.setdefault(table, {}).update(keys)
-    for table, key, value in (
-        ("render", "method", method),
-        ("camera", "width", width),
-        ("camera", "height", height),
-        ("render", "spp", spp),
-        ("render", "seed", seed),
-        ("render", "aov", aov),
+    for table, key, value, kind in (
+        ("render", "method", method, str),
+        ("camera", "width", width, numbers.Integral),
+        ("camera", "height", height, numbers.Integral),
+        ("render", "spp", spp, numbers.Integral),
+        ("render", "seed", seed, numbers.Integral),
+        ("render", "aov", aov, (bool, np.bool_)),
     ):
-        if value is not None:
-            over.setdefault(table, {})[key] = value
+        if value is None:
+            continue
+        if not isinstance(value, kind) or (kind is numbers.Integral and isinstance(value, bool)):
+            expected = {str: "a str", numbers.Integral: "an int"}.get(kind, "a bool")
+            raise TypeError(f"{key} must be {expected} (the scene's {table}.{key}), not {type(value).__name__} {value!r}")
+        over.setdefault(table, {})[key] = value
     return _json(over)
 
 
@@ -131,7 +158,13 @@ def _npy_bytes(density: Any) -> bytes:
     """The bytes of ``density`` as a ``.npy`` file, so the grid is checked exactly as one."""
     if not isinstance(density, np.ndarray):
         raise TypeError(f"density must be a numpy.ndarray, not {type(density).__name__}")
+    if isinstance(density, np.ma.MaskedArray):
+        raise TypeError("density is a masked array, whose mask a grid cannot hold; give density.filled(0)")
     buf = io.BytesIO()
+    if density.dtype.hasobject:
+        # np.save refuses Python objects; the header alone has the reader name the dtype.
+        np.lib.format.write_array_header_1_0(buf, np.lib.format.header_data_from_array_1_0(density))
+        return buf.getvalue()
     # C order, as the reader requires; a 0-d array stays 0-d (ascontiguousarray would make it 1-d
     # and the message would count the wrong dimensions).
     np.save(buf, density if density.flags.c_contiguous else np.ascontiguousarray(density), allow_pickle=False)
@@ -161,7 +194,8 @@ def render(
 
     ``scene``: a path to a scene file, TOML text, or a dict in the scene file's schema (tables
     and keys it leaves out take the defaults, and no ``ground`` table means no ground, as in a
-    scene file); ``None``: the built-in default scene (the command line without a scene file). ``method`` (``"transport"``, ``"single"``,
+    scene file); ``None``: the built-in default scene (the command line without a scene file;
+    ``""`` raises ValueError). ``method`` (``"transport"``, ``"single"``,
     ``"diffusion"``, ``"full"``, ``"reference"``; default: the scene's ``render.method``),
     ``width``, ``height``, ``spp``, ``seed`` and ``aov`` override the scene's keys, and so does
     ``overrides``, a dict of tables in the scene file's schema (``{"sun": {"elevation_deg": 30}}``),
@@ -170,74 +204,120 @@ def render(
     ``density``: float, integer or bool array indexed ``[z][y][x]`` (as a ``.npy`` file), replacing
     ``medium.grid``; its voxels are ``voxel_size`` metres (one edge, or ``[x, y, z]`` as
     :func:`load_grid` returns it; default ``medium.voxel_size``) with the minimum corner at
-    ``origin`` (default ``medium.origin``).
+    ``origin`` (default ``medium.origin``); either one without ``density`` raises ValueError.
 
     ``progress(stage, done, total)`` is called from this thread while the render runs (at most
     every 50 ms, on change), e.g. to drive a tqdm bar. The GIL is released during the render;
     Ctrl-C cancels it (KeyboardInterrupt). Solver warnings are issued as RuntimeWarning.
 
-    Raises :class:`SceneError` (bad scene or argument), :class:`FormatError` (bad grid data),
+    Raises TypeError or ValueError for an argument of the wrong type or shape, naming it,
+    :class:`SceneError` (bad scene or scene value), :class:`FormatError` (bad grid data),
     :class:`FileError`, :class:`SolverError`, each with the command line's message.
     """
     kind, payload = _scene_input(scene)
+    over = _overrides(method, width, height, spp, seed, aov, overrides)
+    if density is None:
+        for name, value in (("voxel_size", voxel_size), ("origin", origin)):
+            if value is not None:
+                raise ValueError(
+                    f"{name} places the density array, and no density is given; set the scene's "
+                    f"medium.{name} instead, e.g. overrides={{'medium': {{'{name}': ...}}}}"
+                )
+    if progress is not None and not callable(progress):
+        raise TypeError(f"progress must be a callable progress(stage, done, total), not {type(progress).__name__}")
     npy = None if density is None else _npy_bytes(density)
-    if origin is not None:
-        origin = [float(v) for v in origin]
     w, h, layers = _cloudgi.render(
         kind,
         payload,
-        _overrides(method, width, height, spp, seed, aov, overrides),
+        over,
         npy,
         _voxel_size(voxel_size),
-        origin,
+        None if origin is None else _vec3("origin", origin, "[x, y, z] in metres"),
         progress,
     )
     return _images(w, h, layers)
 
 
+def _real(name: str, v: Any) -> float:
+    """``v`` as a float; a bool, a str or anything not a real number raises naming ``name``."""
+    if isinstance(v, np.ndarray) and v.ndim == 0:
+        v = v.item()
+    if isinstance(v, bool) or not isinstance(v, numbers.Real):
+        raise TypeError(f"{name} must be a number, not {type(v).__name__} {v!r}")
+    return float(v)
+
+
+def _vec3(name: str, v: Any, expected: str) -> List[float]:
+    """``v`` as three floats; anything else raises naming ``name`` and ``expected``."""
+    if isinstance(v, (str, bytes)) or not isinstance(v, (Sequence, np.ndarray)):
+        raise TypeError(f"{name} must be {expected}, not {type(v).__name__} {v!r}")
+    if len(v) != 3:
+        raise ValueError(f"{name} has {len(v)} values, {list(v)!r}; it must be {expected}")
+    return [_real(f"{name}[{i}]", x) for i, x in enumerate(v)]
+
+
 def _voxel_size(v: Union[float, Sequence[float], None]) -> Union[float, List[float], None]:
     """``voxel_size`` as the extension takes it: one float, or a list of three."""
-    if v is None or isinstance(v, numbers.Real):
-        return None if v is None else float(v)
-    edges = [float(x) for x in v]
-    if len(edges) != 3:
-        raise SceneError(f"voxel_size: {len(edges)} values given; one edge in metres, or [x, y, z]")
-    return edges
+    if v is None:
+        return None
+    if isinstance(v, numbers.Real) or (isinstance(v, np.ndarray) and v.ndim == 0):
+        return _real("voxel_size", v)
+    return _vec3("voxel_size", v, "one edge in metres, or [x, y, z]")
 
 
-def write_exr(path: Union[str, "os.PathLike[str]"], images: Mapping[str, np.ndarray]) -> None:
+def write_exr(path: Union[str, bytes, "os.PathLike[str]"], images: Mapping[str, np.ndarray]) -> None:
     """Write ``images`` (``"rgb"`` and any AOVs, each ``(H, W, 3)``) as one OpenEXR file,
     atomically: RGB as the R, G, B channels and each AOV as ``NAME.R/G/B``, exactly as the
-    command line writes a render."""
+    command line writes a render. A path that is a folder, in a folder that does not exist or
+    cannot be written raises :class:`FileError` before anything is converted or written."""
+    path = _path("path", path)
+    if not isinstance(images, Mapping):
+        raise TypeError(f"images must be a dict {{name: (H, W, 3) array}} as render returns, not {type(images).__name__}")
+    for name in images:
+        if not isinstance(name, str):
+            raise TypeError(f"{path}: image names must be str (the EXR's layer names), not {type(name).__name__} {name!r}")
     if "rgb" not in images:
-        raise SceneError(f"{os.fspath(path)}: images need an \"rgb\" entry (got {sorted(images)})")
+        raise SceneError(f"{path}: images need an \"rgb\" entry (got {sorted(images)})")
+    _cloudgi.check_output(path, "cloudgi.write_exr", "path")
     shape = np.shape(images["rgb"])
     layers = []
     for name, img in images.items():
         arr = np.asarray(img)
+        if arr.dtype.kind not in "fiub":
+            raise TypeError(f"{path}: image `{name}` has dtype {arr.dtype}; an image holds real numbers (float, int or bool)")
         if arr.ndim != 3 or arr.shape[2] != 3 or arr.shape != shape:
             raise FormatError(
-                f"{os.fspath(path)}: image `{name}` has shape {arr.shape}; every image must be (H, W, 3) like rgb's {shape}"
+                f"{path}: image `{name}` has shape {arr.shape}; every image must be (H, W, 3) like rgb's {shape}"
             )
         if arr.size == 0:
-            raise FormatError(f"{os.fspath(path)}: the images have shape {shape}, no pixel; an EXR needs at least 1×1")
+            raise FormatError(f"{path}: the images have shape {shape}, no pixel; an EXR needs at least 1×1")
         if name == "":
-            raise FormatError(f"{os.fspath(path)}: an image named \"\" would be a second RGB; name it (its layer is NAME.R/G/B)")
+            raise FormatError(f"{path}: an image named \"\" would be a second RGB; name it (its layer is NAME.R/G/B)")
         layers.append((name, np.ascontiguousarray(arr, dtype="<f4").tobytes()))
-    _cloudgi.write_exr(os.fspath(path), shape[1], shape[0], layers)
+    _cloudgi.write_exr(path, shape[1], shape[0], layers)
 
 
-def load_vdb(path: Union[str, "os.PathLike[str]"], grid: str = "density") -> np.ndarray:
+def _path(name: str, path: Any) -> str:
+    """A path argument as str: a str, bytes (decoded as the file system names) or os.PathLike."""
+    try:
+        return os.fsdecode(path)
+    except TypeError:
+        raise TypeError(f"{name} must be a path (str, bytes or os.PathLike), not {type(path).__name__} {path!r}") from None
+
+
+def load_vdb(path: Union[str, bytes, "os.PathLike[str]"], grid: str = "density") -> np.ndarray:
     """Read grid ``grid`` of an OpenVDB file densely over its active voxels: a float32 array
     indexed ``[z][y][x]``, ready for ``render(density=...)`` (its voxel size and origin are the
     file's transform; see :func:`load_grid` for them)."""
     return load_grid(path, grid)[0]
 
 
-def load_grid(path: Union[str, "os.PathLike[str]"], grid: str = "density"):
+def load_grid(path: Union[str, bytes, "os.PathLike[str]"], grid: str = "density"):
     """Read a grid file (``.vdb``, ``.npy``, ``.raw`` with its ``.json``, ``.vol``) as the scene's
     ``medium.grid`` would be read: ``(array [z][y][x] float32, voxel_size (m, x y z), origin (m))``."""
-    dims, data, voxel, origin = _cloudgi.load_grid(os.fspath(path), grid)
+    if not isinstance(grid, str):
+        raise TypeError(f"grid must be a str, the grid's name in the file, not {type(grid).__name__} {grid!r}")
+    dims, data, voxel, origin = _cloudgi.load_grid(_path("path", path), grid)
     nx, ny, nz = dims
     return np.frombuffer(data, dtype="<f4").reshape(nz, ny, nx), tuple(voxel), tuple(origin)
 

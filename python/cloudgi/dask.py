@@ -15,6 +15,7 @@ scene of its own (a path or TOML text), or a ``(scene, overrides)`` pair.
 
 from __future__ import annotations
 
+import inspect
 import os
 import re
 from typing import Any, Iterable, List, Mapping, Optional, Tuple, Union
@@ -27,9 +28,16 @@ Frame = Union[Mapping[str, Any], str, "os.PathLike[str]", Tuple[Any, Mapping[str
 def frame_path(out_pattern: str, frame: int) -> str:
     """The output of frame number ``frame``: ``{frame}`` in the pattern formatted
     (``cloud_{frame:04d}.exr``), or else its run of ``#`` replaced by the zero-padded number
-    (``cloud_####.exr``)."""
+    (``cloud_####.exr``). A pattern whose braces name anything but ``frame`` raises ValueError."""
+    out_pattern = os.fsdecode(out_pattern)
     if "{" in out_pattern:
-        return out_pattern.format(frame=frame)
+        try:
+            return out_pattern.format(frame=frame)
+        except (KeyError, IndexError, ValueError, AttributeError) as e:
+            raise ValueError(
+                f"out_pattern `{out_pattern}` cannot be formatted ({type(e).__name__}: {e}); its only field is "
+                "{frame}, e.g. cloud_{frame:04d}.exr (double a literal brace: {{)"
+            ) from None
     runs = list(re.finditer(r"#+", out_pattern))
     if not runs:
         raise ValueError(f"out_pattern `{out_pattern}` has no `{{frame}}` or `#` for the frame number")
@@ -40,6 +48,8 @@ def frame_path(out_pattern: str, frame: int) -> str:
 def _split(scene: Any, frame: Frame) -> Tuple[Any, Optional[Mapping[str, Any]]]:
     """(scene, overrides) of one frame."""
     if isinstance(frame, tuple):
+        if len(frame) != 2:
+            raise ValueError(f"a frame given as a tuple is (scene, overrides), not {len(frame)} items: {frame!r}")
         own, overrides = frame
         return own, overrides
     if isinstance(frame, Mapping):
@@ -72,8 +82,13 @@ def render_frames(
     Frame ``i`` (numbered from ``start``) is written to ``frame_path(out_pattern, i)``.
     ``options`` are :func:`cloudgi.render`'s keyword arguments (``method``, ``width``, ...).
     A frame whose task raises is tried again up to ``retries`` times; a frame on a worker that
-    dies is rescheduled by Dask on another. Folders are checked before anything is submitted.
+    dies is rescheduled by Dask on another. The options' names and every output path (not a
+    folder, in a folder that exists and can be written) are checked before anything is submitted.
     """
+    try:
+        inspect.signature(cloudgi.render).bind(None, overrides=None, **options)
+    except TypeError as e:
+        raise TypeError(f"render_frames: {e} (options are cloudgi.render's keyword arguments)") from None
     jobs = []
     for i, frame in enumerate(frames, start=start):
         own, overrides = _split(scene, frame)
@@ -82,9 +97,7 @@ def render_frames(
     if len(set(paths)) != len(paths):
         raise ValueError(f"out_pattern `{out_pattern}` gives several frames the same file; put {{frame}} in it")
     for p in paths:
-        folder = os.path.dirname(os.path.abspath(p))
-        if not os.path.isdir(folder):
-            raise cloudgi.FileError(f"{p}: the folder `{folder}` does not exist; create it first")
+        cloudgi._cloudgi.check_output(p, "cloudgi.dask.render_frames", "out_pattern")
     futures = [
         client.submit(render_frame, own, overrides, path, options, retries=retries, pure=False,
                       key=f"cloudgi-frame-{os.path.basename(path)}-{os.urandom(4).hex()}")

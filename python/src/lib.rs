@@ -153,6 +153,9 @@ fn render<'py>(
     let rx = Mutex::new(rx);
     let result = std::thread::scope(|s| {
         s.spawn(|| {
+            // Owned here: a panic in the render drops it, so the wait below ends (and the scope
+            // raises the panic) instead of waiting for a result that never comes.
+            let tx = tx;
             let _ = tx.send(work());
         });
         loop {
@@ -231,6 +234,14 @@ fn write_exr(py: Python<'_>, path: std::path::PathBuf, width: u32, height: u32, 
     py.detach(|| image.write_exr(&path)).map_err(to_py)
 }
 
+/// Check, before any work, that `path` can be written as an output file (see
+/// `cloudgi::check_output_file`); `source` and `field` name the function and argument it came
+/// from. A [`FileError`], whatever the check finds.
+#[pyfunction]
+fn check_output(path: std::path::PathBuf, source: &str, field: &str) -> PyResult<()> {
+    cloudgi::check_output_file(&path, source, field).map_err(|e| FileError::new_err(e.to_string()))
+}
+
 /// Read grid `grid` of a grid file (`.vdb`, `.npy`, `.raw`, `.vol`): (nx, ny, nz), float32
 /// little-endian bytes indexed [z][y][x], voxel size (m) and origin (m).
 #[pyfunction]
@@ -265,6 +276,7 @@ fn _cloudgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("CancelledError", py.get_type::<CancelledError>())?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(write_exr, m)?)?;
+    m.add_function(wrap_pyfunction!(check_output, m)?)?;
     m.add_function(wrap_pyfunction!(load_grid, m)?)?;
     m.add_function(wrap_pyfunction!(scene_toml, m)?)?;
     Ok(())

@@ -89,11 +89,25 @@ impl SceneInput {
             message: e.to_string(),
         })?;
         merge(&mut table, &self.overrides);
+        // The scene alone parsed: an error now is the keyword arguments', and its line is in the
+        // merged text, not the scene's.
+        let merged_name = format!("keyword arguments on {name}");
         let merged = toml::to_string(&table).map_err(|e| Error::Parse {
-            file: name.clone(),
+            file: merged_name.clone(),
             message: e.to_string(),
         })?;
-        Ok((SceneDesc::from_toml(&merged, &name)?, name, base))
+        let mut merged_desc = SceneDesc::from_toml(&merged, &merged_name)?;
+        // A scene without a `[camera]` table frames its cloud (camera.fit); a keyword argument
+        // that creates the table (`width=`) keeps that, as `--width` does on the command line.
+        let sets_fit = self
+            .overrides
+            .get("camera")
+            .and_then(toml::Value::as_table)
+            .is_some_and(|c| c.contains_key("fit"));
+        if !sets_fit {
+            merged_desc.camera.fit = desc.camera.fit;
+        }
+        Ok((merged_desc, name, base))
     }
 }
 

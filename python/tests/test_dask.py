@@ -5,6 +5,7 @@ import os
 import signal
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -37,8 +38,13 @@ def local_bytes(tmp_path, scene, frame, **options) -> bytes:
 def test_frame_paths():
     assert cloudgi.dask.frame_path("out/c_{frame:04d}.exr", 7) == "out/c_0007.exr"
     assert cloudgi.dask.frame_path("out/c_###.exr", 7) == "out/c_007.exr"
+    assert cloudgi.dask.frame_path(Path("out/c_{frame:04d}.exr"), 7) == "out/c_0007.exr"
     with pytest.raises(ValueError):
         cloudgi.dask.frame_path("out/c.exr", 7)
+    # Braces that are not {frame}: a ValueError naming the pattern, not a KeyError or IndexError.
+    for bad in ("out/c_{i}.exr", "out/c_{}.exr", "out/c_{frame.exr"):
+        with pytest.raises(ValueError, match=r"out_pattern `.*` cannot be formatted.*\{frame\}"):
+            cloudgi.dask.frame_path(bad, 7)
 
 
 def test_four_frames_equal_local_renders(client, tmp_path):
@@ -88,3 +94,16 @@ def test_a_failing_frame_raises_after_its_retries(client, tmp_path):
 def test_a_missing_folder_is_found_before_submitting(client, tmp_path):
     with pytest.raises(cloudgi.FileError, match="does not exist"):
         cloudgi.dask.render_frames(tiny_scene(), FRAMES, client, str(tmp_path / "no" / "f_{frame}.exr"))
+
+
+def test_bad_outputs_options_and_frames_are_found_before_submitting(client, tmp_path):
+    # Each used to render on a worker (retried) before failing, or failed with no message.
+    (tmp_path / "f_1.exr").mkdir()
+    with pytest.raises(cloudgi.FileError, match="out_pattern.*f_1.exr` is a folder"):
+        cloudgi.dask.render_frames(tiny_scene(), FRAMES, client, str(tmp_path / "f_{frame}.exr"))
+    with pytest.raises(TypeError, match="widht"):
+        cloudgi.dask.render_frames(tiny_scene(), FRAMES, client, str(tmp_path / "g_{frame}.exr"), widht=8)
+    with pytest.raises(ValueError, match=r"\(scene, overrides\), not 3 items"):
+        cloudgi.dask.render_frames(tiny_scene(), [(tiny_scene(), {}, 1)], client, str(tmp_path / "h_{frame}.exr"))
+    assert not client.processing() or not any(client.processing().values())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f_1.exr"]

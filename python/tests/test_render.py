@@ -18,6 +18,12 @@ def test_version_is_the_crates():
     assert cloudgi.__version__ == "0.1.0"
 
 
+def test_every_public_function_is_exported():
+    # load_grid was missing from __all__, so `from cloudgi import *` left it out.
+    public = {n for n, v in vars(cloudgi).items() if callable(v) and not n.startswith("_") and v.__module__ == "cloudgi"}
+    assert public <= set(cloudgi.__all__), public - set(cloudgi.__all__)
+
+
 @pytest.mark.skipif(
     not (sys.platform.startswith("linux") and platform.machine() == "x86_64"), reason="reads an x86-64 ELF symbol table"
 )
@@ -104,14 +110,36 @@ def npy_message(tmp_path, array) -> str:
         np.where(np.arange(64).reshape(4, 4, 4) == 21, np.nan, 1.0).astype(np.float32),  # NaN
         np.array(1.0, np.float32),  # 0-d: counted as 0 dimensions, as np.save writes it
         np.full((1, 2, 2), 1e300),  # float64 past float32's range: named, not called inf
+        np.ones((2, 2, 2), object),  # numpy.save refuses it without pickle: the dtype is named
+        np.zeros((2, 2, 2), [("density", "<f4")]),  # structured: named so, not "no 'descr'"
     ],
-    ids=["dtype", "2d", "nan", "0d", "float64-huge"],
+    ids=["dtype", "2d", "nan", "0d", "float64-huge", "object", "structured"],
 )
 def test_a_bad_density_raises_format_error_with_the_cli_message(tmp_path, array):
     with pytest.raises(cloudgi.FormatError) as e:
         cloudgi.render(tiny_scene(), density=array)
     assert str(e.value) == "in-memory density: " + npy_message(tmp_path, array)
     assert isinstance(e.value, cloudgi.CloudgiError)
+    assert "'descr'" not in str(e.value)
+
+
+def test_what_the_cli_refuses_for_memory_or_the_solver_is_an_error_not_a_crash_or_a_hang():
+    # The command line's guards did not run for Python: a cloud wider than the diffusion solver's
+    # rows panicked in the render's thread and the call never returned; an image larger than the
+    # memory aborted the interpreter ("memory allocation of ... failed").
+    with pytest.raises(cloudgi.SceneError, match="diffusion solver takes at most 131070"):
+        cloudgi.render(tiny_scene(), method="diffusion", density=np.ones((2, 2, 300000), np.float32), voxel_size=0.01)
+    with pytest.raises(cloudgi.SceneError, match=r"camera.width, camera.height.*32768×32768 image.*GiB"):
+        cloudgi.render(tiny_scene(), method="full", width=32768, height=32768)
+
+
+def test_a_masked_density_is_refused_and_a_0d_voxel_size_is_a_number():
+    density = np.ones((2, 2, 2), np.float32)
+    with pytest.raises(TypeError, match="masked array.*filled"):
+        cloudgi.render(tiny_scene(), method="single", density=np.ma.masked_array(density))
+    a = cloudgi.render(tiny_scene(), method="single", density=density, voxel_size=np.array(30.0))["rgb"]
+    b = cloudgi.render(tiny_scene(), method="single", density=density, voxel_size=30.0)["rgb"]
+    assert np.array_equal(a, b)
 
 
 def test_an_unknown_dict_key_raises_scene_error_with_the_cli_message(tmp_path):
@@ -220,6 +248,69 @@ def test_an_integer_beyond_a_scene_files_names_its_key():
     assert "`camera.width`" in str(e.value)
 
 
+def test_an_empty_scene_string_is_an_error_not_a_default_scene():
+    # None is the built-in scene; "" is no path and no TOML a user means.
+    for f in (cloudgi.render, cloudgi.scene_toml):
+        with pytest.raises(ValueError, match="scene is an empty string"):
+            f("")
+
+
+@pytest.mark.parametrize(
+    "kwargs, error, words",
+    [
+        ({"overrides": [1, 2]}, TypeError, ["overrides", "list [1, 2]", "dict of scene tables"]),
+        ({"overrides": {"camera": 5}}, TypeError, ["overrides['camera']", "int 5", "dict of the table's keys"]),
+        ({"width": "8"}, TypeError, ["width", "str '8'", "an int"]),
+        ({"spp": 2.0}, TypeError, ["spp", "float 2.0", "an int"]),
+        ({"aov": 1}, TypeError, ["aov", "int 1", "a bool"]),
+        ({"method": 3}, TypeError, ["method", "int 3", "a str"]),
+        ({"density": np.ones((2, 2, 2)), "origin": [0, 0]}, ValueError, ["origin", "2 values", "[x, y, z]"]),
+        ({"density": np.ones((2, 2, 2)), "origin": "abc"}, TypeError, ["origin", "str 'abc'", "[x, y, z]"]),
+        ({"density": np.ones((2, 2, 2)), "origin": [0, None, 0]}, TypeError, ["origin[1]", "None", "a number"]),
+        ({"density": np.ones((2, 2, 2)), "voxel_size": "x"}, TypeError, ["voxel_size", "str 'x'", "one edge"]),
+        ({"density": np.ones((2, 2, 2)), "voxel_size": True}, TypeError, ["voxel_size", "bool True", "a number"]),
+        ({"origin": [0, 0, 0]}, ValueError, ["origin", "no density", "medium.origin"]),
+        ({"voxel_size": 10.0}, ValueError, ["voxel_size", "no density", "medium.voxel_size"]),
+        ({"progress": 5}, TypeError, ["progress", "int", "callable"]),
+        ({"overrides": {"medium": {"grid": b"g.npy"}}}, TypeError, ["`medium.grid`", "bytes b'g.npy'", "a str, number"]),
+        ({"overrides": {"sun": {"irradiance": {1, 2, 3}}}}, TypeError, ["`sun.irradiance`", "set", "a str, number"]),
+        ({"overrides": {"camera": {1: 5}}}, TypeError, ["`camera`", "key 1", "str"]),
+    ],
+)
+def test_a_wrong_argument_type_names_the_key_what_was_given_and_what_is_expected(kwargs, error, words):
+    with pytest.raises(error) as e:
+        cloudgi.render(tiny_scene(), **kwargs)
+    assert all(w in str(e.value) for w in words), str(e.value)
+
+
+def test_a_path_value_in_a_dict_is_its_string(tmp_path):
+    np.save(tmp_path / "g.npy", np.ones((2, 3, 4), np.float32))
+    as_path = cloudgi.scene_toml({"medium": {"grid": tmp_path / "g.npy"}})
+    assert as_path == cloudgi.scene_toml({"medium": {"grid": str(tmp_path / "g.npy")}})
+
+
+def test_a_keyword_argument_keeps_a_scene_without_camera_framing_its_cloud(tmp_path):
+    # No [camera] table: camera.fit frames the cloud; width= made a table and turned that off.
+    scene = tmp_path / "s.toml"
+    scene.write_text('[medium]\nresolution = [10, 8, 6]\nvoxel_size = 25.0\n[render]\nmethod = "single"\n')
+    r = run_cli("render", "--quiet", scene, "--width", 16, "--height", 12, "-o", tmp_path / "cli.exr")
+    assert r.returncode == 0, r.stderr
+    cloudgi.write_exr(tmp_path / "py.exr", cloudgi.render(scene, width=16, height=12))
+    assert (tmp_path / "py.exr").read_bytes() == (tmp_path / "cli.exr").read_bytes()
+    assert "fit = true" in cloudgi.scene_toml(str(scene), width=16)
+    assert "fit = false" in cloudgi.scene_toml(str(scene), overrides={"camera": {"fit": False}})
+
+
+def test_a_bad_override_value_is_blamed_on_the_keyword_arguments_not_the_scene_file(tmp_path):
+    scene = tmp_path / "s.toml"
+    scene.write_text("[camera]\nwidth = 8\nheight = 6\n")
+    with pytest.raises(cloudgi.SceneError) as e:
+        cloudgi.render(scene, overrides={"camera": {"width": "8"}})
+    msg = str(e.value)
+    assert msg.startswith(f"keyword arguments on {scene}: ") and 'width = "8"' in msg, msg
+    assert msg.endswith('invalid type: string "8", expected u32'), msg
+
+
 def test_a_missing_scene_file_is_the_cli_message(tmp_path):
     missing = tmp_path / "missing.toml"
     cli = cli_error("render", missing, "-o", tmp_path / "x.exr")
@@ -296,12 +387,47 @@ def test_write_exr_checks_shapes(tmp_path):
     assert not (tmp_path / "x.exr").exists()
 
 
+@pytest.mark.parametrize(
+    "where, words",
+    [
+        (".", ["cloudgi.write_exr", "`.` is a folder"]),
+        ("{tmp}", ["cloudgi.write_exr", "{tmp}` is a folder"]),
+        ("{tmp}/sub/", ["ends in a path separator"]),
+        ("{tmp}/missing/x.exr", ["the folder `{tmp}/missing` does not exist"]),
+        ("", ["the path is empty"]),
+    ],
+)
+def test_write_exr_to_a_folder_raises_file_error_naming_it_and_writes_nothing(tmp_path, where, words):
+    images = {"rgb": np.ones((2, 2, 3), np.float32)}
+    before = sorted(tmp_path.iterdir())
+    with pytest.raises(cloudgi.FileError) as e:
+        cloudgi.write_exr(where.format(tmp=tmp_path), images)
+    assert all(w.format(tmp=tmp_path) in str(e.value) for w in words), str(e.value)
+    assert sorted(tmp_path.iterdir()) == before
+
+
+def test_write_exr_takes_bytes_and_unicode_paths_and_refuses_what_is_no_image(tmp_path):
+    images = {"rgb": np.ones((2, 2, 3), np.float32)}
+    cloudgi.write_exr(bytes(tmp_path / "b.exr"), images)
+    cloudgi.write_exr(tmp_path / "wolke-☁.exr", images)
+    assert (tmp_path / "b.exr").read_bytes() == (tmp_path / "wolke-☁.exr").read_bytes()
+    with pytest.raises(TypeError, match="images must be a dict"):
+        cloudgi.write_exr(tmp_path / "x.exr", images["rgb"])
+    with pytest.raises(TypeError, match="image names must be str.*int 5"):
+        cloudgi.write_exr(tmp_path / "x.exr", {"rgb": images["rgb"], 5: images["rgb"]})
+    for rgb in (np.ones((2, 2, 3), complex), np.ones((2, 2, 3), object), np.full((2, 2, 3), "a")):
+        with pytest.raises(TypeError, match=f"image `rgb` has dtype {rgb.dtype}"):
+            cloudgi.write_exr(tmp_path / "x.exr", {"rgb": rgb})
+    assert not (tmp_path / "x.exr").exists()
+
+
 def test_load_vdb_reads_the_grid_the_scene_renders(tmp_path):
     from conftest import ROOT
 
     vdb = ROOT / "tests" / "data" / "vdb" / "multi_grid_blosc.vdb"
     density, voxel, origin = cloudgi.load_grid(vdb)
     assert np.array_equal(cloudgi.load_vdb(vdb), density)
+    assert np.array_equal(cloudgi.load_grid(bytes(vdb))[0], density)
     assert density.dtype == np.float32 and density.ndim == 3 and density.max() > 0
     scene = tiny_scene()
     scene["medium"] = {"grid": str(vdb)}
@@ -309,6 +435,21 @@ def test_load_vdb_reads_the_grid_the_scene_renders(tmp_path):
     assert voxel[0] == voxel[1] == voxel[2]
     b = cloudgi.render(tiny_scene(), method="single", density=density, voxel_size=voxel[0], origin=origin)["rgb"]
     assert np.array_equal(a, b)
+
+
+def test_load_grid_of_a_missing_file_or_a_folder_names_the_path_not_a_scene_key(tmp_path, monkeypatch):
+    # It said "field `medium.grid`: ... (paths are relative to the scene file)", and
+    # load_grid("procedural") gave the scene's built-in cloud.
+    with pytest.raises(cloudgi.FileError) as e:
+        cloudgi.load_grid(tmp_path / "missing.vdb")
+    assert str(e.value).startswith(f"{tmp_path / 'missing.vdb'}: ") and "medium.grid" not in str(e.value)
+    with pytest.raises(cloudgi.FormatError, match="not a regular file"):
+        cloudgi.load_vdb(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(cloudgi.FileError, match="procedural"):
+        cloudgi.load_grid("procedural")
+    with pytest.raises(TypeError, match="grid must be a str"):
+        cloudgi.load_grid(tmp_path / "missing.vdb", None)
 
 
 def test_a_grid_with_cells_that_are_not_cubes_renders_as_its_file_does():
@@ -325,5 +466,5 @@ def test_a_grid_with_cells_that_are_not_cubes_renders_as_its_file_does():
     del scene["medium"]["grid"]
     b = cloudgi.render(scene, method="single", density=density, voxel_size=voxel, origin=origin)["rgb"]
     assert a.max() > 0 and np.array_equal(a, b)
-    with pytest.raises(cloudgi.SceneError, match="voxel_size: 2 values"):
+    with pytest.raises(ValueError, match="voxel_size has 2 values"):
         cloudgi.render(scene, method="single", density=density, voxel_size=[1.0, 2.0])

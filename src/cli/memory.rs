@@ -40,10 +40,20 @@ pub fn gib(b: u64) -> String {
 
 /// The image of `desc` (after the command line's overrides) must fit in `available` bytes.
 pub fn check_image_fits(desc: &SceneDesc, source: &str, available: Option<u64>) -> Result<()> {
-    let (w, h) = (desc.camera.width as u64, desc.camera.height as u64);
     let r = &desc.render;
+    image_fits(
+        [desc.camera.width, desc.camera.height],
+        (r.method, r.aov, r.stderr),
+        source,
+        available,
+    )
+}
+
+/// A `w`×`h` image rendered by `(method, aov, stderr)` must fit in `available` bytes.
+fn image_fits([w, h]: [u32; 2], (method, aov, stderr): (Method, bool, bool), source: &str, available: Option<u64>) -> Result<()> {
+    let (w, h) = (w as u64, h as u64);
     // Saturating: the camera's own limits are checked later, so any u32 size may arrive here.
-    let need = (w * h).saturating_mul(bytes_per_pixel(r.method, r.aov, r.stderr));
+    let need = (w * h).saturating_mul(bytes_per_pixel(method, aov, stderr));
     match available {
         Some(avail) if need > avail => Err(Error::invalid(
             source,
@@ -51,13 +61,28 @@ pub fn check_image_fits(desc: &SceneDesc, source: &str, available: Option<u64>) 
             format!(
                 "a {w}×{h} image with method {} needs about {} of memory but {} is available; \
                  lower camera.width and camera.height (or --width/--height)",
-                r.method.name(),
+                method.name(),
                 gib(need),
                 gib(avail)
             ),
         )),
         _ => Ok(()),
     }
+}
+
+/// The command line's guards on a built scene as it will render (its method, image and cloud),
+/// for [`crate::render`]: the image and the solver must fit this machine's available memory and
+/// the cloud the diffusion solver's rows, so no caller's render aborts or panics midway.
+pub fn check_scene(scene: &Scene) -> Result<()> {
+    let available = available_bytes();
+    let r = &scene.render;
+    image_fits(
+        [scene.camera.width, scene.camera.height],
+        (r.method, r.aov, r.stderr),
+        &scene.source,
+        available,
+    )?;
+    check_solver_fits(scene, available, 0)
 }
 
 /// [`check_image_fits`] against this machine's available memory.

@@ -22,7 +22,7 @@ mod grid_scene;
 mod info;
 mod low_albedo;
 mod map_sun;
-mod memory;
+pub(crate) mod memory;
 mod output;
 mod progress;
 mod scene_file;
@@ -261,7 +261,7 @@ fn check_exr_path(p: &Path, flag: &str) -> Result<()> {
 
 /// An output's file name: one the file system takes, and a name before `.exr` / `.png`.
 fn check_output_name(p: &Path, flag: &str) -> Result<()> {
-    output::check_file_name(p, flag)?;
+    crate::io::check_file_name(p, "command line", flag)?;
     let bare = p
         .file_name()
         .and_then(|n| n.to_str())

@@ -3,15 +3,11 @@
 //! scene's own input files (the atomic rename would replace either).
 
 use crate::error::{Error, Result};
+use crate::io::{check_output_file, check_writable_folder, folder_of};
 use std::path::{Path, PathBuf};
 
-/// The folder a file path lives in (`.` for a bare name).
-fn folder_of(path: &Path) -> &Path {
-    match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    }
-}
+/// The source named in the messages.
+const CLI: &str = "command line";
 
 /// `path` with its folder resolved (symbolic links, `..`), the file itself need not exist.
 fn resolved(path: &Path) -> Option<PathBuf> {
@@ -19,58 +15,6 @@ fn resolved(path: &Path) -> Option<PathBuf> {
         return Some(p);
     }
     Some(folder_of(path).canonicalize().ok()?.join(path.file_name()?))
-}
-
-/// `dir` must be an existing folder this process can create files in (tried with a probe file,
-/// which is removed again).
-pub fn check_writable_folder(dir: &Path, flag: &str) -> Result<()> {
-    if !dir.is_dir() {
-        return Err(Error::invalid(
-            "command line",
-            flag,
-            format!("the folder `{}` does not exist; create it first", dir.display()),
-        ));
-    }
-    let probe = dir.join(format!(".cloudgi-write-test-{}", std::process::id()));
-    match std::fs::OpenOptions::new().write(true).create_new(true).open(&probe) {
-        Ok(_) => {
-            let _ = std::fs::remove_file(&probe);
-            Ok(())
-        }
-        Err(e) => Err(Error::invalid(
-            "command line",
-            flag,
-            format!("cannot write in the folder `{}`: {e}", dir.display()),
-        )),
-    }
-}
-
-/// Longest file name (bytes) Linux, macOS and Windows file systems accept.
-const NAME_MAX: usize = 255;
-
-/// `path` names a file a command can create: it does not end in a `/` (a folder) and its name
-/// fits the file system's limit of [`NAME_MAX`] bytes.
-pub fn check_file_name(path: &Path, flag: &str) -> Result<()> {
-    let text = path.as_os_str().as_encoded_bytes();
-    if text.ends_with(b"/") || text.ends_with(std::path::MAIN_SEPARATOR_STR.as_bytes()) {
-        return Err(Error::invalid(
-            "command line",
-            flag,
-            format!(
-                "`{}` ends in a path separator, so it names a folder; give a file name, e.g. cloud.exr",
-                path.display()
-            ),
-        ));
-    }
-    let len = path.file_name().map_or(0, |n| n.as_encoded_bytes().len());
-    if len > NAME_MAX {
-        return Err(Error::invalid(
-            "command line",
-            flag,
-            format!("the file name is {len} bytes long; file systems allow at most {NAME_MAX}: choose a shorter name"),
-        ));
-    }
-    Ok(())
 }
 
 /// `path` must not be one of `inputs` (path, the key or role that names it).
@@ -93,31 +37,12 @@ fn check_not_input(path: &Path, flag: &str, inputs: &[(PathBuf, String)]) -> Res
     Ok(())
 }
 
-/// Every file in `files` can be written: its folder exists and is writable, it is not a folder
-/// nor an existing read-only file, and it is none of the scene's `inputs`. `flag` names the option the paths come from.
+/// Every file in `files` can be written ([`check_output_file`]: a file name, not a folder nor an
+/// existing read-only file, in a writable folder) and is none of the scene's `inputs`. `flag`
+/// names the option the paths come from.
 pub fn check_files(files: &[&Path], flag: &str, inputs: &[(PathBuf, String)]) -> Result<()> {
     for f in files {
-        check_file_name(f, flag)?;
-        if f.is_dir() {
-            return Err(Error::invalid(
-                "command line",
-                flag,
-                format!("`{}` is a folder; the output must be a file name", f.display()),
-            ));
-        }
-        // The atomic write renames a new file over the old one, which its own permission would
-        // not stop.
-        if std::fs::metadata(f).is_ok_and(|m| m.permissions().readonly()) {
-            return Err(Error::invalid(
-                "command line",
-                flag,
-                format!(
-                    "`{}` exists and is read-only; make it writable (chmod u+w) to replace it, or choose another output name",
-                    f.display()
-                ),
-            ));
-        }
-        check_writable_folder(folder_of(f), flag)?;
+        check_output_file(f, CLI, flag)?;
         check_not_input(f, flag, inputs)?;
     }
     Ok(())
@@ -139,9 +64,9 @@ pub fn check_folder(dir: &Path, flag: &str, inputs: &[(PathBuf, String)], would_
         while !above.exists() {
             above = folder_of(above);
         }
-        return check_writable_folder(above, flag);
+        return check_writable_folder(above, CLI, flag);
     }
-    check_writable_folder(dir, flag)?;
+    check_writable_folder(dir, CLI, flag)?;
     let Ok(d) = dir.canonicalize() else {
         return Ok(());
     };
@@ -191,16 +116,6 @@ mod tests {
         std::fs::set_permissions(&out, p).unwrap();
         let e = check_files(&[&out], "--output", &[]).unwrap_err().to_string();
         assert!(e.contains("--output") && e.contains("out.exr") && e.contains("read-only"), "{e}");
-    }
-
-    #[test]
-    fn names_no_file_system_accepts_are_refused() {
-        let e = check_file_name(Path::new("out.exr/"), "--output").unwrap_err().to_string();
-        assert!(e.contains("names a folder"), "{e}");
-        let long = format!("{}.exr", "n".repeat(300));
-        let e = check_file_name(Path::new(&long), "--output").unwrap_err().to_string();
-        assert!(e.contains("304 bytes") && e.contains("shorter"), "{e}");
-        assert!(check_file_name(Path::new(&format!("{}.exr", "n".repeat(251))), "--output").is_ok());
     }
 
     #[test]

@@ -348,10 +348,13 @@ pub fn parse_npy(b: &[u8], name: &str) -> Result<Grid3> {
         let colon = rest.find(':')?;
         Some(rest[colon + 1..].trim_start())
     };
-    let descr = field("descr")
-        .and_then(|s| s.strip_prefix('\''))
-        .and_then(|s| s.split('\'').next())
-        .ok_or_else(|| Error::format(name, ".npy header has no 'descr'"))?;
+    let descr = field("descr").ok_or_else(|| Error::format(name, ".npy header has no 'descr'"))?;
+    let descr = descr.strip_prefix('\'').and_then(|s| s.split('\'').next()).ok_or_else(|| {
+        Error::format(
+            name,
+            ".npy dtype is structured (named fields), not one number per voxel; save one field, e.g. numpy.save(path, array['density'])",
+        )
+    })?;
     let fortran = field("fortran_order").map(|s| s.starts_with("True")).unwrap_or(false);
     let dtype = super::npy_dtype::NpyDtype::parse(descr).ok_or_else(|| {
         Error::format(

@@ -133,8 +133,8 @@ impl Dz for u16 {
 pub(super) const NO_MINUS_X: u32 = 1 << 31;
 
 /// Widest box (cells along x) the solver takes: a row's ±y distances, at most half a box row of
-/// the other colour's entries, are stored in a u16. The command line refuses a wider cloud
-/// before any work (`medium.downsample` is the fix); a library caller's build panics.
+/// the other colour's entries, are stored in a u16. The command line and the library's `render`
+/// refuse a wider cloud before any work (`medium.downsample` is the fix); a build past them panics.
 pub const MAX_BOX_ROW_CELLS: usize = 2 * u16::MAX as usize;
 
 impl<Z: Dz> Row<Z> {
