@@ -190,6 +190,14 @@ pub fn write_atomic_all(files: &[(&Path, &[u8])]) -> Result<()> {
     result
 }
 
+/// Bytes of memory available to new allocations (Linux `MemAvailable`), if known.
+pub fn available_memory() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
 /// A byte count for messages, in binary units with one decimal: `1536` → `1.5 KiB`.
 pub fn format_bytes(b: u128) -> String {
     const UNITS: [&str; 7] = ["B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"];

@@ -25,14 +25,6 @@ pub fn bytes_per_pixel(method: Method, aov: bool, stderr: bool) -> u64 {
     }
 }
 
-/// Bytes of memory available to new allocations (Linux `MemAvailable`), if known.
-fn available_bytes() -> Option<u64> {
-    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
-}
-
 /// Bytes as GiB with one decimal.
 pub fn gib(b: u64) -> String {
     format!("{:.1} GiB", b as f64 / (1u64 << 30) as f64)
@@ -62,7 +54,7 @@ pub fn check_image_fits(desc: &SceneDesc, source: &str, available: Option<u64>) 
 
 /// [`check_image_fits`] against this machine's available memory.
 pub fn check_image(desc: &SceneDesc, source: &str) -> Result<()> {
-    check_image_fits(desc, source, available_bytes())
+    check_image_fits(desc, source, crate::io::available_memory())
 }
 
 /// The sizes of a cloud a grid method's memory follows.
@@ -258,7 +250,7 @@ fn check_solver_row(scene: &Scene) -> Result<()> {
 /// [`check_solver_fits`] against this machine's available memory, with `warm` bytes of
 /// warm-start state.
 pub fn check_solver(scene: &Scene, warm: u64) -> Result<()> {
-    check_solver_fits(scene, available_bytes(), warm)
+    check_solver_fits(scene, crate::io::available_memory(), warm)
 }
 
 #[cfg(test)]
