@@ -253,8 +253,20 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
         }
         let seconds = t0.elapsed().as_secs_f64();
         progress.log(&format!("{id}: {} spp in {seconds:.1} s", stats.spp));
-        write_pair(dir, id, &img, scene.render.exposure)?;
         let m = masks(&img)?;
+        if !m.cloud.contains(&true) {
+            return Err(Error::invalid(
+                "command line",
+                "--width/--height",
+                format!(
+                    "no pixel of the {}×{} {id} shows the cloud (transmittance < {}), so there is nothing to \
+                     measure the figures on; raise --width and --height, or point the scene's camera at the cloud",
+                    opts.width,
+                    opts.height,
+                    crate::tools::compare::CLOUD_T
+                ),
+            ));
+        }
         references.push(ReferenceResult {
             id: id.into(),
             spp: stats.spp,
@@ -264,7 +276,11 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
             cloud_noise: relative_noise(&img, &m.cloud),
             edge_noise: relative_noise(&img, &m.edge),
         });
-        refs.push((img, m));
+        refs.push((img, m, scene.render.exposure));
+    }
+    // Written once both have a cloud to measure: a failed check leaves no output.
+    for (r, (img, _, exposure)) in references.iter().zip(&refs) {
+        write_pair(dir, &r.id, img, *exposure)?;
     }
 
     let plan = [
@@ -300,7 +316,7 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
         let seconds = t0.elapsed().as_secs_f64();
         progress.log(&format!("{id}: {seconds:.1} s"));
         write_pair(dir, id, &out.image, scene.render.exposure)?;
-        let (rimg, m) = &refs[which];
+        let (rimg, m, _) = &refs[which];
         write_diff_png(&dir.join(format!("diff-{id}.png")), &out.image, rimg, Some(&m.cloud))?;
         let cloud = compare(&out.image, rimg, Some(&m.cloud))?;
         let edge = if m.edge.iter().any(|&b| b) {
