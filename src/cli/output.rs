@@ -127,6 +127,16 @@ pub fn check_files(files: &[&Path], flag: &str, inputs: &[(PathBuf, String)]) ->
 /// exists, is writable, and it holds none of the scene's `inputs` under a name `would_write` says
 /// the command writes there.
 pub fn check_folder(dir: &Path, flag: &str, inputs: &[(PathBuf, String)], would_write: impl Fn(&Path) -> bool) -> Result<()> {
+    if let Some(len) = dir.iter().map(|c| c.as_encoded_bytes().len()).find(|&n| n > NAME_MAX) {
+        return Err(Error::invalid(
+            "command line",
+            flag,
+            format!(
+                "a folder name in `{}` is {len} bytes long; file systems allow at most {NAME_MAX}: choose a shorter name",
+                dir.display()
+            ),
+        ));
+    }
     if dir.exists() && !dir.is_dir() {
         return Err(Error::invalid(
             "command line",
@@ -195,6 +205,11 @@ mod tests {
 
     #[test]
     fn names_no_file_system_accepts_are_refused() {
+        // A folder the command would create, too: refused before any work, naming the flag.
+        let dir = tempfile::tempdir().unwrap();
+        let long = dir.path().join("figs").join("n".repeat(300));
+        let e = check_folder(&long, "--output", &[], |_| true).unwrap_err().to_string();
+        assert!(e.contains("--output") && e.contains("300 bytes"), "{e}");
         let e = check_file_name(Path::new("out.exr/"), "--output").unwrap_err().to_string();
         assert!(e.contains("names a folder"), "{e}");
         let long = format!("{}.exr", "n".repeat(300));
