@@ -183,10 +183,10 @@ fn write_pair(dir: &Path, id: &str, img: &Image, exposure: f32) -> Result<()> {
     img.write_png(&dir.join(format!("{id}.png")), exposure)
 }
 
-/// Render the figure series of the scene at `scene_path` (None: the built-in scene) into `dir`
-/// (created if missing) and return what was measured. The scene's own camera size and method
-/// are replaced by `opts` and each figure's method.
-pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress: &dyn Progress) -> Result<FigureReport> {
+/// Render the figure series of the scene `desc` (named `source` in messages, its relative paths
+/// resolved against `folder`) into `dir` (created if missing) and return what was measured. The
+/// scene's own camera size and method are replaced by `opts` and each figure's method.
+pub fn run(desc: &SceneDesc, source: &str, folder: &Path, dir: &Path, opts: &FigureOptions, progress: &dyn Progress) -> Result<FigureReport> {
     if opts.width == 0 || opts.height == 0 {
         return Err(Error::invalid(
             "command line",
@@ -202,12 +202,10 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
         ));
     }
     crate::io::create_output_dir(dir)?;
-    let base = Scene::load(scene_path, |d| {
-        d.camera.width = opts.width;
-        d.camera.height = opts.height;
-        d.render.aov = false;
-    })?;
-    let sunset_base = Scene::build(sunset_desc(&base.desc), &format!("{} (sunset)", base.source), &base_dir(scene_path))?;
+    let mut d = desc.clone();
+    (d.camera.width, d.camera.height, d.render.aov) = (opts.width, opts.height, false);
+    let base = Scene::build(d, source, folder)?;
+    let sunset_base = Scene::build(sunset_desc(&base.desc), &format!("{source} (sunset)"), folder)?;
 
     // `paper`: the paper's scheme (the measured fixes of docs/budget.md off); else the scene's own settings.
     let with = |s: &Scene, method: Method, iterations: Option<usize>, paper: bool| -> Result<Scene> {
@@ -229,7 +227,7 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
             // One sample has no standard error; the report's noise is then unknown.
             d.render.stderr = opts.reference_spp >= 2;
         }
-        Scene::build(d, &s.source, &base_dir(scene_path))
+        Scene::build(d, &s.source, folder)
     };
 
     // References first: the masks come from them.
@@ -374,13 +372,6 @@ fn relative_noise(img: &Image, mask: &[bool]) -> f64 {
     } else {
         0.0
     }
-}
-
-fn base_dir(scene_path: Option<&Path>) -> std::path::PathBuf {
-    scene_path
-        .and_then(Path::parent)
-        .map(Path::to_path_buf)
-        .unwrap_or_else(|| std::path::PathBuf::from("."))
 }
 
 fn edge_mask_name() -> String {

@@ -158,3 +158,28 @@ fn a_view_without_cloud_pixels_fails_before_writing_anything() {
     );
     assert!(!d.join("figs").exists(), "the output folder is left behind");
 }
+
+#[test]
+fn a_grid_file_takes_the_scene_files_place_as_for_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("g.npy"), crate::common::npy_grid([4, 4, 4], |_, _, _| 1.0)).unwrap();
+    let out = cloudgi(
+        d,
+        &[
+            "-q",
+            "figures",
+            "g.npy",
+            "-o",
+            "figs",
+            "--width",
+            "8",
+            "--height",
+            "6",
+            "--reference-spp",
+            "1",
+        ],
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(d.join("figs/index.md").exists() && d.join("figs/fig7-full.exr").exists());
+}
