@@ -91,6 +91,7 @@ impl Image {
     pub fn read_exr(path: &Path) -> Result<Image> {
         let name = path.display().to_string();
         let bytes = crate::io::read_regular(path, "an OpenEXR image")?;
+        check_exr_fits(&bytes, &name, crate::io::available_memory())?;
         let img = exr::prelude::read()
             .no_deep_data()
             .largest_resolution_level()
@@ -195,6 +196,31 @@ impl Image {
     }
 }
 
+/// The pixels an OpenEXR file's header declares must fit in `available` bytes once decoded (its
+/// samples, then their f32 copies here): a damaged or hostile header can declare billions of
+/// pixels in a few bytes, which the decoder would allocate before finding the data missing.
+fn check_exr_fits(bytes: &[u8], name: &str, available: Option<u64>) -> Result<()> {
+    let meta = exr::meta::MetaData::read_from_buffered(bytes, false)
+        .map_err(|e| Error::format(name, format!("not a readable OpenEXR image: {e}")))?;
+    let Some(avail) = available else { return Ok(()) };
+    for h in &meta.headers {
+        let (w, ht, n) = (h.layer_size.width(), h.layer_size.height(), h.channels.list.len());
+        let need = (w as u128 * ht as u128) * (h.channels.bytes_per_pixel as u128 + 8 * n as u128);
+        if need > u128::from(avail) {
+            return Err(Error::format(
+                name,
+                format!(
+                    "its header declares a {w}×{ht} image of {n} channels, which needs about {} of memory to \
+                     read but {} is available; a damaged header declares such sizes: check or re-export the file",
+                    crate::io::format_bytes(need),
+                    crate::io::format_bytes(u128::from(avail))
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Filmic tone curve (Narkowicz's ACES fit): maps [0, ∞) to [0, 1), 1.0 → 0.80.
 #[inline]
 pub fn filmic(x: f32) -> f32 {
@@ -231,5 +257,24 @@ mod tests {
         img.write_exr(&p).unwrap();
         let back = Image::read_exr(&p).unwrap();
         assert_eq!(back, img);
+    }
+
+    #[test]
+    fn a_header_declaring_more_pixels_than_memory_is_refused_before_decoding() {
+        let mut bytes = Image::new(2, 2).to_exr_bytes().unwrap();
+        // dataWindow (box2i: x min, y min, x max, y max) → 200000×200000 pixels, 480 GB of samples.
+        let key = b"dataWindow\0box2i\0";
+        let at = bytes.windows(key.len()).position(|w| w == key).unwrap() + key.len() + 4;
+        for (k, v) in [0i32, 0, 199_999, 199_999].iter().enumerate() {
+            bytes[at + 4 * k..at + 4 * k + 4].copy_from_slice(&v.to_le_bytes());
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("huge.exr");
+        std::fs::write(&p, &bytes).unwrap();
+        let e = Image::read_exr(&p).unwrap_err().to_string();
+        assert!(e.contains("huge.exr") && e.contains("200000×200000") && e.contains("available"), "{e}");
+        // The same header where the memory is there passes the check.
+        check_exr_fits(&bytes, "huge.exr", Some(u64::MAX)).unwrap();
+        check_exr_fits(&bytes, "huge.exr", None).unwrap();
     }
 }

@@ -83,7 +83,7 @@ pub fn check_writable_folder(dir: &Path, source: &str, field: &str) -> Result<()
 }
 
 /// Longest file name (bytes) Linux, macOS and Windows file systems accept.
-const NAME_MAX: usize = 255;
+pub(crate) const NAME_MAX: usize = 255;
 
 /// `path` names a file a command can create: it is not empty, does not end in a `/` (a folder)
 /// and its name fits the file system's limit of [`NAME_MAX`] bytes.
@@ -280,6 +280,14 @@ pub fn write_atomic_all(files: &[(&Path, &[u8])]) -> Result<()> {
             .extend(files.iter().map(|(p, _)| p.to_path_buf()));
     }
     result
+}
+
+/// Bytes of memory available to new allocations (Linux `MemAvailable`), if known.
+pub fn available_memory() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
 }
 
 /// A byte count for messages, in binary units with one decimal: `1536` → `1.5 KiB`.

@@ -9,7 +9,8 @@ use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct FiguresArgs {
-    /// Scene file (TOML). Without it, the built-in default scene.
+    /// Scene file (TOML), or a grid file (.vdb, .npy, .vol, .raw) framed under the default sun and
+    /// sky, as for `render`. Without it, the built-in default scene.
     scene: Option<PathBuf>,
     /// Output folder (created if missing).
     #[arg(short, long, default_value = "figures")]
@@ -57,7 +58,8 @@ pub fn run(a: FiguresArgs, quiet: bool) -> Result<()> {
     }
     let progress = super::progress::Bars::new(quiet);
     // A run that fails leaves no empty output folder (an interrupt: src/cli/console.rs).
-    let report = run_figures(a.scene.as_deref(), &a.output, &opts, &progress).inspect_err(|_| crate::io::remove_created_empty_dirs())?;
+    let report = run_figures(&file.desc, &file.source, &file.base, &a.output, &opts, &progress)
+        .inspect_err(|_| crate::io::remove_created_empty_dirs())?;
     if !quiet {
         note!("{}", table_markdown(&report).trim_end());
         note!("→ {}", a.output.join("index.md").display());

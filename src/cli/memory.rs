@@ -25,14 +25,6 @@ pub fn bytes_per_pixel(method: Method, aov: bool, stderr: bool) -> u64 {
     }
 }
 
-/// Bytes of memory available to new allocations (Linux `MemAvailable`), if known.
-fn available_bytes() -> Option<u64> {
-    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
-}
-
 /// Bytes as GiB with one decimal.
 pub fn gib(b: u64) -> String {
     format!("{:.1} GiB", b as f64 / (1u64 << 30) as f64)
@@ -74,7 +66,7 @@ fn image_fits([w, h]: [u32; 2], (method, aov, stderr): (Method, bool, bool), sou
 /// for [`crate::render`]: the image and the solver must fit this machine's available memory and
 /// the cloud the diffusion solver's rows, so no caller's render aborts or panics midway.
 pub fn check_scene(scene: &Scene) -> Result<()> {
-    let available = available_bytes();
+    let available = crate::io::available_memory();
     let r = &scene.render;
     image_fits(
         [scene.camera.width, scene.camera.height],
@@ -87,7 +79,7 @@ pub fn check_scene(scene: &Scene) -> Result<()> {
 
 /// [`check_image_fits`] against this machine's available memory.
 pub fn check_image(desc: &SceneDesc, source: &str) -> Result<()> {
-    check_image_fits(desc, source, available_bytes())
+    check_image_fits(desc, source, crate::io::available_memory())
 }
 
 /// The sizes of a cloud a grid method's memory follows.
@@ -283,7 +275,7 @@ fn check_solver_row(scene: &Scene) -> Result<()> {
 /// [`check_solver_fits`] against this machine's available memory, with `warm` bytes of
 /// warm-start state.
 pub fn check_solver(scene: &Scene, warm: u64) -> Result<()> {
-    check_solver_fits(scene, available_bytes(), warm)
+    check_solver_fits(scene, crate::io::available_memory(), warm)
 }
 
 #[cfg(test)]

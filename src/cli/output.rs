@@ -3,7 +3,7 @@
 //! scene's own input files (the atomic rename would replace either).
 
 use crate::error::{Error, Result};
-use crate::io::{check_output_file, check_writable_folder, folder_of};
+use crate::io::{check_output_file, check_writable_folder, folder_of, NAME_MAX};
 use std::path::{Path, PathBuf};
 
 /// The source named in the messages.
@@ -52,6 +52,16 @@ pub fn check_files(files: &[&Path], flag: &str, inputs: &[(PathBuf, String)]) ->
 /// exists, is writable, and it holds none of the scene's `inputs` under a name `would_write` says
 /// the command writes there.
 pub fn check_folder(dir: &Path, flag: &str, inputs: &[(PathBuf, String)], would_write: impl Fn(&Path) -> bool) -> Result<()> {
+    if let Some(len) = dir.iter().map(|c| c.as_encoded_bytes().len()).find(|&n| n > NAME_MAX) {
+        return Err(Error::invalid(
+            "command line",
+            flag,
+            format!(
+                "a folder name in `{}` is {len} bytes long; file systems allow at most {NAME_MAX}: choose a shorter name",
+                dir.display()
+            ),
+        ));
+    }
     if dir.exists() && !dir.is_dir() {
         return Err(Error::invalid(
             "command line",
@@ -116,6 +126,15 @@ mod tests {
         std::fs::set_permissions(&out, p).unwrap();
         let e = check_files(&[&out], "--output", &[]).unwrap_err().to_string();
         assert!(e.contains("--output") && e.contains("out.exr") && e.contains("read-only"), "{e}");
+    }
+
+    #[test]
+    fn a_folder_name_no_file_system_accepts_is_refused() {
+        // A folder the command would create: refused before any work, naming the flag.
+        let dir = tempfile::tempdir().unwrap();
+        let long = dir.path().join("figs").join("n".repeat(300));
+        let e = check_folder(&long, "--output", &[], |_| true).unwrap_err().to_string();
+        assert!(e.contains("--output") && e.contains("300 bytes"), "{e}");
     }
 
     #[test]

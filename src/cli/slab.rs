@@ -46,7 +46,7 @@ pub struct SlabArgs {
     /// Transport method.
     #[arg(long, value_enum, default_value = "reference")]
     method: SlabMethod,
-    /// Photons.
+    /// Photons (2 to 1e12).
     #[arg(long, default_value_t = 1_000_000)]
     samples: u64,
     /// `diffusion`: forward fraction f of the δ-M similarity transform, 0 ≤ f < 1 (default g²,

@@ -96,4 +96,7 @@ fn slab_is_deterministic_and_rejects_bad_input() {
         assert!(slab(&bad, 100, 0).is_err());
     }
     assert!(slab(&p, 1, 0).is_err());
+    // A count past what any run finishes is refused with the bound, not allocated for.
+    let e = slab(&p, u64::MAX, 0).unwrap_err().to_string();
+    assert!(e.contains("--samples") && e.contains("1e12"), "{e}");
 }

@@ -183,10 +183,10 @@ fn write_pair(dir: &Path, id: &str, img: &Image, exposure: f32) -> Result<()> {
     img.write_png(&dir.join(format!("{id}.png")), exposure)
 }
 
-/// Render the figure series of the scene at `scene_path` (None: the built-in scene) into `dir`
-/// (created if missing) and return what was measured. The scene's own camera size and method
-/// are replaced by `opts` and each figure's method.
-pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress: &dyn Progress) -> Result<FigureReport> {
+/// Render the figure series of the scene `desc` (named `source` in messages, its relative paths
+/// resolved against `folder`) into `dir` (created if missing) and return what was measured. The
+/// scene's own camera size and method are replaced by `opts` and each figure's method.
+pub fn run(desc: &SceneDesc, source: &str, folder: &Path, dir: &Path, opts: &FigureOptions, progress: &dyn Progress) -> Result<FigureReport> {
     if opts.width == 0 || opts.height == 0 {
         return Err(Error::invalid(
             "command line",
@@ -202,12 +202,10 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
         ));
     }
     crate::io::create_output_dir(dir)?;
-    let base = Scene::load(scene_path, |d| {
-        d.camera.width = opts.width;
-        d.camera.height = opts.height;
-        d.render.aov = false;
-    })?;
-    let sunset_base = Scene::build(sunset_desc(&base.desc), &format!("{} (sunset)", base.source), &base_dir(scene_path))?;
+    let mut d = desc.clone();
+    (d.camera.width, d.camera.height, d.render.aov) = (opts.width, opts.height, false);
+    let base = Scene::build(d, source, folder)?;
+    let sunset_base = Scene::build(sunset_desc(&base.desc), &format!("{source} (sunset)"), folder)?;
 
     // `paper`: the paper's scheme (the measured fixes of docs/budget.md off); else the scene's own settings.
     let with = |s: &Scene, method: Method, iterations: Option<usize>, paper: bool| -> Result<Scene> {
@@ -229,7 +227,7 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
             // One sample has no standard error; the report's noise is then unknown.
             d.render.stderr = opts.reference_spp >= 2;
         }
-        Scene::build(d, &s.source, &base_dir(scene_path))
+        Scene::build(d, &s.source, folder)
     };
 
     // References first: the masks come from them.
@@ -253,8 +251,20 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
         }
         let seconds = t0.elapsed().as_secs_f64();
         progress.log(&format!("{id}: {} spp in {seconds:.1} s", stats.spp));
-        write_pair(dir, id, &img, scene.render.exposure)?;
         let m = masks(&img)?;
+        if !m.cloud.contains(&true) {
+            return Err(Error::invalid(
+                "command line",
+                "--width/--height",
+                format!(
+                    "no pixel of the {}×{} {id} shows the cloud (transmittance < {}), so there is nothing to \
+                     measure the figures on; raise --width and --height, or point the scene's camera at the cloud",
+                    opts.width,
+                    opts.height,
+                    crate::tools::compare::CLOUD_T
+                ),
+            ));
+        }
         references.push(ReferenceResult {
             id: id.into(),
             spp: stats.spp,
@@ -264,7 +274,11 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
             cloud_noise: relative_noise(&img, &m.cloud),
             edge_noise: relative_noise(&img, &m.edge),
         });
-        refs.push((img, m));
+        refs.push((img, m, scene.render.exposure));
+    }
+    // Written once both have a cloud to measure: a failed check leaves no output.
+    for (r, (img, _, exposure)) in references.iter().zip(&refs) {
+        write_pair(dir, &r.id, img, *exposure)?;
     }
 
     let plan = [
@@ -300,7 +314,7 @@ pub fn run(scene_path: Option<&Path>, dir: &Path, opts: &FigureOptions, progress
         let seconds = t0.elapsed().as_secs_f64();
         progress.log(&format!("{id}: {seconds:.1} s"));
         write_pair(dir, id, &out.image, scene.render.exposure)?;
-        let (rimg, m) = &refs[which];
+        let (rimg, m, _) = &refs[which];
         write_diff_png(&dir.join(format!("diff-{id}.png")), &out.image, rimg, Some(&m.cloud))?;
         let cloud = compare(&out.image, rimg, Some(&m.cloud))?;
         let edge = if m.edge.iter().any(|&b| b) {
@@ -358,13 +372,6 @@ fn relative_noise(img: &Image, mask: &[bool]) -> f64 {
     } else {
         0.0
     }
-}
-
-fn base_dir(scene_path: Option<&Path>) -> std::path::PathBuf {
-    scene_path
-        .and_then(Path::parent)
-        .map(Path::to_path_buf)
-        .unwrap_or_else(|| std::path::PathBuf::from("."))
 }
 
 fn edge_mask_name() -> String {

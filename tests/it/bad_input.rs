@@ -522,6 +522,11 @@ fn corrupt_npy_raw_and_vdb_files() {
         &["g.vdb", "truncated", "ends at byte", "cut short"],
     );
     grid_fails("g.vdb", &[("g.vdb", sphere[..40].to_vec())], &["g.vdb"]);
+    // An integer grid is not a density (docs/vdb.md), whatever its values.
+    let mut int32 = sphere.clone();
+    let at = int32.windows(16).position(|w| w == b"Tree_float_5_4_3").unwrap();
+    int32[at..at + 16].copy_from_slice(b"Tree_int32_5_4_3");
+    grid_fails("g.vdb", &[("g.vdb", int32)], &["g.vdb", "`int32` values", "float, double or half"]);
     render_fails(
         "[medium]\ngrid = \"g.vdb\"\ngrid_name = \"smoke\"\n",
         &[("g.vdb", sphere.clone())],

@@ -23,28 +23,20 @@ const IDS: [&str; 6] = [
     "fig7-full-fixed",
 ];
 
+/// Write `scene` to `d/scene.toml` and run `cloudgi -q figures scene.toml -o figs` with `args`.
+fn figures(d: &std::path::Path, scene: &str, args: &[&str]) -> std::process::Output {
+    std::fs::write(d.join("scene.toml"), scene).unwrap();
+    cloudgi(d, &[&["-q", "figures", "scene.toml", "-o", "figs"], args].concat())
+}
+
 #[test]
 fn figure_series_writes_everything() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    std::fs::write(d.join("scene.toml"), SCENE).unwrap();
-    let out = cloudgi(
+    let out = figures(
         d,
-        &[
-            "-q",
-            "--threads",
-            "2",
-            "figures",
-            "scene.toml",
-            "-o",
-            "figs",
-            "--width",
-            "48",
-            "--height",
-            "36",
-            "--reference-spp",
-            "4",
-        ],
+        SCENE,
+        &["--threads", "2", "--width", "48", "--height", "36", "--reference-spp", "4"],
     );
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let f = d.join("figs");
@@ -149,4 +141,45 @@ fn a_run_that_fails_leaves_no_output_folder() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("bad.vol"));
     assert!(!d.join("out").exists(), "no folder left behind");
+}
+
+#[test]
+fn a_view_without_cloud_pixels_fails_before_writing_anything() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // The camera looks away from the cloud: no reference pixel has transmittance < 0.99.
+    let away = format!("{SCENE}[camera]\nposition = [0.0, 350.0, 1500.0]\nlook_at = [0.0, 350.0, 3000.0]\n");
+    let out = figures(d, &away, &["--width", "8", "--height", "6", "--reference-spp", "1"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("--width/--height") && err.contains("no pixel") && !err.contains("--mask"),
+        "{err}"
+    );
+    assert!(!d.join("figs").exists(), "the output folder is left behind");
+}
+
+#[test]
+fn a_grid_file_takes_the_scene_files_place_as_for_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("g.npy"), crate::common::npy_grid([4, 4, 4], |_, _, _| 1.0)).unwrap();
+    let out = cloudgi(
+        d,
+        &[
+            "-q",
+            "figures",
+            "g.npy",
+            "-o",
+            "figs",
+            "--width",
+            "8",
+            "--height",
+            "6",
+            "--reference-spp",
+            "1",
+        ],
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(d.join("figs/index.md").exists() && d.join("figs/fig7-full.exr").exists());
 }

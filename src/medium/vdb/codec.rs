@@ -49,9 +49,14 @@ impl ValueType {
         })
     }
 
-    /// True for the scalar types a density can be read from.
+    /// True for the scalar types (`info` sums them).
     pub fn is_scalar(&self) -> bool {
         self.comps == 1
+    }
+
+    /// True for the types a density is read from: real scalars (float, double, half).
+    pub fn is_density(&self) -> bool {
+        self.comps == 1 && self.real
     }
 
     /// Bytes of one stored value (half precision when `half`).

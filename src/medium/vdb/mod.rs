@@ -6,7 +6,7 @@
 //! (`_HalfFloat`); no compression, zip, blosc (LZ4, byte shuffle) and active-mask compression;
 //! active tiles at every level including the root; several grids per file; instanced grids;
 //! scale, non-uniform scale, translation and diagonal affine maps. Vector and integer grids
-//! are listed by [`read_vdb_info`] but cannot be densified.
+//! are listed by [`read_vdb_info`] but cannot be read as a density.
 
 mod bytes;
 pub mod codec;
@@ -171,7 +171,7 @@ pub fn read_vdb_grids_bytes(bytes: &[u8], file: &str) -> Result<Vec<VdbGrid>> {
 }
 
 /// Read one grid of a `.vdb` held in memory: `grid_name`, or else `density`, or else the first
-/// scalar grid.
+/// float, double or half grid; a grid of another type is refused.
 pub fn read_vdb_grid_bytes(bytes: &[u8], file: &str, grid_name: Option<&str>) -> Result<VdbGrid> {
     let mut c = Cursor::new(bytes, file);
     let h = read_header(&mut c)?;
@@ -190,7 +190,7 @@ pub fn read_vdb_grid_bytes(bytes: &[u8], file: &str, grid_name: Option<&str>) ->
     let scalar = |d: &&GridDescriptor| {
         tree::parse_tree_type(&d.tree_type)
             .and_then(|(t, _)| ValueType::from_token(&t))
-            .is_some_and(|v| v.is_scalar())
+            .is_some_and(|v| v.is_density())
     };
     let d = match grid_name {
         Some(n) => h.descriptors.iter().find(|d| d.name == n),
@@ -209,13 +209,13 @@ pub fn read_vdb_grid_bytes(bytes: &[u8], file: &str, grid_name: Option<&str>) ->
                     "the file has no grid named `{n}`; it has: {}",
                     if h.descriptors.is_empty() { "no grids".into() } else { list() }
                 ),
-                None => format!("the file has no scalar grid; it has: {}", list()),
+                None => format!("the file has no float, double or half grid; it has: {}", list()),
             },
         ));
     };
     let g = read_grid(bytes, file, d, &h.descriptors, true)?;
     match ValueType::from_token(&g.value_type) {
-        Some(v) if v.is_scalar() => Ok(g),
+        Some(v) if v.is_density() => Ok(g),
         _ => Err(Error::invalid(
             file,
             "medium.grid_name",
