@@ -15,8 +15,8 @@ const SHARE: f64 = 0.2;
 fn measured(method: Method) -> Option<&'static str> {
     match method {
         Method::Transport => Some("transport −52 % on the cloud"),
-        Method::Full => Some("full 19 % block error and −16 % on the cloud"),
-        Method::Diffusion => Some("diffusion 27 % block error on the cloud"),
+        Method::Full => Some("full 14 % block error and −15 % on the cloud"),
+        Method::Diffusion => Some("diffusion 19 % block error on the cloud"),
         Method::Single | Method::Reference => None,
     }
 }
