@@ -68,8 +68,8 @@ pub struct SkyDesc {
     pub path: Option<String>,
     /// Envmap: factor on the file's radiance (unitless).
     pub scale: f32,
-    /// Envmap: take the map's sun out of it and make it the scene's sun
-    /// ([`crate::lighting::EnvMap::extract_sun`]).
+    /// Envmap: take the map's sun out of it and make it the scene's sun (docs/sky.md, "A sun in
+    /// the map").
     pub extract_sun: bool,
 }
 
