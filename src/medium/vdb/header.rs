@@ -12,6 +12,17 @@ pub(crate) const MIN_VERSION: u32 = 222;
 pub(crate) const MAX_VERSION: u32 = 224;
 
 /// What the file header says.
+/// `text` from a file with its control characters written as escapes (`\u{1b}`): grid names and
+/// types are printed by `info` and in errors, and a file's bytes must not drive the terminal.
+pub(super) fn printable(text: &str) -> String {
+    text.chars()
+        .map(|c| match c.is_control() {
+            true => c.escape_unicode().to_string(),
+            false => c.to_string(),
+        })
+        .collect()
+}
+
 #[derive(Debug)]
 pub(crate) struct FileHeader {
     #[allow(dead_code)]
@@ -112,8 +123,8 @@ pub(crate) fn read_header(c: &mut Cursor) -> Result<FileHeader> {
     let mut descriptors = Vec::new();
     for _ in 0..count {
         let unique = c.string("grid name")?;
-        let name = unique.split('\u{1e}').next().unwrap_or("").to_string();
-        let mut tree_type = c.string("grid type")?;
+        let name = printable(unique.split('\u{1e}').next().unwrap_or(""));
+        let mut tree_type = printable(&c.string("grid type")?);
         let half = tree_type.ends_with("_HalfFloat");
         if half {
             tree_type.truncate(tree_type.len() - "_HalfFloat".len());
@@ -147,4 +158,16 @@ pub(crate) fn read_header(c: &mut Cursor) -> Result<FileHeader> {
         c.seek(end_pos as u64, "the grid end offset")?;
     }
     Ok(FileHeader { version, descriptors })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn control_characters_in_a_files_text_are_written_as_escapes() {
+        assert_eq!(printable("density"), "density");
+        assert_eq!(printable("smoke\u{1b}[2J\nx"), "smoke\\u{1b}[2J\\u{a}x");
+        assert_eq!(printable("dichte→ü"), "dichte→ü");
+    }
 }

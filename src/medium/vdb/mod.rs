@@ -98,7 +98,7 @@ fn read_grid(bytes: &[u8], file: &str, d: &GridDescriptor, all: &[GridDescriptor
     }
     let meta = read_meta(&mut c)?;
     let class = meta.iter().find_map(|(k, v)| match (k.as_str(), v) {
-        ("class", Meta::Str(s)) => Some(s.clone()),
+        ("class", Meta::Str(s)) => Some(header::printable(s)),
         _ => None,
     });
     let transform = transform::read_transform(&mut c, &d.name)?;
