@@ -46,17 +46,7 @@ pub struct CompareArgs {
 
 pub fn run(a: CompareArgs) -> Result<()> {
     if let Some(d) = &a.diff {
-        if !d
-            .extension()
-            .and_then(|e| e.to_str())
-            .is_some_and(|e| e.eq_ignore_ascii_case("png"))
-        {
-            return Err(Error::invalid(
-                "command line",
-                "--diff",
-                format!("`{}` must end in .png", d.display()),
-            ));
-        }
+        super::tonemap::check_png_name(d, "--diff")?;
         let mut inputs = vec![(a.test.clone(), "TEST".to_string()), (a.reference.clone(), "REF".to_string())];
         inputs.extend(a.mask.iter().map(|m| (m.clone(), "--mask".to_string())));
         inputs.extend(a.where_from.iter().map(|m| (m.clone(), "--where-from".to_string())));

@@ -70,20 +70,22 @@ pub fn outputs(output: &Path) -> Result<(PathBuf, PathBuf)> {
     }
 }
 
+/// `path`, given with `flag`, names a PNG: a file name ending in `.png` (`.png` alone is a
+/// hidden file's name with no extension).
+pub(super) fn check_png_name(path: &Path, flag: &str) -> Result<()> {
+    match path.extension().and_then(|e| e.to_str()) {
+        Some(e) if e.eq_ignore_ascii_case("png") => Ok(()),
+        _ => Err(Error::invalid(
+            "command line",
+            flag,
+            format!("`{}` must be a file name ending in .png, e.g. preview.png", path.display()),
+        )),
+    }
+}
+
 pub fn run(a: TonemapArgs, quiet: bool) -> Result<()> {
     check_flag(a.exposure)?;
-    if !a
-        .output
-        .extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
-    {
-        return Err(Error::invalid(
-            "command line",
-            "--output",
-            format!("`{}` must end in .png", a.output.display()),
-        ));
-    }
+    check_png_name(&a.output, "--output")?;
     super::output::check_files(&[&a.output], "--output", &[(a.input.clone(), "IN".to_string())])?;
     let img = Image::read_exr(&a.input)?;
     if let Some(w) = invalid_pixels_warning(&img, &a.input) {

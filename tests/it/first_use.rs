@@ -69,7 +69,8 @@ fn bad_first_use_input_is_refused_before_any_output() {
         (vec!["render", "-o", "out.jpg"], "must end in .exr or .png"),
         (vec!["tonemap", "missing.exr", "-o", "t.png"], "missing.exr"),
         (vec!["tonemap", "fit.toml", "-o", "t.png"], "fit.toml"),
-        (vec!["tonemap", "missing.exr", "-o", "t.exr"], "must end in .png"),
+        (vec!["tonemap", "missing.exr", "-o", "t.exr"], "must be a file name ending in .png"),
+        (vec!["tonemap", "missing.exr", "-o", ".png"], "must be a file name ending in .png"),
         (vec!["tonemap", "missing.exr", "-o", "t.png", "--exposure", "inf"], "--exposure"),
     ] {
         let out = cloudgi(d, &args);
