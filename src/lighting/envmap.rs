@@ -294,6 +294,14 @@ pub(super) fn row_solid_angle(j: usize, rows: usize, columns: usize) -> f64 {
     2.0 * std::f64::consts::PI / columns as f64 * (theta(j).cos() - theta(j + 1).cos())
 }
 
+/// Pixel `k` of a `w` × `h` map and its 8-connected neighbours: wrapping in azimuth (columns),
+/// not across the poles (rows).
+pub(super) fn neighbourhood(k: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
+    let (i, j) = (k % w, k / w);
+    let rows = j.saturating_sub(1)..(j + 2).min(h);
+    rows.flat_map(move |r| [w - 1, 0, 1].map(|di| r * w + (i + di) % w))
+}
+
 /// Column `a` of `w` sub-pixel columns: its centre's u and (sin φ, cos φ).
 struct SubColumn {
     u: f32,
@@ -368,10 +376,7 @@ impl EnvMap {
         // The cells a bright pixel's bilinear radiance reaches: its own and its eight neighbours.
         let mut cells: Vec<usize> = bright
             .iter()
-            .flat_map(|&n| {
-                let (i, j) = (n % w, n / w);
-                (j.saturating_sub(1)..(j + 2).min(h)).flat_map(move |jj| (0..3).map(move |di| jj * w + (i + w + di - 1) % w))
-            })
+            .flat_map(|&n| neighbourhood(n, w, h))
             .collect();
         cells.sort_unstable();
         cells.dedup();
@@ -472,6 +477,14 @@ mod tests {
         let exact = 1e6 * std::f64::consts::PI / w as f64 * (t1.sin().powi(2) - t0.sin().powi(2));
         let e = EnvMap::new(w, h, px).irradiance_up().x as f64;
         assert!((e - exact).abs() < 1e-5 * exact, "{e} vs {exact}");
+    }
+
+    #[test]
+    fn a_neighbourhood_wraps_in_azimuth_and_stops_at_the_poles() {
+        let mut n: Vec<usize> = neighbourhood(0, 4, 3).collect();
+        n.sort_unstable();
+        assert_eq!(n, vec![0, 1, 3, 4, 5, 7]);
+        assert_eq!(neighbourhood(5, 4, 3).count(), 9);
     }
 
     #[test]

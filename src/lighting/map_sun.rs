@@ -4,7 +4,7 @@
 //! fixed directions degrees apart, and carry a directional sun exactly (docs/sky.md, "A sun in
 //! the map").
 
-use super::envmap::{direction, row_solid_angle, EnvMap};
+use super::envmap::{direction, neighbourhood, row_solid_angle, EnvMap};
 use crate::math::{luminance, Rgb, Vec3};
 use glam::DVec3;
 
@@ -108,7 +108,7 @@ impl EnvMap {
         let (mut stack, mut sun_pixels) = (vec![seed], Vec::new());
         while let Some(k) = stack.pop() {
             sun_pixels.push(k);
-            for n in neighbours(k, w, h) {
+            for n in neighbourhood(k, w, h) {
                 if !inside[n] && lum(n) > threshold {
                     inside[n] = true;
                     stack.push(n);
@@ -125,7 +125,7 @@ impl EnvMap {
         let mut bordering = vec![false; w * h];
         let (mut border_light, mut border_solid_angle) = (DVec3::ZERO, 0.0);
         for &k in &sun_pixels {
-            for n in neighbours(k, w, h) {
+            for n in neighbourhood(k, w, h) {
                 if !inside[n] && !bordering[n] {
                     bordering[n] = true;
                     border_light += self.pixels[n].as_dvec3() * solid_angle_of(n);
@@ -159,15 +159,6 @@ impl EnvMap {
     fn pixel_direction(&self, i: usize, j: usize) -> Vec3 {
         direction((i as f32 + 0.5) / self.width as f32, (j as f32 + 0.5) / self.height as f32)
     }
-}
-
-/// The 8-connected neighbours of pixel `k` of a `w` × `h` map: wrapping in azimuth (columns), not
-/// across the poles (rows).
-fn neighbours(k: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
-    let (i, j) = (k % w, k / w);
-    let rows = j.saturating_sub(1)..(j + 2).min(h);
-    rows.flat_map(move |r| [w - 1, 0, 1].map(|di| r * w + (i + di) % w))
-        .filter(move |&n| n != k)
 }
 
 #[cfg(test)]
@@ -256,13 +247,5 @@ mod tests {
             }
         }
         assert!(matches!(EnvMap::new(w, h, px).extract_sun(), Err(NoSun::TooWide(sr)) if sr > MAX_SUN_SOLID_ANGLE));
-    }
-
-    #[test]
-    fn neighbours_wrap_in_azimuth_and_stop_at_the_poles() {
-        let mut n: Vec<usize> = neighbours(0, 4, 3).collect();
-        n.sort_unstable();
-        assert_eq!(n, vec![1, 3, 4, 5, 7]);
-        assert_eq!(neighbours(5, 4, 3).count(), 8);
     }
 }
