@@ -39,7 +39,7 @@ use super::source::{diffuse_source_of, parity_order, PairTables};
 use super::sphere::Quadrature;
 use super::start::{next_phase, start_over, Phase, StartTables};
 use super::sweep::{sweep, BatchArrays};
-use super::warm::{TransportState, WarmStart, WarmStop};
+use super::warm::{TransportState, WarmStart, WarmStop, FAR_START_TOLERANCES};
 use super::TransportOptics;
 use crate::diffusion::multigrid::Hierarchy;
 use crate::error::{Error, Result};
@@ -399,6 +399,9 @@ impl Solver<'_> {
                 self.start_cold(it, change, progress);
                 continue;
             }
+            if it.warm.is_some() && it.since_start == 1 && change >= FAR_START_TOLERANCES * s.tolerance {
+                self.mix_from_far_start(it, change, progress);
+            }
             it.starting &= !start_over(phase, change);
             // Cold solves mix (src/transport/mixing.rs); warm ones extrapolate, as their
             // stopping rule reads the extrapolated mode.
@@ -467,6 +470,20 @@ impl Solver<'_> {
         progress.log(&format!(
             "transport: iteration {}, relative change of I0 {change:.2e} from the previous frame's light, no nearer than \
              zero: solving from zero",
+            it.history.len()
+        ));
+    }
+
+    /// A warm start far from this frame's light (a first change of I0 of many tolerances: every
+    /// voxel of a simulation's cloud changed, the extinction or the sun jumped) leaves an error
+    /// the mixing takes faster than the warm solve's extrapolation, and large enough that the
+    /// cold stopping test cannot stop early on it: go on from the iterate as a cold solve (the
+    /// mixing, the cold test), keeping what the start got right.
+    fn mix_from_far_start(&self, it: &mut Iterate, change: f64, progress: &dyn Progress) {
+        it.warm = None;
+        progress.log(&format!(
+            "transport: iteration {}, relative change of I0 {change:.2e} from the previous frame's light, at least \
+             {FAR_START_TOLERANCES} tolerances: mixing on from it as a cold solve",
             it.history.len()
         ));
     }
