@@ -1,8 +1,9 @@
 //! A warning when an environment map holds a sun of its own (a compact source carrying much of
-//! its light): `transport` takes the sky's light along its ordinates, `full` and `diffusion`
-//! along their bins' samples, directions degrees apart, so a source a few map pixels wide is
-//! missed or smeared; `reference` samples the map exactly. The warning points to
-//! `sky.extract_sun`, which takes it out of the map as the scene's sun, carried exactly.
+//! its light): `transport` takes the sky's light as its mean over each ordinate's cell, about 20°
+//! wide, so a source a few map pixels wide keeps its power but loses its direction; `full` and
+//! `diffusion` take it along their bins' samples, directions degrees apart, so it is missed or
+//! smeared; `reference` samples the map exactly. The warning points to `sky.extract_sun`, which
+//! takes it out of the map as the scene's sun, carried exactly.
 
 use crate::lighting::map_sun::MAX_SUN_SOLID_ANGLE;
 use crate::lighting::SkyModel;
@@ -11,12 +12,21 @@ use crate::scene::{Method, Scene};
 /// Share of the map's light above which a compact source is warned about.
 const SHARE: f64 = 0.2;
 
-/// What each method measured under a map with a sun (docs/sky.md, "A sun in the map").
-fn measured(method: Method) -> Option<&'static str> {
+/// How each method takes a map's sun, and what it measured (docs/sky.md, "A sun in the map").
+fn measured(method: Method) -> Option<(&'static str, &'static str)> {
     match method {
-        Method::Transport => Some("transport −52 % on the cloud"),
-        Method::Full => Some("full 14 % block error and −15 % on the cloud"),
-        Method::Diffusion => Some("diffusion 19 % block error on the cloud"),
+        Method::Transport => Some((
+            "averages over cells about 20° wide, keeping its light but blurring its direction",
+            "transport 11 % block error and −7 % on the cloud",
+        )),
+        Method::Full => Some((
+            "takes at directions degrees apart, missing or smearing it",
+            "full 14 % block error and −15 % on the cloud",
+        )),
+        Method::Diffusion => Some((
+            "takes at directions degrees apart, missing or smearing it",
+            "diffusion 19 % block error on the cloud",
+        )),
         Method::Single | Method::Reference => None,
     }
 }
@@ -24,7 +34,7 @@ fn measured(method: Method) -> Option<&'static str> {
 /// The warning for `scene`, if its sky is an environment map whose compact source carries more
 /// than [`SHARE`] of its light and its method takes the map at fixed directions.
 pub fn warning(scene: &Scene) -> Option<String> {
-    let measured = measured(scene.render.method)?;
+    let (takes, measured) = measured(scene.render.method)?;
     if scene.desc.sky.model != SkyModel::Envmap {
         return None;
     }
@@ -38,7 +48,7 @@ pub fn warning(scene: &Scene) -> Option<String> {
     };
     Some(format!(
         "{}: the sky map holds a sun ({:.0} % of its light in {:.1e} sr towards [{:.3}, {:.3}, {:.3}]), which method {} \
-         takes at directions degrees apart, missing or smearing it (a 3×3-pixel sun in a 512×256 map: {measured}; \
+         {takes} (a 3×3-pixel sun in a 512×256 map: {measured}; \
          docs/sky.md, \"A sun in the map\"); {fix}, or render with --method reference",
         scene.source,
         100.0 * c.share,

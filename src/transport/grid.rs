@@ -3,9 +3,10 @@
 //! box's cells in each sweep order ([`box_cells`]).
 
 use super::ground::GroundMap;
+use super::sky_cells::SkyCells;
 use super::source::parity_order;
 use super::BandOptics;
-use crate::lighting::{Ground, Sky};
+use crate::lighting::Ground;
 use crate::math::{sh_count, Rgb};
 use crate::medium::sparse::FullIndex;
 use crate::medium::{Density, Medium};
@@ -63,7 +64,8 @@ pub(super) struct Ctx<'a> {
     pub(super) sigma_t: [f32; 3],
     /// All bands share σt′ (one set of step weights serves them).
     pub(super) grey: bool,
-    pub(super) sky: &'a Sky,
+    /// The sky along each ordinate (its mean over the ordinate's cell).
+    pub(super) sky: &'a SkyCells,
     /// Grid origin (m) and the ground's height (m), if any.
     pub(super) origin: DVec3,
     pub(super) ground_height: Option<f64>,
@@ -74,7 +76,7 @@ impl<'a> Ctx<'a> {
     /// by one voxel, swept with SH `order` and the δ-M `bands`.
     pub(super) fn new(
         m: &'a Medium,
-        sky: &'a Sky,
+        sky: &'a SkyCells,
         ground: Option<&Ground>,
         index: &'a FullVoxels,
         sun_t: &'a [[f32; 3]],

@@ -20,6 +20,7 @@ mod simd;
 pub mod slab;
 pub mod solve;
 mod source;
+mod sky_cells;
 pub mod sphere;
 mod start;
 mod sweep;

@@ -36,6 +36,7 @@ use super::ground::GroundLight;
 use super::mixing::Mixing;
 pub use super::ground::GroundMap;
 use super::source::{diffuse_source_of, parity_order, PairTables};
+use super::sky_cells::SkyCells;
 use super::sphere::Quadrature;
 use super::start::{next_phase, start_over, Phase, StartTables};
 use super::sweep::{sweep, BatchArrays};
@@ -184,8 +185,9 @@ pub fn solve_warm(
     }
     let index = FullVoxels::of(&m.density);
     let sun_t = sun_transmittance(m, sun, &optics, &index.voxels, ground.map(|g| g.height));
-    let ctx = Ctx::new(m, sky, ground, &index, &sun_t, s.order, &optics.bands);
     let q = s.quadrature();
+    let sky_cells = SkyCells::new(sky, &q);
+    let ctx = Ctx::new(m, &sky_cells, ground, &index, &sun_t, s.order, &optics.bands);
     let tables = pair_tables(&q, sun, s.order, &optics);
     let start = StartTables::new(&tables, s.order);
     let ground_light = GroundLight::new(m, sun, sky, ground, &optics);

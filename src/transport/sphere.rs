@@ -12,6 +12,21 @@ pub struct Quadrature {
     pub dirs: Vec<DVec3>,
     /// Weights (sr).
     pub weights: Vec<f64>,
+    /// The rings of ordinates, in `dirs` order.
+    pub rings: Vec<Ring>,
+}
+
+/// One ring of ordinates (one Gauss node in cos θ) and the cells of the sphere it stands for: the
+/// band of cos θ whose width is its node's weight (the bands tile [−1, 1] in the nodes' order, and
+/// each holds its node), cut into `count` equal azimuth sectors, each centred on an ordinate. A
+/// cell's solid angle is its ordinate's weight.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Ring {
+    /// The band of cos θ, low to high.
+    pub mu: [f64; 2],
+    /// Its first ordinate in `dirs` and how many it has.
+    pub first: usize,
+    pub count: usize,
 }
 
 impl Quadrature {
@@ -38,19 +53,56 @@ impl Quadrature {
     /// half a step (so no ordinate is axis-aligned), each weighted by its node's share of 4π.
     fn rings(n_mu: usize, azimuths: impl Fn(f64) -> usize) -> Quadrature {
         let (x, w) = gauss_legendre(n_mu);
+        let bands = mu_bands(&x, &w);
         let mut dirs = Vec::new();
         let mut weights = Vec::new();
-        for (mu, wm) in x.iter().zip(&w) {
+        let mut rings = Vec::new();
+        for ((mu, wm), band) in x.iter().zip(&w).zip(bands) {
             let s = (1.0 - mu * mu).max(0.0).sqrt();
             let n = azimuths(s);
+            rings.push(Ring {
+                mu: band,
+                first: dirs.len(),
+                count: n,
+            });
             for k in 0..n {
                 let phi = 2.0 * PI * (k as f64 + 0.5) / n as f64;
                 dirs.push(DVec3::new(s * phi.cos(), *mu, s * phi.sin()));
                 weights.push(wm * 2.0 * PI / n as f64);
             }
         }
-        Quadrature { dirs, weights }
+        Quadrature { dirs, weights, rings }
     }
+
+    /// The ordinate whose cell ([`Ring`]) holds the unit direction `dir`.
+    pub fn cell_of(&self, dir: DVec3) -> usize {
+        let ring = self
+            .rings
+            .iter()
+            .find(|r| dir.y < r.mu[1])
+            .or_else(|| self.rings.iter().max_by(|a, b| a.mu[1].total_cmp(&b.mu[1])))
+            .expect("a quadrature has rings");
+        let phi = dir.z.atan2(dir.x).rem_euclid(2.0 * PI);
+        let k = ((phi / (2.0 * PI) * ring.count as f64) as usize).min(ring.count - 1);
+        ring.first + k
+    }
+}
+
+/// The bands of cos θ the Gauss nodes `x` with weights `w` (summing to 2) stand for: in the
+/// nodes' ascending order, each as wide as its weight, from −1 to 1. Each band holds its node
+/// (the Chebyshev–Markov–Stieltjes separation of Gauss quadrature).
+fn mu_bands(x: &[f64], w: &[f64]) -> Vec<[f64; 2]> {
+    let mut order: Vec<usize> = (0..x.len()).collect();
+    order.sort_by(|a, b| x[*a].total_cmp(&x[*b]));
+    let mut bands = vec![[0.0; 2]; x.len()];
+    let mut lo = -1.0;
+    for (n, &i) in order.iter().enumerate() {
+        // The last band ends at 1 exactly, whatever the weights' rounding.
+        let hi = if n + 1 == order.len() { 1.0 } else { lo + w[i] };
+        bands[i] = [lo, hi];
+        lo = hi;
+    }
+    bands
 }
 
 #[cfg(test)]
@@ -58,6 +110,35 @@ mod tests {
     use super::*;
     use crate::math::{real_sh, sh_count};
     use crate::transport::legendre;
+
+    #[test]
+    fn every_ordinate_lies_in_its_own_cell_and_the_cells_tile_the_sphere_by_the_weights() {
+        for q in [Quadrature::reduced(8, 16), Quadrature::product(4, 8), Quadrature::reduced(2, 4)] {
+            for (o, d) in q.dirs.iter().enumerate() {
+                assert_eq!(q.cell_of(*d), o, "ordinate {o} at {d}");
+            }
+            // The cells' solid angles, counted on a fine grid of directions, are the weights.
+            let (n_theta, n_phi) = (720, 1440);
+            let mut area = vec![0.0; q.dirs.len()];
+            for i in 0..n_theta {
+                let theta = PI * (i as f64 + 0.5) / n_theta as f64;
+                let d_omega = theta.sin() * (PI / n_theta as f64) * (2.0 * PI / n_phi as f64);
+                for j in 0..n_phi {
+                    let phi = 2.0 * PI * (j as f64 + 0.5) / n_phi as f64;
+                    let dir = DVec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
+                    area[q.cell_of(dir)] += d_omega;
+                }
+            }
+            for (o, (a, w)) in area.iter().zip(&q.weights).enumerate() {
+                assert!((a / w - 1.0).abs() < 0.02, "ordinate {o}: cell {a:.4} sr, weight {w:.4} sr");
+            }
+            assert_eq!(q.cell_of(DVec3::Y), q.cell_of(DVec3::new(1e-9, 1.0, 0.0)), "the pole");
+            let mut bands: Vec<[f64; 2]> = q.rings.iter().map(|r| r.mu).collect();
+            bands.sort_by(|a, b| a[0].total_cmp(&b[0]));
+            assert_eq!((bands[0][0], bands[bands.len() - 1][1]), (-1.0, 1.0));
+            assert!(bands.windows(2).all(|p| p[0][1] == p[1][0]), "contiguous: {bands:?}");
+        }
+    }
 
     #[test]
     fn quadrature_weights_sum_to_four_pi_and_sh_are_orthonormal() {

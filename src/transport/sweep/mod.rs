@@ -14,7 +14,6 @@ use super::source::{moments_block, source_block, Lanes, PairTables, ORDINATE_BAT
 use super::sphere::Quadrature;
 use lanes::Vector;
 use step::{record, step_row, Plane, Step};
-use crate::math::Vec3;
 use glam::DVec3;
 
 mod ground_cut;
@@ -129,7 +128,7 @@ fn sweep_kernel<V: Vector>(
     light: &mut [[f32; 3]],
 ) -> Splats {
     let mut splats = Vec::new();
-    let skyr = c.sky.radiance(Vec3::new(-om.x as f32, -om.y as f32, -om.z as f32));
+    let skyr = c.sky.arriving(om);
     let splat = om.y < 0.0 && c.ground_height.is_some();
     // Major axis and the two others.
     let r = [om.x.abs() / c.h[0], om.y.abs() / c.h[1], om.z.abs() / c.h[2]];
@@ -382,7 +381,7 @@ unsafe fn sweep_ordinate_avx(c: &Ctx, om: DVec3, w: f64, ground: &GroundMap, lig
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::lighting::Sky;
+    use crate::transport::sky_cells::SkyCells;
     use crate::math::{real_sh, Rgb};
     use crate::medium::Density;
     use crate::transport::grid::{box_cells, full_spans};
@@ -449,7 +448,7 @@ mod tests {
         let (perm, even) = parity_order(order);
         let nsh = perm.len();
         let sun_t: Vec<[f32; 3]> = voxels.iter().map(|v| [0.3, 0.5, 0.7].map(|t| t + 0.01 * (v % 7) as f32)).collect();
-        let sky = Sky::constant(Rgb::new(0.2, 0.3, 0.5));
+        let sky = SkyCells::Constant(Rgb::new(0.2, 0.3, 0.5));
         let c = Ctx {
             dims,
             lo: [0; 3],
