@@ -229,6 +229,10 @@ pub(crate) fn code_after<T: Copy + Into<f64> + Sync>(values: &[T], lead: usize) 
 /// field is 0 … 31 (f32's lowest binades, 2⁻¹²⁶ … 2⁻⁹⁵) and its upper 11 mantissa bits are kept.
 const SCALED_SHIFT: u32 = 12;
 
+/// The largest scale exponent of [`Scaled16::wide_exponent_for`]: f32's largest values (below
+/// 2¹²⁸) land in exponent field 30 under it.
+const WIDE_TOP: i32 = 127 + 97;
+
 /// An unsigned float for a field of values ≥ 0 under a power-of-two scale 2^k per field (the
 /// multigrid's couplings and row sums, whose magnitudes depend on the voxel size and density):
 /// the code of v is the f32 v·2⁻ᵏ shifted right by 12 bits, rounded to nearest (ties to even)
@@ -260,6 +264,27 @@ impl Scaled16 {
         (e + 97).clamp(-126, 127)
     }
 
+    /// [`Scaled16::exponent_for`] without its top: k up to 127 + 97, so the largest value of a
+    /// field of any finite f32 values (up to 2¹²⁸) still lands in exponent field 30 instead of
+    /// saturating above 2³¹. A k above 127 is beyond one f32 scale: decode under
+    /// [`Scaled16::split_scale`]'s two factors.
+    pub fn wide_exponent_for(max: f64) -> i32 {
+        if !(max > 0.0 && max.is_finite()) {
+            return 0;
+        }
+        let e = ((max.to_bits() >> 52) & 0x7ff) as i32 - 1023;
+        (e + 97).clamp(-126, WIDE_TOP)
+    }
+
+    /// 2^k for k in −126 … 127 + 97 as two normal f32 factors, [2^min(k, 127), 2^max(k − 127, 0)]:
+    /// a code's value is `decode(first) · second`, exact (a code's f32 under the first factor is
+    /// a normal number, and both are powers of two). The second is 1 wherever
+    /// [`Scaled16::exponent_for`] would have done.
+    pub fn split_scale(k: i32) -> [f32; 2] {
+        let k = k.clamp(-126, WIDE_TOP);
+        [Scaled16::scale(k), Scaled16::scale(k - k.min(127))]
+    }
+
     /// 2^k as an f32, for k in −126 … 127 (the decoding scale).
     pub fn scale(k: i32) -> f32 {
         let k = k.clamp(-126, 127);
@@ -267,12 +292,12 @@ impl Scaled16 {
     }
 
     /// `v` under scale 2^k, rounded to nearest, ties to even (type docs; k from
-    /// [`Scaled16::exponent_for`]). Values beyond the code's top, (2 − 2⁻¹¹)·2^(k−96) (only
-    /// when k was not chosen from them), saturate there.
+    /// [`Scaled16::exponent_for`] or [`Scaled16::wide_exponent_for`]). Values beyond the code's
+    /// top, (2 − 2⁻¹¹)·2^(k−96) (only when k was not chosen from them), saturate there.
     pub fn encode(v: f64, k: i32) -> Scaled16 {
         // v·2⁻ᵏ is exact in f64; round it to 12 significant bits there (41 of f64's 52 stored
         // mantissa bits dropped), then the f32 is exact.
-        let x = v * f64::from_bits(((1023 - k.clamp(-126, 127)) as u64) << 52);
+        let x = v * f64::from_bits(((1023 - k.clamp(-126, WIDE_TOP)) as u64) << 52);
         if x.is_nan() || x <= 0.0 {
             return Scaled16::ZERO;
         }
@@ -540,5 +565,32 @@ mod tests {
         assert_eq!(Scaled16::exponent_for(0.0), 0);
         assert_eq!(Scaled16::scale(Scaled16::exponent_for(1e300)), 2f32.powi(127));
         assert_eq!(Scaled16::scale(Scaled16::exponent_for(1e-300)), 2f32.powi(-126));
+    }
+
+    /// Fields whose largest value is above 2³² (ρ·I0 of light brighter than ~4e9 W·m⁻²·sr⁻¹):
+    /// one f32 scale saturates them ([`Scaled16::exponent_for`] stops at 127); the wide exponent
+    /// under its two factors keeps them to 2⁻¹² up to f32's largest, and below 2³¹ it is the same
+    /// scale with a second factor of 1.
+    #[test]
+    fn scaled16_wide_scale_keeps_fields_up_to_f32s_largest() {
+        for max in [1e10f64, 1e20, 1e30, 3e38] {
+            let one = Scaled16::exponent_for(max);
+            let saturated = Scaled16::encode(max, one).decode(Scaled16::scale(one));
+            assert!(f64::from(saturated) < 0.5 * max, "{max}: one scale reads {saturated}");
+            let k = Scaled16::wide_exponent_for(max);
+            let [first, second] = Scaled16::split_scale(k);
+            let mut rng = Rng::new(5, 1);
+            for _ in 0..10_000 {
+                let v = max * (-29.0 * std::f64::consts::LN_2 * rng.uniform() as f64).exp();
+                let r = f64::from(Scaled16::encode(v, k).decode(first) * second);
+                assert!((r - v).abs() <= v / 4096.0, "{v} of {max}: {r}");
+            }
+            assert_eq!(Scaled16::ZERO.decode(first) * second, 0.0);
+        }
+        for max in [1e-30, 1.0, 2.0e9] {
+            let k = Scaled16::wide_exponent_for(max);
+            assert_eq!(k, Scaled16::exponent_for(max));
+            assert_eq!(Scaled16::split_scale(k), [Scaled16::scale(k), 1.0]);
+        }
     }
 }

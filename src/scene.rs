@@ -334,6 +334,27 @@ pub(crate) fn check_magnitudes(d: &SceneDesc, f: &str) -> Result<()> {
     )
 }
 
+/// The grid's largest density times the brightest light within
+/// [`crate::limits::MAX_DENSITY_TIMES_LIGHT`] (each alone may be within its own bound).
+fn check_density_times_light(medium: &Medium, sun: &Sun, sky: &Sky, f: &str) -> Result<()> {
+    let densest = f64::from(medium.density.max_value());
+    let light = f64::from(sun.irradiance.max_element().max(sky.brightest()));
+    let product = densest * light;
+    let max = crate::limits::MAX_DENSITY_TIMES_LIGHT;
+    check(
+        f,
+        "medium.grid",
+        product <= max,
+        densest as f32,
+        &format!(
+            "the grid's largest density {densest:e} times the brightest light {light:e} (sun.irradiance or the sky's \
+             radiance) is {product:e}, above {max:e}: the methods weight light by density in f32, which would overflow; \
+             scale the grid's densities down and medium.sigma_t up by the same factor (only their product, the \
+             extinction, is physical)"
+        ),
+    )
+}
+
 /// Every array of a scene file holds three numbers (a colour, a position, a direction, a
 /// resolution): a longer one is refused, naming its key.
 fn check_array_lengths(table: &toml::Table, prefix: &str, file: &str) -> Result<()> {
@@ -556,6 +577,7 @@ impl Scene {
         };
         let sun = crate::lighting::sun_over_ground(sun, ground.as_ref());
         let medium = Medium::from_desc_with(&desc.medium, f, base_dir, density.map(crate::Density::into_loaded))?;
+        check_density_times_light(&medium, &sun, &sky, f)?;
         // The ground is opaque: density under it is neither lit nor seen (every method alike).
         let medium = match &ground {
             Some(g) => medium.emptied_below(g.height).unwrap_or(medium),

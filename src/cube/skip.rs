@@ -6,7 +6,6 @@
 
 use crate::lit::pyramid::{Cell, Level};
 use crate::math::{fast_floor, small_int, Trilinear, Vec3};
-use glam::Vec4;
 
 /// Occupied dual cells of one level (bit set: some corner has ρ > 0).
 #[derive(Clone, Debug)]
@@ -104,11 +103,11 @@ impl DualMask {
             idx: std::array::from_fn(ix),
             f,
         });
-        let rho = t.blend(|s| level.cells.rho_at_slot(s));
+        let rho = level.cells.rho_blend(&t);
         if rho <= 1e-12 {
             return None;
         }
-        let c = t.blend(|s| Vec4::from_array(level.cells.rest_at_slot(s)));
+        let c = level.cells.rest_blend(&t);
         Some(([rho, c.x, c.y, c.z, c.w], t))
     }
 }

@@ -351,6 +351,15 @@ impl Sky {
         }
     }
 
+    /// The largest radiance of any band from any direction (W·m⁻²·sr⁻¹).
+    pub fn brightest(&self) -> f32 {
+        match (&self.kind, self.map()) {
+            (SkyKind::Constant(l), _) => l.max_element(),
+            (_, Some(map)) => map.pixels.iter().fold(0.0, |m, p| m.max(p.max_element())),
+            (_, None) => unreachable!("every sky but the constant one has a map"),
+        }
+    }
+
     /// The equirectangular map behind this sky, if it has one.
     pub fn map(&self) -> Option<&EnvMap> {
         match &self.kind {

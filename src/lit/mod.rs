@@ -165,7 +165,7 @@ impl LitVolume {
             return Rgb::ZERO;
         }
         let f = &*self.cells;
-        f.slots(&Trilinear::new(self.dims(), v.to_array())).blend(|s| rho_i0(f, s)) / rho
+        f.rho_i0_blend(&f.slots(&Trilinear::new(self.dims(), v.to_array()))) / rho
     }
 
     /// The diffuse radiance scattered towards `to_eye` per unit albedo (W·m⁻²·sr⁻¹): I0, or
@@ -204,7 +204,7 @@ impl LitVolume {
     fn diffuse_corners(&self, v: Vec3, rho: f32, t: &Trilinear, to_eye: Vec3) -> Rgb {
         let f = &*self.cells;
         let slots = f.slots(t);
-        let i0 = slots.blend(|s| rho_i0(f, s)) / rho;
+        let i0 = f.rho_i0_blend(&slots) / rho;
         let shared = self.flux.as_ref().filter(|fl| Arc::ptr_eq(fl.rho_i1().index(), f.index()));
         self.diffuse_parts(v, rho, i0, shared.map(|_| &slots), to_eye)
     }
@@ -248,13 +248,6 @@ impl LitVolume {
     pub fn ground_hit(&self, o: Vec3, d: Vec3) -> Option<f32> {
         self.ground.as_ref().and_then(|g| g.ground.intersect(o, d))
     }
-}
-
-/// ρ·I0 (channels 1..4) of the cells' slot `s`, decoded.
-#[inline(always)]
-fn rho_i0(f: &Cells, s: usize) -> Rgb {
-    let c = f.rest_at_slot(s);
-    Rgb::new(c[0], c[1], c[2])
 }
 
 #[cfg(test)]

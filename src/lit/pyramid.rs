@@ -12,7 +12,7 @@
 
 use super::LitVolume;
 use crate::half::Scaled16;
-use crate::math::{Trilinear, Vec3};
+use crate::math::{Rgb, Trilinear, Vec3};
 use crate::medium::sparse::{FullIndex, VoxelField};
 use crate::medium::MajorantGrid;
 use glam::Vec4;
@@ -33,13 +33,28 @@ type Code = [Scaled16; 5];
 /// (ρ, ρ·max(I0, 0), ρ·T_sun), which is what [`Scaled16`] codes. **Rounding:** every value from
 /// 2⁻²⁹ of its channel's largest up reads back within 2⁻¹² relative (round to nearest); smaller
 /// ones read 0 (an absolute error below 2⁻²⁹ of the largest); 0 reads exactly 0. Readers decode
-/// (a shift and a multiply a channel, the four colour channels in one SSE2 step) and keep their
-/// arithmetic in f32.
+/// (a shift and a multiply a channel, the four colour channels in one SSE2 step, then the second
+/// factor) and keep their arithmetic in f32. Any light and density f32 holds fits: a channel whose
+/// largest value is above 2³¹ (ρ·I0 of light brighter than ~2e9 W·m⁻²·sr⁻¹) takes a second
+/// factor beyond one f32 scale ([`Scaled16::split_scale`]); one scale saturated above 2³².
 #[derive(Clone, Debug)]
 pub struct Cells {
     codes: VoxelField<Code>,
-    /// 2^k per channel ([`Scaled16::scale`]).
+    /// 2^k per channel: the first factor of [`Scaled16::split_scale`] …
     scale: [f32; 5],
+    /// … and the second, 1 unless the channel's largest value is above 2³¹.
+    high: [f32; 5],
+}
+
+/// The scales ([`Cells::scale`], [`Cells::high`]) of channels whose largest values are `max`.
+fn scales(max: [f32; 5]) -> ([f32; 5], [f32; 5]) {
+    let s = max.map(|m| Scaled16::split_scale(Scaled16::wide_exponent_for(f64::from(m))));
+    (s.map(|s| s[0]), s.map(|s| s[1]))
+}
+
+/// The scale exponents the cells are coded under.
+fn exponents(max: [f32; 5]) -> [i32; 5] {
+    max.map(|m| Scaled16::wide_exponent_for(f64::from(m)))
 }
 
 impl Cells {
@@ -51,21 +66,21 @@ impl Cells {
         for g in index.full_voxels() {
             max = std::array::from_fn(|a| max[a].max(at(g)[a]));
         }
-        let k = max.map(|m| Scaled16::exponent_for(f64::from(m)));
+        let k = exponents(max);
         let codes = VoxelField::from_fn(index, [Scaled16::ZERO; 5], |g| encode(at(g), k));
-        Cells {
-            codes,
-            scale: k.map(Scaled16::scale),
-        }
+        let (scale, high) = scales(max);
+        Cells { codes, scale, high }
     }
 
     /// From every full voxel's cell in grid order (`cells.len()` = `index.count()`).
     fn from_packed(index: Arc<FullIndex>, cells: &[Cell]) -> Cells {
         let max = cells.iter().fold([0f32; 5], |m, c| std::array::from_fn(|a| m[a].max(c[a])));
-        let k = max.map(|m| Scaled16::exponent_for(f64::from(m)));
+        let k = exponents(max);
+        let (scale, high) = scales(max);
         Cells {
             codes: VoxelField::new(index, [Scaled16::ZERO; 5], cells.iter().map(|c| encode(*c, k))),
-            scale: k.map(Scaled16::scale),
+            scale,
+            high,
         }
     }
 
@@ -75,25 +90,49 @@ impl Cells {
         self.codes.slots(t)
     }
 
-    /// ρ in slot `s`.
+    /// ρ in slot `s` under the channel's first factor only ([`Self::high`] not applied).
     #[inline(always)]
-    pub fn rho_at_slot(&self, s: usize) -> f32 {
+    fn rho_first(&self, s: usize) -> f32 {
         self.codes.at_slot(s)[0].decode(self.scale[0])
     }
 
-    /// ρ·I0 (RGB) and ρ·T_sun in slot `s`, decoded at once.
+    /// ρ·I0 (RGB) and ρ·T_sun in slot `s`, decoded at once, under their first factors only.
     #[inline(always)]
-    pub fn rest_at_slot(&self, s: usize) -> [f32; 4] {
+    fn rest_first(&self, s: usize) -> [f32; 4] {
         let c = self.codes.at_slot(s);
         let sc = &self.scale;
         Scaled16::decode4([c[1], c[2], c[3], c[4]], [sc[1], sc[2], sc[3], sc[4]])
     }
 
+    /// ρ blended over `t`'s slots (from [`Self::slots`]). The second factor multiplies the
+    /// blend once, not each corner (the same value: powers of two; 1 at ordinary scales).
+    #[inline(always)]
+    pub fn rho_blend(&self, t: &Trilinear) -> f32 {
+        t.blend(|s| self.rho_first(s)) * self.high[0]
+    }
+
+    /// ρ·I0 (RGB) and ρ·T_sun blended over `t`'s slots, as [`Self::rho_blend`].
+    #[inline(always)]
+    pub fn rest_blend(&self, t: &Trilinear) -> Vec4 {
+        let h = &self.high;
+        t.blend(|s| Vec4::from_array(self.rest_first(s))) * Vec4::new(h[1], h[2], h[3], h[4])
+    }
+
+    /// ρ·I0 (RGB) blended over `t`'s slots, as [`Self::rho_blend`].
+    #[inline(always)]
+    pub fn rho_i0_blend(&self, t: &Trilinear) -> Rgb {
+        let h = &self.high;
+        t.blend(|s| {
+            let c = self.rest_first(s);
+            Rgb::new(c[0], c[1], c[2])
+        }) * Rgb::new(h[1], h[2], h[3])
+    }
+
     /// The cell in slot `s` (from [`Self::slots`]).
     #[inline(always)]
     pub fn at_slot(&self, s: usize) -> Cell {
-        let r = self.rest_at_slot(s);
-        [self.rho_at_slot(s), r[0], r[1], r[2], r[3]]
+        let (r, h) = (self.rest_first(s), &self.high);
+        [self.rho_first(s) * h[0], r[0] * h[1], r[1] * h[2], r[2] * h[3], r[3] * h[4]]
     }
 
     /// The cell of grid voxel `g` (zero where empty).
@@ -145,11 +184,11 @@ impl Level {
     #[inline]
     pub fn sample(&self, v: Vec3) -> Option<Cell> {
         let t = self.cells.slots(&Trilinear::new(self.dims, v.to_array()));
-        let rho = t.blend(|s| self.cells.rho_at_slot(s));
+        let rho = self.cells.rho_blend(&t);
         if rho <= 1e-12 {
             return None;
         }
-        let c = t.blend(|s| Vec4::from_array(self.cells.rest_at_slot(s)));
+        let c = self.cells.rest_blend(&t);
         Some([rho, c.x, c.y, c.z, c.w])
     }
 }
@@ -333,6 +372,24 @@ mod tests {
         for a in 0..4 {
             let k = Scaled16::exponent_for(f64::from(want.iter().map(|c| c[a]).fold(0.0, f32::max)));
             assert_eq!(cells.scale[a], Scaled16::scale(k), "channel {a}");
+            assert_eq!(cells.high[a], 1.0, "channel {a}");
+        }
+    }
+
+    /// Channels above 2³¹ (ρ·I0 under light of 1e10 to 1e30 W·m⁻²·sr⁻¹, a density of 1e12) read
+    /// back within 2⁻¹² like any other: one f32 scale saturated them (1e10 read as ~4.3e9).
+    #[test]
+    fn cells_keep_channels_above_two_to_the_31() {
+        let n = 500;
+        let index = Arc::new(FullIndex::build([n, 1, 1], &vec![1.0; n]));
+        let mag = [1e12f32, 1e10, 3e20, 1e30, 0.5];
+        let want: Vec<Cell> = (0..n).map(|g| mag.map(|m| m * (1.0 + (g % 17) as f32 / 17.0))).collect();
+        let cells = Cells::from_fn(index, |g| want[g]);
+        for (g, w) in want.iter().enumerate() {
+            let c = cells.get(g);
+            for a in 0..5 {
+                assert!((c[a] - w[a]).abs() <= w[a] / 4096.0, "voxel {g} channel {a}: {} vs {}", c[a], w[a]);
+            }
         }
     }
 }

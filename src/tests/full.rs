@@ -228,3 +228,33 @@ fn bad_propagation_settings_name_the_field() {
         assert!(err.contains(&format!("render.{key}")) && err.contains("bad.toml"), "{err}");
     }
 }
+
+/// `full` is linear in the light, at any scale f32 holds: the built-in scene with sun and sky
+/// 2⁴⁰ times brighter (1e12 W·m⁻²·sr⁻¹) is the same image 2⁴⁰ times brighter, to the solver's
+/// rounding. Its lit volume's 16-bit cells saturated above 2³¹ before, and the cloud came out up
+/// to 64 % too dark (docs/performance.md, the 16-bit fields).
+#[test]
+fn full_is_linear_in_the_light_at_any_scale() {
+    let render = |scale: f32| {
+        let s = Scene::load(None, |d| {
+            d.medium.resolution = [25, 20, 15];
+            d.medium.voxel_size = 40.0.into();
+            d.camera.width = 24;
+            d.camera.height = 18;
+            d.render.method = Method::Full;
+            d.sun.irradiance = d.sun.irradiance.map(|e| e * scale);
+            d.sky.radiance = d.sky.radiance.map(|l| l * scale);
+        })
+        .unwrap();
+        crate::render::render(&s, &NoProgress).unwrap().image
+    };
+    let scale = 2f32.powi(40);
+    let (base, bright) = (render(1.0), render(scale));
+    let mut worst = 0f32;
+    for (a, b) in base.pixels.iter().zip(&bright.pixels) {
+        for c in 0..3 {
+            worst = worst.max((b[c] / scale - a[c]).abs() / a[c].max(1e-6));
+        }
+    }
+    assert!(worst < 1e-3, "largest relative difference {worst}");
+}

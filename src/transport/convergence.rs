@@ -51,13 +51,19 @@ const RATIO_AGREEMENT: f64 = 0.15;
 /// evaluation scenes), a diverging one's grows by orders of magnitude within a few iterations.
 pub(super) const DIVERGENCE_FACTOR: f64 = 4.0;
 
+/// The floor of the divisors of the relative changes: below every non-zero f32 (2⁻¹⁴⁹), so a
+/// field of zeros divides to 0 (never NaN) while the dimmest light is still measured against
+/// itself. The iteration is linear in the light: its stopping rule must not depend on the
+/// light's units (a floor of 1e-30 stopped a scene lit at 1e-30 W/m² after one iteration).
+const NO_LIGHT: f64 = f64::MIN_POSITIVE;
+
 /// (max |ΔI_00|, max |I_00|) over the full voxels and bands (W·m⁻²·sr⁻¹): inf for the first
 /// when either iterate holds a non-finite value (so a NaN is never read as "no change").
 pub(super) fn i00_change(next: &[f32], moments: &[f32], nsh: usize) -> (f64, f64) {
     next.iter()
         .step_by(nsh)
         .zip(moments.iter().step_by(nsh))
-        .fold((0.0f64, 1e-30f64), |(c, m), (x, y)| {
+        .fold((0.0f64, NO_LIGHT), |(c, m), (x, y)| {
             let d = (x - y).abs() as f64;
             (if d.is_finite() { c.max(d) } else { f64::INFINITY }, m.max(x.abs() as f64))
         })
@@ -70,7 +76,7 @@ pub(super) fn i00_mean_change(next: &[f32], moments: &[f32], nsh: usize) -> f64 
         .iter()
         .step_by(nsh)
         .zip(moments.iter().step_by(nsh))
-        .fold((0.0f64, 1e-30f64), |(d, m), (x, y)| (d + (x - y).abs() as f64, m + x.abs() as f64));
+        .fold((0.0f64, NO_LIGHT), |(d, m), (x, y)| (d + (x - y).abs() as f64, m + x.abs() as f64));
     if d.is_finite() { d / m } else { f64::INFINITY }
 }
 
@@ -115,5 +121,27 @@ mod tests {
         assert_eq!(dominant_mode_step(&[1.0, 0.5, 0.3, 0.24], 0), None, "ratios 0.6 and 0.8 disagree");
         assert_eq!(dominant_mode_step(&[1.0, 0.95, 0.9025, 0.857], 0), None, "too slow to trust");
         assert_eq!(dominant_mode_step(&[1.0, 0.1, 0.01, 0.001], 0), None, "fast already");
+    }
+
+    /// The relative changes do not depend on the light's units: the same iterates at 2⁻¹¹⁰ (the
+    /// I_00 of a scene lit at ~1e-32 W/m²) give the same ratios, bit for bit; a field of zeros
+    /// changes by 0.
+    #[test]
+    fn relative_changes_are_independent_of_the_light_scale() {
+        let nsh = 3;
+        let next: Vec<f32> = (0..30).map(|i| 0.5 + (i % 7) as f32 * 0.25).collect();
+        let moments: Vec<f32> = next.iter().enumerate().map(|(i, x)| x * (1.0 + 0.01 * (i % 5) as f32)).collect();
+        let scaled = |v: &[f32]| v.iter().map(|x| x * 2f32.powi(-110)).collect::<Vec<f32>>();
+        let (c, m) = i00_change(&next, &moments, nsh);
+        let (cs, ms) = i00_change(&scaled(&next), &scaled(&moments), nsh);
+        assert!(c > 0.0);
+        assert_eq!(c / m, cs / ms, "max change: {c}/{m} vs {cs}/{ms}");
+        let mean = i00_mean_change(&next, &moments, nsh);
+        assert!(mean > 0.0);
+        assert_eq!(mean, i00_mean_change(&scaled(&next), &scaled(&moments), nsh));
+        let zeros = vec![0.0f32; 30];
+        let (c0, m0) = i00_change(&zeros, &zeros, nsh);
+        assert_eq!(c0 / m0, 0.0);
+        assert_eq!(i00_mean_change(&zeros, &zeros, nsh), 0.0);
     }
 }

@@ -622,6 +622,17 @@ fn arrays_longer_than_three_and_magnitudes_no_f32_render_holds() {
         &f32s(&[1.0, 1.0, 1e30, 1.0]),
     );
     grid_fails("g.npy", &[("g.npy", dense)], &["s.toml", "medium.sigma_t", "largest density"]);
+    // Density and light each within its bound, their product past what f32 holds (1e20 under a
+    // sun of 3e20 gave inf in three methods): named, with the fix.
+    let dense = npy(
+        "{'descr': '<f4', 'fortran_order': False, 'shape': (1, 2, 2), }",
+        &f32s(&[1e20, 1e20, 1e20, 1e20]),
+    );
+    render_fails(
+        "[medium]\ngrid = \"g.npy\"\nsigma_t = 1e-21\n[sun]\nirradiance = [3e20, 3e20, 3e20]\n",
+        &[("g.npy", dense)],
+        &["s.toml", "medium.grid", "brightest light", "1e33", "medium.sigma_t up"],
+    );
     // A grid file larger than any grid medium.max_voxels allows is refused before it is read.
     render_fails(
         "[medium]\ngrid = \"g.npy\"\nmax_voxels = 8\n",
