@@ -1,6 +1,6 @@
 //! `.vdb` input as simulations write it: empty frames (before a cloud forms, after it is gone) in
 //! a sequence and alone, files whose only float grid is not named `density`, and files with
-//! several such grids. The files are written by the test writer (`src/medium/vdb/test_file.rs`).
+//! several such grids (render, export, info). The files are written by the test writer (`src/medium/vdb/test_file.rs`).
 
 use crate::common::{block_error, cloudgi, ok};
 use crate::vdb_writer::{vdb_file, TestGrid};
@@ -101,6 +101,9 @@ fn an_empty_file_alone_renders_clear_sky_with_a_warning_and_info_says_empty() {
     ok(d, &[&["render", "clear.toml", "-o", "clear.exr", "-q"][..], &small].concat());
     let e = block_error(d, "e.exr", "clear.exr");
     assert!(e < 1e-5, "{e}");
+    // Exported for Mitsuba with the same warning.
+    let err = ok(d, &["export", "mitsuba", "e.vdb", "-o", "mitsuba"]);
+    assert!(err.contains("warning: ") && err.contains("`density` has no active voxels"), "{err}");
     let out = cloudgi(d, &["info", "e.vdb"]);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success() && text.contains("active voxels  0: empty"), "{text}");
