@@ -145,12 +145,21 @@ fn the_only_float_grid_is_read_whatever_its_name_and_several_are_a_choice() {
         "`smoke` (float)",
         "`heat` (float)",
         "grid_name = \"NAME\"",
+        "cloudgi render two.vdb --grid-name NAME",
     ] {
         assert!(err.contains(part), "{part}: {err}");
     }
     assert!(!d.join("two.exr").exists() && !d.join("two.png").exists());
-    // The scene key picks one.
+    // The scene key picks one, and so does --grid-name on the grid file itself.
     std::fs::write(d.join("heat.toml"), "[medium]\ngrid = \"two.vdb\"\ngrid_name = \"heat\"\n").unwrap();
     let err = ok(d, &[&["render", "heat.toml"][..], &small, &["heat.exr"]].concat());
     assert!(!err.contains("only float grid"), "{err}");
+    ok(
+        d,
+        &[&["render", "two.vdb", "--grid-name", "heat", "-q"][..], &small, &["flag.exr"]].concat(),
+    );
+    assert!(
+        read(&d.join("heat.exr")) == read(&d.join("flag.exr")),
+        "the flag reads the grid the key does"
+    );
 }

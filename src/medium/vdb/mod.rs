@@ -216,7 +216,8 @@ pub fn read_vdb_grid_bytes(bytes: &[u8], file: &str, grid_name: Option<&str>) ->
                 }
             }
             let fix = format!(
-                "choose one with medium.grid_name in a scene file (`[medium]` `grid = \"{}\"` `grid_name = \"NAME\"`)",
+                "choose one with medium.grid_name (`cloudgi render {} --grid-name NAME`, or in a scene file `[medium]` `grid = \"{}\"` `grid_name = \"NAME\"`)",
+                file_name(file),
                 file_name(file)
             );
             match fog.as_slice() {
