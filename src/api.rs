@@ -60,6 +60,14 @@ impl Scene {
         Scene::build(desc, crate::scene::BUILTIN, Path::new("."))
     }
 
+    /// What reading the scene's inputs found that the user should be told, e.g. a `.vdb` grid
+    /// with no active voxels (the scene renders without a cloud) or the grid read from a file
+    /// without a `density` grid. `cloudgi render` prints them as warnings; Python issues them as
+    /// `RuntimeWarning`s.
+    pub fn notes(&self) -> &[String] {
+        &self.notes
+    }
+
     /// Resolution `[nx, ny, nz]` of the density grid as loaded (after `medium.downsample` or
     /// `medium.refine`).
     ///
@@ -108,6 +116,7 @@ pub struct Density {
     grid: Grid3,
     voxel_size: [f32; 3],
     origin: [f32; 3],
+    notes: Vec<String>,
 }
 
 impl Density {
@@ -134,6 +143,7 @@ impl Density {
             grid: Grid3::from_vec(dims, values, DENSITY_SOURCE)?,
             voxel_size: voxel_size.into().to_vec3().to_array(),
             origin,
+            notes: Vec::new(),
         })
     }
 
@@ -154,6 +164,7 @@ impl Density {
             grid: crate::medium::loaders::parse_npy(bytes, DENSITY_SOURCE)?,
             voxel_size: voxel_size.into().to_vec3().to_array(),
             origin,
+            notes: Vec::new(),
         })
     }
 
@@ -190,7 +201,15 @@ impl Density {
             grid: loaded.grid,
             voxel_size: loaded.voxel_size.to_array(),
             origin: loaded.origin.to_array(),
+            notes: loaded.notes,
         })
+    }
+
+    /// What reading the file found that the user should be told: a `.vdb` grid with no active
+    /// voxels (read as one voxel of density 0 at the grid's index origin, a scene without a cloud)
+    /// or the grid read from a file without a `density` grid ([`Scene::notes`] carries them on).
+    pub fn notes(&self) -> &[String] {
+        &self.notes
     }
 
     /// The values, `[z][y][x]` (x fastest).
@@ -221,6 +240,7 @@ impl Density {
             voxel_size: Vec3::from(self.voxel_size),
             name: DENSITY_SOURCE.to_string(),
             downsampled: false,
+            notes: self.notes,
         }
     }
 }

@@ -494,6 +494,8 @@ pub struct Scene {
     pub render: RenderSettings,
     #[cfg(not(feature = "internals"))]
     pub(crate) render: RenderSettings,
+    /// What reading the inputs found that the user should be told ([`Scene::notes`]).
+    pub(crate) notes: Vec<String>,
 }
 
 impl Scene {
@@ -576,15 +578,18 @@ impl Scene {
             None => None,
         };
         let sun = crate::lighting::sun_over_ground(sun, ground.as_ref());
-        let medium = Medium::from_desc_with(&desc.medium, f, base_dir, density.map(crate::Density::into_loaded))?;
+        let (medium, notes) = Medium::from_desc_with(&desc.medium, f, base_dir, density.map(crate::Density::into_loaded))?;
         check_density_times_light(&medium, &sun, &sky, f)?;
         // The ground is opaque: density under it is neither lit nor seen (every method alike).
         let medium = match &ground {
             Some(g) => medium.emptied_below(g.height).unwrap_or(medium),
             None => medium,
         };
-        // camera.fit: the camera moved to frame the cloud's box (src/camera/fit.rs).
-        let (desc, camera) = match desc.camera.fit {
+        // camera.fit: the camera moved to frame the cloud's box (src/camera/fit.rs). A medium with
+        // no density (an empty frame of a simulation) has no box to frame: the camera stays where
+        // the scene puts it, looking the same way as a framed one (camera.fit keeps the direction),
+        // and the sky and a cloud-less ground look the same from any point above the ground.
+        let (desc, camera) = match desc.camera.fit && medium.active_box(0).is_some() {
             true => {
                 let (lo, hi) = medium.cloud_box();
                 let mut desc = desc;
@@ -604,6 +609,7 @@ impl Scene {
             ground,
             camera,
             render,
+            notes,
         })
     }
 

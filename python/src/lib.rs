@@ -138,6 +138,9 @@ fn render<'py>(
             None => None,
         };
         let scene = cloudgi::Scene::build_with(desc, &source, &base, density)?;
+        for note in scene.notes() {
+            reported.warn(note);
+        }
         let options = Options {
             progress: Some(&reported),
             cancel: Some(&cancel),
@@ -184,14 +187,19 @@ fn render<'py>(
     Ok((w, h, arrays))
 }
 
+/// Issue `msg` as a Python `RuntimeWarning`.
+fn runtime_warning(py: Python<'_>, msg: &str) -> PyResult<()> {
+    let category = py.get_type::<pyo3::exceptions::PyRuntimeWarning>();
+    PyErr::warn(py, category.as_any(), &std::ffi::CString::new(msg).unwrap_or_default(), 1)
+}
+
 /// Show the render's progress and warnings and check for signals (on the main thread a pending
 /// Ctrl-C raises KeyboardInterrupt here).
 fn report(py: Python<'_>, reported: &Reported, progress: Option<&Bound<'_, PyAny>>, shown: &mut (String, u64, u64)) -> PyResult<()> {
     py.check_signals()?;
     let warnings = reported.warnings.lock().map(|mut w| std::mem::take(&mut *w)).unwrap_or_default();
     for w in warnings {
-        let category = py.get_type::<pyo3::exceptions::PyRuntimeWarning>();
-        PyErr::warn(py, category.as_any(), &std::ffi::CString::new(w).unwrap_or_default(), 1)?;
+        runtime_warning(py, &w)?;
     }
     let now = reported.stage.lock().map(|s| s.clone()).unwrap_or_default();
     if let Some(cb) = progress {
@@ -252,6 +260,9 @@ fn load_grid<'py>(
     grid: &str,
 ) -> PyResult<([usize; 3], Bound<'py, PyByteArray>, [f32; 3], [f32; 3])> {
     let d = py.detach(|| Density::load(&path, grid)).map_err(to_py)?;
+    for note in d.notes() {
+        runtime_warning(py, note)?;
+    }
     let bytes: Vec<u8> = d.values().iter().flat_map(|v| v.to_le_bytes()).collect();
     Ok((d.dims(), PyByteArray::new(py, &bytes), d.voxel_size(), d.origin()))
 }

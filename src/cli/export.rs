@@ -66,6 +66,10 @@ pub fn run(a: ExportArgs, quiet: bool) -> Result<()> {
             };
             super::output::check_folder(&m.output, "--output", &file.inputs(&desc), ours)?;
             let scene = Scene::build(desc, &file.source, &file.base)?;
+            // What reading the grid found (an empty .vdb, the grid chosen), as render prints it.
+            for n in scene.notes() {
+                note!("warning: {n}");
+            }
             let files = crate::reference::mitsuba::export(&scene, &m.output)?;
             if !quiet {
                 for f in files {

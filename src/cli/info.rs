@@ -40,6 +40,7 @@ fn describe(g: &VdbGridInfo) -> String {
     }
     s.push('\n');
     match g.active_voxels {
+        Some(0) => s += "    active voxels  0: empty (a render reads it as a scene without a cloud)\n",
         Some(n) => s += &format!("    active voxels  {} (tiles expanded)\n", grouped(n)),
         None => s += "    active voxels  unknown (value type not read)\n",
     }

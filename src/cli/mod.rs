@@ -153,6 +153,10 @@ struct RenderArgs {
     /// light sources, transmittance; docs/reference.md and docs/transport.md).
     #[arg(long)]
     aov: bool,
+    /// Override medium.grid_name: the .vdb grid read as the density (for `render cloud.vdb`
+    /// whose file holds several float grids and none named `density`).
+    #[arg(long, value_name = "NAME")]
+    grid_name: Option<String>,
     #[command(flatten)]
     frames: frames::FrameArgs,
 }
@@ -287,6 +291,7 @@ impl RenderArgs {
             (self.stderr, "render.stderr", "--stderr"),
             (self.iterations.is_some(), "render.iterations", "--iterations"),
             (self.aov, "render.aov", "--aov"),
+            (self.grid_name.is_some(), "medium.grid_name", "--grid-name"),
         ];
         given.into_iter().filter(|g| g.0).map(|(_, k, f)| (k, f)).collect()
     }
@@ -325,6 +330,9 @@ impl RenderArgs {
         }
         if self.aov {
             d.render.aov = true;
+        }
+        if let Some(g) = &self.grid_name {
+            d.medium.grid_name = g.clone();
         }
     }
 }

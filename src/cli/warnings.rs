@@ -38,7 +38,7 @@ fn grid_kind(grid: &str) -> GridKind {
 /// as (the key they set, the flag).
 pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<String> {
     let d = &scene.desc;
-    let mut out = Vec::new();
+    let mut out = scene.notes.clone();
     let mut rule = |key: &str, applies: bool, why: &str| {
         if applies {
             return;
@@ -113,12 +113,15 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
         );
     }
     out.extend(hidden_sun_warning(scene));
-    out.extend(super::cloud_size::warning(scene));
+    // A medium with no density (an empty .vdb frame, which its note reports) has no cloud to
+    // size or frame.
+    let cloud = scene.medium.active_box(0).is_some();
+    out.extend(super::cloud_size::warning(scene).filter(|_| cloud));
     out.extend(super::thick_voxels::warning(scene));
     out.extend(super::low_albedo::warning(scene));
     out.extend(super::back_scattering::warning(scene));
     out.extend(super::map_sun::warning(scene));
-    out.extend(frame_warning(scene));
+    out.extend(frame_warning(scene).filter(|_| cloud));
     out
 }
 

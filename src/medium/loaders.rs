@@ -24,6 +24,8 @@ pub struct Loaded {
     pub name: String,
     /// True if `medium.downsample` was already applied while loading.
     pub downsampled: bool,
+    /// What the user should be told about the file (a `.vdb`'s grid chosen for them, an empty grid).
+    pub notes: Vec<String>,
 }
 
 /// The smallest `.raw` sidecar, for messages.
@@ -81,6 +83,7 @@ pub fn load(d: &MediumDesc, file: &str, base_dir: &Path) -> Result<Loaded> {
                 voxel_size: size,
                 name,
                 downsampled: false,
+                notes: Vec::new(),
             })
         }
         "npy" => placed(d, file, name.clone(), || parse_npy(&read_dense(&path, d, file)?, &name)),
@@ -135,6 +138,7 @@ fn placed(d: &MediumDesc, file: &str, name: String, grid: impl FnOnce() -> Resul
         voxel_size: d.voxel_size.to_vec3(),
         name,
         downsampled: false,
+        notes: Vec::new(),
     })
 }
 
@@ -149,6 +153,7 @@ fn load_vdb(d: &MediumDesc, file: &str, bytes: &[u8], name: String) -> Result<Lo
         "the factor on the .vdb transform must be positive and finite",
     )?;
     let v = super::vdb::read_vdb_dense_bytes(bytes, &name, Some(&d.grid_name), d.max_voxels, d.downsample)?;
+    check_vdb_densities(&v, d.downsample, &name)?;
     let s = d.scale as f64;
     let (origin, voxel_size) = (v.origin.map(|x| x * s), v.voxel_size.map(|x| x * s));
     let max = super::MAX_VOXEL_SIZE as f64;
@@ -179,7 +184,36 @@ fn load_vdb(d: &MediumDesc, file: &str, bytes: &[u8], name: String) -> Result<Lo
         voxel_size: Vec3::from(voxel_size.map(|x| x as f32)),
         name,
         downsampled: true,
+        notes: v.notes,
     })
+}
+
+/// A `.vdb` density that is negative or not finite, named by its index in the file (what `cloudgi
+/// info` and the DCC show), with the usual cause and fix: a simulation's advection leaves small
+/// negative values in fog volumes.
+fn check_vdb_densities(v: &super::vdb::VdbDense, downsample: usize, name: &str) -> Result<()> {
+    let Some((i, &value)) = v.grid.data().iter().enumerate().find(|(_, x)| !x.is_finite() || **x < 0.0) else {
+        return Ok(());
+    };
+    let n = v.grid.dims();
+    let at = [i % n[0], (i / n[0]) % n[1], i / (n[0] * n[1])];
+    let index = [0, 1, 2].map(|a| v.index_min[a] + (at[a] * downsample.max(1)) as i64);
+    let block = match downsample {
+        0 | 1 => String::new(),
+        k => format!(" (the mean of the {k}³ block from there)"),
+    };
+    let fix = match value < 0.0 {
+        true => {
+            "a fog volume's densities must be non-negative: simulations leave small negative values where \
+             advection overshoots; clamp them before export (Houdini: a Volume Wrangle with \
+             `@density = max(@density, 0);`)"
+        }
+        false => "densities must be finite: the file holds NaN or infinite values; re-export it from a clean simulation",
+    };
+    Err(Error::format(
+        name,
+        format!("grid `{}`: the voxel at index {index:?}{block} holds {value}; {fix}", v.grid_name),
+    ))
 }
 
 fn read(path: &Path) -> Result<Vec<u8>> {

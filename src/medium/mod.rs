@@ -181,8 +181,9 @@ impl Medium {
     }
 
     /// [`Medium::from_desc`] with the grid `given` in memory instead of `medium.grid`'s (the
-    /// library's [`crate::Density`]); it is checked like a loaded one.
-    pub fn from_desc_with(d: &MediumDesc, file: &str, base_dir: &Path, given: Option<loaders::Loaded>) -> Result<Medium> {
+    /// library's [`crate::Density`]); it is checked like a loaded one. Returns the medium and the
+    /// loader's notes for the user ([`loaders::Loaded::notes`]).
+    pub fn from_desc_with(d: &MediumDesc, file: &str, base_dir: &Path, given: Option<loaders::Loaded>) -> Result<(Medium, Vec<String>)> {
         check(
             file,
             "medium.sigma_t",
@@ -316,7 +317,8 @@ impl Medium {
             ),
         )?;
         check_voxel_resolvable(&loaded.name, grid.dims(), origin, voxel)?;
-        Ok(Medium::new(grid, origin, voxel, d.sigma_t, Rgb::from(d.albedo), d.g))
+        let medium = Medium::new(grid, origin, voxel, d.sigma_t, Rgb::from(d.albedo), d.g);
+        Ok((medium, loaded.notes))
     }
 
     /// Grid resolution.
@@ -628,6 +630,7 @@ mod tests {
                 voxel_size: Vec3::splat(10.0),
                 name: "in-memory density".into(),
                 downsampled: false,
+                notes: Vec::new(),
             };
             Medium::from_desc_with(&MediumDesc::default(), "s.toml", Path::new("."), Some(given))
         };

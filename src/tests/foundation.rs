@@ -262,7 +262,7 @@ fn the_scene_empties_the_density_under_its_ground() {
     desc.medium.voxel_size = 50.0.into();
     desc.medium.origin = [-500.0, -300.0, -300.0];
     desc.ground.as_mut().expect("the default scene has a ground").height = 0.0;
-    let loaded = Medium::from_desc_with(&desc.medium, "cut.toml", Path::new("."), None).unwrap();
+    let (loaded, _) = Medium::from_desc_with(&desc.medium, "cut.toml", Path::new("."), None).unwrap();
     let s = Scene::build(desc, "cut.toml", Path::new(".")).unwrap();
     let m = &s.medium;
     let (mut under, mut above) = (0.0f64, 0.0f64);

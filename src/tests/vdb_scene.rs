@@ -13,8 +13,13 @@ fn data(name: &str) -> PathBuf {
 /// A scene in `dir` whose `[medium]` is `medium` (TOML lines); the .vdb is copied beside it.
 fn scene(dir: &Path, vdb: &str, medium: &str, rest: &str) -> crate::Result<Scene> {
     std::fs::copy(data(vdb), dir.join("cloud.vdb")).unwrap();
+    scene_over(dir, "cloud.vdb", &format!("{medium}\n{rest}"))
+}
+
+/// The scene file `[medium] grid = "{grid}"` followed by `text`, in `dir`, loaded.
+fn scene_over(dir: &Path, grid: &str, text: &str) -> crate::Result<Scene> {
     let path = dir.join("scene.toml");
-    std::fs::write(&path, format!("[medium]\ngrid = \"cloud.vdb\"\n{medium}\n{rest}")).unwrap();
+    std::fs::write(&path, format!("[medium]\ngrid = \"{grid}\"\n{text}")).unwrap();
     Scene::load(Some(&path), |_| {})
 }
 
@@ -119,4 +124,63 @@ fn a_vdb_cloud_renders_end_to_end() {
     let covered = img.pixels.iter().filter(|p| (**p - sky).abs().max_element() > 1e-3).count();
     let frac = covered as f32 / img.pixels.len() as f32;
     assert!((0.2..0.7).contains(&frac), "cloud covers {frac} of the image");
+}
+
+/// A scene in `dir` over the `.vdb` the test writer makes of `grids`.
+fn written(dir: &Path, grids: &[crate::medium::vdb::test_file::TestGrid], rest: &str) -> crate::Result<Scene> {
+    std::fs::write(dir.join("w.vdb"), crate::medium::vdb::test_file::vdb_file(grids)).unwrap();
+    scene_over(dir, "w.vdb", rest)
+}
+
+#[test]
+fn an_empty_grid_keeps_the_camera_and_its_note_reaches_the_scene_and_the_library() {
+    use crate::medium::vdb::test_file::TestGrid;
+    let dir = tempfile::tempdir().unwrap();
+    let mut empty = TestGrid::float("density", Vec::new());
+    empty.voxel_size = [50.0; 3];
+    // camera.fit (no [camera] table) has no box to frame: the scene's camera stays.
+    let s = written(dir.path(), &[empty.clone()], "").unwrap();
+    assert!(s.desc.camera.fit && s.medium.active_box(0).is_none());
+    assert_eq!(s.desc.camera.position, crate::camera::CameraDesc::default().position);
+    assert!(s.notes().len() == 1 && s.notes()[0].contains("no active voxels"), "{:?}", s.notes());
+    // A cloud is framed as before, with no note.
+    let s = written(
+        dir.path(),
+        &[TestGrid {
+            voxels: vec![([0, 0, 0], 1.0)],
+            ..empty
+        }],
+        "",
+    )
+    .unwrap();
+    assert!(s.notes().is_empty() && s.desc.camera.position != crate::camera::CameraDesc::default().position);
+    // The library's Density::load carries the grid-choice note into a scene built with it.
+    std::fs::write(
+        dir.path().join("s.vdb"),
+        crate::medium::vdb::test_file::vdb_file(&[TestGrid::block("smoke", 2, 1.0)]),
+    )
+    .unwrap();
+    let d = crate::Density::load(dir.path().join("s.vdb"), "density").unwrap();
+    assert!(d.notes().len() == 1 && d.notes()[0].contains("`smoke`"), "{:?}", d.notes());
+    let s = Scene::build_with(crate::SceneDesc::default(), "t", dir.path(), Some(d)).unwrap();
+    assert!(s.notes()[0].contains("`smoke`"), "{:?}", s.notes());
+}
+
+#[test]
+fn a_negative_or_nan_vdb_density_is_named_by_its_index_in_the_file() {
+    use crate::medium::vdb::test_file::TestGrid;
+    let dir = tempfile::tempdir().unwrap();
+    let mut g = TestGrid::block("density", 4, 1.0);
+    g.voxels.push(([5, -3, 2], -1e-7));
+    let e = written(dir.path(), &[g.clone()], "").unwrap_err().to_string();
+    for part in ["w.vdb", "grid `density`", "index [5, -3, 2]", "-0.0000001", "max(@density, 0)"] {
+        assert!(e.contains(part), "{part}: {e}");
+    }
+    g.voxels.pop();
+    g.voxels.push(([-6, 1, 1], f32::NAN));
+    let e = written(dir.path(), &[g], "downsample = 2").unwrap_err().to_string();
+    assert!(
+        e.contains("index [-6, 0, 0]") && e.contains("2³ block") && e.contains("finite"),
+        "{e}"
+    );
 }

@@ -65,3 +65,15 @@ pub fn npy_grid(dims: [usize; 3], density: impl Fn(usize, usize, usize) -> f32) 
         &f32s(&v),
     )
 }
+
+/// `cloudgi compare`'s block mean relative error of `test` against `reference`.
+pub fn block_error(dir: &Path, test: &str, reference: &str) -> f64 {
+    let out = Command::new(BIN)
+        .current_dir(dir)
+        .args(["compare", test, reference])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let m: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    m["block_mean_relative_error"].as_f64().unwrap()
+}

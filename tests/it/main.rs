@@ -13,4 +13,8 @@ mod sky;
 mod slab;
 mod transport;
 mod transport_slab;
+mod vdb_input;
 mod vdb_scene;
+/// The test writer of `.vdb` files (empty grids, grids of any name), shared with the unit tests.
+#[path = "../../src/medium/vdb/test_file.rs"]
+mod vdb_writer;

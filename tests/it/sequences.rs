@@ -3,7 +3,7 @@
 //! time-lapse, and a real Slurm array job (ci/slurm/start.sh; skipped with a message where Slurm
 //! cannot start, a failure under CI=true).
 
-use crate::common::{npy_grid, ok as cloudgi, BIN};
+use crate::common::{block_error, npy_grid, ok as cloudgi, BIN};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -96,18 +96,6 @@ fn chunks_write_the_bits_of_the_whole_range_and_skip_existing_resumes() {
         &["render", "s.toml", "-o", "sun.####.png", "--cold", "--frames", "7-8", "-q"],
     );
     same_frames(whole.path(), png.path(), 7..=8);
-}
-
-/// `cloudgi compare`'s block mean relative error of `test` against `reference`.
-fn block_error(dir: &Path, test: &str, reference: &str) -> f64 {
-    let out = Command::new(BIN)
-        .current_dir(dir)
-        .args(["compare", test, reference])
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let m: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    m["block_mean_relative_error"].as_f64().unwrap()
 }
 
 /// The iterations of each frame's solve, from the per-frame lines.
