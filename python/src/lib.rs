@@ -138,6 +138,9 @@ fn render<'py>(
             None => None,
         };
         let scene = cloudgi::Scene::build_with(desc, &source, &base, density)?;
+        if let Some(w) = cloudgi::clipped_sun_warning(&scene) {
+            reported.warn(&w);
+        }
         let options = Options {
             progress: Some(&reported),
             cancel: Some(&cancel),

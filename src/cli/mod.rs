@@ -21,7 +21,7 @@ mod frames;
 mod grid_scene;
 mod info;
 mod low_albedo;
-mod map_sun;
+pub(crate) mod map_sun;
 pub(crate) mod memory;
 mod output;
 mod progress;
