@@ -343,6 +343,14 @@ pub fn render(scene: &Scene, method: Method, options: &Options) -> Result<Render
     })
 }
 
+/// The warning when the sun `sky.extract_sun` took out of the scene's sky map was clipped in
+/// the map, so its irradiance is a lower bound (docs/sky.md, "A clipped sun"); `None` otherwise.
+/// The command line prints it among the scene's warnings, the Python package as a
+/// `RuntimeWarning`.
+pub fn clipped_sun_warning(scene: &Scene) -> Option<String> {
+    crate::cli::map_sun::clip_warning(scene)
+}
+
 /// The caller's progress sink with the cancel flag as its [`Progress::cancelled`].
 struct Watched<'a> {
     inner: &'a dyn Progress,

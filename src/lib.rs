@@ -51,7 +51,9 @@ mod par;
 #[cfg(test)]
 mod tests;
 
-pub use crate::api::{check_output_file, render, Density, Event, FnProgress, Options, Render, Stats, DENSITY_SOURCE, TOML_SOURCE};
+pub use crate::api::{
+    check_output_file, clipped_sun_warning, render, Density, Event, FnProgress, Options, Render, Stats, DENSITY_SOURCE, TOML_SOURCE,
+};
 pub use crate::camera::CameraDesc;
 pub use crate::error::{Error, Result};
 pub use crate::image::Image;

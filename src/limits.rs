@@ -41,3 +41,28 @@ pub const MIN_SIGMA_T: f32 = 1e-30;
 /// Largest |exposure| of the PNG preview (stops): 2^64 spans any radiance from 1e-19 to 1e19;
 /// past 2^127 the f32 scale factor itself overflows.
 pub const MAX_EXPOSURE: f32 = 64.0;
+
+/// Longest duration a setting may give (s): 1e9, about 32 years, longer than any render runs.
+/// A deadline far past it overflows the clock (`Instant + Duration` panics past ~1.8e19 s), and
+/// one near it is no limit at all.
+pub const MAX_SECONDS: f64 = 1e9;
+
+/// A duration `s` (seconds) as messages write it: `15 s`, `0.25 s`, and `1e-300 s` rather than
+/// 300 digits of `0.000…1`.
+pub fn seconds_text(s: f64) -> String {
+    match (1e-3..1e7).contains(&s.abs()) || s == 0.0 {
+        true => format!("{s} s"),
+        false => format!("{s:e} s"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_duration_reads_as_written_not_as_hundreds_of_digits() {
+        assert_eq!(super::seconds_text(15.0), "15 s");
+        assert_eq!(super::seconds_text(0.25), "0.25 s");
+        assert_eq!(super::seconds_text(1e-9), "1e-9 s");
+        assert_eq!(super::seconds_text(1e300), "1e300 s");
+    }
+}

@@ -547,9 +547,9 @@ impl Scene {
             check(
                 f,
                 "render.time_limit",
-                t.is_finite() && t > 0.0,
+                t.is_finite() && t > 0.0 && t <= crate::limits::MAX_SECONDS,
                 t,
-                "the time limit is a positive number of seconds",
+                "the time limit is a positive number of seconds, at most 1e9 (about 32 years)",
             )?;
         }
         check(

@@ -141,6 +141,9 @@ fn render<'py>(
         for note in scene.notes() {
             reported.warn(note);
         }
+        if let Some(w) = cloudgi::clipped_sun_warning(&scene) {
+            reported.warn(&w);
+        }
         let options = Options {
             progress: Some(&reported),
             cancel: Some(&cancel),

@@ -6,6 +6,7 @@ import subprocess
 import sys
 import textwrap
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -468,3 +469,20 @@ def test_a_grid_with_cells_that_are_not_cubes_renders_as_its_file_does():
     assert a.max() > 0 and np.array_equal(a, b)
     with pytest.raises(ValueError, match="voxel_size has 2 values"):
         cloudgi.render(scene, method="single", density=density, voxel_size=[1.0, 2.0])
+
+
+def test_a_clipped_sun_taken_out_of_the_sky_map_is_a_runtime_warning(tmp_path):
+    # A 1024×512 map of 0.5 with a Gaussian sun (σ = 2 pixels, peak 1e6), whole and cut at 65504.
+    j, i = np.mgrid[0:512, 0:1024].astype(np.float32)
+    sun = 0.5 + 1e6 * np.exp(-((i - 200.3) ** 2 + (j - 120.6) ** 2) / 8.0)
+    for name, ceiling in [("whole.exr", np.inf), ("clipped.exr", 65504.0)]:
+        rgb = np.repeat(np.minimum(sun, ceiling)[:, :, None], 3, axis=2).astype(np.float32)
+        cloudgi.write_exr(tmp_path / name, {"rgb": rgb})
+        scene = tiny_scene(width=8, height=6)
+        scene["sky"] = {"model": "envmap", "path": str(tmp_path / name), "extract_sun": True}
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            cloudgi.render(scene, method="single")
+        clipped = [w for w in caught if "is clipped" in str(w.message)]
+        assert len(clipped) == (name == "clipped.exr"), [str(w.message) for w in caught]
+        assert all(w.category is RuntimeWarning and "65504 in the file" in str(w.message) for w in clipped)

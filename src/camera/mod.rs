@@ -106,7 +106,9 @@ impl Camera {
         let cross = forward.cross(up_hint.unwrap_or(Vec3::Y));
         if cross.length() <= 1e-4 {
             // A camera looking straight down or up with the default up: name an up that works.
+            // (Each zero written 0.0: negating the axis would show -0.0.)
             let (a, b) = (perpendicular_axis(forward), -perpendicular_axis(forward));
+            let (a, b) = (a.to_array(), b.to_array().map(|x| if x == 0.0 { 0.0 } else { x }));
             return Err(crate::error::Error::invalid(
                 file,
                 "camera.up",
@@ -116,8 +118,8 @@ impl Camera {
                      {:?} or {:?}",
                     d.up,
                     to.to_array(),
-                    a.to_array(),
-                    b.to_array()
+                    a,
+                    b
                 ),
             ));
         }

@@ -38,6 +38,17 @@ pub struct BenchArgs {
     height: Option<u32>,
 }
 
+impl BenchArgs {
+    /// The scene keys the command line sets, with their flags (for the messages).
+    fn flags(&self) -> Vec<(&'static str, &'static str)> {
+        let given = [
+            (self.width.is_some(), "camera.width", "--width"),
+            (self.height.is_some(), "camera.height", "--height"),
+        ];
+        given.into_iter().filter(|g| g.0).map(|(_, k, f)| (k, f)).collect()
+    }
+}
+
 /// Keeps the solver's one-line summaries (iterations per band), drops the progress bars and the
 /// transport solver's line per iteration (its summary has the count).
 struct Log(Mutex<Vec<String>>);
@@ -186,11 +197,14 @@ fn megabytes(bytes: u64) -> String {
 
 pub fn run(a: BenchArgs) -> Result<()> {
     let sizes = a.sizes.iter().map(|s| parse_size(s)).collect::<Result<Vec<_>>>()?;
-    if !(a.max_seconds.is_finite() && a.max_seconds > 0.0) {
+    if !(a.max_seconds > 0.0 && a.max_seconds <= crate::limits::MAX_SECONDS) {
         return Err(Error::invalid(
             "command line",
             "--max-seconds",
-            format!("{} is not a positive number of seconds, e.g. 60", a.max_seconds),
+            format!(
+                "{:?} is not allowed: it is a positive number of seconds, at most 1e9 (about 32 years), e.g. 60",
+                a.max_seconds
+            ),
         ));
     }
     let file = SceneFile::read(a.scene.as_deref())?;
@@ -244,7 +258,7 @@ pub fn run(a: BenchArgs) -> Result<()> {
             }
             super::memory::check_image(&desc, &cloud.source)?;
             let resident = resident::restart_peak();
-            let scene = Scene::build(desc, &cloud.source, &cloud.base)?;
+            let scene = Scene::build(desc, &cloud.source, &cloud.base).map_err(|e| super::blamed_on_flags(e, &a.flags()))?;
             let voxels = scene.medium.density.len();
             let last = rows.iter().rev().find(|r: &&Row| r.method == method);
             if let Some(t) = last.map(|r| predicted(r.voxels, r.total, voxels)).filter(|t| *t > a.max_seconds) {

@@ -36,11 +36,14 @@ pub fn run(a: FiguresArgs, quiet: bool) -> Result<()> {
         reference_spp: a.reference_spp,
         reference_time: (a.reference_time > 0.0).then_some(a.reference_time),
     };
-    if !(a.reference_time.is_finite() && a.reference_time >= 0.0) {
+    if !(0.0..=crate::limits::MAX_SECONDS).contains(&a.reference_time) {
         return Err(crate::Error::invalid(
             "command line",
             "--reference-time",
-            "the time limit is a number of seconds ≥ 0 (0 = none)",
+            format!(
+                "{:?} is not allowed: the time limit is a number of seconds from 0 (none) to 1e9 (about 32 years)",
+                a.reference_time
+            ),
         ));
     }
     let file = super::SceneFile::read(a.scene.as_deref())?;

@@ -185,7 +185,8 @@ pub fn render(a: &RenderArgs, file: &SceneFile, quiet: bool) -> Result<()> {
     let (mut shown, mut per_frame) = (std::collections::HashSet::new(), Vec::with_capacity(todo.len()));
     for (i, frame) in todo.iter().enumerate() {
         let t = Instant::now();
-        let scene = Scene::build(frame.desc.clone(), &file.source, &file.base).map_err(|e| at_frame(e, frame.number))?;
+        let scene = Scene::build(frame.desc.clone(), &file.source, &file.base)
+            .map_err(|e| at_frame(super::blamed_on_flags(e, &a.flags()), frame.number))?;
         let kept = memory::warm_state_bytes(&scene, warm.bytes(), warm.enabled);
         memory::check_solver(&scene, kept).map_err(|e| at_frame(e, frame.number))?;
         // Each warning the first time its kind comes (its keyed sun, extinction and camera, its

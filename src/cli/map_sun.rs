@@ -7,6 +7,7 @@
 
 use crate::lighting::map_sun::MAX_SUN_SOLID_ANGLE;
 use crate::lighting::SkyModel;
+use crate::math::{luminance, Rgb};
 use crate::scene::{Method, Scene};
 
 /// Share of the map's light above which a compact source is warned about.
@@ -60,11 +61,68 @@ pub fn warning(scene: &Scene) -> Option<String> {
     ))
 }
 
+/// Under a clear sky, the sun's irradiance on a plane facing it over the sky's on a level plane
+/// (direct normal over diffuse horizontal irradiance): about 850 over 100 W/m² with the sun 45°
+/// high, 550 over 60 with it 15° high; a hazy sky's is lower (600 over 200).
+const CLEAR_SKY_SUN_OVER_SKY: (f32, f32) = (5.0, 10.0);
+
+/// The warning for `scene` when the sun `sky.extract_sun` took out of its map was clipped
+/// ([`crate::lighting::sun_clip`]): its irradiance is a lower bound.
+pub fn clip_warning(scene: &Scene) -> Option<String> {
+    let clip = scene.sky.extracted_sun_clip?;
+    let d = &scene.desc.sky;
+    let path = d.path.as_deref().unwrap_or_default();
+    // The ceiling as the file holds it (the map is the file times sky.scale).
+    let in_file = clip.ceiling / d.scale;
+    let ceiling = match in_file.max_element() == in_file.min_element() {
+        true => format!("{}", in_file.x),
+        false => ["R", "G", "B"]
+            .iter()
+            .zip(in_file.to_array())
+            .filter(|(_, c)| *c > 0.0)
+            .map(|(band, c)| format!("{c} in {band}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+    };
+    // A sun under the ground lights nothing (another warning says so).
+    let e = scene.sun.irradiance;
+    if e == Rgb::ZERO {
+        return None;
+    }
+    let sky = luminance(scene.sky.irradiance_up);
+    let ratio = luminance(e) / sky;
+    let (low, high) = CLEAR_SKY_SUN_OVER_SKY;
+    let against_sky = match (sky > 0.0, ratio < low) {
+        (false, _) => String::new(),
+        (true, false) => format!("; it is {ratio:.2} times the sky's on a level plane"),
+        (true, true) => format!(
+            "; it is {ratio:.2} times the sky's on a level plane, where under a clear sky the sun's is {low:.0} to \
+             {high:.0} times it, so it may hold as little as 1/{:.0} to 1/{:.0} of the sun's light",
+            low / ratio,
+            high / ratio
+        ),
+    };
+    Some(format!(
+        "{}: the sun sky.extract_sun took out of `{path}` is clipped: {} of its pixels ({:.1e} sr) hold its brightest \
+         value, {ceiling} in the file, so its irradiance, {}, is a lower bound (docs/sky.md, \"A clipped sun\"){against_sky}; use an \
+         HDRI whose sun is not clipped",
+        scene.source,
+        clip.pixels,
+        clip.solid_angle,
+        rgb_text(e, "W/m²"),
+    ))
+}
+
+/// `(r, g, b) unit`, each to 3 significant digits.
+fn rgb_text(c: Rgb, unit: &str) -> String {
+    let digits = |x: f32| format!("{x:.2e}").parse::<f64>().unwrap_or(x as f64);
+    format!("({}, {}, {}) {unit}", digits(c.x), digits(c.y), digits(c.z))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::image::Image;
-    use crate::math::Rgb;
     use crate::scene::SceneDesc;
 
     #[test]
@@ -95,5 +153,47 @@ mod tests {
             assert_eq!(warning_for(&uniform, m), None);
         }
         assert_eq!(warning_for(&sunny, Method::Reference), None);
+    }
+
+    /// A 1024×512 map of 0.5 with a Gaussian sun (σ = 2 pixels, peak 10⁶) cut at `ceiling`.
+    fn clipped_sun_map(ceiling: f32) -> Image {
+        let (w, h) = (1024u32, 512u32);
+        let mut img = Image::new(w, h);
+        img.pixels = (0..w * h)
+            .map(|k| {
+                let (di, dj) = ((k % w) as f32 - 200.3, (k / w) as f32 - 120.6);
+                Rgb::splat((0.5 + 1e6 * (-(di * di + dj * dj) / 8.0).exp()).min(ceiling))
+            })
+            .collect();
+        img
+    }
+
+    #[test]
+    fn a_clipped_sun_taken_out_of_the_map_is_warned_about_with_its_ceiling() {
+        let dir = tempfile::tempdir().unwrap();
+        let warning_for = |ceiling: f32, scale: f32| {
+            let map = dir.path().join(format!("sun{ceiling}.exr"));
+            clipped_sun_map(ceiling).write_exr(&map).unwrap();
+            let mut d = SceneDesc::default();
+            d.medium.resolution = [20, 16, 12];
+            d.sun.irradiance = [0.0; 3];
+            d.sky.model = SkyModel::Envmap;
+            d.sky.path = Some(map.to_string_lossy().into_owned());
+            d.sky.scale = scale;
+            d.sky.extract_sun = true;
+            clip_warning(&Scene::build(d, "s.toml", dir.path()).unwrap())
+        };
+        assert_eq!(warning_for(f32::MAX, 1.0), None);
+        let w = warning_for(65504.0, 1.0).expect("clipped");
+        assert!(
+            w.starts_with("s.toml: ") && w.contains("sun65504.exr") && w.contains("65504 in the file"),
+            "{w}"
+        );
+        assert!(w.contains("is a lower bound") && w.contains("not clipped"), "{w}");
+        // The ceiling as the file holds it, whatever sky.scale makes of it.
+        let w = warning_for(1e3, 4.0).expect("clipped");
+        assert!(w.contains("1000 in the file") && w.contains("of its pixels"), "{w}");
+        // The sun clipped at 10³ gives under the clear-sky 5 to 10 times the sky's: named.
+        assert!(w.contains("may hold as little as 1/"), "{w}");
     }
 }

@@ -21,7 +21,7 @@ mod frames;
 mod grid_scene;
 mod info;
 mod low_albedo;
-mod map_sun;
+pub(crate) mod map_sun;
 pub(crate) mod memory;
 mod output;
 mod progress;
@@ -280,10 +280,24 @@ fn check_output_name(p: &Path, flag: &str) -> Result<()> {
     }
 }
 
+/// `e` as the command line's when the key it names was set by one of `flags` (key, flag): the
+/// value of `--width 0` is the user's flag, not the scene file's `camera.width`.
+fn blamed_on_flags(e: Error, flags: &[(&str, &str)]) -> Error {
+    match e {
+        Error::Invalid { file, field, message } => match flags.iter().find(|(key, _)| *key == field) {
+            Some((_, flag)) => Error::invalid("command line", *flag, message),
+            None => Error::Invalid { file, field, message },
+        },
+        e => e,
+    }
+}
+
 impl RenderArgs {
     /// The scene keys the command line sets, with their flags (for the warnings).
     fn flags(&self) -> Vec<(&'static str, &'static str)> {
         let given = [
+            (self.width.is_some(), "camera.width", "--width"),
+            (self.height.is_some(), "camera.height", "--height"),
             (self.spp.is_some(), "render.spp", "--spp"),
             (self.aa_samples.is_some(), "render.aa_samples", "--aa-samples"),
             (self.max_depth.is_some(), "render.max_depth", "--max-depth"),
@@ -358,7 +372,7 @@ fn render(a: RenderArgs, quiet: bool) -> Result<()> {
     a.apply(&mut desc);
     output::check_files(&[&exr, &png], "--output", &file.inputs(&desc))?;
     memory::check_image(&desc, &file.source)?;
-    let scene = Scene::build(desc, &file.source, &file.base)?;
+    let scene = Scene::build(desc, &file.source, &file.base).map_err(|e| blamed_on_flags(e, &a.flags()))?;
     memory::check_solver(&scene, 0)?;
     for w in warnings::warnings(&file, &a.flags(), &scene) {
         note!("warning: {w}");

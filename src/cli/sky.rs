@@ -63,8 +63,12 @@ pub fn run(a: SkyArgs, quiet: bool) -> Result<()> {
             png.display(),
             t.elapsed().as_secs_f64()
         );
+        let clipped = match sky.extracted_sun_clip {
+            Some(_) => " (a lower bound: the map's sun is clipped)",
+            None => "",
+        };
         note!(
-            "sun (not in the map): direction {:?}, irradiance {:?} W/m²; sky irradiance on the ground {:?} W/m²",
+            "sun (not in the map): direction {:?}, irradiance {:?} W/m²{clipped}; sky irradiance on the ground {:?} W/m²",
             sun.dir.to_array(),
             sun.irradiance.to_array(),
             sky.irradiance_up.to_array()

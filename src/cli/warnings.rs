@@ -121,6 +121,7 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
     out.extend(super::low_albedo::warning(scene));
     out.extend(super::back_scattering::warning(scene));
     out.extend(super::map_sun::warning(scene));
+    out.extend(super::map_sun::clip_warning(scene));
     out.extend(frame_warning(scene).filter(|_| cloud));
     out
 }

@@ -5,6 +5,7 @@
 //! the map").
 
 use super::envmap::{direction, neighbourhood, row_solid_angle, EnvMap};
+use super::sun_clip::SunClip;
 use crate::math::{luminance, Rgb, Vec3};
 use glam::DVec3;
 
@@ -40,6 +41,8 @@ pub struct ExtractedSun {
     pub irradiance: Rgb,
     /// The solid angle of the pixels painted over (sr).
     pub solid_angle: f64,
+    /// The sun's clipped top, if it has one: then its irradiance is a lower bound.
+    pub clip: Option<SunClip>,
 }
 
 /// Why a map has no sun to take out.
@@ -152,6 +155,7 @@ impl EnvMap {
             direction: toward.try_normalize().unwrap_or(self.pixel_direction(seed % w, seed / w).as_dvec3()).as_vec3(),
             irradiance: ((sun_mean - fill) * solid_angle).as_vec3(),
             solid_angle,
+            clip: self.sun_clip(&sun_pixels),
         })
     }
 

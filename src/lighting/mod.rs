@@ -5,6 +5,7 @@ pub mod bins;
 pub mod desc;
 pub mod envmap;
 pub mod map_sun;
+pub mod sun_clip;
 
 use crate::error::Result;
 use crate::error::{check, rgb_in_unit, rgb_nonneg};
@@ -132,6 +133,9 @@ pub struct Sky {
     /// Irradiance on an upward-facing horizontal plane from the whole unoccluded upper
     /// hemisphere (W/m² per band).
     pub irradiance_up: Rgb,
+    /// The clipped top of the sun `sky.extract_sun` took out of this sky's map, if it had one:
+    /// the scene's sun is then a lower bound on the map's.
+    pub extracted_sun_clip: Option<sun_clip::SunClip>,
 }
 
 /// Default width of the atmosphere's equirectangular map (pixels; height = width / 2).
@@ -187,7 +191,11 @@ fn map_sun_and_sky(sun: &SunDesc, sky: &SkyDesc, built: &Sky, file: &str) -> Res
                 dir: x.direction,
                 irradiance: x.irradiance,
             };
-            return Ok((sun, Sky::from_envmap(x.map)));
+            let sky = Sky {
+                extracted_sun_clip: x.clip,
+                ..Sky::from_envmap(x.map)
+            };
+            return Ok((sun, sky));
         }
         Err(map_sun::NoSun::Black) => format!("`{path}` is black: it holds no sun"),
         Err(map_sun::NoSun::NotBright(ratio)) => format!(
@@ -320,6 +328,7 @@ impl Sky {
         Sky {
             kind: SkyKind::Constant(l),
             irradiance_up: l * PI,
+            extracted_sun_clip: None,
         }
     }
 
@@ -329,6 +338,7 @@ impl Sky {
         Sky {
             kind: SkyKind::EnvMap { map: Arc::new(map) },
             irradiance_up,
+            extracted_sun_clip: None,
         }
     }
 
@@ -348,6 +358,7 @@ impl Sky {
                 map: Arc::new(map),
             },
             irradiance_up,
+            extracted_sun_clip: None,
         }
     }
 

@@ -137,19 +137,19 @@ fn check_samples(scene: &Scene, stats: &ReferenceStats, progress: &dyn Progress)
     if stats.min_spp > 0 || progress.cancelled() {
         return Ok(());
     }
-    let limit = scene.render.time_limit.unwrap_or(f64::INFINITY);
+    let limit = crate::limits::seconds_text(scene.render.time_limit.unwrap_or(f64::INFINITY));
     if stats.spp == 0 {
         return Err(Error::invalid(
             &scene.source,
             "render.time_limit",
             format!(
-                "{limit} s ended the reference before any pixel completed a sample, so there is no image: \
+                "{limit} ended the reference before any pixel completed a sample, so there is no image: \
                  raise render.time_limit (--time-limit S)"
             ),
         ));
     }
     progress.warn(&format!(
-        "{}: render.time_limit {limit} s ended the reference inside its first pass: pixels without a \
+        "{}: render.time_limit {limit} ended the reference inside its first pass: pixels without a \
          sample read 0 (layer `samples` counts each pixel's); raise render.time_limit (--time-limit S)",
         scene.source
     ));
@@ -236,7 +236,7 @@ pub fn render_with_stats(scene: &Scene, progress: &dyn Progress, timings: &mut T
     let (w, h) = (cam.width as usize, cam.height as usize);
     let rs = &scene.render;
     let start = Instant::now();
-    let deadline = rs.time_limit.map(|s| start + std::time::Duration::from_secs_f64(s.clamp(0.0, 1e9)));
+    let deadline = rs.time_limit.map(|s| start + std::time::Duration::from_secs_f64(s.clamp(0.0, crate::limits::MAX_SECONDS)));
     let opts = PathOptions {
         max_depth: rs.max_depth.unwrap_or(u32::MAX),
         deadline,
@@ -249,7 +249,7 @@ pub fn render_with_stats(scene: &Scene, progress: &dyn Progress, timings: &mut T
     timings.time("path tracing", || {
         if let Some(t) = rs.time_limit {
             // The progress counts towards `spp`; the limit usually ends the render first.
-            progress.log(&format!("reference: time limit {t} s"));
+            progress.log(&format!("reference: time limit {}", crate::limits::seconds_text(t)));
         }
         progress.begin("reference paths", rs.spp as u64 * (w * h) as u64);
         let pace = rs.time_limit.is_none().then(|| Pace::new(start, rs.spp as u64 * (w * h) as u64));

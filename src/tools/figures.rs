@@ -243,9 +243,9 @@ pub fn run(desc: &SceneDesc, source: &str, folder: &Path, dir: &Path, opts: &Fig
                 "command line",
                 "--reference-time",
                 format!(
-                    "{} s ended the reference before any pixel completed a sample, so there is nothing to \
+                    "{} ended the reference before any pixel completed a sample, so there is nothing to \
                      measure against; raise --reference-time (0: no limit)",
-                    opts.reference_time.unwrap_or(0.0)
+                    crate::limits::seconds_text(opts.reference_time.unwrap_or(0.0))
                 ),
             ));
         }

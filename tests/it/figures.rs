@@ -127,6 +127,7 @@ fn bad_arguments_are_reported() {
         ],
     );
     assert!(!out.status.success() && !dir.path().join("x").exists());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("1e-9 s ended the reference"));
     assert!(String::from_utf8_lossy(&out.stderr).contains("raise --reference-time"));
 }
 

@@ -100,7 +100,7 @@ fn render_compare_and_export() {
     let out = cloudgi(d, &["compare", "single.exr", "ref.exr", "--diff", "diff.jpg"]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("--diff"));
     let out = cloudgi(d, &["render", "s.toml", "-o", "x.exr", "--time-limit", "0", "-q"]);
-    assert!(String::from_utf8_lossy(&out.stderr).contains("render.time_limit"));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("command line: field `--time-limit`"));
 
     let out = cloudgi(d, &["export", "mitsuba", "s.toml", "-o", "mi", "-q"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));

@@ -84,3 +84,34 @@ fn a_maps_sun_is_warned_about_and_taken_out_with_extract_sun() {
     let painted = cloudgi::Image::read_exr(&d.join("painted.exr")).unwrap();
     assert!(painted.pixels.iter().all(|p| *p == cloudgi::Rgb::splat(0.5)));
 }
+
+#[test]
+fn a_clipped_sun_taken_out_with_extract_sun_is_warned_about() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A 1024×512 map of 0.5 with a Gaussian sun (σ = 2 pixels, peak 10⁶), as it is and cut at
+    // half float's largest value.
+    let (w, h) = (1024u32, 512u32);
+    for (name, ceiling) in [("whole.exr", f32::MAX), ("clipped.exr", 65504.0)] {
+        let mut map = cloudgi::Image::new(w, h);
+        map.pixels = (0..w * h)
+            .map(|k| {
+                let (di, dj) = ((k % w) as f32 - 200.3, (k / w) as f32 - 120.6);
+                cloudgi::Rgb::splat((0.5 + 1e6 * (-(di * di + dj * dj) / 8.0).exp()).min(ceiling))
+            })
+            .collect();
+        map.write_exr(&d.join(name)).unwrap();
+        let scene = format!(
+            "[medium]\nresolution = [8, 8, 8]\nvoxel_size = 100.0\n[sky]\nmodel = \"envmap\"\npath = \"{name}\"\n\
+             extract_sun = true\n[camera]\nwidth = 8\nheight = 6\n"
+        );
+        std::fs::write(d.join("s.toml"), scene).unwrap();
+        let out = cloudgi(d, &["render", "s.toml", "--method", "transport", "-o", "x.exr"]);
+        assert!(out.status.success(), "{out:?}");
+        let said = String::from_utf8_lossy(&out.stderr);
+        let warned = said.contains("warning: s.toml: the sun sky.extract_sun took out of `clipped.exr` is clipped");
+        assert_eq!(warned, name == "clipped.exr", "{said}");
+        let shown = ok(d, &["sky", "s.toml", "-o", "painted.exr"]);
+        assert_eq!(shown.contains("a lower bound"), name == "clipped.exr", "{shown}");
+    }
+}
