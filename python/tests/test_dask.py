@@ -107,3 +107,25 @@ def test_bad_outputs_options_and_frames_are_found_before_submitting(client, tmp_
         cloudgi.dask.render_frames(tiny_scene(), [(tiny_scene(), {}, 1)], client, str(tmp_path / "h_{frame}.exr"))
     assert not client.processing() or not any(client.processing().values())
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f_1.exr"]
+
+
+@pytest.mark.parametrize(
+    "kwargs, error, words",
+    [
+        ({"retries": -1}, ValueError, r"retries = -1; it must be at least 0"),
+        ({"retries": 1.5}, TypeError, r"retries must be an int, not float 1.5"),
+        ({"retries": True}, TypeError, r"retries must be an int, not bool"),
+        ({"start": "1"}, TypeError, r"start must be an int, not str"),
+    ],
+)
+def test_bad_numeric_arguments_are_refused_before_the_client_is_used(tmp_path, kwargs, error, words):
+    # retries=-1 went to Dask, which took it; no client is needed to refuse them.
+    with pytest.raises(error, match=words):
+        cloudgi.dask.render_frames(tiny_scene(), FRAMES, None, str(tmp_path / "f_{frame}.exr"), **kwargs)
+
+
+def test_frames_given_as_one_scene_are_refused(tmp_path):
+    # A str was iterated as one frame per character, a dict as one per table name.
+    for frames in ("scene.toml", {"sun": {"elevation_deg": 20.0}}):
+        with pytest.raises(TypeError, match=r"frames must be a list of frames .* give \[frame\] for one frame"):
+            cloudgi.dask.render_frames(tiny_scene(), frames, None, str(tmp_path / "f_{frame}.exr"))
