@@ -56,7 +56,7 @@ __all__ = [
 #: The rendering methods, as ``render(method=...)`` and the scene's ``render.method`` name them.
 METHODS = ("single", "diffusion", "full", "transport", "reference")
 
-SceneLike = Union[str, "os.PathLike[str]", Mapping[str, Any]]
+SceneLike = Union[str, bytes, "os.PathLike[str]", Mapping[str, Any]]
 ProgressCallback = Callable[[str, int, int], Any]
 
 
@@ -108,7 +108,7 @@ def _scene_input(scene: Optional[SceneLike]) -> "tuple[str, str]":
         return "builtin", ""
     if isinstance(scene, Mapping):
         return "dict", _json(scene)
-    if isinstance(scene, os.PathLike):
+    if isinstance(scene, (os.PathLike, bytes)):
         return "path", os.fsdecode(scene)
     if isinstance(scene, str):
         if scene == "":
@@ -123,10 +123,12 @@ def _scene_input(scene: Optional[SceneLike]) -> "tuple[str, str]":
 
 def _overrides(method: Optional[str], width: Optional[int], height: Optional[int],
                spp: Optional[int], seed: Optional[int], aov: Optional[bool],
-               extra: Optional[Mapping[str, Mapping[str, Any]]] = None) -> str:
-    """The keyword arguments as scene keys: their types checked here, their values by the scene
-    file's own parser."""
+               extra: Optional[Mapping[str, Mapping[str, Any]]] = None) -> "tuple[str, List[str]]":
+    """The keyword arguments as scene keys (JSON), and the dotted keys set by a keyword of its own
+    (``render.spp`` for ``spp=``, for messages): their types checked here, their values by the
+    scene file's own parser."""
     over: Dict[str, Dict[str, Any]] = {}
+    keywords: List[str] = []
     if extra is not None and not isinstance(extra, Mapping):
         raise TypeError(
             f"overrides must be a dict of scene tables, e.g. {{'sun': {{'elevation_deg': 30}}}}, not {type(extra).__name__} {extra!r}"
@@ -151,7 +153,8 @@ def _overrides(method: Optional[str], width: Optional[int], height: Optional[int
             expected = {str: "a str", numbers.Integral: "an int"}.get(kind, "a bool")
             raise TypeError(f"{key} must be {expected} (the scene's {table}.{key}), not {type(value).__name__} {value!r}")
         over.setdefault(table, {})[key] = value
-    return _json(over)
+        keywords.append(f"{table}.{key}")
+    return _json(over), keywords
 
 
 def _npy_bytes(density: Any) -> bytes:
@@ -160,6 +163,10 @@ def _npy_bytes(density: Any) -> bytes:
         raise TypeError(f"density must be a numpy.ndarray, not {type(density).__name__}")
     if isinstance(density, np.ma.MaskedArray):
         raise TypeError("density is a masked array, whose mask a grid cannot hold; give density.filled(0)")
+    # Before any copy: a virtual array (np.broadcast_to) would be materialised by np.save. The
+    # copies: the .npy bytes and their bytes object, a C-order copy first if it is not one.
+    copies = 2 if density.flags.c_contiguous else 3
+    _cloudgi.check_density_fits([int(n) for n in density.shape], density.dtype.itemsize * copies)
     buf = io.BytesIO()
     if density.dtype.hasobject:
         # np.save refuses Python objects; the header alone has the reader name the dtype.
@@ -204,7 +211,10 @@ def render(
     ``density``: float, integer or bool array indexed ``[z][y][x]`` (as a ``.npy`` file), replacing
     ``medium.grid``; its voxels are ``voxel_size`` metres (one edge, or ``[x, y, z]`` as
     :func:`load_grid` returns it; default ``medium.voxel_size``) with the minimum corner at
-    ``origin`` (default ``medium.origin``); either one without ``density`` raises ValueError.
+    ``origin`` (default ``medium.origin``); either one without ``density`` raises ValueError, and
+    a NaN, infinity or value float32 cannot hold raises :class:`SceneError` naming it. A density
+    whose copies would not fit in the available memory is refused from its shape
+    (:class:`SceneError`) before numpy copies it (``np.broadcast_to`` arrays included).
 
     ``progress(stage, done, total)`` is called from this thread while the render runs (at most
     every 50 ms, on change), e.g. to drive a tqdm bar. The GIL is released during the render;
@@ -215,7 +225,7 @@ def render(
     :class:`FileError`, :class:`SolverError`, each with the command line's message.
     """
     kind, payload = _scene_input(scene)
-    over = _overrides(method, width, height, spp, seed, aov, overrides)
+    over, keywords = _overrides(method, width, height, spp, seed, aov, overrides)
     if density is None:
         for name, value in (("voxel_size", voxel_size), ("origin", origin)):
             if value is not None:
@@ -230,6 +240,7 @@ def render(
         kind,
         payload,
         over,
+        keywords,
         npy,
         _voxel_size(voxel_size),
         None if origin is None else _vec3("origin", origin, "[x, y, z] in metres"),
@@ -238,13 +249,34 @@ def render(
     return _images(w, h, layers)
 
 
+_F32_MAX = float(np.finfo(np.float32).max)
+
+
 def _real(name: str, v: Any) -> float:
-    """``v`` as a float; a bool, a str or anything not a real number raises naming ``name``."""
+    """``v`` as a float32-sized float; a bool, a str or anything not a real number raises
+    TypeError naming ``name``; NaN, infinity or a value float32 (the renderer's precision) cannot
+    hold raises :class:`SceneError` naming it and the value (cast, 1e300 would read as inf and
+    1e-50 as 0)."""
     if isinstance(v, np.ndarray) and v.ndim == 0:
         v = v.item()
     if isinstance(v, bool) or not isinstance(v, numbers.Real):
         raise TypeError(f"{name} must be a number, not {type(v).__name__} {v!r}")
-    return float(v)
+    shown = str(v) if len(str(v)) <= 24 else f"{str(v)[:12]}... ({len(str(v))} digits)"
+    out_of_range = SceneError(
+        f"{name} = {shown} is out of range: the renderer holds it as float32, "
+        f"from {float(np.finfo(np.float32).smallest_subnormal):.1e} to {_F32_MAX:.1e} in magnitude"
+    )
+    try:
+        x = float(v)
+    except OverflowError:  # an int past float64's range
+        raise out_of_range from None
+    if not math.isfinite(x):
+        raise SceneError(f"{name} = {shown} is not a finite number")
+    with np.errstate(over="ignore", under="ignore"):
+        as_f32 = float(np.float32(x))
+    if not math.isfinite(as_f32) or (as_f32 == 0.0 and x != 0.0):
+        raise out_of_range
+    return x
 
 
 def _vec3(name: str, v: Any, expected: str) -> List[float]:
@@ -269,7 +301,9 @@ def write_exr(path: Union[str, bytes, "os.PathLike[str]"], images: Mapping[str, 
     """Write ``images`` (``"rgb"`` and any AOVs, each ``(H, W, 3)``) as one OpenEXR file,
     atomically: RGB as the R, G, B channels and each AOV as ``NAME.R/G/B``, exactly as the
     command line writes a render. A path that is a folder, in a folder that does not exist or
-    cannot be written raises :class:`FileError` before anything is converted or written."""
+    cannot be written raises :class:`FileError` before anything is converted or written; a NaN,
+    an infinity or a value past float32's range (float64 1e300) raises :class:`FormatError`
+    naming the image and pixel, and nothing is written."""
     path = _path("path", path)
     if not isinstance(images, Mapping):
         raise TypeError(f"images must be a dict {{name: (H, W, 3) array}} as render returns, not {type(images).__name__}")
@@ -293,8 +327,55 @@ def write_exr(path: Union[str, bytes, "os.PathLike[str]"], images: Mapping[str, 
             raise FormatError(f"{path}: the images have shape {shape}, no pixel; an EXR needs at least 1×1")
         if name == "":
             raise FormatError(f"{path}: an image named \"\" would be a second RGB; name it (its layer is NAME.R/G/B)")
-        layers.append((name, np.ascontiguousarray(arr, dtype="<f4").tobytes()))
+        _check_layer_name(path, name)
+        layers.append((name, _f32_bytes(path, name, arr)))
     _cloudgi.write_exr(path, shape[1], shape[0], layers)
+
+
+# An EXR channel name (NAME.R) holds at most 255 bytes of UTF-8; a longer one, or a NUL (which
+# ends a name in the file), made a file no reader opens.
+_MAX_LAYER_NAME_BYTES = 255 - len(".R")
+
+
+def _check_layer_name(path: str, name: str) -> None:
+    """An image's name as an EXR can hold it: UTF-8, no NUL, at most 253 bytes."""
+    if name == "rgb":
+        return
+    try:
+        size = len(name.encode("utf-8"))
+    except UnicodeEncodeError as e:
+        raise FormatError(f"{path}: image name {name!r} is not valid Unicode ({e.reason}); an EXR's names are UTF-8") from None
+    if "\0" in name:
+        raise FormatError(f"{path}: image name {name!r} holds a NUL character, which ends a name in an EXR file")
+    if size > _MAX_LAYER_NAME_BYTES:
+        raise FormatError(
+            f"{path}: image name {name[:20]!r}... is {size} bytes of UTF-8; an EXR channel name (NAME.R) holds at most "
+            f"255 bytes, so a name at most {_MAX_LAYER_NAME_BYTES}"
+        )
+
+
+def _f32_bytes(path: str, name: str, arr: np.ndarray) -> bytes:
+    """Image ``name`` as float32 bytes, as the EXR holds it; a NaN or infinity, or a value past
+    float32's range (which the cast would make infinite), raises :class:`FormatError` naming it:
+    the file would hold non-finite pixels that nothing downstream expects."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        f32 = np.ascontiguousarray(arr, dtype="<f4")
+    bad = ~np.isfinite(f32)
+    if not bad.any():
+        return f32.tobytes()
+    y, x, c = (int(i) for i in np.argwhere(bad)[0])
+    value = arr[y, x, c]
+    where = f"pixel (row {y}, column {x}), channel {'RGB'[c]}"
+    if np.isfinite(value):
+        largest = np.abs(arr[np.isfinite(arr)]).max()
+        raise FormatError(
+            f"{path}: images[{name!r}] holds {value:g} at {where} (largest magnitude {largest:g}), past float32's "
+            f"{_F32_MAX:.4g} that an EXR's float channels hold; scale the image down"
+        )
+    raise FormatError(
+        f"{path}: images[{name!r}] holds {value} at {where} ({int(bad.sum())} non-finite values): an EXR of a render "
+        "holds finite values; find where they came from (or replace them, e.g. numpy.nan_to_num)"
+    )
 
 
 def _path(name: str, path: Any) -> str:
@@ -325,10 +406,10 @@ def load_grid(path: Union[str, bytes, "os.PathLike[str]"], grid: str = "density"
 def scene_toml(scene: Optional[SceneLike] = None, **overrides: Any) -> str:
     """The scene ``render`` would use, as scene-file TOML with every default filled in."""
     kind, payload = _scene_input(scene)
-    over = _overrides(overrides.pop("method", None), overrides.pop("width", None),
-                      overrides.pop("height", None), overrides.pop("spp", None),
-                      overrides.pop("seed", None), overrides.pop("aov", None),
-                      overrides.pop("overrides", None))
+    over, keywords = _overrides(overrides.pop("method", None), overrides.pop("width", None),
+                                overrides.pop("height", None), overrides.pop("spp", None),
+                                overrides.pop("seed", None), overrides.pop("aov", None),
+                                overrides.pop("overrides", None))
     if overrides:
         raise TypeError(f"unknown keyword arguments: {sorted(overrides)}")
-    return _cloudgi.scene_toml(kind, payload, over)
+    return _cloudgi.scene_toml(kind, payload, over, keywords)
