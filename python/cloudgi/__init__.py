@@ -113,8 +113,10 @@ def _scene_input(scene: Optional[SceneLike]) -> "tuple[str, str]":
     if isinstance(scene, str):
         if scene == "":
             raise ValueError("scene is an empty string: give a scene file's path, TOML text or a dict (None: the built-in scene)")
-        # TOML text has a newline, a `=` or a `[`; a path has none of them (or names a file).
-        looks_like_toml = any(c in scene for c in "\n=[")
+        # TOML text has a newline, a `=` or a `[`; a path has none of them, names a file, or is
+        # one line ending in `.toml` (`shots/a=1/scene.toml`: a missing one is named as a file).
+        is_toml_path = "\n" not in scene and scene.lower().endswith(".toml")
+        looks_like_toml = any(c in scene for c in "\n=[") and not is_toml_path
         if looks_like_toml and not os.path.isfile(scene):
             return "toml", scene
         return "path", scene

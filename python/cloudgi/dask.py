@@ -110,6 +110,8 @@ def render_frames(
         raise ValueError(f"out_pattern `{out_pattern}` gives several frames the same file; put {{frame}} in it")
     for p in paths:
         cloudgi._cloudgi.check_output(p, "cloudgi.dask.render_frames", "out_pattern")
+    if not all(callable(getattr(client, m, None)) for m in ("submit", "gather")):
+        raise TypeError(f"render_frames: client must be a dask.distributed.Client, not {type(client).__name__} {client!r}")
     futures = [
         client.submit(render_frame, own, overrides, path, options, retries=int(retries), pure=False,
                       key=f"cloudgi-frame-{os.path.basename(path)}-{os.urandom(4).hex()}")

@@ -129,3 +129,9 @@ def test_frames_given_as_one_scene_are_refused(tmp_path):
     for frames in ("scene.toml", {"sun": {"elevation_deg": 20.0}}):
         with pytest.raises(TypeError, match=r"frames must be a list of frames .* give \[frame\] for one frame"):
             cloudgi.dask.render_frames(tiny_scene(), frames, None, str(tmp_path / "f_{frame}.exr"))
+
+
+def test_a_client_that_is_not_one_is_named(tmp_path):
+    # It failed with "'NoneType' object has no attribute 'submit'".
+    with pytest.raises(TypeError, match=r"client must be a dask.distributed.Client, not NoneType"):
+        cloudgi.dask.render_frames(tiny_scene(), FRAMES, None, str(tmp_path / "f_{frame}.exr"))

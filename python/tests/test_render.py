@@ -657,3 +657,16 @@ def test_errors_survive_pickling_as_dask_sends_them():
         cloudgi.render(tiny_scene(), spp=-1)
     back = pickle.loads(pickle.dumps(e.value))
     assert type(back) is cloudgi.SceneError and str(back) == str(e.value)
+
+
+def test_a_missing_scene_path_with_brackets_or_equals_is_named_as_a_file(tmp_path):
+    # It was read as TOML text: "TOML string: TOML parse error at line 1 ... expected `.`, `=`".
+    for name in ("a=1", "[v2]"):
+        missing = tmp_path / name / "scene.toml"
+        cli = cli_error("render", missing, "-o", tmp_path / "x.exr")
+        with pytest.raises(cloudgi.FileError) as e:
+            cloudgi.render(str(missing))
+        assert str(e.value) == cli
+    (tmp_path / "[v2]").mkdir()
+    (tmp_path / "[v2]" / "scene.toml").write_text("[camera]\nwidth = 8\nheight = 6\n")
+    assert "width = 8" in cloudgi.scene_toml(str(tmp_path / "[v2]" / "scene.toml"))
