@@ -154,6 +154,11 @@ def _overrides(method: Optional[str], width: Optional[int], height: Optional[int
         if not isinstance(value, kind) or (kind is numbers.Integral and isinstance(value, bool)):
             expected = {str: "a str", numbers.Integral: "an int"}.get(kind, "a bool")
             raise TypeError(f"{key} must be {expected} (the scene's {table}.{key}), not {type(value).__name__} {value!r}")
+        if key in over.get(table, {}):
+            raise TypeError(
+                f"{key}={value!r} and overrides[{table!r}][{key!r}]={over[table][key]!r} both set the scene's "
+                f"{table}.{key}; give one of them"
+            )
         over.setdefault(table, {})[key] = value
         keywords.append(f"{table}.{key}")
     return _json(over), keywords

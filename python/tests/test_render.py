@@ -670,3 +670,11 @@ def test_a_missing_scene_path_with_brackets_or_equals_is_named_as_a_file(tmp_pat
     (tmp_path / "[v2]").mkdir()
     (tmp_path / "[v2]" / "scene.toml").write_text("[camera]\nwidth = 8\nheight = 6\n")
     assert "width = 8" in cloudgi.scene_toml(str(tmp_path / "[v2]" / "scene.toml"))
+
+
+def test_a_key_given_both_as_a_keyword_and_in_overrides_is_refused():
+    # The keyword won silently: spp=4 rendered 4 samples whatever overrides said.
+    for call in (cloudgi.render, cloudgi.scene_toml):
+        with pytest.raises(TypeError, match=r"spp=4 and overrides\['render'\]\['spp'\]=8 both set the scene's render.spp"):
+            call(tiny_scene(), spp=4, overrides={"render": {"spp": 8}})
+    assert "spp = 8" in cloudgi.scene_toml(tiny_scene(), overrides={"render": {"spp": 8}})
