@@ -21,6 +21,8 @@ import os
 import re
 from typing import Any, Iterable, List, Mapping, Optional, Tuple, Union
 
+import numpy as np
+
 import cloudgi
 
 Frame = Union[Mapping[str, Any], str, "os.PathLike[str]", Tuple[Any, Mapping[str, Any]]]
@@ -112,6 +114,10 @@ def render_frames(
         cloudgi._cloudgi.check_output(p, "cloudgi.dask.render_frames", "out_pattern")
     if not all(callable(getattr(client, m, None)) for m in ("submit", "gather")):
         raise TypeError(f"render_frames: client must be a dask.distributed.Client, not {type(client).__name__} {client!r}")
+    if isinstance(options.get("density"), np.ndarray):
+        # Sent to each worker once, not pickled into every frame's task (a 1 GB grid, 100 frames:
+        # 1 GB, not 100); Dask hands each task the array.
+        options = dict(options, density=client.scatter(options["density"], broadcast=True))
     futures = [
         client.submit(render_frame, own, overrides, path, options, retries=int(retries), pure=False,
                       key=f"cloudgi-frame-{os.path.basename(path)}-{os.urandom(4).hex()}")

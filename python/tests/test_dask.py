@@ -135,3 +135,24 @@ def test_a_client_that_is_not_one_is_named(tmp_path):
     # It failed with "'NoneType' object has no attribute 'submit'".
     with pytest.raises(TypeError, match=r"client must be a dask.distributed.Client, not NoneType"):
         cloudgi.dask.render_frames(tiny_scene(), FRAMES, None, str(tmp_path / "f_{frame}.exr"))
+
+
+def test_a_density_option_is_sent_once_and_renders_as_locally(client, tmp_path):
+    # It was pickled into every frame's task: a grid of N bytes cost N per frame.
+    density = np.random.default_rng(5).random((12, 16, 20)).astype(np.float32)
+    submitted = []
+    real_submit = client.submit
+
+    def submit(fn, *args, **kwargs):
+        submitted.append(args[3]["density"])
+        return real_submit(fn, *args, **kwargs)
+
+    client.submit = submit
+    try:
+        paths = cloudgi.dask.render_frames(tiny_scene(), FRAMES[:2], client, str(tmp_path / "d_{frame}.exr"),
+                                           method="single", density=density, voxel_size=40.0)
+    finally:
+        del client.submit
+    assert len(submitted) == 2 and all(isinstance(d, distributed.Future) for d in submitted)
+    for frame, path in zip(FRAMES, paths):
+        assert open(path, "rb").read() == local_bytes(tmp_path, tiny_scene(), frame, method="single", density=density, voxel_size=40.0)
