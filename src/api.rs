@@ -538,7 +538,8 @@ mod tests {
         let e = Scene::build_with(SceneDesc::default(), "x", Path::new("."), Some(d)).unwrap_err();
         assert_eq!(
             e.to_string(),
-            "in-memory density: density at voxel (1, 1, 0) is NaN: densities must be finite and non-negative"
+            "in-memory density: density at voxel (x, y, z) = (1, 1, 0), array index [0, 1, 1], is NaN: \
+             densities must be finite and non-negative"
         );
     }
 }

@@ -678,3 +678,11 @@ def test_a_key_given_both_as_a_keyword_and_in_overrides_is_refused():
         with pytest.raises(TypeError, match=r"spp=4 and overrides\['render'\]\['spp'\]=8 both set the scene's render.spp"):
             call(tiny_scene(), spp=4, overrides={"render": {"spp": 8}})
     assert "spp = 8" in cloudgi.scene_toml(tiny_scene(), overrides={"render": {"spp": 8}})
+
+
+def test_a_bad_density_value_is_located_by_its_array_index_too():
+    # The message gave (x, y, z) = (3, 2, 1) alone: a numpy user looked at density[3, 2, 1].
+    density = np.ones((4, 5, 6), np.float32)
+    density[1, 2, 3] = np.nan
+    with pytest.raises(cloudgi.FormatError, match=r"voxel \(x, y, z\) = \(3, 2, 1\), array index \[1, 2, 3\], is NaN"):
+        cloudgi.render(tiny_scene(), density=density)
