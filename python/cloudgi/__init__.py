@@ -250,7 +250,7 @@ def render(
         keywords,
         npy,
         _voxel_size(voxel_size),
-        None if origin is None else _vec3("origin", origin, "[x, y, z] in metres"),
+        None if origin is None else _vec3("origin", origin, "[x, y, z] in metres", tiny_is_zero=True),
         progress,
     )
     return _images(w, h, layers)
@@ -259,11 +259,12 @@ def render(
 _F32_MAX = float(np.finfo(np.float32).max)
 
 
-def _real(name: str, v: Any) -> float:
+def _real(name: str, v: Any, tiny_is_zero: bool) -> float:
     """``v`` as a float32-sized float; a bool, a str or anything not a real number raises
-    TypeError naming ``name``; NaN, infinity or a value float32 (the renderer's precision) cannot
-    hold raises :class:`SceneError` naming it and the value (cast, 1e300 would read as inf and
-    1e-50 as 0)."""
+    TypeError naming ``name``; NaN, infinity or a value past float32's range (the renderer's
+    precision) raises :class:`SceneError` naming it and the value (cast, 1e300 would read as
+    inf). So does a nonzero value float32 rounds to 0 (1e-50), unless ``tiny_is_zero`` (a
+    coordinate, where it is 0 to within the precision of every other one)."""
     if isinstance(v, np.ndarray) and v.ndim == 0:
         v = v.item()
     if isinstance(v, bool) or not isinstance(v, numbers.Real):
@@ -281,18 +282,18 @@ def _real(name: str, v: Any) -> float:
         raise SceneError(f"{name} = {shown} is not a finite number")
     with np.errstate(over="ignore", under="ignore"):
         as_f32 = float(np.float32(x))
-    if not math.isfinite(as_f32) or (as_f32 == 0.0 and x != 0.0):
+    if not math.isfinite(as_f32) or (as_f32 == 0.0 and x != 0.0 and not tiny_is_zero):
         raise out_of_range
     return x
 
 
-def _vec3(name: str, v: Any, expected: str) -> List[float]:
+def _vec3(name: str, v: Any, expected: str, tiny_is_zero: bool) -> List[float]:
     """``v`` as three floats; anything else raises naming ``name`` and ``expected``."""
     if isinstance(v, (str, bytes)) or not isinstance(v, (Sequence, np.ndarray)):
         raise TypeError(f"{name} must be {expected}, not {type(v).__name__} {v!r}")
     if len(v) != 3:
         raise ValueError(f"{name} has {len(v)} values, {list(v)!r}; it must be {expected}")
-    return [_real(f"{name}[{i}]", x) for i, x in enumerate(v)]
+    return [_real(f"{name}[{i}]", x, tiny_is_zero) for i, x in enumerate(v)]
 
 
 def _voxel_size(v: Union[float, Sequence[float], None]) -> Union[float, List[float], None]:
@@ -300,8 +301,8 @@ def _voxel_size(v: Union[float, Sequence[float], None]) -> Union[float, List[flo
     if v is None:
         return None
     if isinstance(v, numbers.Real) or (isinstance(v, np.ndarray) and v.ndim == 0):
-        return _real("voxel_size", v)
-    return _vec3("voxel_size", v, "one edge in metres, or [x, y, z]")
+        return _real("voxel_size", v, tiny_is_zero=False)
+    return _vec3("voxel_size", v, "one edge in metres, or [x, y, z]", tiny_is_zero=False)
 
 
 def write_exr(path: Union[str, bytes, "os.PathLike[str]"], images: Mapping[str, np.ndarray]) -> None:

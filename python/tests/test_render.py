@@ -504,6 +504,14 @@ def test_voxel_size_and_origin_past_float32_name_the_argument_and_value(kwargs, 
     assert "float32" in str(e.value) or "finite" in str(e.value)
 
 
+def test_a_coordinate_float32_rounds_to_zero_is_zero():
+    # An origin of 1e-50 m is 0 to the renderer's precision, not an error (a voxel size is).
+    density = np.ones((2, 2, 2), np.float32)
+    at_zero = cloudgi.render(tiny_scene(), method="single", density=density, origin=[0.0, 0.0, 0.0])["rgb"]
+    tiny = cloudgi.render(tiny_scene(), method="single", density=density, origin=[1e-50, 0.0, -1e-50])["rgb"]
+    assert np.array_equal(at_zero, tiny)
+
+
 def test_a_placement_argument_out_of_the_scenes_range_names_the_argument():
     with pytest.raises(cloudgi.SceneError, match=r"field `voxel_size \(argument\)`: .* at most 1e6 m"):
         cloudgi.render(tiny_scene(), method="single", density=np.ones((2, 2, 2), np.float32), voxel_size=1e7)
