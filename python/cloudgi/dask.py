@@ -99,6 +99,11 @@ def render_frames(
             f"render_frames: frames must be a list of frames (dicts of overrides, scenes or (scene, overrides) pairs), "
             f"not one {type(frames).__name__}; give [frame] for one frame"
         )
+    if "progress" in options:
+        raise TypeError(
+            "render_frames: progress= would be called on the workers, not here; follow the frames "
+            "with the Dask dashboard (or render one frame locally with cloudgi.render(progress=...))"
+        )
     try:
         inspect.signature(cloudgi.render).bind(None, overrides=None, **options)
     except TypeError as e:

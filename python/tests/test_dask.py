@@ -156,3 +156,9 @@ def test_a_density_option_is_sent_once_and_renders_as_locally(client, tmp_path):
     assert len(submitted) == 2 and all(isinstance(d, distributed.Future) for d in submitted)
     for frame, path in zip(FRAMES, paths):
         assert open(path, "rb").read() == local_bytes(tmp_path, tiny_scene(), frame, method="single", density=density, voxel_size=40.0)
+
+
+def test_a_progress_callback_is_refused_as_it_would_run_on_the_workers(tmp_path):
+    # It was pickled to the workers (or failed to pickle, e.g. a tqdm bar) and never called here.
+    with pytest.raises(TypeError, match=r"progress= would be called on the workers"):
+        cloudgi.dask.render_frames(tiny_scene(), FRAMES, None, str(tmp_path / "f_{frame}.exr"), progress=print)
