@@ -153,23 +153,14 @@ impl Density {
     /// ```
     pub fn check_fits(shape: &[u64], caller_bytes_per_value: u64) -> Result<()> {
         let values = shape.iter().fold(1u128, |n, &d| n.saturating_mul(d as u128));
-        let need = values.saturating_mul(caller_bytes_per_value as u128 + 4);
-        match crate::io::available_memory() {
-            Some(avail) if need > avail as u128 => {
-                let dims = shape.iter().map(u64::to_string).collect::<Vec<_>>().join("×");
-                Err(Error::invalid(
-                    DENSITY_SOURCE,
-                    "density",
-                    format!(
-                        "{dims} values need about {} of memory to render but {} is available; \
-                         downsample the array (e.g. density[::2, ::2, ::2])",
-                        crate::io::format_bytes(need),
-                        crate::io::format_bytes(avail as u128)
-                    ),
-                ))
-            }
-            _ => Ok(()),
-        }
+        let dims = shape.iter().map(u64::to_string).collect::<Vec<_>>().join("×");
+        crate::io::check_memory(
+            DENSITY_SOURCE,
+            "density",
+            &format!("{dims} values need"),
+            values.saturating_mul(caller_bytes_per_value as u128 + 4),
+            "downsample the array (e.g. density[::2, ::2, ::2])",
+        )
     }
 
     /// A density from the bytes of a `.npy` file (float32 or float64, C order, shape

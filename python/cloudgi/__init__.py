@@ -311,7 +311,8 @@ def write_exr(path: Union[str, bytes, "os.PathLike[str]"], images: Mapping[str, 
     command line writes a render. A path that is a folder, in a folder that does not exist or
     cannot be written raises :class:`FileError` before anything is converted or written; a NaN,
     an infinity or a value past float32's range (float64 1e300) raises :class:`FormatError`
-    naming the image and pixel, and nothing is written."""
+    naming the image and pixel, and nothing is written. Images whose copies would not fit in
+    the available memory are refused from their shape (:class:`SceneError`) before any copy."""
     path = _path("path", path)
     if not isinstance(images, Mapping):
         raise TypeError(f"images must be a dict {{name: (H, W, 3) array}} as render returns, not {type(images).__name__}")
@@ -322,7 +323,7 @@ def write_exr(path: Union[str, bytes, "os.PathLike[str]"], images: Mapping[str, 
         raise SceneError(f"{path}: images need an \"rgb\" entry (got {sorted(images)})")
     _cloudgi.check_output(path, "cloudgi.write_exr", "path")
     shape = np.shape(images["rgb"])
-    layers = []
+    arrays = {}
     for name, img in images.items():
         arr = np.asarray(img)
         if arr.dtype.kind not in "fiub":
@@ -336,8 +337,18 @@ def write_exr(path: Union[str, bytes, "os.PathLike[str]"], images: Mapping[str, 
         if name == "":
             raise FormatError(f"{path}: an image named \"\" would be a second RGB; name it (its layer is NAME.R/G/B)")
         _check_layer_name(path, name)
-        layers.append((name, _f32_bytes(path, name, arr)))
+        arrays[name] = arr
+    if max(shape[:2]) > _EXR_MAX_SIDE:
+        raise FormatError(f"{path}: the images have shape {shape}; an EXR holds at most {_EXR_MAX_SIDE} pixels a side")
+    # Before any conversion: a virtual array (np.broadcast_to) would be materialised. The copies
+    # here: float32 and its bytes, 4 bytes a value each.
+    _cloudgi.check_image_fits(path, shape[1], shape[0], len(arrays), 8)
+    layers = [(name, _f32_bytes(path, name, arr)) for name, arr in arrays.items()]
     _cloudgi.write_exr(path, shape[1], shape[0], layers)
+
+
+# An EXR's data window is held in signed 32-bit integers.
+_EXR_MAX_SIDE = 2**31 - 1
 
 
 # An EXR channel name (NAME.R) holds at most 255 bytes of UTF-8; a longer one, or a NUL (which

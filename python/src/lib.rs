@@ -279,6 +279,13 @@ fn check_density_fits(shape: Vec<u64>, itemsize: u64) -> PyResult<()> {
     Density::check_fits(&shape, itemsize).map_err(to_py)
 }
 
+/// Refuse, before numpy converts them, `layers` images of `width`×`height` whose copies
+/// (`itemsize` bytes a value) and EXR would not fit in the available memory ([`Image::check_fits`]).
+#[pyfunction]
+fn check_image_fits(path: std::path::PathBuf, width: u32, height: u32, layers: u32, itemsize: u64) -> PyResult<()> {
+    Image::check_fits(width, height, layers, itemsize, &path.display().to_string(), "images").map_err(to_py)
+}
+
 /// The scene a render would use, as TOML (defaults filled in, overrides applied).
 #[pyfunction]
 fn scene_toml(kind: &str, payload: &str, overrides: &str, keywords: Vec<String>) -> PyResult<String> {
@@ -303,5 +310,6 @@ fn _cloudgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(load_grid, m)?)?;
     m.add_function(wrap_pyfunction!(scene_toml, m)?)?;
     m.add_function(wrap_pyfunction!(check_density_fits, m)?)?;
+    m.add_function(wrap_pyfunction!(check_image_fits, m)?)?;
     Ok(())
 }

@@ -694,3 +694,17 @@ def test_a_bad_density_value_is_located_by_its_array_index_too():
     density[1, 2, 3] = np.nan
     with pytest.raises(cloudgi.FormatError, match=r"voxel \(x, y, z\) = \(3, 2, 1\), array index \[1, 2, 3\], is NaN"):
         cloudgi.render(tiny_scene(), density=density)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the available memory is known on Linux")
+def test_a_virtual_image_too_large_is_refused_from_its_shape_before_numpy_converts_it(tmp_path):
+    # np.ascontiguousarray materialised it: a MemoryError from numpy, or swapping for one that
+    # nearly fits.
+    huge = np.broadcast_to(np.float32(1.0), (2**20, 2**20, 3))
+    t = time.monotonic()
+    with pytest.raises(cloudgi.SceneError, match=r"x.exr: field `images`: a 1048576×1048576 image of 2 layers needs about .* TiB of memory"):
+        cloudgi.write_exr(tmp_path / "x.exr", {"rgb": huge, "aov": huge})
+    assert time.monotonic() - t < 5
+    assert not list(tmp_path.iterdir())
+    with pytest.raises(cloudgi.FormatError, match=r"an EXR holds at most 2147483647 pixels a side"):
+        cloudgi.write_exr(tmp_path / "x.exr", {"rgb": np.broadcast_to(np.float32(1.0), (1, 2**31, 3))})
