@@ -147,6 +147,32 @@ impl Density {
         })
     }
 
+    /// Refuse, from its shape alone, a density a caller is about to copy that would not fit in
+    /// this machine's available memory: `shape` (any number of dimensions) holds values of which
+    /// the caller's copies take `caller_bytes_per_value` bytes each, and the grid 4 more (f32).
+    /// A virtual array (numpy's `broadcast_to`) is then refused before it is materialised.
+    ///
+    /// ```
+    /// assert!(cloudgi::Density::check_fits(&[4, 3, 2], 8).is_ok());
+    /// // Linux tells the available memory (elsewhere nothing is refused).
+    /// # #[cfg(target_os = "linux")]
+    /// # {
+    /// let err = cloudgi::Density::check_fits(&[1 << 30, 1 << 30, 1 << 30], 4).unwrap_err();
+    /// assert!(err.to_string().contains("field `density`: 1073741824×1073741824×1073741824 values need about"));
+    /// # }
+    /// ```
+    pub fn check_fits(shape: &[u64], caller_bytes_per_value: u64) -> Result<()> {
+        let values = shape.iter().fold(1u128, |n, &d| n.saturating_mul(d as u128));
+        let dims = shape.iter().map(u64::to_string).collect::<Vec<_>>().join("×");
+        crate::io::check_memory(
+            DENSITY_SOURCE,
+            "density",
+            &format!("{dims} values need"),
+            values.saturating_mul(caller_bytes_per_value as u128 + 4),
+            "downsample the array (e.g. density[::2, ::2, ::2])",
+        )
+    }
+
     /// A density from the bytes of a `.npy` file (float32 or float64, C order, shape
     /// `(nz, ny, nx)`), checked like a `.npy` grid file named [`DENSITY_SOURCE`].
     ///
@@ -531,7 +557,8 @@ mod tests {
         let e = Scene::build_with(SceneDesc::default(), "x", Path::new("."), Some(d)).unwrap_err();
         assert_eq!(
             e.to_string(),
-            "in-memory density: density at voxel (1, 1, 0) is NaN: densities must be finite and non-negative"
+            "in-memory density: density at voxel (x, y, z) = (1, 1, 0), array index [0, 1, 1], is NaN: \
+             densities must be finite and non-negative"
         );
     }
 }

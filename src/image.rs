@@ -22,6 +22,32 @@ pub struct Image {
 }
 
 impl Image {
+    /// Refuse, from its size alone, writing a `width`×`height` image of `layers` RGB layers
+    /// whose caller holds `caller_bytes_per_value` bytes per value (on top of the 12 a value
+    /// the image, its EXR channels and the encoded file take here) when this machine's available
+    /// memory is smaller: an [`Error::Invalid`] of `source`'s `field`.
+    ///
+    /// ```
+    /// use cloudgi::Image;
+    /// assert!(Image::check_fits(64, 48, 2, 8, "images.exr", "images").is_ok());
+    /// # #[cfg(target_os = "linux")]
+    /// # {
+    /// let err = Image::check_fits(u32::MAX, u32::MAX, 1, 4, "images.exr", "images").unwrap_err();
+    /// assert!(err.to_string().contains("field `images`: a 4294967295×4294967295 image of 1 layer needs about"));
+    /// # }
+    /// ```
+    pub fn check_fits(width: u32, height: u32, layers: u32, caller_bytes_per_value: u64, source: &str, field: &str) -> Result<()> {
+        let values = width as u128 * height as u128 * 3 * layers as u128;
+        let plural = if layers == 1 { "" } else { "s" };
+        crate::io::check_memory(
+            source,
+            field,
+            &format!("a {width}×{height} image of {layers} layer{plural} needs"),
+            values.saturating_mul(caller_bytes_per_value as u128 + 12),
+            "write it in tiles or at a lower resolution",
+        )
+    }
+
     /// A black image.
     pub fn new(width: u32, height: u32) -> Self {
         Image {

@@ -290,6 +290,24 @@ pub fn available_memory() -> Option<u64> {
     Some(kib * 1024)
 }
 
+/// Refuse, before it is allocated, work that needs `need` bytes when less is available: an
+/// [`Error::Invalid`] of `source`'s `field` saying "`what` need(s) about N of memory to `purpose`
+/// but M is available; `fix`". Unknown available memory (not Linux) refuses nothing.
+pub fn check_memory(source: &str, field: &str, what: &str, need: u128, fix: &str) -> Result<()> {
+    match available_memory() {
+        Some(avail) if need > avail as u128 => Err(Error::invalid(
+            source,
+            field,
+            format!(
+                "{what} about {} of memory but {} is available; {fix}",
+                format_bytes(need),
+                format_bytes(avail as u128)
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
 /// A byte count for messages, in binary units with one decimal: `1536` → `1.5 KiB`.
 pub fn format_bytes(b: u128) -> String {
     const UNITS: [&str; 7] = ["B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"];

@@ -56,7 +56,7 @@ __all__ = [
 #: The rendering methods, as ``render(method=...)`` and the scene's ``render.method`` name them.
 METHODS = ("single", "diffusion", "full", "transport", "reference")
 
-SceneLike = Union[str, "os.PathLike[str]", Mapping[str, Any]]
+SceneLike = Union[str, bytes, "os.PathLike[str]", Mapping[str, Any]]
 ProgressCallback = Callable[[str, int, int], Any]
 
 
@@ -108,13 +108,15 @@ def _scene_input(scene: Optional[SceneLike]) -> "tuple[str, str]":
         return "builtin", ""
     if isinstance(scene, Mapping):
         return "dict", _json(scene)
-    if isinstance(scene, os.PathLike):
+    if isinstance(scene, (os.PathLike, bytes)):
         return "path", os.fsdecode(scene)
     if isinstance(scene, str):
         if scene == "":
             raise ValueError("scene is an empty string: give a scene file's path, TOML text or a dict (None: the built-in scene)")
-        # TOML text has a newline, a `=` or a `[`; a path has none of them (or names a file).
-        looks_like_toml = any(c in scene for c in "\n=[")
+        # TOML text has a newline, a `=` or a `[`; a path has none of them, names a file, or is
+        # one line ending in `.toml` (`shots/a=1/scene.toml`: a missing one is named as a file).
+        is_toml_path = "\n" not in scene and scene.lower().endswith(".toml")
+        looks_like_toml = any(c in scene for c in "\n=[") and not is_toml_path
         if looks_like_toml and not os.path.isfile(scene):
             return "toml", scene
         return "path", scene
@@ -123,10 +125,12 @@ def _scene_input(scene: Optional[SceneLike]) -> "tuple[str, str]":
 
 def _overrides(method: Optional[str], width: Optional[int], height: Optional[int],
                spp: Optional[int], seed: Optional[int], aov: Optional[bool],
-               extra: Optional[Mapping[str, Mapping[str, Any]]] = None) -> str:
-    """The keyword arguments as scene keys: their types checked here, their values by the scene
-    file's own parser."""
+               extra: Optional[Mapping[str, Mapping[str, Any]]] = None) -> "tuple[str, List[str]]":
+    """The keyword arguments as scene keys (JSON), and the dotted keys set by a keyword of its own
+    (``render.spp`` for ``spp=``, for messages): their types checked here, their values by the
+    scene file's own parser."""
     over: Dict[str, Dict[str, Any]] = {}
+    keywords: List[str] = []
     if extra is not None and not isinstance(extra, Mapping):
         raise TypeError(
             f"overrides must be a dict of scene tables, e.g. {{'sun': {{'elevation_deg': 30}}}}, not {type(extra).__name__} {extra!r}"
@@ -150,8 +154,14 @@ def _overrides(method: Optional[str], width: Optional[int], height: Optional[int
         if not isinstance(value, kind) or (kind is numbers.Integral and isinstance(value, bool)):
             expected = {str: "a str", numbers.Integral: "an int"}.get(kind, "a bool")
             raise TypeError(f"{key} must be {expected} (the scene's {table}.{key}), not {type(value).__name__} {value!r}")
+        if key in over.get(table, {}):
+            raise TypeError(
+                f"{key}={value!r} and overrides[{table!r}][{key!r}]={over[table][key]!r} both set the scene's "
+                f"{table}.{key}; give one of them"
+            )
         over.setdefault(table, {})[key] = value
-    return _json(over)
+        keywords.append(f"{table}.{key}")
+    return _json(over), keywords
 
 
 def _npy_bytes(density: Any) -> bytes:
@@ -160,6 +170,10 @@ def _npy_bytes(density: Any) -> bytes:
         raise TypeError(f"density must be a numpy.ndarray, not {type(density).__name__}")
     if isinstance(density, np.ma.MaskedArray):
         raise TypeError("density is a masked array, whose mask a grid cannot hold; give density.filled(0)")
+    # Before any copy: a virtual array (np.broadcast_to) would be materialised by np.save. The
+    # copies: the .npy bytes and their bytes object, a C-order copy first if it is not one.
+    copies = 2 if density.flags.c_contiguous else 3
+    _cloudgi.check_density_fits([int(n) for n in density.shape], density.dtype.itemsize * copies)
     buf = io.BytesIO()
     if density.dtype.hasobject:
         # np.save refuses Python objects; the header alone has the reader name the dtype.
@@ -204,7 +218,10 @@ def render(
     ``density``: float, integer or bool array indexed ``[z][y][x]`` (as a ``.npy`` file), replacing
     ``medium.grid``; its voxels are ``voxel_size`` metres (one edge, or ``[x, y, z]`` as
     :func:`load_grid` returns it; default ``medium.voxel_size``) with the minimum corner at
-    ``origin`` (default ``medium.origin``); either one without ``density`` raises ValueError.
+    ``origin`` (default ``medium.origin``); either one without ``density`` raises ValueError, and
+    a NaN, infinity or value float32 cannot hold raises :class:`SceneError` naming it. A density
+    whose copies would not fit in the available memory is refused from its shape
+    (:class:`SceneError`) before numpy copies it (``np.broadcast_to`` arrays included).
 
     ``progress(stage, done, total)`` is called from this thread while the render runs (at most
     every 50 ms, on change), e.g. to drive a tqdm bar. The GIL is released during the render;
@@ -216,7 +233,7 @@ def render(
     :class:`FileError`, :class:`SolverError`, each with the command line's message.
     """
     kind, payload = _scene_input(scene)
-    over = _overrides(method, width, height, spp, seed, aov, overrides)
+    over, keywords = _overrides(method, width, height, spp, seed, aov, overrides)
     if density is None:
         for name, value in (("voxel_size", voxel_size), ("origin", origin)):
             if value is not None:
@@ -231,30 +248,53 @@ def render(
         kind,
         payload,
         over,
+        keywords,
         npy,
         _voxel_size(voxel_size),
-        None if origin is None else _vec3("origin", origin, "[x, y, z] in metres"),
+        None if origin is None else _vec3("origin", origin, "[x, y, z] in metres", tiny_is_zero=True),
         progress,
     )
     return _images(w, h, layers)
 
 
-def _real(name: str, v: Any) -> float:
-    """``v`` as a float; a bool, a str or anything not a real number raises naming ``name``."""
+_F32_MAX = float(np.finfo(np.float32).max)
+
+
+def _real(name: str, v: Any, tiny_is_zero: bool) -> float:
+    """``v`` as a float32-sized float; a bool, a str or anything not a real number raises
+    TypeError naming ``name``; NaN, infinity or a value past float32's range (the renderer's
+    precision) raises :class:`SceneError` naming it and the value (cast, 1e300 would read as
+    inf). So does a nonzero value float32 rounds to 0 (1e-50), unless ``tiny_is_zero`` (a
+    coordinate, where it is 0 to within the precision of every other one)."""
     if isinstance(v, np.ndarray) and v.ndim == 0:
         v = v.item()
     if isinstance(v, bool) or not isinstance(v, numbers.Real):
         raise TypeError(f"{name} must be a number, not {type(v).__name__} {v!r}")
-    return float(v)
+    shown = str(v) if len(str(v)) <= 24 else f"{str(v)[:12]}... ({len(str(v))} digits)"
+    out_of_range = SceneError(
+        f"{name} = {shown} is out of range: the renderer holds it as float32, "
+        f"from {float(np.finfo(np.float32).smallest_subnormal):.1e} to {_F32_MAX:.1e} in magnitude"
+    )
+    try:
+        x = float(v)
+    except OverflowError:  # an int past float64's range
+        raise out_of_range from None
+    if not math.isfinite(x):
+        raise SceneError(f"{name} = {shown} is not a finite number")
+    with np.errstate(over="ignore", under="ignore"):
+        as_f32 = float(np.float32(x))
+    if not math.isfinite(as_f32) or (as_f32 == 0.0 and x != 0.0 and not tiny_is_zero):
+        raise out_of_range
+    return x
 
 
-def _vec3(name: str, v: Any, expected: str) -> List[float]:
+def _vec3(name: str, v: Any, expected: str, tiny_is_zero: bool) -> List[float]:
     """``v`` as three floats; anything else raises naming ``name`` and ``expected``."""
     if isinstance(v, (str, bytes)) or not isinstance(v, (Sequence, np.ndarray)):
         raise TypeError(f"{name} must be {expected}, not {type(v).__name__} {v!r}")
     if len(v) != 3:
         raise ValueError(f"{name} has {len(v)} values, {list(v)!r}; it must be {expected}")
-    return [_real(f"{name}[{i}]", x) for i, x in enumerate(v)]
+    return [_real(f"{name}[{i}]", x, tiny_is_zero) for i, x in enumerate(v)]
 
 
 def _voxel_size(v: Union[float, Sequence[float], None]) -> Union[float, List[float], None]:
@@ -262,15 +302,18 @@ def _voxel_size(v: Union[float, Sequence[float], None]) -> Union[float, List[flo
     if v is None:
         return None
     if isinstance(v, numbers.Real) or (isinstance(v, np.ndarray) and v.ndim == 0):
-        return _real("voxel_size", v)
-    return _vec3("voxel_size", v, "one edge in metres, or [x, y, z]")
+        return _real("voxel_size", v, tiny_is_zero=False)
+    return _vec3("voxel_size", v, "one edge in metres, or [x, y, z]", tiny_is_zero=False)
 
 
 def write_exr(path: Union[str, bytes, "os.PathLike[str]"], images: Mapping[str, np.ndarray]) -> None:
     """Write ``images`` (``"rgb"`` and any AOVs, each ``(H, W, 3)``) as one OpenEXR file,
     atomically: RGB as the R, G, B channels and each AOV as ``NAME.R/G/B``, exactly as the
     command line writes a render. A path that is a folder, in a folder that does not exist or
-    cannot be written raises :class:`FileError` before anything is converted or written."""
+    cannot be written raises :class:`FileError` before anything is converted or written; a NaN,
+    an infinity or a value past float32's range (float64 1e300) raises :class:`FormatError`
+    naming the image and pixel, and nothing is written. Images whose copies would not fit in
+    the available memory are refused from their shape (:class:`SceneError`) before any copy."""
     path = _path("path", path)
     if not isinstance(images, Mapping):
         raise TypeError(f"images must be a dict {{name: (H, W, 3) array}} as render returns, not {type(images).__name__}")
@@ -281,7 +324,7 @@ def write_exr(path: Union[str, bytes, "os.PathLike[str]"], images: Mapping[str, 
         raise SceneError(f"{path}: images need an \"rgb\" entry (got {sorted(images)})")
     _cloudgi.check_output(path, "cloudgi.write_exr", "path")
     shape = np.shape(images["rgb"])
-    layers = []
+    arrays = {}
     for name, img in images.items():
         arr = np.asarray(img)
         if arr.dtype.kind not in "fiub":
@@ -294,8 +337,65 @@ def write_exr(path: Union[str, bytes, "os.PathLike[str]"], images: Mapping[str, 
             raise FormatError(f"{path}: the images have shape {shape}, no pixel; an EXR needs at least 1×1")
         if name == "":
             raise FormatError(f"{path}: an image named \"\" would be a second RGB; name it (its layer is NAME.R/G/B)")
-        layers.append((name, np.ascontiguousarray(arr, dtype="<f4").tobytes()))
+        _check_layer_name(path, name)
+        arrays[name] = arr
+    if max(shape[:2]) > _EXR_MAX_SIDE:
+        raise FormatError(f"{path}: the images have shape {shape}; an EXR holds at most {_EXR_MAX_SIDE} pixels a side")
+    # Before any conversion: a virtual array (np.broadcast_to) would be materialised. The copies
+    # here: float32 and its bytes, 4 bytes a value each.
+    _cloudgi.check_image_fits(path, shape[1], shape[0], len(arrays), 8)
+    layers = [(name, _f32_bytes(path, name, arr)) for name, arr in arrays.items()]
     _cloudgi.write_exr(path, shape[1], shape[0], layers)
+
+
+# An EXR's data window is held in signed 32-bit integers.
+_EXR_MAX_SIDE = 2**31 - 1
+
+
+# An EXR channel name (NAME.R) holds at most 255 bytes of UTF-8; a longer one, or a NUL (which
+# ends a name in the file), made a file no reader opens.
+_MAX_LAYER_NAME_BYTES = 255 - len(".R")
+
+
+def _check_layer_name(path: str, name: str) -> None:
+    """An image's name as an EXR can hold it: UTF-8, no NUL, at most 253 bytes."""
+    if name == "rgb":
+        return
+    try:
+        size = len(name.encode("utf-8"))
+    except UnicodeEncodeError as e:
+        raise FormatError(f"{path}: image name {name!r} is not valid Unicode ({e.reason}); an EXR's names are UTF-8") from None
+    if "\0" in name:
+        raise FormatError(f"{path}: image name {name!r} holds a NUL character, which ends a name in an EXR file")
+    if size > _MAX_LAYER_NAME_BYTES:
+        raise FormatError(
+            f"{path}: image name {name[:20]!r}... is {size} bytes of UTF-8; an EXR channel name (NAME.R) holds at most "
+            f"255 bytes, so a name at most {_MAX_LAYER_NAME_BYTES}"
+        )
+
+
+def _f32_bytes(path: str, name: str, arr: np.ndarray) -> bytes:
+    """Image ``name`` as float32 bytes, as the EXR holds it; a NaN or infinity, or a value past
+    float32's range (which the cast would make infinite), raises :class:`FormatError` naming it:
+    the file would hold non-finite pixels that nothing downstream expects."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        f32 = np.ascontiguousarray(arr, dtype="<f4")
+    bad = ~np.isfinite(f32)
+    if not bad.any():
+        return f32.tobytes()
+    y, x, c = (int(i) for i in np.argwhere(bad)[0])
+    value = arr[y, x, c]
+    where = f"pixel (row {y}, column {x}), channel {'RGB'[c]}"
+    if np.isfinite(value):
+        largest = np.abs(arr[np.isfinite(arr)]).max()
+        raise FormatError(
+            f"{path}: images[{name!r}] holds {value:g} at {where} (largest magnitude {largest:g}), past float32's "
+            f"{_F32_MAX:.4g} that an EXR's float channels hold; scale the image down"
+        )
+    raise FormatError(
+        f"{path}: images[{name!r}] holds {value} at {where} ({int(bad.sum())} non-finite values): an EXR of a render "
+        "holds finite values; find where they came from (or replace them, e.g. numpy.nan_to_num)"
+    )
 
 
 def _path(name: str, path: Any) -> str:
@@ -326,10 +426,10 @@ def load_grid(path: Union[str, bytes, "os.PathLike[str]"], grid: str = "density"
 def scene_toml(scene: Optional[SceneLike] = None, **overrides: Any) -> str:
     """The scene ``render`` would use, as scene-file TOML with every default filled in."""
     kind, payload = _scene_input(scene)
-    over = _overrides(overrides.pop("method", None), overrides.pop("width", None),
-                      overrides.pop("height", None), overrides.pop("spp", None),
-                      overrides.pop("seed", None), overrides.pop("aov", None),
-                      overrides.pop("overrides", None))
+    over, keywords = _overrides(overrides.pop("method", None), overrides.pop("width", None),
+                                overrides.pop("height", None), overrides.pop("spp", None),
+                                overrides.pop("seed", None), overrides.pop("aov", None),
+                                overrides.pop("overrides", None))
     if overrides:
         raise TypeError(f"unknown keyword arguments: {sorted(overrides)}")
-    return _cloudgi.scene_toml(kind, payload, over)
+    return _cloudgi.scene_toml(kind, payload, over, keywords)

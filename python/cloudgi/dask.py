@@ -16,9 +16,12 @@ scene of its own (a path or TOML text), or a ``(scene, overrides)`` pair.
 from __future__ import annotations
 
 import inspect
+import numbers
 import os
 import re
 from typing import Any, Iterable, List, Mapping, Optional, Tuple, Union
+
+import numpy as np
 
 import cloudgi
 
@@ -82,9 +85,25 @@ def render_frames(
     Frame ``i`` (numbered from ``start``) is written to ``frame_path(out_pattern, i)``.
     ``options`` are :func:`cloudgi.render`'s keyword arguments (``method``, ``width``, ...).
     A frame whose task raises is tried again up to ``retries`` times; a frame on a worker that
-    dies is rescheduled by Dask on another. The options' names and every output path (not a
-    folder, in a folder that exists and can be written) are checked before anything is submitted.
+    dies is rescheduled by Dask on another. ``start`` (an int), ``retries`` (an int, at least 0),
+    ``frames`` (a list, not one frame), the options' names and every output path (not a folder,
+    in a folder that exists and can be written) are checked before anything is submitted.
     """
+    for name, value in (("start", start), ("retries", retries)):
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+            raise TypeError(f"render_frames: {name} must be an int, not {type(value).__name__} {value!r}")
+    if retries < 0:
+        raise ValueError(f"render_frames: retries = {retries}; it must be at least 0 (the times a failed frame is tried again)")
+    if isinstance(frames, (str, bytes, os.PathLike, Mapping)):
+        raise TypeError(
+            f"render_frames: frames must be a list of frames (dicts of overrides, scenes or (scene, overrides) pairs), "
+            f"not one {type(frames).__name__}; give [frame] for one frame"
+        )
+    if "progress" in options:
+        raise TypeError(
+            "render_frames: progress= would be called on the workers, not here; follow the frames "
+            "with the Dask dashboard (or render one frame locally with cloudgi.render(progress=...))"
+        )
     try:
         inspect.signature(cloudgi.render).bind(None, overrides=None, **options)
     except TypeError as e:
@@ -98,8 +117,14 @@ def render_frames(
         raise ValueError(f"out_pattern `{out_pattern}` gives several frames the same file; put {{frame}} in it")
     for p in paths:
         cloudgi._cloudgi.check_output(p, "cloudgi.dask.render_frames", "out_pattern")
+    if not all(callable(getattr(client, m, None)) for m in ("submit", "gather")):
+        raise TypeError(f"render_frames: client must be a dask.distributed.Client, not {type(client).__name__} {client!r}")
+    if isinstance(options.get("density"), np.ndarray):
+        # Sent to each worker once, not pickled into every frame's task (a 1 GB grid, 100 frames:
+        # 1 GB, not 100); Dask hands each task the array.
+        options = dict(options, density=client.scatter(options["density"], broadcast=True))
     futures = [
-        client.submit(render_frame, own, overrides, path, options, retries=retries, pure=False,
+        client.submit(render_frame, own, overrides, path, options, retries=int(retries), pure=False,
                       key=f"cloudgi-frame-{os.path.basename(path)}-{os.urandom(4).hex()}")
         for own, overrides, path in jobs
     ]

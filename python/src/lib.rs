@@ -112,18 +112,24 @@ impl From<Edges> for VoxelSize {
 /// briefly every [`POLL`], calls `progress(stage, done, total)`, issues warnings and checks for
 /// signals (Ctrl-C raises KeyboardInterrupt here, which cancels the render).
 #[pyfunction]
-#[pyo3(signature = (kind, payload, overrides, npy=None, voxel_size=None, origin=None, progress=None))]
+#[pyo3(signature = (kind, payload, overrides, keywords, npy=None, voxel_size=None, origin=None, progress=None))]
+#[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
     kind: &str,
     payload: &str,
     overrides: &str,
+    keywords: Vec<String>,
     npy: Option<&[u8]>,
     voxel_size: Option<Edges>,
     origin: Option<[f32; 3]>,
     progress: Option<Bound<'py, PyAny>>,
 ) -> PyResult<PyImages<'py>> {
-    let input = scene_input::SceneInput::new(kind, payload, overrides).map_err(to_py)?;
+    let input = scene_input::SceneInput::new(kind, payload, overrides, keywords).map_err(to_py)?;
+    let arguments = [
+        ("medium.voxel_size", "voxel_size", voxel_size.is_some()),
+        ("medium.origin", "origin", origin.is_some()),
+    ];
     let cancel = AtomicBool::new(false);
     let reported = Reported::default();
     let (tx, rx) = mpsc::channel();
@@ -137,7 +143,17 @@ fn render<'py>(
             )?),
             None => None,
         };
-        let scene = cloudgi::Scene::build_with(desc, &source, &base, density)?;
+        let scene = cloudgi::Scene::build_with(desc, &source, &base, density).map_err(|e| match e {
+            // The density's placement came from render()'s own arguments: name them.
+            Error::Invalid { file, field, message } if file == cloudgi::DENSITY_SOURCE => {
+                let field = match arguments.iter().find(|(key, _, given)| *given && *key == field) {
+                    Some((_, argument, _)) => format!("{argument} (argument)"),
+                    None => field,
+                };
+                Error::Invalid { file, field, message }
+            }
+            e => input.blame_field(e, &source),
+        })?;
         for note in scene.notes() {
             reported.warn(note);
         }
@@ -270,10 +286,24 @@ fn load_grid<'py>(
     Ok((d.dims(), PyByteArray::new(py, &bytes), d.voxel_size(), d.origin()))
 }
 
+/// Refuse, before numpy copies it, a density of `shape` whose copies (`itemsize` bytes a
+/// value) and grid would not fit in the available memory ([`Density::check_fits`]).
+#[pyfunction]
+fn check_density_fits(shape: Vec<u64>, itemsize: u64) -> PyResult<()> {
+    Density::check_fits(&shape, itemsize).map_err(to_py)
+}
+
+/// Refuse, before numpy converts them, `layers` images of `width`×`height` whose copies
+/// (`itemsize` bytes a value) and EXR would not fit in the available memory ([`Image::check_fits`]).
+#[pyfunction]
+fn check_image_fits(path: std::path::PathBuf, width: u32, height: u32, layers: u32, itemsize: u64) -> PyResult<()> {
+    Image::check_fits(width, height, layers, itemsize, &path.display().to_string(), "images").map_err(to_py)
+}
+
 /// The scene a render would use, as TOML (defaults filled in, overrides applied).
 #[pyfunction]
-fn scene_toml(kind: &str, payload: &str, overrides: &str) -> PyResult<String> {
-    let input = scene_input::SceneInput::new(kind, payload, overrides).map_err(to_py)?;
+fn scene_toml(kind: &str, payload: &str, overrides: &str, keywords: Vec<String>) -> PyResult<String> {
+    let input = scene_input::SceneInput::new(kind, payload, overrides, keywords).map_err(to_py)?;
     let (desc, _, _) = input.desc().map_err(to_py)?;
     Ok(desc.to_toml())
 }
@@ -293,5 +323,7 @@ fn _cloudgi(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(check_output, m)?)?;
     m.add_function(wrap_pyfunction!(load_grid, m)?)?;
     m.add_function(wrap_pyfunction!(scene_toml, m)?)?;
+    m.add_function(wrap_pyfunction!(check_density_fits, m)?)?;
+    m.add_function(wrap_pyfunction!(check_image_fits, m)?)?;
     Ok(())
 }

@@ -22,12 +22,15 @@ enum Source {
 pub struct SceneInput {
     source: Source,
     overrides: toml::Table,
+    /// The overrides given as `render()`'s own keywords (`spp=`), as dotted keys
+    /// (`render.spp`); the others came in its `overrides` dict.
+    keywords: Vec<String>,
 }
 
 impl SceneInput {
     /// `kind` is `builtin`, `path`, `toml` or `dict` (then `payload` is JSON); `overrides` a JSON object
-    /// `{table: {key: value}}`.
-    pub fn new(kind: &str, payload: &str, overrides: &str) -> Result<SceneInput> {
+    /// `{table: {key: value}}`, of which `keywords` (dotted keys) came as `render()`'s own keywords.
+    pub fn new(kind: &str, payload: &str, overrides: &str, keywords: Vec<String>) -> Result<SceneInput> {
         let source = match kind {
             "builtin" => Source::Builtin,
             "path" => Source::Path(PathBuf::from(payload)),
@@ -38,7 +41,11 @@ impl SceneInput {
         let mut overrides: toml::Table =
             serde_json::from_str(overrides).map_err(|e| Error::invalid("cloudgi.render", "keyword arguments", e.to_string()))?;
         unmark_non_finite(&mut overrides);
-        Ok(SceneInput { source, overrides })
+        Ok(SceneInput {
+            source,
+            overrides,
+            keywords,
+        })
     }
 
     /// The description, the name of its source for messages, and the folder its relative paths
@@ -96,7 +103,7 @@ impl SceneInput {
             file: merged_name.clone(),
             message: e.to_string(),
         })?;
-        let mut merged_desc = SceneDesc::from_toml(&merged, &merged_name)?;
+        let mut merged_desc = SceneDesc::from_toml(&merged, &merged_name).map_err(|e| self.blame(&text, &merged_name).unwrap_or(e))?;
         // A scene without a `[camera]` table frames its cloud (camera.fit); a keyword argument
         // that creates the table (`width=`) keeps that, as `--width` does on the command line.
         let sets_fit = self
@@ -108,6 +115,86 @@ impl SceneInput {
             merged_desc.camera.fit = desc.camera.fit;
         }
         Ok((merged_desc, name, base))
+    }
+}
+
+impl SceneInput {
+    /// The error of the first override (in key order) that the scene `text` does not take,
+    /// naming it and its value: the message of the merged scene would show a line of TOML the
+    /// caller never wrote. `None` if each parses (then the merged scene's own error stands).
+    fn blame(&self, text: &str, merged_name: &str) -> Option<Error> {
+        let mut table: toml::Table = text.parse().ok()?;
+        for (path, value) in leaves(&self.overrides) {
+            merge(&mut table, &one_leaf(&path, value));
+            let merged = toml::to_string(&table).ok()?;
+            let message = match toml::from_str::<SceneDesc>(&merged) {
+                Err(e) => e.message().trim_end().to_string(),
+                Ok(_) => match SceneDesc::from_toml(&merged, merged_name) {
+                    Err(Error::Invalid { message, .. }) => message,
+                    _ => continue,
+                },
+            };
+            let key = path.join(".");
+            let written = match self.keyword(&key) {
+                Some(name) => format!("{name}={value} (the scene's {key})"),
+                None => format!("{key} = {value}"),
+            };
+            return Some(Error::Parse {
+                file: merged_name.to_string(),
+                message: format!("{written}: {message}"),
+            });
+        }
+        None
+    }
+
+    /// `render()`'s keyword that set the dotted `key`, if one did (`spp` for `render.spp`).
+    fn keyword<'k>(&self, key: &'k str) -> Option<&'k str> {
+        let name = key.rsplit('.').next()?;
+        self.keywords.iter().any(|k| k == key).then_some(name)
+    }
+
+    /// `e`, from building the merged scene, blamed on the keyword arguments when its field is
+    /// one of them: the scene itself was valid before they were applied.
+    pub fn blame_field(&self, e: Error, name: &str) -> Error {
+        match e {
+            Error::Invalid { file, field, message }
+                if file == name && leaves(&self.overrides).iter().any(|(p, _)| p.join(".") == field) =>
+            {
+                let file = match self.keyword(&field) {
+                    Some(k) => format!("keyword argument {k}= on {file}"),
+                    None => format!("keyword arguments on {file}"),
+                };
+                Error::Invalid { file, field, message }
+            }
+            e => e,
+        }
+    }
+}
+
+/// Every non-table value of `table` with its path of keys, in key order.
+fn leaves(table: &toml::Table) -> Vec<(Vec<String>, &toml::Value)> {
+    let mut out = Vec::new();
+    for (k, v) in table {
+        match v {
+            toml::Value::Table(t) if !t.is_empty() => out.extend(leaves(t).into_iter().map(|(mut p, v)| {
+                p.insert(0, k.clone());
+                (p, v)
+            })),
+            v => out.push((vec![k.clone()], v)),
+        }
+    }
+    out
+}
+
+/// The table that sets the key at `path` to `value` alone.
+fn one_leaf(path: &[String], value: &toml::Value) -> toml::Table {
+    let mut value = value.clone();
+    for part in path.iter().rev() {
+        value = toml::Value::Table(toml::Table::from_iter([(part.clone(), value)]));
+    }
+    match value {
+        toml::Value::Table(t) => t,
+        _ => toml::Table::new(),
     }
 }
 

@@ -107,3 +107,58 @@ def test_bad_outputs_options_and_frames_are_found_before_submitting(client, tmp_
         cloudgi.dask.render_frames(tiny_scene(), [(tiny_scene(), {}, 1)], client, str(tmp_path / "h_{frame}.exr"))
     assert not client.processing() or not any(client.processing().values())
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f_1.exr"]
+
+
+@pytest.mark.parametrize(
+    "kwargs, error, words",
+    [
+        ({"retries": -1}, ValueError, r"retries = -1; it must be at least 0"),
+        ({"retries": 1.5}, TypeError, r"retries must be an int, not float 1.5"),
+        ({"retries": True}, TypeError, r"retries must be an int, not bool"),
+        ({"start": "1"}, TypeError, r"start must be an int, not str"),
+    ],
+)
+def test_bad_numeric_arguments_are_refused_before_the_client_is_used(tmp_path, kwargs, error, words):
+    # retries=-1 went to Dask, which took it; no client is needed to refuse them.
+    with pytest.raises(error, match=words):
+        cloudgi.dask.render_frames(tiny_scene(), FRAMES, None, str(tmp_path / "f_{frame}.exr"), **kwargs)
+
+
+def test_frames_given_as_one_scene_are_refused(tmp_path):
+    # A str was iterated as one frame per character, a dict as one per table name.
+    for frames in ("scene.toml", {"sun": {"elevation_deg": 20.0}}):
+        with pytest.raises(TypeError, match=r"frames must be a list of frames .* give \[frame\] for one frame"):
+            cloudgi.dask.render_frames(tiny_scene(), frames, None, str(tmp_path / "f_{frame}.exr"))
+
+
+def test_a_client_that_is_not_one_is_named(tmp_path):
+    # It failed with "'NoneType' object has no attribute 'submit'".
+    with pytest.raises(TypeError, match=r"client must be a dask.distributed.Client, not NoneType"):
+        cloudgi.dask.render_frames(tiny_scene(), FRAMES, None, str(tmp_path / "f_{frame}.exr"))
+
+
+def test_a_density_option_is_sent_once_and_renders_as_locally(client, tmp_path):
+    # It was pickled into every frame's task: a grid of N bytes cost N per frame.
+    density = np.random.default_rng(5).random((12, 16, 20)).astype(np.float32)
+    submitted = []
+    real_submit = client.submit
+
+    def submit(fn, *args, **kwargs):
+        submitted.append(args[3]["density"])
+        return real_submit(fn, *args, **kwargs)
+
+    client.submit = submit
+    try:
+        paths = cloudgi.dask.render_frames(tiny_scene(), FRAMES[:2], client, str(tmp_path / "d_{frame}.exr"),
+                                           method="single", density=density, voxel_size=40.0)
+    finally:
+        del client.submit
+    assert len(submitted) == 2 and all(isinstance(d, distributed.Future) for d in submitted)
+    for frame, path in zip(FRAMES, paths):
+        assert open(path, "rb").read() == local_bytes(tmp_path, tiny_scene(), frame, method="single", density=density, voxel_size=40.0)
+
+
+def test_a_progress_callback_is_refused_as_it_would_run_on_the_workers(tmp_path):
+    # It was pickled to the workers (or failed to pickle, e.g. a tqdm bar) and never called here.
+    with pytest.raises(TypeError, match=r"progress= would be called on the workers"):
+        cloudgi.dask.render_frames(tiny_scene(), FRAMES, None, str(tmp_path / "f_{frame}.exr"), progress=print)

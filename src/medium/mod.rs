@@ -265,7 +265,11 @@ impl Medium {
             let (i, j, k) = (idx % dims[0], (idx / dims[0]) % dims[1], idx / (dims[0] * dims[1]));
             return Err(Error::format(
                 &loaded.name,
-                format!("density at voxel ({i}, {j}, {k}) is {v}: densities must be finite and non-negative"),
+                // Both orders: a numpy user indexes the array [z][y][x].
+                format!(
+                    "density at voxel (x, y, z) = ({i}, {j}, {k}), array index [{k}, {j}, {i}], is {v}: \
+                     densities must be finite and non-negative"
+                ),
             ));
         }
         let densest = grid.data().iter().fold(0.0f32, |m, &v| m.max(v));

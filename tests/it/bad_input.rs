@@ -368,7 +368,7 @@ fn corrupt_vol_files() {
         (vol([2, 2, 2], &ones, 0)[..20].to_vec(), &["g.vol", "truncated"]),
         (
             vol([2, 2, 2], &[1.0, f32::NAN, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0], 0),
-            &["g.vol", "voxel (1, 0, 0)", "finite"],
+            &["g.vol", "voxel (x, y, z) = (1, 0, 0), array index [0, 0, 1]", "finite"],
         ),
         (
             vol([2, 2, 2], &[1.0, 1.0, 1.0, -0.5, 1.0, 1.0, 1.0, 1.0], 0),
