@@ -306,14 +306,14 @@ impl Medium {
             &loaded.name,
             "medium.voxel_size",
             finite3(voxel.to_array()) && voxel.min_element() > 0.0 && voxel.max_element() <= MAX_VOXEL_SIZE,
-            voxel,
+            voxel.to_array(),
             "voxel size must be positive and at most 1e6 m (1000 km); check the grid's units",
         )?;
         check(
             &loaded.name,
             "medium.origin",
             finite3(origin.to_array()) && origin.abs().max_element() <= crate::limits::MAX_COORDINATE,
-            origin,
+            origin.to_array(),
             &format!(
                 "the grid's minimum corner must be finite and within ±{:e} m of the world's origin (m); \
                  move the cloud nearer 0",
