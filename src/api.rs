@@ -369,12 +369,13 @@ pub fn render(scene: &Scene, method: Method, options: &Options) -> Result<Render
     })
 }
 
-/// The warning when the sun `sky.extract_sun` took out of the scene's sky map was clipped in
-/// the map, so its irradiance is a lower bound (docs/sky.md, "A clipped sun"); `None` otherwise.
-/// The command line prints it among the scene's warnings, the Python package as a
-/// `RuntimeWarning`.
-pub fn clipped_sun_warning(scene: &Scene) -> Option<String> {
-    crate::cli::map_sun::clip_warning(scene)
+/// The warnings about `scene` itself that the command line prints before it renders: a sun
+/// under the ground, a cloud of an odd size, voxels too thick for the fast methods, a low albedo,
+/// a back-scattering phase function, a sun in the sky map or a clipped one (docs/sky.md), a cloud
+/// the camera does not see. (Warnings about keys that do not apply read the scene file, and the
+/// grid's notes are in [`Scene::notes`].) The Python package issues them as `RuntimeWarning`s.
+pub fn scene_warnings(scene: &Scene) -> Vec<String> {
+    crate::cli::warnings::scene_warnings(scene)
 }
 
 /// The caller's progress sink with the cancel flag as its [`Progress::cancelled`].

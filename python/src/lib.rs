@@ -157,7 +157,7 @@ fn render<'py>(
         for note in scene.notes() {
             reported.warn(note);
         }
-        if let Some(w) = cloudgi::clipped_sun_warning(&scene) {
+        for w in cloudgi::scene_warnings(&scene) {
             reported.warn(&w);
         }
         let options = Options {

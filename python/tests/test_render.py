@@ -485,6 +485,23 @@ def test_a_grid_with_cells_that_are_not_cubes_renders_as_its_file_does():
         cloudgi.render(scene, method="single", density=density, voxel_size=[1.0, 2.0])
 
 
+def test_the_command_lines_scene_warnings_are_runtime_warnings():
+    # A camera looking away from the cloud: `cloudgi render` warns that the image shows no cloud,
+    # and so does the package (it issued none of the scene's warnings before).
+    scene = tiny_scene(width=8, height=6)
+    scene["camera"].update({"position": [0.0, 300.0, 2000.0], "look_at": [0.0, 300.0, 4000.0]})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cloudgi.render(scene, method="single")
+    seen = [str(w.message) for w in caught if w.category is RuntimeWarning]
+    assert any("is not in the camera's view" in m for m in seen), seen
+    # The framed scene warns about nothing.
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cloudgi.render(tiny_scene(width=8, height=6), method="single")
+    assert not [str(w.message) for w in caught if w.category is RuntimeWarning]
+
+
 def test_a_clipped_sun_taken_out_of_the_sky_map_is_a_runtime_warning(tmp_path):
     # A 1024×512 map of 0.5 with a Gaussian sun (σ = 2 pixels, peak 1e6), whole and cut at 65504.
     j, i = np.mgrid[0:512, 0:1024].astype(np.float32)

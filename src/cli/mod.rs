@@ -21,7 +21,7 @@ mod frames;
 mod grid_scene;
 mod info;
 mod low_albedo;
-pub(crate) mod map_sun;
+mod map_sun;
 pub(crate) mod memory;
 mod output;
 mod progress;
@@ -30,7 +30,7 @@ mod sky;
 mod slab;
 mod thick_voxels;
 mod tonemap;
-mod warnings;
+pub(crate) mod warnings;
 
 use crate::error::{Error, Result};
 use crate::scene::{Method, Scene};

@@ -112,6 +112,16 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
              set render.sky_boundary = false for the paper's stage-1 sky)",
         );
     }
+    out.extend(scene_warnings(scene));
+    out
+}
+
+/// The warnings about the scene itself, whatever its keys were given by (a file, flags, the
+/// Python package's keywords): a sun under the ground, a cloud of an odd size, thick voxels, a
+/// low albedo, a back-scattering phase function, a sun in the sky map or a clipped one, a cloud
+/// the camera does not see.
+pub fn scene_warnings(scene: &Scene) -> Vec<String> {
+    let mut out = Vec::new();
     out.extend(hidden_sun_warning(scene));
     // A medium with no density (an empty .vdb frame, which its note reports) has no cloud to
     // size or frame.
