@@ -10,6 +10,10 @@ use crate::lighting::SkyModel;
 use crate::math::{luminance, Rgb};
 use crate::scene::{Method, Scene};
 
+/// Angular radius (°) around the sun sky.extract_sun took out within which what is left is
+/// its aureole: the extracted region is at most 0.01 sr, a cap about 3.2° in radius.
+const AUREOLE_RADIUS_DEG: f32 = 5.0;
+
 /// Share of the map's light above which a compact source is warned about.
 const SHARE: f64 = 0.2;
 
@@ -41,6 +45,13 @@ pub fn warning(scene: &Scene) -> Option<String> {
     }
     let c = scene.sky.map()?.compact_source()?;
     if c.share < SHARE || c.solid_angle > MAX_SUN_SOLID_ANGLE {
+        return None;
+    }
+    // What sky.extract_sun leaves around the sun it took out (a bright sun's flanks under its
+    // threshold: a Gaussian sun's tail holds about 0.5 % of its light, yet much of a dim sky's)
+    // is the sun's own aureole, not another sun.
+    let aureole = scene.desc.sky.extract_sun && c.direction.angle_between(scene.sun.dir) < AUREOLE_RADIUS_DEG.to_radians();
+    if aureole {
         return None;
     }
     let fix = match scene.desc.sky.extract_sun {
@@ -195,5 +206,28 @@ mod tests {
         assert!(w.contains("1000 in the file") && w.contains("of its pixels"), "{w}");
         // The sun clipped at 10³ gives under the clear-sky 5 to 10 times the sky's: named.
         assert!(w.contains("may hold as little as 1/"), "{w}");
+    }
+
+    #[test]
+    fn the_aureole_extract_sun_leaves_around_its_sun_is_not_another_sun() {
+        // A Gaussian sun (σ = 2 pixels, peak 1e6) on a sky of 0.5: after extract_sun its flanks
+        // under the threshold hold about a third of the map's light left, next to the sun.
+        let dir = tempfile::tempdir().unwrap();
+        let img = clipped_sun_map(f32::INFINITY);
+        // A second sun, far from the first, is still warned about.
+        let mut two = img.clone();
+        two.pixels[300 * img.width as usize + 700] = Rgb::splat(3e6);
+        for (name, map, warned) in [("aureole.exr", &img, false), ("two.exr", &two, true)] {
+            let path = dir.path().join(name);
+            map.write_exr(&path).unwrap();
+            let mut d = SceneDesc::default();
+            d.sky.model = SkyModel::Envmap;
+            d.sky.path = Some(path.to_string_lossy().into_owned());
+            d.sky.extract_sun = true;
+            d.sun.irradiance = [0.0; 3];
+            d.medium.resolution = [20, 16, 12];
+            let scene = Scene::build(d, "s.toml", dir.path()).unwrap();
+            assert_eq!(warning(&scene).is_some(), warned, "{name}: {:?}", warning(&scene));
+        }
     }
 }
