@@ -198,11 +198,21 @@ fn map_sun_and_sky(sun: &SunDesc, sky: &SkyDesc, built: &Sky, file: &str) -> Res
             return Ok((sun, sky));
         }
         Err(map_sun::NoSun::Black) => format!("`{path}` is black: it holds no sun"),
-        Err(map_sun::NoSun::NotBright(ratio)) => format!(
-            "the brightest pixel of `{path}` is {ratio:.1} times the map's mean radiance; a sun's pixels are over {} \
-             times it",
-            map_sun::BRIGHT_OVER_MEAN
-        ),
+        Err(map_sun::NoSun::NotBright(ratio)) => {
+            let clipped = match map.plateau_at_max() {
+                Some((top, pixels)) => format!(
+                    " ({pixels} pixels hold its brightest value, {} in the file: if its sun was clipped there, at a format's or \
+                     camera's ceiling, the map has lost the sun's light; use an HDRI whose sun is not clipped)",
+                    top / sky.scale
+                ),
+                None => String::new(),
+            };
+            format!(
+                "the brightest pixel of `{path}` is {ratio:.1} times the map's mean radiance; a sun's pixels are over \
+                 {} times it{clipped}",
+                map_sun::BRIGHT_OVER_MEAN
+            )
+        }
         Err(map_sun::NoSun::TooWide(sr)) => format!(
             "the bright pixels around the brightest one of `{path}` cover {sr:.2e} sr, more than a sun's {:.0e} sr (a \
              cap about 3° in radius): a directional sun would not stand for them",

@@ -53,6 +53,16 @@ impl EnvMap {
         })
     }
 
+    /// The map's largest value in any band and how many pixels hold it exactly in that band, if
+    /// at least [`MIN_CLIPPED_PIXELS`] do: the mark of a map cut at a ceiling, where a sun too
+    /// dim to find (its pixels under 100 times the mean) may have been clipped.
+    pub fn plateau_at_max(&self) -> Option<(f32, usize)> {
+        let top = self.pixels.iter().map(|p| p.max_element()).fold(0.0, f32::max);
+        let band = (0..3).find(|&b| self.pixels.iter().any(|p| p[b] == top))?;
+        let count = self.pixels.iter().filter(|p| p[band] == top).count();
+        (top > 0.0 && count >= MIN_CLIPPED_PIXELS).then_some((top, count))
+    }
+
     /// Whether the pixels two out from `plateau` (8-connected) hold, in `band`, a median over
     /// [`RISE_TWO_PIXELS_OUT`] times `top`.
     fn rises_into(&self, plateau: &BTreeSet<usize>, band: usize, top: f32) -> bool {
@@ -142,5 +152,21 @@ mod tests {
         let mut m = map_with(|r| if r < 2.0 { 1e7 } else { 0.0 }, f32::MAX);
         m.pixels.iter_mut().enumerate().for_each(|(k, p)| *p = p.max(Rgb::splat((3.0 * (1.0 - (k / W) as f32 / H as f32)).min(1.0))));
         assert_eq!(extracted(&m).clip, None);
+    }
+
+    #[test]
+    fn a_map_cut_at_a_ceiling_shows_a_plateau_at_its_maximum() {
+        // A sky of 0.3 whose sun was clipped at 1.0 over 3×3 pixels; the same sky with the sun
+        // one pixel of 1.0 (a peak, not a plateau).
+        let (w, h) = (64, 32);
+        let mut px = vec![Rgb::splat(0.3); w * h];
+        for k in [0, 1, 2].iter().flat_map(|j| [0, 1, 2].map(|i| (10 + j) * w + 20 + i)) {
+            px[k] = Rgb::splat(1.0);
+        }
+        assert_eq!(EnvMap::new(w, h, px).plateau_at_max(), Some((1.0, 9)));
+        let mut one = vec![Rgb::splat(0.3); w * h];
+        one[10 * w + 20] = Rgb::splat(1.0);
+        assert_eq!(EnvMap::new(w, h, one).plateau_at_max(), None);
+        assert_eq!(EnvMap::new(w, h, vec![Rgb::ZERO; w * h]).plateau_at_max(), None);
     }
 }

@@ -666,4 +666,25 @@ fn extract_sun_makes_the_maps_sun_the_scenes_sun_or_says_why_not() {
         e.to_string().contains("sky.extract_sun") && e.to_string().contains("black.exr"),
         "{e}"
     );
+    // A sun clipped at 1.0 over a sky of 0.5 is too dim to find: the refusal says the map looks
+    // clipped; the unclipped sunless map's does not.
+    for j in 38..41 {
+        for i in 60..63 {
+            img.pixels[(j * w + i) as usize] = Rgb::splat(1.0);
+        }
+    }
+    img.write_exr(&d.join("clipped.exr")).unwrap();
+    let e = sun_and_sky(&SunDesc::default(), &env("clipped.exr", true), "s.toml", d)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("9 pixels hold its brightest value, 1 in the file") && e.contains("not clipped"),
+        "{e}"
+    );
+    img.pixels[(38 * w + 60) as usize] = Rgb::splat(1.5);
+    img.write_exr(&d.join("peak.exr")).unwrap();
+    let e = sun_and_sky(&SunDesc::default(), &env("peak.exr", true), "s.toml", d)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("times the map's mean radiance") && !e.contains("brightest value"), "{e}");
 }
