@@ -11,19 +11,38 @@ use crate::scene::{Method, Scene};
 /// `reference` up to a median of 2.45 and 3.6–8 % dark from 3 to 3.8.
 pub const THICK_ENTRY: f32 = 2.5;
 
+/// The phase function's g down to which [`THICK_ENTRY`] holds (the clouds of docs/accuracy.md
+/// have g = 0.88 and 0.9).
+const THICK_ENTRY_G: f32 = 0.85;
+
+/// The threshold at g ≤ [`LOW_G`]: the layer the light leaves a lit face from is thinner the less
+/// forward the phase function. On the built-in cloud at 40-m voxels `transport` measured 2.7, 1.3
+/// and 0.3 % dark at a median of 1.3 and 7.6, 4.9 and 2.9 % at 1.5 for g = 0, 0.5 and 0.7
+/// (docs/accuracy.md, "Thick voxels at low g").
+const LOW_G_ENTRY: f32 = 1.4;
+const LOW_G: f32 = 0.7;
+
+/// The median entry depth above which a medium of HG parameter `g` is warned about:
+/// [`LOW_G_ENTRY`] up to g = [`LOW_G`], [`THICK_ENTRY`] from [`THICK_ENTRY_G`], linear between.
+pub fn thick_entry(g: f32) -> f32 {
+    let t = ((g - LOW_G) / (THICK_ENTRY_G - LOW_G)).clamp(0.0, 1.0);
+    LOW_G_ENTRY + t * (THICK_ENTRY - LOW_G_ENTRY)
+}
+
 /// The warning for `scene`, if its method holds one value of the light per voxel and the median
-/// voxel its light enters through is thicker than [`THICK_ENTRY`]; it names the `medium.refine`
-/// that brings the median to [`THICK_ENTRY`] or below, where one within [`MAX_REFINE`] does.
+/// voxel its light enters through is thicker than [`thick_entry`] of its g; it names the
+/// `medium.refine` that brings the median to that or below, where one within [`MAX_REFINE`] does.
 pub fn warning(scene: &Scene) -> Option<String> {
     if scene.render.method == Method::Reference {
         return None;
     }
-    let median = median_entry_cell_depth(&scene.medium).filter(|d| *d > THICK_ENTRY)?;
+    let threshold = thick_entry(scene.desc.medium.g);
+    let median = median_entry_cell_depth(&scene.medium).filter(|d| *d > threshold)?;
     let d = &scene.desc.medium;
     // Refining k times makes the entry cells k times thinner. (Their ramps from the empty voxels
     // thin faster, as 1/k², but transport on such refined clouds was measured 3.4-3.8 % dark where
     // that estimate was 2.5: docs/accuracy.md.)
-    let more = (3..=MAX_REFINE).step_by(2).find(|k| median / *k as f32 <= THICK_ENTRY);
+    let more = (3..=MAX_REFINE).step_by(2).find(|k| median / *k as f32 <= threshold);
     let finer = match more.map(|k| k * d.refine).filter(|k| *k <= MAX_REFINE) {
         _ if d.downsample > 1 => "a lower medium.downsample".to_string(),
         Some(k) => format!("medium.refine = {k} ({}× the voxels, memory and time)", k.pow(3) / d.refine.pow(3)),
@@ -37,12 +56,21 @@ pub fn warning(scene: &Scene) -> Option<String> {
     } else {
         format!("render with --method transport and {finer}, or with --method reference")
     };
+    // Below THICK_ENTRY_G the threshold is lower: say why at this g.
+    let low_g = match threshold < THICK_ENTRY {
+        true => format!(
+            "; with medium.g = {} the layer is thinner and the limit {threshold:.2} (transport measured 8 % dark at 1.5 \
+             with g = 0, 5 % with g = 0.5; docs/accuracy.md, \"Thick voxels at low g\")",
+            d.g
+        ),
+        false => String::new(),
+    };
     Some(format!(
         "{}: light enters the cloud through voxels {median:.1} optical depths thick (the median over the cloud's \
          surface; medium.sigma_t × density × the voxel's side the light crosses), too thick for method {} to resolve the layer the light leaves from: the image comes \
          out dark (transport measured 4-8 % dark at 3-4, 22 % at 9, 39 % at 18 where the density ramps up from \
          the cloud's edge, 38 % at 10 and 91 % at 20 on the sunlit faces of a uniform block; full and diffusion \
-         10-25 %; docs/accuracy.md, \"Optically thick voxels\"); {remedy}",
+         10-25 %; docs/accuracy.md, \"Optically thick voxels\"){low_g}; {remedy}",
         scene.source,
         m.name()
     ))
@@ -79,6 +107,34 @@ mod tests {
             );
         }
         assert_eq!(warning_for(1.0, Method::Reference), None);
+    }
+
+    #[test]
+    fn a_phase_function_less_forward_than_measured_is_warned_about_at_thinner_voxels() {
+        // The built-in cloud at 40-m voxels, σt = 0.05: entry voxels 1.5 thick, where transport
+        // measured −7.6 % at g = 0, −4.9 % at 0.5 and 0.0 % at 0.9.
+        let at = |g: f32| {
+            warning_with(0.05, Method::Transport, |d| {
+                d.medium.resolution = [24, 20, 16];
+                d.medium.voxel_size = 40.0.into();
+                d.medium.g = g;
+            })
+        };
+        assert!(at(0.0).is_some_and(|w| w.contains("medium.g = 0") && w.contains("limit 1.40")));
+        assert!(at(0.5).is_some() && at(-0.3).is_some());
+        assert_eq!(at(0.9), None);
+        // σt = 0.025 (entry voxels 1.3, transport −2.7 % at g = 0): no warning.
+        let thinner = warning_with(0.025, Method::Transport, |d| {
+            d.medium.resolution = [24, 20, 16];
+            d.medium.voxel_size = 40.0.into();
+            d.medium.g = 0.0;
+        });
+        assert_eq!(thinner, None);
+        assert_eq!(
+            (thick_entry(0.9), thick_entry(0.85), thick_entry(0.0)),
+            (THICK_ENTRY, THICK_ENTRY, LOW_G_ENTRY)
+        );
+        assert!((thick_entry(0.775) - 0.5 * (THICK_ENTRY + LOW_G_ENTRY)).abs() < 1e-6);
     }
 
     #[test]
