@@ -46,9 +46,9 @@ pub struct Cells {
     high: [f32; 5],
 }
 
-/// The scales ([`Cells::scale`], [`Cells::high`]) of channels whose largest values are `max`.
-fn scales(max: [f32; 5]) -> ([f32; 5], [f32; 5]) {
-    let s = max.map(|m| Scaled16::split_scale(Scaled16::wide_exponent_for(f64::from(m))));
+/// The scales ([`Cells::scale`], [`Cells::high`]) of channels coded under exponents `k`.
+fn scales(k: [i32; 5]) -> ([f32; 5], [f32; 5]) {
+    let s = k.map(Scaled16::split_scale);
     (s.map(|s| s[0]), s.map(|s| s[1]))
 }
 
@@ -68,7 +68,7 @@ impl Cells {
         }
         let k = exponents(max);
         let codes = VoxelField::from_fn(index, [Scaled16::ZERO; 5], |g| encode(at(g), k));
-        let (scale, high) = scales(max);
+        let (scale, high) = scales(k);
         Cells { codes, scale, high }
     }
 
@@ -76,7 +76,7 @@ impl Cells {
     fn from_packed(index: Arc<FullIndex>, cells: &[Cell]) -> Cells {
         let max = cells.iter().fold([0f32; 5], |m, c| std::array::from_fn(|a| m[a].max(c[a])));
         let k = exponents(max);
-        let (scale, high) = scales(max);
+        let (scale, high) = scales(k);
         Cells {
             codes: VoxelField::new(index, [Scaled16::ZERO; 5], cells.iter().map(|c| encode(*c, k))),
             scale,

@@ -31,8 +31,8 @@ impl SkyCells {
         let Some(map) = sky.map() else {
             return SkyCells::Constant(sky.radiance(glam::Vec3::Y));
         };
-        // The narrowest cell's edge: its ring's azimuth sector on the equator-most ring, or the
-        // polar bands' width in θ.
+        // The narrowest cell edge, as the smaller of each band's width in θ and its sectors'
+        // angle in azimuth.
         let narrowest = q
             .rings
             .iter()
@@ -46,32 +46,25 @@ impl SkyCells {
         // Per block of map rows, in parallel, summed in the blocks' order: the same bits for any
         // number of threads.
         let blocks = map.height.div_ceil(ROWS_PER_BLOCK);
+        // Per cell: the power in each band and the solid angle (sr).
         let sums = crate::par::map_range(blocks, &|b| {
-            let mut power = vec![[0.0f64; 3]; q.dirs.len()];
-            let mut area = vec![0.0f64; q.dirs.len()];
+            let mut sum = vec![[0.0f64; 4]; q.dirs.len()];
             let rows = b * ROWS_PER_BLOCK..((b + 1) * ROWS_PER_BLOCK).min(map.height);
             map.for_each_subpixel(rows, k, &mut |dir, l, d_omega| {
-                let o = q.cell_of(DVec3::new(dir.x as f64, dir.y as f64, dir.z as f64));
-                for (b, c) in [l.x, l.y, l.z].into_iter().enumerate() {
-                    power[o][b] += c as f64 * d_omega;
+                let cell = &mut sum[q.cell_of(DVec3::new(dir.x as f64, dir.y as f64, dir.z as f64))];
+                for (c, v) in cell.iter_mut().zip([l.x as f64, l.y as f64, l.z as f64, 1.0]) {
+                    *c += v * d_omega;
                 }
-                area[o] += d_omega;
             });
-            (power, area)
+            sum
         });
-        let mut power = vec![[0.0f64; 3]; q.dirs.len()];
-        let mut area = vec![0.0f64; q.dirs.len()];
-        for (p, a) in &sums {
-            for o in 0..q.dirs.len() {
-                (0..3).for_each(|b| power[o][b] += p[o][b]);
-                area[o] += a[o];
+        let mut total = vec![[0.0f64; 4]; q.dirs.len()];
+        for block in &sums {
+            for (t, s) in total.iter_mut().zip(block) {
+                (0..4).for_each(|i| t[i] += s[i]);
             }
         }
-        let means = power
-            .iter()
-            .zip(&area)
-            .map(|(p, a)| Rgb::new((p[0] / a) as f32, (p[1] / a) as f32, (p[2] / a) as f32))
-            .collect();
+        let means = total.iter().map(|[r, g, b, a]| Rgb::new((r / a) as f32, (g / a) as f32, (b / a) as f32)).collect();
         SkyCells::Means { q: q.clone(), means }
     }
 

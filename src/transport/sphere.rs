@@ -76,10 +76,12 @@ impl Quadrature {
 
     /// The ordinate whose cell ([`Ring`]) holds the unit direction `dir`.
     pub fn cell_of(&self, dir: DVec3) -> usize {
+        // The band holding cos θ, whatever the rings' order; cos θ = 1 (or above, rounded) in the
+        // top band.
         let ring = self
             .rings
             .iter()
-            .find(|r| dir.y < r.mu[1])
+            .find(|r| (r.mu[0]..r.mu[1]).contains(&dir.y))
             .or_else(|| self.rings.iter().max_by(|a, b| a.mu[1].total_cmp(&b.mu[1])))
             .expect("a quadrature has rings");
         let phi = dir.z.atan2(dir.x).rem_euclid(2.0 * PI);
