@@ -1,9 +1,10 @@
 //! A warning when an environment map holds a sun of its own (a compact source carrying much of
 //! its light): `transport` takes the sky's light as its mean over each ordinate's cell, about 20°
 //! wide, so a source a few map pixels wide keeps its power but loses its direction; `full` and
-//! `diffusion` take it along their bins' samples, directions degrees apart, so it is missed or
-//! smeared; `reference` samples the map exactly. The warning points to `sky.extract_sun`, which
-//! takes it out of the map as the scene's sun, carried exactly.
+//! `diffusion` take it as their bins' means (cells about 20° wide too) and let the sky in at the
+//! cloud's surface as diffuse light, so a sun's light keeps its power but not the depth a
+//! collimated beam reaches; `reference` samples the map exactly. The warning points to
+//! `sky.extract_sun`, which takes it out of the map as the scene's sun, carried exactly.
 
 use crate::lighting::map_sun::MAX_SUN_SOLID_ANGLE;
 use crate::lighting::SkyModel;
@@ -25,19 +26,21 @@ fn measured(method: Method) -> Option<(&'static str, &'static str)> {
             "transport 11 % block error and −7 % on the cloud",
         )),
         Method::Full => Some((
-            "takes at directions degrees apart, missing or smearing it",
-            "full 14 % block error and −15 % on the cloud",
+            "averages over bins about 20° wide and lets in at the cloud's surface as diffuse light, keeping its \
+             power but not the depth a beam reaches",
+            "full 15 % block error and +16 % on the cloud",
         )),
         Method::Diffusion => Some((
-            "takes at directions degrees apart, missing or smearing it",
-            "diffusion 19 % block error on the cloud",
+            "averages over bins about 20° wide and lets in at the cloud's surface as diffuse light, keeping its \
+             power but not the depth a beam reaches",
+            "diffusion 23 % block error on the cloud",
         )),
         Method::Single | Method::Reference => None,
     }
 }
 
 /// The warning for `scene`, if its sky is an environment map whose compact source carries more
-/// than [`SHARE`] of its light and its method takes the map at fixed directions.
+/// than [`SHARE`] of its light and its method takes the map as its means over wide cells.
 pub fn warning(scene: &Scene) -> Option<String> {
     let (takes, measured) = measured(scene.render.method)?;
     if scene.desc.sky.model != SkyModel::Envmap {

@@ -15,7 +15,7 @@
 //! neighbours across several faces needs the union of those half cubes (for two faces sharing an
 //! edge, 72 of the 96 bins; the paper rendered 80).
 
-use super::render::{opposite_bin, BinMask, CubeOptions, CubeRenderer};
+use super::render::{opposite_bin, BinMask, CubeOptions, CubeRenderer, LevelTables};
 use crate::diffusion::boundary::hemisphere_radiance;
 use crate::lighting::bins::{DirectionBins, CUBE_FACES, NUM_BINS};
 use crate::lit::LitVolume;
@@ -141,7 +141,15 @@ impl BorderCubes {
 /// parallel, marching with `opts.border_step_level_voxels` and `opts.border_t_cutoff`; the result does not depend on the
 /// thread count.
 pub fn render_border_cubes(lit: &LitVolume, opts: &CubeOptions, progress: &dyn Progress) -> BorderCubes {
-    render_border_cubes_with(&CubeRenderer::new(lit, &border_options(opts)), progress)
+    render_border_cubes_with(&border_renderer(lit, opts, LevelTables::new(lit, opts)), progress)
+}
+
+/// The border cubes' renderer over `lit` with `tables` ([`CubeRenderer::with_tables`]): the
+/// border's options ([`border_options`]), and behind each pixel's one ray the sky's mean over
+/// the pixel ([`CubeRenderer::with_sky_means`]), so a sun in a map sky reaches the border
+/// voxels whose pixels hold it with its power.
+pub fn border_renderer<'a>(lit: &'a LitVolume, opts: &CubeOptions, tables: LevelTables) -> CubeRenderer<'a> {
+    CubeRenderer::with_tables(lit, &border_options(opts), tables).with_sky_means()
 }
 
 /// The border cubes' renderer options: `opts` with the border's step, cut-off and resolution.
@@ -349,6 +357,48 @@ mod tests {
     use crate::lighting::{Sky, Sun};
     use crate::medium::Grid3;
     use crate::pipeline::NoProgress;
+
+    /// An empty scene under a 256×128 map of 0.5 W·m⁻²·sr⁻¹ with one pixel of 10⁷: the border
+    /// renderer sees behind each pixel's ray the map's mean over that pixel, so the cube's pixels
+    /// times their solid angles sum to the map's integral (to 5·10⁻³, the sub-pixels along the
+    /// pixels' edges), the sun's power in the pixel holding it; the plain renderer's rays along the pixels' axes miss it.
+    #[test]
+    fn the_border_cubes_see_a_map_sky_by_its_pixels_means() {
+        let (w, h) = (256, 128);
+        let mut pixels = vec![Rgb::splat(0.5); w * h];
+        pixels[40 * w + 77] = Rgb::splat(1e7);
+        let sky = Sky::from_envmap(crate::lighting::envmap::EnvMap::new(w, h, pixels));
+        let map = sky.map().unwrap().clone();
+        let sun = Sun {
+            dir: Vec3::Y,
+            irradiance: Rgb::ZERO,
+        };
+        let empty = crate::medium::Medium::new(Grid3::filled([2, 2, 2], 0.0), Vec3::ZERO, Vec3::ONE, 1.0, Rgb::ONE, 0.0);
+        let lit = LitVolume::new(empty, vec![Rgb::ZERO; 8], Grid3::filled([2, 2, 2], 1.0), sun, sky, None);
+        let opts = CubeOptions::default();
+        let mut exact = 0.0;
+        map.for_each_subpixel(0..h, 2, &mut |_, l, d_omega| exact += l.x as f64 * d_omega);
+        let total = |r: &CubeRenderer<'_>| -> f64 {
+            let px = &r.pixels;
+            let res = r.opts.res;
+            let mut sum = 0.0;
+            let image = crate::cube::CubeImage::new(res);
+            for face in 0..6 {
+                for j in 0..res {
+                    for i in 0..res {
+                        let k = image.index(face, i, j);
+                        let l = r.trace(Vec3::splat(1.0), px.dirs[k], px.cone[j * res + i]);
+                        sum += l.x as f64 * crate::cube::CubeImage::pixel_solid_angle(res, i, j);
+                    }
+                }
+            }
+            sum
+        };
+        let means = total(&border_renderer(&lit, &opts, LevelTables::new(&lit, &opts)));
+        assert!((means / exact - 1.0).abs() < 5e-3, "{means} against {exact}");
+        let axes = total(&CubeRenderer::new(&lit, &border_options(&opts)));
+        assert!(axes < 0.5 * exact, "the axes miss it: {axes} against {exact}");
+    }
 
     #[test]
     fn border_voxels_are_the_empty_ones_with_a_full_face_neighbour() {

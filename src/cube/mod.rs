@@ -113,7 +113,7 @@ pub fn clear_air(lit: LitVolume, ground: Option<&Ground>, opts: &CubeOptions, ke
         let lg = ground::render_ground_with(&renderer, g, progress);
         lit = lit.with_ground(Some(lg));
     }
-    let renderer = CubeRenderer::with_tables(&lit, &border::border_options(opts), tables);
+    let renderer = border::border_renderer(&lit, opts, tables);
     let border = match keep {
         BorderKeep::Bins => BorderLight::Bins(border::render_border_cubes_with(&renderer, progress)),
         BorderKeep::FaceLight => {

@@ -15,7 +15,7 @@ use super::image::CubeImage;
 use super::skip::DualMask;
 use crate::diffusion::flux::{decode_band, encode_flux, CodedFlux, FluxField, CODED_ZERO};
 use crate::error::{Error, Result};
-use crate::lighting::bins::{DirectionBins, BINS_PER_EDGE, NUM_BINS};
+use crate::lighting::bins::{cube_pixel, narrowest_pixel_edge, DirectionBins, BINS_PER_EDGE, NUM_BINS};
 use crate::lit::pyramid::{Cell, LitPyramid, BLOCK};
 use crate::lit::LitVolume;
 use crate::math::{small_int, Rgb, Trilinear, Vec3};
@@ -308,6 +308,10 @@ pub struct CubeRenderer<'a> {
     pub uniform_short_levels: bool,
     /// ρ·I1 of levels 1.. of the pyramid, built on first use by a gather-source march.
     coarse_flux: Arc<OnceLock<Option<CoarseFlux>>>,
+    /// Per pixel of the cube at `opts.res`, the sky's mean radiance over it (W·m⁻²·sr⁻¹), taken
+    /// behind a ray that leaves the scene instead of the sky on the ray ([`Self::with_sky_means`]);
+    /// None: the sky on the ray.
+    sky_means: Option<Arc<Vec<Rgb>>>,
     /// The sun's single scattering in the cube with the transformed medium's own albedo and phase
     /// (a′, HG(g′)) instead of the exact TMS pair: right where the cube's light is scattered again
     /// (the edge and surface orders), whose forward peak the δ-M transmittance already carries.
@@ -392,6 +396,7 @@ impl<'a> CubeRenderer<'a> {
             sun_transformed: false,
             uniform_short_levels: false,
             coarse_flux: Arc::default(),
+            sky_means: None,
         }
     }
 
@@ -460,14 +465,33 @@ impl<'a> CubeRenderer<'a> {
         self.finish(o, d, t_ground, l, tr)
     }
 
-    /// `l` plus the background behind, seen with transmittance `tr`.
+    /// `l` plus the background behind, seen with transmittance `tr`: the lit ground, or the sky
+    /// (its mean over the ray's pixel with [`Self::with_sky_means`]).
     #[inline]
     fn finish(&self, o: Vec3, d: Vec3, t_ground: Option<f32>, l: Rgb, tr: f32) -> Rgb {
         let mut l = l;
         if tr > 0.0 {
-            l += self.lit.background(o, d, t_ground) * tr;
+            let behind = match (t_ground, &self.sky_means) {
+                (None, Some(means)) => means[cube_pixel(self.opts.res, d)],
+                _ => self.lit.background(o, d, t_ground),
+            };
+            l += behind * tr;
         }
         l
+    }
+
+    /// `self` seeing, behind each ray that leaves the scene, a map sky's mean radiance over the
+    /// cube pixel the ray lies in ([`EnvMap::cell_means`](crate::lighting::envmap::EnvMap::cell_means))
+    /// rather than the sky on the ray: for renderers that trace one ray per pixel of their cube
+    /// along its axis (the border cubes), so a pixel holding a sun one map pixel wide carries its
+    /// power. A constant sky is its own mean and is left on the ray.
+    pub fn with_sky_means(mut self) -> Self {
+        if let Some(map) = self.lit.sky.map() {
+            let res = self.opts.res;
+            let means = map.cell_means(6 * res * res, narrowest_pixel_edge(res), &|d| cube_pixel(res, d), None);
+            self.sky_means = Some(Arc::new(means));
+        }
+        self
     }
 
     /// Radiance gathered and transmittance left along `o + t·d` through the pyramid (each level

@@ -57,7 +57,7 @@
 //! buffer, and the plane is reduced per voxel in a fixed order of groups (axis and direction) and
 //! families, so the result is bit-identical at any thread count.
 
-use crate::lighting::bins::{DirectionBins, NUM_BINS};
+use crate::lighting::bins::{narrowest_pixel_edge, DirectionBins, BINS_PER_EDGE, NUM_BINS};
 use crate::lighting::{Ground, Sky, Sun};
 use crate::math::{mix64, Rgb, Rng, Vec3};
 use crate::math::{sh9, SH_COEFFS};
@@ -78,8 +78,6 @@ pub struct IncidentSettings {
     /// n > 1 traces n² parallel families per bin, one per jittered sub-square of the bin, each
     /// weighted by its exact solid angle.
     pub rays_per_face_edge: usize,
-    /// Sub-rectangles per bin edge when integrating the sky's radiance over a bin.
-    pub sky_subdivisions: usize,
     /// Seed of the ray jitter.
     pub seed: u64,
     /// Also project the reduced sky and ground radiance per voxel onto degree-≤ 2 spherical
@@ -93,7 +91,6 @@ impl Default for IncidentSettings {
     fn default() -> Self {
         IncidentSettings {
             rays_per_face_edge: 1,
-            sky_subdivisions: 8,
             seed: 0,
             sky_single: true,
         }
@@ -110,19 +107,23 @@ pub struct IncidentSources {
 }
 
 impl IncidentSources {
-    /// The sky (any model, through [`DirectionBins::integrate`]), the ground below the
-    /// horizon (unshadowed), and the sun.
-    pub fn from_lighting(sun: &Sun, sky: &Sky, ground: Option<&Ground>, bins: &DirectionBins, sky_subdivisions: usize) -> IncidentSources {
-        let power = bins.integrate(sky_subdivisions.max(1), &|d| {
-            if d.y < 0.0 {
-                if let Some(g) = ground {
-                    // The Lambertian ground is uniform: its radiance does not depend on the point.
-                    return g.radiance(Vec3::ZERO, sun, sky, 1.0);
-                }
+    /// The sky, the ground below the horizon (unshadowed) and the sun. Each bin carries its mean
+    /// radiance: a map sky's pixels summed into the bins ([`crate::lighting::envmap::EnvMap::cell_means`], so a sun in the
+    /// map enters its bin with its power); a constant sky over a ground is exact with any
+    /// sub-rectangles, the horizon being a bin edge.
+    pub fn from_lighting(sun: &Sun, sky: &Sky, ground: Option<&Ground>, bins: &DirectionBins) -> IncidentSources {
+        // The Lambertian ground is uniform: its radiance does not depend on the point.
+        let below = ground.map(|g| g.radiance(Vec3::ZERO, sun, sky, 1.0));
+        let bin_radiance = match sky.map() {
+            Some(map) => map.cell_means(NUM_BINS, narrowest_pixel_edge(BINS_PER_EDGE), &|d| bins.bin_of(d), below),
+            None => {
+                let power = bins.integrate(8, &|d| match below {
+                    Some(g) if d.y < 0.0 => g,
+                    _ => sky.radiance(d),
+                });
+                power.iter().zip(&bins.bins).map(|(p, b)| *p / b.solid_angle as f32).collect()
             }
-            sky.radiance(d)
-        });
-        let bin_radiance = power.iter().zip(&bins.bins).map(|(p, b)| *p / b.solid_angle as f32).collect();
+        };
         IncidentSources {
             bin_radiance,
             sun: Some((sun.dir, sun.irradiance)),
@@ -840,6 +841,47 @@ mod tests {
         Medium::new(g, Vec3::ZERO, Vec3::ONE, 1e-4, Rgb::splat(0.9), 0.7)
     }
 
+    /// A 256×128 map of 0.5 W·m⁻²·sr⁻¹ with one pixel of 10⁷ above the horizon, over a ground:
+    /// the bins' powers, Σ Δω·L̄, are the map's integral over the upper hemisphere (its sum over
+    /// pixels times their solid angles) plus the ground's π-sr hemisphere, the sun's pixel in one
+    /// bin (to 5·10⁻³: a mean times the bin's exact solid angle, its sub-pixels along the bin's
+    /// edges in or out); each bin below the horizon holds the ground's radiance. Samples at fixed
+    /// directions miss the sun's pixel or count it over a whole sub-rectangle.
+    #[test]
+    fn a_map_sky_enters_the_bins_with_its_power() {
+        let (w, h) = (256, 128);
+        let (si, sj) = (77, 40);
+        let mut pixels = vec![Rgb::splat(0.5); w * h];
+        pixels[sj * w + si] = Rgb::splat(1e7);
+        let sky = Sky::from_envmap(crate::lighting::envmap::EnvMap::new(w, h, pixels));
+        let sun = Sun {
+            dir: Vec3::Y,
+            irradiance: Rgb::ZERO,
+        };
+        let ground = Ground {
+            height: 0.0,
+            albedo: Rgb::splat(0.3),
+        };
+        let bins = DirectionBins::new();
+        let src = IncidentSources::from_lighting(&sun, &sky, Some(&ground), &bins);
+        let map = sky.map().unwrap();
+        let mut upper = 0.0;
+        map.for_each_subpixel(0..h / 2, 2, &mut |_, l, d_omega| upper += l.x as f64 * d_omega);
+        let ground_l = ground.radiance(Vec3::ZERO, &sun, &sky, 1.0).x as f64;
+        let exact = upper + 2.0 * PI * ground_l;
+        let sum: f64 = src.bin_radiance.iter().zip(&bins.bins).map(|(l, b)| l.x as f64 * b.solid_angle).sum();
+        assert!((sum / exact - 1.0).abs() < 5e-3, "{sum} against {exact}");
+        let sun_bin = bins.bin_of(crate::lighting::envmap::direction((si as f32 + 0.5) / w as f32, (sj as f32 + 0.5) / h as f32));
+        let brightest = (0..NUM_BINS).max_by(|&a, &b| src.bin_radiance[a].x.total_cmp(&src.bin_radiance[b].x)).unwrap();
+        assert_eq!(brightest, sun_bin);
+        for (l, b) in src.bin_radiance.iter().zip(&bins.bins).filter(|(_, b)| b.mean_dir.y < 0.0) {
+            assert!((l.x as f64 / ground_l - 1.0).abs() < 1e-5, "bin {b:?}: {l}");
+        }
+        let point = bins.integrate(8, &|d| if d.y < 0.0 { Rgb::splat(ground_l as f32) } else { sky.radiance(d) });
+        let point: f64 = point.iter().map(|p| p.x as f64).sum();
+        assert!((point / exact - 1.0).abs() > 0.1, "samples miss it or count it too often: {point} against {exact}");
+    }
+
     /// Q0 of every grid voxel, in grid order.
     fn q0_of(inc: &IncidentLight) -> Vec<Rgb> {
         (0..inc.dims.iter().product())
@@ -1007,7 +1049,6 @@ mod tests {
                 rays_per_face_edge: ss,
                 sky_single: false,
                 seed: 5,
-                ..IncidentSettings::default()
             };
             for b in [3, 18, 37, 52, 65, 90] {
                 let mut radiance = vec![Rgb::ZERO; NUM_BINS];

@@ -89,6 +89,13 @@ pub fn cube_pixel(res: usize, dir: Vec3) -> usize {
     (face * res + at(v)) * res + at(u)
 }
 
+/// The narrowest angle (rad) across a pixel of a `res` cube: a corner pixel's, along its edge on
+/// the cube's edge, where the face is seen most obliquely.
+pub fn narrowest_pixel_edge(res: usize) -> f64 {
+    let inner = glam::DVec3::new(1.0 - 2.0 / res as f64, 1.0, 1.0).normalize();
+    inner.angle_between(glam::DVec3::ONE.normalize())
+}
+
 /// Exact solid angle (sr) subtended by the rectangle [u0, u1]×[v0, v1] on a cube face at unit distance.
 #[inline]
 pub fn rect_solid_angle(u0: f64, u1: f64, v0: f64, v1: f64) -> f64 {
@@ -267,6 +274,23 @@ mod tests {
             s *= (b.u[1] - b.u[0]) * (b.v[1] - b.v[0]) / (n * n) as f64;
             assert!((s - b.solid_angle).abs() < 1e-6 * b.solid_angle, "{s} vs {}", b.solid_angle);
         }
+    }
+
+    #[test]
+    fn the_narrowest_pixel_edge_is_a_corner_pixels() {
+        // Against the angle across every pixel of a res-8 cube, along u and along v.
+        let res = 8;
+        let step = 2.0 / res as f32;
+        let mut least = f64::INFINITY;
+        for a in 0..res {
+            for b in 0..res {
+                let (u, v) = (-1.0 + a as f32 * step, -1.0 + b as f32 * step);
+                let at = |u: f32, v: f32| Vec3::new(u, v, 1.0).normalize().as_dvec3();
+                least = least.min(at(u, v).angle_between(at(u + step, v)));
+                least = least.min(at(u, v).angle_between(at(u, v + step)));
+            }
+        }
+        assert!((narrowest_pixel_edge(res) - least).abs() < 1e-6, "{} against {least}", narrowest_pixel_edge(res));
     }
 
     #[test]

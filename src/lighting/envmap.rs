@@ -22,6 +22,13 @@ use crate::math::{luminance, Rgb, Vec3};
 use glam::Vec2;
 use std::f32::consts::PI;
 
+/// Fewest map samples along the narrowest cell's edge in [`EnvMap::cell_means`]: a map coarser
+/// than that is read at several bilinear points per pixel, a finer one at its pixels.
+pub const SAMPLES_PER_CELL_EDGE: f64 = 64.0;
+
+/// Map rows summed per parallel task in [`EnvMap::cell_means`].
+const ROWS_PER_BLOCK: usize = 16;
+
 /// An equirectangular radiance map with its sampling distribution.
 #[derive(Clone)]
 pub struct EnvMap {
@@ -264,6 +271,50 @@ impl EnvMap {
                 visit(row.direction(c), self.lookup(c.u, row.v), row.solid_angle);
             }
         }
+    }
+
+    /// The map's mean radiance (W·m⁻²·sr⁻¹) over each of `cells` cells of the sphere, `cell_of`
+    /// naming the cell a unit direction lies in: every sub-pixel's radiance times its solid angle
+    /// summed into its cell, over the solid angle summed there. A sun one map pixel wide enters
+    /// its cell with its power, where samples at fixed directions degrees apart would miss it or
+    /// count it over a whole cell. The map is read at enough sub-pixels per pixel that at least
+    /// [`SAMPLES_PER_CELL_EDGE`] lie across the narrowest cell edge, `narrowest` (rad).
+    /// `below_horizon`: the radiance taken instead of the map's from directions below the horizon
+    /// (y < 0), a ground's. Summed per block of rows in parallel and the blocks in order: the same
+    /// bits for any number of threads.
+    pub fn cell_means(
+        &self,
+        cells: usize,
+        narrowest: f64,
+        cell_of: &(dyn Fn(Vec3) -> usize + Sync),
+        below_horizon: Option<Rgb>,
+    ) -> Vec<Rgb> {
+        let pixel_rad = (std::f64::consts::PI / self.height as f64).max(2.0 * std::f64::consts::PI / self.width as f64);
+        let k = (pixel_rad * SAMPLES_PER_CELL_EDGE / narrowest).ceil().max(1.0) as usize;
+        let blocks = self.height.div_ceil(ROWS_PER_BLOCK);
+        // Per cell: the power in each band and the solid angle (sr).
+        let sums = crate::par::map_range(blocks, &|b| {
+            let mut sum = vec![[0.0f64; 4]; cells];
+            let rows = b * ROWS_PER_BLOCK..((b + 1) * ROWS_PER_BLOCK).min(self.height);
+            self.for_each_subpixel(rows, k, &mut |dir, l, d_omega| {
+                let l = match below_horizon {
+                    Some(ground) if dir.y < 0.0 => ground,
+                    _ => l,
+                };
+                let cell = &mut sum[cell_of(dir)];
+                for (c, v) in cell.iter_mut().zip([l.x as f64, l.y as f64, l.z as f64, 1.0]) {
+                    *c += v * d_omega;
+                }
+            });
+            sum
+        });
+        let mut total = vec![[0.0f64; 4]; cells];
+        for block in &sums {
+            for (t, s) in total.iter_mut().zip(block) {
+                (0..4).for_each(|i| t[i] += s[i]);
+            }
+        }
+        total.iter().map(|[r, g, b, a]| Rgb::new((r / a) as f32, (g / a) as f32, (b / a) as f32)).collect()
     }
 
     /// Irradiance (W/m² per band) on an upward-facing plane from the upper hemisphere of the map,

@@ -1,8 +1,8 @@
 //! A sun painted into an environment map: found ([`EnvMap::compact_source`], for the warning that
-//! the fast methods miss it) and taken out of the map as a directional sun
-//! ([`EnvMap::extract_sun`], for `sky.extract_sun`). The methods but `reference` take a map sky at
-//! fixed directions degrees apart, and carry a directional sun exactly (docs/sky.md, "A sun in
-//! the map").
+//! the fast methods blur it) and taken out of the map as a directional sun
+//! ([`EnvMap::extract_sun`], for `sky.extract_sun`). The methods but `reference` take a map sky as
+//! its means over cells about 20° wide, and carry a directional sun exactly (docs/sky.md, "A sun
+//! in the map").
 
 use super::envmap::{direction, neighbourhood, row_solid_angle, EnvMap};
 use super::sun_clip::SunClip;

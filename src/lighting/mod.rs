@@ -19,6 +19,7 @@ use std::sync::Arc;
 
 pub use atmosphere::{Atmosphere, AtmosphereParams};
 pub use bins::{DirectionBins, CUBE_FACES};
+use bins::{narrowest_pixel_edge, BINS_PER_EDGE, NUM_BINS};
 pub use envmap::EnvMap;
 
 /// The sun: a directional light.
@@ -420,13 +421,16 @@ impl Sky {
         }
     }
 
-    /// Power ∫_bin L dω (W/m² per band) of the sky in each of the 96 direction bins, integrated
-    /// over the bin (constant: exactly L·Δω; maps: 16 × 16 sub-rectangles per bin, each weighted
-    /// by its exact solid angle). The sun is never binned.
+    /// Power ∫_bin L dω (W/m² per band) of the sky in each of the 96 direction bins (constant:
+    /// exactly L·Δω; maps: the map's mean over the bin, [`EnvMap::cell_means`], times Δω). The
+    /// sun is never binned.
     pub fn bin_powers(&self, bins: &DirectionBins) -> Vec<Rgb> {
         match &self.kind {
             SkyKind::Constant(l) => bins.bins.iter().map(|b| *l * b.solid_angle as f32).collect(),
-            _ => bins.integrate(16, &|d| self.radiance(d)),
+            SkyKind::Atmosphere { map, .. } | SkyKind::EnvMap { map } => {
+                let means = map.cell_means(NUM_BINS, narrowest_pixel_edge(BINS_PER_EDGE), &|d| bins.bin_of(d), None);
+                means.iter().zip(&bins.bins).map(|(l, b)| *l * b.solid_angle as f32).collect()
+            }
         }
     }
 

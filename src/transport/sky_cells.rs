@@ -10,13 +10,6 @@ use crate::lighting::Sky;
 use crate::math::Rgb;
 use glam::DVec3;
 
-/// Fewest map samples along the narrowest cell's edge when the cells' means are summed: a map
-/// coarser than that is read at several bilinear points per pixel, a finer one at its pixels.
-const SAMPLES_PER_CELL_EDGE: f64 = 64.0;
-
-/// Map rows summed per parallel task.
-const ROWS_PER_BLOCK: usize = 16;
-
 /// The sky radiance each ordinate's sweep starts from.
 pub(super) enum SkyCells {
     /// The same radiance from every direction.
@@ -41,30 +34,7 @@ impl SkyCells {
                 theta.min(2.0 * std::f64::consts::PI / r.count as f64)
             })
             .fold(f64::INFINITY, f64::min);
-        let pixel_rad = (std::f64::consts::PI / map.height as f64).max(2.0 * std::f64::consts::PI / map.width as f64);
-        let k = (pixel_rad * SAMPLES_PER_CELL_EDGE / narrowest).ceil().max(1.0) as usize;
-        // Per block of map rows, in parallel, summed in the blocks' order: the same bits for any
-        // number of threads.
-        let blocks = map.height.div_ceil(ROWS_PER_BLOCK);
-        // Per cell: the power in each band and the solid angle (sr).
-        let sums = crate::par::map_range(blocks, &|b| {
-            let mut sum = vec![[0.0f64; 4]; q.dirs.len()];
-            let rows = b * ROWS_PER_BLOCK..((b + 1) * ROWS_PER_BLOCK).min(map.height);
-            map.for_each_subpixel(rows, k, &mut |dir, l, d_omega| {
-                let cell = &mut sum[q.cell_of(DVec3::new(dir.x as f64, dir.y as f64, dir.z as f64))];
-                for (c, v) in cell.iter_mut().zip([l.x as f64, l.y as f64, l.z as f64, 1.0]) {
-                    *c += v * d_omega;
-                }
-            });
-            sum
-        });
-        let mut total = vec![[0.0f64; 4]; q.dirs.len()];
-        for block in &sums {
-            for (t, s) in total.iter_mut().zip(block) {
-                (0..4).for_each(|i| t[i] += s[i]);
-            }
-        }
-        let means = total.iter().map(|[r, g, b, a]| Rgb::new((r / a) as f32, (g / a) as f32, (b / a) as f32)).collect();
+        let means = map.cell_means(q.dirs.len(), narrowest, &|d| q.cell_of(DVec3::new(d.x as f64, d.y as f64, d.z as f64)), None);
         SkyCells::Means { q: q.clone(), means }
     }
 

@@ -85,8 +85,7 @@ pub fn boundary_light(scene: &Scene) -> BoundaryLight {
 
 /// The scene's sun, and its sky and unshadowed ground averaged over each of `bins`.
 fn scene_sources(scene: &Scene, bins: &DirectionBins) -> IncidentSources {
-    let subdivisions = scene.render.incident.sky_subdivisions;
-    IncidentSources::from_lighting(&scene.sun, &scene.sky, scene.ground.as_ref(), bins, subdivisions)
+    IncidentSources::from_lighting(&scene.sun, &scene.sky, scene.ground.as_ref(), bins)
 }
 
 /// The lit volume of a scene from I0 per voxel and the sun transmittance at voxel centres, the
