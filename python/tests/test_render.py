@@ -519,6 +519,24 @@ def test_a_clipped_sun_taken_out_of_the_sky_map_is_a_runtime_warning(tmp_path):
         assert all(w.category is RuntimeWarning and "65504 in the file" in str(w.message) for w in clipped)
 
 
+def test_a_sun_taken_out_of_the_sky_map_is_noted_and_kept_with_extract_sun_false(tmp_path):
+    # A 256×128 map of 0.5 with a 2×2-pixel sun of 1e5: left out, sky.extract_sun takes it out
+    # as the scene's sun (the default [sun] has no light of its own) and says so; false keeps it.
+    rgb = np.full((128, 256, 3), 0.5, np.float32)
+    rgb[38:40, 60:62] = 1e5
+    cloudgi.write_exr(tmp_path / "sunny.exr", {"rgb": rgb})
+    for extract, noted in [(None, True), (False, False)]:
+        scene = tiny_scene(width=8, height=6)
+        scene["sky"] = {"model": "envmap", "path": str(tmp_path / "sunny.exr")}
+        if extract is not None:
+            scene["sky"]["extract_sun"] = extract
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            cloudgi.render(scene, method="single")
+        seen = [str(w.message) for w in caught if w.category is RuntimeWarning]
+        assert any("holds a sun: it is taken out" in m for m in seen) == noted, seen
+
+
 @pytest.mark.parametrize(
     "kwargs, message",
     [

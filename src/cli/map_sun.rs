@@ -6,17 +6,13 @@
 //! collimated beam reaches; `reference` samples the map exactly. The warning points to
 //! `sky.extract_sun`, which takes it out of the map as the scene's sun, carried exactly.
 
-use crate::lighting::map_sun::MAX_SUN_SOLID_ANGLE;
-use crate::lighting::SkyModel;
+use crate::lighting::{SkyModel, SunFromMap};
 use crate::math::{luminance, Rgb};
 use crate::scene::{Method, Scene};
 
 /// Angular radius (°) around the sun sky.extract_sun took out within which what is left is
 /// its aureole: the extracted region is at most 0.01 sr, a cap about 3.2° in radius.
 const AUREOLE_RADIUS_DEG: f32 = 5.0;
-
-/// Share of the map's light above which a compact source is warned about.
-const SHARE: f64 = 0.2;
 
 /// How each method takes a map's sun, and what it measured (docs/sky.md, "A sun in the map").
 fn measured(method: Method) -> Option<(&'static str, &'static str)> {
@@ -47,19 +43,19 @@ pub fn warning(scene: &Scene) -> Option<String> {
         return None;
     }
     let c = scene.sky.map()?.compact_source()?;
-    if c.share < SHARE || c.solid_angle > MAX_SUN_SOLID_ANGLE {
+    if !c.is_sun() {
         return None;
     }
     // What sky.extract_sun leaves around the sun it took out (a bright sun's flanks under its
     // threshold: a Gaussian sun's tail holds about 0.5 % of its light, yet much of a dim sky's)
     // is the sun's own aureole, not another sun.
-    let aureole = scene.desc.sky.extract_sun && c.direction.angle_between(scene.sun.dir) < AUREOLE_RADIUS_DEG.to_radians();
+    let aureole = scene.sky.sun_from_map.is_some() && c.direction.angle_between(scene.sun.dir) < AUREOLE_RADIUS_DEG.to_radians();
     if aureole {
         return None;
     }
-    let fix = match scene.desc.sky.extract_sun {
-        false => "set [sky] extract_sun = true, which makes it the scene's sun (docs/sky.md)",
-        true => "it is another than the sun sky.extract_sun took out; paint it out of the map",
+    let fix = match scene.sky.sun_from_map {
+        None => "set [sky] extract_sun = true, which makes it the scene's sun (docs/sky.md)",
+        Some(_) => "it is another than the sun taken out of the map; paint it out of the map",
     };
     Some(format!(
         "{}: the sky map holds a sun ({:.0} % of its light in {:.1e} sr towards [{:.3}, {:.3}, {:.3}]), which method {} \
@@ -79,6 +75,26 @@ pub fn warning(scene: &Scene) -> Option<String> {
 /// (direct normal over diffuse horizontal irradiance): about 850 over 100 W/m² with the sun 45°
 /// high, 550 over 60 with it 15° high; a hazy sky's is lower (600 over 200).
 const CLEAR_SKY_SUN_OVER_SKY: (f32, f32) = (5.0, 10.0);
+
+/// The note for `scene` when its sun was taken out of its map with `sky.extract_sun` left out
+/// ([`SunFromMap::Found`]): the scene's light is the map's, but where it comes from has changed.
+pub fn found_note(scene: &Scene) -> Option<String> {
+    if scene.sky.sun_from_map != Some(SunFromMap::Found) {
+        return None;
+    }
+    let (d, e) = (scene.sun.dir, scene.sun.irradiance);
+    Some(format!(
+        "{}: the sky map `{}` holds a sun: it is taken out of the map as the scene's sun, towards [{:.3}, {:.3}, \
+         {:.3}] with {}, which every method carries exactly (they would blur it over cells about 20° wide; \
+         docs/sky.md, \"A sun in the map\"); set sky.extract_sun = false to keep it in the map",
+        scene.source,
+        scene.desc.sky.path.as_deref().unwrap_or_default(),
+        d.x,
+        d.y,
+        d.z,
+        rgb_text(e, "W/m²"),
+    ))
+}
 
 /// The warning for `scene` when the sun `sky.extract_sun` took out of its map was clipped
 /// ([`crate::lighting::sun_clip`]): its irradiance is a lower bound.
@@ -140,7 +156,7 @@ mod tests {
     use crate::scene::SceneDesc;
 
     #[test]
-    fn a_map_with_a_sun_warns_the_methods_that_sample_it_at_fixed_directions() {
+    fn a_sun_kept_in_the_map_warns_the_methods_that_blur_it_and_one_taken_out_is_noted() {
         let dir = tempfile::tempdir().unwrap();
         let (w, h) = (128, 64);
         let mut img = Image::new(w, h);
@@ -150,23 +166,35 @@ mod tests {
         img.pixels[20 * w as usize + 30] = Rgb::splat(1e6);
         let sunny = dir.path().join("sun.exr");
         img.write_exr(&sunny).unwrap();
-        let warning_for = |map: &std::path::Path, method: Method| {
+        let scene = |map: &std::path::Path, method: Method, extract_sun: Option<bool>| {
             let mut d = SceneDesc::default();
             d.medium.resolution = [20, 16, 12];
             d.sky.model = SkyModel::Envmap;
             d.sky.path = Some(map.to_string_lossy().into_owned());
+            d.sky.extract_sun = extract_sun;
             d.render.method = method;
-            warning(&Scene::build(d, "s.toml", dir.path()).unwrap())
+            Scene::build(d, "s.toml", dir.path()).unwrap()
         };
         for m in [Method::Transport, Method::Full, Method::Diffusion] {
-            let w = warning_for(&sunny, m).expect("a sun in the map");
+            let w = warning(&scene(&sunny, m, Some(false))).expect("a sun in the map");
             assert!(
                 w.contains("s.toml") && w.contains("extract_sun = true") && w.contains("--method reference"),
                 "{w}"
             );
-            assert_eq!(warning_for(&uniform, m), None);
+            assert_eq!(warning(&scene(&uniform, m, Some(false))), None);
+            // Left out, sky.extract_sun takes the sun out (the default [sun] has none of its own
+            // light): no warning, a note that says so and how to keep it.
+            let taken = scene(&sunny, m, None);
+            assert_eq!(warning(&taken), None);
+            let note = found_note(&taken).expect("a note");
+            assert!(
+                note.contains("s.toml") && note.contains("sun.exr") && note.contains("extract_sun = false"),
+                "{note}"
+            );
+            assert_eq!(found_note(&scene(&sunny, m, Some(true))), None);
+            assert_eq!(found_note(&scene(&uniform, m, None)), None);
         }
-        assert_eq!(warning_for(&sunny, Method::Reference), None);
+        assert_eq!(warning(&scene(&sunny, Method::Reference, Some(false))), None);
     }
 
     /// A 1024×512 map of 0.5 with a Gaussian sun (σ = 2 pixels, peak 10⁶) cut at `ceiling`.
@@ -194,7 +222,7 @@ mod tests {
             d.sky.model = SkyModel::Envmap;
             d.sky.path = Some(map.to_string_lossy().into_owned());
             d.sky.scale = scale;
-            d.sky.extract_sun = true;
+            d.sky.extract_sun = Some(true);
             clip_warning(&Scene::build(d, "s.toml", dir.path()).unwrap())
         };
         assert_eq!(warning_for(f32::MAX, 1.0), None);
@@ -226,7 +254,7 @@ mod tests {
             let mut d = SceneDesc::default();
             d.sky.model = SkyModel::Envmap;
             d.sky.path = Some(path.to_string_lossy().into_owned());
-            d.sky.extract_sun = true;
+            d.sky.extract_sun = Some(true);
             d.sun.irradiance = [0.0; 3];
             d.medium.resolution = [20, 16, 12];
             let scene = Scene::build(d, "s.toml", dir.path()).unwrap();

@@ -130,6 +130,7 @@ pub fn scene_warnings(scene: &Scene) -> Vec<String> {
     out.extend(super::thick_voxels::warning(scene));
     out.extend(super::low_albedo::warning(scene));
     out.extend(super::back_scattering::warning(scene));
+    out.extend(super::map_sun::found_note(scene));
     out.extend(super::map_sun::warning(scene));
     out.extend(super::map_sun::clip_warning(scene));
     out.extend(frame_warning(scene).filter(|_| cloud));
@@ -205,11 +206,14 @@ pub fn kind(text: &str) -> String {
 /// ([`crate::lighting::sun_over_ground`]).
 fn hidden_sun_warning(scene: &Scene) -> Option<String> {
     let d = &scene.desc.sun;
-    let extracted = scene.desc.sky.extract_sun;
+    let extracted = scene.sky.sun_from_map.is_some();
     let given = extracted || (!d.from_atmosphere && d.irradiance.iter().any(|&e| e > 0.0));
     let hidden = scene.ground.is_some() && scene.sun.irradiance == crate::math::Rgb::ZERO;
     let raise = match extracted {
-        true => "the map's sun (sky.extract_sun) lies there; set ground.enabled = false to light the cloud from below",
+        true => {
+            "the sun taken out of the map (sky.extract_sun) lies there; set ground.enabled = false to light the cloud \
+                 from below"
+        }
         false => {
             "raise sun.direction's y (or sun.elevation_deg) above 0, or set ground.enabled = false to light the \
              cloud from below"

@@ -69,8 +69,11 @@ pub struct SkyDesc {
     /// Envmap: factor on the file's radiance (unitless).
     pub scale: f32,
     /// Envmap: take the map's sun out of it and make it the scene's sun (docs/sky.md, "A sun in
-    /// the map").
-    pub extract_sun: bool,
+    /// the map"): true asks for it (an error where the map holds none), false keeps the map as it
+    /// is, and left out it is done where the map holds a sun and the scene's `[sun]` no light of
+    /// its own.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub extract_sun: Option<bool>,
 }
 
 impl Default for SkyDesc {
@@ -83,7 +86,7 @@ impl Default for SkyDesc {
             planet_albedo: [0.3, 0.3, 0.3],
             path: None,
             scale: 1.0,
-            extract_sun: false,
+            extract_sun: None,
         }
     }
 }

@@ -16,6 +16,10 @@ pub const BRIGHT_OVER_MEAN: f64 = 100.0;
 /// (the real sun's is 6.8·10⁻⁵ sr; an HDRI's sun with its glare covers a few pixels).
 pub const MAX_SUN_SOLID_ANGLE: f64 = 0.01;
 
+/// The share of a map's light (luminance) a compact source carries at least to be the map's sun:
+/// warned about, and taken out as the scene's sun where `sky.extract_sun` is left out.
+pub const SUN_SHARE: f64 = 0.2;
+
 /// A compact bright source in a map: the pixels brighter than [`BRIGHT_OVER_MEAN`] times the
 /// map's mean radiance.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -28,6 +32,14 @@ pub struct CompactSource {
     pub direction: Vec3,
     /// Their ∫ L dω per band: the irradiance they give a surface facing them (W/m²).
     pub irradiance: Rgb,
+}
+
+impl CompactSource {
+    /// Whether it is a sun: at least [`SUN_SHARE`] of the map's light within
+    /// [`MAX_SUN_SOLID_ANGLE`].
+    pub fn is_sun(&self) -> bool {
+        self.share >= SUN_SHARE && self.solid_angle <= MAX_SUN_SOLID_ANGLE
+    }
 }
 
 /// A sun taken out of a map by [`EnvMap::extract_sun`].

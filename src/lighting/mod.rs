@@ -137,6 +137,18 @@ pub struct Sky {
     /// The clipped top of the sun `sky.extract_sun` took out of this sky's map, if it had one:
     /// the scene's sun is then a lower bound on the map's.
     pub extracted_sun_clip: Option<sun_clip::SunClip>,
+    /// How the scene's sun came out of this sky's map, if it did.
+    pub sun_from_map: Option<SunFromMap>,
+}
+
+/// Why the scene's sun was taken out of the sky's map (`sky.extract_sun`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SunFromMap {
+    /// `sky.extract_sun = true`.
+    Asked,
+    /// `sky.extract_sun` left out, the map holding a sun ([`map_sun::CompactSource::is_sun`])
+    /// and the scene's `[sun]` no light of its own.
+    Found,
 }
 
 /// Default width of the atmosphere's equirectangular map (pixels; height = width / 2).
@@ -147,8 +159,14 @@ pub const DEFAULT_MAP_WIDTH: u32 = 512;
 pub fn sun_and_sky(sun: &SunDesc, sky: &SkyDesc, file: &str, base_dir: &Path) -> Result<(Sun, Sky)> {
     let mut s = Sun::from_desc(sun, file)?;
     let k = Sky::from_desc_with_sun(sky, s.dir, file, base_dir)?;
-    if sky.extract_sun {
-        return map_sun_and_sky(sun, sky, &k, file);
+    match sky.extract_sun {
+        Some(true) => return map_sun_and_sky(sun, sky, &k, file),
+        Some(false) => {}
+        None => {
+            if let Some(found) = found_map_sun(sun, sky, &k) {
+                return Ok(found);
+            }
+        }
     }
     if sun.from_atmosphere {
         let atm = match &k.kind {
@@ -161,8 +179,38 @@ pub fn sun_and_sky(sun: &SunDesc, sky: &SkyDesc, file: &str, base_dir: &Path) ->
     Ok((s, k))
 }
 
-/// `sky.extract_sun`: the map's sun taken out of it ([`EnvMap::extract_sun`]) as the scene's one
-/// sun, so a `[sun]` other than the default (the table left out) with light of its own is refused.
+/// Whether `sun` gives the scene a sun of its own: a `[sun]` other than the default (the table
+/// left out) with light.
+fn has_own_sun(sun: &SunDesc) -> bool {
+    *sun != SunDesc::default() && (sun.from_atmosphere || sun.irradiance.iter().any(|&e| e > 0.0))
+}
+
+/// The scene's sun taken out of the map, and the map left, as `how` asked.
+fn taken_out(x: map_sun::ExtractedSun, how: SunFromMap) -> (Sun, Sky) {
+    let sun = Sun {
+        dir: x.direction,
+        irradiance: x.irradiance,
+    };
+    let sky = Sky {
+        extracted_sun_clip: x.clip,
+        sun_from_map: Some(how),
+        ..Sky::from_envmap(x.map)
+    };
+    (sun, sky)
+}
+
+/// `sky.extract_sun` left out: the map's sun taken out as the scene's where an environment map
+/// holds one ([`map_sun::CompactSource::is_sun`]) and the scene no sun of its own. Every method
+/// but `reference` carries a directional sun exactly and a map's sun only blurred over cells
+/// about 20° wide (docs/sky.md, "A sun in the map"); `reference` renders the same scene either way.
+fn found_map_sun(sun: &SunDesc, sky: &SkyDesc, built: &Sky) -> Option<(Sun, Sky)> {
+    let map = built.map().filter(|_| sky.model == SkyModel::Envmap && !has_own_sun(sun))?;
+    map.compact_source().filter(map_sun::CompactSource::is_sun)?;
+    map.extract_sun().ok().map(|x| taken_out(x, SunFromMap::Found))
+}
+
+/// `sky.extract_sun = true`: the map's sun taken out of it ([`EnvMap::extract_sun`]) as the
+/// scene's one sun, so a `[sun]` with light of its own is refused.
 fn map_sun_and_sky(sun: &SunDesc, sky: &SkyDesc, built: &Sky, file: &str) -> Result<(Sun, Sky)> {
     let key = "sky.extract_sun";
     let map = match (sky.model, built.map()) {
@@ -172,32 +220,21 @@ fn map_sun_and_sky(sun: &SunDesc, sky: &SkyDesc, built: &Sky, file: &str) -> Res
                 file,
                 key,
                 "takes a sun out of an environment map: it needs sky.model = \"envmap\" (the atmosphere's sun is \
-                 the scene's [sun] already); leave sky.extract_sun out",
+                 the scene's [sun] already); leave sky.extract_sun out or set it false",
             ))
         }
     };
-    let own_light = sun.from_atmosphere || sun.irradiance.iter().any(|&e| e > 0.0);
-    if *sun != SunDesc::default() && own_light {
+    if has_own_sun(sun) {
         return Err(crate::Error::invalid(
             file,
             key,
             "makes the map's sun the scene's sun, and the [sun] table gives another; a scene has one sun: leave \
-             the [sun] table out (or set sun.irradiance = [0, 0, 0]), or leave sky.extract_sun out",
+             the [sun] table out (or set sun.irradiance = [0, 0, 0]), or set sky.extract_sun = false",
         ));
     }
     let path = sky.path.as_deref().unwrap_or_default();
     let why = match map.extract_sun() {
-        Ok(x) => {
-            let sun = Sun {
-                dir: x.direction,
-                irradiance: x.irradiance,
-            };
-            let sky = Sky {
-                extracted_sun_clip: x.clip,
-                ..Sky::from_envmap(x.map)
-            };
-            return Ok((sun, sky));
-        }
+        Ok(x) => return Ok(taken_out(x, SunFromMap::Asked)),
         Err(map_sun::NoSun::Black) => format!("`{path}` is black: it holds no sun"),
         Err(map_sun::NoSun::NotBright(ratio)) => {
             let clipped = match map.plateau_at_max() {
@@ -220,7 +257,7 @@ fn map_sun_and_sky(sun: &SunDesc, sky: &SkyDesc, built: &Sky, file: &str) -> Res
             map_sun::MAX_SUN_SOLID_ANGLE
         ),
     };
-    Err(crate::Error::invalid(file, key, format!("{why}; leave sky.extract_sun out")))
+    Err(crate::Error::invalid(file, key, format!("{why}; set sky.extract_sun = false")))
 }
 
 fn check_altitude(d: &SkyDesc, file: &str) -> Result<()> {
@@ -340,6 +377,7 @@ impl Sky {
             kind: SkyKind::Constant(l),
             irradiance_up: l * PI,
             extracted_sun_clip: None,
+            sun_from_map: None,
         }
     }
 
@@ -350,6 +388,7 @@ impl Sky {
             kind: SkyKind::EnvMap { map: Arc::new(map) },
             irradiance_up,
             extracted_sun_clip: None,
+            sun_from_map: None,
         }
     }
 
@@ -370,6 +409,7 @@ impl Sky {
             },
             irradiance_up,
             extracted_sun_clip: None,
+            sun_from_map: None,
         }
     }
 

@@ -3,7 +3,7 @@
 //! irradiance, and bad input.
 
 use crate::lighting::atmosphere::{cornette_shanks_phase, rayleigh_phase, Atmosphere, AtmosphereParams};
-use crate::lighting::{sun_and_sky, DirectionBins, Ground, Sky, SkyKind, Sun};
+use crate::lighting::{sun_and_sky, DirectionBins, Ground, Sky, SkyKind, Sun, SunFromMap};
 use crate::math::{Rgb, Rng, Vec3};
 use crate::par;
 use crate::scene::{SceneDesc, SkyDesc, SkyModel, SunDesc};
@@ -631,8 +631,8 @@ fn extract_sun_makes_the_maps_sun_the_scenes_sun_or_says_why_not() {
         extract_sun,
         ..Default::default()
     };
-    let (_, kept) = sun_and_sky(&SunDesc::default(), &env("sunny.exr", false), "s.toml", d).unwrap();
-    let (sun, sky) = sun_and_sky(&SunDesc::default(), &env("sunny.exr", true), "s.toml", d).unwrap();
+    let (_, kept) = sun_and_sky(&SunDesc::default(), &env("sunny.exr", Some(false)), "s.toml", d).unwrap();
+    let (sun, sky) = sun_and_sky(&SunDesc::default(), &env("sunny.exr", Some(true)), "s.toml", d).unwrap();
     // The default [sun] is replaced: towards the map's sun, with the light the map lost, so the
     // ground's unoccluded irradiance is the same.
     let towards = crate::lighting::envmap::direction(61.0 / w as f32, 39.0 / h as f32);
@@ -641,27 +641,41 @@ fn extract_sun_makes_the_maps_sun_the_scenes_sun_or_says_why_not() {
     let rel = ((ground - kept.irradiance_up) / kept.irradiance_up).abs().max_element();
     assert!(rel < 2e-3, "{ground} vs {}: {rel}", kept.irradiance_up);
     assert!(sky.map().unwrap().pixels.iter().all(|p| *p == Rgb::splat(0.5)));
+    assert_eq!((kept.sun_from_map, sky.sun_from_map), (None, Some(SunFromMap::Asked)));
+    // Left out, the map's sun is taken out the same, the default [sun] replaced.
+    let (found_sun, found) = sun_and_sky(&SunDesc::default(), &env("sunny.exr", None), "s.toml", d).unwrap();
+    assert_eq!((found_sun.dir, found_sun.irradiance), (sun.dir, sun.irradiance));
+    assert_eq!(
+        (found.sun_from_map, found.map().unwrap().pixels == sky.map().unwrap().pixels),
+        (Some(SunFromMap::Found), true)
+    );
     // A [sun] with light of its own is a second sun: refused; one without light is replaced.
     let lit = SunDesc {
         irradiance: [1.0, 1.0, 1.0],
         ..Default::default()
     };
-    invalid(lit, env("sunny.exr", true), "sky.extract_sun", d);
+    invalid(lit.clone(), env("sunny.exr", Some(true)), "sky.extract_sun", d);
+    // Left out, it keeps the map as it is beside the scene's own sun, as a black map with no sun.
+    let (own, as_is) = sun_and_sky(&lit, &env("sunny.exr", None), "s.toml", d).unwrap();
+    assert_eq!((own.irradiance, as_is.sun_from_map), (Rgb::ONE, None));
+    assert_eq!(as_is.map().unwrap().pixels, kept.map().unwrap().pixels);
+    let (_, black) = sun_and_sky(&SunDesc::default(), &env("black.exr", None), "s.toml", d).unwrap();
+    assert_eq!(black.sun_from_map, None);
     let dark = SunDesc {
         irradiance: [0.0; 3],
         ..Default::default()
     };
     assert_eq!(
-        sun_and_sky(&dark, &env("sunny.exr", true), "s.toml", d).unwrap().0.irradiance,
+        sun_and_sky(&dark, &env("sunny.exr", Some(true)), "s.toml", d).unwrap().0.irradiance,
         sun.irradiance
     );
     // No map, or a map with no sun: errors naming the key and the file.
     let constant = SkyDesc {
-        extract_sun: true,
+        extract_sun: Some(true),
         ..Default::default()
     };
     invalid(SunDesc::default(), constant, "sky.extract_sun", d);
-    let e = sun_and_sky(&SunDesc::default(), &env("black.exr", true), "s.toml", d).unwrap_err();
+    let e = sun_and_sky(&SunDesc::default(), &env("black.exr", Some(true)), "s.toml", d).unwrap_err();
     assert!(
         e.to_string().contains("sky.extract_sun") && e.to_string().contains("black.exr"),
         "{e}"
@@ -674,7 +688,7 @@ fn extract_sun_makes_the_maps_sun_the_scenes_sun_or_says_why_not() {
         }
     }
     img.write_exr(&d.join("clipped.exr")).unwrap();
-    let e = sun_and_sky(&SunDesc::default(), &env("clipped.exr", true), "s.toml", d)
+    let e = sun_and_sky(&SunDesc::default(), &env("clipped.exr", Some(true)), "s.toml", d)
         .unwrap_err()
         .to_string();
     assert!(
@@ -683,7 +697,7 @@ fn extract_sun_makes_the_maps_sun_the_scenes_sun_or_says_why_not() {
     );
     img.pixels[(38 * w + 60) as usize] = Rgb::splat(1.5);
     img.write_exr(&d.join("peak.exr")).unwrap();
-    let e = sun_and_sky(&SunDesc::default(), &env("peak.exr", true), "s.toml", d)
+    let e = sun_and_sky(&SunDesc::default(), &env("peak.exr", Some(true)), "s.toml", d)
         .unwrap_err()
         .to_string();
     assert!(e.contains("times the map's mean radiance") && !e.contains("brightest value"), "{e}");

@@ -1,6 +1,6 @@
 //! `cloudgi sky`: the sky exported as an EXR with its PNG, at the scene's width or `--width`, and a
 //! bad width refused without writing anything (the map's content is checked in `src/tests/sky.rs`);
-//! a sequence's sky by frame; a map's sun warned about and taken out by `sky.extract_sun`.
+//! a sequence's sky by frame; a map's sun taken out as the scene's (`sky.extract_sun`) or warned about.
 
 use crate::common::{cloudgi, ok};
 
@@ -50,7 +50,7 @@ fn sky_of_a_sequence_shows_the_sun_of_the_frame_asked_for() {
 }
 
 #[test]
-fn a_maps_sun_is_warned_about_and_taken_out_with_extract_sun() {
+fn a_maps_sun_is_taken_out_unless_extract_sun_is_false() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     // A 256×128 map of 0.5 with a 2×2-pixel sun of 10⁵ about 35° up, towards +z.
@@ -63,14 +63,15 @@ fn a_maps_sun_is_warned_about_and_taken_out_with_extract_sun() {
         }
     }
     map.write_exr(&d.join("sunny.exr")).unwrap();
-    let scene = |extract: bool| {
+    let scene = |extract: &str| {
         format!(
             "[medium]\nresolution = [8, 8, 8]\nvoxel_size = 100.0\n[sun]\nirradiance = [0.0, 0.0, 0.0]\n\
-             [sky]\nmodel = \"envmap\"\npath = \"sunny.exr\"\nextract_sun = {extract}\n[camera]\nwidth = 8\nheight = 6\n"
+             [sky]\nmodel = \"envmap\"\npath = \"sunny.exr\"\n{extract}\n[camera]\nwidth = 8\nheight = 6\n"
         )
     };
-    std::fs::write(d.join("kept.toml"), scene(false)).unwrap();
-    std::fs::write(d.join("taken.toml"), scene(true)).unwrap();
+    std::fs::write(d.join("kept.toml"), scene("extract_sun = false")).unwrap();
+    std::fs::write(d.join("taken.toml"), scene("extract_sun = true")).unwrap();
+    std::fs::write(d.join("found.toml"), scene("")).unwrap();
     let render = |file: &str| {
         let out = cloudgi(d, &["render", file, "--method", "transport", "-o", "x.exr"]);
         assert!(out.status.success(), "{out:?}");
@@ -78,6 +79,20 @@ fn a_maps_sun_is_warned_about_and_taken_out_with_extract_sun() {
     };
     assert!(render("kept.toml").contains("extract_sun = true"));
     assert!(!render("taken.toml").contains("holds a sun"));
+    // Left out, the sun is taken out too, and a note says so and how to keep it in the map.
+    let found = render("found.toml");
+    assert!(
+        found.contains("holds a sun: it is taken out") && found.contains("extract_sun = false"),
+        "{found}"
+    );
+    let (a, b) = (d.join("a.exr"), d.join("b.exr"));
+    for (file, out) in [("taken.toml", &a), ("found.toml", &b)] {
+        let out = out.to_string_lossy().into_owned();
+        assert!(cloudgi(d, &["render", file, "--method", "transport", "-q", "-o", &out])
+            .status
+            .success());
+    }
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap(), "the same scene either way");
     // `cloudgi sky` shows the map without it and the sun it became.
     let shown = ok(d, &["sky", "taken.toml", "-o", "painted.exr"]);
     assert!(shown.contains("sun (not in the map): direction [0.060"), "{shown}");
