@@ -25,7 +25,7 @@
 //! - **Mixing** (src/transport/mixing.rs): Anderson mixing of a cold solve's orders l ≤ 2 over
 //!   the last three accelerated maps, fitted on I_00.
 //! - **Start** (src/transport/start.rs): a cold solve's first iterations read the source of
-//!   order ≤ 3 only.
+//!   order ≤ 3 only, the very first on 32 ordinates.
 //! - **Convergence** (src/transport/convergence.rs): the stopping test, the divergence guard and
 //!   the dominant-mode extrapolation of warm solves.
 
@@ -189,7 +189,7 @@ pub fn solve_warm(
     let sky_cells = SkyCells::new(sky, &q);
     let ctx = Ctx::new(m, &sky_cells, ground, &index, &sun_t, s.order, &optics.bands);
     let tables = pair_tables(&q, sun, s.order, &optics);
-    let start = StartTables::new(&tables, s.order);
+    let start = StartTables::new(&q, &tables, s.order, |q| pair_tables(q, sun, s.order, &optics));
     let ground_light = GroundLight::new(m, sun, sky, ground, &optics);
     let hier = if s.acceleration {
         hierarchies(m, &optics.bands, &index, &q)
@@ -372,8 +372,8 @@ impl Solver<'_> {
             // The last two iterations allowed are full ones, so a solve cut off by
             // render.transport_max_iterations still ends on the whole map.
             let phase = if it.starting && iterations - done > 2 { next_phase(it.since_restart()) } else { Phase::Full };
-            let tables = self.start.map_or(self.tables, |st| st.tables(phase, self.tables));
-            let e_down = sweep(self.ctx, self.q, tables, &it.moments, &mut it.next, &it.ground_map, &mut it.batch);
+            let (q, tables) = self.start.map_or((self.q, self.tables), |st| st.tables(phase, self.q, self.tables));
+            let e_down = sweep(self.ctx, q, tables, &it.moments, &mut it.next, &it.ground_map, &mut it.batch);
             if it.accelerated && !self.hier.is_empty() {
                 accelerate(self.ctx, self.ctx.voxels, self.hier, &self.optics.bands, &it.moments, &mut it.next);
             }
