@@ -40,7 +40,9 @@ pub(crate) fn full_of(index: &FullIndex, g: usize) -> u32 {
 /// Cells ahead of the current one in a sweep's plane whose source and radiance are prefetched.
 pub(super) const PREFETCH_AHEAD: usize = 16;
 
-/// Everything the sweeps read: the grid, the swept box, the full voxels and the δ-M optics.
+/// Everything the sweeps read: the grid, the swept box, the full voxels and the δ-M optics. A
+/// clone shares the cell lists (a sweep on other ordinates takes one with their sky).
+#[derive(Clone)]
 pub(super) struct Ctx<'a> {
     pub(super) dims: [usize; 3],
     /// The swept box: minimum corner and cells per axis (the full voxels plus one voxel).
@@ -57,10 +59,10 @@ pub(super) struct Ctx<'a> {
     /// δ-M sun transmittance T′ per full voxel and band.
     pub(super) sun_t: &'a [[f32; 3]],
     /// The box's cells in each major axis' sweep order ([`box_cells`]).
-    pub(super) cells: [Vec<(f32, u32)>; 3],
+    pub(super) cells: Arc<[Vec<(f32, u32)>; 3]>,
     /// Per major axis, each row of `cells`: its first full cell and one past its last
     /// ([`full_spans`]).
-    pub(super) spans: [Vec<(u32, u32)>; 3],
+    pub(super) spans: Arc<[Vec<(u32, u32)>; 3]>,
     pub(super) sigma_t: [f32; 3],
     /// All bands share σt′ (one set of step weights serves them).
     pub(super) grey: bool,
@@ -100,8 +102,8 @@ impl<'a> Ctx<'a> {
             even: parity_order(order).1,
             voxels: &index.voxels,
             sun_t,
-            cells,
-            spans,
+            cells: Arc::new(cells),
+            spans: Arc::new(spans),
             sigma_t: [0, 1, 2].map(|b| bands[b].sigma_t as f32),
             grey: bands[0].sigma_t == bands[1].sigma_t && bands[1].sigma_t == bands[2].sigma_t,
             sky,

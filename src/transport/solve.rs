@@ -156,6 +156,12 @@ pub fn solve(
 /// g = 0, 40-m voxels): τ = 60 converges in 12 iterations, 6·10³ in 43, 6·10⁵ diverges.
 pub const MAX_VOXEL_OPTICAL_DEPTH: f64 = 1e4;
 
+/// Most optical depth per voxel (ρσt′ h) at which a cold solve's first iteration sweeps the
+/// start's coarser ordinates (src/transport/start.rs): the acceleration's numerical diffusion is
+/// the solve's ordinates', and on thicker voxels the coarse sweep's differs enough to cost an
+/// iteration (the default scene at σt = 5, 50 optical depths: 9 → 10; at 10 the same 9).
+const COARSE_FIRST_MAX_OPTICAL_DEPTH: f64 = 10.0;
+
 /// [`solve`] from `opts.start`, iterated to the same tolerance; with `opts.keep`, also the
 /// converged state for the next frame.
 pub fn solve_warm(
@@ -189,7 +195,11 @@ pub fn solve_warm(
     let sky_cells = SkyCells::new(sky, &q);
     let ctx = Ctx::new(m, &sky_cells, ground, &index, &sun_t, s.order, &optics.bands);
     let tables = pair_tables(&q, sun, s.order, &optics);
-    let start = StartTables::new(&q, &tables, s.order, |q| pair_tables(q, sun, s.order, &optics));
+    let coarse_first = max_voxel_optical_depth(&ctx, ctx.voxels, &optics.bands) <= COARSE_FIRST_MAX_OPTICAL_DEPTH;
+    let start = StartTables::new(&q, &tables, s.order, coarse_first, |q| pair_tables(q, sun, s.order, &optics));
+    // The first iteration's own sky cells: its ordinates' cells are not the solve's.
+    let first_sky = start.as_ref().and_then(StartTables::first_quadrature).map(|fq| SkyCells::new(sky, fq));
+    let first_ctx = first_sky.as_ref().map(|fs| Ctx { sky: fs, ..ctx.clone() });
     let ground_light = GroundLight::new(m, sun, sky, ground, &optics);
     let hier = if s.acceleration {
         hierarchies(m, &optics.bands, &index, &q)
@@ -198,6 +208,7 @@ pub fn solve_warm(
     };
     let solver = Solver {
         ctx: &ctx,
+        first_ctx: first_ctx.as_ref(),
         q: &q,
         tables: &tables,
         start: start.as_ref(),
@@ -266,6 +277,8 @@ struct Solver<'a> {
     ctx: &'a Ctx<'a>,
     q: &'a Quadrature,
     tables: &'a PairTables,
+    /// `ctx` with the sky of the first iteration's ordinates, where they are not the solve's.
+    first_ctx: Option<&'a Ctx<'a>>,
     /// The tables of a cold solve's first iterations (src/transport/start.rs; none when the
     /// solve's order is not above its start order).
     start: Option<&'a StartTables>,
@@ -373,7 +386,11 @@ impl Solver<'_> {
             // render.transport_max_iterations still ends on the whole map.
             let phase = if it.starting && iterations - done > 2 { next_phase(it.since_restart()) } else { Phase::Full };
             let (q, tables) = self.start.map_or((self.q, self.tables), |st| st.tables(phase, self.q, self.tables));
-            let e_down = sweep(self.ctx, q, tables, &it.moments, &mut it.next, &it.ground_map, &mut it.batch);
+            let ctx = match phase {
+                Phase::First => self.first_ctx.unwrap_or(self.ctx),
+                _ => self.ctx,
+            };
+            let e_down = sweep(ctx, q, tables, &it.moments, &mut it.next, &it.ground_map, &mut it.batch);
             if it.accelerated && !self.hier.is_empty() {
                 accelerate(self.ctx, self.ctx.voxels, self.hier, &self.optics.bands, &it.moments, &mut it.next);
             }

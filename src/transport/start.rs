@@ -56,17 +56,28 @@ pub(super) struct StartTables {
 
 impl StartTables {
     /// The start's tables from the solve's (`full`, of order `order`, on `q`); `tables_on`
-    /// makes the solve's tables on another quadrature. None when the order is not above
-    /// [`START_ORDER`].
-    pub(super) fn new(q: &Quadrature, full: &PairTables, order: usize, tables_on: impl Fn(&Quadrature) -> PairTables) -> Option<StartTables> {
+    /// makes the solve's tables on another quadrature, and with `coarse_first` false the first
+    /// iteration keeps the solve's ordinates. None when the order is not above [`START_ORDER`].
+    pub(super) fn new(
+        q: &Quadrature,
+        full: &PairTables,
+        order: usize,
+        coarse_first: bool,
+        tables_on: impl Fn(&Quadrature) -> PairTables,
+    ) -> Option<StartTables> {
         (order > START_ORDER).then(|| StartTables {
-            first: Some(first_quadrature()).filter(|f| f.dirs.len() < q.dirs.len()).map(|f| {
+            first: Some(first_quadrature()).filter(|f| coarse_first && f.dirs.len() < q.dirs.len()).map(|f| {
                 let tables = tables_on(&f).truncated(START_ORDER, START_ORDER);
                 (f, tables)
             }),
             low: full.truncated(START_ORDER, START_ORDER),
             handover: full.truncated(START_ORDER, order),
         })
+    }
+
+    /// The first iteration's ordinates where they are not the solve's.
+    pub(super) fn first_quadrature(&self) -> Option<&Quadrature> {
+        self.first.as_ref().map(|(q, _)| q)
     }
 
     /// The ordinates and tables of `phase`: the solve's, `q` and `full`, for [`Phase::Full`].
@@ -118,7 +129,7 @@ mod tests {
         let tables_on = |q: &Quadrature| PairTables::new(q, order, &perm, &bands, [1.0; 3], &vec![0.0; perm.len()]);
         let q = Quadrature::reduced(8, 16);
         let full = tables_on(&q);
-        let start = StartTables::new(&q, &full, order, tables_on).unwrap();
+        let start = StartTables::new(&q, &full, order, true, tables_on).unwrap();
         let (first, tables) = start.tables(Phase::First, &q, &full);
         assert_eq!((first.dirs.len(), q.dirs.len()), (32, 96));
         assert_eq!((tables.pairs.len(), tables.source_active, tables.moment_active), (16, [6, 10], [6, 10]));
@@ -127,8 +138,10 @@ mod tests {
         }
         let small = first_quadrature();
         let own = tables_on(&small);
-        let start = StartTables::new(&small, &own, order, tables_on).unwrap();
+        let start = StartTables::new(&small, &own, order, true, tables_on).unwrap();
         assert!(std::ptr::eq(start.tables(Phase::First, &small, &own).0, &small));
+        let start = StartTables::new(&q, &full, order, false, tables_on).unwrap();
+        assert!(start.first_quadrature().is_none() && std::ptr::eq(start.tables(Phase::First, &q, &full).0, &q));
     }
 
     #[test]

@@ -381,6 +381,7 @@ unsafe fn sweep_ordinate_avx(c: &Ctx, om: DVec3, w: f64, ground: &GroundMap, lig
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::sync::Arc;
     use crate::transport::sky_cells::SkyCells;
     use crate::math::{real_sh, Rgb};
     use crate::medium::Density;
@@ -460,8 +461,8 @@ mod tests {
             even,
             voxels: &voxels,
             sun_t: &sun_t,
-            cells: [0, 1, 2].map(|a| box_cells(dims, [0; 3], dims, &density, &full, voxels.len(), a)),
-            spans: [0, 1, 2].map(|_| Vec::new()),
+            cells: Arc::new([0, 1, 2].map(|a| box_cells(dims, [0; 3], dims, &density, &full, voxels.len(), a))),
+            spans: Arc::new([0, 1, 2].map(|_| Vec::new())),
             sigma_t: [0.05, 0.06, 0.07],
             grey: false,
             sky: &sky,
@@ -469,7 +470,7 @@ mod tests {
             ground_height: None,
         };
         let c = Ctx {
-            spans: [0, 1, 2].map(|a| full_spans(&c.cells[a], dims[cross_axes(a).0])),
+            spans: Arc::new([0, 1, 2].map(|a| full_spans(&c.cells[a], dims[cross_axes(a).0]))),
             ..c
         };
         let ground = GroundMap {
@@ -523,7 +524,7 @@ mod tests {
         }
         // Every cell stepped: each row's span the whole row.
         let every = Ctx {
-            spans: [0, 1, 2].map(|a| vec![(0, dims[cross_axes(a).0] as u32); c.spans[a].len()]),
+            spans: Arc::new([0, 1, 2].map(|a| vec![(0, dims[cross_axes(a).0] as u32); c.spans[a].len()])),
             cells: c.cells.clone(),
             ..c
         };
@@ -562,8 +563,8 @@ mod tests {
         let tight = Ctx {
             lo,
             n,
-            spans: [0, 1, 2].map(|a| full_spans(&cells[a], n[cross_axes(a).0])),
-            cells,
+            spans: Arc::new([0, 1, 2].map(|a| full_spans(&cells[a], n[cross_axes(a).0]))),
+            cells: Arc::new(cells),
             ..grounded(&c)
         };
         let wide = GroundMap {
