@@ -84,7 +84,7 @@ struct Cli {
 enum Command {
     /// Render a scene (default: the built-in cloud) to OUT.exr plus a tone-mapped OUT.png.
     Render(RenderArgs),
-    /// Reflectance and transmittance of a plane-parallel slab (reference transport), one JSON line.
+    /// Reflectance and transmittance of a plane-parallel slab (Monte Carlo, diffusion or discrete ordinates), one JSON line.
     Slab(slab::SlabArgs),
     /// Compare TEST.exr against REF.exr over the cloud pixels: one JSON line, optional difference PNG.
     Compare(compare::CompareArgs),
