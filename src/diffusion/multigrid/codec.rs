@@ -45,9 +45,9 @@ pub(super) type Mg = f32;
 /// and where the entries of the six neighbours (−x, +x, −y, +y, −z, +z) lie (20 B with `Z` =
 /// u16, 24 B with u32; stored as [`Runs`]: its codes per entry, the rest per run). The couplings and the sum are 16-bit codes ([`Scaled16`],
 /// ≤ 2⁻¹² relative, under a power-of-two scale per level and field); in f32 beside 24 B rows
-/// they took 28 B per unknown. The −a couplings are read from the −a neighbours' rows (a
-/// separate array of couplings, 16 + 12 B, took as many instructions as 40 B rows with all six,
-/// but `full`'s peak at 200×160×120 came out 4 MB above the rows', through the allocator).
+/// they would take 28 B per unknown. The −a couplings are read from the −a neighbours' rows (a
+/// separate array of couplings, 16 + 12 B, takes as many instructions as 40 B rows with all six,
+/// but puts `full`'s peak at 200×160×120 4 MB above the rows', through the allocator).
 ///
 /// The entries are the other colour's, counted from its first (a colour's pass indexes the
 /// other's values and rows with them as they are: subtracting an offset cost ~7 % more of the
@@ -276,7 +276,7 @@ impl<Z: Dz> RowAt<'_, Z> {
 /// distances, 20 B with u32 ones), ~9.4 B per unknown on the procedural cloud's finest level
 /// against 20 B for whole rows per entry (−3.8 MB at 200×160×120). The passes rebuild each row
 /// from its run and its codes, walking the runs in order ([`Coded::each_row`]), so their inner
-/// loops read rows as before; the other colour's couplings are read from the codes by entry.
+/// loops read whole rows, as from rows stored per entry; the other colour's couplings are read from the codes by entry.
 #[derive(Clone, Debug)]
 pub(super) struct Runs<Z> {
     pub(super) codes: Vec<Codes>,

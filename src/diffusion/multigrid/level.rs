@@ -49,7 +49,7 @@ pub(super) use with_rows;
 /// coupling of 0 to the other colour's pad), so the rows need no branches and a colour's pass
 /// reads only the other colour.
 ///
-/// No level is scaled to unit diagonal (that took, on the finest level, a scale D^-½, a fix of
+/// No level is scaled to unit diagonal (that would take, on the finest level, a scale D^-½, a fix of
 /// its rounding and the prolongation weights D^½: 10 B per unknown). Gauss–Seidel does not depend
 /// on a diagonal scaling S, and PCG on S A S with the preconditioner S M S has the iterates of PCG
 /// on A with M, so the cycle works on the unknowns as assembled; its coarse space, piecewise
