@@ -14,7 +14,7 @@ pub(super) struct Coded<'a, Z> {
     pub(super) red: usize,
     pub(super) codes: &'a [Codes],
     pub(super) runs: &'a [Run<Z>],
-    /// The scales of a row's own codes (+x, +y, +z couplings and [`Row::own`]:
+    /// The scales of a row's own codes (+x, +y, +z couplings and [`Row::own`](super::codec::Row::own):
     /// [`Level::cpl_scale`] ×3, [`Level::own_scale`]) and of its −a neighbours' couplings (and
     /// a zero lane), as [`Scaled16::decode4`] takes them.
     pub(super) mine: [f32; 4],
@@ -59,7 +59,7 @@ pub(super) use with_rows;
 #[derive(Clone, Debug)]
 pub(super) struct Level {
     pub(super) red: usize,
-    /// Each row's [`Row::own`] holds its sum, its diagonal plus its six couplings, computed in
+    /// Each row's [`Row::own`](super::codec::Row::own) holds its sum, its diagonal plus its six couplings, computed in
     /// f64 from the assembled row and rounded once (the finest level), not its diagonal; the
     /// diagonal is that sum less the row's stored couplings ([`less_couplings`]). CG's operator
     /// ([`Coded::apply_row`]) so keeps every assembled row sum to its own rounding: the
@@ -141,7 +141,7 @@ impl<'a, const K: usize> OtherColour<'a, K> {
 }
 
 /// Runs `$pass` with `$d`, the rule giving a row's diagonal on `$level` from the row's decoded
-/// [`Row::own`] and its couplings: one copy of the pass per rule, so its
+/// [`Row::own`](super::codec::Row::own) and its couplings: one copy of the pass per rule, so its
 /// inner loop does not branch on it.
 macro_rules! with_diagonal {
     ($level:expr, |$d:ident| $pass:expr) => {{
