@@ -202,7 +202,7 @@ impl From<Signed16> for f64 {
     }
 }
 
-/// The scale 2ᵏ [`Field16`] and [`Signed16::code_all`] choose for values of largest magnitude
+/// The scale 2ᵏ [`Field16`](crate::medium::field16::Field16) and [`Signed16::code_all`] choose for values of largest magnitude
 /// `max` (1 for 0): codes of v·2⁻ᵏ are within 2⁻¹² relative of every value above 2⁻¹³·`max`.
 pub fn power_of_two_scale(max: f64) -> f32 {
     2f32.powi(scale_exponent(max))

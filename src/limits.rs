@@ -21,15 +21,15 @@ pub const MAX_SIGMA_T: f32 = 1e9;
 /// Largest density a grid may hold (unitless, in units of `medium.sigma_t`): 1e30. Only the
 /// product σt·ρ is physical, but the methods also form density products and sums on their own
 /// (weights ρ·X and trilinear(ρ), squared densities, 16-bit codes of ρ-weighted fields) in f32:
-/// a grid at 1e38 overflowed them (`full` and `transport` gave inf, NaN or a 27 % error at 1e37).
+/// a grid at 1e38 overflows them (`full` and `transport` give inf, NaN or a 27 % error at 1e37).
 pub const MAX_DENSITY: f32 = 1e30;
 
 /// Largest product of a grid's largest density and the brightest light (sun irradiance or sky
 /// radiance): 1e33, [`MAX_LIGHT`] at densities up to 1000 (a uint8 grid read by value under the
 /// brightest sun). Each bound alone is not enough: the methods weight light by density in f32
-/// (ρ·I0, ρ·Q), so a grid of 1e20 under light of 3e20 (product 3e40) gave inf or NaN in
+/// (ρ·I0, ρ·Q), so a grid of 1e20 under light of 3e20 (product 3e40) gives inf or NaN in
 /// `diffusion`, `full` and `transport`, and 1e12 under 3e26 (3e38) in `full`; products up to 3e36
-/// rendered in proportion, and 1e34 with g = 0.999 seen against the sun (its phase peak 1.6e5
+/// render in proportion, and 1e34 with g = 0.999 seen against the sun (its phase peak 1.6e5
 /// sr⁻¹) rendered finitely.
 pub const MAX_DENSITY_TIMES_LIGHT: f64 = 1e33;
 

@@ -183,7 +183,7 @@ render_table! {
     iterations: usize => clear_air.iterations, for [Full];
     /// `full`: stop iterating once I0 changes by less than this fraction (unitless).
     propagation_tolerance: f64 => clear_air.propagation_tolerance, for [Full];
-    /// `full`: write the components (diffusion, low_density, sun_single, background) as EXR layers.
+    /// `full`, `transport`: write the method's components as EXR layers (docs/scene.md, "AOVs").
     aov: bool => aov, for [Full, Transport] ("only full and transport write AOV layers");
     /// `diffusion`, `full`: the gather's diffuse source is a·max(0, I0 + g·I1·ω) instead of a·I0
     /// (src/diffusion/flux.rs, docs/diffusion.md); default on (measured with the δ-M transform,
@@ -205,8 +205,9 @@ render_table! {
     /// `transport`: Legendre order L of the δ-M phase function and of the spherical-harmonic
     /// source, 1 to 15 (memory 24·(L + 1)² bytes per full voxel; docs/transport.md).
     transport_order: usize => transport.order, for [Transport];
-    /// `transport`: Gauss–Legendre ordinates in cos θ, even, 2 to 32; the azimuths are twice as
-    /// many (8: 8 × 16 = 128 ordinates). Exact for order L when ≥ L + 1.
+    /// `transport`: Gauss–Legendre ordinates in cos θ, even, 2 to 32; up to twice as many
+    /// azimuths per ring (`transport_reduced_azimuths`: 96 ordinates at 8, else 8 × 16 = 128).
+    /// At least L + 1 for order L.
     transport_polar_ordinates: usize => transport.n_mu, for [Transport];
     /// `transport`: fewer azimuths on the rings of ordinates towards the poles, about 2·n·sin θ
     /// and at least 8 (SHDOM's reduced grid: 96 ordinates at the default 8; exact for harmonics
@@ -416,7 +417,7 @@ pub struct RenderSettings {
     /// `full`: the final gather's edge treatment (`render.low_density_threshold`, `render.step`
     /// in metres, `render.cube_resolution`).
     pub edges: EdgeSettings,
-    /// `full`: write the components (diffusion, low_density, sun_single, background) as EXR layers.
+    /// `full`, `transport`: write the method's components as EXR layers (docs/scene.md, "AOVs").
     pub aov: bool,
     /// `diffusion`, `full`: the gather's diffuse source is a·max(0, I0 + g·I1·ω) instead of a·I0
     /// (src/diffusion/flux.rs, docs/diffusion.md).

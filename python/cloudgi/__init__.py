@@ -354,7 +354,7 @@ _EXR_MAX_SIDE = 2**31 - 1
 
 
 # An EXR channel name (NAME.R) holds at most 255 bytes of UTF-8; a longer one, or a NUL (which
-# ends a name in the file), made a file no reader opens.
+# ends a name in the file), makes a file no reader opens.
 _MAX_LAYER_NAME_BYTES = 255 - len(".R")
 
 

@@ -97,7 +97,7 @@ def test_a_missing_folder_is_found_before_submitting(client, tmp_path):
 
 
 def test_bad_outputs_options_and_frames_are_found_before_submitting(client, tmp_path):
-    # Each used to render on a worker (retried) before failing, or failed with no message.
+    # Each is refused here, with a message, before a worker renders (and retries) anything.
     (tmp_path / "f_1.exr").mkdir()
     with pytest.raises(cloudgi.FileError, match="out_pattern.*f_1.exr` is a folder"):
         cloudgi.dask.render_frames(tiny_scene(), FRAMES, client, str(tmp_path / "f_{frame}.exr"))
@@ -119,13 +119,13 @@ def test_bad_outputs_options_and_frames_are_found_before_submitting(client, tmp_
     ],
 )
 def test_bad_numeric_arguments_are_refused_before_the_client_is_used(tmp_path, kwargs, error, words):
-    # retries=-1 went to Dask, which took it; no client is needed to refuse them.
+    # Checked here (Dask itself takes retries=-1); no client is needed to refuse them.
     with pytest.raises(error, match=words):
         cloudgi.dask.render_frames(tiny_scene(), FRAMES, None, str(tmp_path / "f_{frame}.exr"), **kwargs)
 
 
 def test_frames_given_as_one_scene_are_refused(tmp_path):
-    # A str was iterated as one frame per character, a dict as one per table name.
+    # Iterated, a str would be one frame per character, a dict one per table name.
     for frames in ("scene.toml", {"sun": {"elevation_deg": 20.0}}):
         with pytest.raises(TypeError, match=r"frames must be a list of frames .* give \[frame\] for one frame"):
             cloudgi.dask.render_frames(tiny_scene(), frames, None, str(tmp_path / "f_{frame}.exr"))
@@ -138,7 +138,7 @@ def test_a_client_that_is_not_one_is_named(tmp_path):
 
 
 def test_a_density_option_is_sent_once_and_renders_as_locally(client, tmp_path):
-    # It was pickled into every frame's task: a grid of N bytes cost N per frame.
+    # Sent once (scattered), not pickled into every frame's task: a grid of N bytes would cost N per frame.
     density = np.random.default_rng(5).random((12, 16, 20)).astype(np.float32)
     submitted = []
     real_submit = client.submit
@@ -159,6 +159,6 @@ def test_a_density_option_is_sent_once_and_renders_as_locally(client, tmp_path):
 
 
 def test_a_progress_callback_is_refused_as_it_would_run_on_the_workers(tmp_path):
-    # It was pickled to the workers (or failed to pickle, e.g. a tqdm bar) and never called here.
+    # Pickled to the workers (or failing to pickle, e.g. a tqdm bar), it would never be called here.
     with pytest.raises(TypeError, match=r"progress= would be called on the workers"):
         cloudgi.dask.render_frames(tiny_scene(), FRAMES, None, str(tmp_path / "f_{frame}.exr"), progress=print)

@@ -22,7 +22,7 @@ def test_version_is_the_crates():
 
 
 def test_every_public_function_is_exported():
-    # load_grid was missing from __all__, so `from cloudgi import *` left it out.
+    # A public function missing from __all__ is left out by `from cloudgi import *`.
     public = {n for n, v in vars(cloudgi).items() if callable(v) and not n.startswith("_") and v.__module__ == "cloudgi"}
     assert public <= set(cloudgi.__all__), public - set(cloudgi.__all__)
 
@@ -127,9 +127,9 @@ def test_a_bad_density_raises_format_error_with_the_cli_message(tmp_path, array)
 
 
 def test_what_the_cli_refuses_for_memory_or_the_solver_is_an_error_not_a_crash_or_a_hang():
-    # The command line's guards did not run for Python: a cloud wider than the diffusion solver's
-    # rows panicked in the render's thread and the call never returned; an image larger than the
-    # memory aborted the interpreter ("memory allocation of ... failed").
+    # The command line's guards run for Python too: unguarded, a cloud wider than the diffusion
+    # solver's rows panics in the render's thread and the call never returns, and an image larger
+    # than the memory aborts the interpreter ("memory allocation of ... failed").
     with pytest.raises(cloudgi.SceneError, match="diffusion solver takes at most 131070"):
         cloudgi.render(tiny_scene(), method="diffusion", density=np.ones((2, 2, 300000), np.float32), voxel_size=0.01)
     with pytest.raises(cloudgi.SceneError, match=r"camera.width, camera.height.*32768×32768 image.*GiB"):
@@ -294,7 +294,7 @@ def test_a_path_value_in_a_dict_is_its_string(tmp_path):
 
 
 def test_a_keyword_argument_keeps_a_scene_without_camera_framing_its_cloud(tmp_path):
-    # No [camera] table: camera.fit frames the cloud; width= made a table and turned that off.
+    # No [camera] table: camera.fit frames the cloud; width= must not make a table that turns it off.
     scene = tmp_path / "s.toml"
     scene.write_text('[medium]\nresolution = [10, 8, 6]\nvoxel_size = 25.0\n[render]\nmethod = "single"\n')
     r = run_cli("render", "--quiet", scene, "--width", 16, "--height", 12, "-o", tmp_path / "cli.exr")
@@ -453,8 +453,8 @@ def test_load_vdb_reads_the_grid_the_scene_renders(tmp_path):
 
 
 def test_load_grid_of_a_missing_file_or_a_folder_names_the_path_not_a_scene_key(tmp_path, monkeypatch):
-    # It said "field `medium.grid`: ... (paths are relative to the scene file)", and
-    # load_grid("procedural") gave the scene's built-in cloud.
+    # A grid file is not a scene key: the message names the path, not "field `medium.grid`: ...
+    # (paths are relative to the scene file)", and load_grid("procedural") is not the built-in cloud.
     with pytest.raises(cloudgi.FileError) as e:
         cloudgi.load_grid(tmp_path / "missing.vdb")
     assert str(e.value).startswith(f"{tmp_path / 'missing.vdb'}: ") and "medium.grid" not in str(e.value)
@@ -549,8 +549,8 @@ def test_a_sun_taken_out_of_the_sky_map_is_noted_and_kept_with_extract_sun_false
     ],
 )
 def test_voxel_size_and_origin_past_float32_name_the_argument_and_value(kwargs, message):
-    # They were cast to float32 unchecked: the message said `medium.voxel_size`: Vec3(inf, inf,
-    # inf) (or 0 for 1e-50), and an int past float64 raised a bare OverflowError.
+    # Checked before the cast to float32, which would make them inf (or 0 for 1e-50) and name
+    # `medium.voxel_size`: Vec3(inf, inf, inf); an int past float64 is not a bare OverflowError.
     with pytest.raises(cloudgi.SceneError) as e:
         cloudgi.render(tiny_scene(), method="single", density=np.ones((2, 2, 2), np.float32), **kwargs)
     assert str(e.value).startswith(message), str(e.value)
@@ -583,7 +583,7 @@ def test_a_placement_argument_out_of_the_scenes_range_names_the_argument():
     ids=["float64-huge", "float64-huge-negative", "nan", "float16-inf"],
 )
 def test_write_exr_refuses_non_finite_pixels_and_values_past_float32(tmp_path, image, words):
-    # float64 past float32's range was cast to inf and written; NaN and inf were written as given.
+    # Checked before writing: float64 past float32's range would be cast to inf; NaN and inf are refused as given.
     images = {"rgb": np.ones((2, 3, 3), np.float32), "aov": image}
     if not np.isfinite(image).all():
         images = {"rgb": image, "aov": np.ones((2, 3, 3), np.float32)}
@@ -672,7 +672,7 @@ def test_odd_layouts_and_dtypes_of_a_density_render_as_its_c_order_float32():
     ids=["nul", "long", "long-utf8", "surrogate"],
 )
 def test_write_exr_refuses_a_layer_name_an_exr_cannot_hold(tmp_path, name, words):
-    # They were written into a file that no reader opened ("missing or invalid channels attribute").
+    # Such a name makes a file no reader opens ("missing or invalid channels attribute").
     with pytest.raises(cloudgi.FormatError, match=words):
         cloudgi.write_exr(tmp_path / "x.exr", {"rgb": np.ones((2, 2, 3), np.float32), name: np.ones((2, 2, 3), np.float32)})
     assert not list(tmp_path.iterdir())
@@ -721,7 +721,7 @@ def test_errors_survive_pickling_as_dask_sends_them():
 
 
 def test_a_missing_scene_path_with_brackets_or_equals_is_named_as_a_file(tmp_path):
-    # It was read as TOML text: "TOML string: TOML parse error at line 1 ... expected `.`, `=`".
+    # A path, not TOML text: not "TOML string: TOML parse error at line 1 ... expected `.`, `=`".
     for name in ("a=1", "[v2]"):
         missing = tmp_path / name / "scene.toml"
         cli = cli_error("render", missing, "-o", tmp_path / "x.exr")
@@ -742,7 +742,7 @@ def test_a_key_given_both_as_a_keyword_and_in_overrides_is_refused():
 
 
 def test_a_bad_density_value_is_located_by_its_array_index_too():
-    # The message gave (x, y, z) = (3, 2, 1) alone: a numpy user looked at density[3, 2, 1].
+    # (x, y, z) = (3, 2, 1) alone would send a numpy user to density[3, 2, 1].
     density = np.ones((4, 5, 6), np.float32)
     density[1, 2, 3] = np.nan
     with pytest.raises(cloudgi.FormatError, match=r"voxel \(x, y, z\) = \(3, 2, 1\), array index \[1, 2, 3\], is NaN"):

@@ -5,7 +5,7 @@
 /// 32 MiB), after which the stages' large arrays come from the heap, whose freed ranges stay
 /// resident. The per-band and per-stage arrays (1–4 MiB at 200×160×120) are what `full`'s peak
 /// holds, so a fixed 1 MiB threshold keeps that peak near its live heap for a little more system
-/// time (docs/performance.md, "Memory of `full`"). Below that size freed memory stays with its
+/// time (docs/performance.md, "The solver on its unknowns"). Below that size freed memory stays with its
 /// heap up to 64 MiB (the default, once the mapping threshold is fixed, is 128 KiB): `transport`'s
 /// sweeps free and take again their plane buffers (about 0.5 MiB each) every ordinate, and a trim
 /// hands them back to the system to be faulted in afresh (docs/performance.md, "`transport`

@@ -27,7 +27,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 120.0)]
     max_seconds: f64,
     /// Scene files timed as they stand after the procedural sizes (their own grid, e.g.
-    /// examples/bench/disney16.toml: the Disney cloud at 1/16), one row per method each.
+    /// examples/disney16.toml: the Disney cloud at 1/16), one row per method each.
     #[arg(long, value_delimiter = ',')]
     clouds: Vec<PathBuf>,
     /// Override camera.width (pixels).

@@ -84,7 +84,7 @@ struct Cli {
 enum Command {
     /// Render a scene (default: the built-in cloud) to OUT.exr plus a tone-mapped OUT.png.
     Render(RenderArgs),
-    /// Reflectance and transmittance of a plane-parallel slab (reference transport), one JSON line.
+    /// Reflectance and transmittance of a plane-parallel slab (Monte Carlo, diffusion or discrete ordinates), one JSON line.
     Slab(slab::SlabArgs),
     /// Compare TEST.exr against REF.exr over the cloud pixels: one JSON line, optional difference PNG.
     Compare(compare::CompareArgs),
@@ -96,7 +96,7 @@ enum Command {
     Export(export::ExportArgs),
     /// Render the paper's figure series (Figs. 4–8) and the reference, with errors, into a folder with index.md.
     Figures(figures::FiguresArgs),
-    /// Time every stage of the chosen methods on three sizes of the procedural cloud: a markdown table.
+    /// Time every stage of the chosen methods on sizes of the procedural cloud (--sizes) and on scene files (--clouds): a markdown table.
     Bench(bench::BenchArgs),
     /// Re-make a render's PNG preview from its EXR (the same automatic exposure, or --exposure).
     Tonemap(tonemap::TonemapArgs),

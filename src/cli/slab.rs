@@ -46,14 +46,14 @@ pub struct SlabArgs {
     /// Transport method.
     #[arg(long, value_enum, default_value = "reference")]
     method: SlabMethod,
-    /// Photons (2 to 1e12).
+    /// `reference`: photons (2 to 1e12).
     #[arg(long, default_value_t = 1_000_000)]
     samples: u64,
     /// `diffusion`: forward fraction f of the δ-M similarity transform, 0 ≤ f < 1 (default g²,
     /// measured against adding-doubling in docs/budget.md); 0 is the paper's scheme exactly.
     #[arg(long)]
     forward_fraction: Option<f64>,
-    /// Seed of the photon streams.
+    /// `reference`: seed of the photon streams.
     #[arg(long, default_value_t = 0)]
     seed: u64,
 }

@@ -4,7 +4,7 @@
 //! the last) are evaluated; each finer pass halves the spacing, and a new node is interpolated
 //! (bilinearly, from the nodes of the pass before that bracket it) when those nodes agree to a
 //! relative tolerance in every channel, else evaluated. A field that is linear between the
-//! coarse nodes costs only the coarse nodes; near an edge the grid is evaluated as before.
+//! coarse nodes costs only the coarse nodes; near an edge every node is evaluated.
 
 use crate::math::Rgb;
 use crate::par;

@@ -743,9 +743,10 @@ impl LevelWalk {
     }
 }
 
-/// [`LitVolume::diffuse_beyond_i0`] at voxel coordinates `v` (density `rho` > 0) given I0 there
-/// (`i0` = [`LitVolume::i0`]`(v, rho)`), so I0 is looked up once, not twice; the same operations
-/// in the same order, so the same bits.
+/// What [`LitVolume::diffuse`] adds to I0 (the first moment's max(0, I0 + g·I1·ω) − I0 and the
+/// sky's single scattering) at voxel coordinates `v` (density `rho` > 0) given I0 there (`i0` =
+/// [`LitVolume::i0`]`(v, rho)`), so I0 is looked up once, not twice; the same operations in the
+/// same order as its per-voxel path, so the same bits.
 #[inline]
 fn beyond_i0(lit: &LitVolume, v: Vec3, rho: f32, i0: Rgb, to_eye: Vec3) -> Rgb {
     let d = match &lit.flux {

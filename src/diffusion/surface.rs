@@ -5,7 +5,7 @@
 //! is φ = (β(I_P − L) + f)/(1 + 2β), β = 2/(3ρσtr h), and the face value is I_face = L + 2φ.
 //! In a voxel many optical depths thick, β → 0 and I_P ≈ L + (3/2)ρσtr h φ: the centre lies
 //! τ/2 optical depths below a surface the eye cannot see past one. Shown as the surface (the
-//! gathers and the clear-air cubes blend I0 from voxel centres), it made a thick cloud as bright
+//! gathers and the clear-air cubes blend I0 from voxel centres), it would make a thick cloud as bright
 //! as (3/2)τ times its outgoing flux (albedo 1, 40-m voxels: max pixel 1.0·10³ at σt = 100 m⁻¹,
 //! 1.0·10⁷ at 10⁶, under a sun giving ≲ 1).
 //!

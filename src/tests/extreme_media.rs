@@ -38,8 +38,8 @@ fn the_disney_cloud_renders_near_reference_with_every_method() {
         let metrics = crate::tools::compare::compare(&img, &reference, mask.as_deref()).unwrap();
         let mre = metrics.block_mean_relative_error.unwrap();
         assert!(mre < bound, "{}: block MRE {mre:.3} against reference (bound {bound})", m.name());
-        // Not black: the cloud's mean luminance is a real fraction of the reference's (the
-        // unfixed transport solve gave 3 % of it).
+        // Not black: the cloud's mean luminance is a real fraction of the reference's (a transport
+        // solve that mishandles its tiny densities renders 3 % of it: docs/transport.md, "Tiny densities").
         assert!(
             metrics.luminance_bias.unwrap() > -0.9,
             "{}: luminance bias {:?}",

@@ -157,8 +157,8 @@ fn light_crosses_clear_air_between_cloud_parts() {
         // (docs/diffusion.md); the δ-M medium with f = g (every stage) keeps it positive, so the
         // rise is measurable.
         d.render.forward_fraction = 0.85;
-        // The paper's hook: the cubes' light enters through stage 1 (the boundary-condition
-        // variant is `light_crosses_clear_air_through_the_boundary_condition`).
+        // The paper's hook: the cubes' light enters through stage 1 (the default
+        // boundary-condition variant, `render.sky_boundary`, has no such test of its own).
         d.render.sky_boundary = false;
     });
     s.sun.dir = Vec3::X;

@@ -491,7 +491,7 @@ fn fog_under_the_ground_takes_no_part_in_the_transport() {
     // The ground bounds the transport domain: the density under the plane (given to the solver
     // as it is here; a scene empties the voxels a voxel or more under it, `Medium::emptied_below`)
     // must not change the solution: thin or thick, the same light at and above the plane. Swept
-    // as medium, the thick fog under the plane was lit through it and shone up into the fog.
+    // as medium, the thick fog under the plane would be lit through it and shine up into the fog.
     use crate::lighting::Ground;
     let (sun, sky) = high_sun_and_blue_sky();
     let ground = Ground {

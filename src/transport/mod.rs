@@ -185,7 +185,7 @@ impl TransportMemory {
 /// σt′ = σt(1 − a f), a′ = a(1 − f)/(1 − a f), χ′_l = (g^l − f)/(1 − f) for l ≤ L. A
 /// back-scattering phase function (g < 0) has no forward peak to truncate: f = 0 there (g^{L+1}
 /// of a negative g is ±|g|^{L+1}, and with f = 0.43 for g = −0.9 at L = 7 the scaled moment
-/// χ′_1 = −2.3 made the scattering operator amplify the first moment: source iteration diverged).
+/// χ′_1 = −2.3 would make the scattering operator amplify the first moment: source iteration diverges).
 /// So |χ′_l| ≤ 1 for every g.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BandOptics {

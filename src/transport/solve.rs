@@ -309,7 +309,7 @@ struct Iterate {
     /// next frame's start takes this solve's, else the previous one's.
     slowest: Option<f64>,
     carried_ratio: f64,
-    /// The acceleration's guard (docs/transport.md, "When the acceleration diverges"): whether
+    /// The acceleration's guard (docs/transport.md, "Robustness", "Thick voxels"): whether
     /// it is still on, the smallest change of I_00 since the iteration (re)started, iterations
     /// since then, and the iteration at which the acceleration was given up.
     accelerated: bool,

@@ -631,7 +631,7 @@ fn arrays_longer_than_three_and_magnitudes_no_f32_render_holds() {
     );
     grid_fails("g.npy", &[("g.npy", dense)], &["s.toml", "medium.sigma_t", "largest density"]);
     // Density and light each within its bound, their product past what f32 holds (1e20 under a
-    // sun of 3e20 gave inf in three methods): named, with the fix.
+    // sun of 3e20 gives inf in three methods unrefused): named, with the fix.
     let dense = npy(
         "{'descr': '<f4', 'fortran_order': False, 'shape': (1, 2, 2), }",
         &f32s(&[1e20, 1e20, 1e20, 1e20]),

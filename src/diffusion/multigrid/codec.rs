@@ -7,7 +7,7 @@ use super::CHUNK;
 use crate::half::Scaled16;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-/// The scalar of the multigrid levels ([`Level`]) and of the CG vectors.
+/// The scalar of the multigrid levels ([`Level`](super::level::Level)) and of the CG vectors.
 pub(super) trait Real: Copy + Send + Sync {
     fn of(v: f64) -> Self;
     fn get(self) -> f64;
@@ -41,13 +41,13 @@ impl Real for f64 {
 /// when the recursion's rounding left it above the tolerance; 1e-12 is still reached).
 pub(super) type Mg = f32;
 
-/// One row of a [`Level`]: its couplings to its +x, +y, +z neighbours, its sum (or diagonal)
+/// One row of a [`Level`](super::level::Level): its couplings to its +x, +y, +z neighbours, its sum (or diagonal)
 /// and where the entries of the six neighbours (−x, +x, −y, +y, −z, +z) lie (20 B with `Z` =
 /// u16, 24 B with u32; stored as [`Runs`]: its codes per entry, the rest per run). The couplings and the sum are 16-bit codes ([`Scaled16`],
 /// ≤ 2⁻¹² relative, under a power-of-two scale per level and field); in f32 beside 24 B rows
-/// they took 28 B per unknown. The −a couplings are read from the −a neighbours' rows (a
-/// separate array of couplings, 16 + 12 B, took as many instructions as 40 B rows with all six,
-/// but `full`'s peak at 200×160×120 came out 4 MB above the rows', through the allocator).
+/// they would take 28 B per unknown. The −a couplings are read from the −a neighbours' rows (a
+/// separate array of couplings, 16 + 12 B, takes as many instructions as 40 B rows with all six,
+/// but puts `full`'s peak at 200×160×120 4 MB above the rows', through the allocator).
 ///
 /// The entries are the other colour's, counted from its first (a colour's pass indexes the
 /// other's values and rows with them as they are: subtracting an offset cost ~7 % more of the
@@ -65,11 +65,11 @@ pub(super) struct Row<Z> {
     /// the [`NO_MINUS_X`] flag.
     pub(super) base: u32,
     /// Couplings to the +x, +y, +z neighbours, negated (they are ≤ 0) and coded at the level's
-    /// [`Level::cpl_scale`] (0 to a missing one, and on the pads): each face's coupling is
+    /// [`Level::cpl_scale`](super::level::Level::cpl_scale) (0 to a missing one, and on the pads): each face's coupling is
     /// stored once, and a row's −a coupling is its −a neighbour's +a one.
     pub(super) up: [Scaled16; 3],
-    /// The row's sum (the finest level: [`Level::row_sums`]) or its diagonal, coded at the
-    /// level's [`Level::own_scale`] (0 on the pads).
+    /// The row's sum (the finest level: [`Level::row_sums`](super::level::Level::row_sums)) or its diagonal, coded at the
+    /// level's [`Level::own_scale`](super::level::Level::own_scale) (0 on the pads).
     pub(super) own: Scaled16,
     /// Entries from `base` back to the −y neighbour and on to the +y one.
     pub(super) dy: [u16; 2],
@@ -80,7 +80,7 @@ pub(super) struct Row<Z> {
 /// The type of a [`Row`]'s ±z distances: u16 where they all fit (fewer than 2^16 of the other
 /// colour's entries between any cell and its ±z neighbours: every level of the clouds measured,
 /// up to 400×320×240), else u32. Each level picks once ([`Rows`]); the passes are compiled per
-/// type ([`with_rows`]).
+/// type ([`with_rows`](super::level::with_rows)).
 pub(super) trait Dz: Copy + Default + PartialEq + Send + Sync + std::fmt::Debug + Into<u32> {
     /// How a missing −z neighbour is coded, `base.wrapping_sub(pad)` in u32 (read back by the
     /// same subtraction as a present one: no select), 0 in u16 (the pad is too far, and a
@@ -275,8 +275,8 @@ impl<Z: Dz> RowAt<'_, Z> {
 /// A level's rows: their codes per entry (8 B) and their links per [`Run`] (16 B with u16 ±z
 /// distances, 20 B with u32 ones), ~9.4 B per unknown on the procedural cloud's finest level
 /// against 20 B for whole rows per entry (−3.8 MB at 200×160×120). The passes rebuild each row
-/// from its run and its codes, walking the runs in order ([`Coded::each_row`]), so their inner
-/// loops read rows as before; the other colour's couplings are read from the codes by entry.
+/// from its run and its codes, walking the runs in order ([`Coded::each_row`](super::level::Coded::each_row)), so their inner
+/// loops read whole rows, as from rows stored per entry; the other colour's couplings are read from the codes by entry.
 #[derive(Clone, Debug)]
 pub(super) struct Runs<Z> {
     pub(super) codes: Vec<Codes>,
@@ -344,7 +344,7 @@ pub(super) fn unit_of(max: f64) -> i32 {
     (((max.to_bits() >> 52) & 0x7ff) as i32 - 1023 + 4).clamp(-1000, 1000)
 }
 
-/// One row as [`Level::from_stencils`] makes it, before it is coded ([`Row::encode`]): its +a
+/// One row as [`Level::from_stencils`](super::level::Level::from_stencils) makes it, before it is coded ([`Row::encode`]): its +a
 /// couplings (≤ 0) and its sum (or diagonal), in f64 as assembled, its neighbours' entries, its
 /// `base` and the other colour's pad.
 pub(super) type Plain = ([f64; 3], f64, [u32; 6], u32, u32);

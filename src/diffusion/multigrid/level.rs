@@ -14,7 +14,7 @@ pub(super) struct Coded<'a, Z> {
     pub(super) red: usize,
     pub(super) codes: &'a [Codes],
     pub(super) runs: &'a [Run<Z>],
-    /// The scales of a row's own codes (+x, +y, +z couplings and [`Row::own`]:
+    /// The scales of a row's own codes (+x, +y, +z couplings and [`Row::own`](super::codec::Row::own):
     /// [`Level::cpl_scale`] ×3, [`Level::own_scale`]) and of its −a neighbours' couplings (and
     /// a zero lane), as [`Scaled16::decode4`] takes them.
     pub(super) mine: [f32; 4],
@@ -49,7 +49,7 @@ pub(super) use with_rows;
 /// coupling of 0 to the other colour's pad), so the rows need no branches and a colour's pass
 /// reads only the other colour.
 ///
-/// No level is scaled to unit diagonal (that took, on the finest level, a scale D^-½, a fix of
+/// No level is scaled to unit diagonal (that would take, on the finest level, a scale D^-½, a fix of
 /// its rounding and the prolongation weights D^½: 10 B per unknown). Gauss–Seidel does not depend
 /// on a diagonal scaling S, and PCG on S A S with the preconditioner S M S has the iterates of PCG
 /// on A with M, so the cycle works on the unknowns as assembled; its coarse space, piecewise
@@ -59,7 +59,7 @@ pub(super) use with_rows;
 #[derive(Clone, Debug)]
 pub(super) struct Level {
     pub(super) red: usize,
-    /// Each row's [`Row::own`] holds its sum, its diagonal plus its six couplings, computed in
+    /// Each row's [`Row::own`](super::codec::Row::own) holds its sum, its diagonal plus its six couplings, computed in
     /// f64 from the assembled row and rounded once (the finest level), not its diagonal; the
     /// diagonal is that sum less the row's stored couplings ([`less_couplings`]). CG's operator
     /// ([`Coded::apply_row`]) so keeps every assembled row sum to its own rounding: the
@@ -141,7 +141,7 @@ impl<'a, const K: usize> OtherColour<'a, K> {
 }
 
 /// Runs `$pass` with `$d`, the rule giving a row's diagonal on `$level` from the row's decoded
-/// [`Row::own`] and its couplings: one copy of the pass per rule, so its
+/// [`Row::own`](super::codec::Row::own) and its couplings: one copy of the pass per rule, so its
 /// inner loop does not branch on it.
 macro_rules! with_diagonal {
     ($level:expr, |$d:ident| $pass:expr) => {{

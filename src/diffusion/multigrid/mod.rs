@@ -7,12 +7,12 @@
 //!   the density: the build then never holds the finest operator beside its level);
 //!   [`Hierarchy::build`] turns every level into a [`Level`] that stores its unknowns with their
 //!   six neighbours' coded entries, their +x, +y, +z couplings and their row sum (or diagonal),
-//!   the values in 16-bit codes ([`Row`]: its 8 B of codes per entry, its neighbours' coding once
-//!   per run of entries that share it, [`Runs`], 16 B, or 20 B on a level whose z planes are too
-//!   large for u16 ±z distances: [`Rows`]; each −a coupling is read from the −a neighbour's
+//!   the values in 16-bit codes ([`Row`](codec::Row): its 8 B of codes per entry, its neighbours' coding once
+//!   per run of entries that share it, [`Runs`](codec::Runs), 16 B, or 20 B on a level whose z planes are too
+//!   large for u16 ±z distances: [`Rows`](codec::Rows); each −a coupling is read from the −a neighbour's
 //!   codes, so each face's is stored once). Nothing is stored per cell of the box (the cloud fills about
 //!   half of its tight box), so the memory and the work scale with the unknowns. The whole
-//!   hierarchy is divided by one power of two ([`unit_of`], the right-hand sides alike), which
+//!   hierarchy is divided by one power of two ([`unit_of`](codec::unit_of), the right-hand sides alike), which
 //!   keeps every level's code scale a normal f32 whatever the voxel size.
 //! * **Coarsening** by 2×2×2 aggregation with the Galerkin product Aᶜ = PᵀAP, P the piecewise-
 //!   constant prolongation: the coarse operator is again a 7-point stencil (an aggregate's diagonal

@@ -251,7 +251,7 @@ pub(super) fn coarsen(a: &impl Stencils) -> (Operator, Vec<u32>, Maxima) {
 }
 
 /// The largest values of an operator's rows, from which a level's codes take their scales
-/// ([`Scaled16::exponent_for`]): coupling magnitude, diagonal, row sum.
+/// ([`Scaled16::exponent_for`](crate::half::Scaled16::exponent_for)): coupling magnitude, diagonal, row sum.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(super) struct Maxima {
     pub(super) cpl: f64,

@@ -1,5 +1,5 @@
 //! The assembled operator (eq. 4 with eq. 7) and the solver, against dense linear algebra
-//! (moved here from tests/ so the solver's internals need not be public).
+//! (inside the crate, so the solver's internals need not be public).
 
 use super::coarse::{cholesky_in_place, envelope};
 use super::codec::{pow2, Mg, Rows};

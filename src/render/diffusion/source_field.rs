@@ -10,7 +10,7 @@
 //! direction only is computed once per ray ([`SourceField::along`]). Same values up to float
 //! rounding (the blend order differs). The records are density-weighted, so they are stored only
 //! at the full voxels (an empty corner reads the zero record): the field costs 48 B per full
-//! voxel, not the 160 B per voxel of the cloud's box it took when every box voxel had a record.
+//! voxel, not the 160 B per voxel of the cloud's box that a record per box voxel would take.
 
 use crate::lighting::Sun;
 use crate::lit::sunlight::SunGrid;
