@@ -46,16 +46,32 @@ pub struct SlabArgs {
     /// Transport method.
     #[arg(long, value_enum, default_value = "reference")]
     method: SlabMethod,
-    /// `reference`: photons (2 to 1e12).
-    #[arg(long, default_value_t = 1_000_000)]
-    samples: u64,
+    /// `reference`: photons (2 to 1e12; default 1,000,000).
+    #[arg(long)]
+    samples: Option<u64>,
     /// `diffusion`: forward fraction f of the δ-M similarity transform, 0 ≤ f < 1 (default g²,
     /// measured against adding-doubling in docs/budget.md); 0 is the paper's scheme exactly.
     #[arg(long)]
     forward_fraction: Option<f64>,
-    /// `reference`: seed of the photon streams.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
+    /// `reference`: seed of the photon streams (default 0).
+    #[arg(long)]
+    seed: Option<u64>,
+}
+
+impl SlabArgs {
+    /// The flags given that `self.method` does not read, each with the method that does.
+    fn unused_flags(&self) -> Vec<(&'static str, &'static str)> {
+        let reference = self.method == SlabMethod::Reference;
+        let diffusion = self.method == SlabMethod::Diffusion;
+        [
+            ("--samples", "reference", self.samples.is_some() && !reference),
+            ("--seed", "reference", self.seed.is_some() && !reference),
+            ("--forward-fraction", "diffusion", self.forward_fraction.is_some() && !diffusion),
+        ]
+        .into_iter()
+        .filter_map(|(flag, method, unused)| unused.then_some((flag, method)))
+        .collect()
+    }
 }
 
 /// Thickest slab `--method transport` meshes (optical depths): its layer count grows as τ.
@@ -72,8 +88,14 @@ pub fn run(a: SlabArgs) -> Result<()> {
         },
     };
     p.validate("command line")?;
+    for (flag, method) in a.unused_flags() {
+        note!(
+            "warning: command line: `{flag}` does not apply to --method {}, only to --method {method}; it is ignored",
+            a.method.to_possible_value().map_or_else(String::new, |v| v.get_name().to_string())
+        );
+    }
     let r = match a.method {
-        SlabMethod::Reference => slab(&p, a.samples, a.seed)?,
+        SlabMethod::Reference => slab(&p, a.samples.unwrap_or(1_000_000), a.seed.unwrap_or(0))?,
         SlabMethod::Transport => {
             let s = crate::transport::slab::SlabSettings::default();
             if a.thickness > MAX_TRANSPORT_THICKNESS {
