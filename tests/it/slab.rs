@@ -1,25 +1,20 @@
 //! `cloudgi slab` (the path-traced slab): one JSON line near the adding-doubling row, a bad
-//! albedo named.
+//! albedo named, a flag the method does not read named as ignored.
 
 use crate::common::BIN;
 
+/// `cloudgi slab` on the slab τ = 1, albedo 0.8, g = 0 lit by `incidence`, with `extra`.
+fn slab(incidence: &str, extra: &[&str]) -> std::process::Output {
+    std::process::Command::new(BIN)
+        .args(["slab", "--thickness", "1", "--albedo", "0.8", "--g", "0", "--incidence", incidence])
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
 #[test]
 fn cli_prints_one_json_line() {
-    let out = std::process::Command::new(BIN)
-        .args([
-            "slab",
-            "--thickness",
-            "1",
-            "--albedo",
-            "0.8",
-            "--g",
-            "0",
-            "--incidence",
-            "collimated",
-        ])
-        .args(["--samples", "20000", "--seed", "5"])
-        .output()
-        .unwrap();
+    let out = slab("collimated", &["--samples", "20000", "--seed", "5"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let text = String::from_utf8(out.stdout).unwrap();
     assert_eq!(text.lines().count(), 1);
@@ -31,39 +26,23 @@ fn cli_prints_one_json_line() {
     assert!((v["R"].as_f64().unwrap() - 0.210847).abs() < 3.0 * v["R_stderr"].as_f64().unwrap() + 0.002);
     assert!((v["T"].as_f64().unwrap() - 0.541400).abs() < 3.0 * v["T_stderr"].as_f64().unwrap() + 0.002);
     // A flag the method does not read is named as ignored; the one it reads is not.
-    let slab = |method: &str, extra: &[&str]| {
-        let out = std::process::Command::new(BIN)
-            .args([
-                "slab",
-                "--thickness",
-                "1",
-                "--albedo",
-                "0.8",
-                "--g",
-                "0",
-                "--incidence",
-                "diffuse",
-                "--method",
-                method,
-            ])
-            .args(extra)
-            .output()
-            .unwrap();
+    let warned = |method: &str, extra: &[&str]| {
+        let out = slab("diffuse", &[&["--method", method], extra].concat());
         assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
         String::from_utf8_lossy(&out.stderr).into_owned()
     };
-    let said = slab("diffusion", &["--samples", "100", "--seed", "3", "--forward-fraction", "0.5"]);
+    let said = warned("diffusion", &["--samples", "100", "--seed", "3", "--forward-fraction", "0.5"]);
     assert!(
         said.contains("`--samples` does not apply to --method diffusion") && said.contains("`--seed`"),
         "{said}"
     );
     assert!(!said.contains("--forward-fraction"), "{said}");
-    let said = slab("transport", &["--forward-fraction", "0.5"]);
+    let said = warned("transport", &["--forward-fraction", "0.5"]);
     assert!(
         said.contains("`--forward-fraction` does not apply to --method transport, only to --method diffusion"),
         "{said}"
     );
-    assert!(!slab("reference", &["--samples", "2000"]).contains("warning"));
+    assert!(!warned("reference", &["--samples", "2000"]).contains("warning"));
     let bad = std::process::Command::new(BIN)
         .args(["slab", "--thickness", "1", "--albedo", "2", "--g", "0", "--incidence", "diffuse"])
         .output()
