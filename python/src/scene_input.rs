@@ -147,6 +147,45 @@ impl SceneInput {
         None
     }
 
+    /// Who set `table.key` (a keyword argument, the `overrides` dict, or the scene named `name`),
+    /// to start a warning that it does not apply ([`cloudgi::ignored_settings`]); None where
+    /// nobody did (a default, or the built-in scene's own keys).
+    pub fn given_by(&self, name: &str) -> impl Fn(&str) -> Option<String> {
+        let first_two = |table: &toml::Table| -> Vec<String> {
+            leaves(table)
+                .into_iter()
+                .map(|(p, _)| p.iter().take(2).cloned().collect::<Vec<_>>().join("."))
+                .collect()
+        };
+        let overridden = first_two(&self.overrides);
+        let in_scene = first_two(&self.scene_table());
+        let keywords = self.keywords.clone();
+        let name = name.to_string();
+        move |key: &str| {
+            if keywords.iter().any(|k| k == key) {
+                Some(format!("keyword argument `{}=`", key.rsplit('.').next().unwrap_or(key)))
+            } else if overridden.iter().any(|k| k == key) {
+                Some(format!("overrides: `{key}`"))
+            } else if in_scene.iter().any(|k| k == key) {
+                Some(format!("{name}: `{key}`"))
+            } else {
+                None
+            }
+        }
+    }
+
+    /// The scene's own keys as a table (empty for the built-in scene); called after the scene
+    /// parsed, so a failure here reads as no keys.
+    fn scene_table(&self) -> toml::Table {
+        let text = match &self.source {
+            Source::Builtin => return toml::Table::new(),
+            Source::Path(p) => std::fs::read_to_string(p).unwrap_or_default(),
+            Source::Toml(t) => t.clone(),
+            Source::Dict(json) => return serde_json::from_str(json).unwrap_or_default(),
+        };
+        text.parse().unwrap_or_default()
+    }
+
     /// `render()`'s keyword that set the dotted `key`, if one did (`spp` for `render.spp`).
     fn keyword<'k>(&self, key: &'k str) -> Option<&'k str> {
         let name = key.rsplit('.').next()?;

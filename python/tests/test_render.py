@@ -502,6 +502,46 @@ def test_the_command_lines_scene_warnings_are_runtime_warnings():
     assert not [str(w.message) for w in caught if w.category is RuntimeWarning]
 
 
+def _ignored(*args, **kwargs) -> list:
+    """The "does not apply" RuntimeWarnings of a render."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cloudgi.render(*args, **kwargs)
+    return [str(w.message) for w in caught if w.category is RuntimeWarning and "does not apply" in str(w.message)]
+
+
+def test_a_key_the_method_does_not_read_is_a_runtime_warning_as_on_the_command_line(tmp_path):
+    # `cloudgi render --method single` warns that a scene's render.transport_order is ignored;
+    # the package said nothing. Each way of giving the key is named as the command line names it.
+    scene = tiny_scene(width=8, height=6)
+    scene["render"] = {"transport_order": 5}
+    assert _ignored(scene, method="single") == [
+        "scene dict: `render.transport_order` does not apply to method single (only transport uses it); it is ignored"
+    ]
+    path = tmp_path / "s.toml"
+    path.write_text('[camera]\nwidth = 8\nheight = 6\n[medium]\nresolution = [8, 6, 4]\n[render]\nmethod = "single"\nspp = 4\n')
+    cli = run_cli("render", path, "-o", tmp_path / "c.exr").stderr
+    python = _ignored(str(path))
+    assert len(python) == 1 and f"warning: {python[0]}" in cli, (python, cli)
+    assert _ignored(tiny_scene(width=8, height=6), method="single", aov=True) == [
+        "keyword argument `aov=` does not apply to method single (only full and transport write AOV layers); it is ignored"
+    ]
+    assert _ignored(tiny_scene(width=8, height=6), method="single", overrides={"sky": {"path": "x.exr"}}) == [
+        'overrides: `sky.path` does not apply unless sky.model = "envmap"; it is ignored'
+    ]
+    # A density array replaces medium.grid, and with it the procedural cumulus' keys.
+    scene = {"camera": {"width": 8, "height": 6}, "medium": {"seed": 3, "voxel_size": 100.0}}
+    assert _ignored(scene, method="single", density=np.ones((2, 2, 2), np.float32)) == [
+        "scene dict: `medium.seed` does not apply to a density array (it replaces medium.grid); it is ignored"
+    ]
+
+
+@pytest.mark.parametrize("method", cloudgi.METHODS)
+def test_the_framed_default_scene_warns_of_no_ignored_key_whatever_the_method(method):
+    # The built-in scene's own keys are defaults, not given: only what the caller sets warns.
+    assert _ignored(None, method=method, width=8, height=6) == []
+
+
 def test_a_clipped_sun_taken_out_of_the_sky_map_is_a_runtime_warning(tmp_path):
     # A 1024×512 map of 0.5 with a Gaussian sun (σ = 2 pixels, peak 1e6), whole and cut at 65504.
     j, i = np.mgrid[0:512, 0:1024].astype(np.float32)

@@ -6,7 +6,7 @@ use crate::math::Vec3;
 use crate::scene::{Method, Scene, SkyModel, RENDER_KEYS};
 use crate::sequence::FrameList;
 
-/// What kind of grid `medium.grid` names.
+/// What kind of grid the medium is: the one `medium.grid` names, or an array given in memory.
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum GridKind {
     Procedural,
@@ -14,6 +14,7 @@ enum GridKind {
     Npy,
     Raw,
     Vdb,
+    Array,
 }
 
 fn grid_kind(grid: &str) -> GridKind {
@@ -37,29 +38,46 @@ fn grid_kind(grid: &str) -> GridKind {
 /// Every warning for `scene`, read from `file`; `flags` are the command-line options given,
 /// as (the key they set, the flag).
 pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<String> {
-    let d = &scene.desc;
+    let given_by = |key: &str| match flags.iter().find(|(k, _)| *k == key) {
+        Some((_, flag)) => Some(format!("command line: `{flag}`")),
+        None if file.sets(key) => Some(format!("{}: `{key}`", file.source)),
+        None => None,
+    };
     let mut out = scene.notes.clone();
+    out.extend(ignored_settings(scene, false, &given_by));
+    out.extend(scene_warnings(scene));
+    out
+}
+
+/// The warnings for keys that do not apply to `scene`'s grid, sun, sky, ground or method (they
+/// would be silently ignored). `given_by(key)` says who set `table.key` (`command line:
+/// `--spp 4``), or None where nobody did (a default never warns); `array` is whether the density
+/// came as an array in memory, which replaces `medium.grid`.
+pub fn ignored_settings(scene: &Scene, array: bool, given_by: &dyn Fn(&str) -> Option<String>) -> Vec<String> {
+    let d = &scene.desc;
+    let mut out = Vec::new();
     let mut rule = |key: &str, applies: bool, why: &str| {
         if applies {
             return;
         }
-        let given = match flags.iter().find(|(k, _)| *k == key) {
-            Some((_, flag)) => format!("command line: `{flag}`"),
-            None if file.sets(key) => format!("{}: `{key}`", file.source),
-            None => return,
-        };
-        out.push(format!("{given} does not apply {why}; it is ignored"));
+        if let Some(given) = given_by(key) {
+            out.push(format!("{given} does not apply {why}; it is ignored"));
+        }
     };
 
-    let kind = grid_kind(&d.medium.grid);
-    let file_grid = format!("to a grid read from a file (`{}` gives it)", d.medium.grid);
+    let kind = if array { GridKind::Array } else { grid_kind(&d.medium.grid) };
+    let file_grid = match kind {
+        GridKind::Array => "to a density array (it replaces medium.grid)".to_string(),
+        _ => format!("to a grid read from a file (`{}` gives it)", d.medium.grid),
+    };
+    rule("medium.grid", kind != GridKind::Array, &file_grid);
     rule("medium.seed", kind == GridKind::Procedural, &file_grid);
     rule("medium.resolution", kind == GridKind::Procedural, &file_grid);
     let placement = match kind {
         GridKind::Vol => "to a .vol grid (the file carries its own bounding box)",
         _ => "to a .vdb grid (the file carries its own transform; medium.scale scales it)",
     };
-    let placed_by_desc = matches!(kind, GridKind::Procedural | GridKind::Npy | GridKind::Raw);
+    let placed_by_desc = matches!(kind, GridKind::Procedural | GridKind::Npy | GridKind::Raw | GridKind::Array);
     rule("medium.voxel_size", placed_by_desc, placement);
     rule("medium.origin", placed_by_desc, placement);
     let not_vdb = "unless medium.grid is a .vdb file";
@@ -112,7 +130,6 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
              set render.sky_boundary = false for the paper's stage-1 sky)",
         );
     }
-    out.extend(scene_warnings(scene));
     out
 }
 
