@@ -4,6 +4,7 @@ import os
 import platform
 import select
 import signal
+import stat
 import subprocess
 import sys
 import textwrap
@@ -421,6 +422,20 @@ def test_write_exr_to_a_folder_raises_file_error_naming_it_and_writes_nothing(tm
     assert sorted(tmp_path.iterdir()) == before
 
 
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes are POSIX")
+def test_write_exr_to_a_pipe_or_a_path_with_a_nul_is_refused_and_the_pipe_kept(tmp_path):
+    # The atomic write renamed its file over the pipe (and, as root, over /dev/full, which then
+    # held the EXR); a NUL reached the OS, whose message named neither the function nor `path`.
+    fifo = tmp_path / "p.exr"
+    os.mkfifo(fifo)
+    image = {"rgb": np.ones((2, 2, 3), np.float32)}
+    with pytest.raises(cloudgi.FileError, match=r"^cloudgi.write_exr: field `path`: `.*p.exr` is a device, pipe or socket, not a file"):
+        cloudgi.write_exr(fifo, image)
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+    with pytest.raises(cloudgi.FileError, match=r"^cloudgi.write_exr: field `path`: .* holds a NUL character"):
+        cloudgi.write_exr(str(tmp_path / "a\0b.exr"), image)
+
+
 def test_write_exr_takes_bytes_and_unicode_paths_and_refuses_what_is_no_image(tmp_path):
     images = {"rgb": np.ones((2, 2, 3), np.float32)}
     cloudgi.write_exr(bytes(tmp_path / "b.exr"), images)
@@ -779,6 +794,15 @@ def test_a_key_given_both_as_a_keyword_and_in_overrides_is_refused():
         with pytest.raises(TypeError, match=r"spp=4 and overrides\['render'\]\['spp'\]=8 both set the scene's render.spp"):
             call(tiny_scene(), spp=4, overrides={"render": {"spp": 8}})
     assert "spp = 8" in cloudgi.scene_toml(tiny_scene(), overrides={"render": {"spp": 8}})
+
+
+def test_an_empty_axis_or_a_tiny_voxel_is_named_as_the_caller_wrote_it():
+    # The empty axis was named as [5, 4, 0] (nx, ny, nz) for an array of shape (0, 4, 5), and the
+    # tiny voxel as `Vec3(1e-30, 1e-30, 1e-30)`, the Rust type's debug form.
+    with pytest.raises(cloudgi.FormatError, match=r"array of shape \(0, 4, 5\) holds no voxel"):
+        cloudgi.render(tiny_scene(), method="single", density=np.ones((0, 4, 5), np.float32))
+    with pytest.raises(cloudgi.SceneError, match=r"`voxel_size \(argument\)`: \[1e-30, 1e-30, 1e-30\] is not allowed"):
+        cloudgi.render(tiny_scene(), method="single", density=np.ones((2, 2, 2)), voxel_size=1e-30)
 
 
 def test_a_bad_density_value_is_located_by_its_array_index_too():
