@@ -60,6 +60,7 @@ impl SceneInput {
                 (desc.to_toml(), BUILTIN.to_string(), PathBuf::from("."))
             }
             Source::Path(p) => {
+                refuse_pipe(p)?;
                 // The file alone first: its errors read exactly as the command line's.
                 let desc = SceneDesc::from_file(p)?;
                 let name = p.display().to_string();
@@ -208,6 +209,24 @@ impl SceneInput {
             e => e,
         }
     }
+}
+
+/// Refuse a scene path that is a named pipe: its read waits for a writer, on the render's own
+/// thread, which Ctrl-C cannot end (the command line's signal handler ends the process instead).
+fn refuse_pipe(path: &Path) -> Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if std::fs::metadata(path).is_ok_and(|m| m.file_type().is_fifo()) {
+            return Err(Error::format(
+                path.display().to_string(),
+                "a named pipe, which cloudgi.render would wait on for a writer, uninterruptibly; give the scene's text \
+                 (render(open(path).read())) or a scene file",
+            ));
+        }
+    }
+    let _ = path;
+    Ok(())
 }
 
 /// Every non-table value of `table` with its path of keys, in key order.

@@ -8,6 +8,7 @@ import stat
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 import warnings
 
@@ -325,8 +326,6 @@ def test_a_missing_scene_file_is_the_cli_message(tmp_path):
 
 
 def test_progress_is_reported_on_the_calling_thread():
-    import threading
-
     calls = []
     caller = threading.get_ident()
 
@@ -434,6 +433,31 @@ def test_write_exr_to_a_pipe_or_a_path_with_a_nul_is_refused_and_the_pipe_kept(t
     assert stat.S_ISFIFO(os.stat(fifo).st_mode)
     with pytest.raises(cloudgi.FileError, match=r"^cloudgi.write_exr: field `path`: .* holds a NUL character"):
         cloudgi.write_exr(str(tmp_path / "a\0b.exr"), image)
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes are POSIX")
+def test_a_scene_path_that_is_a_pipe_is_refused_not_waited_on(tmp_path):
+    # The read waited for a writer on the render's thread, and Ctrl-C could not end it.
+    fifo = tmp_path / "s.toml"
+    os.mkfifo(fifo)
+
+    def feed():
+        # A reader still waiting after 5 s gets a scene, so the call returns (and the test fails).
+        try:
+            fd = os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)
+        except OSError:  # no reader: the call was refused
+            return
+        os.write(fd, b"[camera]\nwidth = 4\nheight = 3\n")
+        os.close(fd)
+
+    for call in (lambda: cloudgi.render(fifo, method="single"), lambda: cloudgi.scene_toml(str(fifo))):
+        timer = threading.Timer(5, feed)
+        timer.start()
+        try:
+            with pytest.raises(cloudgi.FormatError, match=r"s.toml: a named pipe, which cloudgi.render would wait on"):
+                call()
+        finally:
+            timer.cancel()
 
 
 def test_write_exr_takes_bytes_and_unicode_paths_and_refuses_what_is_no_image(tmp_path):
