@@ -61,6 +61,7 @@ impl SceneInput {
             }
             Source::Path(p) => {
                 refuse_pipe(p)?;
+                refuse_grid_file(p)?;
                 // The file alone first: its errors read exactly as the command line's.
                 let desc = SceneDesc::from_file(p)?;
                 let name = p.display().to_string();
@@ -227,6 +228,23 @@ fn refuse_pipe(path: &Path) -> Result<()> {
     }
     let _ = path;
     Ok(())
+}
+
+/// Refuse a grid file given as the scene (`cloudgi render cloud.vdb` renders one, framed): read
+/// as TOML its message was "not UTF-8 text", which does not say what to pass instead.
+fn refuse_grid_file(path: &Path) -> Result<()> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    if !["vdb", "npy", "vol", "raw"].contains(&ext.as_str()) {
+        return Ok(());
+    }
+    Err(Error::format(
+        path.display().to_string(),
+        format!(
+            "a .{ext} grid file, not a scene file; give it as the scene's grid, scene={{\"medium\": {{\"grid\": path}}}} \
+             (relative paths from the working folder; without a \"camera\" table the camera frames it), or its array as \
+             density= (cloudgi.load_grid(path) returns it with its voxel_size and origin)"
+        ),
+    ))
 }
 
 /// Every non-table value of `table` with its path of keys, in key order.

@@ -460,6 +460,15 @@ def test_a_scene_path_that_is_a_pipe_is_refused_not_waited_on(tmp_path):
             timer.cancel()
 
 
+def test_a_grid_file_given_as_the_scene_says_how_to_render_it(tmp_path):
+    # `cloudgi render g.npy` renders the grid; the package read it as TOML: "not UTF-8 text".
+    np.save(tmp_path / "g.npy", np.ones((2, 2, 2), np.float32))
+    with pytest.raises(cloudgi.FormatError, match=r"g.npy: a .npy grid file, not a scene file; give it as the scene's grid"):
+        cloudgi.render(tmp_path / "g.npy")
+    images = cloudgi.render({"medium": {"grid": str(tmp_path / "g.npy")}}, method="single", width=4, height=3)
+    assert images["rgb"].shape == (3, 4, 3)
+
+
 def test_write_exr_takes_bytes_and_unicode_paths_and_refuses_what_is_no_image(tmp_path):
     images = {"rgb": np.ones((2, 2, 3), np.float32)}
     cloudgi.write_exr(bytes(tmp_path / "b.exr"), images)
