@@ -370,9 +370,9 @@ pub fn render(scene: &Scene, method: Method, options: &Options) -> Result<Render
 }
 
 /// The warnings about `scene` itself that the command line prints before it renders: a sun
-/// under the ground, a cloud of an odd size, voxels too thick for the fast methods, a low albedo,
-/// a back-scattering phase function, a sun in the sky map or a clipped one (docs/sky.md), a cloud
-/// the camera does not see. (Warnings about keys that do not apply are [`ignored_settings`], and
+/// under the ground, a grid of zeros, a cloud of an odd size, voxels too thick for the fast
+/// methods, a low albedo, a back-scattering phase function, a sun in the sky map or a clipped one
+/// (docs/sky.md), a cloud the camera does not see. (Warnings about keys that do not apply are [`ignored_settings`], and
 /// the grid's notes are in [`Scene::notes`].) The Python package issues them as `RuntimeWarning`s.
 pub fn scene_warnings(scene: &Scene) -> Vec<String> {
     crate::cli::warnings::scene_warnings(scene)

@@ -590,6 +590,16 @@ def test_the_framed_default_scene_warns_of_no_ignored_key_whatever_the_method(me
     assert _ignored(None, method=method, width=8, height=6) == []
 
 
+def test_a_density_of_zeros_or_of_values_float32_reads_as_zero_is_a_runtime_warning():
+    # The image showed sky and ground only, and nothing said why.
+    for value, warned in ((0.0, True), (1e-300, True), (1e-3, False)):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            cloudgi.render({"camera": {"width": 8, "height": 6}}, method="single", density=np.full((2, 2, 2), value))
+        seen = [str(w.message) for w in caught if "every density of the grid is 0" in str(w.message)]
+        assert bool(seen) == warned, (value, seen)
+
+
 def test_a_clipped_sun_taken_out_of_the_sky_map_is_a_runtime_warning(tmp_path):
     # A 1024×512 map of 0.5 with a Gaussian sun (σ = 2 pixels, peak 1e6), whole and cut at 65504.
     j, i = np.mgrid[0:512, 0:1024].astype(np.float32)

@@ -134,15 +134,16 @@ pub fn ignored_settings(scene: &Scene, array: bool, given_by: &dyn Fn(&str) -> O
 }
 
 /// The warnings about the scene itself, whatever its keys were given by (a file, flags, the
-/// Python package's keywords): a sun under the ground, a cloud of an odd size, thick voxels, a
-/// low albedo, a back-scattering phase function, a sun in the sky map or a clipped one, a cloud
-/// the camera does not see.
+/// Python package's keywords): a sun under the ground, a grid of zeros, a cloud of an odd size,
+/// thick voxels, a low albedo, a back-scattering phase function, a sun in the sky map or a
+/// clipped one, a cloud the camera does not see.
 pub fn scene_warnings(scene: &Scene) -> Vec<String> {
     let mut out = Vec::new();
     out.extend(hidden_sun_warning(scene));
     // A medium with no density (an empty .vdb frame, which its note reports) has no cloud to
     // size or frame.
     let cloud = scene.medium.active_box(0).is_some();
+    out.extend(no_density_warning(scene).filter(|_| !cloud));
     out.extend(super::cloud_size::warning(scene).filter(|_| cloud));
     out.extend(super::thick_voxels::warning(scene));
     out.extend(super::low_albedo::warning(scene));
@@ -242,6 +243,19 @@ fn hidden_sun_warning(scene: &Scene) -> Option<String> {
              only the sky lights the scene; {raise}",
             scene.source,
             -scene.sun.dir.y.asin().to_degrees()
+        )
+    })
+}
+
+/// A warning when the grid's densities are all 0, so the image shows no cloud: an array of
+/// zeros, or of values float32 cannot tell from 0 (1e-300 in a float64 `.npy`). A `.vdb` with
+/// no active voxels has its own note.
+fn no_density_warning(scene: &Scene) -> Option<String> {
+    (grid_kind(&scene.desc.medium.grid) != GridKind::Vdb).then(|| {
+        format!(
+            "{}: every density of the grid is 0 (or below float32's smallest, 1.4e-45, which reads as 0): the image \
+             shows sky and ground only; check the grid (or scale its densities up and medium.sigma_t down)",
+            scene.source
         )
     })
 }
@@ -431,6 +445,31 @@ mod tests {
             ]
         );
         assert_eq!(kind("at -2.86° and [1.0, -3]; x-ray"), "at #° and [#, #]; x-ray");
+    }
+
+    #[test]
+    fn a_grid_of_zeros_is_reported_and_one_with_a_density_is_not() {
+        let dir = tempfile::tempdir().unwrap();
+        for (value, warned) in [(0.0f64, true), (1e-300, true), (1e-3, false)] {
+            // A float64 .npy of 2×2×2.
+            let header = "{'descr': '<f8', 'fortran_order': False, 'shape': (2, 2, 2), }";
+            let mut npy = b"\x93NUMPY\x01\x00".to_vec();
+            let pad = 64 - (10 + header.len() + 1) % 64;
+            npy.extend_from_slice(&((header.len() + pad + 1) as u16).to_le_bytes());
+            npy.extend_from_slice(header.as_bytes());
+            npy.extend(std::iter::repeat_n(b' ', pad));
+            npy.push(b'\n');
+            npy.extend((0..8).flat_map(|_| value.to_le_bytes()));
+            std::fs::write(dir.path().join("g.npy"), npy).unwrap();
+            let p = dir.path().join("s.toml");
+            std::fs::write(&p, "[medium]\ngrid = \"g.npy\"\nvoxel_size = 100.0\n").unwrap();
+            let w = warnings_of(&p);
+            assert_eq!(
+                w.iter().any(|m| m.contains("every density of the grid is 0")),
+                warned,
+                "{value}: {w:?}"
+            );
+        }
     }
 
     #[test]
