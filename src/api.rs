@@ -370,12 +370,22 @@ pub fn render(scene: &Scene, method: Method, options: &Options) -> Result<Render
 }
 
 /// The warnings about `scene` itself that the command line prints before it renders: a sun
-/// under the ground, a cloud of an odd size, voxels too thick for the fast methods, a low albedo,
-/// a back-scattering phase function, a sun in the sky map or a clipped one (docs/sky.md), a cloud
-/// the camera does not see. (Warnings about keys that do not apply read the scene file, and the
-/// grid's notes are in [`Scene::notes`].) The Python package issues them as `RuntimeWarning`s.
+/// under the ground, a grid of zeros, a cloud of an odd size, voxels too thick for the fast
+/// methods, a low albedo, a back-scattering phase function, a sun in the sky map or a clipped one
+/// (docs/sky.md), a cloud the camera does not see. (Warnings about keys that do not apply are [`ignored_settings`], and
+/// the grid's notes are in [`Scene::notes`].) The Python package issues them as `RuntimeWarning`s.
 pub fn scene_warnings(scene: &Scene) -> Vec<String> {
     crate::cli::warnings::scene_warnings(scene)
+}
+
+/// The command line's warnings for keys given that do not apply to `scene`'s grid, sun, sky,
+/// ground or method, so would be ignored (`render.spp` with a deterministic method, `sky.path`
+/// with a constant sky). `given_by("table.key")` names who set the key (it starts the warning:
+/// `"scene.toml: `render.spp`"`), None where nobody did: a default never warns. `array`: the
+/// density came as a [`Density`], which replaces `medium.grid`. The Python package issues them
+/// as `RuntimeWarning`s.
+pub fn ignored_settings(scene: &Scene, array: bool, given_by: &dyn Fn(&str) -> Option<String>) -> Vec<String> {
+    crate::cli::warnings::ignored_settings(scene, array, given_by)
 }
 
 /// The caller's progress sink with the cancel flag as its [`Progress::cancelled`].

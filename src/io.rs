@@ -102,6 +102,13 @@ pub fn check_file_name(path: &Path, source: &str, field: &str) -> Result<()> {
             ),
         ));
     }
+    if text.contains(&0) {
+        return Err(Error::invalid(
+            source,
+            field,
+            format!("{path:?} holds a NUL character, which no file name can; remove it"),
+        ));
+    }
     let len = path.file_name().map_or(0, |n| n.as_encoded_bytes().len());
     if len > NAME_MAX {
         return Err(Error::invalid(
@@ -125,8 +132,20 @@ pub fn check_output_file(path: &Path, source: &str, field: &str) -> Result<()> {
             format!("`{}` is a folder; the output must be a file name", path.display()),
         ));
     }
-    // The atomic write renames a new file over the old one, which its own permission would not
-    // stop.
+    // The atomic write renames a new file over the old one: a device, pipe or socket there would
+    // be replaced by a regular file (`/dev/full`, where root may rename), not written to.
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file()) {
+        return Err(Error::invalid(
+            source,
+            field,
+            format!(
+                "`{}` is a device, pipe or socket, not a file: the output is written as a new file renamed over \
+                 the old one, which would replace it; give a file name",
+                path.display()
+            ),
+        ));
+    }
+    // Nor would the old file's own permission stop it.
     if std::fs::metadata(path).is_ok_and(|m| m.permissions().readonly()) {
         return Err(Error::invalid(
             source,
@@ -385,6 +404,21 @@ mod tests {
         assert!(e.ends_with(&format!("`{}` is a file, not a folder to write in", file.display())), "{e}");
         std::fs::remove_file(&file).unwrap();
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "the probe file is removed");
+    }
+
+    #[test]
+    #[cfg(unix)]
+    fn an_output_that_is_a_socket_or_device_or_holds_a_nul_is_refused_not_replaced() {
+        // Renamed over, a device (`/dev/full` as root) became a regular file holding an EXR.
+        let dir = tempfile::tempdir().unwrap();
+        let socket = dir.path().join("s.exr");
+        let _listener = std::os::unix::net::UnixListener::bind(&socket).unwrap();
+        for path in [socket.as_path(), Path::new("/dev/null")] {
+            let e = check_output_file(path, "cloudgi.write_exr", "path").unwrap_err().to_string();
+            assert!(e.contains("is a device, pipe or socket, not a file"), "{e}");
+        }
+        let e = check_output_file(Path::new("a\0b.exr"), "cloudgi.write_exr", "path").unwrap_err().to_string();
+        assert_eq!(e, "cloudgi.write_exr: field `path`: \"a\\0b.exr\" holds a NUL character, which no file name can; remove it");
     }
 
     #[test]

@@ -52,7 +52,8 @@ mod par;
 mod tests;
 
 pub use crate::api::{
-    check_output_file, render, scene_warnings, Density, Event, FnProgress, Options, Render, Stats, DENSITY_SOURCE, TOML_SOURCE,
+    check_output_file, ignored_settings, render, scene_warnings, Density, Event, FnProgress, Options, Render, Stats, DENSITY_SOURCE,
+    TOML_SOURCE,
 };
 pub use crate::camera::CameraDesc;
 pub use crate::error::{Error, Result};

@@ -274,6 +274,7 @@ impl SceneDesc {
         // serde reads a `[T; 3]` from the first three items and ignores the rest.
         if let Ok(table) = text.parse::<toml::Table>() {
             check_array_lengths(&table, "", file)?;
+            check_f32_overflow(&table, &desc, file)?;
             // A file without a `[camera]` table frames its cloud (camera.fit).
             if !table.contains_key("camera") {
                 desc.camera.fit = true;
@@ -309,30 +310,85 @@ pub use crate::limits::{MAX_COORDINATE, MAX_EXPOSURE, MAX_LIGHT, MAX_SIGMA_T};
 pub(crate) fn check_magnitudes(d: &SceneDesc, f: &str) -> Result<()> {
     let light = format!("at most {MAX_LIGHT:e}; the sun gives 1361 W/m² (default 3), larger values overflow f32 in the methods");
     let place = format!("each coordinate within ±{MAX_COORDINATE:e} m; move the scene near the origin");
-    let rows: [(&str, Vec<f32>, f32, &str); 7] = [
-        ("sun.irradiance", d.sun.irradiance.to_vec(), MAX_LIGHT, &light),
-        ("sky.radiance", d.sky.radiance.to_vec(), MAX_LIGHT, &light),
-        ("sky.scale", vec![d.sky.scale], MAX_LIGHT, &light),
+    let rows: [(&str, Vec<f32>, &str); 7] = [
+        ("sun.irradiance", d.sun.irradiance.to_vec(), &light),
+        ("sky.radiance", d.sky.radiance.to_vec(), &light),
+        ("sky.scale", vec![d.sky.scale], &light),
         (
             "medium.sigma_t",
             vec![d.medium.sigma_t],
-            MAX_SIGMA_T,
             "at most 1e9 m⁻¹ (an optical depth of 1 per nanometre); clouds have 0.01–1 m⁻¹",
         ),
-        ("medium.origin", d.medium.origin.to_vec(), MAX_COORDINATE, &place),
-        ("camera.position", d.camera.position.to_vec(), MAX_COORDINATE, &place),
-        ("camera.look_at", d.camera.look_at.to_vec(), MAX_COORDINATE, &place),
+        ("medium.origin", d.medium.origin.to_vec(), &place),
+        ("camera.position", d.camera.position.to_vec(), &place),
+        ("camera.look_at", d.camera.look_at.to_vec(), &place),
     ];
-    for (key, values, max, what) in rows {
+    for (key, values, what) in rows {
+        let max = largest_magnitude(key);
         check(f, key, values.iter().all(|v| !v.is_finite() || v.abs() <= max), &values, what)?;
     }
     check(
         f,
         "render.exposure",
-        d.render.exposure.abs() <= MAX_EXPOSURE || !d.render.exposure.is_finite(),
+        d.render.exposure.abs() <= largest_magnitude("render.exposure") || !d.render.exposure.is_finite(),
         d.render.exposure,
         "at most ±64 stops; past 127 the preview's scale factor overflows f32",
     )
+}
+
+/// The largest magnitude scene field `key` takes: its own bound where [`check_magnitudes`] has
+/// one, else f32's largest (every other float field is an f32 or an f64).
+fn largest_magnitude(key: &str) -> f32 {
+    match key {
+        "sun.irradiance" | "sky.radiance" | "sky.scale" => MAX_LIGHT,
+        "medium.sigma_t" => MAX_SIGMA_T,
+        "medium.origin" | "camera.position" | "camera.look_at" => MAX_COORDINATE,
+        "render.exposure" => MAX_EXPOSURE,
+        _ => f32::MAX,
+    }
+}
+
+/// Refuse a number of the file that its f32 field cannot hold (`1e39` reads as infinity, whose
+/// message would be "inf is not allowed"), naming the field, the value as written and the
+/// largest allowed. `desc` is `table` parsed: a field infinite in `desc` where `table` holds a
+/// finite number overflowed. One walk covers every field; f64 fields hold such numbers and pass.
+fn check_f32_overflow(table: &toml::Table, desc: &SceneDesc, file: &str) -> Result<()> {
+    fn walk(written: &toml::Value, parsed: &toml::Value, key: &str, file: &str) -> Result<()> {
+        use toml::Value::{Array, Float, Table};
+        match (written, parsed) {
+            (Table(w), Table(p)) => {
+                for (k, v) in w {
+                    let name = if key.is_empty() { k.clone() } else { format!("{key}.{k}") };
+                    if let Some(pv) = p.get(k) {
+                        walk(v, pv, &name, file)?;
+                    }
+                }
+            }
+            // An array of tables names each (`animation.key[0].sun`); a list of numbers is one field.
+            (Array(w), Array(p)) => {
+                for (i, (v, pv)) in w.iter().zip(p).enumerate() {
+                    let name = if v.is_table() { format!("{key}[{i}]") } else { key.to_string() };
+                    walk(v, pv, &name, file)?;
+                }
+            }
+            (Float(x), Float(y)) if x.is_finite() && y.is_infinite() => {
+                let largest = largest_magnitude(key);
+                let kind = if largest == f32::MAX { " (a 32-bit float's largest)" } else { "" };
+                return Err(Error::invalid(
+                    file,
+                    key,
+                    format!("{x:?} is beyond the range of this field: the largest magnitude allowed is {largest:?}{kind}"),
+                ));
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+    match toml::Value::try_from(desc) {
+        Ok(parsed) => walk(&toml::Value::Table(table.clone()), &parsed, "", file),
+        // The description always serialises; if it did not, the owners' checks still refuse the infinity.
+        Err(_) => Ok(()),
+    }
 }
 
 /// The grid's largest density times the brightest light within
@@ -706,4 +762,40 @@ pub struct CameraKey {
 pub struct MediumKey {
     /// Extinction at density 1 (m⁻¹).
     pub sigma_t: Option<f32>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The message of the scene file `text`, which must be refused.
+    fn refusal(text: &str) -> String {
+        SceneDesc::from_toml(text, "s.toml").unwrap_err().to_string()
+    }
+
+    #[test]
+    fn a_number_past_f32_names_its_field_its_value_and_the_largest_allowed_whatever_the_field() {
+        let f32_max = "the largest magnitude allowed is 3.4028235e38 (a 32-bit float's largest)";
+        for (text, message) in [
+            ("[medium]\nvoxel_size = 1e39", format!("field `medium.voxel_size`: 1e39 is beyond the range of this field: {f32_max}")),
+            ("[medium]\nvoxel_size = [1.0, -2e39, 1.0]", format!("field `medium.voxel_size`: -2e39 is beyond the range of this field: {f32_max}")),
+            ("[medium]\ng = -1e39", format!("field `medium.g`: -1e39 is beyond the range of this field: {f32_max}")),
+            ("[camera]\nfov_deg = 1e300", format!("field `camera.fov_deg`: 1e300 is beyond the range of this field: {f32_max}")),
+            // Fields with a bound of their own name it.
+            ("[medium]\norigin = [0.0, 1e39, 0.0]", "field `medium.origin`: 1e39 is beyond the range of this field: the largest magnitude allowed is 10000000.0".into()),
+            ("[sun]\nirradiance = [1e40, 1.0, 1.0]", "field `sun.irradiance`: 1e40 is beyond the range of this field: the largest magnitude allowed is 1e30".into()),
+            ("[sky]\nradiance = [1.0, 1.0, 3.5e38]", "field `sky.radiance`: 3.5e38 is beyond the range of this field: the largest magnitude allowed is 1e30".into()),
+            // A keyframe of a sequence is named by its index.
+            (
+                "[[animation.key]]\nframe = 1\nsun.irradiance = [1.0, 1e39, 1.0]",
+                format!("field `animation.key[0].sun.irradiance`: 1e39 is beyond the range of this field: {f32_max}"),
+            ),
+        ] {
+            assert!(refusal(text).ends_with(&message), "{text}: {}", refusal(text));
+        }
+        // An f64 field holds 1e39: its own check (at build) refuses it, naming its range.
+        assert!(SceneDesc::from_toml("[render]\nsolver_tolerance = 1e39", "s.toml").is_ok());
+        // Within f32's range, a number is not this check's to refuse.
+        assert!(SceneDesc::from_toml("[camera]\nfov_deg = 3.4e38", "s.toml").is_ok());
+    }
 }

@@ -225,9 +225,10 @@ def render(
 
     ``progress(stage, done, total)`` is called from this thread while the render runs (at most
     every 50 ms, on change), e.g. to drive a tqdm bar. The GIL is released during the render;
-    Ctrl-C cancels it (KeyboardInterrupt). Solver warnings and the scene's warnings and notes
-    (a sun taken out of the sky map by ``sky.extract_sun``, a clipped one, ...) are issued as
-    RuntimeWarning.
+    Ctrl-C cancels it (KeyboardInterrupt). Solver warnings, the scene's warnings and notes (a
+    sun taken out of the sky map by ``sky.extract_sun``, a clipped one, a cloud out of view, ...)
+    and the command line's warnings about a key given that does not apply to the method, sky,
+    ground or grid (``spp`` with a deterministic method) are issued as RuntimeWarning.
 
     Raises TypeError or ValueError for an argument of the wrong type or shape, naming it,
     :class:`SceneError` (bad scene or scene value), :class:`FormatError` (bad grid data),

@@ -157,6 +157,9 @@ fn render<'py>(
         for note in scene.notes() {
             reported.warn(note);
         }
+        for w in cloudgi::ignored_settings(&scene, npy.is_some(), &input.given_by(&source)) {
+            reported.warn(&w);
+        }
         for w in cloudgi::scene_warnings(&scene) {
             reported.warn(&w);
         }

@@ -60,6 +60,8 @@ impl SceneInput {
                 (desc.to_toml(), BUILTIN.to_string(), PathBuf::from("."))
             }
             Source::Path(p) => {
+                refuse_pipe(p)?;
+                refuse_grid_file(p)?;
                 // The file alone first: its errors read exactly as the command line's.
                 let desc = SceneDesc::from_file(p)?;
                 let name = p.display().to_string();
@@ -147,6 +149,45 @@ impl SceneInput {
         None
     }
 
+    /// Who set `table.key` (a keyword argument, the `overrides` dict, or the scene named `name`),
+    /// to start a warning that it does not apply ([`cloudgi::ignored_settings`]); None where
+    /// nobody did (a default, or the built-in scene's own keys).
+    pub fn given_by(&self, name: &str) -> impl Fn(&str) -> Option<String> {
+        let first_two = |table: &toml::Table| -> Vec<String> {
+            leaves(table)
+                .into_iter()
+                .map(|(p, _)| p.iter().take(2).cloned().collect::<Vec<_>>().join("."))
+                .collect()
+        };
+        let overridden = first_two(&self.overrides);
+        let in_scene = first_two(&self.scene_table());
+        let keywords = self.keywords.clone();
+        let name = name.to_string();
+        move |key: &str| {
+            if keywords.iter().any(|k| k == key) {
+                Some(format!("keyword argument `{}=`", key.rsplit('.').next().unwrap_or(key)))
+            } else if overridden.iter().any(|k| k == key) {
+                Some(format!("overrides: `{key}`"))
+            } else if in_scene.iter().any(|k| k == key) {
+                Some(format!("{name}: `{key}`"))
+            } else {
+                None
+            }
+        }
+    }
+
+    /// The scene's own keys as a table (empty for the built-in scene); called after the scene
+    /// parsed, so a failure here reads as no keys.
+    fn scene_table(&self) -> toml::Table {
+        let text = match &self.source {
+            Source::Builtin => return toml::Table::new(),
+            Source::Path(p) => std::fs::read_to_string(p).unwrap_or_default(),
+            Source::Toml(t) => t.clone(),
+            Source::Dict(json) => return serde_json::from_str(json).unwrap_or_default(),
+        };
+        text.parse().unwrap_or_default()
+    }
+
     /// `render()`'s keyword that set the dotted `key`, if one did (`spp` for `render.spp`).
     fn keyword<'k>(&self, key: &'k str) -> Option<&'k str> {
         let name = key.rsplit('.').next()?;
@@ -169,6 +210,41 @@ impl SceneInput {
             e => e,
         }
     }
+}
+
+/// Refuse a scene path that is a named pipe: its read waits for a writer, on the render's own
+/// thread, which Ctrl-C cannot end (the command line's signal handler ends the process instead).
+fn refuse_pipe(path: &Path) -> Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if std::fs::metadata(path).is_ok_and(|m| m.file_type().is_fifo()) {
+            return Err(Error::format(
+                path.display().to_string(),
+                "a named pipe, which cloudgi.render would wait on for a writer, uninterruptibly; give the scene's text \
+                 (render(open(path).read())) or a scene file",
+            ));
+        }
+    }
+    let _ = path;
+    Ok(())
+}
+
+/// Refuse a grid file given as the scene (`cloudgi render cloud.vdb` renders one, framed): read
+/// as TOML its message was "not UTF-8 text", which does not say what to pass instead.
+fn refuse_grid_file(path: &Path) -> Result<()> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    if !["vdb", "npy", "vol", "raw"].contains(&ext.as_str()) {
+        return Ok(());
+    }
+    Err(Error::format(
+        path.display().to_string(),
+        format!(
+            "a .{ext} grid file, not a scene file; give it as the scene's grid, scene={{\"medium\": {{\"grid\": path}}}} \
+             (relative paths from the working folder; without a \"camera\" table the camera frames it), or its array as \
+             density= (cloudgi.load_grid(path) returns it with its voxel_size and origin)"
+        ),
+    ))
 }
 
 /// Every non-table value of `table` with its path of keys, in key order.

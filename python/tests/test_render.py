@@ -4,9 +4,11 @@ import os
 import platform
 import select
 import signal
+import stat
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 import warnings
 
@@ -324,8 +326,6 @@ def test_a_missing_scene_file_is_the_cli_message(tmp_path):
 
 
 def test_progress_is_reported_on_the_calling_thread():
-    import threading
-
     calls = []
     caller = threading.get_ident()
 
@@ -421,6 +421,54 @@ def test_write_exr_to_a_folder_raises_file_error_naming_it_and_writes_nothing(tm
     assert sorted(tmp_path.iterdir()) == before
 
 
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes are POSIX")
+def test_write_exr_to_a_pipe_or_a_path_with_a_nul_is_refused_and_the_pipe_kept(tmp_path):
+    # The atomic write renamed its file over the pipe (and, as root, over /dev/full, which then
+    # held the EXR); a NUL reached the OS, whose message named neither the function nor `path`.
+    fifo = tmp_path / "p.exr"
+    os.mkfifo(fifo)
+    image = {"rgb": np.ones((2, 2, 3), np.float32)}
+    with pytest.raises(cloudgi.FileError, match=r"^cloudgi.write_exr: field `path`: `.*p.exr` is a device, pipe or socket, not a file"):
+        cloudgi.write_exr(fifo, image)
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+    with pytest.raises(cloudgi.FileError, match=r"^cloudgi.write_exr: field `path`: .* holds a NUL character"):
+        cloudgi.write_exr(str(tmp_path / "a\0b.exr"), image)
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes are POSIX")
+def test_a_scene_path_that_is_a_pipe_is_refused_not_waited_on(tmp_path):
+    # The read waited for a writer on the render's thread, and Ctrl-C could not end it.
+    fifo = tmp_path / "s.toml"
+    os.mkfifo(fifo)
+
+    def feed():
+        # A reader still waiting after 5 s gets a scene, so the call returns (and the test fails).
+        try:
+            fd = os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)
+        except OSError:  # no reader: the call was refused
+            return
+        os.write(fd, b"[camera]\nwidth = 4\nheight = 3\n")
+        os.close(fd)
+
+    for call in (lambda: cloudgi.render(fifo, method="single"), lambda: cloudgi.scene_toml(str(fifo))):
+        timer = threading.Timer(5, feed)
+        timer.start()
+        try:
+            with pytest.raises(cloudgi.FormatError, match=r"s.toml: a named pipe, which cloudgi.render would wait on"):
+                call()
+        finally:
+            timer.cancel()
+
+
+def test_a_grid_file_given_as_the_scene_says_how_to_render_it(tmp_path):
+    # `cloudgi render g.npy` renders the grid; the package read it as TOML: "not UTF-8 text".
+    np.save(tmp_path / "g.npy", np.ones((2, 2, 2), np.float32))
+    with pytest.raises(cloudgi.FormatError, match=r"g.npy: a .npy grid file, not a scene file; give it as the scene's grid"):
+        cloudgi.render(tmp_path / "g.npy")
+    images = cloudgi.render({"medium": {"grid": str(tmp_path / "g.npy")}}, method="single", width=4, height=3)
+    assert images["rgb"].shape == (3, 4, 3)
+
+
 def test_write_exr_takes_bytes_and_unicode_paths_and_refuses_what_is_no_image(tmp_path):
     images = {"rgb": np.ones((2, 2, 3), np.float32)}
     cloudgi.write_exr(bytes(tmp_path / "b.exr"), images)
@@ -500,6 +548,56 @@ def test_the_command_lines_scene_warnings_are_runtime_warnings():
         warnings.simplefilter("always")
         cloudgi.render(tiny_scene(width=8, height=6), method="single")
     assert not [str(w.message) for w in caught if w.category is RuntimeWarning]
+
+
+def _ignored(*args, **kwargs) -> list:
+    """The "does not apply" RuntimeWarnings of a render."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cloudgi.render(*args, **kwargs)
+    return [str(w.message) for w in caught if w.category is RuntimeWarning and "does not apply" in str(w.message)]
+
+
+def test_a_key_the_method_does_not_read_is_a_runtime_warning_as_on_the_command_line(tmp_path):
+    # `cloudgi render --method single` warns that a scene's render.transport_order is ignored;
+    # the package said nothing. Each way of giving the key is named as the command line names it.
+    scene = tiny_scene(width=8, height=6)
+    scene["render"] = {"transport_order": 5}
+    assert _ignored(scene, method="single") == [
+        "scene dict: `render.transport_order` does not apply to method single (only transport uses it); it is ignored"
+    ]
+    path = tmp_path / "s.toml"
+    path.write_text('[camera]\nwidth = 8\nheight = 6\n[medium]\nresolution = [8, 6, 4]\n[render]\nmethod = "single"\nspp = 4\n')
+    cli = run_cli("render", path, "-o", tmp_path / "c.exr").stderr
+    python = _ignored(str(path))
+    assert len(python) == 1 and f"warning: {python[0]}" in cli, (python, cli)
+    assert _ignored(tiny_scene(width=8, height=6), method="single", aov=True) == [
+        "keyword argument `aov=` does not apply to method single (only full and transport write AOV layers); it is ignored"
+    ]
+    assert _ignored(tiny_scene(width=8, height=6), method="single", overrides={"sky": {"path": "x.exr"}}) == [
+        'overrides: `sky.path` does not apply unless sky.model = "envmap"; it is ignored'
+    ]
+    # A density array replaces medium.grid, and with it the procedural cumulus' keys.
+    scene = {"camera": {"width": 8, "height": 6}, "medium": {"seed": 3, "voxel_size": 100.0}}
+    assert _ignored(scene, method="single", density=np.ones((2, 2, 2), np.float32)) == [
+        "scene dict: `medium.seed` does not apply to a density array (it replaces medium.grid); it is ignored"
+    ]
+
+
+@pytest.mark.parametrize("method", cloudgi.METHODS)
+def test_the_framed_default_scene_warns_of_no_ignored_key_whatever_the_method(method):
+    # The built-in scene's own keys are defaults, not given: only what the caller sets warns.
+    assert _ignored(None, method=method, width=8, height=6) == []
+
+
+def test_a_density_of_zeros_or_of_values_float32_reads_as_zero_is_a_runtime_warning():
+    # The image showed sky and ground only, and nothing said why.
+    for value, warned in ((0.0, True), (1e-300, True), (1e-3, False)):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            cloudgi.render({"camera": {"width": 8, "height": 6}}, method="single", density=np.full((2, 2, 2), value))
+        seen = [str(w.message) for w in caught if "every density of the grid is 0" in str(w.message)]
+        assert bool(seen) == warned, (value, seen)
 
 
 def test_a_clipped_sun_taken_out_of_the_sky_map_is_a_runtime_warning(tmp_path):
@@ -739,6 +837,15 @@ def test_a_key_given_both_as_a_keyword_and_in_overrides_is_refused():
         with pytest.raises(TypeError, match=r"spp=4 and overrides\['render'\]\['spp'\]=8 both set the scene's render.spp"):
             call(tiny_scene(), spp=4, overrides={"render": {"spp": 8}})
     assert "spp = 8" in cloudgi.scene_toml(tiny_scene(), overrides={"render": {"spp": 8}})
+
+
+def test_an_empty_axis_or_a_tiny_voxel_is_named_as_the_caller_wrote_it():
+    # The empty axis was named as [5, 4, 0] (nx, ny, nz) for an array of shape (0, 4, 5), and the
+    # tiny voxel as `Vec3(1e-30, 1e-30, 1e-30)`, the Rust type's debug form.
+    with pytest.raises(cloudgi.FormatError, match=r"array of shape \(0, 4, 5\) holds no voxel"):
+        cloudgi.render(tiny_scene(), method="single", density=np.ones((0, 4, 5), np.float32))
+    with pytest.raises(cloudgi.SceneError, match=r"`voxel_size \(argument\)`: \[1e-30, 1e-30, 1e-30\] is not allowed"):
+        cloudgi.render(tiny_scene(), method="single", density=np.ones((2, 2, 2)), voxel_size=1e-30)
 
 
 def test_a_bad_density_value_is_located_by_its_array_index_too():

@@ -6,7 +6,7 @@ use crate::math::Vec3;
 use crate::scene::{Method, Scene, SkyModel, RENDER_KEYS};
 use crate::sequence::FrameList;
 
-/// What kind of grid `medium.grid` names.
+/// What kind of grid the medium is: the one `medium.grid` names, or an array given in memory.
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum GridKind {
     Procedural,
@@ -14,6 +14,7 @@ enum GridKind {
     Npy,
     Raw,
     Vdb,
+    Array,
 }
 
 fn grid_kind(grid: &str) -> GridKind {
@@ -37,29 +38,46 @@ fn grid_kind(grid: &str) -> GridKind {
 /// Every warning for `scene`, read from `file`; `flags` are the command-line options given,
 /// as (the key they set, the flag).
 pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<String> {
-    let d = &scene.desc;
+    let given_by = |key: &str| match flags.iter().find(|(k, _)| *k == key) {
+        Some((_, flag)) => Some(format!("command line: `{flag}`")),
+        None if file.sets(key) => Some(format!("{}: `{key}`", file.source)),
+        None => None,
+    };
     let mut out = scene.notes.clone();
+    out.extend(ignored_settings(scene, false, &given_by));
+    out.extend(scene_warnings(scene));
+    out
+}
+
+/// The warnings for keys that do not apply to `scene`'s grid, sun, sky, ground or method (they
+/// would be silently ignored). `given_by(key)` says who set `table.key` (`command line:
+/// `--spp 4``), or None where nobody did (a default never warns); `array` is whether the density
+/// came as an array in memory, which replaces `medium.grid`.
+pub fn ignored_settings(scene: &Scene, array: bool, given_by: &dyn Fn(&str) -> Option<String>) -> Vec<String> {
+    let d = &scene.desc;
+    let mut out = Vec::new();
     let mut rule = |key: &str, applies: bool, why: &str| {
         if applies {
             return;
         }
-        let given = match flags.iter().find(|(k, _)| *k == key) {
-            Some((_, flag)) => format!("command line: `{flag}`"),
-            None if file.sets(key) => format!("{}: `{key}`", file.source),
-            None => return,
-        };
-        out.push(format!("{given} does not apply {why}; it is ignored"));
+        if let Some(given) = given_by(key) {
+            out.push(format!("{given} does not apply {why}; it is ignored"));
+        }
     };
 
-    let kind = grid_kind(&d.medium.grid);
-    let file_grid = format!("to a grid read from a file (`{}` gives it)", d.medium.grid);
+    let kind = if array { GridKind::Array } else { grid_kind(&d.medium.grid) };
+    let file_grid = match kind {
+        GridKind::Array => "to a density array (it replaces medium.grid)".to_string(),
+        _ => format!("to a grid read from a file (`{}` gives it)", d.medium.grid),
+    };
+    rule("medium.grid", kind != GridKind::Array, &file_grid);
     rule("medium.seed", kind == GridKind::Procedural, &file_grid);
     rule("medium.resolution", kind == GridKind::Procedural, &file_grid);
     let placement = match kind {
         GridKind::Vol => "to a .vol grid (the file carries its own bounding box)",
         _ => "to a .vdb grid (the file carries its own transform; medium.scale scales it)",
     };
-    let placed_by_desc = matches!(kind, GridKind::Procedural | GridKind::Npy | GridKind::Raw);
+    let placed_by_desc = matches!(kind, GridKind::Procedural | GridKind::Npy | GridKind::Raw | GridKind::Array);
     rule("medium.voxel_size", placed_by_desc, placement);
     rule("medium.origin", placed_by_desc, placement);
     let not_vdb = "unless medium.grid is a .vdb file";
@@ -112,20 +130,20 @@ pub fn warnings(file: &SceneFile, flags: &[(&str, &str)], scene: &Scene) -> Vec<
              set render.sky_boundary = false for the paper's stage-1 sky)",
         );
     }
-    out.extend(scene_warnings(scene));
     out
 }
 
 /// The warnings about the scene itself, whatever its keys were given by (a file, flags, the
-/// Python package's keywords): a sun under the ground, a cloud of an odd size, thick voxels, a
-/// low albedo, a back-scattering phase function, a sun in the sky map or a clipped one, a cloud
-/// the camera does not see.
+/// Python package's keywords): a sun under the ground, a grid of zeros, a cloud of an odd size,
+/// thick voxels, a low albedo, a back-scattering phase function, a sun in the sky map or a
+/// clipped one, a cloud the camera does not see.
 pub fn scene_warnings(scene: &Scene) -> Vec<String> {
     let mut out = Vec::new();
     out.extend(hidden_sun_warning(scene));
     // A medium with no density (an empty .vdb frame, which its note reports) has no cloud to
     // size or frame.
     let cloud = scene.medium.active_box(0).is_some();
+    out.extend(no_density_warning(scene).filter(|_| !cloud));
     out.extend(super::cloud_size::warning(scene).filter(|_| cloud));
     out.extend(super::thick_voxels::warning(scene));
     out.extend(super::low_albedo::warning(scene));
@@ -225,6 +243,19 @@ fn hidden_sun_warning(scene: &Scene) -> Option<String> {
              only the sky lights the scene; {raise}",
             scene.source,
             -scene.sun.dir.y.asin().to_degrees()
+        )
+    })
+}
+
+/// A warning when the grid's densities are all 0, so the image shows no cloud: an array of
+/// zeros, or of values float32 cannot tell from 0 (1e-300 in a float64 `.npy`). A `.vdb` with
+/// no active voxels has its own note.
+fn no_density_warning(scene: &Scene) -> Option<String> {
+    (grid_kind(&scene.desc.medium.grid) != GridKind::Vdb).then(|| {
+        format!(
+            "{}: every density of the grid is 0 (or below float32's smallest, 1.4e-45, which reads as 0): the image \
+             shows sky and ground only; check the grid (or scale its densities up and medium.sigma_t down)",
+            scene.source
         )
     })
 }
@@ -414,6 +445,31 @@ mod tests {
             ]
         );
         assert_eq!(kind("at -2.86° and [1.0, -3]; x-ray"), "at #° and [#, #]; x-ray");
+    }
+
+    #[test]
+    fn a_grid_of_zeros_is_reported_and_one_with_a_density_is_not() {
+        let dir = tempfile::tempdir().unwrap();
+        for (value, warned) in [(0.0f64, true), (1e-300, true), (1e-3, false)] {
+            // A float64 .npy of 2×2×2.
+            let header = "{'descr': '<f8', 'fortran_order': False, 'shape': (2, 2, 2), }";
+            let mut npy = b"\x93NUMPY\x01\x00".to_vec();
+            let pad = 64 - (10 + header.len() + 1) % 64;
+            npy.extend_from_slice(&((header.len() + pad + 1) as u16).to_le_bytes());
+            npy.extend_from_slice(header.as_bytes());
+            npy.extend(std::iter::repeat_n(b' ', pad));
+            npy.push(b'\n');
+            npy.extend((0..8).flat_map(|_| value.to_le_bytes()));
+            std::fs::write(dir.path().join("g.npy"), npy).unwrap();
+            let p = dir.path().join("s.toml");
+            std::fs::write(&p, "[medium]\ngrid = \"g.npy\"\nvoxel_size = 100.0\n").unwrap();
+            let w = warnings_of(&p);
+            assert_eq!(
+                w.iter().any(|m| m.contains("every density of the grid is 0")),
+                warned,
+                "{value}: {w:?}"
+            );
+        }
     }
 
     #[test]

@@ -40,7 +40,7 @@ impl Grid3 {
             }),
             Some(0) => Err(Error::format(
                 what,
-                format!("grid has zero size {dims:?}: every dimension must be at least 1"),
+                format!("grid has zero size (nx, ny, nz) = {dims:?}: every dimension must be at least 1"),
             )),
             _ => Err(Error::format(
                 what,

@@ -252,7 +252,7 @@ fn voxel_count(dims: [u64; 3], name: &str) -> Result<usize> {
     if dims.contains(&0) {
         return Err(Error::format(
             name,
-            format!("grid has zero size {dims:?}: every dimension must be at least 1"),
+            format!("grid has zero size (nx, ny, nz) = {dims:?}: every dimension must be at least 1"),
         ));
     }
     dims[0]
@@ -414,8 +414,19 @@ pub fn parse_npy(b: &[u8], name: &str) -> Result<Grid3> {
         return Err(Error::format(
             name,
             format!(
-                ".npy array has {} dimensions; a density grid needs 3, indexed [z][y][x]",
-                shape.len()
+                ".npy array has {} dimension{}; a density grid needs 3, indexed [z][y][x]",
+                shape.len(),
+                if shape.len() == 1 { "" } else { "s" }
+            ),
+        ));
+    }
+    if shape.contains(&0) {
+        // Named by the array's own shape: (nx, ny, nz) reversed reads as another array.
+        return Err(Error::format(
+            name,
+            format!(
+                ".npy array of shape ({}, {}, {}) holds no voxel: each axis of [z][y][x] must be at least 1 long",
+                shape[0], shape[1], shape[2]
             ),
         ));
     }

@@ -583,7 +583,7 @@ fn check_voxel_resolvable(file: &str, dims: [usize; 3], origin: Vec3, voxel: Vec
         file,
         "medium.voxel_size",
         voxel.min_element() >= smallest,
-        voxel,
+        voxel.to_array(),
         &format!(
             "a voxel must be at least {smallest:.1e} m here ({MIN_VOXEL_SIZE:e} m, and 2⁻²⁰ of the grid's farthest \
              coordinate, {farthest:.0} m, for f32 positions to resolve it); check the grid's units \

@@ -454,6 +454,15 @@ fn corrupt_npy_raw_and_vdb_files() {
             &["g.npy", "2 dimensions"],
         ),
         (npy("{'fortran_order': False, 'shape': (1, 2, 2), }", &four), &["g.npy", "descr"]),
+        // Named by the array's shape, not (nx, ny, nz) reversed.
+        (
+            npy("{'descr': '<f4', 'fortran_order': False, 'shape': (0, 2, 3), }", &[]),
+            &["g.npy", "array of shape (0, 2, 3) holds no voxel", "[z][y][x]"],
+        ),
+        (
+            npy("{'descr': '<f4', 'fortran_order': False, 'shape': (4,), }", &four),
+            &["g.npy", "has 1 dimension;"],
+        ),
         (
             npy(
                 "{'descr': '<f4', 'fortran_order': False, 'shape': (1, 2, 2), }",
