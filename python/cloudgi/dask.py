@@ -19,7 +19,8 @@ import inspect
 import numbers
 import os
 import re
-from typing import Any, Iterable, List, Mapping, Optional, Tuple, Union
+import warnings
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Tuple, Type, Union
 
 import numpy as np
 
@@ -69,6 +70,41 @@ def render_frame(scene: Any, overrides: Optional[Mapping[str, Any]], path: str, 
     return path
 
 
+def _frame_task(
+    scene: Any, overrides: Optional[Mapping[str, Any]], path: str, options: Mapping[str, Any]
+) -> Tuple[str, List[Tuple[Type[Warning], str]]]:
+    """:func:`render_frame` on a worker, with the warnings it issued (category, message): a
+    warning raised on a worker stays in its log, so they travel back with the path."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        done = render_frame(scene, overrides, path, options)
+    return done, [(w.category, str(w.message)) for w in caught]
+
+
+def _frame_ranges(frames: List[int]) -> str:
+    """``frame 3``, ``frames 0-3`` or ``frames 0-1, 5``: ascending frame numbers as runs."""
+    runs: List[List[int]] = []
+    for f in frames:
+        if runs and f == runs[-1][1] + 1:
+            runs[-1][1] = f
+        else:
+            runs.append([f, f])
+    text = ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in runs)
+    return ("frame " if len(frames) == 1 else "frames ") + text
+
+
+def _reissue(per_frame: List[Tuple[int, List[Tuple[Type[Warning], str]]]]) -> None:
+    """Issue the workers' warnings here, each message once with the frames that gave it."""
+    seen: Dict[Tuple[Type[Warning], str], List[int]] = {}
+    for frame, caught in per_frame:
+        for key in caught:
+            frames = seen.setdefault(key, [])
+            if not frames or frames[-1] != frame:
+                frames.append(frame)
+    for (category, message), frames in seen.items():
+        warnings.warn(f"{_frame_ranges(frames)}: {message}", category, stacklevel=3)
+
+
 def render_frames(
     scene: Any,
     frames: Iterable[Frame],
@@ -88,6 +124,8 @@ def render_frames(
     dies is rescheduled by Dask on another. ``start`` (an int), ``retries`` (an int, at least 0),
     ``frames`` (a list, not one frame), the options' names and every output path (not a folder,
     in a folder that exists and can be written) are checked before anything is submitted.
+    The warnings each frame's render issued on its worker are issued here once all are written,
+    each message once, prefixed with the frames that gave it (``frames 0-3: ...``).
     """
     for name, value in (("start", start), ("retries", retries)):
         if isinstance(value, bool) or not isinstance(value, numbers.Integral):
@@ -124,8 +162,10 @@ def render_frames(
         # 1 GB, not 100); Dask hands each task the array.
         options = dict(options, density=client.scatter(options["density"], broadcast=True))
     futures = [
-        client.submit(render_frame, own, overrides, path, options, retries=int(retries), pure=False,
+        client.submit(_frame_task, own, overrides, path, options, retries=int(retries), pure=False,
                       key=f"cloudgi-frame-{os.path.basename(path)}-{os.urandom(4).hex()}")
         for own, overrides, path in jobs
     ]
-    return list(client.gather(futures))
+    done = list(client.gather(futures))
+    _reissue([(i, caught) for i, (_, caught) in enumerate(done, start=start)])
+    return [path for path, _ in done]

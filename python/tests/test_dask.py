@@ -56,6 +56,29 @@ def test_four_frames_equal_local_renders(client, tmp_path):
     assert not [p for p in os.listdir(tmp_path) if ".tmp" in p]
 
 
+def test_the_workers_warnings_reach_the_client_once_with_their_frames(client, tmp_path):
+    # A camera looking away from the cloud warns on every frame; the client sees it once, naming
+    # the frames, as a RuntimeWarning; a framed scene warns about nothing.
+    scene = tiny_scene(width=8, height=6)
+    scene["camera"].update({"position": [0.0, 300.0, 2000.0], "look_at": [0.0, 300.0, 4000.0]})
+    with pytest.warns(RuntimeWarning) as caught:
+        cloudgi.dask.render_frames(scene, FRAMES[:3], client, str(tmp_path / "w_{frame}.exr"), method="single", start=5)
+    seen = [str(w.message) for w in caught if "is not in the camera's view" in str(w.message)]
+    assert len(seen) == 1 and seen[0].startswith("frames 5-7: "), [str(w.message) for w in caught]
+    import warnings
+
+    with warnings.catch_warnings(record=True) as quiet:
+        warnings.simplefilter("always")
+        cloudgi.dask.render_frames(tiny_scene(width=8, height=6), FRAMES[:2], client, str(tmp_path / "q_{frame}.exr"), method="single")
+    assert not [str(w.message) for w in quiet if w.category is RuntimeWarning]
+
+
+def test_frame_ranges_read_as_runs():
+    assert cloudgi.dask._frame_ranges([3]) == "frame 3"
+    assert cloudgi.dask._frame_ranges([0, 1, 2, 3]) == "frames 0-3"
+    assert cloudgi.dask._frame_ranges([0, 1, 5, 7, 8]) == "frames 0-1, 5, 7-8"
+
+
 def test_a_killed_worker_loses_no_frame(client, tmp_path):
     # Frames of about a second each, so one is running when its worker is killed.
     scene = tiny_scene(width=48, height=36)
