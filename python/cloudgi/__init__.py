@@ -312,7 +312,8 @@ def write_exr(path: Union[str, bytes, "os.PathLike[str]"], images: Mapping[str, 
     """Write ``images`` (``"rgb"`` and any AOVs, each ``(H, W, 3)``) as one OpenEXR file,
     atomically: RGB as the R, G, B channels and each AOV as ``NAME.R/G/B``, exactly as the
     command line writes a render. A path that is a folder, in a folder that does not exist or
-    cannot be written raises :class:`FileError` before anything is converted or written; a NaN,
+    cannot be written, or whose name does not end in ``.exr``, raises :class:`FileError` before
+    anything is converted or written; a NaN,
     an infinity or a value past float32's range (float64 1e300) raises :class:`FormatError`
     naming the image and pixel, and nothing is written. Images whose copies would not fit in
     the available memory are refused from their shape (:class:`SceneError`) before any copy."""
@@ -325,6 +326,13 @@ def write_exr(path: Union[str, bytes, "os.PathLike[str]"], images: Mapping[str, 
     if "rgb" not in images:
         raise SceneError(f"{path}: images need an \"rgb\" entry (got {sorted(images)})")
     _cloudgi.check_output(path, "cloudgi.write_exr", "path")
+    suffix = os.path.splitext(path)[1]
+    if suffix.lower() != ".exr":
+        # An OpenEXR file under another image's name (c.png) opens nowhere as that format.
+        raise FileError(
+            f"cloudgi.write_exr: field `path`: `{path}` ends in {f'`{suffix}`' if suffix else 'no extension'}; "
+            "write_exr writes OpenEXR: give the name the .exr extension"
+        )
     shape = np.shape(images["rgb"])
     arrays = {}
     for name, img in images.items():

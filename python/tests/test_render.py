@@ -421,6 +421,16 @@ def test_write_exr_to_a_folder_raises_file_error_naming_it_and_writes_nothing(tm
     assert sorted(tmp_path.iterdir()) == before
 
 
+def test_write_exr_to_a_name_without_the_exr_extension_is_refused(tmp_path):
+    images = {"rgb": np.ones((2, 2, 3), np.float32)}
+    for name, said in [("c.png", "ends in `.png`"), ("c", "ends in no extension")]:
+        with pytest.raises(cloudgi.FileError, match=f"^cloudgi.write_exr: field `path`: .*{said}.*\\.exr extension"):
+            cloudgi.write_exr(tmp_path / name, images)
+    assert not list(tmp_path.iterdir())
+    cloudgi.write_exr(tmp_path / "c.EXR", images)
+    assert (tmp_path / "c.EXR").read_bytes()[:4] == b"\x76\x2f\x31\x01", "the OpenEXR magic number"
+
+
 @pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes are POSIX")
 def test_write_exr_to_a_pipe_or_a_path_with_a_nul_is_refused_and_the_pipe_kept(tmp_path):
     # The atomic write renamed its file over the pipe (and, as root, over /dev/full, which then
