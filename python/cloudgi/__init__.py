@@ -325,14 +325,7 @@ def write_exr(path: Union[str, bytes, "os.PathLike[str]"], images: Mapping[str, 
             raise TypeError(f"{path}: image names must be str (the EXR's layer names), not {type(name).__name__} {name!r}")
     if "rgb" not in images:
         raise SceneError(f"{path}: images need an \"rgb\" entry (got {sorted(images)})")
-    _cloudgi.check_output(path, "cloudgi.write_exr", "path")
-    suffix = os.path.splitext(path)[1]
-    if suffix.lower() != ".exr":
-        # An OpenEXR file under another image's name (c.png) opens nowhere as that format.
-        raise FileError(
-            f"cloudgi.write_exr: field `path`: `{path}` ends in {f'`{suffix}`' if suffix else 'no extension'}; "
-            "write_exr writes OpenEXR: give the name the .exr extension"
-        )
+    _check_exr_output(path, "cloudgi.write_exr", "path")
     shape = np.shape(images["rgb"])
     arrays = {}
     for name, img in images.items():
@@ -406,6 +399,19 @@ def _f32_bytes(path: str, name: str, arr: np.ndarray) -> bytes:
         f"{path}: images[{name!r}] holds {value} at {where} ({int(bad.sum())} non-finite values): an EXR of a render "
         "holds finite values; find where they came from (or replace them, e.g. numpy.nan_to_num)"
     )
+
+
+def _check_exr_output(path: str, source: str, field: str) -> None:
+    """Raise :class:`FileError` (naming ``source`` and ``field``) unless ``path`` can be written
+    as an output file (``_cloudgi.check_output``) and ends in ``.exr``: an OpenEXR file under
+    another image's name (``c.png``) opens nowhere as that format."""
+    _cloudgi.check_output(path, source, field)
+    suffix = os.path.splitext(path)[1]
+    if suffix.lower() != ".exr":
+        raise FileError(
+            f"{source}: field `{field}`: `{path}` ends in {f'`{suffix}`' if suffix else 'no extension'}; "
+            "the file is written as OpenEXR: give the name the .exr extension"
+        )
 
 
 def _path(name: str, path: Any) -> str:

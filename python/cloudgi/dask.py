@@ -154,7 +154,7 @@ def render_frames(
     if len(set(paths)) != len(paths):
         raise ValueError(f"out_pattern `{out_pattern}` gives several frames the same file; put {{frame}} in it")
     for p in paths:
-        cloudgi._cloudgi.check_output(p, "cloudgi.dask.render_frames", "out_pattern")
+        cloudgi._check_exr_output(p, "cloudgi.dask.render_frames", "out_pattern")
     if not all(callable(getattr(client, m, None)) for m in ("submit", "gather")):
         raise TypeError(f"render_frames: client must be a dask.distributed.Client, not {type(client).__name__} {client!r}")
     if isinstance(options.get("density"), np.ndarray):

@@ -124,6 +124,8 @@ def test_bad_outputs_options_and_frames_are_found_before_submitting(client, tmp_
     (tmp_path / "f_1.exr").mkdir()
     with pytest.raises(cloudgi.FileError, match="out_pattern.*f_1.exr` is a folder"):
         cloudgi.dask.render_frames(tiny_scene(), FRAMES, client, str(tmp_path / "f_{frame}.exr"))
+    with pytest.raises(cloudgi.FileError, match=r"out_pattern.*p_0.png` ends in `.png`.*\.exr extension"):
+        cloudgi.dask.render_frames(tiny_scene(), FRAMES, client, str(tmp_path / "p_{frame}.png"))
     with pytest.raises(TypeError, match="widht"):
         cloudgi.dask.render_frames(tiny_scene(), FRAMES, client, str(tmp_path / "g_{frame}.exr"), widht=8)
     with pytest.raises(ValueError, match=r"\(scene, overrides\), not 3 items"):
