@@ -1,6 +1,6 @@
 //! The terminal side of the command line: results on stdout as fallible writes (a full disk is
 //! an error, a closed pipe ends the command quietly), notes on stderr that never panic, and
-//! SIGINT/SIGTERM, which remove the temporary output files before the process exits.
+//! SIGINT/SIGTERM/SIGHUP, which remove the temporary output files before the process exits.
 
 use crate::error::{Error, Result};
 use std::io::Write;
@@ -30,16 +30,26 @@ pub fn note(args: std::fmt::Arguments) {
     let _ = err.write_fmt(args).and_then(|()| err.write_all(b"\n"));
 }
 
-/// On SIGINT or SIGTERM: remove the output temporaries being written (waiting for renames in
-/// progress) and the output folders created that are still empty, say in one line whether anything was written, and exit with 128 + the signal.
+/// On SIGINT, SIGTERM or SIGHUP (the terminal closed; not where it is ignored, as under
+/// `nohup`): remove the output temporaries being written (waiting for renames in progress) and
+/// the output folders created that are still empty, say in one line whether anything was
+/// written, and exit with 128 + the signal.
 pub fn clean_up_on_interrupt() -> Result<()> {
-    use signal_hook::consts::{SIGINT, SIGTERM};
-    let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM]).map_err(|e| Error::io("signal handlers", e))?;
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    let mut caught = vec![SIGINT, SIGTERM];
+    if !ignored(SIGHUP) {
+        caught.push(SIGHUP);
+    }
+    let mut signals = signal_hook::iterator::Signals::new(caught).map_err(|e| Error::io("signal handlers", e))?;
     std::thread::spawn(move || {
         if let Some(sig) = signals.forever().next() {
             let removed = crate::io::remove_temporaries();
             crate::io::remove_created_empty_dirs();
-            let name = if sig == SIGINT { "SIGINT" } else { "SIGTERM" };
+            let name = match sig {
+                SIGINT => "SIGINT",
+                SIGTERM => "SIGTERM",
+                _ => "SIGHUP",
+            };
             let written = crate::io::written();
             let what = match (written.is_empty(), removed) {
                 (true, _) => "no output written".to_string(),
@@ -54,4 +64,14 @@ pub fn clean_up_on_interrupt() -> Result<()> {
         }
     });
     Ok(())
+}
+
+/// Whether signal `sig` is ignored (SIG_IGN), as `nohup` leaves SIGHUP for the command it starts:
+/// a handler would undo what the user asked for.
+fn ignored(sig: i32) -> bool {
+    let mut old = std::mem::MaybeUninit::<libc::sigaction>::zeroed();
+    // SAFETY: a null new action only reads the current one into `old`, which is valid for writes.
+    let read = unsafe { libc::sigaction(sig, std::ptr::null(), old.as_mut_ptr()) } == 0;
+    // SAFETY: sigaction succeeded, so it wrote `old` (and zeroed memory is a valid sigaction anyway).
+    read && unsafe { old.assume_init() }.sa_sigaction == libc::SIG_IGN
 }

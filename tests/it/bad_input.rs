@@ -839,8 +839,12 @@ fn a_full_disk_or_a_closed_pipe_is_no_panic() {
 fn an_interrupt_leaves_no_file_and_says_so() {
     // Both renders at once, a thread each, each signalled as soon as it catches the signals (a
     // render of 100,000 samples per pixel is still running then).
+    // SIGHUP too, unless this process ignores it (started under nohup): the render inherits that
+    // and rightly keeps it ignored (the next test).
+    let hup = [("HUP", 129)].into_iter().filter(|_| !ignores_hangups());
     let runs: Vec<_> = [("INT", 130), ("TERM", 143)]
         .into_iter()
+        .chain(hup)
         .map(|(signal, code)| {
             let dir = tempfile::tempdir().unwrap();
             std::fs::write(dir.path().join("s.toml"), SCENE).unwrap();
@@ -873,7 +877,10 @@ fn an_interrupt_leaves_no_file_and_says_so() {
         })
         .collect();
     for (((signal, code, dir, child), killed), ready) in runs.into_iter().zip(killed).zip(ready) {
-        assert!(ready, "SIG{signal}: the render exited or caught no SIGINT/SIGTERM within 60 s");
+        assert!(
+            ready,
+            "SIG{signal}: the render exited or caught no SIGINT/SIGTERM/SIGHUP within 60 s"
+        );
         assert!(killed);
         let out = child.wait_with_output().unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
@@ -882,6 +889,60 @@ fn an_interrupt_leaves_no_file_and_says_so() {
         assert!(err.contains(&format!("interrupted (SIG{signal}): no output written")), "{err}");
         assert_eq!(listing(dir.path()), [PathBuf::from("s.toml")]);
     }
+}
+
+/// A render started under `nohup` (SIGHUP ignored) keeps it ignored: a closed terminal does not
+/// end it, and SIGTERM still does.
+#[cfg(unix)]
+#[test]
+fn a_render_under_nohup_goes_on_through_a_hangup() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("s.toml"), SCENE).unwrap();
+    let Ok(child) = Command::new("nohup")
+        .current_dir(dir.path())
+        .args([
+            BIN,
+            "render",
+            "s.toml",
+            "--method",
+            "reference",
+            "--spp",
+            "100000",
+            "-q",
+            "--threads",
+            "1",
+        ])
+        .stderr(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+    else {
+        return; // no nohup on this machine
+    };
+    let pid = child.id().to_string();
+    let ready = catches_interrupts(child.id());
+    let hup = Command::new("kill").args(["-HUP", &pid]).status().is_ok_and(|s| s.success());
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let still = std::fs::read_to_string(format!("/proc/{pid}/status")).is_ok_and(|s| !s.contains("State:\tZ"));
+    let term = Command::new("kill").args(["-TERM", &pid]).status().is_ok_and(|s| s.success());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(ready && hup && term, "{err}");
+    assert!(
+        still || !Path::new("/proc/self/status").exists(),
+        "SIGHUP ended a render under nohup: {err}"
+    );
+    assert_eq!(out.status.code(), Some(143), "{err}");
+    assert!(err.contains("interrupted (SIGTERM): no output written"), "{err}");
+}
+
+/// Whether this process ignores SIGHUP (bit 1 of its `SigIgn` mask in /proc; false without /proc).
+#[cfg(unix)]
+fn ignores_hangups() -> bool {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    let ignored = status.lines().find_map(|l| l.strip_prefix("SigIgn:")).map(str::trim);
+    ignored
+        .and_then(|mask| u64::from_str_radix(mask, 16).ok())
+        .is_some_and(|mask| mask & 1 == 1)
 }
 
 /// Whether process `pid` catches SIGINT and SIGTERM (bits 2 and 15, counted from 1, of its
