@@ -847,23 +847,7 @@ fn an_interrupt_leaves_no_file_and_says_so() {
         .chain(hup)
         .map(|(signal, code)| {
             let dir = tempfile::tempdir().unwrap();
-            std::fs::write(dir.path().join("s.toml"), SCENE).unwrap();
-            let child = Command::new(BIN)
-                .current_dir(dir.path())
-                .args([
-                    "render",
-                    "s.toml",
-                    "--method",
-                    "reference",
-                    "--spp",
-                    "100000",
-                    "-q",
-                    "--threads",
-                    "1",
-                ])
-                .stderr(std::process::Stdio::piped())
-                .spawn()
-                .unwrap();
+            let child = long_render(dir.path(), Command::new(BIN)).spawn().unwrap();
             (signal, code, dir, child)
         })
         .collect();
@@ -897,25 +881,9 @@ fn an_interrupt_leaves_no_file_and_says_so() {
 #[test]
 fn a_render_under_nohup_goes_on_through_a_hangup() {
     let dir = tempfile::tempdir().unwrap();
-    std::fs::write(dir.path().join("s.toml"), SCENE).unwrap();
-    let Ok(child) = Command::new("nohup")
-        .current_dir(dir.path())
-        .args([
-            BIN,
-            "render",
-            "s.toml",
-            "--method",
-            "reference",
-            "--spp",
-            "100000",
-            "-q",
-            "--threads",
-            "1",
-        ])
-        .stderr(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::null())
-        .spawn()
-    else {
+    let mut nohup = Command::new("nohup");
+    nohup.arg(BIN);
+    let Ok(child) = long_render(dir.path(), nohup).stdout(std::process::Stdio::null()).spawn() else {
         return; // no nohup on this machine
     };
     let pid = child.id().to_string();
@@ -933,6 +901,29 @@ fn a_render_under_nohup_goes_on_through_a_hangup() {
     );
     assert_eq!(out.status.code(), Some(143), "{err}");
     assert!(err.contains("interrupted (SIGTERM): no output written"), "{err}");
+}
+
+/// `command` (the binary, or a wrapper with the binary as its first argument) set to render
+/// [`SCENE`] in `dir` with `reference` at 100,000 samples per pixel on one thread (still running
+/// when it is signalled), its stderr piped.
+#[cfg(unix)]
+fn long_render(dir: &Path, mut command: Command) -> Command {
+    std::fs::write(dir.join("s.toml"), SCENE).unwrap();
+    command
+        .current_dir(dir)
+        .args([
+            "render",
+            "s.toml",
+            "--method",
+            "reference",
+            "--spp",
+            "100000",
+            "-q",
+            "--threads",
+            "1",
+        ])
+        .stderr(std::process::Stdio::piped());
+    command
 }
 
 /// Whether this process ignores SIGHUP (bit 1 of its `SigIgn` mask in /proc; false without /proc).
