@@ -248,10 +248,11 @@ fn hidden_sun_warning(scene: &Scene) -> Option<String> {
 }
 
 /// A warning when the grid's densities are all 0, so the image shows no cloud: an array of
-/// zeros, or of values float32 cannot tell from 0 (1e-300 in a float64 `.npy`). A `.vdb` with
-/// no active voxels has its own note.
+/// zeros, or of values float32 cannot tell from 0 (1e-300 in a float64 `.npy`). A `.vdb` read
+/// with no active voxels has its own note (an array given in its place has none).
 fn no_density_warning(scene: &Scene) -> Option<String> {
-    (grid_kind(&scene.desc.medium.grid) != GridKind::Vdb).then(|| {
+    let noted = grid_kind(&scene.desc.medium.grid) == GridKind::Vdb && !scene.notes.is_empty();
+    (!noted).then(|| {
         format!(
             "{}: every density of the grid is 0 (or below float32's smallest, 1.4e-45, which reads as 0): the image \
              shows sky and ground only; check the grid (or scale its densities up and medium.sigma_t down)",
@@ -445,6 +446,15 @@ mod tests {
             ]
         );
         assert_eq!(kind("at -2.86° and [1.0, -3]; x-ray"), "at #° and [#, #]; x-ray");
+    }
+
+    #[test]
+    fn an_array_of_zeros_given_for_a_vdb_grid_is_reported() {
+        let mut desc = crate::scene::SceneDesc::default();
+        desc.medium.grid = "cloud.vdb".into();
+        let zeros = crate::Density::new([2, 2, 2], vec![0.0; 8], 100.0, [0.0; 3]).unwrap();
+        let scene = Scene::build_with(desc, "s.toml", Path::new("."), Some(zeros)).unwrap();
+        assert!(scene_warnings(&scene).iter().any(|m| m.contains("every density of the grid is 0")));
     }
 
     #[test]
